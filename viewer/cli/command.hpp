@@ -1,0 +1,51 @@
+#pragma once
+// Sub-commands of `veneer`. Each cmd_<name>.cpp defines one (or a group) with
+//   VENEER_COMMAND(simulate) { auto* cmd = app.add_subcommand("simulate", "...");
+//                              ...; return [=] { return run(...); }; }
+// The returned function runs when the sub-command was chosen and gives the
+// exit code (0 ok, 1 failure, 2 bad usage). Errors go to stderr as one line
+// "veneer <cmd>: <what was wrong>".
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+namespace veneer::cli {
+
+using Runner = std::function<int()>;
+using Setup = std::function<Runner(CLI::App& app)>;
+
+struct CommandRegistry {
+  static std::vector<std::pair<std::string, Setup>>& all() {
+    static std::vector<std::pair<std::string, Setup>> v;
+    return v;
+  }
+};
+
+struct CommandRegistrar {
+  CommandRegistrar(const char* name, Setup setup) { CommandRegistry::all().emplace_back(name, std::move(setup)); }
+};
+
+// A progress bar on stderr for slow steps (only when stderr is a terminal
+// unless forced).
+class ProgressBar {
+ public:
+  explicit ProgressBar(std::string label);
+  ~ProgressBar();
+  void update(double fraction, const std::string& stage);
+  void done();
+
+ private:
+  std::string label_;
+  int last_percent_ = -1;
+  bool tty_ = false;
+  bool finished_ = false;
+};
+
+}  // namespace veneer::cli
+
+#define VENEER_COMMAND(name)                                                     \
+  static ::veneer::cli::Runner veneer_setup_##name(CLI::App& app);               \
+  static ::veneer::cli::CommandRegistrar veneer_registrar_##name(#name, veneer_setup_##name); \
+  static ::veneer::cli::Runner veneer_setup_##name(CLI::App& app)

@@ -1,0 +1,90 @@
+#pragma once
+// An image set: one object photographed once per lamp (DESIGN.md, "Image set").
+//
+// In memory:
+//  - photos (images, ambient) are CV_32FC3, linear, OpenCV's BGR channel order,
+//    scaled so that the full 16-bit range (65535) is 1.0;
+//  - normals are CV_32FC3 with channel 0 = x, 1 = y, 2 = z in the rig frame
+//    (x right, y up, z toward the camera), (0,0,0) outside the object;
+//  - masks are CV_8UC1, 255 = object, 0 = background;
+//  - depth is CV_32FC1, metres along -z from the camera (0 = background);
+//  - a light's intensity is [r, g, b] as in the manifest.
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "veneer/util/expected.hpp"
+
+namespace veneer {
+
+enum class Role { unknown, destination, source };
+const char* role_name(Role role);                 // "destination" | "source" | "unknown"
+std::optional<Role> parse_role(const std::string&);
+
+struct Light {
+  int index = 0;                      // 0-based position in the set's light list
+  std::string lamp_id;                // e.g. the Hue lamp id, or "sim-3"
+  std::optional<cv::Vec3d> position_m;  // lamp position in the rig frame (near-light model)
+  cv::Vec3d direction{0, 0, 1};       // unit vector from the object toward the lamp
+  cv::Vec3f intensity{1, 1, 1};       // [r, g, b]
+};
+
+struct CameraInfo {
+  std::string model;
+  double exposure_s = 0;
+  double aperture = 0;
+  int iso = 0;
+  // Pinhole intrinsics in pixels when known (simulated sets, calibrated rigs):
+  // focal length and principal point. 0 = unknown.
+  double focal_px = 0;
+  double cx = 0, cy = 0;
+};
+
+// Ground truth written by the simulator into <set>/truth/.
+struct Truth {
+  cv::Mat normals;  // CV_32FC3 x,y,z
+  cv::Mat mask;     // CV_8UC1
+  cv::Mat albedo;   // CV_32FC3 BGR
+  cv::Mat depth;    // CV_32FC1
+  bool present() const { return !normals.empty(); }
+};
+
+struct ImageSet {
+  std::string id;
+  Role role = Role::unknown;
+  std::string object;
+  std::string created;  // UTC, ISO 8601
+  cv::Size size;        // [w, h]
+  CameraInfo camera;
+  std::vector<Light> lights;
+  std::vector<cv::Mat> images;  // images[i] lit by lights[i]
+  cv::Mat ambient;              // all lamps off; empty when absent
+  cv::Mat mask;                 // supplied object mask (DiLiGenT mask.png); empty when absent
+  std::vector<std::string> warnings;  // e.g. bright ambient frame
+  std::string scene;            // simulator scene name, when simulated
+  Truth truth;
+  std::filesystem::path origin;  // folder it was read from (diagnostics)
+};
+
+enum class SetFormat { automatic, veneer, diligent, thesis };
+
+struct ReadOptions {
+  SetFormat format = SetFormat::automatic;  // automatic: set.json -> veneer, filenames.txt -> DiLiGenT, else thesis
+  bool load_truth = true;                   // read <set>/truth/ when present
+};
+
+// Reads a set folder. Every failure names the file and the problem.
+Expected<ImageSet> read_set(const std::filesystem::path& folder, const ReadOptions& options = {});
+
+// Writes a veneer-set/1 folder atomically: everything goes to a temporary
+// sibling folder that is fsynced and renamed into place, so a reader never sees
+// half a set. Fails (and leaves nothing) if `folder` exists unless overwrite.
+Status write_set(const ImageSet& set, const std::filesystem::path& folder, bool overwrite = false);
+
+// Checks the in-memory invariants (sizes, counts, unit directions, types).
+Status validate(const ImageSet& set);
+
+}  // namespace veneer

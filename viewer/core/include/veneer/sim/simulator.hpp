@@ -1,0 +1,61 @@
+#pragma once
+// The scene simulator: a ray caster that renders a named scene (after the
+// thesis's objects) under any set of point lamps in the rig frame, as the
+// rig's camera would see it. Used by `veneer simulate`, the simulated camera of
+// veneerd, and every quality test (its ground truth is the oracle).
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "veneer/io/imageset.hpp"
+#include "veneer/util/expected.hpp"
+#include "veneer/util/progress.hpp"
+
+namespace veneer::sim {
+
+struct Lamp {
+  cv::Vec3d position_m;        // rig frame
+  cv::Vec3f color{1, 1, 1};    // [r, g, b] radiant intensity, 1 = a rig lamp at full white
+  float brightness = 1.0f;     // 0..1 multiplier (Hue bri / 254)
+};
+
+// The thesis rig: 8 sockets on a 0.47 m circle around the camera at (0,0,1),
+// the bottom socket empty, so 7 lamps. Index order is the order used in sets.
+std::vector<Lamp> thesis_rig();
+
+struct RenderOptions {
+  cv::Size size{1024, 680};     // image size [px]
+  double focal_px = 0;          // pinhole focal length [px]; 0 = the rig default for `size`
+  double exposure = 1.0;        // linear gain on radiance (1 = a well-exposed rig shot)
+  double noise_sigma = 0.0;     // sensor noise, std-dev as a fraction of full scale
+  double ambient = 0.0;         // uniform ambient light level (room light leaking in)
+  uint64_t seed = 1;            // noise seed; same seed, same bytes
+  cv::Vec3d offset_m{0, 0, 0};  // moves the whole object in the rig frame
+  double scale = 1.0;           // scales the object about its base
+  int threads = 0;              // 0 = all cores
+  Status check() const;
+};
+
+class Scene;  // opaque: primitives + materials
+
+// Names: orange apple banana cup-dots cup-white two-spheres blocks stone bull
+// sphere-gray sphere-red-gloss.
+std::vector<std::string> scene_names();
+Expected<std::shared_ptr<const Scene>> make_scene(const std::string& name, const RenderOptions& options);
+
+// Renders linear BGR CV_32FC3 (clipped at 1.0 like a sensor) under `lamps`.
+cv::Mat render(const Scene& scene, const std::vector<Lamp>& lamps, const RenderOptions& options,
+               const Progress& progress = {});
+// Truth for the scene as seen by the camera: normals, mask, albedo, depth.
+Truth render_truth(const Scene& scene, const RenderOptions& options);
+
+// A whole image set as the thesis rig would capture it: ambient frame + one shot
+// per lamp, lights filled in with positions and directions (toward the object
+// centre), truth attached.
+Expected<ImageSet> simulate_set(const std::string& scene_name, const RenderOptions& options,
+                                Role role = Role::unknown, const Progress& progress = {});
+
+}  // namespace veneer::sim
