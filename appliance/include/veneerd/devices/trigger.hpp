@@ -1,0 +1,29 @@
+#pragma once
+// The capture button and the status LED. Implementations: "gpio" (libgpiod,
+// logic from firmware/), "simulated" (pressed through the API / a test hook).
+#include <functional>
+#include <string>
+
+namespace veneerd {
+
+enum class Press { short_press, long_press, double_press };
+
+class Trigger {
+ public:
+  virtual ~Trigger() = default;
+  virtual std::string name() const = 0;
+  // Delivers recognised presses (short = capture next, long = cancel).
+  std::function<void(Press)> on_press;
+  virtual void press(Press p) { if (on_press) on_press(p); }  // simulated rig / tests
+};
+
+enum class LedState { idle, capturing, done, error, no_camera };
+
+class StatusLed {
+ public:
+  virtual ~StatusLed() = default;
+  virtual std::string name() const = 0;
+  virtual void show(LedState state) = 0;
+};
+
+}  // namespace veneerd

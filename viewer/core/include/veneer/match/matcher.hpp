@@ -1,0 +1,54 @@
+#pragma once
+// Correspondence: for every destination pixel, the source pixel whose
+// appearance should be shown there (DESIGN.md "correspondence map").
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "veneer/util/expected.hpp"
+#include "veneer/util/progress.hpp"
+
+namespace veneer::match {
+
+enum class Feature { normals, intensities };
+enum class Method { linear, flann, candidates, patchmatch, regiongrow, baseline, coherent };
+const char* method_name(Method);
+const char* feature_name(Feature);
+Expected<Method> parse_method(const std::string&);
+Expected<Feature> parse_feature(const std::string&);
+
+// One object as the matcher sees it.
+struct ObjectView {
+  cv::Mat normals;              // CV_32FC3 x,y,z (rig frame)
+  cv::Mat mask;                 // CV_8UC1, 255 = object; only these pixels take part
+  std::vector<cv::Mat> images;  // CV_32FC3 BGR, one per lamp (intensity feature, repaint)
+};
+
+// The correspondence map (DESIGN.md): xy = source x, y in pixels (CV_32FC2),
+// -1,-1 where a destination pixel is not mapped; distance = match distance (CV_32F).
+struct Map {
+  cv::Mat xy;
+  cv::Mat distance;
+  bool valid(int x, int y) const { return xy.at<cv::Vec2f>(y, x)[0] >= 0; }
+};
+
+struct MatchOptions {
+  Method method = Method::linear;      // which algorithm
+  Feature feature = Feature::normals;  // what is compared
+  int patch = 1;                       // patch side: 1, 3, 5 or 7 (mirrored borders)
+  int candidates = 10;                 // K for `candidates` (1..100)
+  double threshold = 0.05;             // `regiongrow` smoothness threshold (>= 0; 0 = direct matching)
+  int iterations = 5;                  // `patchmatch` iterations
+  double coherent_threshold = 0.10;    // `coherent` normal error allowed for a chunk, radians-ish (|dn|)
+  double uniformity = 0.0;             // reuse penalty weight for `coherent`/`patchmatch` (0 = off)
+  bool fast = true;                    // use the fast engine where it applies (false = faithful thesis code)
+  unsigned seed = 1;                   // random init/jitter seed (same seed, same map)
+  int threads = 0;                     // 0 = all cores
+  Status check() const;
+};
+
+Expected<Map> compute_map(const ObjectView& destination, const ObjectView& source,
+                          const MatchOptions& options, const Progress& progress = {});
+
+}  // namespace veneer::match
