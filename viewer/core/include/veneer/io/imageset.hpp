@@ -29,7 +29,11 @@ struct Light {
   std::string lamp_id;                // e.g. the Hue lamp id, or "sim-3"
   std::optional<cv::Vec3d> position_m;  // lamp position in the rig frame (near-light model)
   cv::Vec3d direction{0, 0, 1};       // unit vector from the object toward the lamp
-  cv::Vec3f intensity{1, 1, 1};       // [r, g, b]
+  // [r, g, b] irradiance this lamp delivers at the rig origin (0,0,0), the
+  // object's nominal position. A point p receives
+  //   intensity * |position - 0|^2 / |position - p|^2   from direction (position - p)/|position - p|
+  // (the near-light model); the distant-light model uses `intensity` and `direction` as they are.
+  cv::Vec3f intensity{1, 1, 1};
 };
 
 struct CameraInfo {
