@@ -1,0 +1,77 @@
+#pragma once
+// Photometric stereo: per-pixel surface normals and albedo from an image set
+// (one photo per lamp), Lambertian model I = albedo * intensity * max(0, n . l).
+//
+//  - distant mode: one light direction and intensity per lamp for the whole
+//    image; the pseudo-inverse of the light matrix is computed once.
+//  - near mode: the lamps' positions are known, so every pixel gets its own
+//    light vectors with 1/r^2 falloff (Light::intensity convention of
+//    imageset.hpp). The surface is first assumed on the z = 0 plane, then its
+//    depth is refined from the recovered normals and the normals solved again.
+//  - robust: per pixel, shadowed (dark relative to the pixel's brightest
+//    sample) and saturated samples are dropped; at least 3 must remain or the
+//    pixel is unreliable. Pseudo-inverses are cached per "lamps kept" pattern.
+#include <string>
+
+#include <opencv2/core.hpp>
+
+#include "veneer/io/imageset.hpp"
+#include "veneer/util/expected.hpp"
+#include "veneer/util/progress.hpp"
+
+namespace veneer::ps {
+
+enum class LightModel {
+  automatic,  // near when every light has a position and the camera focal length is known, else distant
+  distant,    // one direction per lamp for the whole image
+  near,       // per-pixel light vectors from lamp positions, 1/r^2 falloff, depth refined
+};
+const char* light_model_name(LightModel);  // "automatic" | "distant" | "near"
+Expected<LightModel> parse_light_model(const std::string&);
+
+struct PsOptions {
+  LightModel light_model = LightModel::automatic;  // see LightModel
+  bool robust = true;              // drop shadowed/saturated samples per pixel (false = plain least squares)
+  float shadow_fraction = 0.10f;   // robust: a sample below this fraction of the pixel's brightest is shadowed [0, 1)
+  float saturation = 0.98f;        // robust: a sample with any channel >= this (1.0 = full scale) is saturated (0, 1]
+  float min_signal = 1e-3f;        // pixels whose brightest grey sample is below this are unreliable (>= 0)
+  bool subtract_ambient = true;    // subtract set.ambient when present
+  int near_iterations = 2;         // near: depth refinements after the z = 0 pass (0..5)
+  int threads = 0;                 // 0 = all cores (TBB)
+  Status check() const;
+};
+
+struct PsResult {
+  cv::Mat normals;   // CV_32FC3 x,y,z rig frame, unit; (0,0,0) outside the mask or unreliable
+  cv::Mat albedo;    // CV_32FC3 BGR, relative to lamp intensity (1 = white Lambertian); 0 outside
+  cv::Mat mask;      // CV_8UC1, the pixels that were solved (the input mask, or all)
+  cv::Mat reliable;  // CV_8UC1, 255 where the normal is trustworthy (>= 3 samples kept, signal present)
+  cv::Mat residual;  // CV_32FC1, RMS of the grey fit over kept samples, relative to the pixel's
+                     // brightest sample (0 = perfect fit); 0 outside the mask. A confidence map.
+  cv::Mat depth;     // CV_32FC1, near mode: estimated depth in metres along -z from the camera
+                     // (0 outside); empty in distant mode
+  LightModel model_used = LightModel::distant;
+  int solved_pixels = 0;      // pixels in mask
+  int unreliable_pixels = 0;  // pixels in mask that are not reliable
+};
+
+// Solves normals for the pixels of `mask` (CV_8UC1 of set.size; empty = every
+// pixel). Fails with a message for: fewer than 3 lights, degenerate light
+// directions (rank < 3), an empty mask, a mask of the wrong size, near mode
+// without lamp positions/focal length, bad options, cancellation.
+Expected<PsResult> photometric_stereo(const ImageSet& set, const cv::Mat& mask, const PsOptions& options = {},
+                                      const Progress& progress = {});
+
+// Angular error of `normals` against `truth` (both CV_32FC3 x,y,z) over the
+// pixels of `mask` where both are non-zero.
+struct AngularError {
+  double mean_deg = 0, median_deg = 0, p95_deg = 0, max_deg = 0;
+  int pixels = 0;  // pixels compared
+};
+AngularError angular_error(const cv::Mat& normals, const cv::Mat& truth, const cv::Mat& mask);
+
+// Pictures: residual as a grey 8-bit picture (black = perfect fit, white = the
+// given relative residual or more), red where `reliable` is 0 inside `mask`.
+cv::Mat residual_picture(const PsResult& result, float full_scale = 0.1f);
+
+}  // namespace veneer::ps
