@@ -1,6 +1,8 @@
 #pragma once
 // Single-image files: PFM (float), 16-bit linear PNG, pictures for people.
 #include <filesystem>
+#include <string>
+#include <string_view>
 
 #include <opencv2/core.hpp>
 
@@ -14,12 +16,25 @@ namespace veneer {
 // and written so that the file's R slot holds the red channel.
 Status write_pfm(const std::filesystem::path& file, const cv::Mat& image, bool xyz_order);
 Expected<cv::Mat> read_pfm(const std::filesystem::path& file, bool xyz_order);
+// The same from bytes in memory; `name` is used in error messages.
+Expected<cv::Mat> read_pfm_bytes(std::string_view bytes, bool xyz_order, const std::string& name = "<memory>");
+std::string encode_pfm(const cv::Mat& image, bool xyz_order);  // the file's bytes (image must be CV_32FC1/3)
 
 // 16-bit linear PNG from/to CV_32FC3 BGR in [0,1] (values clamped).
 Status write_png16(const std::filesystem::path& file, const cv::Mat& image);
+// The PNG bytes write_png16 writes (1- or 3-channel float input).
+Expected<std::string> encode_png16(const cv::Mat& image);
 // Reads an 8- or 16-bit PNG (or PPM/PGM) as CV_32FC3 BGR scaled to [0,1];
-// grey images are expanded to 3 channels.
+// grey images are expanded to 3 channels. A PFM photo is read as it is
+// (file RGB -> Mat BGR). Truncated or corrupt files are refused.
 Expected<cv::Mat> read_linear_image(const std::filesystem::path& file);
+// The same from a file's bytes in memory (PNG, PPM/PGM or PFM, told apart by
+// their magic, not the name); `name` is used in error messages.
+Expected<cv::Mat> decode_linear_image(std::string_view bytes, const std::string& name);
+// A mask file (PNG/PGM/PPM, any depth) as CV_8UC1: 255 where the file is non-zero.
+Expected<cv::Mat> read_mask(const std::filesystem::path& file);
+// The whole file as bytes; the error names the file.
+Expected<std::string> read_file_bytes(const std::filesystem::path& file);
 
 // Pictures a person looks at (8-bit PNG):
 cv::Mat normals_picture(const cv::Mat& normals);  // RGB = (n+1)/2, black outside

@@ -91,4 +91,26 @@ Status write_set(const ImageSet& set, const std::filesystem::path& folder, bool 
 // Checks the in-memory invariants (sizes, counts, unit directions, types).
 Status validate(const ImageSet& set);
 
+// --- the manifest on its own (used by read_set, `veneer info`, the fuzz target) ---
+
+inline constexpr const char* kSetFormat = "veneer-set/1";
+// How far a light direction's length may be from 1 before it is refused.
+inline constexpr double kUnitTolerance = 1e-3;
+
+// A parsed set.json: the set without pixels, and the files it names (relative
+// to the set folder, already checked to stay inside it).
+struct Manifest {
+  ImageSet set;                             // lights sorted by index, no images loaded
+  std::vector<std::filesystem::path> image_files;  // image_files[i] is lit by set.lights[i]
+  std::filesystem::path ambient_file;       // empty when absent
+  std::filesystem::path mask_file;          // empty when absent
+};
+
+// Parses and checks set.json text without touching the disk; `folder` only
+// names the file in errors.
+Expected<Manifest> parse_manifest(const std::string& json, const std::filesystem::path& folder);
+
+// The set.json write_set would write for `set` (images named light_NN.png).
+std::string manifest_json(const ImageSet& set);
+
 }  // namespace veneer

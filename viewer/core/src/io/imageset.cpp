@@ -1,0 +1,884 @@
+// Image sets on disk: the veneer-set/1 folder (read and written), and two
+// layouts that are only read: DiLiGenT and the thesis's PPM/PFM folders.
+//
+// veneer-set/1 (DESIGN.md, "Image set"):
+//   set.json, light_NN.png (16-bit linear RGB, NN = 0-based light index),
+//   ambient.png (optional), mask.png (optional, 8-bit), truth/ (simulated sets:
+//   normals.pfm xyz, mask.png 8-bit, albedo.png 16-bit, depth.pfm).
+//
+// DiLiGenT (detected by filenames.txt):
+//   filenames.txt          one image file per line, in light order
+//   light_directions.txt   "x y z" per line, unit vectors in the rig frame
+//   light_intensities.txt  optional, "r g b" per line
+//   mask.png               optional object mask
+//
+// Thesis layout (anything else with a lights.txt): the PPM/PFM files of the
+// thesis's experiments, arranged as
+//   lights.txt             one lamp per line, "x y z" (unit direction) optionally
+//                          followed by "r g b" (intensity); '#' starts a comment
+//   <N>.ppm|.pgm|.pfm|.png one image per lamp; N is a decimal number (leading
+//                          zeros allowed: 1.ppm, 02.ppm, ...); images are taken
+//                          in increasing N and matched to lights.txt line by line
+//   ambient.ppm|.pfm|.png  optional
+//   mask.pgm|.png          optional
+//   normals.pfm            optional reference normals (x,y,z in R,G,B), kept as truth
+// PFM photos are used as stored (linear, 1.0 = full scale).
+#include "veneer/io/imageset.hpp"
+
+#include <algorithm>
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <cstring>
+#include <ctime>
+#include <map>
+#include <set>
+#include <sstream>
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/core/utility.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "file_util.hpp"
+#include "veneer/io/image_io.hpp"
+#include "veneer/util/log.hpp"
+
+namespace veneer {
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+constexpr int kMaxSide = 1 << 16;
+constexpr size_t kMaxLights = 1024;
+
+std::string fmt_vec(const cv::Vec3d& v) {
+  char buf[96];
+  std::snprintf(buf, sizeof buf, "(%.6g, %.6g, %.6g)", v[0], v[1], v[2]);
+  return buf;
+}
+
+std::string size_text(cv::Size s) { return std::to_string(s.width) + "x" + std::to_string(s.height); }
+
+bool finite3(const cv::Vec3d& v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
+
+// A direction that is finite and of unit length within kUnitTolerance; else why not.
+std::string direction_problem(const cv::Vec3d& d) {
+  if (!finite3(d)) return "direction " + fmt_vec(d) + " is not finite";
+  double len = cv::norm(d);
+  if (std::abs(len - 1.0) > kUnitTolerance) {
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%.6g", len);
+    return "direction " + fmt_vec(d) + " has length " + buf + ", expected a unit vector";
+  }
+  return {};
+}
+
+std::string intensity_problem(const cv::Vec3d& v) {
+  if (!finite3(v)) return "intensity " + fmt_vec(v) + " is not finite";
+  if (v[0] < 0 || v[1] < 0 || v[2] < 0) return "intensity " + fmt_vec(v) + " is negative";
+  return {};
+}
+
+// A file named by a manifest or list must stay inside the set folder.
+std::string file_name_problem(const std::string& name) {
+  if (name.empty()) return "empty file name";
+  if (name.find('\0') != std::string::npos) return "file name contains a NUL byte";
+  fs::path p(name);
+  if (p.is_absolute()) return "file name \"" + name + "\" is absolute; it must be relative to the set folder";
+  for (const auto& part : p) {
+    if (part == "..") return "file name \"" + name + "\" leaves the set folder";
+  }
+  if (!p.has_filename()) return "file name \"" + name + "\" names a folder";
+  return {};
+}
+
+std::string utc_now() {
+  std::time_t t = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return buf;
+}
+
+std::string light_file_name(int index) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "light_%02d.png", index);
+  return buf;
+}
+
+// --- manifest parsing helpers ------------------------------------------------
+// Each returns an error text (empty = fine) so the caller can prefix the file.
+
+std::string get_vec3(const json& j, const std::string& what, cv::Vec3d& out) {
+  if (!j.is_array() || j.size() != 3) return what + " must be an array of 3 numbers";
+  for (int i = 0; i < 3; ++i) {
+    if (!j[static_cast<size_t>(i)].is_number()) return what + " must be an array of 3 numbers";
+    out[i] = j[static_cast<size_t>(i)].get<double>();
+  }
+  if (!finite3(out)) return what + " " + fmt_vec(out) + " is not finite";
+  return {};
+}
+
+std::string get_string(const json& obj, const char* key, std::string& out, bool required) {
+  auto it = obj.find(key);
+  if (it == obj.end() || it->is_null()) return required ? std::string("missing field \"") + key + "\"" : "";
+  if (!it->is_string()) return std::string("field \"") + key + "\" must be a string";
+  out = it->get<std::string>();
+  return {};
+}
+
+std::string get_number(const json& obj, const char* key, double& out) {
+  auto it = obj.find(key);
+  if (it == obj.end() || it->is_null()) return {};
+  if (!it->is_number()) return std::string("field \"") + key + "\" must be a number";
+  double v = it->get<double>();
+  if (!std::isfinite(v) || v < 0) return std::string("field \"") + key + "\" must be a finite number >= 0";
+  out = v;
+  return {};
+}
+
+std::string get_index(const json& obj, const char* key, const std::string& where, int& out) {
+  auto it = obj.find(key);
+  if (it == obj.end()) return where + ": missing field \"" + key + "\"";
+  if (!it->is_number_integer()) return where + ": field \"" + key + "\" must be an integer";
+  long long v = it->get<long long>();
+  if (v < 0 || v >= static_cast<long long>(kMaxLights))
+    return where + ": field \"" + key + "\" = " + std::to_string(v) + " is out of range";
+  out = static_cast<int>(v);
+  return {};
+}
+
+Expected<Manifest> parse_manifest_json(const json& root, const fs::path& folder) {
+  Manifest m;
+  ImageSet& set = m.set;
+  set.origin = folder;
+  if (!root.is_object()) return make_error("the manifest must be a JSON object");
+
+  std::string format;
+  if (auto e = get_string(root, "format", format, true); !e.empty()) return make_error(e);
+  if (format != kSetFormat)
+    return make_error("format is \"" + format.substr(0, 64) + "\", expected \"" + kSetFormat + "\"");
+
+  if (auto e = get_string(root, "id", set.id, false); !e.empty()) return make_error(e);
+  if (set.id.empty()) set.id = folder.filename().string();
+  std::string role = "unknown";
+  if (auto e = get_string(root, "role", role, false); !e.empty()) return make_error(e);
+  auto parsed_role = parse_role(role);
+  if (!parsed_role) return make_error("role \"" + role.substr(0, 64) + "\" is not destination, source or unknown");
+  set.role = *parsed_role;
+  if (auto e = get_string(root, "object", set.object, false); !e.empty()) return make_error(e);
+  if (auto e = get_string(root, "created", set.created, false); !e.empty()) return make_error(e);
+  if (auto e = get_string(root, "scene", set.scene, false); !e.empty()) return make_error(e);
+
+  auto size = root.find("size");
+  if (size == root.end()) return make_error("missing field \"size\"");
+  if (!size->is_array() || size->size() != 2 || !(*size)[0].is_number_integer() || !(*size)[1].is_number_integer())
+    return make_error("field \"size\" must be [width, height] in pixels");
+  long long w = (*size)[0].get<long long>(), h = (*size)[1].get<long long>();
+  if (w <= 0 || h <= 0 || w > kMaxSide || h > kMaxSide)
+    return make_error("size [" + std::to_string(w) + ", " + std::to_string(h) + "] is not a valid image size");
+  set.size = cv::Size(static_cast<int>(w), static_cast<int>(h));
+
+  if (auto cam = root.find("camera"); cam != root.end() && !cam->is_null()) {
+    if (!cam->is_object()) return make_error("field \"camera\" must be an object");
+    CameraInfo& c = set.camera;
+    if (auto e = get_string(*cam, "model", c.model, false); !e.empty()) return make_error("camera: " + e);
+    for (auto [key, dst] : {std::pair{"exposure_s", &c.exposure_s}, std::pair{"aperture", &c.aperture},
+                            std::pair{"focal_px", &c.focal_px}, std::pair{"cx", &c.cx}, std::pair{"cy", &c.cy}}) {
+      if (auto e = get_number(*cam, key, *dst); !e.empty()) return make_error("camera: " + e);
+    }
+    if (auto iso = cam->find("iso"); iso != cam->end() && !iso->is_null()) {
+      if (!iso->is_number_integer() || iso->get<long long>() < 0 || iso->get<long long>() > 10'000'000)
+        return make_error("camera: field \"iso\" must be a non-negative integer");
+      c.iso = static_cast<int>(iso->get<long long>());
+    }
+  }
+
+  auto lights = root.find("lights");
+  if (lights == root.end()) return make_error("missing field \"lights\"");
+  if (!lights->is_array() || lights->empty()) return make_error("field \"lights\" must be a non-empty array");
+  if (lights->size() > kMaxLights) return make_error("too many lights (" + std::to_string(lights->size()) + ")");
+  std::map<int, Light> by_index;
+  for (size_t i = 0; i < lights->size(); ++i) {
+    const json& jl = (*lights)[i];
+    const std::string where = "lights[" + std::to_string(i) + "]";
+    if (!jl.is_object()) return make_error(where + " must be an object");
+    Light light;
+    if (auto e = get_index(jl, "index", where, light.index); !e.empty()) return make_error(e);
+    const std::string lw = "light " + std::to_string(light.index);
+    if (by_index.count(light.index)) return make_error("duplicate light index " + std::to_string(light.index));
+    if (auto e = get_string(jl, "lamp_id", light.lamp_id, false); !e.empty()) return make_error(lw + ": " + e);
+    auto dir = jl.find("direction");
+    if (dir == jl.end()) return make_error(lw + ": missing field \"direction\"");
+    if (auto e = get_vec3(*dir, "direction", light.direction); !e.empty()) return make_error(lw + ": " + e);
+    if (auto e = direction_problem(light.direction); !e.empty()) return make_error(lw + ": " + e);
+    if (auto pos = jl.find("position_m"); pos != jl.end() && !pos->is_null()) {
+      cv::Vec3d p;
+      if (auto e = get_vec3(*pos, "position_m", p); !e.empty()) return make_error(lw + ": " + e);
+      light.position_m = p;
+    }
+    if (auto in = jl.find("intensity"); in != jl.end() && !in->is_null()) {
+      cv::Vec3d v;
+      if (auto e = get_vec3(*in, "intensity", v); !e.empty()) return make_error(lw + ": " + e);
+      if (auto e = intensity_problem(v); !e.empty()) return make_error(lw + ": " + e);
+      light.intensity = cv::Vec3f(static_cast<float>(v[0]), static_cast<float>(v[1]), static_cast<float>(v[2]));
+    }
+    by_index.emplace(light.index, std::move(light));
+  }
+  // Indices are positions in the light list: 0..n-1, each once.
+  int expect = 0;
+  for (auto& [index, light] : by_index) {
+    if (index != expect)
+      return make_error("light indices must be 0.." + std::to_string(by_index.size() - 1) + ", but light " +
+                        std::to_string(expect) + " is missing");
+    set.lights.push_back(light);
+    ++expect;
+  }
+
+  auto images = root.find("images");
+  if (images == root.end()) return make_error("missing field \"images\"");
+  if (!images->is_array()) return make_error("field \"images\" must be an array");
+  if (images->size() != set.lights.size())
+    return make_error("lists " + std::to_string(set.lights.size()) + " lights but " + std::to_string(images->size()) +
+                      " images; every light needs exactly one image");
+  m.image_files.assign(set.lights.size(), fs::path());
+  std::set<std::string> seen_files;
+  for (size_t i = 0; i < images->size(); ++i) {
+    const json& ji = (*images)[i];
+    const std::string where = "images[" + std::to_string(i) + "]";
+    if (!ji.is_object()) return make_error(where + " must be an object");
+    int light = 0;
+    if (auto e = get_index(ji, "light", where, light); !e.empty()) return make_error(e);
+    if (light >= static_cast<int>(set.lights.size()))
+      return make_error(where + ": light " + std::to_string(light) + " is not in the light list (" +
+                        std::to_string(set.lights.size()) + " lights)");
+    if (!m.image_files[static_cast<size_t>(light)].empty())
+      return make_error(where + ": light " + std::to_string(light) + " has more than one image");
+    std::string file;
+    if (auto e = get_string(ji, "file", file, true); !e.empty()) return make_error(where + ": " + e);
+    if (auto e = file_name_problem(file); !e.empty()) return make_error(where + ": " + e);
+    if (!seen_files.insert(file).second) return make_error(where + ": file \"" + file + "\" is listed twice");
+    m.image_files[static_cast<size_t>(light)] = file;
+  }
+
+  for (auto [key, dst] : {std::pair{"ambient", &m.ambient_file}, std::pair{"mask", &m.mask_file}}) {
+    std::string file;
+    if (auto e = get_string(root, key, file, false); !e.empty()) return make_error(e);
+    if (file.empty()) continue;
+    if (auto e = file_name_problem(file); !e.empty()) return make_error(std::string(key) + ": " + e);
+    *dst = file;
+  }
+
+  if (auto warn = root.find("warnings"); warn != root.end() && !warn->is_null()) {
+    if (!warn->is_array()) return make_error("field \"warnings\" must be an array of strings");
+    for (const auto& w : *warn) {
+      if (!w.is_string()) return make_error("field \"warnings\" must be an array of strings");
+      set.warnings.push_back(w.get<std::string>());
+    }
+  }
+  return m;
+}
+
+// --- loading pixels ------------------------------------------------------------
+
+// Loads `files` (absolute) in parallel into CV_32FC3; the first error wins (by
+// list order, so the message does not depend on thread timing).
+Status load_images(const std::vector<fs::path>& files, std::vector<cv::Mat>& out) {
+  out.assign(files.size(), cv::Mat());
+  std::vector<std::string> errors(files.size());
+  cv::parallel_for_(cv::Range(0, static_cast<int>(files.size())), [&](const cv::Range& r) {
+    for (int i = r.start; i < r.end; ++i) {
+      auto image = read_linear_image(files[static_cast<size_t>(i)]);
+      if (image) {
+        out[static_cast<size_t>(i)] = std::move(image).value();
+      } else {
+        errors[static_cast<size_t>(i)] = image.message();
+      }
+    }
+  });
+  for (const auto& e : errors) {
+    if (!e.empty()) return make_error(e);
+  }
+  return Status::success();
+}
+
+Status check_size(const fs::path& file, const cv::Mat& image, cv::Size expected, const std::string& why) {
+  if (image.size() != expected)
+    return make_error(file.string() + ": image is " + size_text(image.size()) + " but " + why + " is " +
+                      size_text(expected));
+  return Status::success();
+}
+
+Status load_truth(const fs::path& truth_dir, ImageSet& set) {
+  std::error_code ec;
+  if (!fs::is_directory(truth_dir, ec)) return Status::success();
+  Truth& t = set.truth;
+  const std::string why = "the set's size";
+  if (fs::path f = truth_dir / "normals.pfm"; fs::exists(f, ec)) {
+    auto n = read_pfm(f, true);
+    if (!n) return n.error();
+    if (n->channels() != 3) return make_error(f.string() + ": normals must have 3 channels (x, y, z)");
+    if (Status s = check_size(f, *n, set.size, why); !s) return s;
+    t.normals = std::move(n).value();
+  }
+  if (fs::path f = truth_dir / "mask.png"; fs::exists(f, ec)) {
+    auto m = read_mask(f);
+    if (!m) return m.error();
+    if (Status s = check_size(f, *m, set.size, why); !s) return s;
+    t.mask = std::move(m).value();
+  }
+  if (fs::path f = truth_dir / "albedo.png"; fs::exists(f, ec)) {
+    auto a = read_linear_image(f);
+    if (!a) return a.error();
+    if (Status s = check_size(f, *a, set.size, why); !s) return s;
+    t.albedo = std::move(a).value();
+  }
+  if (fs::path f = truth_dir / "depth.pfm"; fs::exists(f, ec)) {
+    auto d = read_pfm(f, true);
+    if (!d) return d.error();
+    if (d->channels() != 1) return make_error(f.string() + ": depth must have 1 channel");
+    if (Status s = check_size(f, *d, set.size, why); !s) return s;
+    t.depth = std::move(d).value();
+  }
+  return Status::success();
+}
+
+Expected<ImageSet> read_veneer(const fs::path& folder, const ReadOptions& options) {
+  const fs::path manifest_file = folder / "set.json";
+  auto text = read_file_bytes(manifest_file);
+  if (!text) return text.error();
+  auto manifest = parse_manifest(*text, folder);
+  if (!manifest) return manifest.error();
+  ImageSet set = std::move(manifest->set);
+  std::vector<fs::path> files;
+  for (const auto& f : manifest->image_files) files.push_back(folder / f);
+  if (Status s = load_images(files, set.images); !s) return s.error();
+  const std::string why = "set.json's size";
+  for (size_t i = 0; i < files.size(); ++i) {
+    if (Status s = check_size(files[i], set.images[i], set.size, why); !s) return s.error();
+  }
+  if (!manifest->ambient_file.empty()) {
+    fs::path f = folder / manifest->ambient_file;
+    auto a = read_linear_image(f);
+    if (!a) return a.error();
+    if (Status s = check_size(f, *a, set.size, why); !s) return s.error();
+    set.ambient = std::move(a).value();
+  }
+  if (!manifest->mask_file.empty()) {
+    fs::path f = folder / manifest->mask_file;
+    auto m = read_mask(f);
+    if (!m) return m.error();
+    if (Status s = check_size(f, *m, set.size, why); !s) return s.error();
+    set.mask = std::move(m).value();
+  }
+  if (options.load_truth) {
+    if (Status s = load_truth(folder / "truth", set); !s) return s.error();
+  }
+  return set;
+}
+
+// --- text lists (DiLiGenT, thesis) -----------------------------------------------
+
+struct Line {
+  int number;  // 1-based
+  std::string text;
+};
+
+// Non-empty lines with '#' comments and surrounding blanks removed.
+Expected<std::vector<Line>> read_lines(const fs::path& file) {
+  auto bytes = read_file_bytes(file);
+  if (!bytes) return bytes.error();
+  if (bytes->find('\0') != std::string::npos) return make_error(file.string() + ": not a text file");
+  std::vector<Line> lines;
+  std::stringstream ss(*bytes);
+  std::string line;
+  int number = 0;
+  while (std::getline(ss, line)) {
+    ++number;
+    if (auto hash = line.find('#'); hash != std::string::npos) line.erase(hash);
+    auto first = line.find_first_not_of(" \t\r");
+    if (first == std::string::npos) continue;
+    auto last = line.find_last_not_of(" \t\r");
+    lines.push_back({number, line.substr(first, last - first + 1)});
+  }
+  return lines;
+}
+
+// Parses whitespace-separated numbers (strict: every token must be a number).
+bool parse_numbers(const std::string& text, std::vector<double>& out) {
+  out.clear();
+  std::stringstream ss(text);
+  std::string token;
+  while (ss >> token) {
+    double v = 0;
+    const char* begin = token.data();
+    const char* end = begin + token.size();
+    if (*begin == '+') ++begin;
+    auto [p, ec] = std::from_chars(begin, end, v);
+    if (ec != std::errc() || p != end) return false;
+    out.push_back(v);
+  }
+  return true;
+}
+
+// "x y z" (and optionally "r g b" when allow_rgb) per line.
+Status parse_light_lines(const fs::path& file, const std::vector<Line>& lines, bool allow_rgb,
+                         std::vector<Light>& lights) {
+  std::vector<double> v;
+  for (const Line& line : lines) {
+    const std::string where = file.string() + " line " + std::to_string(line.number);
+    if (!parse_numbers(line.text, v) || !(v.size() == 3 || (allow_rgb && v.size() == 6)))
+      return make_error(where + ": expected \"x y z\"" + std::string(allow_rgb ? " or \"x y z r g b\"" : "") +
+                        ", got \"" + line.text.substr(0, 80) + "\"");
+    Light light;
+    light.index = static_cast<int>(lights.size());
+    light.direction = cv::Vec3d(v[0], v[1], v[2]);
+    if (auto e = direction_problem(light.direction); !e.empty()) return make_error(where + ": " + e);
+    if (v.size() == 6) {
+      cv::Vec3d in(v[3], v[4], v[5]);
+      if (auto e = intensity_problem(in); !e.empty()) return make_error(where + ": " + e);
+      light.intensity = cv::Vec3f(static_cast<float>(in[0]), static_cast<float>(in[1]), static_cast<float>(in[2]));
+    }
+    lights.push_back(light);
+  }
+  return Status::success();
+}
+
+Status check_same_sizes(const std::vector<fs::path>& files, const std::vector<cv::Mat>& images) {
+  for (size_t i = 1; i < images.size(); ++i) {
+    if (images[i].size() != images[0].size())
+      return make_error(files[i].string() + ": image is " + size_text(images[i].size()) + " but " +
+                        files[0].filename().string() + " is " + size_text(images[0].size()) +
+                        " (all images of a set must have the same size)");
+  }
+  return Status::success();
+}
+
+std::string folder_name(const fs::path& folder) {
+  fs::path f = folder;
+  if (!f.has_filename()) f = f.parent_path();
+  return f.filename().string();
+}
+
+Expected<ImageSet> read_diligent(const fs::path& folder) {
+  ImageSet set;
+  set.origin = folder;
+  set.id = set.object = folder_name(folder);
+  const fs::path names_file = folder / "filenames.txt";
+  const fs::path dirs_file = folder / "light_directions.txt";
+  const fs::path ints_file = folder / "light_intensities.txt";
+  auto names = read_lines(names_file);
+  if (!names) return names.error();
+  if (names->empty()) return make_error(names_file.string() + ": lists no images");
+  if (names->size() > kMaxLights) return make_error(names_file.string() + ": too many images");
+  auto dirs = read_lines(dirs_file);
+  if (!dirs) return dirs.error();
+  if (dirs->size() != names->size())
+    return make_error(dirs_file.string() + ": has " + std::to_string(dirs->size()) + " directions but " +
+                      names_file.filename().string() + " lists " + std::to_string(names->size()) + " images");
+  if (Status s = parse_light_lines(dirs_file, *dirs, false, set.lights); !s) return s.error();
+  std::error_code ec;
+  if (fs::exists(ints_file, ec)) {
+    auto ints = read_lines(ints_file);
+    if (!ints) return ints.error();
+    if (ints->size() != names->size())
+      return make_error(ints_file.string() + ": has " + std::to_string(ints->size()) + " intensities but " +
+                        names_file.filename().string() + " lists " + std::to_string(names->size()) + " images");
+    std::vector<double> v;
+    for (size_t i = 0; i < ints->size(); ++i) {
+      const Line& line = (*ints)[i];
+      const std::string where = ints_file.string() + " line " + std::to_string(line.number);
+      if (!parse_numbers(line.text, v) || v.size() != 3)
+        return make_error(where + ": expected \"r g b\", got \"" + line.text.substr(0, 80) + "\"");
+      cv::Vec3d in(v[0], v[1], v[2]);
+      if (auto e = intensity_problem(in); !e.empty()) return make_error(where + ": " + e);
+      set.lights[i].intensity = cv::Vec3f(static_cast<float>(v[0]), static_cast<float>(v[1]), static_cast<float>(v[2]));
+    }
+  }
+  std::vector<fs::path> files;
+  for (const Line& line : *names) {
+    if (auto e = file_name_problem(line.text); !e.empty())
+      return make_error(names_file.string() + " line " + std::to_string(line.number) + ": " + e);
+    files.push_back(folder / line.text);
+    set.lights[files.size() - 1].lamp_id = fs::path(line.text).stem().string();
+  }
+  if (Status s = load_images(files, set.images); !s) return s.error();
+  if (Status s = check_same_sizes(files, set.images); !s) return s.error();
+  set.size = set.images[0].size();
+  if (fs::path f = folder / "mask.png"; fs::exists(f, ec)) {
+    auto m = read_mask(f);
+    if (!m) return m.error();
+    if (Status s = check_size(f, *m, set.size, "the images' size"); !s) return s.error();
+    set.mask = std::move(m).value();
+  }
+  return set;
+}
+
+// The first existing file among folder/<stem>.<ext> for the given extensions.
+fs::path find_with_ext(const fs::path& folder, const std::string& stem, std::initializer_list<const char*> exts) {
+  std::error_code ec;
+  for (const char* ext : exts) {
+    fs::path f = folder / (stem + ext);
+    if (fs::is_regular_file(f, ec)) return f;
+  }
+  return {};
+}
+
+Expected<ImageSet> read_thesis(const fs::path& folder) {
+  std::error_code ec;
+  if (!fs::is_directory(folder, ec)) return make_error(folder.string() + ": not a folder");
+  const fs::path lights_file = folder / "lights.txt";
+  if (!fs::exists(lights_file, ec))
+    return make_error(folder.string() + ": not an image set (no set.json, filenames.txt or lights.txt)");
+  ImageSet set;
+  set.origin = folder;
+  set.id = set.object = folder_name(folder);
+  auto lines = read_lines(lights_file);
+  if (!lines) return lines.error();
+  if (lines->empty()) return make_error(lights_file.string() + ": lists no lights");
+  if (lines->size() > kMaxLights) return make_error(lights_file.string() + ": too many lights");
+  if (Status s = parse_light_lines(lights_file, *lines, true, set.lights); !s) return s.error();
+
+  std::map<long, fs::path> numbered;
+  for (const auto& entry : fs::directory_iterator(folder, ec)) {
+    if (!entry.is_regular_file(ec)) continue;
+    const fs::path& p = entry.path();
+    std::string ext = p.extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+    if (ext != ".ppm" && ext != ".pgm" && ext != ".pfm" && ext != ".png") continue;
+    std::string stem = p.stem().string();
+    if (stem.empty() || stem.size() > 6 || !std::all_of(stem.begin(), stem.end(), [](char c) { return c >= '0' && c <= '9'; }))
+      continue;
+    long n = std::stol(stem);
+    if (auto [it, fresh] = numbered.emplace(n, p); !fresh)
+      return make_error(p.string() + ": two images carry number " + std::to_string(n) + " (also " +
+                        it->second.filename().string() + ")");
+  }
+  if (ec) return make_error(folder.string() + ": cannot list folder: " + ec.message());
+  if (numbered.size() != set.lights.size())
+    return make_error(lights_file.string() + ": lists " + std::to_string(set.lights.size()) + " lights but the folder has " +
+                      std::to_string(numbered.size()) + " numbered images (<N>.ppm, .pgm, .pfm or .png)");
+  std::vector<fs::path> files;
+  for (auto& [n, p] : numbered) {
+    set.lights[files.size()].lamp_id = p.stem().string();
+    files.push_back(p);
+  }
+  if (Status s = load_images(files, set.images); !s) return s.error();
+  if (Status s = check_same_sizes(files, set.images); !s) return s.error();
+  set.size = set.images[0].size();
+  const std::string why = "the images' size";
+  if (fs::path f = find_with_ext(folder, "ambient", {".ppm", ".pgm", ".pfm", ".png"}); !f.empty()) {
+    auto a = read_linear_image(f);
+    if (!a) return a.error();
+    if (Status s = check_size(f, *a, set.size, why); !s) return s.error();
+    set.ambient = std::move(a).value();
+  }
+  if (fs::path f = find_with_ext(folder, "mask", {".pgm", ".png", ".ppm"}); !f.empty()) {
+    auto m = read_mask(f);
+    if (!m) return m.error();
+    if (Status s = check_size(f, *m, set.size, why); !s) return s.error();
+    set.mask = std::move(m).value();
+  }
+  if (fs::path f = folder / "normals.pfm"; fs::is_regular_file(f, ec)) {
+    auto n = read_pfm(f, true);
+    if (!n) return n.error();
+    if (n->channels() != 3) return make_error(f.string() + ": normals must have 3 channels (x, y, z)");
+    if (Status s = check_size(f, *n, set.size, why); !s) return s.error();
+    set.truth.normals = std::move(n).value();
+  }
+  return set;
+}
+
+// --- writing ---------------------------------------------------------------------
+
+json vec_json(const cv::Vec3d& v) { return json::array({v[0], v[1], v[2]}); }
+
+// Removes temporary folders left beside `target` by writers that died.
+void clean_stale_temps(const fs::path& target) {
+  std::error_code ec;
+  fs::path parent = target.parent_path().empty() ? fs::path(".") : target.parent_path();
+  for (const auto& entry : fs::directory_iterator(parent, ec)) {
+    const std::string name = entry.path().filename().string();
+    for (const char* kind : {"tmp", "old"}) {
+      long pid = io_detail::temp_sibling_pid(target, name, kind);
+      if (pid <= 0) continue;
+      if (pid == static_cast<long>(::getpid())) continue;  // ours, maybe another thread's
+      if (::kill(static_cast<pid_t>(pid), 0) == 0 || errno != ESRCH) continue;
+      std::error_code rm;
+      fs::remove_all(entry.path(), rm);
+      VLOG_INFO("ImageSet", "removed {} left by a writer that stopped (pid {})", entry.path().string(), pid);
+    }
+  }
+}
+
+// Removes a folder on scope exit unless released.
+struct FolderGuard {
+  fs::path path;
+  ~FolderGuard() {
+    if (path.empty()) return;
+    std::error_code ec;
+    fs::remove_all(path, ec);
+  }
+};
+
+Status write_bytes(const fs::path& file, const Expected<std::string>& bytes) {
+  if (!bytes) return make_error(file.string() + ": " + bytes.message());
+  return io_detail::write_file_synced(file, *bytes);
+}
+
+Expected<std::string> encode_png8(const cv::Mat& mask) {
+  std::vector<uchar> buffer;
+  try {
+    if (!cv::imencode(".png", mask, buffer)) return make_error("PNG encoder failed");
+  } catch (const cv::Exception& e) {
+    return make_error(std::string("PNG encoder failed: ") + e.what());
+  }
+  return std::string(buffer.begin(), buffer.end());
+}
+
+Status write_contents(const ImageSet& set, const fs::path& dir) {
+  // Encode the photos in parallel (the slow part), then write them in order.
+  std::vector<Expected<std::string>> encoded(set.images.size(), Expected<std::string>(std::string()));
+  cv::parallel_for_(cv::Range(0, static_cast<int>(set.images.size())), [&](const cv::Range& r) {
+    for (int i = r.start; i < r.end; ++i) encoded[static_cast<size_t>(i)] = encode_png16(set.images[static_cast<size_t>(i)]);
+  });
+  for (size_t i = 0; i < set.images.size(); ++i) {
+    if (Status s = write_bytes(dir / light_file_name(set.lights[i].index), encoded[i]); !s) return s;
+    encoded[i] = std::string();
+  }
+  if (!set.ambient.empty()) {
+    if (Status s = write_bytes(dir / "ambient.png", encode_png16(set.ambient)); !s) return s;
+  }
+  if (!set.mask.empty()) {
+    if (Status s = write_bytes(dir / "mask.png", encode_png8(set.mask)); !s) return s;
+  }
+  const Truth& t = set.truth;
+  if (!t.normals.empty() || !t.mask.empty() || !t.albedo.empty() || !t.depth.empty()) {
+    fs::path truth = dir / "truth";
+    std::error_code ec;
+    if (!fs::create_directory(truth, ec)) return make_error(truth.string() + ": cannot create folder: " + ec.message());
+    if (!t.normals.empty()) {
+      if (Status s = io_detail::write_file_synced(truth / "normals.pfm", encode_pfm(t.normals, true)); !s) return s;
+    }
+    if (!t.mask.empty()) {
+      if (Status s = write_bytes(truth / "mask.png", encode_png8(t.mask)); !s) return s;
+    }
+    if (!t.albedo.empty()) {
+      if (Status s = write_bytes(truth / "albedo.png", encode_png16(t.albedo)); !s) return s;
+    }
+    if (!t.depth.empty()) {
+      if (Status s = io_detail::write_file_synced(truth / "depth.pfm", encode_pfm(t.depth, true)); !s) return s;
+    }
+    if (Status s = io_detail::fsync_dir(truth); !s) return s;
+  }
+  // The manifest last: a folder with a set.json has everything it names.
+  if (Status s = io_detail::write_file_synced(dir / "set.json", manifest_json(set)); !s) return s;
+  return io_detail::fsync_dir(dir);
+}
+
+}  // namespace
+
+// --- public ----------------------------------------------------------------------
+
+const char* role_name(Role role) {
+  switch (role) {
+    case Role::destination: return "destination";
+    case Role::source: return "source";
+    case Role::unknown: break;
+  }
+  return "unknown";
+}
+
+std::optional<Role> parse_role(const std::string& name) {
+  if (name == "destination") return Role::destination;
+  if (name == "source") return Role::source;
+  if (name == "unknown" || name.empty()) return Role::unknown;
+  return std::nullopt;
+}
+
+Expected<Manifest> parse_manifest(const std::string& text, const fs::path& folder) {
+  const std::string name = (folder / "set.json").string();
+  try {
+    json root = json::parse(text);
+    auto manifest = parse_manifest_json(root, folder);
+    if (!manifest) return make_error(name + ": " + manifest.message());
+    return manifest;
+  } catch (const json::exception& e) {
+    // e.what() reads "[json.exception.parse_error.101] parse error at line 1, ...".
+    std::string what = e.what();
+    if (auto close = what.find("] "); close != std::string::npos) what = what.substr(close + 2);
+    return make_error(name + ": malformed JSON: " + what.substr(0, 200));
+  }
+}
+
+std::string manifest_json(const ImageSet& set) {
+  json root;
+  root["format"] = kSetFormat;
+  root["id"] = set.id;
+  root["role"] = role_name(set.role);
+  root["object"] = set.object;
+  root["created"] = set.created;
+  root["size"] = json::array({set.size.width, set.size.height});
+  json camera;
+  camera["model"] = set.camera.model;
+  camera["exposure_s"] = set.camera.exposure_s;
+  camera["aperture"] = set.camera.aperture;
+  camera["iso"] = set.camera.iso;
+  if (set.camera.focal_px > 0) {
+    camera["focal_px"] = set.camera.focal_px;
+    camera["cx"] = set.camera.cx;
+    camera["cy"] = set.camera.cy;
+  }
+  root["camera"] = camera;
+  json lights = json::array(), images = json::array();
+  for (const Light& l : set.lights) {
+    json jl;
+    jl["index"] = l.index;
+    jl["lamp_id"] = l.lamp_id;
+    if (l.position_m) jl["position_m"] = vec_json(*l.position_m);
+    jl["direction"] = vec_json(l.direction);
+    jl["intensity"] = json::array({l.intensity[0], l.intensity[1], l.intensity[2]});
+    lights.push_back(jl);
+    images.push_back(json{{"light", l.index}, {"file", light_file_name(l.index)}});
+  }
+  root["lights"] = lights;
+  root["images"] = images;
+  root["ambient"] = set.ambient.empty() ? json(nullptr) : json("ambient.png");
+  if (!set.mask.empty()) root["mask"] = "mask.png";
+  if (!set.warnings.empty()) root["warnings"] = set.warnings;
+  if (!set.scene.empty()) root["scene"] = set.scene;
+  // Non-finite numbers cannot be written as JSON; validate() keeps them out.
+  return root.dump(2, ' ', false, json::error_handler_t::replace) + "\n";
+}
+
+Status validate(const ImageSet& set) {
+  if (set.size.width <= 0 || set.size.height <= 0 || set.size.width > kMaxSide || set.size.height > kMaxSide)
+    return make_error("size " + size_text(set.size) + " is not a valid image size");
+  if (set.lights.empty()) return make_error("the set has no lights");
+  if (set.lights.size() > kMaxLights) return make_error("the set has too many lights");
+  if (set.images.size() != set.lights.size())
+    return make_error("the set has " + std::to_string(set.lights.size()) + " lights but " +
+                      std::to_string(set.images.size()) + " images");
+  for (size_t i = 0; i < set.lights.size(); ++i) {
+    const Light& l = set.lights[i];
+    const std::string lw = "light " + std::to_string(i);
+    if (l.index != static_cast<int>(i))
+      return make_error(lw + ": index is " + std::to_string(l.index) + ", expected its position " + std::to_string(i));
+    if (auto e = direction_problem(l.direction); !e.empty()) return make_error(lw + ": " + e);
+    if (auto e = intensity_problem(cv::Vec3d(l.intensity[0], l.intensity[1], l.intensity[2])); !e.empty())
+      return make_error(lw + ": " + e);
+    if (l.position_m && !finite3(*l.position_m)) return make_error(lw + ": position_m " + fmt_vec(*l.position_m) + " is not finite");
+    const cv::Mat& im = set.images[i];
+    if (im.type() != CV_32FC3) return make_error("image " + std::to_string(i) + ": expected CV_32FC3 (linear BGR)");
+    if (im.size() != set.size)
+      return make_error("image " + std::to_string(i) + ": is " + size_text(im.size()) + " but the set is " + size_text(set.size));
+  }
+  auto check = [&](const cv::Mat& m, int type, const char* what, const char* type_name) -> Status {
+    if (m.empty()) return Status::success();
+    if (m.type() != type) return make_error(std::string(what) + ": expected " + type_name);
+    if (m.size() != set.size)
+      return make_error(std::string(what) + ": is " + size_text(m.size()) + " but the set is " + size_text(set.size));
+    return Status::success();
+  };
+  if (Status s = check(set.ambient, CV_32FC3, "ambient", "CV_32FC3"); !s) return s;
+  if (Status s = check(set.mask, CV_8UC1, "mask", "CV_8UC1"); !s) return s;
+  if (Status s = check(set.truth.normals, CV_32FC3, "truth normals", "CV_32FC3 (x, y, z)"); !s) return s;
+  if (Status s = check(set.truth.mask, CV_8UC1, "truth mask", "CV_8UC1"); !s) return s;
+  if (Status s = check(set.truth.albedo, CV_32FC3, "truth albedo", "CV_32FC3"); !s) return s;
+  if (Status s = check(set.truth.depth, CV_32FC1, "truth depth", "CV_32FC1"); !s) return s;
+  const CameraInfo& c = set.camera;
+  for (auto [name, v] : {std::pair{"exposure_s", c.exposure_s}, std::pair{"aperture", c.aperture},
+                         std::pair{"focal_px", c.focal_px}, std::pair{"cx", c.cx}, std::pair{"cy", c.cy}}) {
+    if (!std::isfinite(v) || v < 0) return make_error(std::string("camera ") + name + " must be a finite number >= 0");
+  }
+  if (c.iso < 0) return make_error("camera iso must be >= 0");
+  return Status::success();
+}
+
+Expected<ImageSet> read_set(const fs::path& folder, const ReadOptions& options) {
+  std::error_code ec;
+  if (!fs::exists(folder, ec)) return make_error(folder.string() + ": no such folder");
+  if (!fs::is_directory(folder, ec)) return make_error(folder.string() + ": not a folder");
+  SetFormat format = options.format;
+  if (format == SetFormat::automatic) {
+    if (fs::exists(folder / "set.json", ec)) {
+      format = SetFormat::veneer;
+    } else if (fs::exists(folder / "filenames.txt", ec)) {
+      format = SetFormat::diligent;
+    } else {
+      format = SetFormat::thesis;
+    }
+  }
+  Expected<ImageSet> set = make_error("unknown set format");
+  switch (format) {
+    case SetFormat::veneer: set = read_veneer(folder, options); break;
+    case SetFormat::diligent: set = read_diligent(folder); break;
+    case SetFormat::thesis: set = read_thesis(folder); break;
+    case SetFormat::automatic: break;
+  }
+  if (!set) return set;
+  // A last check of the invariants every reader promises.
+  if (Status s = validate(*set); !s) return make_error(folder.string() + ": " + s.message());
+  return set;
+}
+
+Status write_set(const ImageSet& set_in, const fs::path& folder_in, bool overwrite) {
+  fs::path folder = folder_in;
+  if (!folder.has_filename()) folder = folder.parent_path();  // "out/" -> "out"
+  if (folder.empty()) return make_error("write_set: empty folder name");
+  if (Status s = validate(set_in); !s) return make_error(folder.string() + ": cannot write set: " + s.message());
+  std::error_code ec;
+  const bool exists = fs::exists(fs::symlink_status(folder, ec));
+  if (exists && !overwrite) return make_error(folder.string() + ": already exists (not overwriting it)");
+  fs::path parent = folder.parent_path().empty() ? fs::path(".") : folder.parent_path();
+  fs::create_directories(parent, ec);
+  if (ec) return make_error(parent.string() + ": cannot create folder: " + ec.message());
+  clean_stale_temps(folder);
+
+  ImageSet set = set_in;  // shallow: cv::Mat shares pixels
+  if (set.created.empty()) set.created = utc_now();
+  if (set.id.empty()) set.id = folder.filename().string();
+
+  fs::path tmp = io_detail::temp_sibling(folder);
+  if (!fs::create_directory(tmp, ec)) return make_error(tmp.string() + ": cannot create temporary folder: " + ec.message());
+  FolderGuard guard{tmp};
+  if (Status s = write_contents(set, tmp); !s) return s;
+
+  if (!exists) {
+    // RENAME_NOREPLACE: a folder that appeared meanwhile is never replaced.
+    if (::renameat2(AT_FDCWD, tmp.c_str(), AT_FDCWD, folder.c_str(), RENAME_NOREPLACE) != 0) {
+      int err = errno;
+      if (err == EEXIST) return make_error(folder.string() + ": already exists (not overwriting it)");
+      if (err != EINVAL && err != ENOSYS) return make_error(folder.string() + ": cannot rename set into place: " + std::strerror(err));
+      if (::rename(tmp.c_str(), folder.c_str()) != 0)
+        return make_error(folder.string() + ": cannot rename set into place: " + std::strerror(errno));
+    }
+    guard.path.clear();
+  } else {
+    // Swap the new folder with the old one in one step, then drop the old.
+    if (::renameat2(AT_FDCWD, tmp.c_str(), AT_FDCWD, folder.c_str(), RENAME_EXCHANGE) != 0) {
+      int err = errno;
+      if (err != EINVAL && err != ENOSYS) return make_error(folder.string() + ": cannot swap the new set into place: " + std::strerror(err));
+      fs::path old = io_detail::temp_sibling(folder, "old");
+      if (::rename(folder.c_str(), old.c_str()) != 0)
+        return make_error(folder.string() + ": cannot move the old set aside: " + std::strerror(errno));
+      if (::rename(tmp.c_str(), folder.c_str()) != 0) {
+        int err2 = errno;
+        (void)::rename(old.c_str(), folder.c_str());
+        return make_error(folder.string() + ": cannot rename set into place: " + std::strerror(err2));
+      }
+      guard.path = old;
+    }
+    // guard.path now holds the old set (tmp after the exchange) and removes it.
+  }
+  return io_detail::fsync_dir(parent);
+}
+
+}  // namespace veneer
