@@ -1,0 +1,4 @@
+// The fast engine's maps against the exact methods.
+#include <gtest/gtest.h>
+
+#include "veneer/match/fast.hpp"

@@ -1,0 +1,124 @@
+// The fast engine's indices against an exact brute force.
+#include <cmath>
+#include <limits>
+#include <random>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "veneer/match/fast.hpp"
+
+namespace {
+
+using veneer::match::NearestIndex;
+
+// Exact k nearest, ties to the lower id, distances summed dimension by dimension.
+void brute_knn(const std::vector<float>& pts, int dims, const float* q, int k, std::vector<int>& ids,
+               std::vector<float>& d) {
+  const int n = static_cast<int>(pts.size()) / dims;
+  std::vector<std::pair<float, int>> all(n);
+  for (int i = 0; i < n; ++i) {
+    float s = 0;
+    for (int j = 0; j < dims; ++j) {
+      float t = pts[static_cast<size_t>(i) * dims + j] - q[j];
+      s += t * t;
+    }
+    all[i] = {s, i};
+  }
+  std::sort(all.begin(), all.end());
+  ids.assign(k, -1);
+  d.assign(k, std::numeric_limits<float>::infinity());
+  for (int j = 0; j < std::min(k, n); ++j) ids[j] = all[j].second, d[j] = all[j].first;
+}
+
+std::vector<float> unit_normals(int n, std::mt19937& rng, bool hemisphere, int duplicates) {
+  std::normal_distribution<float> g(0, 1);
+  std::vector<float> p;
+  for (int i = 0; i < n; ++i) {
+    float x = g(rng), y = g(rng), z = g(rng);
+    if (hemisphere) z = std::fabs(z) * 0.8f + 0.05f;
+    const float l = std::sqrt(x * x + y * y + z * z);
+    p.insert(p.end(), {x / l, y / l, z / l});
+  }
+  for (int i = 0; i < duplicates; ++i) {  // flat regions: many equal normals
+    const int from = static_cast<int>(rng() % n) * 3;
+    p.insert(p.end(), {p[from], p[from + 1], p[from + 2]});
+  }
+  return p;
+}
+
+void expect_same(NearestIndex& index, const std::vector<float>& pts, int dims, const std::vector<float>& queries,
+                 int k) {
+  index.build(pts.data(), static_cast<int>(pts.size()) / dims, dims);
+  std::vector<int> ids(k), bids;
+  std::vector<float> d(k), bd;
+  const int nq = static_cast<int>(queries.size()) / dims;
+  int mismatches = 0;
+  for (int i = 0; i < nq; ++i) {
+    const float* q = queries.data() + static_cast<size_t>(i) * dims;
+    index.knn(q, k, ids.data(), d.data());
+    brute_knn(pts, dims, q, k, bids, bd);
+    for (int j = 0; j < k; ++j) {
+      if (d[j] != bd[j] || ids[j] != bids[j]) ++mismatches;
+    }
+    if (mismatches) {
+      ADD_FAILURE() << index.name() << " query " << i << " k=" << k << " differs from brute force";
+      return;
+    }
+  }
+}
+
+TEST(FastIndex, KnownKinds) {
+  EXPECT_NE(veneer::match::fast::make_index("grid"), nullptr);
+  EXPECT_NE(veneer::match::fast::make_index("kdtree"), nullptr);
+  EXPECT_EQ(veneer::match::fast::make_index("nonsense"), nullptr);
+}
+
+TEST(FastIndex, NearestNormalEqualsBruteForce) {
+  std::mt19937 rng(7);
+  const auto src = unit_normals(3000, rng, true, 600);
+  auto queries = unit_normals(1500, rng, false, 0);  // whole sphere: includes the far side
+  queries.insert(queries.end(), {0.f, 0.f, 0.f, 0.3f, 0.1f, 0.2f, 2.f, -1.f, 0.5f, 0.f, 0.f, -1.f});
+  for (const char* kind : {"grid", "kdtree"}) {
+    auto index = veneer::match::fast::make_index(kind);
+    expect_same(*index, src, 3, queries, 1);
+  }
+}
+
+TEST(FastIndex, KnnListsEqualBruteForceForKUpTo100) {
+  std::mt19937 rng(11);
+  const auto src = unit_normals(2000, rng, false, 400);
+  const auto queries = unit_normals(120, rng, false, 0);
+  for (const char* kind : {"grid", "kdtree"}) {
+    auto index = veneer::match::fast::make_index(kind);
+    for (int k : {1, 2, 5, 17, 50, 100}) expect_same(*index, src, 3, queries, k);
+  }
+}
+
+TEST(FastIndex, GridStaysExactOnSmallGridsAndFewPoints) {
+  std::mt19937 rng(3);
+  for (int n : {1, 2, 7, 40}) {
+    const auto src = unit_normals(n, rng, true, 0);
+    const auto queries = unit_normals(200, rng, false, 0);
+    auto index = veneer::match::fast::make_index("grid");
+    expect_same(*index, src, 3, queries, std::min(n, 5));
+    expect_same(*index, src, 3, queries, 8);  // asks for more than there are
+  }
+}
+
+TEST(FastIndex, NonNormalPointsAndHigherDimensions) {
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> u(-2, 2);
+  for (int dims : {3, 7}) {
+    std::vector<float> src(2000 * dims), queries(100 * dims);
+    for (auto& v : src) v = u(rng);
+    for (auto& v : queries) v = u(rng);
+    for (const char* kind : {"grid", "kdtree"}) {
+      auto index = veneer::match::fast::make_index(kind);
+      expect_same(*index, src, dims, queries, 1);
+      expect_same(*index, src, dims, queries, 10);
+    }
+  }
+}
+
+}  // namespace

@@ -1,0 +1,52 @@
+#pragma once
+// The fast correspondence engine (issue 4): the default wherever it applies.
+//
+//  - Nearest normal through a lookup over the sphere of normals: an
+//    octahedral grid ("grid") filled from the source's object pixels, searched
+//    ring by ring until the best found is provably nearer than any unvisited
+//    cell (exact), or an exact low-dimensional kd-tree ("kdtree", nanoflann).
+//  - Patch and intensity features: a 3-D projection that is a lower bound of
+//    the full distance (patch mean, then the 3 principal directions) yields
+//    candidates from the same index; they are re-ranked by the exact full
+//    distance, and the answer is certified exact when the next unvisited
+//    candidate's lower bound exceeds it (else the candidate list grows up to a
+//    cap; the share of certified pixels is reported in Stats).
+//  - Fast patchmatch, regiongrow and candidates with the semantics of the
+//    faithful methods, and the `coherent` method (StyleBlit-style chunks).
+// Every per-pixel stage runs on all cores (TBB).
+#include <memory>
+#include <string>
+
+#include "veneer/match/index.hpp"
+#include "veneer/match/matcher.hpp"
+#include "veneer/util/expected.hpp"
+#include "veneer/util/progress.hpp"
+
+namespace veneer::match::fast {
+
+// True when the fast engine serves `options` (method x feature x patch).
+// `coherent` is served only here, whatever options.fast says.
+bool supports(const MatchOptions& options);
+
+// What the last run did, for benches and diagnostics.
+struct Stats {
+  std::string index;             // "grid" or "kdtree"
+  int projected_dims = 0;        // dims of the candidate search (3), 0 = searched at full dimension
+  double explained_variance = 1;  // share of the feature variance kept by the projection
+  double certified = 1;          // share of destination pixels whose nearest is proven exact
+  double seconds = 0;            // wall time of compute_map
+};
+
+Expected<Map> compute_map(const ObjectView& destination, const ObjectView& source, const MatchOptions& options,
+                          const Progress& progress = {});
+Expected<Map> compute_map(const ObjectView& destination, const ObjectView& source, const MatchOptions& options,
+                          const Progress& progress, Stats* stats);
+
+// "grid" (octahedral lookup, exact for any 3-D points, fastest on normals) or
+// "kdtree" (nanoflann, exact, any dimension); nullptr for other names.
+std::unique_ptr<NearestIndex> make_index(const std::string& kind);
+
+// The index kind compute_map uses for nearest normals (the faster one as measured).
+const char* default_index();
+
+}  // namespace veneer::match::fast

@@ -1,0 +1,35 @@
+#pragma once
+// Internal: the fast engine's indices (see fast.hpp).
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "veneer/match/fast.hpp"
+#include "veneer/match/index.hpp"
+
+namespace veneer::match::fast {
+
+// Exact nearest neighbours of 3-D points through an octahedral lookup over the
+// sphere of directions (index_fast.cpp explains why it is exact). Points far
+// from unit length, or dims != 3, are served by an internal kd-tree.
+class OctGridIndex final : public NearestIndex {
+ public:
+  explicit OctGridIndex(int cells_per_side = 0);  // 0 = chosen from the point count
+  ~OctGridIndex() override;
+  void build(const float* points, int n, int dims) override;
+  void knn(const float* query, int k, int* ids, float* sq_dists) const override;
+  std::string name() const override { return "grid"; }
+
+ private:
+  int fixed_side_ = 0, side_ = 0, n_ = 0, dims_ = 0;
+  float eps_ = 0;
+  const float* points_ = nullptr;
+  std::vector<float> xs_, ys_, zs_;  // points sorted by cell (SoA)
+  std::vector<int> ids_;
+  std::vector<int> start_;  // 2 layers x side^2 cells, CSR offsets
+  std::unique_ptr<NearestIndex> fallback_;
+};
+
+std::unique_ptr<NearestIndex> make_kdtree();
+
+}  // namespace veneer::match::fast
