@@ -42,7 +42,9 @@ struct PsOptions {
 };
 
 struct PsResult {
-  cv::Mat normals;   // CV_32FC3 x,y,z rig frame, unit; (0,0,0) outside the mask or unreliable
+  cv::Mat normals;   // CV_32FC3 x,y,z rig frame, unit; (0,0,0) outside the mask or where there is
+                     // no signal. A robust pixel with < 3 samples kept falls back to the plain
+                     // least-squares normal (and is marked unreliable), so maps have no holes.
   cv::Mat albedo;    // CV_32FC3 BGR, relative to lamp intensity (1 = white Lambertian); 0 outside
   cv::Mat mask;      // CV_8UC1, the pixels that were solved (the input mask, or all)
   cv::Mat reliable;  // CV_8UC1, 255 where the normal is trustworthy (>= 3 samples kept, signal present)

@@ -21,7 +21,7 @@ enum class SegmentMethod {
   automatic,  // set.mask when present, else otsu
   supplied,   // set.mask (fails when the set has none)
   threshold,  // fixed threshold on the mean grey intensity over lamps
-  otsu,       // Otsu's threshold on the mean grey intensity over lamps
+  otsu,       // Otsu's threshold on the log of the mean grey intensity over lamps
   none,       // every pixel (then the rectangle and cleaning still apply)
 };
 const char* segment_method_name(SegmentMethod);

@@ -1,0 +1,106 @@
+#pragma once
+// An analytic Lambertian sphere under point lamps (the Light::intensity
+// convention of imageset.hpp) or distant lights, with exact truth: the oracle
+// for the photometric-stereo tests and bench, independent of the simulator.
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "veneer/io/imageset.hpp"
+
+namespace veneer::ps::test {
+
+struct SynthOptions {
+  cv::Size size{256, 170};
+  double focal_scale = 1.3;        // focal length = focal_scale * width [px]
+  cv::Vec3d center{0, 0, 0};       // sphere centre, rig frame [m]
+  double radius = 0.08;            // [m]
+  cv::Vec3f albedo_bgr{0.5f, 0.6f, 0.7f};
+  bool distant = false;            // true: directional lights (no falloff, constant direction)
+  double noise = 0.0;              // Gaussian noise sigma (full scale 1)
+  double ambient = 0.0;            // uniform ambient added to every photo (and the ambient frame)
+  unsigned seed = 1;
+  double lamp_intensity = 1.0;
+};
+
+// The thesis rig: 8 sockets on a 0.47 m circle around the camera at (0,0,1), bottom one empty.
+inline std::vector<cv::Vec3d> rig_positions() {
+  std::vector<cv::Vec3d> p;
+  for (int k = 0; k < 8; ++k) {
+    const double a = k * CV_PI / 4;
+    if (k == 6) continue;  // 270 degrees: the empty bottom socket
+    p.emplace_back(0.47 * std::cos(a), 0.47 * std::sin(a), 1.0);
+  }
+  return p;
+}
+
+inline ImageSet synth_sphere(const SynthOptions& o) {
+  ImageSet set;
+  set.id = "synth";
+  set.object = "sphere";
+  set.size = o.size;
+  const double f = o.focal_scale * o.size.width, cx = (o.size.width - 1) * 0.5, cy = (o.size.height - 1) * 0.5;
+  set.camera.focal_px = f;
+  set.camera.cx = cx;
+  set.camera.cy = cy;
+  const auto pos = rig_positions();
+  const int n = static_cast<int>(pos.size());
+  for (int i = 0; i < n; ++i) {
+    Light l;
+    l.index = i;
+    l.lamp_id = "synth-" + std::to_string(i);
+    l.direction = pos[i] / cv::norm(pos[i]);
+    if (!o.distant) l.position_m = pos[i];
+    l.intensity = cv::Vec3f(float(o.lamp_intensity), float(o.lamp_intensity), float(o.lamp_intensity));
+    set.lights.push_back(l);
+    set.images.emplace_back(o.size, CV_32FC3, cv::Scalar::all(o.ambient));
+  }
+  if (o.ambient > 0) set.ambient = cv::Mat(o.size, CV_32FC3, cv::Scalar::all(o.ambient));
+  set.truth.normals = cv::Mat(o.size, CV_32FC3, cv::Scalar::all(0));
+  set.truth.mask = cv::Mat(o.size, CV_8UC1, cv::Scalar(0));
+  set.truth.albedo = cv::Mat(o.size, CV_32FC3, cv::Scalar::all(0));
+  set.truth.depth = cv::Mat(o.size, CV_32FC1, cv::Scalar(0));
+  const cv::Vec3d cam(0, 0, 1);
+  for (int v = 0; v < o.size.height; ++v) {
+    for (int u = 0; u < o.size.width; ++u) {
+      cv::Vec3d d((u - cx) / f, -(v - cy) / f, -1);
+      d /= cv::norm(d);
+      const cv::Vec3d oc = cam - o.center;
+      const double b = oc.dot(d), c = oc.dot(oc) - o.radius * o.radius, disc = b * b - c;
+      if (disc <= 0) continue;
+      const double t = -b - std::sqrt(disc);
+      const cv::Vec3d p = cam + t * d;
+      const cv::Vec3d nrm = (p - o.center) / o.radius;
+      set.truth.normals.at<cv::Vec3f>(v, u) = cv::Vec3f(nrm);
+      set.truth.mask.at<uint8_t>(v, u) = 255;
+      set.truth.albedo.at<cv::Vec3f>(v, u) = o.albedo_bgr;
+      set.truth.depth.at<float>(v, u) = static_cast<float>(1.0 - p[2]);
+      for (int i = 0; i < n; ++i) {
+        double shade;
+        if (o.distant) {
+          shade = std::max(0.0, nrm.dot(set.lights[i].direction));
+        } else {
+          const cv::Vec3d L = pos[i] - p;
+          const double d2 = L.dot(L);
+          shade = std::max(0.0, nrm.dot(L / std::sqrt(d2))) * pos[i].dot(pos[i]) / d2;
+        }
+        cv::Vec3f& px = set.images[i].at<cv::Vec3f>(v, u);
+        for (int ch = 0; ch < 3; ++ch) px[ch] += static_cast<float>(o.albedo_bgr[ch] * o.lamp_intensity * shade);
+      }
+    }
+  }
+  set.mask = cv::Mat();
+  if (o.noise > 0) {
+    std::mt19937 rng(o.seed);
+    std::normal_distribution<float> g(0.f, static_cast<float>(o.noise));
+    for (auto& im : set.images)
+      for (auto it = im.begin<cv::Vec3f>(); it != im.end<cv::Vec3f>(); ++it)
+        for (int ch = 0; ch < 3; ++ch) (*it)[ch] += g(rng);
+  }
+  for (auto& im : set.images) cv::min(cv::max(im, 0.0), 1.0, im);
+  return set;
+}
+
+}  // namespace veneer::ps::test

@@ -1,0 +1,293 @@
+// core/PhotometricStereo.*: normals against analytic truth, robust and
+// near-light modes, bad input.
+#include <gtest/gtest.h>
+
+#include "synth.hpp"
+#include "veneer/ps/photometric_stereo.hpp"
+
+namespace veneer::ps {
+namespace {
+
+using test::SynthOptions;
+using test::synth_sphere;
+
+AngularError solve_error(const ImageSet& set, const PsOptions& opt, PsResult* out = nullptr) {
+  auto r = photometric_stereo(set, set.truth.mask, opt);
+  EXPECT_TRUE(r.ok()) << (r.ok() ? "" : r.message());
+  if (!r.ok()) return {};
+  AngularError e = angular_error(r->normals, set.truth.normals, set.truth.mask);
+  if (out) *out = std::move(*r);
+  return e;
+}
+
+TEST(PhotometricStereo, DistantLightsExactSphere) {
+  SynthOptions o;
+  o.distant = true;
+  ImageSet set = synth_sphere(o);
+  PsOptions opt;
+  opt.light_model = LightModel::distant;
+  opt.robust = true;
+  PsResult r;
+  AngularError e = solve_error(set, opt, &r);
+  EXPECT_GT(e.pixels, 1500);
+  EXPECT_LT(e.mean_deg, 0.1);
+  EXPECT_LT(e.p95_deg, 0.3);
+  EXPECT_EQ(r.model_used, LightModel::distant);
+  // Albedo per channel is recovered (BGR).
+  cv::Scalar mean_albedo = cv::mean(r.albedo, r.reliable);
+  EXPECT_NEAR(mean_albedo[0], 0.5, 0.01);
+  EXPECT_NEAR(mean_albedo[1], 0.6, 0.01);
+  EXPECT_NEAR(mean_albedo[2], 0.7, 0.01);
+  // The fit is exact where no sample is shadowed: tiny residual.
+  EXPECT_LT(cv::mean(r.residual, r.reliable)[0], 0.01);
+  // Outside the mask normals are zero.
+  EXPECT_EQ(r.normals.at<cv::Vec3f>(0, 0), cv::Vec3f(0, 0, 0));
+}
+
+TEST(PhotometricStereo, PlainLeastSquaresIsBiasedByShadows) {
+  // Attached shadows near the limb violate the linear model: the robust mode
+  // drops those samples, plain least squares does not.
+  SynthOptions o;
+  o.distant = true;
+  ImageSet set = synth_sphere(o);
+  PsOptions robust, plain;
+  robust.light_model = plain.light_model = LightModel::distant;
+  plain.robust = false;
+  AngularError er = solve_error(set, robust), ep = solve_error(set, plain);
+  EXPECT_LT(er.mean_deg, ep.mean_deg);
+  EXPECT_GT(ep.p95_deg, 3 * er.p95_deg);
+}
+
+TEST(PhotometricStereo, AmbientIsSubtracted) {
+  SynthOptions o;
+  o.distant = true;
+  o.ambient = 0.05;
+  ImageSet set = synth_sphere(o);
+  PsOptions opt;
+  opt.light_model = LightModel::distant;
+  EXPECT_LT(solve_error(set, opt).mean_deg, 0.1);
+  opt.subtract_ambient = false;
+  EXPECT_GT(solve_error(set, opt).mean_deg, 1.0);
+}
+
+TEST(PhotometricStereo, NearLightModelCorrectsOffCentreSphere) {
+  SynthOptions o;
+  o.center = cv::Vec3d(0.10, 0.0, 0.0);
+  ImageSet set = synth_sphere(o);
+  PsOptions near_opt, distant_opt;
+  near_opt.light_model = LightModel::near;
+  distant_opt.light_model = LightModel::distant;
+  PsResult r;
+  AngularError en = solve_error(set, near_opt, &r), ed = solve_error(set, distant_opt);
+  EXPECT_EQ(r.model_used, LightModel::near);
+  EXPECT_LT(en.mean_deg, 1.0);
+  EXPECT_GT(ed.mean_deg, 2 * en.mean_deg);
+  EXPECT_GT(ed.mean_deg, 3.0);
+  // The refined depth follows the sphere: the centre pixel of the sphere is
+  // nearer the camera than its silhouette by about a radius.
+  ASSERT_FALSE(r.depth.empty());
+  cv::Mat diff;
+  cv::absdiff(r.depth, set.truth.depth, diff);
+  EXPECT_LT(cv::mean(diff, set.truth.mask)[0], 0.02);
+}
+
+TEST(PhotometricStereo, AutomaticPicksNearWhenLampPositionsKnown) {
+  SynthOptions o;
+  ImageSet set = synth_sphere(o);
+  auto r = photometric_stereo(set, set.truth.mask, {});
+  ASSERT_TRUE(r.ok()) << r.message();
+  EXPECT_EQ(r->model_used, LightModel::near);
+  for (auto& l : set.lights) l.position_m.reset();
+  r = photometric_stereo(set, set.truth.mask, {});
+  ASSERT_TRUE(r.ok()) << r.message();
+  EXPECT_EQ(r->model_used, LightModel::distant);
+}
+
+TEST(PhotometricStereo, RobustBeatsPlainUnderNoise) {
+  SynthOptions o;
+  o.noise = 0.01;
+  o.seed = 7;
+  ImageSet set = synth_sphere(o);
+  PsOptions robust, plain;
+  plain.robust = false;
+  AngularError er = solve_error(set, robust), ep = solve_error(set, plain);
+  EXPECT_LT(er.mean_deg, 3.0);
+  EXPECT_LT(er.mean_deg, ep.mean_deg);
+}
+
+TEST(PhotometricStereo, SaturatedSamplesAreDropped) {
+  SynthOptions o;
+  o.distant = true;
+  o.lamp_intensity = 1.6;  // bright lamps clip the facing part of the sphere
+  ImageSet set = synth_sphere(o);
+  PsOptions robust, plain;
+  robust.light_model = plain.light_model = LightModel::distant;
+  plain.robust = false;
+  AngularError er = solve_error(set, robust), ep = solve_error(set, plain);
+  EXPECT_LT(er.mean_deg, 0.5);
+  EXPECT_LT(er.mean_deg, ep.mean_deg);
+}
+
+TEST(PhotometricStereo, UnreliablePixelsAreMarked) {
+  // Three lamps only: every attached shadow leaves < 3 samples.
+  SynthOptions o;
+  o.distant = true;
+  ImageSet set = synth_sphere(o);
+  set.images.resize(3);
+  set.lights.resize(3);
+  PsOptions opt;
+  opt.light_model = LightModel::distant;
+  auto r = photometric_stereo(set, set.truth.mask, opt);
+  ASSERT_TRUE(r.ok()) << r.message();
+  EXPECT_GT(r->unreliable_pixels, 0);
+  EXPECT_LT(r->unreliable_pixels, r->solved_pixels);
+  EXPECT_EQ(r->unreliable_pixels, r->solved_pixels - cv::countNonZero(r->reliable));
+  // Where all three see the surface the answer is exact.
+  EXPECT_LT(angular_error(r->normals, set.truth.normals, r->reliable).mean_deg, 0.1);
+}
+
+TEST(PhotometricStereo, ManyLightsUseNormalEquations) {
+  // More lamps than the pattern cache holds: the same answer by another path.
+  SynthOptions o;
+  o.distant = true;
+  ImageSet set = synth_sphere(o);
+  ImageSet big = set;
+  for (int rep = 0; rep < 2; ++rep)
+    for (size_t i = 0; i < set.images.size(); ++i) {
+      big.images.push_back(set.images[i]);
+      big.lights.push_back(set.lights[i]);
+    }
+  PsOptions opt;
+  opt.light_model = LightModel::distant;
+  ASSERT_GT(big.images.size(), 12u);
+  EXPECT_LT(solve_error(big, opt).mean_deg, 0.1);
+  opt.robust = false;
+  EXPECT_NEAR(solve_error(big, opt).mean_deg, solve_error(set, opt).mean_deg, 1e-3);
+}
+
+TEST(PhotometricStereo, CancelIsHonoured) {
+  ImageSet set = synth_sphere({});
+  std::atomic<bool> cancel{true};
+  Progress p;
+  p.cancel = &cancel;
+  auto r = photometric_stereo(set, {}, {}, p);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.message().find("cancel"), std::string::npos);
+}
+
+TEST(PhotometricStereo, ProgressReachesOne) {
+  ImageSet set = synth_sphere({});
+  double last = -1;
+  Progress p;
+  p.on_progress = [&](double f, const std::string&) {
+    EXPECT_GE(f, last);
+    last = f;
+  };
+  ASSERT_TRUE(photometric_stereo(set, set.truth.mask, {}, p).ok());
+  EXPECT_DOUBLE_EQ(last, 1.0);
+}
+
+// ---- bad input ----
+
+TEST(PhotometricStereoBadInput, FewerThanThreeLights) {
+  ImageSet set = synth_sphere({});
+  set.images.resize(2);
+  set.lights.resize(2);
+  auto r = photometric_stereo(set, {}, {});
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.message().find("at least 3 lights"), std::string::npos) << r.message();
+}
+
+TEST(PhotometricStereoBadInput, IdenticalDirections) {
+  SynthOptions o;
+  o.distant = true;
+  ImageSet set = synth_sphere(o);
+  for (auto& l : set.lights) l.direction = set.lights[0].direction;
+  PsOptions opt;
+  opt.light_model = LightModel::distant;
+  auto r = photometric_stereo(set, {}, opt);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.message().find("degenerate"), std::string::npos) << r.message();
+}
+
+TEST(PhotometricStereoBadInput, CoplanarDirections) {
+  SynthOptions o;
+  o.distant = true;
+  ImageSet set = synth_sphere(o);
+  // All directions in the x-z plane.
+  for (size_t i = 0; i < set.lights.size(); ++i) {
+    const double a = 0.2 * double(i) - 0.6;
+    set.lights[i].direction = cv::Vec3d(std::sin(a), 0, std::cos(a));
+  }
+  PsOptions opt;
+  opt.light_model = LightModel::distant;
+  auto r = photometric_stereo(set, {}, opt);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.message().find("degenerate"), std::string::npos) << r.message();
+}
+
+TEST(PhotometricStereoBadInput, EmptyMask) {
+  ImageSet set = synth_sphere({});
+  cv::Mat mask(set.images[0].size(), CV_8UC1, cv::Scalar(0));
+  auto r = photometric_stereo(set, mask, {});
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.message().find("mask is empty"), std::string::npos) << r.message();
+}
+
+TEST(PhotometricStereoBadInput, MaskOfWrongSize) {
+  ImageSet set = synth_sphere({});
+  cv::Mat mask(10, 10, CV_8UC1, cv::Scalar(255));
+  auto r = photometric_stereo(set, mask, {});
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.message().find("10x10"), std::string::npos) << r.message();
+}
+
+TEST(PhotometricStereoBadInput, ImagesOfDifferentSizes) {
+  ImageSet set = synth_sphere({});
+  set.images[3] = cv::Mat(20, 30, CV_32FC3, cv::Scalar::all(0));
+  auto r = photometric_stereo(set, {}, {});
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.message().find("image 3"), std::string::npos) << r.message();
+}
+
+TEST(PhotometricStereoBadInput, NearWithoutPositions) {
+  ImageSet set = synth_sphere({});
+  set.lights[2].position_m.reset();
+  PsOptions opt;
+  opt.light_model = LightModel::near;
+  auto r = photometric_stereo(set, {}, opt);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.message().find("position"), std::string::npos) << r.message();
+}
+
+TEST(PhotometricStereoBadInput, BadOptions) {
+  ImageSet set = synth_sphere({});
+  PsOptions opt;
+  opt.shadow_fraction = 1.5f;
+  EXPECT_FALSE(opt.check().ok());
+  auto r = photometric_stereo(set, {}, opt);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.message().find("shadow_fraction"), std::string::npos) << r.message();
+  opt = {};
+  opt.near_iterations = 9;
+  EXPECT_FALSE(opt.check().ok());
+  opt = {};
+  opt.saturation = 0.f;
+  EXPECT_FALSE(opt.check().ok());
+}
+
+TEST(AngularError, KnownAngles) {
+  cv::Mat a(1, 4, CV_32FC3), t(1, 4, CV_32FC3);
+  for (int i = 0; i < 4; ++i) {
+    const double deg = 10.0 * i, r = deg * CV_PI / 180;
+    a.at<cv::Vec3f>(0, i) = cv::Vec3f(float(std::sin(r)), 0, float(std::cos(r)));
+    t.at<cv::Vec3f>(0, i) = cv::Vec3f(0, 0, 1);
+  }
+  AngularError e = angular_error(a, t, {});
+  EXPECT_EQ(e.pixels, 4);
+  EXPECT_NEAR(e.mean_deg, 15.0, 1e-3);
+  EXPECT_NEAR(e.max_deg, 30.0, 1e-3);
+}
+
+}  // namespace
+}  // namespace veneer::ps

@@ -1,0 +1,737 @@
+// Photometric stereo (see photometric_stereo.hpp).
+//
+// Speed: every full-resolution pass works on one image row at a time with
+// structure-of-arrays buffers (per lamp: B, G, R, grey), so the inner loops run
+// over pixels and vectorise. The distant model multiplies by one
+// pseudo-inverse per "lamps kept" pattern (computed once, at most 2^n); the
+// near model forms the 3x3 normal equations per pixel from its own light
+// vectors. The near model's depth refinement runs on a sub-sampled grid; the
+// full-resolution image is read exactly once.
+#include "veneer/ps/photometric_stereo.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include "depth.hpp"
+#include "veneer/util/log.hpp"
+
+namespace veneer::ps {
+
+const char* light_model_name(LightModel m) {
+  switch (m) {
+    case LightModel::automatic: return "automatic";
+    case LightModel::distant: return "distant";
+    case LightModel::near: return "near";
+  }
+  return "automatic";
+}
+
+Expected<LightModel> parse_light_model(const std::string& s) {
+  if (s == "automatic" || s == "auto") return LightModel::automatic;
+  if (s == "distant") return LightModel::distant;
+  if (s == "near") return LightModel::near;
+  return make_error("unknown light model '" + s + "' (automatic, distant, near)");
+}
+
+Status PsOptions::check() const {
+  if (!(shadow_fraction >= 0.f && shadow_fraction < 1.f))
+    return make_error("shadow_fraction must be in [0, 1), got " + std::to_string(shadow_fraction));
+  if (!(saturation > 0.f && saturation <= 1.f))
+    return make_error("saturation must be in (0, 1], got " + std::to_string(saturation));
+  if (!(min_signal >= 0.f)) return make_error("min_signal must be >= 0, got " + std::to_string(min_signal));
+  if (near_iterations < 0 || near_iterations > 5)
+    return make_error("near_iterations must be in 0..5, got " + std::to_string(near_iterations));
+  if (threads < 0) return make_error("threads must be >= 0, got " + std::to_string(threads));
+  return Status::success();
+}
+
+namespace {
+
+constexpr int kMaxPatternLights = 12;  // cache every pattern up to 2^12 (distant model)
+constexpr int kMaxNearLights = 32;
+
+struct Setup {
+  int n = 0;
+  int width = 0, height = 0;
+  bool near = false;
+  bool robust = true;
+  float shadow_fraction = 0.1f, saturation = 0.98f, min_signal = 1e-3f;
+  std::vector<float> dir;        // n*3 distant directions
+  std::vector<float> pos;        // n*3 lamp positions (near)
+  std::vector<float> pos_norm2;  // n: |position|^2 (intensity reference distance)
+  std::vector<float> inv_e;      // n*3 BGR 1/intensity
+  float f = 1, cx = 0, cy = 0;   // intrinsics (near)
+  // Distant model: pseudo-inverse (3 x n, zero columns for dropped lamps) per pattern.
+  bool use_cache = false;
+  std::vector<float> pinv;       // (1 << n) * 3 * n, or only the full pattern when !use_cache
+  std::vector<uint8_t> pinv_ok;
+  uint32_t full = 0;
+  std::vector<const float*> images;  // n, continuous CV_32FC3
+  const float* ambient = nullptr;
+};
+
+// Pseudo-inverse of the rows of `dir` selected by `pattern`: (L^T L)^-1 L^T,
+// in double. False when the kept directions do not span 3-D.
+bool pattern_pinv(const std::vector<float>& dir, int n, uint32_t pattern, float* out) {
+  double a[3][3] = {};
+  for (int i = 0; i < n; ++i) {
+    if (!(pattern >> i & 1u)) continue;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) a[r][c] += double(dir[i * 3 + r]) * dir[i * 3 + c];
+  }
+  cv::Matx33d A(&a[0][0]);
+  cv::Matx31d w;
+  cv::Matx33d u, vt;
+  cv::SVD::compute(A, w, u, vt);
+  if (w(0) <= 0 || w(2) < 1e-6 * w(0)) return false;
+  cv::Matx33d inv = A.inv(cv::DECOMP_CHOLESKY);
+  for (int i = 0; i < n; ++i) {
+    bool kept = pattern >> i & 1u;
+    for (int r = 0; r < 3; ++r) {
+      double v = 0;
+      if (kept)
+        for (int c = 0; c < 3; ++c) v += inv(r, c) * dir[i * 3 + c];
+      out[r * n + i] = static_cast<float>(v);
+    }
+  }
+  return true;
+}
+
+// Per-task scratch: structure-of-arrays rows.
+struct Scratch {
+  int cap = 0, n = 0;
+  std::vector<float> C;    // n*3*cap normalised B,G,R
+  std::vector<float> Y;    // n*cap grey
+  std::vector<float> W;    // n*cap weights (0/1)
+  std::vector<float> V;    // n*3*cap light vectors (near)
+  std::vector<float> acc;  // 12*cap: A00 A01 A02 A11 A12 A22 b0 b1 b2 gx gy gz
+  std::vector<float> M, K, a, nx, ny, nz, ok, den, px, py, pz;
+  std::vector<uint32_t> pat;
+  std::vector<uint8_t> sat;
+  void resize(int n_, int cap_) {
+    n = n_;
+    cap = cap_;
+    C.assign(size_t(n) * 3 * cap, 0.f);
+    Y.assign(size_t(n) * cap, 0.f);
+    W.assign(size_t(n) * cap, 0.f);
+    V.assign(size_t(n) * 3 * cap, 0.f);
+    acc.assign(size_t(12) * cap, 0.f);
+    for (auto* v : {&M, &K, &a, &nx, &ny, &nz, &ok, &den, &px, &py, &pz}) v->assign(cap, 0.f);
+    pat.assign(cap, 0);
+    sat.assign(size_t(n) * cap, 0);
+  }
+};
+
+// Output pointers for one row of `count` pixels.
+struct RowOut {
+  float* normals = nullptr;   // count*3
+  float* albedo = nullptr;    // count*3 (may be null)
+  float* residual = nullptr;  // count (may be null)
+  uint8_t* reliable = nullptr;  // count (may be null)
+};
+
+// Solves `count` pixels of row y: x = x0 + k*step. `z` gives each pixel's
+// surface z (rig frame) for the near model (null = 0). `mask` row pointer
+// sampled with the same step (null = all).
+void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, const float* z,
+               const uint8_t* mask, const RowOut& out) {
+  const int n = s.n;
+  const size_t cap = size_t(b.cap);
+  const size_t row_off = size_t(y) * s.width * 3;
+  // 1. load, normalise by lamp colour, grey, saturation.
+  float* __restrict M = b.M.data();
+  std::fill(M, M + count, 0.f);
+  for (int i = 0; i < n; ++i) {
+    const float* __restrict src = s.images[i] + row_off + size_t(x0) * 3;
+    const float* __restrict amb = s.ambient ? s.ambient + row_off + size_t(x0) * 3 : nullptr;
+    float* __restrict cb = b.C.data() + (size_t(i) * 3 + 0) * cap;
+    float* __restrict cg = b.C.data() + (size_t(i) * 3 + 1) * cap;
+    float* __restrict cr = b.C.data() + (size_t(i) * 3 + 2) * cap;
+    float* __restrict yy = b.Y.data() + size_t(i) * cap;
+    uint8_t* __restrict st = b.sat.data() + size_t(i) * cap;
+    const float e0 = s.inv_e[i * 3], e1 = s.inv_e[i * 3 + 1], e2 = s.inv_e[i * 3 + 2];
+    const float satv = s.saturation;
+    const int st3 = step * 3;
+    if (amb) {
+      for (int k = 0; k < count; ++k) {
+        const float v0 = src[k * st3], v1 = src[k * st3 + 1], v2 = src[k * st3 + 2];
+        st[k] = (v0 >= satv) | (v1 >= satv) | (v2 >= satv);
+        const float c0 = (v0 - amb[k * st3]) * e0, c1 = (v1 - amb[k * st3 + 1]) * e1,
+                    c2 = (v2 - amb[k * st3 + 2]) * e2;
+        cb[k] = c0;
+        cg[k] = c1;
+        cr[k] = c2;
+        const float g = (c0 + c1 + c2) * (1.f / 3.f);
+        yy[k] = g;
+        M[k] = std::max(M[k], g);
+      }
+    } else {
+      for (int k = 0; k < count; ++k) {
+        const float v0 = src[k * st3], v1 = src[k * st3 + 1], v2 = src[k * st3 + 2];
+        st[k] = (v0 >= satv) | (v1 >= satv) | (v2 >= satv);
+        const float c0 = v0 * e0, c1 = v1 * e1, c2 = v2 * e2;
+        cb[k] = c0;
+        cg[k] = c1;
+        cr[k] = c2;
+        const float g = (c0 + c1 + c2) * (1.f / 3.f);
+        yy[k] = g;
+        M[k] = std::max(M[k], g);
+      }
+    }
+  }
+  // 2. weights: robust drops shadowed and saturated samples; < 3 kept falls back to all.
+  uint32_t* __restrict pat = b.pat.data();
+  float* __restrict K = b.K.data();
+  float* __restrict okv = b.ok.data();
+  if (s.robust) {
+    for (int i = 0; i < n; ++i) {
+      const float* __restrict yy = b.Y.data() + size_t(i) * cap;
+      const uint8_t* __restrict st = b.sat.data() + size_t(i) * cap;
+      float* __restrict w = b.W.data() + size_t(i) * cap;
+      const float sf = s.shadow_fraction;
+      for (int k = 0; k < count; ++k) w[k] = float((yy[k] >= sf * M[k]) & (st[k] == 0) & (yy[k] > 0.f));
+    }
+    std::fill(K, K + count, 0.f);
+    for (int i = 0; i < n; ++i) {
+      const float* __restrict w = b.W.data() + size_t(i) * cap;
+      for (int k = 0; k < count; ++k) K[k] += w[k];
+    }
+    for (int k = 0; k < count; ++k) okv[k] = K[k] >= 3.f ? 1.f : 0.f;
+    if (s.use_cache) {
+      std::fill(pat, pat + count, 0u);
+      for (int i = 0; i < n; ++i) {
+        const float* __restrict w = b.W.data() + size_t(i) * cap;
+        for (int k = 0; k < count; ++k) pat[k] |= uint32_t(w[k] != 0.f) << i;
+      }
+    }
+    // Fallback to every sample where fewer than 3 are kept.
+    for (int k = 0; k < count; ++k) {
+      if (okv[k] == 0.f) {
+        for (int i = 0; i < n; ++i) b.W[size_t(i) * cap + k] = 1.f;
+        K[k] = float(n);
+        pat[k] = s.full;
+      }
+    }
+  } else {
+    for (int i = 0; i < n; ++i) std::fill(b.W.begin() + size_t(i) * cap, b.W.begin() + size_t(i) * cap + count, 1.f);
+    std::fill(pat, pat + count, s.full);
+    std::fill(K, K + count, float(n));
+    std::fill(okv, okv + count, 1.f);
+  }
+  float* __restrict gx = b.acc.data() + 9 * cap;
+  float* __restrict gy = b.acc.data() + 10 * cap;
+  float* __restrict gz = b.acc.data() + 11 * cap;
+  // 3. solve g = albedo * n.
+  if (!s.near) {
+    if (s.use_cache || !s.robust) {
+      // Full pattern for everybody (vectorised), then the other patterns pixel by pixel.
+      const float* P = s.pinv.data() + size_t(s.use_cache ? s.full : 0) * 3 * n;
+      std::fill(gx, gx + count, 0.f);
+      std::fill(gy, gy + count, 0.f);
+      std::fill(gz, gz + count, 0.f);
+      for (int i = 0; i < n; ++i) {
+        const float* __restrict yy = b.Y.data() + size_t(i) * cap;
+        const float p0 = P[i], p1 = P[n + i], p2 = P[2 * n + i];
+        for (int k = 0; k < count; ++k) {
+          gx[k] += p0 * yy[k];
+          gy[k] += p1 * yy[k];
+          gz[k] += p2 * yy[k];
+        }
+      }
+      if (s.robust) {
+        for (int k = 0; k < count; ++k) {
+          const uint32_t p = pat[k];
+          if (p == s.full) continue;
+          if (!s.pinv_ok[p]) {
+            okv[k] = 0.f;
+            continue;
+          }
+          const float* Q = s.pinv.data() + size_t(p) * 3 * n;
+          float x = 0, yv = 0, zv = 0;
+          for (int i = 0; i < n; ++i) {
+            const float v = b.Y[size_t(i) * cap + k];
+            x += Q[i] * v;
+            yv += Q[n + i] * v;
+            zv += Q[2 * n + i] * v;
+          }
+          gx[k] = x;
+          gy[k] = yv;
+          gz[k] = zv;
+        }
+      }
+    } else {
+      // Many lamps: per-pixel weighted normal equations with the constant directions.
+      float* __restrict A = b.acc.data();
+      std::fill(A, A + 9 * cap, 0.f);
+      for (int i = 0; i < n; ++i) {
+        const float* __restrict yy = b.Y.data() + size_t(i) * cap;
+        const float* __restrict w = b.W.data() + size_t(i) * cap;
+        const float lx = s.dir[i * 3], ly = s.dir[i * 3 + 1], lz = s.dir[i * 3 + 2];
+        for (int k = 0; k < count; ++k) {
+          const float wk = w[k], wy = wk * yy[k];
+          A[k] += wk * lx * lx;
+          A[cap + k] += wk * lx * ly;
+          A[2 * cap + k] += wk * lx * lz;
+          A[3 * cap + k] += wk * ly * ly;
+          A[4 * cap + k] += wk * ly * lz;
+          A[5 * cap + k] += wk * lz * lz;
+          A[6 * cap + k] += wy * lx;
+          A[7 * cap + k] += wy * ly;
+          A[8 * cap + k] += wy * lz;
+        }
+      }
+    }
+  } else {
+    // Near model: per-pixel light vectors V_i = f_i * l_i from the back-projected point.
+    float* __restrict px = b.px.data();
+    float* __restrict py = b.py.data();
+    float* __restrict pz = b.pz.data();
+    const float invf = 1.f / s.f;
+    const float v = (float(y) - s.cy) * invf;
+    for (int k = 0; k < count; ++k) {
+      const float zz = z ? z[k] : 0.f;
+      const float t = 1.f - zz;
+      px[k] = t * (float(x0 + k * step) - s.cx) * invf;
+      py[k] = -t * v;
+      pz[k] = zz;
+    }
+    float* __restrict A = b.acc.data();
+    std::fill(A, A + 9 * cap, 0.f);
+    for (int i = 0; i < n; ++i) {
+      const float* __restrict yy = b.Y.data() + size_t(i) * cap;
+      const float* __restrict w = b.W.data() + size_t(i) * cap;
+      float* __restrict vx = b.V.data() + (size_t(i) * 3 + 0) * cap;
+      float* __restrict vy = b.V.data() + (size_t(i) * 3 + 1) * cap;
+      float* __restrict vz = b.V.data() + (size_t(i) * 3 + 2) * cap;
+      const float lx = s.pos[i * 3], ly = s.pos[i * 3 + 1], lz = s.pos[i * 3 + 2], r2 = s.pos_norm2[i];
+      for (int k = 0; k < count; ++k) {
+        const float dx = lx - px[k], dy = ly - py[k], dz = lz - pz[k];
+        const float d2 = dx * dx + dy * dy + dz * dz;
+        const float inv = 1.f / std::sqrt(d2);
+        const float sc = r2 * inv * inv * inv;  // falloff |L|^2/d^2 times 1/d normalisation
+        const float ex = dx * sc, ey = dy * sc, ez = dz * sc;
+        vx[k] = ex;
+        vy[k] = ey;
+        vz[k] = ez;
+        const float wk = w[k], wy = wk * yy[k];
+        A[k] += wk * ex * ex;
+        A[cap + k] += wk * ex * ey;
+        A[2 * cap + k] += wk * ex * ez;
+        A[3 * cap + k] += wk * ey * ey;
+        A[4 * cap + k] += wk * ey * ez;
+        A[5 * cap + k] += wk * ez * ez;
+        A[6 * cap + k] += wy * ex;
+        A[7 * cap + k] += wy * ey;
+        A[8 * cap + k] += wy * ez;
+      }
+    }
+  }
+  if (s.near || (s.robust && !s.use_cache)) {
+    // 3x3 symmetric solve by cofactors, vectorised.
+    const float* __restrict A = b.acc.data();
+    for (int k = 0; k < count; ++k) {
+      const float a00 = A[k], a01 = A[cap + k], a02 = A[2 * cap + k], a11 = A[3 * cap + k],
+                  a12 = A[4 * cap + k], a22 = A[5 * cap + k];
+      const float b0 = A[6 * cap + k], b1 = A[7 * cap + k], b2 = A[8 * cap + k];
+      const float c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
+      const float c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
+      const float det = a00 * c00 + a01 * c01 + a02 * c02;
+      const float tr = (a00 + a11 + a22) * (1.f / 3.f);
+      const bool good = det > 1e-5f * tr * tr * tr && tr > 0.f;
+      const float id = good ? 1.f / det : 0.f;
+      gx[k] = (c00 * b0 + c01 * b1 + c02 * b2) * id;
+      gy[k] = (c01 * b0 + c11 * b1 + c12 * b2) * id;
+      gz[k] = (c02 * b0 + c12 * b1 + c22 * b2) * id;
+      okv[k] = good ? okv[k] : 0.f;
+    }
+  }
+  // 4. normal and grey albedo.
+  float* __restrict nx = b.nx.data();
+  float* __restrict ny = b.ny.data();
+  float* __restrict nz = b.nz.data();
+  float* __restrict ga = b.a.data();
+  const float ms = s.min_signal;
+  for (int k = 0; k < count; ++k) {
+    const float len = std::sqrt(gx[k] * gx[k] + gy[k] * gy[k] + gz[k] * gz[k]);
+    const bool sig = len > 0.f && M[k] > ms;
+    const float il = sig ? 1.f / len : 0.f;
+    nx[k] = gx[k] * il;
+    ny[k] = gy[k] * il;
+    nz[k] = gz[k] * il;
+    ga[k] = sig ? len : 0.f;
+    okv[k] = sig ? okv[k] : 0.f;
+  }
+  // 5. per-channel albedo and residual over the kept samples, with shading S_i = n . V_i.
+  float* __restrict den = b.den.data();
+  float* __restrict numb = b.acc.data();  // reuse: 3 numerators + residual sum
+  float* __restrict numg = b.acc.data() + cap;
+  float* __restrict numr = b.acc.data() + 2 * cap;
+  float* __restrict res = b.acc.data() + 3 * cap;
+  std::fill(numb, numb + 4 * cap, 0.f);
+  std::fill(den, den + count, 0.f);
+  for (int i = 0; i < n; ++i) {
+    const float* __restrict yy = b.Y.data() + size_t(i) * cap;
+    const float* __restrict w = b.W.data() + size_t(i) * cap;
+    const float* __restrict cb = b.C.data() + (size_t(i) * 3 + 0) * cap;
+    const float* __restrict cg = b.C.data() + (size_t(i) * 3 + 1) * cap;
+    const float* __restrict cr = b.C.data() + (size_t(i) * 3 + 2) * cap;
+    if (s.near) {
+      const float* __restrict vx = b.V.data() + (size_t(i) * 3 + 0) * cap;
+      const float* __restrict vy = b.V.data() + (size_t(i) * 3 + 1) * cap;
+      const float* __restrict vz = b.V.data() + (size_t(i) * 3 + 2) * cap;
+      for (int k = 0; k < count; ++k) {
+        const float sh = nx[k] * vx[k] + ny[k] * vy[k] + nz[k] * vz[k];
+        const float ws = w[k] * sh;
+        numb[k] += ws * cb[k];
+        numg[k] += ws * cg[k];
+        numr[k] += ws * cr[k];
+        den[k] += ws * sh;
+        const float d = yy[k] - ga[k] * sh;
+        res[k] += w[k] * d * d;
+      }
+    } else {
+      const float lx = s.dir[i * 3], ly = s.dir[i * 3 + 1], lz = s.dir[i * 3 + 2];
+      for (int k = 0; k < count; ++k) {
+        const float sh = nx[k] * lx + ny[k] * ly + nz[k] * lz;
+        const float ws = w[k] * sh;
+        numb[k] += ws * cb[k];
+        numg[k] += ws * cg[k];
+        numr[k] += ws * cr[k];
+        den[k] += ws * sh;
+        const float d = yy[k] - ga[k] * sh;
+        res[k] += w[k] * d * d;
+      }
+    }
+  }
+  // 6. write.
+  for (int k = 0; k < count; ++k) {
+    const bool in = mask == nullptr || mask[size_t(k) * step] != 0;
+    const bool sig = ga[k] > 0.f;
+    float* o = out.normals + size_t(k) * 3;
+    o[0] = in ? nx[k] : 0.f;
+    o[1] = in ? ny[k] : 0.f;
+    o[2] = in ? nz[k] : 0.f;
+    if (out.albedo) {
+      const float id = (in && sig && den[k] > 0.f) ? 1.f / den[k] : 0.f;
+      float* al = out.albedo + size_t(k) * 3;
+      al[0] = std::max(0.f, numb[k] * id);
+      al[1] = std::max(0.f, numg[k] * id);
+      al[2] = std::max(0.f, numr[k] * id);
+    }
+    if (out.residual) {
+      const float r = (in && sig) ? std::sqrt(res[k] / std::max(K[k], 1.f)) / M[k] : 0.f;
+      out.residual[k] = r;
+    }
+    if (out.reliable) out.reliable[k] = (in && okv[k] != 0.f) ? 255 : 0;
+  }
+}
+
+Status check_directions(const std::vector<float>& dir, int n, const std::string& what) {
+  cv::Mat L(n, 3, CV_64F);
+  for (int i = 0; i < n; ++i)
+    for (int c = 0; c < 3; ++c) L.at<double>(i, c) = dir[i * 3 + c];
+  cv::Mat w;
+  cv::SVD::compute(L, w, cv::SVD::NO_UV);
+  const double s0 = w.at<double>(0), s2 = w.at<double>(2);
+  if (!(s0 > 0) || s2 < 1e-3 * s0) {
+    char buf[160];
+    std::snprintf(buf, sizeof buf, "degenerate %s: they do not span 3-D (coplanar or identical; singular values %.3g %.3g %.3g)",
+                  what.c_str(), s0, w.at<double>(1), s2);
+    return make_error(buf);
+  }
+  return Status::success();
+}
+
+template <class F>
+void run_parallel(int threads, F&& f) {
+  if (threads > 0) {
+    tbb::task_arena arena(threads);
+    arena.execute(f);
+  } else {
+    f();
+  }
+}
+
+// Solves every row in [y0, y1) (step 1) in parallel, writing into `result`.
+void solve_rows(const Setup& s, const cv::Mat& mask, const cv::Mat* zmap, int y0, int y1, PsResult& result) {
+  tbb::parallel_for(tbb::blocked_range<int>(y0, y1, 4), [&](const tbb::blocked_range<int>& r) {
+    Scratch sc;
+    sc.resize(s.n, s.width);
+    for (int y = r.begin(); y < r.end(); ++y) {
+      RowOut out;
+      out.normals = result.normals.ptr<float>(y);
+      out.albedo = result.albedo.ptr<float>(y);
+      out.residual = result.residual.ptr<float>(y);
+      out.reliable = result.reliable.ptr<uint8_t>(y);
+      const uint8_t* mrow = mask.ptr<uint8_t>(y);
+      // Skip rows without object pixels: outputs are already zero.
+      if (std::find_if(mrow, mrow + s.width, [](uint8_t v) { return v != 0; }) == mrow + s.width) continue;
+      solve_row(s, sc, y, 0, 1, s.width, zmap ? zmap->ptr<float>(y) : nullptr, mrow, out);
+    }
+  });
+}
+
+}  // namespace
+
+Expected<PsResult> photometric_stereo(const ImageSet& set, const cv::Mat& mask_in, const PsOptions& options,
+                                      const Progress& progress) {
+  if (Status st = options.check(); !st) return make_error("photometric stereo options: " + st.message());
+  const int n = static_cast<int>(set.images.size());
+  if (n < 3)
+    return make_error("photometric stereo needs at least 3 lights, the set has " + std::to_string(n));
+  if (set.lights.size() != set.images.size())
+    return make_error("the set has " + std::to_string(set.images.size()) + " images but " +
+                      std::to_string(set.lights.size()) + " lights");
+  const cv::Size size = set.images[0].size();
+  if (size.width <= 0 || size.height <= 0) return make_error("the set's images are empty");
+  for (int i = 0; i < n; ++i) {
+    const cv::Mat& im = set.images[i];
+    if (im.type() != CV_32FC3) return make_error("image " + std::to_string(i) + " is not CV_32FC3 (linear float BGR)");
+    if (im.size() != size)
+      return make_error("image " + std::to_string(i) + " is " + std::to_string(im.cols) + "x" +
+                        std::to_string(im.rows) + ", image 0 is " + std::to_string(size.width) + "x" +
+                        std::to_string(size.height));
+  }
+  cv::Mat mask;
+  if (mask_in.empty()) {
+    mask = cv::Mat(size, CV_8UC1, cv::Scalar(255));
+  } else {
+    if (mask_in.type() != CV_8UC1) return make_error("the mask is not CV_8UC1");
+    if (mask_in.size() != size)
+      return make_error("the mask is " + std::to_string(mask_in.cols) + "x" + std::to_string(mask_in.rows) +
+                        ", the images are " + std::to_string(size.width) + "x" + std::to_string(size.height));
+    mask = mask_in;
+  }
+  const int solved = cv::countNonZero(mask);
+  if (solved == 0) return make_error("the mask is empty: no object pixels to solve");
+
+  Setup s;
+  s.n = n;
+  s.width = size.width;
+  s.height = size.height;
+  s.robust = options.robust;
+  s.shadow_fraction = options.shadow_fraction;
+  s.saturation = options.saturation;
+  s.min_signal = options.min_signal;
+  s.dir.resize(size_t(n) * 3);
+  s.inv_e.resize(size_t(n) * 3);
+  bool have_positions = true;
+  for (int i = 0; i < n; ++i) {
+    const Light& l = set.lights[i];
+    const double len = cv::norm(l.direction);
+    if (!(len > 0.5 && len < 1.5))
+      return make_error("light " + std::to_string(i) + " has a direction of length " + std::to_string(len));
+    for (int c = 0; c < 3; ++c) s.dir[i * 3 + c] = static_cast<float>(l.direction[c] / len);
+    for (int c = 0; c < 3; ++c) {
+      const float e = l.intensity[2 - c];  // intensity is [r,g,b]; channel 0 is B
+      if (!(e > 0.f)) return make_error("light " + std::to_string(i) + " has a non-positive intensity");
+      s.inv_e[i * 3 + c] = 1.f / e;
+    }
+    if (!l.position_m) have_positions = false;
+  }
+  LightModel model = options.light_model;
+  const bool near_possible = have_positions && set.camera.focal_px > 0;
+  if (model == LightModel::automatic) model = near_possible ? LightModel::near : LightModel::distant;
+  if (model == LightModel::near) {
+    if (!have_positions) return make_error("the near-light model needs every lamp's position_m; the set lacks some");
+    if (!(set.camera.focal_px > 0)) return make_error("the near-light model needs the camera focal length (camera.focal_px)");
+    if (n > kMaxNearLights) return make_error("the near-light model supports at most 32 lamps, the set has " + std::to_string(n));
+  }
+  s.near = model == LightModel::near;
+  if (Status st = check_directions(s.dir, n, "light directions"); !st) return make_error(st.message());
+  if (s.near) {
+    s.pos.resize(size_t(n) * 3);
+    s.pos_norm2.resize(n);
+    std::vector<float> pdir(size_t(n) * 3);
+    for (int i = 0; i < n; ++i) {
+      const cv::Vec3d p = *set.lights[i].position_m;
+      const double r = cv::norm(p);
+      if (!(r > 1e-6)) return make_error("lamp " + std::to_string(i) + " sits at the rig origin");
+      for (int c = 0; c < 3; ++c) {
+        s.pos[i * 3 + c] = static_cast<float>(p[c]);
+        pdir[i * 3 + c] = static_cast<float>(p[c] / r);
+      }
+      s.pos_norm2[i] = static_cast<float>(r * r);
+    }
+    if (Status st = check_directions(pdir, n, "lamp positions"); !st) return make_error(st.message());
+    s.f = static_cast<float>(set.camera.focal_px);
+    s.cx = static_cast<float>(set.camera.cx > 0 ? set.camera.cx : (size.width - 1) * 0.5);
+    s.cy = static_cast<float>(set.camera.cy > 0 ? set.camera.cy : (size.height - 1) * 0.5);
+  }
+  s.full = n >= 32 ? 0xffffffffu : ((1u << n) - 1u);
+  if (!s.near) {
+    s.use_cache = n <= kMaxPatternLights;
+    if (s.use_cache) {
+      const size_t patterns = size_t(1) << n;
+      s.pinv.assign(patterns * 3 * n, 0.f);
+      s.pinv_ok.assign(patterns, 0);
+      if (s.robust) {
+        for (uint32_t p = 0; p < patterns; ++p)
+          if (std::popcount(p) >= 3) s.pinv_ok[p] = pattern_pinv(s.dir, n, p, s.pinv.data() + size_t(p) * 3 * n);
+      } else {
+        s.pinv_ok[s.full] = pattern_pinv(s.dir, n, s.full, s.pinv.data() + size_t(s.full) * 3 * n);
+      }
+    } else if (!s.robust) {
+      // Too many lamps for a pattern cache: the one pseudo-inverse of all of them.
+      cv::Mat L(n, 3, CV_64F);
+      for (int i = 0; i < n; ++i)
+        for (int c = 0; c < 3; ++c) L.at<double>(i, c) = s.dir[i * 3 + c];
+      cv::Mat P;
+      cv::invert(L, P, cv::DECOMP_SVD);
+      s.pinv.assign(size_t(3) * n, 0.f);
+      for (int r = 0; r < 3; ++r)
+        for (int i = 0; i < n; ++i) s.pinv[size_t(r) * n + i] = static_cast<float>(P.at<double>(r, i));
+    }
+  }
+  s.images.resize(n);
+  std::vector<cv::Mat> holders;  // continuous copies when needed
+  for (int i = 0; i < n; ++i) {
+    if (set.images[i].isContinuous()) {
+      s.images[i] = set.images[i].ptr<float>();
+    } else {
+      holders.push_back(set.images[i].clone());
+      s.images[i] = holders.back().ptr<float>();
+    }
+  }
+  cv::Mat ambient;
+  if (options.subtract_ambient && !set.ambient.empty()) {
+    if (set.ambient.type() != CV_32FC3 || set.ambient.size() != size)
+      return make_error("the ambient frame does not match the images (type or size)");
+    ambient = set.ambient.isContinuous() ? set.ambient : set.ambient.clone();
+    s.ambient = ambient.ptr<float>();
+  }
+
+  PsResult result;
+  result.model_used = model;
+  result.mask = mask.clone();
+  result.solved_pixels = solved;
+  result.normals = cv::Mat(size, CV_32FC3, cv::Scalar::all(0));
+  result.albedo = cv::Mat(size, CV_32FC3, cv::Scalar::all(0));
+  result.residual = cv::Mat(size, CV_32FC1, cv::Scalar(0));
+  result.reliable = cv::Mat(size, CV_8UC1, cv::Scalar(0));
+
+  std::atomic<bool> cancelled{false};
+  cv::Mat zfull;
+  bool failed_depth = false;
+  run_parallel(options.threads, [&] {
+    if (s.near) {
+      // Depth refinement on a sub-sampled grid: z = 0 first, then integrate the
+      // normals into a depth map and solve again.
+      progress.report(0.0, "near light: depth");
+      DepthGrid grid = make_depth_grid(size, mask, s.f, s.cx, s.cy);
+      std::vector<float> zrow;
+      for (int it = 0; it <= options.near_iterations; ++it) {
+        if (progress.cancelled()) {
+          cancelled = true;
+          return;
+        }
+        tbb::parallel_for(tbb::blocked_range<int>(0, grid.rows, 2), [&](const tbb::blocked_range<int>& r) {
+          Scratch sc;
+          sc.resize(s.n, grid.cols);
+          std::vector<float> zr(grid.cols);
+          for (int gyi = r.begin(); gyi < r.end(); ++gyi) {
+            const int y = grid.y0 + gyi * grid.step;
+            for (int k = 0; k < grid.cols; ++k) zr[k] = grid.z.at<float>(gyi, k);
+            RowOut out;
+            out.normals = grid.normals.ptr<float>(gyi);
+            out.reliable = grid.reliable.ptr<uint8_t>(gyi);
+            solve_row(s, sc, y, grid.x0, grid.step, grid.cols, zr.data(), mask.ptr<uint8_t>(y) + grid.x0, out);
+          }
+        });
+        if (it == options.near_iterations) break;
+        if (!integrate_depth(grid)) {
+          failed_depth = true;
+          break;
+        }
+        progress.report(0.3 * (it + 1) / std::max(1, options.near_iterations), "near light: depth");
+      }
+      zfull = upsample_depth(grid, size);
+    }
+    const int batches = 8;
+    for (int bi = 0; bi < batches; ++bi) {
+      if (progress.cancelled()) {
+        cancelled = true;
+        return;
+      }
+      const int y0 = size.height * bi / batches, y1 = size.height * (bi + 1) / batches;
+      solve_rows(s, mask, s.near ? &zfull : nullptr, y0, y1, result);
+      progress.report((s.near ? 0.3 : 0.0) + (s.near ? 0.7 : 1.0) * (bi + 1) / batches, "normals");
+    }
+  });
+  if (cancelled) return make_error("photometric stereo cancelled");
+  if (failed_depth) VLOG_WARN("PS", "near-light depth refinement did not converge; kept the previous depth");
+  if (s.near) {
+    result.depth = cv::Mat(size, CV_32FC1, cv::Scalar(0));
+    // Depth along -z from the camera at z = 1.
+    cv::subtract(cv::Scalar(1.0), zfull, result.depth, mask);
+  }
+  result.unreliable_pixels = solved - cv::countNonZero(result.reliable);
+  progress.report(1.0, "normals");
+  return result;
+}
+
+AngularError angular_error(const cv::Mat& normals, const cv::Mat& truth, const cv::Mat& mask) {
+  AngularError e;
+  if (normals.empty() || truth.empty() || normals.size() != truth.size()) return e;
+  std::vector<float> deg;
+  deg.reserve(size_t(normals.total()));
+  for (int y = 0; y < normals.rows; ++y) {
+    const cv::Vec3f* a = normals.ptr<cv::Vec3f>(y);
+    const cv::Vec3f* t = truth.ptr<cv::Vec3f>(y);
+    const uint8_t* m = mask.empty() ? nullptr : mask.ptr<uint8_t>(y);
+    for (int x = 0; x < normals.cols; ++x) {
+      if (m && !m[x]) continue;
+      const float la = std::sqrt(a[x].dot(a[x])), lt = std::sqrt(t[x].dot(t[x]));
+      if (la < 1e-6f || lt < 1e-6f) continue;
+      const double c = std::clamp(double(a[x].dot(t[x])) / (double(la) * lt), -1.0, 1.0);
+      deg.push_back(static_cast<float>(std::acos(c) * 180.0 / CV_PI));
+    }
+  }
+  e.pixels = static_cast<int>(deg.size());
+  if (deg.empty()) return e;
+  double sum = 0;
+  for (float d : deg) sum += d;
+  e.mean_deg = sum / deg.size();
+  auto nth = [&](double q) {
+    size_t k = std::min(deg.size() - 1, static_cast<size_t>(q * (deg.size() - 1) + 0.5));
+    std::nth_element(deg.begin(), deg.begin() + k, deg.end());
+    return double(deg[k]);
+  };
+  e.median_deg = nth(0.5);
+  e.p95_deg = nth(0.95);
+  e.max_deg = *std::max_element(deg.begin(), deg.end());
+  return e;
+}
+
+cv::Mat residual_picture(const PsResult& result, float full_scale) {
+  cv::Mat out(result.residual.size(), CV_8UC3, cv::Scalar::all(0));
+  const float sc = full_scale > 0 ? 255.f / full_scale : 255.f;
+  for (int y = 0; y < out.rows; ++y) {
+    const float* r = result.residual.ptr<float>(y);
+    const uint8_t* m = result.mask.ptr<uint8_t>(y);
+    const uint8_t* ok = result.reliable.ptr<uint8_t>(y);
+    cv::Vec3b* o = out.ptr<cv::Vec3b>(y);
+    for (int x = 0; x < out.cols; ++x) {
+      if (!m[x]) continue;
+      if (!ok[x]) {
+        o[x] = cv::Vec3b(0, 0, 255);
+        continue;
+      }
+      const uint8_t v = static_cast<uint8_t>(std::clamp(r[x] * sc, 0.f, 255.f));
+      o[x] = cv::Vec3b(v, v, v);
+    }
+  }
+  return out;
+}
+
+}  // namespace veneer::ps
