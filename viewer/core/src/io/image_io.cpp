@@ -8,10 +8,10 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
-#include <fstream>
 #include <vector>
 
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <opencv2/imgcodecs.hpp>
@@ -159,14 +159,35 @@ Expected<cv::Mat> decode_raw(std::string_view bytes, const std::string& name) {
 // --- files ---------------------------------------------------------------
 
 Expected<std::string> read_file_bytes(const fs::path& file) {
-  std::error_code ec;
-  auto status = fs::status(file, ec);
-  if (ec || !fs::exists(status)) return make_error(file.string() + ": file not found");
-  if (fs::is_directory(status)) return make_error(file.string() + ": is a folder, expected a file");
-  std::ifstream in(file, std::ios::binary);
-  if (!in) return make_error(file.string() + ": cannot open: " + std::strerror(errno));
-  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  if (in.bad()) return make_error(file.string() + ": read error");
+  int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) {
+    int err = errno;
+    if (err == ENOENT) return make_error(file.string() + ": file not found");
+    return make_error(file.string() + ": cannot open: " + std::strerror(err));
+  }
+  struct stat st {};
+  if (::fstat(fd, &st) != 0 || S_ISDIR(st.st_mode)) {
+    ::close(fd);
+    return make_error(file.string() + (S_ISDIR(st.st_mode) ? ": is a folder, expected a file" : ": cannot stat"));
+  }
+  std::string bytes;
+  // One spare byte, so end of file is seen without growing the buffer.
+  bytes.resize(S_ISREG(st.st_mode) ? static_cast<size_t>(st.st_size) + 1 : 0);
+  size_t done = 0;
+  while (true) {
+    if (done == bytes.size()) bytes.resize(std::max<size_t>(4096, bytes.size() * 2));  // grew, or not a regular file
+    ssize_t n = ::read(fd, bytes.data() + done, bytes.size() - done);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) {
+      int err = errno;
+      ::close(fd);
+      return make_error(file.string() + ": read error: " + std::strerror(err));
+    }
+    if (n == 0) break;
+    done += static_cast<size_t>(n);
+  }
+  ::close(fd);
+  bytes.resize(done);
   return bytes;
 }
 
