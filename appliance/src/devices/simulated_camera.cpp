@@ -1,0 +1,418 @@
+// Camera backend "simulated" (see simulated_camera.hpp).
+#include "veneerd/devices/simulated_camera.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <mutex>
+
+#include <opencv2/imgcodecs.hpp>
+
+#include "veneer/util/log.hpp"
+
+namespace veneerd {
+
+using json = nlohmann::json;
+
+namespace {
+
+constexpr const char* kLog = "Camera";
+constexpr double kRefShutter = 1.0 / 30, kRefAperture = 8.0, kRefIso = 100.0;
+
+const std::vector<std::pair<std::string, double>> kShutters = {
+    {"1/500", 1.0 / 500}, {"1/250", 1.0 / 250}, {"1/125", 1.0 / 125}, {"1/60", 1.0 / 60}, {"1/30", 1.0 / 30},
+    {"1/15", 1.0 / 15},   {"1/8", 1.0 / 8},     {"1/4", 0.25},        {"1/2", 0.5},       {"1", 1.0}};
+const std::vector<std::string> kApertures = {"2.8", "4", "5.6", "8", "11", "16", "22"};
+const std::vector<std::string> kIsos = {"100", "200", "400", "800", "1600", "3200"};
+
+// Hue CIE xy -> [r, g, b] relative to the rig white (which maps to 1, 1, 1),
+// the strongest channel scaled to 1.
+cv::Vec3f xy_to_rgb(double x, double y) {
+  auto rgb = [](double x, double y) {
+    y = std::max(y, 1e-4);
+    double X = x / y, Y = 1.0, Z = (1.0 - x - y) / y;
+    return cv::Vec3d{std::max(0.0, 3.2406 * X - 1.5372 * Y - 0.4986 * Z),
+                     std::max(0.0, -0.9689 * X + 1.8758 * Y + 0.0415 * Z),
+                     std::max(0.0, 0.0557 * X - 0.2040 * Y + 1.0570 * Z)};
+  };
+  cv::Vec3d white = rgb(0.3227, 0.329), c = rgb(x, y);
+  cv::Vec3d rel{c[0] / white[0], c[1] / white[1], c[2] / white[2]};
+  double m = std::max({rel[0], rel[1], rel[2]});
+  if (!(m > 0)) return {1, 1, 1};
+  return cv::Vec3f(static_cast<float>(rel[0] / m), static_cast<float>(rel[1] / m), static_cast<float>(rel[2] / m));
+}
+
+veneer::Status check_scene(const std::string& name) {
+  auto names = veneer::sim::scene_names();
+  if (std::find(names.begin(), names.end(), name) != names.end()) return {};
+  std::string known;
+  for (const auto& n : names) {
+    if (!known.empty()) known += ", ";
+    known += n;
+  }
+  return veneer::make_error("simulated camera: unknown scene '" + name + "' (known: " + known + ")");
+}
+
+veneer::Status check_size(const cv::Size& s, const char* what) {
+  if (s.width < 8 || s.height < 8 || s.width > 8192 || s.height > 8192)
+    return veneer::make_error(std::string("simulated camera: ") + what + " " + std::to_string(s.width) + "x" +
+                              std::to_string(s.height) + " is outside 8x8 .. 8192x8192");
+  return {};
+}
+
+}  // namespace
+
+// --- options ---------------------------------------------------------------
+
+veneer::Status SimulatedCameraOptions::check() const {
+  if (auto st = bridge.check(); !st) return st;
+  if (auto st = check_scene(scene); !st) return st;
+  if (auto st = check_scene(preview_scene); !st) return st;
+  if (auto st = check_size(size, "size"); !st) return st;
+  if (auto st = check_size(preview_size, "preview_size"); !st) return st;
+  if (!(noise_sigma >= 0 && noise_sigma <= 0.2)) return veneer::make_error("simulated camera: noise_sigma must be in [0, 0.2]");
+  if (preview_quality < 1 || preview_quality > 100) return veneer::make_error("simulated camera: preview_quality must be 1..100");
+  return {};
+}
+
+veneer::Expected<SimulatedCameraOptions> SimulatedCameraOptions::from_json(const json& s) {
+  if (!s.is_object()) return veneer::make_error("simulated camera: config section must be a JSON object");
+  SimulatedCameraOptions o;
+  auto bridge = HueLampsOptions::from_json(s);
+  if (!bridge) return veneer::make_error("simulated camera: " + bridge.message());
+  o.bridge = *bridge;
+  auto get_size = [&](const char* key, cv::Size& out) -> veneer::Status {
+    if (!s.contains(key)) return {};
+    const json& v = s[key];
+    if (!v.is_array() || v.size() != 2 || !v[0].is_number_integer() || !v[1].is_number_integer())
+      return veneer::make_error(std::string("simulated camera: '") + key + "' must be [width, height]");
+    out = cv::Size(static_cast<int>(std::clamp<int64_t>(v[0].get<int64_t>(), 0, 1 << 20)),
+                   static_cast<int>(std::clamp<int64_t>(v[1].get<int64_t>(), 0, 1 << 20)));
+    return {};
+  };
+  if (auto st = get_size("size", o.size); !st) return st.error();
+  if (auto st = get_size("preview_size", o.preview_size); !st) return st.error();
+  for (const char* key : {"scene", "preview_scene"}) {
+    if (!s.contains(key)) continue;
+    if (!s[key].is_string()) return veneer::make_error(std::string("simulated camera: '") + key + "' must be a scene name");
+    (std::string(key) == "scene" ? o.scene : o.preview_scene) = s[key].get<std::string>();
+  }
+  if (s.contains("noise_sigma")) {
+    if (!s["noise_sigma"].is_number()) return veneer::make_error("simulated camera: 'noise_sigma' must be a number");
+    o.noise_sigma = s["noise_sigma"].get<double>();
+  }
+  if (s.contains("preview_quality")) {
+    if (!s["preview_quality"].is_number_integer())
+      return veneer::make_error("simulated camera: 'preview_quality' must be an integer");
+    o.preview_quality = static_cast<int>(std::clamp<int64_t>(s["preview_quality"].get<int64_t>(), -1, 1000));
+  }
+  if (auto st = o.check(); !st) return st.error();
+  return o;
+}
+
+json SimulatedCameraOptions::to_json() const {
+  json j = bridge.to_json();
+  j["scene"] = scene;
+  j["preview_scene"] = preview_scene;
+  j["size"] = {size.width, size.height};
+  j["preview_size"] = {preview_size.width, preview_size.height};
+  j["noise_sigma"] = noise_sigma;
+  j["preview_quality"] = preview_quality;
+  return j;
+}
+
+// --- the camera ------------------------------------------------------------
+
+struct SimulatedCamera::Impl {
+  SimulatedCameraOptions options;
+  std::unique_ptr<HueLamps> bridge;  // reads lamp states only
+  mutable std::mutex mutex;          // everything below
+  std::mutex bridge_mutex;           // HueLamps is used by one thread at a time
+  std::string scene, preview_scene;
+  Exposure exposure{kRefShutter, kRefAperture, static_cast<int>(kRefIso)};
+  cv::Vec3d hand_lamp{0.25, 0.3, 0.6};
+  float hand_brightness = 1.0f;
+  bool connected = true;
+  uint64_t shots = 0;
+  uint64_t fail_at = 0;  // shot number that fails; 0 = none
+  uint64_t previews = 0;
+  std::vector<veneer::sim::Lamp> last_lamps;
+  // Scenes keep their G-buffer for one size: stills and live view use separate objects.
+  std::map<std::string, std::shared_ptr<const veneer::sim::Scene>> still_scenes, preview_scenes;
+
+  double gain_locked() const {
+    return (exposure.shutter_s / kRefShutter) * (kRefAperture / exposure.aperture) * (kRefAperture / exposure.aperture) *
+           (exposure.iso / kRefIso);
+  }
+
+  veneer::sim::RenderOptions still_options_locked() const {
+    veneer::sim::RenderOptions r;
+    r.size = options.size;
+    r.focal_px = 2.0 * options.size.width;
+    r.exposure = gain_locked();
+    r.noise_sigma = options.noise_sigma;
+    r.seed = shots + 1;
+    return r;
+  }
+
+  veneer::Expected<std::shared_ptr<const veneer::sim::Scene>> scene_for(
+      std::map<std::string, std::shared_ptr<const veneer::sim::Scene>>& cache, const std::string& name,
+      const veneer::sim::RenderOptions& r) {
+    {
+      std::lock_guard lock(mutex);
+      if (auto it = cache.find(name); it != cache.end()) return it->second;
+    }
+    auto made = veneer::sim::make_scene(name, r);
+    if (!made) return made.error();
+    std::lock_guard lock(mutex);
+    return cache.emplace(name, *made).first->second;
+  }
+};
+
+SimulatedCamera::SimulatedCamera(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+SimulatedCamera::~SimulatedCamera() = default;
+
+veneer::Expected<std::unique_ptr<SimulatedCamera>> SimulatedCamera::create(const SimulatedCameraOptions& options) {
+  if (auto st = options.check(); !st) return st.error();
+  auto impl = std::make_unique<Impl>();
+  impl->options = options;
+  HueLampsOptions reader = options.bridge;
+  reader.settle_ms = 0;
+  reader.verify_reachable = false;
+  auto lamps = HueLamps::create(reader);
+  if (!lamps) return lamps.error();
+  impl->bridge = std::move(*lamps);
+  impl->scene = options.scene;
+  impl->preview_scene = options.preview_scene;
+  return std::unique_ptr<SimulatedCamera>(new SimulatedCamera(std::move(impl)));
+}
+
+veneer::Status SimulatedCamera::open() {
+  std::lock_guard lock(impl_->mutex);
+  if (!impl_->connected) return veneer::make_error("simulated camera: not connected (unplugged)");
+  return {};
+}
+
+bool SimulatedCamera::connected() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->connected;
+}
+
+veneer::Expected<CameraDescription> SimulatedCamera::describe() {
+  std::lock_guard lock(impl_->mutex);
+  if (!impl_->connected) return veneer::make_error("simulated camera: not connected (unplugged)");
+  CameraDescription d;
+  d.model = "Veneer simulated camera (scene " + impl_->scene + ")";
+  for (const auto& [n, v] : kShutters) d.shutter_values.push_back(n);
+  d.aperture_values = kApertures;
+  d.iso_values = kIsos;
+  return d;
+}
+
+veneer::Status SimulatedCamera::set_exposure(const Exposure& e) {
+  if (e.shutter_s < 0 || e.shutter_s > 30 || !std::isfinite(e.shutter_s))
+    return veneer::make_error("simulated camera: shutter " + std::to_string(e.shutter_s) + " s is outside 0..30 s");
+  if (e.aperture != 0 && (e.aperture < 1 || e.aperture > 32 || !std::isfinite(e.aperture)))
+    return veneer::make_error("simulated camera: aperture f/" + std::to_string(e.aperture) + " is outside f/1..f/32");
+  if (e.iso != 0 && (e.iso < 50 || e.iso > 25600))
+    return veneer::make_error("simulated camera: ISO " + std::to_string(e.iso) + " is outside 50..25600");
+  std::lock_guard lock(impl_->mutex);
+  if (!impl_->connected) return veneer::make_error("simulated camera: not connected (unplugged)");
+  if (e.shutter_s > 0) impl_->exposure.shutter_s = e.shutter_s;
+  if (e.aperture > 0) impl_->exposure.aperture = e.aperture;
+  if (e.iso > 0) impl_->exposure.iso = e.iso;
+  return {};
+}
+
+veneer::Expected<Still> SimulatedCamera::capture() {
+  veneer::sim::RenderOptions r;
+  std::string scene_name;
+  uint64_t shot = 0;
+  {
+    std::lock_guard lock(impl_->mutex);
+    if (!impl_->connected) return veneer::make_error("simulated camera: not connected (unplugged)");
+    r = impl_->still_options_locked();
+    shot = ++impl_->shots;
+    scene_name = impl_->scene;
+    if (impl_->fail_at == shot) {
+      impl_->fail_at = 0;
+      VLOG_WARN(kLog, "simulated camera: shot {} fails (injected fault)", shot);
+      return veneer::make_error("simulated camera: shot " + std::to_string(shot) + " failed (injected fault: capture error)");
+    }
+  }
+  // Which lamps are on, as the bridge reports them (the same HTTP path as a real rig).
+  veneer::Expected<std::vector<LampState>> states = veneer::make_error("");
+  {
+    std::lock_guard lock(impl_->bridge_mutex);
+    states = impl_->bridge->read();
+  }
+  if (!states) return veneer::make_error("simulated camera: cannot read the lamps from the bridge: " + states.message());
+  std::vector<veneer::sim::Lamp> rig = veneer::sim::thesis_rig();
+  std::vector<veneer::sim::Lamp> lit, all;
+  for (std::size_t i = 0; i < states->size(); ++i) {
+    veneer::sim::Lamp lamp;
+    if (i < rig.size()) lamp.position_m = rig[i].position_m;
+    const LampState& s = (*states)[i];
+    lamp.brightness = (s.on && s.reachable && i < rig.size()) ? static_cast<float>(s.brightness) / 254.0f : 0.0f;
+    lamp.color = xy_to_rgb(s.x, s.y);
+    all.push_back(lamp);
+    if (lamp.brightness > 0) lit.push_back(lamp);
+  }
+  auto scene = impl_->scene_for(impl_->still_scenes, scene_name, r);
+  if (!scene) return veneer::make_error("simulated camera: " + scene.message());
+  Still still;
+  still.linear = veneer::sim::render(**scene, lit, r);
+  if (still.linear.empty()) return veneer::make_error("simulated camera: the simulator rendered nothing for shot " + std::to_string(shot));
+  {
+    std::lock_guard lock(impl_->mutex);
+    impl_->last_lamps = all;
+  }
+  VLOG_DEBUG(kLog, "simulated shot {}: scene {}, {} lamp(s) on, gain {:.3f}", shot, scene_name, lit.size(), r.exposure);
+  return still;
+}
+
+veneer::Expected<std::vector<unsigned char>> SimulatedCamera::preview() {
+  veneer::sim::RenderOptions r;
+  std::string scene_name;
+  veneer::sim::Lamp hand;
+  int quality = 80;
+  {
+    std::lock_guard lock(impl_->mutex);
+    if (!impl_->connected) return veneer::make_error("simulated camera: not connected (unplugged)");
+    r.size = impl_->options.preview_size;
+    r.focal_px = 2.0 * r.size.width;
+    r.exposure = impl_->gain_locked();
+    r.noise_sigma = impl_->options.noise_sigma;
+    r.seed = ++impl_->previews;
+    scene_name = impl_->preview_scene;
+    hand.position_m = impl_->hand_lamp;
+    hand.brightness = impl_->hand_brightness;
+    quality = impl_->options.preview_quality;
+  }
+  auto scene = impl_->scene_for(impl_->preview_scenes, scene_name, r);
+  if (!scene) return veneer::make_error("simulated camera: " + scene.message());
+  cv::Mat linear = veneer::sim::render(**scene, {hand}, r);
+  if (linear.empty()) return veneer::make_error("simulated camera: the simulator rendered no live-view frame");
+  // Display encoding: sRGB-like gamma on the linear frame.
+  cv::Mat gamma;
+  cv::max(linear, 0.0, gamma);
+  cv::pow(gamma, 1.0 / 2.2, gamma);
+  cv::Mat bytes8;
+  gamma.convertTo(bytes8, CV_8UC3, 255.0);
+  std::vector<unsigned char> jpeg;
+  if (!cv::imencode(".jpg", bytes8, jpeg, {cv::IMWRITE_JPEG_QUALITY, quality}))
+    return veneer::make_error("simulated camera: JPEG encoding of the live-view frame failed");
+  return jpeg;
+}
+
+veneer::Status SimulatedCamera::set_scene(const std::string& name) {
+  if (auto st = check_scene(name); !st) return st;
+  std::lock_guard lock(impl_->mutex);
+  impl_->scene = name;
+  return {};
+}
+
+veneer::Status SimulatedCamera::set_preview_scene(const std::string& name) {
+  if (auto st = check_scene(name); !st) return st;
+  std::lock_guard lock(impl_->mutex);
+  impl_->preview_scene = name;
+  return {};
+}
+
+std::string SimulatedCamera::scene() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->scene;
+}
+
+std::string SimulatedCamera::preview_scene() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->preview_scene;
+}
+
+void SimulatedCamera::set_hand_lamp(const cv::Vec3d& position_m, float brightness) {
+  std::lock_guard lock(impl_->mutex);
+  impl_->hand_lamp = position_m;
+  impl_->hand_brightness = std::clamp(brightness, 0.0f, 1.0f);
+}
+
+cv::Vec3d SimulatedCamera::hand_lamp() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->hand_lamp;
+}
+
+void SimulatedCamera::fail_on_shot(int k) {
+  std::lock_guard lock(impl_->mutex);
+  impl_->fail_at = k > 0 ? impl_->shots + static_cast<uint64_t>(k) : 0;
+}
+
+void SimulatedCamera::disconnect() {
+  {
+    std::lock_guard lock(impl_->mutex);
+    if (!impl_->connected) return;
+    impl_->connected = false;
+  }
+  VLOG_WARN(kLog, "simulated camera unplugged");
+  if (on_connection_change) on_connection_change(false);
+}
+
+void SimulatedCamera::reconnect() {
+  {
+    std::lock_guard lock(impl_->mutex);
+    if (impl_->connected) return;
+    impl_->connected = true;
+  }
+  VLOG_INFO(kLog, "simulated camera plugged in");
+  if (on_connection_change) on_connection_change(true);
+}
+
+uint64_t SimulatedCamera::shots() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->shots;
+}
+
+double SimulatedCamera::gain() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->gain_locked();
+}
+
+veneer::sim::RenderOptions SimulatedCamera::still_options() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->still_options_locked();
+}
+
+std::vector<veneer::sim::Lamp> SimulatedCamera::last_lamps() const {
+  std::lock_guard lock(impl_->mutex);
+  return impl_->last_lamps;
+}
+
+veneer::Expected<veneer::Truth> SimulatedCamera::truth() {
+  veneer::sim::RenderOptions r;
+  std::string name;
+  {
+    std::lock_guard lock(impl_->mutex);
+    r = impl_->still_options_locked();
+    name = impl_->scene;
+  }
+  auto scene = impl_->scene_for(impl_->still_scenes, name, r);
+  if (!scene) return veneer::make_error("simulated camera: " + scene.message());
+  veneer::Truth t = veneer::sim::render_truth(**scene, r);
+  if (!t.present()) return veneer::make_error("simulated camera: the simulator produced no truth for scene " + name);
+  return t;
+}
+
+veneer::CameraInfo SimulatedCamera::camera_info() const {
+  std::lock_guard lock(impl_->mutex);
+  veneer::CameraInfo c;
+  c.model = "Veneer simulated camera";
+  c.exposure_s = impl_->exposure.shutter_s;
+  c.aperture = impl_->exposure.aperture;
+  c.iso = impl_->exposure.iso;
+  c.focal_px = 2.0 * impl_->options.size.width;
+  c.cx = (impl_->options.size.width - 1) * 0.5;
+  c.cy = (impl_->options.size.height - 1) * 0.5;
+  return c;
+}
+
+SimulatedCamera* as_simulated(Camera* camera) { return dynamic_cast<SimulatedCamera*>(camera); }
+
+}  // namespace veneerd
