@@ -1,4 +1,319 @@
-// The fast engine's maps against the exact methods.
+// The fast engine's maps against the exact methods (compute_map with
+// fast = false), on small synthetic objects with fixed seeds.
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <random>
+
 #include <gtest/gtest.h>
 
 #include "veneer/match/fast.hpp"
+#include "veneer/match/matcher.hpp"
+
+namespace {
+
+using namespace veneer::match;
+
+// A sphere of `radius` px at `centre`, with a bumpy texture in its normals
+// (amplitude `bump`), normals quantised to `levels` steps (0 = none) like a
+// photometric-stereo result, and 7 Lambertian photos under the thesis ring.
+ObjectView sphere(cv::Size size, cv::Point2f centre, float radius, float bump, int levels, unsigned seed) {
+  ObjectView v;
+  v.normals = cv::Mat(size, CV_32FC3, cv::Scalar::all(0));
+  v.mask = cv::Mat(size, CV_8UC1, cv::Scalar(0));
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> ph(0, 6.28f);
+  const float p1 = ph(rng), p2 = ph(rng);
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x) {
+      const float dx = (x - centre.x) / radius, dy = -(y - centre.y) / radius;
+      const float r2 = dx * dx + dy * dy;
+      if (r2 >= 0.97f) continue;
+      float n[3] = {dx, dy, std::sqrt(1 - r2)};
+      n[0] += bump * std::sin(x * 0.9f + p1) * std::cos(y * 0.7f + p2);
+      n[1] += bump * std::cos(x * 0.5f + p2) * std::sin(y * 1.1f + p1);
+      float l = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+      for (float& c : n) c /= l;
+      if (levels > 0) {
+        for (float& c : n) c = std::round(c * levels) / levels;
+        l = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        for (float& c : n) c /= l;
+      }
+      v.normals.at<cv::Vec3f>(y, x) = cv::Vec3f(n[0], n[1], n[2]);
+      v.mask.at<uchar>(y, x) = 255;
+    }
+  for (int lamp = 0; lamp < 7; ++lamp) {
+    const float a = 6.2832f * lamp / 8 + 0.4f;
+    cv::Vec3f L(0.47f * std::cos(a), 0.47f * std::sin(a), 1.0f);
+    L /= cv::norm(L);
+    cv::Mat im(size, CV_32FC3, cv::Scalar::all(0));
+    for (int y = 0; y < size.height; ++y)
+      for (int x = 0; x < size.width; ++x) {
+        if (!v.mask.at<uchar>(y, x)) continue;
+        const cv::Vec3f n = v.normals.at<cv::Vec3f>(y, x);
+        const float s = std::max(0.0f, n.dot(L));
+        const float albedo = 0.5f + 0.3f * std::sin(0.3f * x) * std::cos(0.2f * y);
+        im.at<cv::Vec3f>(y, x) = cv::Vec3f(albedo * s * 0.8f, albedo * s, albedo * s * 0.9f);
+      }
+    v.images.push_back(im);
+  }
+  return v;
+}
+
+MatchOptions opts(Method m, Feature f, int patch, bool fast) {
+  MatchOptions o;
+  o.method = m;
+  o.feature = f;
+  o.patch = patch;
+  o.fast = fast;
+  return o;
+}
+
+Map exact(const ObjectView& d, const ObjectView& s, MatchOptions o) {
+  o.fast = false;
+  auto m = compute_map(d, s, o);
+  EXPECT_TRUE(m.ok()) << (m.ok() ? "" : m.message());
+  return m.ok() ? *m : Map{};
+}
+
+Map fast_map(const ObjectView& d, const ObjectView& s, const MatchOptions& o, fast::Stats* stats = nullptr) {
+  auto m = fast::compute_map(d, s, o, {}, stats);
+  EXPECT_TRUE(m.ok()) << (m.ok() ? "" : m.message());
+  return m.ok() ? *m : Map{};
+}
+
+struct Compare {
+  int pixels = 0, same_xy = 0, worse = 0;
+  double max_rel = 0;
+};
+
+// Same pixels mapped; count identical matches; distances relative to the exact.
+Compare compare(const Map& a, const Map& exact_map, const cv::Mat& mask) {
+  Compare c;
+  for (int y = 0; y < mask.rows; ++y)
+    for (int x = 0; x < mask.cols; ++x) {
+      if (!mask.at<uchar>(y, x)) {
+        EXPECT_LT(a.xy.at<cv::Vec2f>(y, x)[0], 0) << "background pixel mapped at " << x << "," << y;
+        continue;
+      }
+      ++c.pixels;
+      const cv::Vec2f p = a.xy.at<cv::Vec2f>(y, x), q = exact_map.xy.at<cv::Vec2f>(y, x);
+      if (p == q) ++c.same_xy;
+      const float da = a.distance.at<float>(y, x), de = exact_map.distance.at<float>(y, x);
+      if (da > de) {
+        ++c.worse;
+        c.max_rel = std::max(c.max_rel, static_cast<double>(da - de) / std::max(1e-6f, de));
+      }
+    }
+  return c;
+}
+
+double coherence(const Map& m, const cv::Mat& mask) {
+  int pairs = 0, good = 0;
+  for (int y = 0; y < mask.rows; ++y)
+    for (int x = 0; x < mask.cols; ++x) {
+      if (!mask.at<uchar>(y, x) || !m.valid(x, y)) continue;
+      for (const cv::Point o : {cv::Point(1, 0), cv::Point(0, 1)}) {
+        const int nx = x + o.x, ny = y + o.y;
+        if (nx >= mask.cols || ny >= mask.rows || !mask.at<uchar>(ny, nx) || !m.valid(nx, ny)) continue;
+        ++pairs;
+        const cv::Vec2f a = m.xy.at<cv::Vec2f>(y, x), b = m.xy.at<cv::Vec2f>(ny, nx);
+        if (cv::norm(a - b) <= 1.5) ++good;
+      }
+    }
+  return pairs ? static_cast<double>(good) / pairs : 0;
+}
+
+int max_reuse(const Map& m, const cv::Mat& mask) {
+  std::map<std::pair<int, int>, int> uses;
+  int best = 0;
+  for (int y = 0; y < mask.rows; ++y)
+    for (int x = 0; x < mask.cols; ++x)
+      if (mask.at<uchar>(y, x) && m.valid(x, y)) {
+        const cv::Vec2f q = m.xy.at<cv::Vec2f>(y, x);
+        best = std::max(best, ++uses[{static_cast<int>(q[0]), static_cast<int>(q[1])}]);
+      }
+  return best;
+}
+
+double mean_normal_error_deg(const Map& m, const ObjectView& d, const ObjectView& s) {
+  double sum = 0;
+  int n = 0;
+  for (int y = 0; y < d.mask.rows; ++y)
+    for (int x = 0; x < d.mask.cols; ++x)
+      if (d.mask.at<uchar>(y, x) && m.valid(x, y)) {
+        const cv::Vec2f q = m.xy.at<cv::Vec2f>(y, x);
+        const cv::Vec3f a = d.normals.at<cv::Vec3f>(y, x);
+        const cv::Vec3f b = s.normals.at<cv::Vec3f>(static_cast<int>(q[1]), static_cast<int>(q[0]));
+        sum += std::acos(std::clamp(static_cast<double>(a.dot(b)), -1.0, 1.0)) * 180 / CV_PI;
+        ++n;
+      }
+  return n ? sum / n : 0;
+}
+
+bool same_map(const Map& a, const Map& b) {
+  return cv::countNonZero(a.xy.reshape(1) != b.xy.reshape(1)) == 0 &&
+         cv::countNonZero(a.distance != b.distance) == 0;
+}
+
+class FastEngine : public ::testing::Test {
+ protected:
+  // Destination smaller than the source, different texture and quantisation.
+  ObjectView dst = sphere({100, 80}, {48.f, 41.f}, 27.f, 0.12f, 24, 1);
+  ObjectView src = sphere({110, 90}, {56.f, 44.f}, 33.f, 0.12f, 0, 2);
+  // Smooth shapes (texture lives in the albedo): what chunks are made for.
+  ObjectView smooth_dst = sphere({100, 80}, {48.f, 41.f}, 27.f, 0.0f, 24, 1);
+  ObjectView smooth_src = sphere({110, 90}, {56.f, 44.f}, 31.f, 0.0f, 0, 2);
+};
+
+TEST_F(FastEngine, SupportsEveryMethodButBaseline) {
+  for (Method m : {Method::linear, Method::flann, Method::candidates, Method::patchmatch, Method::regiongrow,
+                   Method::coherent})
+    EXPECT_TRUE(fast::supports(opts(m, Feature::normals, 1, true))) << method_name(m);
+  EXPECT_FALSE(fast::supports(opts(Method::baseline, Feature::normals, 1, true)));
+}
+
+TEST_F(FastEngine, NormalsOneByOneEqualLinearExactly) {
+  const auto o = opts(Method::linear, Feature::normals, 1, true);
+  fast::Stats st;
+  const Map f = fast_map(dst, src, o, &st);
+  const Map e = exact(dst, src, o);
+  const Compare c = compare(f, e, dst.mask);
+  EXPECT_EQ(c.same_xy, c.pixels);
+  EXPECT_EQ(c.worse, 0);
+  EXPECT_EQ(st.certified, 1.0);
+}
+
+TEST_F(FastEngine, IntensitiesOneByOneEqualLinearExactly) {
+  const auto o = opts(Method::linear, Feature::intensities, 1, true);
+  fast::Stats st;
+  const Map f = fast_map(dst, src, o, &st);
+  const Map e = exact(dst, src, o);
+  const Compare c = compare(f, e, dst.mask);
+  EXPECT_EQ(c.same_xy, c.pixels);
+  EXPECT_EQ(c.worse, 0);
+  // Lambertian photos lie in a 3-D subspace: the projection is used and keeps the nearest.
+  EXPECT_EQ(st.projected_dims, 3);
+  EXPECT_GT(st.explained_variance, 0.99);
+}
+
+// Patches: certified re-ranking is exact up to float summation order, so the
+// stated tolerance is 1e-4 relative on every pixel's distance, and at least
+// 99 % identical matches (the rest are equal-distance ties).
+TEST_F(FastEngine, PatchesMatchLinearWithinTolerance) {
+  const ObjectView dst = sphere({60, 50}, {30.f, 26.f}, 19.f, 0.12f, 24, 4);
+  const ObjectView src = sphere({70, 60}, {33.f, 30.f}, 23.f, 0.12f, 0, 5);
+  for (Feature f : {Feature::normals, Feature::intensities})
+    for (int patch : {3, 5, 7}) {
+      const auto o = opts(Method::linear, f, patch, true);
+      fast::Stats st;
+      const Map fm = fast_map(dst, src, o, &st);
+      const Map e = exact(dst, src, o);
+      const Compare c = compare(fm, e, dst.mask);
+      SCOPED_TRACE(std::string(feature_name(f)) + " " + std::to_string(patch));
+      EXPECT_LE(c.max_rel, 1e-4);
+      EXPECT_GE(c.same_xy, 0.99 * c.pixels);
+      EXPECT_GT(st.certified, 0.95);
+    }
+}
+
+TEST_F(FastEngine, CandidatesEqualTheFaithfulMethod) {
+  for (int k : {1, 10, 100}) {
+    auto o = opts(Method::candidates, Feature::normals, 1, true);
+    o.candidates = k;
+    const Compare c = compare(fast_map(dst, src, o), exact(dst, src, o), dst.mask);
+    EXPECT_EQ(c.same_xy, c.pixels) << "K=" << k;
+  }
+  // K = 1 is direct matching
+  auto o = opts(Method::candidates, Feature::normals, 3, true);
+  o.candidates = 1;
+  const Compare c = compare(fast_map(dst, src, o), exact(dst, src, opts(Method::linear, Feature::normals, 3, false)),
+                            dst.mask);
+  EXPECT_GE(c.same_xy, 0.99 * c.pixels);
+}
+
+TEST_F(FastEngine, RegionGrowAtZeroIsDirectAndFollowsTheFaithfulMethod) {
+  auto o = opts(Method::regiongrow, Feature::normals, 3, true);
+  o.threshold = 0;
+  Compare c = compare(fast_map(dst, src, o), exact(dst, src, opts(Method::linear, Feature::normals, 3, false)),
+                      dst.mask);
+  EXPECT_GE(c.same_xy, 0.99 * c.pixels);
+  o.threshold = 0.08;
+  c = compare(fast_map(dst, src, o), exact(dst, src, o), dst.mask);
+  EXPECT_GE(c.same_xy, 0.99 * c.pixels);
+}
+
+// PatchMatch is approximate; the stated tolerance: its mean distance within
+// 25 % of the exact nearest's, and no pixel mapped off either object.
+TEST_F(FastEngine, PatchMatchIsNearExactAndDeterministic) {
+  auto o = opts(Method::patchmatch, Feature::normals, 7, true);
+  const Map a = fast_map(dst, src, o);
+  const Map e = exact(dst, src, opts(Method::linear, Feature::normals, 7, false));
+  const double mean_fast = cv::mean(a.distance, dst.mask)[0], mean_exact = cv::mean(e.distance, dst.mask)[0];
+  EXPECT_LE(mean_fast, 1.25 * mean_exact + 1e-4);
+  for (int y = 0; y < dst.mask.rows; ++y)
+    for (int x = 0; x < dst.mask.cols; ++x)
+      if (dst.mask.at<uchar>(y, x)) {
+        ASSERT_TRUE(a.valid(x, y));
+        const cv::Vec2f q = a.xy.at<cv::Vec2f>(y, x);
+        ASSERT_TRUE(src.mask.at<uchar>(static_cast<int>(q[1]), static_cast<int>(q[0])));
+      }
+  o.threads = 1;
+  EXPECT_TRUE(same_map(a, fast_map(dst, src, o)));  // independent of the thread count
+}
+
+TEST_F(FastEngine, CoherentIsDeterministicCoherentAndAccurate) {
+  auto o = opts(Method::coherent, Feature::normals, 1, true);
+  o.coherent_threshold = 0.10;
+  const Map a = fast_map(smooth_dst, smooth_src, o);
+  const Map b = fast_map(smooth_dst, smooth_src, o);
+  EXPECT_TRUE(same_map(a, b));
+  o.threads = 1;
+  EXPECT_TRUE(same_map(a, fast_map(smooth_dst, smooth_src, o)));
+  const Map nearest = exact(smooth_dst, smooth_src, opts(Method::linear, Feature::normals, 1, false));
+  const double coh = coherence(a, smooth_dst.mask), coh_nearest = coherence(nearest, smooth_dst.mask);
+  EXPECT_GE(coh, 0.85);
+  EXPECT_GT(coh, coh_nearest);
+  EXPECT_LE(mean_normal_error_deg(a, smooth_dst, smooth_src), mean_normal_error_deg(nearest, smooth_dst, smooth_src) + 3.0);
+  // a different seed gives a different (jittered) chunking
+  o.seed = 2;
+  EXPECT_FALSE(same_map(a, fast_map(smooth_dst, smooth_src, o)));
+}
+
+TEST_F(FastEngine, CoherentChangesLocallyWithTheThreshold) {
+  auto o = opts(Method::coherent, Feature::normals, 1, true);
+  o.coherent_threshold = 0.10;
+  const Map a = fast_map(smooth_dst, smooth_src, o);
+  o.coherent_threshold = 0.102;
+  const Map b = fast_map(smooth_dst, smooth_src, o);
+  const cv::Mat diff = (a.xy.reshape(1) != b.xy.reshape(1));
+  const double changed = cv::countNonZero(diff) / 2.0 / cv::countNonZero(smooth_dst.mask);
+  EXPECT_LT(changed, 0.10);
+}
+
+TEST_F(FastEngine, UniformityReducesReuse) {
+  // A small source forces reuse.
+  const ObjectView small = sphere({60, 60}, {30.f, 30.f}, 14.f, 0.12f, 0, 3);
+  for (Method m : {Method::coherent, Method::patchmatch}) {
+    auto o = opts(m, Feature::normals, m == Method::patchmatch ? 3 : 1, true);
+    const int plain = max_reuse(fast_map(dst, small, o), dst.mask);
+    o.uniformity = 0.5;
+    const int uniform = max_reuse(fast_map(dst, small, o), dst.mask);
+    EXPECT_LT(uniform, plain) << method_name(m);
+  }
+}
+
+TEST_F(FastEngine, BadInputIsAnError) {
+  auto o = opts(Method::linear, Feature::normals, 4, true);
+  EXPECT_FALSE(fast::compute_map(dst, src, o).ok());
+  o.patch = 1;
+  ObjectView empty = dst;
+  empty.mask = cv::Mat::zeros(dst.mask.size(), CV_8UC1);
+  EXPECT_FALSE(fast::compute_map(empty, src, o).ok());
+  o.feature = Feature::intensities;
+  ObjectView fewer = src;
+  fewer.images.pop_back();
+  EXPECT_FALSE(fast::compute_map(dst, fewer, o).ok());
+}
+
+}  // namespace

@@ -1,4 +1,5 @@
 // The fast engine's indices against an exact brute force.
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -25,7 +26,8 @@ void brute_knn(const std::vector<float>& pts, int dims, const float* q, int k, s
     }
     all[i] = {s, i};
   }
-  std::sort(all.begin(), all.end());
+  const int m = std::min(k, n);
+  std::partial_sort(all.begin(), all.begin() + m, all.end());
   ids.assign(k, -1);
   d.assign(k, std::numeric_limits<float>::infinity());
   for (int j = 0; j < std::min(k, n); ++j) ids[j] = all[j].second, d[j] = all[j].first;

@@ -1,0 +1,96 @@
+#pragma once
+// Internal: one object in the fast engine's layout. Patches are not
+// materialised: a patch that lies wholly on the object is read straight from
+// the per-pixel value image (P rows of P*C contiguous floats, stride = image
+// row), and only patches touching the object's rim (whose mirrored pixels
+// follow features.hpp's rule) are stored, contiguously. Rows are the object's
+// pixels in scan order, as in FeatureSet, so ids and tie-breaks agree with
+// the faithful methods.
+#include <functional>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "veneer/match/matcher.hpp"
+#include "veneer/util/expected.hpp"
+#include "veneer/util/progress.hpp"
+
+namespace veneer::match::fast {
+
+struct Object {
+  int channels = 0;  // values per pixel (3 for normals, lamps for intensities)
+  int patch = 1;     // patch side
+  int dims = 0;      // channels * patch^2
+  cv::Size size;
+  cv::Mat values;                 // CV_32FC(channels); read only at object pixels
+  std::vector<cv::Point> pixels;  // row -> pixel
+  cv::Mat row_of;                 // CV_32S pixel -> row (-1 off the object)
+  cv::Rect bbox;
+  std::vector<float> flat;        // rows x channels, the centre values (contiguous)
+  std::vector<int> slot;          // row -> index into rim, -1 = interior (read from values)
+  std::vector<float> rim;         // stored patches of rim rows, dims floats each
+
+  int rows() const { return static_cast<int>(pixels.size()); }
+  int row_at(int x, int y) const {
+    if (x < 0 || y < 0 || x >= size.width || y >= size.height) return -1;
+    return row_of.at<int>(y, x);
+  }
+  // First patch row of `row` and the stride between patch rows (in floats).
+  const float* patch_ptr(int row, size_t& stride) const {
+    const int s = slot[row];
+    if (s < 0) {
+      const cv::Point p = pixels[row];
+      const int r = patch / 2;
+      stride = values.step1();
+      return values.ptr<float>(p.y - r) + static_cast<size_t>(p.x - r) * channels;
+    }
+    stride = static_cast<size_t>(patch) * channels;
+    return rim.data() + static_cast<size_t>(s) * dims;
+  }
+  // The patch of `row` as one contiguous vector (features.hpp's layout).
+  void gather(int row, float* out) const {
+    size_t stride;
+    const float* p = patch_ptr(row, stride);
+    const int w = patch * channels;
+    for (int i = 0; i < patch; ++i)
+      for (int j = 0; j < w; ++j) *out++ = p[i * stride + j];
+  }
+};
+
+// Keeps the k best (distance, id) pairs in caller storage, ascending, ties to
+// the lower id (the brute force's order).
+struct TopK {
+  int k;
+  int* ids;
+  float* d;
+  int filled = 0;
+  TopK(int k_, int* ids_, float* d_) : k(k_), ids(ids_), d(d_) {
+    for (int j = 0; j < k; ++j) ids[j] = -1, d[j] = std::numeric_limits<float>::infinity();
+  }
+  float worst() const { return filled < k ? std::numeric_limits<float>::infinity() : d[k - 1]; }
+  void add(float dist, int id) {
+    if (filled == k && !(dist < d[k - 1] || (dist == d[k - 1] && id < ids[k - 1]))) return;
+    int j = filled < k ? filled++ : k - 1;
+    while (j > 0 && (d[j - 1] > dist || (d[j - 1] == dist && ids[j - 1] > id))) {
+      d[j] = d[j - 1];
+      ids[j] = ids[j - 1];
+      --j;
+    }
+    d[j] = dist;
+    ids[j] = id;
+  }
+};
+
+// Runs body(begin, end) over [0, n) on `threads` threads (0 = all).
+void parallel_rows(int n, int threads, int grain, const std::function<void(int, int)>& body);
+
+// The per-pixel values and the rows; `patch` 1..7; `need_row_of` fills row_of.
+Expected<Object> make_object(const ObjectView& view, Feature feature, int patch, bool need_row_of, int threads);
+
+// Squared distance of a contiguous patch `a` (dims floats) to `src` row `s`;
+// stops early and returns something > `bound` once the sum exceeds it.
+float patch_sq(const float* a, const Object& src, int s, float bound);
+
+}  // namespace veneer::match::fast
