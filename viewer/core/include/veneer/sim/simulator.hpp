@@ -33,6 +33,8 @@ struct RenderOptions {
   double noise_sigma = 0.0;     // sensor noise, std-dev as a fraction of full scale
   double ambient = 0.0;         // uniform ambient light level (room light leaking in)
   uint64_t seed = 1;            // noise seed; same seed, same bytes
+  uint32_t shot = 0;            // noise stream within a seed: shots with different `shot` get
+                                // independent noise (simulate_set: light index; ambient frame 255)
   cv::Vec3d offset_m{0, 0, 0};  // moves the whole object in the rig frame
   double scale = 1.0;           // scales the object about its base
   int threads = 0;              // 0 = all cores

@@ -1,0 +1,354 @@
+// The ray caster: camera rays once per image geometry (a cached G-buffer of
+// hit point, normals, albedo, specular parameters), then one cheap shading
+// pass per shot: Lambert x albedo + Blinn-Phong lobe, attached and cast
+// shadows (a shadow ray to the point lamp), 1/r^2 falloff, ambient, exposure,
+// counter-based Gaussian noise, clipping to [0, 1] like a sensor.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <ctime>
+#include <cstdlib>
+#include <numbers>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include "noise.hpp"
+#include "scene.hpp"
+#include "veneer/sim/simulator.hpp"
+#include "veneer/util/log.hpp"
+
+namespace veneer::sim {
+
+namespace {
+
+constexpr double kRingRadius = 0.47;  // m, the thesis rig's lamp circle
+constexpr double kCameraZ = 1.0;      // m, camera (and lamp plane) distance from the object
+// A rig lamp at full white delivers irradiance 1 at the origin: its radiant
+// intensity is |lamp|^2 = 1 + 0.47^2 in these units.
+constexpr double kRigIntensity = kCameraZ * kCameraZ + kRingRadius * kRingRadius;
+constexpr double kShadowEps = 2e-5;  // m, shadow-ray start offset along the geometric normal
+
+template <class F>
+void for_rows(int rows, int threads, F&& body) {
+  auto run = [&] {
+    tbb::parallel_for(tbb::blocked_range<int>(0, rows, 4), [&](const tbb::blocked_range<int>& r) {
+      for (int y = r.begin(); y < r.end(); ++y) body(y);
+    });
+  };
+  if (threads > 0) {
+    tbb::task_arena arena(threads);
+    arena.execute(run);
+  } else {
+    run();
+  }
+}
+
+V3 f3(const float* v) { return {v[0], v[1], v[2]}; }
+void set3(float* dst, const V3& v) {
+  dst[0] = static_cast<float>(v.x);
+  dst[1] = static_cast<float>(v.y);
+  dst[2] = static_cast<float>(v.z);
+}
+
+// Three independent standard normal deviates for (key, pixel), Box-Muller.
+void gauss3(uint64_t key, uint64_t pixel, double out[3]) {
+  uint64_t h1 = hash_combine(key, pixel * 2), h2 = hash_combine(key, pixel * 2 + 1);
+  double u1 = 1.0 - to_unit(h1), u2 = to_unit(mix64(h1 ^ 0x5bd1e995ULL));
+  double u3 = 1.0 - to_unit(h2), u4 = to_unit(mix64(h2 ^ 0x5bd1e995ULL));
+  double r1 = std::sqrt(-2.0 * std::log(u1)), r2 = std::sqrt(-2.0 * std::log(u3));
+  out[0] = r1 * std::cos(2 * std::numbers::pi * u2);
+  out[1] = r1 * std::sin(2 * std::numbers::pi * u2);
+  out[2] = r2 * std::cos(2 * std::numbers::pi * u4);
+}
+
+std::string utc_now() {
+  // SOURCE_DATE_EPOCH (reproducible-builds convention) pins the timestamp, so
+  // two runs with the same seed can produce byte-identical manifests.
+  std::time_t t = std::time(nullptr);
+  if (const char* epoch = std::getenv("SOURCE_DATE_EPOCH")) t = static_cast<std::time_t>(std::atoll(epoch));
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return buf;
+}
+
+}  // namespace
+
+double default_focal(int width) {
+  // An 8 cm object at 1 m covers about 21 000 pixels at 1024 px wide (as in the thesis).
+  return 2.0 * width;
+}
+
+std::vector<Lamp> thesis_rig() {
+  // Sockets every 45 degrees, starting at the top and going clockwise as seen
+  // in the picture (i.e. from the camera looking at the object): top,
+  // top-right, right, bottom-right, [bottom: empty], bottom-left, left, top-left.
+  std::vector<Lamp> lamps;
+  for (int socket = 0; socket < 8; ++socket) {
+    if (socket == 4) continue;
+    double a = socket * std::numbers::pi / 4;
+    Lamp lamp;
+    lamp.position_m = {kRingRadius * std::sin(a), kRingRadius * std::cos(a), kCameraZ};
+    lamps.push_back(lamp);
+  }
+  return lamps;
+}
+
+Status RenderOptions::check() const {
+  if (size.width < 8 || size.height < 8 || size.width > 16384 || size.height > 16384)
+    return make_error("render options: size " + std::to_string(size.width) + "x" + std::to_string(size.height) +
+                      " is outside 8x8 .. 16384x16384");
+  if (!(focal_px >= 0) || !std::isfinite(focal_px)) return make_error("render options: focal_px must be >= 0");
+  if (!(exposure > 0) || !std::isfinite(exposure)) return make_error("render options: exposure must be > 0");
+  if (!(noise_sigma >= 0) || noise_sigma > 1) return make_error("render options: noise_sigma must be in [0, 1]");
+  if (!(ambient >= 0) || !std::isfinite(ambient)) return make_error("render options: ambient must be >= 0");
+  if (!(scale > 0) || scale > 10) return make_error("render options: scale must be in (0, 10]");
+  for (int i = 0; i < 3; ++i) {
+    if (!std::isfinite(offset_m[i]) || std::abs(offset_m[i]) > 0.5)
+      return make_error("render options: offset_m components must be within +-0.5 m");
+  }
+  if (threads < 0) return make_error("render options: threads must be >= 0");
+  return Status::success();
+}
+
+Expected<std::shared_ptr<const Scene>> make_scene(const std::string& name, const RenderOptions& options) {
+  if (auto st = options.check(); !st) return st.error();
+  auto scene = build_scene(name);
+  if (!scene) {
+    std::string known;
+    for (const auto& n : scene_names()) known += (known.empty() ? "" : ", ") + n;
+    return make_error("unknown scene '" + name + "' (known: " + known + ")");
+  }
+  scene->offset = {options.offset_m[0], options.offset_m[1], options.offset_m[2]};
+  scene->scale = options.scale;
+  std::shared_ptr<const Scene> shared = std::move(scene);
+  return shared;
+}
+
+std::shared_ptr<const GBuffer> Scene::gbuffer(cv::Size size, double focal, int threads) const {
+  {
+    std::lock_guard lock(mutex_);
+    if (cache_ && cache_->size == size && cache_->focal == focal) return cache_;
+  }
+  auto gb = std::make_shared<GBuffer>();
+  gb->size = size;
+  gb->focal = focal;
+  gb->cx = (size.width - 1) * 0.5;
+  gb->cy = (size.height - 1) * 0.5;
+  gb->px.resize(static_cast<size_t>(size.area()));
+  const V3 camera{0, 0, kCameraZ};
+  const V3 cam_obj = to_object(camera);
+  const double table_z_world = table_world_z();
+  for_rows(size.height, threads, [&](int y) {
+    for (int x = 0; x < size.width; ++x) {
+      GPixel& g = gb->px[static_cast<size_t>(y) * size.width + x];
+      g = GPixel{};
+      V3 d = normalize({(x - gb->cx) / focal, -(y - gb->cy) / focal, -1.0});
+      V3 n;
+      int prim = -1;
+      double t_obj = shape.intersect(cam_obj, d, 1e-9, 1e9, &n, &prim);
+      if (t_obj > 0) {
+        V3 p_obj = cam_obj + d * t_obj;
+        SurfaceSample s;
+        s.normal = n;
+        material(p_obj, n, prim, shape.prims[static_cast<size_t>(prim)].part, &s);
+        V3 ns = normalize(s.normal);
+        if (dot(ns, d) > -0.02) ns = normalize(ns - d * (dot(ns, d) + 0.02));  // keep bumps facing the camera
+        set3(g.p, to_world(p_obj));
+        set3(g.ng, n);
+        set3(g.n, ns);
+        set3(g.albedo, s.albedo);
+        g.ks = static_cast<float>(s.ks);
+        g.shininess = static_cast<float>(s.shininess);
+        g.kind = 2;
+      } else if (d.z < 0) {
+        double t = (table_z_world - camera.z) / d.z;
+        V3 p = camera + d * t;
+        // a faint cloth texture so the background is dark but never flat zero
+        V3 q = p * 900.0;
+        double v = 0.85 + 0.3 * value_noise(q, 991);
+        set3(g.p, p);
+        set3(g.ng, {0, 0, 1});
+        set3(g.n, {0, 0, 1});
+        set3(g.albedo, table_albedo * v);
+        g.ks = 0;
+        g.shininess = 1;
+        g.kind = 1;
+      }
+    }
+  });
+  std::shared_ptr<const GBuffer> result = gb;
+  std::lock_guard lock(mutex_);
+  cache_ = result;
+  return result;
+}
+
+namespace {
+
+struct ShotLamp {
+  V3 pos;
+  V3 radiant;  // RGB radiant intensity (irradiance = radiant / r^2)
+};
+
+// Shades one shot from the G-buffer into a BGR CV_32FC3.
+cv::Mat shade(const Scene& scene, const GBuffer& gb, const std::vector<ShotLamp>& lamps, const RenderOptions& o) {
+  cv::Mat out(gb.size, CV_32FC3);
+  const V3 camera{0, 0, kCameraZ};
+  const uint64_t key = hash_combine(hash_combine(0x7665'6e65'6572ULL, o.seed), o.shot);
+  const double inv_scale = 1.0 / scene.scale;
+  for_rows(gb.size.height, o.threads, [&](int y) {
+    auto* row = out.ptr<cv::Vec3f>(y);
+    for (int x = 0; x < gb.size.width; ++x) {
+      const size_t idx = static_cast<size_t>(y) * gb.size.width + x;
+      const GPixel& g = gb.px[idx];
+      V3 rgb{0, 0, 0};
+      if (g.kind != 0) {
+        V3 p = f3(g.p), n = f3(g.n), ng = f3(g.ng), albedo = f3(g.albedo);
+        V3 v = normalize(camera - p);
+        V3 shadow_origin = scene.to_object(p + ng * kShadowEps);
+        for (const auto& lamp : lamps) {
+          V3 L = lamp.pos - p;
+          double r2 = dot(L, L), r = std::sqrt(r2);
+          V3 l = L / r;
+          double ndl = dot(n, l);
+          if (ndl <= 0 || dot(ng, l) <= 0) continue;  // attached shadow
+          if (scene.shape.occluded(shadow_origin, l, 1e-9, (r - kShadowEps) * inv_scale)) continue;  // cast shadow
+          V3 E = lamp.radiant / r2;
+          double spec = 0;
+          if (g.ks > 0) {
+            V3 hv = normalize(l + v);
+            double ndh = dot(n, hv);
+            if (ndh > 0) spec = g.ks * std::pow(ndh, static_cast<double>(g.shininess));
+          }
+          rgb += mul(E, albedo * ndl + V3{spec, spec, spec});
+        }
+        rgb += albedo * o.ambient;
+      }
+      rgb = rgb * o.exposure;
+      if (o.noise_sigma > 0) {
+        double nz[3];
+        gauss3(key, idx, nz);
+        rgb += V3{nz[0], nz[1], nz[2]} * o.noise_sigma;
+      }
+      // BGR, clipped like a sensor
+      row[x] = cv::Vec3f(static_cast<float>(std::clamp(rgb.z, 0.0, 1.0)), static_cast<float>(std::clamp(rgb.y, 0.0, 1.0)),
+                         static_cast<float>(std::clamp(rgb.x, 0.0, 1.0)));
+    }
+  });
+  return out;
+}
+
+std::vector<ShotLamp> shot_lamps(const std::vector<Lamp>& lamps) {
+  std::vector<ShotLamp> out;
+  for (const auto& l : lamps) {
+    double k = kRigIntensity * std::clamp(static_cast<double>(l.brightness), 0.0, 1.0);
+    if (k <= 0) continue;
+    out.push_back({{l.position_m[0], l.position_m[1], l.position_m[2]},
+                   {l.color[0] * k, l.color[1] * k, l.color[2] * k}});
+  }
+  return out;
+}
+
+double focal_for(const RenderOptions& o) { return o.focal_px > 0 ? o.focal_px : default_focal(o.size.width); }
+
+}  // namespace
+
+cv::Mat render(const Scene& scene, const std::vector<Lamp>& lamps, const RenderOptions& options,
+               const Progress& progress) {
+  if (auto st = options.check(); !st) {
+    VLOG_ERROR("Sim", "render: {}", st.message());
+    return {};
+  }
+  progress.report(0.0, "casting camera rays");
+  auto gb = scene.gbuffer(options.size, focal_for(options), options.threads);
+  if (progress.cancelled()) return {};
+  progress.report(0.5, "shading");
+  cv::Mat out = shade(scene, *gb, shot_lamps(lamps), options);
+  progress.report(1.0, "done");
+  return out;
+}
+
+Truth render_truth(const Scene& scene, const RenderOptions& options) {
+  Truth t;
+  if (auto st = options.check(); !st) {
+    VLOG_ERROR("Sim", "render_truth: {}", st.message());
+    return t;
+  }
+  auto gb = scene.gbuffer(options.size, focal_for(options), options.threads);
+  const cv::Size size = gb->size;
+  t.normals = cv::Mat(size, CV_32FC3, cv::Scalar::all(0));
+  t.mask = cv::Mat(size, CV_8UC1, cv::Scalar::all(0));
+  t.albedo = cv::Mat(size, CV_32FC3, cv::Scalar::all(0));
+  t.depth = cv::Mat(size, CV_32FC1, cv::Scalar::all(0));
+  for (int y = 0; y < size.height; ++y) {
+    for (int x = 0; x < size.width; ++x) {
+      const GPixel& g = gb->px[static_cast<size_t>(y) * size.width + x];
+      if (g.kind != 2) continue;
+      t.normals.at<cv::Vec3f>(y, x) = {g.n[0], g.n[1], g.n[2]};
+      t.mask.at<uint8_t>(y, x) = 255;
+      t.albedo.at<cv::Vec3f>(y, x) = {g.albedo[2], g.albedo[1], g.albedo[0]};
+      t.depth.at<float>(y, x) = static_cast<float>(kCameraZ - g.p[2]);
+    }
+  }
+  return t;
+}
+
+Expected<ImageSet> simulate_set(const std::string& scene_name, const RenderOptions& options, Role role,
+                                const Progress& progress) {
+  auto scene_or = make_scene(scene_name, options);
+  if (!scene_or) return scene_or.error();
+  const Scene& scene = **scene_or;
+  const auto lamps = thesis_rig();
+  const double focal = focal_for(options);
+
+  ImageSet set;
+  set.role = role;
+  set.object = scene_name;
+  set.scene = scene_name;
+  set.id = "sim-" + scene_name + "-" + std::to_string(options.seed);
+  set.created = utc_now();
+  set.size = options.size;
+  set.camera.model = "veneer simulated camera";
+  set.camera.exposure_s = options.exposure / 30.0;  // 1/30 s, f/8, ISO 100 is gain 1
+  set.camera.aperture = 8.0;
+  set.camera.iso = 100;
+  set.camera.focal_px = focal;
+  set.camera.cx = (options.size.width - 1) * 0.5;
+  set.camera.cy = (options.size.height - 1) * 0.5;
+
+  const int shots = static_cast<int>(lamps.size()) + 1;
+  progress.report(0.0, "casting camera rays");
+  auto gb = scene.gbuffer(options.size, focal, options.threads);
+  for (size_t i = 0; i < lamps.size(); ++i) {
+    if (progress.cancelled()) return make_error("simulate " + scene_name + ": cancelled");
+    progress.report((0.3 + i) / shots, "lamp " + std::to_string(i + 1));
+    RenderOptions o = options;
+    o.shot = static_cast<uint32_t>(i);
+    set.images.push_back(shade(scene, *gb, shot_lamps({lamps[i]}), o));
+    Light light;
+    light.index = static_cast<int>(i);
+    light.lamp_id = "sim-" + std::to_string(i);
+    cv::Vec3d pos = lamps[i].position_m;
+    light.position_m = pos;
+    light.direction = pos / cv::norm(pos);
+    // irradiance at the origin, in image units (exposure folded in, so the
+    // albedo photometric stereo recovers is the material's albedo)
+    double e = kRigIntensity * lamps[i].brightness / pos.dot(pos) * options.exposure;
+    light.intensity = cv::Vec3f(static_cast<float>(lamps[i].color[0] * e), static_cast<float>(lamps[i].color[1] * e),
+                                static_cast<float>(lamps[i].color[2] * e));
+    set.lights.push_back(light);
+  }
+  if (progress.cancelled()) return make_error("simulate " + scene_name + ": cancelled");
+  progress.report((shots - 0.7) / shots, "ambient frame");
+  RenderOptions o = options;
+  o.shot = 255;
+  set.ambient = shade(scene, *gb, {}, o);
+  set.truth = render_truth(scene, options);
+  progress.report(1.0, "done");
+  return set;
+}
+
+}  // namespace veneer::sim
