@@ -1,0 +1,75 @@
+#pragma once
+// veneerd assembled: devices (simulated or from a config file), the set store,
+// the rig and the API server. main.cpp is argument parsing around this; the
+// integration tests use it to run a whole rig in their own process when they
+// need to reach into the simulated devices (fault injection).
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "veneer/util/expected.hpp"
+#include "veneerd/config.hpp"
+#include "veneerd/rig.hpp"
+#include "veneerd/server.hpp"
+#include "veneerd/store.hpp"
+
+namespace veneerd {
+
+class SimulatedRig;
+class SimulatedCamera;
+
+struct DaemonOptions {
+  bool simulate = false;
+  std::filesystem::path config_file;      // real rigs (ignored with simulate)
+  // Overrides of the config (empty = keep):
+  std::string listen;                     // "host:port"
+  std::filesystem::path store;
+  std::filesystem::path token_file;
+  // Simulated rig:
+  std::vector<std::string> scenes{"bull", "stone"};
+  cv::Size size{1024, 680};               // still size [px]
+  cv::Size preview_size{0, 0};            // live-view size [px]; 0 = same as size
+  double noise_sigma = 0.002;
+  int hue_latency_ms = 5;                 // emulator's per-request latency
+  bool hue_rate_limits = true;
+};
+
+// Reads the token from `file`, creating it (32 random bytes as hex, mode 0600)
+// when it does not exist.
+veneer::Expected<std::string> ensure_token(const std::filesystem::path& file);
+// Reads a token file (whitespace trimmed).
+veneer::Expected<std::string> read_token(const std::filesystem::path& file);
+
+class Daemon {
+ public:
+  static veneer::Expected<std::unique_ptr<Daemon>> create(const DaemonOptions& options);
+  ~Daemon();
+
+  veneer::Status start();
+  void stop();
+
+  uint16_t port() const;
+  const std::string& token() const { return token_; }
+  const Config& config() const { return config_; }
+  Rig& rig() { return *rig_; }
+  Store& store() { return *store_; }
+  Server& server() { return *server_; }
+  // The simulated devices (null for a real rig).
+  SimulatedRig* simulated() { return sim_.get(); }
+  SimulatedCamera* simulated_camera();
+
+ private:
+  Daemon() = default;
+  Config config_;
+  std::string token_;
+  std::unique_ptr<SimulatedRig> sim_;
+  std::unique_ptr<Store> store_;
+  std::unique_ptr<Rig> rig_;
+  std::unique_ptr<Server> server_;
+  Camera* camera_ = nullptr;  // owned by rig_
+};
+
+}  // namespace veneerd

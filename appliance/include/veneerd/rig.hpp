@@ -1,0 +1,169 @@
+#pragma once
+// The rig: its devices, the set store and the capture sequencer, driven from
+// the API server and the capture button. Device work runs on one worker
+// thread (the devices are serial anyway); live view on its own thread.
+// Events and live frames go out through callbacks that must not block.
+#include <atomic>
+#include <condition_variable>
+#include <deque>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "veneer/io/imageset.hpp"
+#include "veneer/util/expected.hpp"
+#include "veneerd/devices/camera.hpp"
+#include "veneerd/devices/lamps.hpp"
+#include "veneerd/devices/trigger.hpp"
+#include "veneerd/store.hpp"
+
+namespace veneerd {
+
+struct RigEvent {
+  enum class Kind {
+    button_pressed, capture_started, shot_taken, set_stored, capture_failed,
+    lamp_state, camera_connected, camera_lost, set_deleted,
+  };
+  Kind kind = Kind::button_pressed;
+  std::string set_id;
+  veneer::Role role = veneer::Role::unknown;
+  std::string object;
+  int k = 0, n = 0;                   // shot_taken; n also in capture_started
+  double eta_s = 0;
+  std::vector<std::string> warnings;  // set_stored
+  std::string reason;                 // capture_failed, camera_lost
+  bool cancelled = false;
+  bool long_press = false;
+  std::vector<bool> lamps_on;         // lamp_state
+  int brightness = 0;
+  std::string camera_model;           // camera_connected
+};
+
+struct LiveFrameData {
+  std::vector<unsigned char> jpeg;
+  uint64_t seq = 0;
+  double ts = 0;  // Unix time [s]
+  int width = 0, height = 0;
+};
+
+struct RigDevices {
+  std::unique_ptr<Lamps> lamps;
+  std::unique_ptr<Camera> camera;
+  std::unique_ptr<Trigger> trigger;   // may be null
+  std::unique_ptr<StatusLed> led;     // may be null
+};
+
+// What only the simulated rig has: scene choice per role, ground truth, the
+// hand-held lamp of the live view.
+struct SimulatedHooks {
+  std::vector<std::string> scenes;  // [destination scene, source scene]
+  std::function<void(veneer::Role role, const std::string& scene)> select_scene;
+  // Completes a captured set before it is stored: ground truth, camera
+  // intrinsics, the lamps' irradiance in image units.
+  std::function<void(veneer::ImageSet& set)> finish_set;
+  std::function<void(const cv::Vec3d& position)> move_hand_lamp;
+};
+
+struct RigOptions {
+  std::string name = "veneer-rig";
+  std::vector<std::string> lamp_ids;
+  std::vector<cv::Vec3d> lamp_positions;
+  Exposure exposure;
+  double ambient_warning = 0.05;
+  int settle_ms = 150;
+  bool simulated = false;
+  SimulatedHooks sim;
+};
+
+struct CaptureRequest {
+  veneer::Role role = veneer::Role::unknown;  // unknown = the next role
+  std::string object;                         // empty = scene or role name
+  Exposure exposure;                          // zeros = the configured exposure
+};
+
+struct RigState {
+  std::string name;
+  bool simulated = false;
+  bool camera_connected = false;
+  std::string camera_model;
+  int lamp_count = 0;
+  std::vector<bool> lamps_on;
+  bool capturing = false;
+  veneer::Role next_role = veneer::Role::destination;
+};
+
+class Rig {
+ public:
+  Rig(RigDevices devices, Store& store, RigOptions options);
+  ~Rig();
+  Rig(const Rig&) = delete;
+  Rig& operator=(const Rig&) = delete;
+
+  // Set before start(); called from the rig's threads, must not block.
+  std::function<void(const RigEvent&)> on_event;
+  std::function<void(std::shared_ptr<const LiveFrameData>)> on_live_frame;
+
+  // Opens the camera, switches every lamp off, starts the threads.
+  void start();
+  void stop();
+
+  // Queues a capture; the id it will be stored under, or why not (busy, ...).
+  veneer::Expected<std::string> capture(const CaptureRequest& request);
+  veneer::Status cancel();
+  // The capture button (physical, simulated or through the API).
+  void press(Press press);
+  // Sets lamps on the worker thread; `done` is called there when finished.
+  void set_lamps(std::vector<bool> on, int brightness, std::function<void(veneer::Status)> done);
+  veneer::Status move_hand_lamp(const cv::Vec3d& position);
+  // Live view rate wanted by the clients (the highest); 0 stops it.
+  void set_live_fps(double fps);
+  // Deletes a stored set (not one being written).
+  veneer::Status delete_set(const std::string& id);
+
+  RigState state() const;
+  Store& store() { return store_; }
+  const RigOptions& options() const { return options_; }
+
+ private:
+  void handle_press(Press press);
+  void emit(RigEvent event);
+  void post(std::function<void()> job);
+  void worker_loop();
+  void live_loop();
+  void run_capture_job(const std::string& id, CaptureRequest request);
+
+  RigDevices dev_;
+  Store& store_;
+  RigOptions options_;
+
+  mutable std::mutex mutex_;  // guards the fields below
+  bool capturing_ = false;
+  std::string capture_id_;
+  veneer::Role next_role_ = veneer::Role::destination;
+  std::vector<bool> lamps_on_;
+  std::string camera_model_;
+  bool camera_connected_ = false;
+  double mean_step_s_ = 0;
+
+  std::atomic<bool> cancel_{false};
+  std::atomic<bool> stopping_{false};
+  std::mutex camera_mutex_;  // capture vs live view
+
+  std::mutex jobs_mutex_;
+  std::condition_variable jobs_cv_;
+  std::deque<std::function<void()>> jobs_;
+  std::thread worker_;
+
+  std::mutex live_mutex_;
+  std::condition_variable live_cv_;
+  double live_fps_ = 0;
+  uint64_t live_seq_ = 0;
+  std::thread live_;
+};
+
+}  // namespace veneerd

@@ -1,0 +1,56 @@
+#pragma once
+// The capture sequence: save the lamps' state, all lamps off -> ambient frame,
+// then for each ring position only that lamp on (full white, same exposure)
+// -> one shot, and finally restore the lamps — also when a step fails or the
+// capture is cancelled. A lamp or camera fault fails the whole capture: a set
+// is never short.
+#include <atomic>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "veneer/io/imageset.hpp"
+#include "veneer/util/expected.hpp"
+#include "veneerd/devices/camera.hpp"
+#include "veneerd/devices/lamps.hpp"
+
+namespace veneerd {
+
+struct CapturePlan {
+  std::string set_id;
+  veneer::Role role = veneer::Role::unknown;
+  std::string object;
+  std::string scene;                      // simulator scene (simulated rig), else empty
+  Exposure exposure;
+  std::vector<std::string> lamp_ids;      // per ring position (manifest)
+  std::vector<cv::Vec3d> lamp_positions;  // per ring position, rig frame [m]
+  double ambient_warning = 0.05;          // ambient mean (of full scale) that warns
+  double expected_shot_s = 1.0;           // first guess of one step's duration, for the ETA
+};
+
+struct CaptureHooks {
+  // k of n shots done (the ambient frame is shot 1), estimated seconds left.
+  std::function<void(int k, int n, double eta_s)> on_shot;
+  const std::atomic<bool>* cancel = nullptr;
+};
+
+struct CaptureResult {
+  veneer::ImageSet set;      // lights, images, ambient, camera info, warnings; no truth
+  double seconds = 0;        // wall time of the whole sequence
+  double mean_step_s = 0;    // mean time of one lamp step (switch + settle + shot)
+};
+
+// Runs the sequence. Errors name the step ("lamp 3 (Hue id 5): ...",
+// "camera, shot 4 of 8: ..."); "cancelled" when the cancel flag was raised.
+veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const CapturePlan& plan,
+                                            const CaptureHooks& hooks = {});
+
+// The mean linear level of a photo (all channels), used for the ambient check.
+double mean_level(const cv::Mat& linear);
+
+// "2026-11-22T08:15:30Z"
+std::string utc_now_iso();
+
+}  // namespace veneerd

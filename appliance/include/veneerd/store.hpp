@@ -1,0 +1,72 @@
+#pragma once
+// The set store: one veneer-set/1 folder per captured set under a root folder.
+// Sets are written with veneer::write_set (temporary folder, fsync, rename), so
+// after a crash or power cut a set is either all there or not at all; opening
+// the store removes leftover temporary folders and lists what is stored.
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "veneer/io/imageset.hpp"
+#include "veneer/util/expected.hpp"
+
+namespace veneerd {
+
+struct StoredSet {
+  std::string id;
+  veneer::Role role = veneer::Role::unknown;
+  std::string object;
+  std::string created;
+  std::string scene;
+  cv::Size size;
+  int lights = 0;
+  std::vector<std::string> warnings;
+  bool has_truth = false;
+  uint64_t bytes = 0;
+};
+
+// Set ids are file names: 1..96 of [A-Za-z0-9._-], not starting with '.'.
+bool valid_set_id(const std::string& id);
+
+class Store {
+ public:
+  // Opens (creating if needed) the store folder, takes its lock (one daemon
+  // per store), removes leftover temporary folders and scans the sets.
+  static veneer::Expected<std::unique_ptr<Store>> open(const std::filesystem::path& root);
+  ~Store();
+
+  const std::filesystem::path& root() const { return root_; }
+  std::vector<StoredSet> list() const;  // oldest first
+  veneer::Expected<StoredSet> find(const std::string& id) const;
+  veneer::Expected<std::string> manifest(const std::string& id) const;  // set.json text
+  // Relative paths of the set's files: set.json, the photos, and truth/* when asked.
+  veneer::Expected<std::vector<std::string>> files(const std::string& id, bool include_truth) const;
+  std::filesystem::path folder(const std::string& id) const { return root_ / id; }
+
+  // A fresh id for a new set, e.g. "20261122-081530-destination-bull".
+  std::string new_id(veneer::Role role, const std::string& object) const;
+  // Bytes a set of this size will take (16-bit PNGs, upper bound) and the free space.
+  static uint64_t estimate_bytes(cv::Size size, int photos, bool truth);
+  uint64_t free_bytes() const;
+
+  // Stores the set under set.id. Fails with a clear error (disk full, ...)
+  // and leaves nothing behind.
+  veneer::Status save(const veneer::ImageSet& set);
+  veneer::Status remove(const std::string& id);
+
+ private:
+  explicit Store(std::filesystem::path root, int lock_fd);
+  veneer::Expected<StoredSet> scan_one(const std::string& id) const;
+
+  std::filesystem::path root_;
+  int lock_fd_ = -1;
+  mutable std::mutex mutex_;
+  std::vector<StoredSet> sets_;
+};
+
+}  // namespace veneerd

@@ -1,0 +1,223 @@
+#include "veneerd/api.hpp"
+
+#include <cmath>
+
+#include "veneer/v1/rig.pb.h"
+
+namespace veneerd::api {
+
+using veneer::make_error;
+namespace pb = veneer::v1;
+
+namespace {
+
+bool printable(const std::string& s) {
+  for (unsigned char ch : s) {
+    if (ch < 0x20 || ch == 0x7f) return false;
+  }
+  return true;
+}
+
+veneer::Expected<veneer::Role> decode_role(int role) {
+  switch (role) {
+    case pb::ROLE_UNSPECIFIED: return veneer::Role::unknown;
+    case pb::ROLE_DESTINATION: return veneer::Role::destination;
+    case pb::ROLE_SOURCE: return veneer::Role::source;
+    default: return make_error("capture.role: unknown role " + std::to_string(role));
+  }
+}
+
+pb::Role encode_role(veneer::Role role) {
+  switch (role) {
+    case veneer::Role::destination: return pb::ROLE_DESTINATION;
+    case veneer::Role::source: return pb::ROLE_SOURCE;
+    default: return pb::ROLE_UNSPECIFIED;
+  }
+}
+
+veneer::Status check_set_id(const std::string& field, const std::string& id) {
+  if (!valid_set_id(id)) {
+    std::string shown = id.size() > 40 ? id.substr(0, 40) + "..." : id;
+    if (!printable(shown)) shown = "(unprintable)";
+    return make_error(field + ": '" + shown + "' is not a set id");
+  }
+  return {};
+}
+
+}  // namespace
+
+bool needs_control(const Body& body) {
+  return std::holds_alternative<CaptureReq>(body) || std::holds_alternative<CancelReq>(body) ||
+         std::holds_alternative<SetLampsReq>(body) || std::holds_alternative<PressReq>(body) ||
+         std::holds_alternative<MoveHandLampReq>(body) || std::holds_alternative<DeleteSetReq>(body);
+}
+
+const char* request_name(const Body& body) {
+  static const char* names[] = {"hello", "status", "list_sets", "get_manifest", "fetch_images", "delete_set", "capture",
+                                "cancel_capture", "set_lamps", "start_live_view", "stop_live_view", "press_button",
+                                "move_hand_lamp"};
+  return names[body.index()];
+}
+
+veneer::Expected<Request> decode(const pb::ClientMessage& m) {
+  Request r;
+  r.id = m.id();
+  switch (m.body_case()) {
+    case pb::ClientMessage::kHello: {
+      const auto& h = m.hello();
+      if (h.token().size() > 256) return make_error("hello.token: longer than 256 bytes");
+      if (h.client_name().size() > 128 || !printable(h.client_name())) {
+        return make_error("hello.client_name: must be up to 128 printable characters");
+      }
+      r.body = Hello{h.protocol_version(), h.token(), h.client_name()};
+      return r;
+    }
+    case pb::ClientMessage::kStatus: r.body = StatusReq{}; return r;
+    case pb::ClientMessage::kListSets: r.body = ListSetsReq{}; return r;
+    case pb::ClientMessage::kGetManifest:
+      if (auto s = check_set_id("get_manifest.set_id", m.get_manifest().set_id()); !s) return s.error();
+      r.body = GetManifestReq{m.get_manifest().set_id()};
+      return r;
+    case pb::ClientMessage::kFetchImages: {
+      const auto& f = m.fetch_images();
+      if (auto s = check_set_id("fetch_images.set_id", f.set_id()); !s) return s.error();
+      size_t chunk = f.chunk_size() == 0 ? kDefaultChunkBytes : f.chunk_size();
+      if (chunk < 1024 || chunk > kMaxChunkBytes) {
+        return make_error("fetch_images.chunk_size: " + std::to_string(f.chunk_size()) + " is outside 1 KiB..4 MiB");
+      }
+      r.body = FetchImagesReq{f.set_id(), f.include_truth(), chunk};
+      return r;
+    }
+    case pb::ClientMessage::kDeleteSet:
+      if (auto s = check_set_id("delete_set.set_id", m.delete_set().set_id()); !s) return s.error();
+      r.body = DeleteSetReq{m.delete_set().set_id()};
+      return r;
+    case pb::ClientMessage::kCapture: {
+      const auto& c = m.capture();
+      CaptureReq req;
+      auto role = decode_role(c.role());
+      if (!role) return role.error();
+      req.capture.role = *role;
+      if (c.object().size() > 64 || !printable(c.object())) {
+        return make_error("capture.object: must be up to 64 printable characters");
+      }
+      req.capture.object = c.object();
+      const auto& e = c.exposure();
+      if (!std::isfinite(e.shutter_s()) || e.shutter_s() < 0 || e.shutter_s() > 60) {
+        return make_error("capture.exposure.shutter_s: " + std::to_string(e.shutter_s()) + " is outside 0..60 s");
+      }
+      if (!std::isfinite(e.aperture()) || e.aperture() < 0 || e.aperture() > 64) {
+        return make_error("capture.exposure.aperture: " + std::to_string(e.aperture()) + " is outside 0..64");
+      }
+      if (e.iso() > 409600) return make_error("capture.exposure.iso: " + std::to_string(e.iso()) + " is too high");
+      req.capture.exposure.shutter_s = e.shutter_s();
+      req.capture.exposure.aperture = e.aperture();
+      req.capture.exposure.iso = static_cast<int>(e.iso());
+      r.body = req;
+      return r;
+    }
+    case pb::ClientMessage::kCancelCapture: r.body = CancelReq{}; return r;
+    case pb::ClientMessage::kSetLamps: {
+      const auto& l = m.set_lamps();
+      if (l.on_size() > 64) return make_error("set_lamps.on: " + std::to_string(l.on_size()) + " lamps is too many");
+      if (l.brightness() > 254) {
+        return make_error("set_lamps.brightness: " + std::to_string(l.brightness()) + " is outside 1..254");
+      }
+      SetLampsReq req;
+      req.on.assign(l.on().begin(), l.on().end());
+      req.brightness = l.brightness() == 0 ? 254 : static_cast<int>(l.brightness());
+      r.body = req;
+      return r;
+    }
+    case pb::ClientMessage::kStartLiveView: {
+      double fps = m.start_live_view().fps();
+      if (fps == 0) fps = 10;
+      if (!std::isfinite(fps) || fps < 0.1 || fps > kMaxLiveFps) {
+        return make_error("start_live_view.fps: " + std::to_string(fps) + " is outside 0.1..60");
+      }
+      r.body = StartLiveReq{fps};
+      return r;
+    }
+    case pb::ClientMessage::kStopLiveView: r.body = StopLiveReq{}; return r;
+    case pb::ClientMessage::kPressButton: r.body = PressReq{m.press_button().long_press()}; return r;
+    case pb::ClientMessage::kMoveHandLamp: {
+      const auto& p = m.move_hand_lamp().position();
+      cv::Vec3d v(p.x(), p.y(), p.z());
+      for (int i = 0; i < 3; ++i) {
+        if (!std::isfinite(v[i]) || std::abs(v[i]) > 5) {
+          return make_error("move_hand_lamp.position: each coordinate must be within 5 m of the object");
+        }
+      }
+      if (cv::norm(v) < 0.05) return make_error("move_hand_lamp.position: closer than 5 cm to the object");
+      r.body = MoveHandLampReq{v};
+      return r;
+    }
+    case pb::ClientMessage::BODY_NOT_SET:
+      break;
+  }
+  return make_error("unknown or empty request (id " + std::to_string(m.id()) + ")");
+}
+
+void encode_set(const StoredSet& s, pb::SetInfo& info) {
+  pb::SetInfo* out = &info;
+  out->set_id(s.id);
+  out->set_role(encode_role(s.role));
+  out->set_object(s.object);
+  out->set_created(s.created);
+  out->set_width(static_cast<uint32_t>(s.size.width));
+  out->set_height(static_cast<uint32_t>(s.size.height));
+  out->set_lights(static_cast<uint32_t>(s.lights));
+  for (const auto& w : s.warnings) out->add_warnings(w);
+  out->set_has_truth(s.has_truth);
+  out->set_bytes(s.bytes);
+  out->set_scene(s.scene);
+}
+
+void encode_event(const RigEvent& e, uint64_t seq, pb::RigMessage& out) {
+  pb::Event* ev = out.mutable_event();
+  ev->set_seq(seq);
+  using K = RigEvent::Kind;
+  switch (e.kind) {
+    case K::button_pressed: ev->mutable_button_pressed()->set_long_press(e.long_press); break;
+    case K::capture_started: {
+      auto* c = ev->mutable_capture_started();
+      c->set_set_id(e.set_id);
+      c->set_role(encode_role(e.role));
+      c->set_object(e.object);
+      c->set_shots(static_cast<uint32_t>(e.n));
+      break;
+    }
+    case K::shot_taken: {
+      auto* s = ev->mutable_shot_taken();
+      s->set_set_id(e.set_id);
+      s->set_k(static_cast<uint32_t>(e.k));
+      s->set_n(static_cast<uint32_t>(e.n));
+      s->set_eta_s(e.eta_s);
+      break;
+    }
+    case K::set_stored: {
+      auto* s = ev->mutable_set_stored();
+      s->set_id(e.set_id);
+      for (const auto& w : e.warnings) s->add_warnings(w);
+      break;
+    }
+    case K::capture_failed: {
+      auto* f = ev->mutable_capture_failed();
+      f->set_set_id(e.set_id);
+      f->set_reason(e.reason);
+      f->set_cancelled(e.cancelled);
+      break;
+    }
+    case K::lamp_state: {
+      auto* l = ev->mutable_lamp_state();
+      for (bool on : e.lamps_on) l->add_on(on);
+      l->set_brightness(static_cast<uint32_t>(e.brightness));
+      break;
+    }
+    case K::camera_connected: ev->mutable_camera_connected()->set_model(e.camera_model); break;
+    case K::camera_lost: ev->mutable_camera_lost()->set_reason(e.reason); break;
+    case K::set_deleted: ev->mutable_set_deleted()->set_id(e.set_id); break;
+  }
+}
+
+}  // namespace veneerd::api

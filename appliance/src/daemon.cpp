@@ -1,0 +1,229 @@
+#include "veneerd/daemon.hpp"
+
+#include <cerrno>
+#include <cstring>
+#include <fstream>
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "veneer/sim/simulator.hpp"
+#include "veneer/util/log.hpp"
+#include "veneerd/devices/registry.hpp"
+#include "veneerd/devices/simulated_camera.hpp"
+#include "veneerd/devices/simulated_rig.hpp"
+
+namespace veneerd {
+
+namespace fs = std::filesystem;
+using veneer::make_error;
+
+veneer::Expected<std::string> read_token(const fs::path& file) {
+  std::ifstream in(file);
+  if (!in) return make_error(file.string() + ": cannot read the access token");
+  std::string token;
+  std::getline(in, token);
+  while (!token.empty() && (token.back() == '\r' || token.back() == ' ' || token.back() == '\t')) token.pop_back();
+  if (token.empty()) return make_error(file.string() + ": the token file is empty");
+  return token;
+}
+
+veneer::Expected<std::string> ensure_token(const fs::path& file) {
+  std::error_code ec;
+  if (fs::exists(file, ec)) {
+    struct stat st {};
+    if (::stat(file.c_str(), &st) == 0 && (st.st_mode & 077) != 0) {
+      VLOG_WARN("Server", "{} is readable by others (mode {:o}); it should be 0600", file.string(), st.st_mode & 0777);
+    }
+    return read_token(file);
+  }
+  if (!file.parent_path().empty()) fs::create_directories(file.parent_path(), ec);
+  unsigned char raw[32];
+  int rfd = ::open("/dev/urandom", O_RDONLY | O_CLOEXEC);
+  if (rfd < 0 || ::read(rfd, raw, sizeof raw) != static_cast<ssize_t>(sizeof raw)) {
+    if (rfd >= 0) ::close(rfd);
+    return make_error("cannot read /dev/urandom to make an access token");
+  }
+  ::close(rfd);
+  static const char* hex = "0123456789abcdef";
+  std::string token;
+  for (unsigned char b : raw) {
+    token += hex[b >> 4];
+    token += hex[b & 15];
+  }
+  int fd = ::open(file.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0600);
+  if (fd < 0) return make_error(file.string() + ": cannot create the token file: " + std::strerror(errno));
+  std::string line = token + "\n";
+  bool ok = ::write(fd, line.data(), line.size()) == static_cast<ssize_t>(line.size()) && ::fsync(fd) == 0;
+  ::close(fd);
+  if (!ok) {
+    ::unlink(file.c_str());
+    return make_error(file.string() + ": cannot write the token file");
+  }
+  VLOG_INFO("Server", "new access token written to {}", file.string());
+  return token;
+}
+
+namespace {
+
+template <class Device>
+veneer::Expected<std::unique_ptr<Device>> build(const std::vector<std::pair<std::string, Factory<Device>>>& list,
+                                                const char* kind, const DeviceConfig& dc) {
+  auto dev = DeviceRegistry::make(list, kind, dc.backend, dc.section);
+  if (!dev) return make_error(std::string(kind) + " (backend '" + dc.backend + "'): " + dev.message());
+  return dev;
+}
+
+}  // namespace
+
+SimulatedCamera* Daemon::simulated_camera() { return as_simulated(camera_); }
+
+veneer::Expected<std::unique_ptr<Daemon>> Daemon::create(const DaemonOptions& o) {
+  std::unique_ptr<Daemon> d(new Daemon());
+  register_simulated_devices();
+  register_hardware_devices();
+
+  if (o.simulate) {
+    SimulatedRigOptions so;
+    so.scenes = o.scenes;
+    so.size = o.size;
+    so.preview_size = o.preview_size.area() > 0 ? o.preview_size : o.size;
+    so.noise_sigma = o.noise_sigma;
+    so.latency_ms = o.hue_latency_ms;
+    so.rate_limits = o.hue_rate_limits;
+    auto sim = SimulatedRig::start(so);
+    if (!sim) return make_error("simulated rig: " + sim.message());
+    d->sim_ = std::move(*sim);
+    nlohmann::json devices = d->sim_->devices_config();
+    Config& c = d->config_;
+    c.name = "veneer-simulated-rig";
+    c.store = "veneer-sets";
+    c.lamps = {devices["lamps"].value("backend", "hue"), devices["lamps"]};
+    c.camera = {devices["camera"].value("backend", "simulated"), devices["camera"]};
+    c.trigger = {devices["trigger"].value("backend", "simulated"), devices["trigger"]};
+    c.led = {devices["led"].value("backend", "simulated"), devices["led"]};
+    c.lamp_ids = d->sim_->context().lamp_ids;
+    c.settle_ms = so.settle_ms;
+    // 1/30 s, f/8, ISO 100: the simulated camera's well-exposed shot.
+    c.exposure.shutter_s = 1.0 / 30;
+    c.exposure.aperture = 8;
+    c.exposure.iso = 100;
+  } else {
+    if (o.config_file.empty()) return make_error("no config file given (--config FILE), and not --simulate");
+    auto cfg = load_config(o.config_file);
+    if (!cfg) return cfg.error();
+    d->config_ = std::move(*cfg);
+  }
+  Config& c = d->config_;
+  if (!o.listen.empty()) {
+    if (auto s = parse_listen(o.listen, c.listen_host, c.listen_port); !s) return s.error();
+  }
+  if (!o.store.empty()) c.store = o.store;
+  if (!o.token_file.empty()) c.token_file = o.token_file;
+
+  auto store = Store::open(c.store);
+  if (!store) return store.error();
+  d->store_ = std::move(*store);
+  auto token = ensure_token(c.token_path());
+  if (!token) return token.error();
+  d->token_ = *token;
+
+  auto& reg = DeviceRegistry::instance();
+  RigDevices dev;
+  auto lamps = build(reg.lamps, "lamps", c.lamps);
+  if (!lamps) return lamps.error();
+  dev.lamps = std::move(*lamps);
+  auto camera = build(reg.cameras, "camera", c.camera);
+  if (!camera) return camera.error();
+  dev.camera = std::move(*camera);
+  d->camera_ = dev.camera.get();
+  if (c.trigger.backend != "none") {
+    auto trigger = build(reg.triggers, "trigger", c.trigger);
+    if (!trigger) return trigger.error();
+    dev.trigger = std::move(*trigger);
+  }
+  if (c.led.backend != "none") {
+    auto led = build(reg.leds, "led", c.led);
+    if (!led) return led.error();
+    dev.led = std::move(*led);
+  }
+
+  RigOptions ro;
+  ro.name = c.name;
+  ro.lamp_ids = c.lamp_ids;
+  ro.lamp_positions = c.lamp_positions;
+  const int count = dev.lamps->count();
+  if (ro.lamp_positions.empty()) {
+    auto ring = thesis_ring_positions();
+    if (count > static_cast<int>(ring.size())) {
+      return make_error("lamps: " + std::to_string(count) + " lamps but no lamps.positions_m in the config (the "
+                        "default thesis ring has " + std::to_string(ring.size()) + " positions)");
+    }
+    ro.lamp_positions.assign(ring.begin(), ring.begin() + count);
+  }
+  if (static_cast<int>(ro.lamp_positions.size()) != count) {
+    return make_error("lamps: the back-end has " + std::to_string(count) + " lamps but " +
+                      std::to_string(ro.lamp_positions.size()) + " positions are configured");
+  }
+  ro.exposure = c.exposure;
+  ro.ambient_warning = c.ambient_warning;
+  ro.settle_ms = c.settle_ms;
+  if (d->sim_) {
+    ro.simulated = true;
+    SimulatedRig* sim = d->sim_.get();
+    Camera* cam = d->camera_;
+    ro.sim.scenes = {sim->destination_scene(), sim->source_scene()};
+    ro.sim.select_scene = [sim, cam](veneer::Role role, const std::string&) {
+      if (auto* sc = as_simulated(cam)) {
+        if (auto s = sc->set_scene(sim->scene_for(role)); !s) VLOG_WARN("Camera", "{}", s.message());
+      }
+    };
+    ro.sim.move_hand_lamp = [cam](const cv::Vec3d& p) {
+      if (auto* sc = as_simulated(cam)) sc->set_hand_lamp(p);
+    };
+    ro.sim.finish_set = [cam](veneer::ImageSet& set) {
+      auto* sc = as_simulated(cam);
+      if (!sc) return;
+      veneer::CameraInfo info = sc->camera_info();
+      set.camera.model = info.model.empty() ? set.camera.model : info.model;
+      set.camera.focal_px = info.focal_px;
+      set.camera.cx = info.cx;
+      set.camera.cy = info.cy;
+      // A rig lamp at full white gives irradiance 1 at the origin; the
+      // camera's gain puts that in image units.
+      const float g = static_cast<float>(sc->gain());
+      for (auto& light : set.lights) light.intensity = cv::Vec3f(g, g, g);
+      if (auto truth = sc->truth(); truth) {
+        set.truth = std::move(*truth);
+      } else {
+        VLOG_WARN("Camera", "{}: no ground truth: {}", set.id, truth.message());
+      }
+    };
+  }
+  d->rig_ = std::make_unique<Rig>(std::move(dev), *d->store_, std::move(ro));
+
+  ServerOptions so;
+  so.host = c.listen_host;
+  so.port = c.listen_port;
+  so.token = d->token_;
+  d->server_ = std::make_unique<Server>(*d->rig_, so);
+  return d;
+}
+
+veneer::Status Daemon::start() {
+  if (auto s = server_->start(); !s) return s;
+  rig_->start();
+  return {};
+}
+
+void Daemon::stop() {
+  if (rig_) rig_->stop();
+  if (server_) server_->stop();
+}
+
+uint16_t Daemon::port() const { return server_ ? server_->port() : 0; }
+
+Daemon::~Daemon() { stop(); }
+
+}  // namespace veneerd

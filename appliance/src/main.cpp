@@ -1,0 +1,135 @@
+// veneerd — the rig daemon.
+//   veneerd --simulate [--scenes bull,stone] [--listen 127.0.0.1:7878] [--store DIR] [--size 1024x680]
+//   veneerd --config /etc/veneer/veneerd.json
+//   veneerd --check-hardware [--config FILE]
+#include <csignal>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+
+#include <sys/resource.h>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include "veneer/util/log.hpp"
+#include "veneerd/daemon.hpp"
+#if __has_include("veneerd/hw/check.hpp")
+#include "veneerd/hw/check.hpp"
+#define VENEERD_HAVE_HW_CHECK 1
+#endif
+
+namespace {
+
+bool parse_size(const std::string& text, cv::Size& out) {
+  int w = 0, h = 0;
+  char x = 0, extra = 0;
+  std::istringstream in(text);
+  if (!(in >> w >> x >> h) || (x != 'x' && x != 'X') || (in >> extra) || w < 16 || h < 16 || w > 8192 || h > 8192) {
+    return false;
+  }
+  out = {w, h};
+  return true;
+}
+
+std::vector<std::string> split(const std::string& text) {
+  std::vector<std::string> out;
+  std::string item;
+  std::istringstream in(text);
+  while (std::getline(in, item, ',')) {
+    if (!item.empty()) out.push_back(item);
+  }
+  return out;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"veneerd — the Veneer capture rig daemon (camera, ring of lamps, button; protobuf API on TCP)"};
+  veneerd::DaemonOptions o;
+  bool check_hardware = false;
+  std::string config, scenes = "bull,stone", size = "1024x680", preview_size, listen, store, token_file, log_spec;
+  unsigned long long max_file_bytes = 0;
+  app.add_flag("--simulate", o.simulate, "run the whole rig simulated in this process (Hue bridge emulator, camera, button)");
+  app.add_option("--config", config, "config file of a real rig (JSON)");
+  app.add_flag("--check-hardware", check_hardware, "probe the configured hardware and exit");
+  app.add_option("--scenes", scenes, "simulated rig: destination,source scene names")->capture_default_str();
+  app.add_option("--size", size, "simulated rig: still size WxH")->capture_default_str();
+  app.add_option("--preview-size", preview_size, "simulated rig: live-view size WxH (default: --size)");
+  app.add_option("--noise", o.noise_sigma, "simulated rig: sensor noise (fraction of full scale)")->capture_default_str();
+  app.add_option("--hue-latency-ms", o.hue_latency_ms, "simulated rig: bridge emulator latency per request [ms]")
+      ->capture_default_str();
+  bool no_limits = false;
+  app.add_flag("--no-rate-limits", no_limits, "simulated rig: the bridge emulator does not enforce Hue's rate limits");
+  app.add_option("--listen", listen, "address to serve the API on, host:port (default 127.0.0.1:7878)");
+  app.add_option("--store", store, "folder for the captured sets (and the token)");
+  app.add_option("--token-file", token_file, "access token file (default <store>/token, created 0600)");
+  app.add_option("--log", log_spec, "log levels, e.g. 'debug' or 'Camera=debug,Lamps=warn'");
+  app.add_option("--max-file-bytes", max_file_bytes, "largest file the daemon may write (RLIMIT_FSIZE; for tests)");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  if (!log_spec.empty()) veneer::log::set_levels(log_spec);
+  auto fail = [](const std::string& what, int code = 1) {
+    std::cerr << "veneerd: " << what << "\n";
+    return code;
+  };
+
+  if (check_hardware) {
+#ifdef VENEERD_HAVE_HW_CHECK
+    nlohmann::json doc = nlohmann::json::object();
+    if (!config.empty()) {
+      std::ifstream in(config);
+      if (!in) return fail(config + ": cannot open config file");
+      doc = nlohmann::json::parse(in, nullptr, false, true);
+      if (doc.is_discarded()) return fail(config + ": not valid JSON");
+    }
+    return veneerd::check_hardware(std::cout, doc);
+#else
+    return fail("--check-hardware: this build has no hardware back-ends", 2);
+#endif
+  }
+  if (!o.simulate && config.empty()) return fail("give --simulate or --config FILE (see --help)", 2);
+  o.config_file = config;
+  o.scenes = split(scenes);
+  if (o.scenes.empty()) return fail("--scenes: no scene named", 2);
+  if (!parse_size(size, o.size)) return fail("--size '" + size + "': expected WxH, e.g. 256x170", 2);
+  if (!preview_size.empty() && !parse_size(preview_size, o.preview_size)) {
+    return fail("--preview-size '" + preview_size + "': expected WxH", 2);
+  }
+  o.hue_rate_limits = !no_limits;
+  o.listen = listen.empty() && o.simulate ? "127.0.0.1:7878" : listen;
+  o.store = store.empty() && o.simulate ? "veneer-sets" : store;
+  o.token_file = token_file;
+
+  // Signals: a write beyond the file-size limit fails with EFBIG instead of
+  // killing us; a vanished peer is an error code, not SIGPIPE.
+  std::signal(SIGPIPE, SIG_IGN);
+  std::signal(SIGXFSZ, SIG_IGN);
+  if (max_file_bytes > 0) {
+    struct rlimit lim {static_cast<rlim_t>(max_file_bytes), static_cast<rlim_t>(max_file_bytes)};
+    if (::setrlimit(RLIMIT_FSIZE, &lim) != 0) return fail("--max-file-bytes: setrlimit failed");
+  }
+  sigset_t stop_signals;
+  sigemptyset(&stop_signals);
+  sigaddset(&stop_signals, SIGINT);
+  sigaddset(&stop_signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);  // every thread made from here on inherits it
+
+  auto daemon = veneerd::Daemon::create(o);
+  if (!daemon) return fail(daemon.message());
+  if (auto s = (*daemon)->start(); !s) return fail(s.message());
+  const auto& c = (*daemon)->config();
+  std::printf("veneerd: listening on %s:%u, store %s, token %s\n", c.listen_host.c_str(),
+              static_cast<unsigned>((*daemon)->port()), c.store.c_str(), c.token_path().c_str());
+  std::fflush(stdout);
+
+  int sig = 0;
+  sigwait(&stop_signals, &sig);
+  VLOG_INFO("Rig", "signal {}: stopping", sig);
+  (*daemon)->stop();
+  return 0;
+}

@@ -1,0 +1,381 @@
+#include "veneerd/rig.hpp"
+
+#include <chrono>
+
+#include "veneer/util/log.hpp"
+#include "veneerd/sequencer.hpp"
+
+namespace veneerd {
+
+using veneer::make_error;
+
+namespace {
+
+double unix_now() {
+  return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+// Width and height from a JPEG's start-of-frame marker (0 when not found).
+void jpeg_size(const std::vector<unsigned char>& j, int& w, int& h) {
+  size_t i = 2;
+  while (i + 9 < j.size()) {
+    if (j[i] != 0xFF) return;
+    unsigned char marker = j[i + 1];
+    size_t len = (static_cast<size_t>(j[i + 2]) << 8) | j[i + 3];
+    if (marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 && marker != 0xCC) {
+      h = (j[i + 5] << 8) | j[i + 6];
+      w = (j[i + 7] << 8) | j[i + 8];
+      return;
+    }
+    i += 2 + len;
+  }
+}
+
+}  // namespace
+
+Rig::Rig(RigDevices devices, Store& store, RigOptions options)
+    : dev_(std::move(devices)), store_(store), options_(std::move(options)) {
+  lamps_on_.assign(dev_.lamps ? dev_.lamps->count() : 0, false);
+}
+
+Rig::~Rig() { stop(); }
+
+void Rig::emit(RigEvent event) {
+  if (on_event) on_event(event);
+}
+
+void Rig::post(std::function<void()> job) {
+  {
+    std::lock_guard lock(jobs_mutex_);
+    jobs_.push_back(std::move(job));
+  }
+  jobs_cv_.notify_one();
+}
+
+void Rig::start() {
+  auto log = veneer::log::get("Rig");
+  if (dev_.camera) {
+    dev_.camera->on_connection_change = [this](bool connected) {
+      std::string model;
+      {
+        std::lock_guard lock(mutex_);
+        camera_connected_ = connected;
+        model = camera_model_;
+      }
+      RigEvent e;
+      e.kind = connected ? RigEvent::Kind::camera_connected : RigEvent::Kind::camera_lost;
+      e.camera_model = model;
+      if (!connected) e.reason = "camera disconnected";
+      if (dev_.led) dev_.led->show(connected ? LedState::idle : LedState::no_camera);
+      emit(e);
+    };
+  }
+  if (dev_.trigger) dev_.trigger->on_press = [this](Press p) { handle_press(p); };
+  worker_ = std::thread([this] { worker_loop(); });
+  live_ = std::thread([this] { live_loop(); });
+  post([this, log] {
+    if (dev_.camera) {
+      std::lock_guard cam(camera_mutex_);
+      if (auto s = dev_.camera->open(); !s) {
+        VLOG_WARN("Camera", "camera not ready: {}", s.message());
+      } else {
+        std::string model = dev_.camera->name();
+        if (auto d = dev_.camera->describe(); d && !d->model.empty()) model = d->model;
+        std::lock_guard lock(mutex_);
+        camera_model_ = model;
+        camera_connected_ = dev_.camera->connected();
+      }
+    }
+    // The rig starts dark: a crash may have left a lamp on.
+    if (dev_.lamps) {
+      if (auto s = dev_.lamps->all_off(); !s) VLOG_WARN("Lamps", "switching all lamps off at start failed: {}", s.message());
+    }
+    if (dev_.led) dev_.led->show(LedState::idle);
+    log->info("rig '{}' ready: {} lamps, camera {}", options_.name, dev_.lamps ? dev_.lamps->count() : 0,
+              camera_model_.empty() ? "(none)" : camera_model_);
+  });
+}
+
+void Rig::stop() {
+  if (stopping_.exchange(true)) return;
+  cancel_ = true;
+  jobs_cv_.notify_all();
+  live_cv_.notify_all();
+  if (worker_.joinable()) worker_.join();
+  if (live_.joinable()) live_.join();
+  if (dev_.lamps) {
+    if (auto s = dev_.lamps->all_off(); !s) VLOG_WARN("Lamps", "switching all lamps off at exit failed: {}", s.message());
+  }
+  if (dev_.trigger) dev_.trigger->on_press = nullptr;
+  if (dev_.camera) dev_.camera->on_connection_change = nullptr;
+}
+
+void Rig::worker_loop() {
+  for (;;) {
+    std::function<void()> job;
+    {
+      std::unique_lock lock(jobs_mutex_);
+      jobs_cv_.wait(lock, [&] { return stopping_ || !jobs_.empty(); });
+      if (stopping_) return;
+      job = std::move(jobs_.front());
+      jobs_.pop_front();
+    }
+    job();
+  }
+}
+
+veneer::Expected<std::string> Rig::capture(const CaptureRequest& request) {
+  if (!dev_.lamps || !dev_.camera) return make_error("the rig has no lamps or no camera");
+  CaptureRequest req = request;
+  std::string id;
+  {
+    std::lock_guard lock(mutex_);
+    if (capturing_) return make_error("a capture is already running (" + capture_id_ + ")");
+    if (req.role == veneer::Role::unknown) req.role = next_role_;
+    if (req.object.empty() && options_.simulated && options_.sim.scenes.size() >= 2) {
+      req.object = options_.sim.scenes[req.role == veneer::Role::source ? 1 : 0];
+    }
+    id = store_.new_id(req.role, req.object);
+    capturing_ = true;
+    capture_id_ = id;
+    cancel_ = false;
+  }
+  post([this, id, req] { run_capture_job(id, req); });
+  return id;
+}
+
+veneer::Status Rig::cancel() {
+  std::lock_guard lock(mutex_);
+  if (!capturing_) return make_error("no capture is running");
+  cancel_ = true;
+  return {};
+}
+
+void Rig::press(Press p) {
+  if (dev_.trigger) {
+    dev_.trigger->press(p);  // the simulated button counts it, then calls on_press
+  } else {
+    handle_press(p);
+  }
+}
+
+void Rig::handle_press(Press p) {
+  if (stopping_) return;
+  RigEvent e;
+  e.kind = RigEvent::Kind::button_pressed;
+  e.long_press = p == Press::long_press;
+  emit(e);
+  if (p == Press::long_press) {
+    if (auto s = cancel(); !s) VLOG_INFO("Trigger", "long press: {}", s.message());
+    return;
+  }
+  if (auto id = capture({}); !id) VLOG_INFO("Trigger", "press ignored: {}", id.message());
+}
+
+void Rig::run_capture_job(const std::string& id, CaptureRequest req) {
+  auto log = veneer::log::get("Rig");
+  if (dev_.led) dev_.led->show(LedState::capturing);
+  const int n = dev_.lamps->count() + 1;
+
+  CapturePlan plan;
+  plan.set_id = id;
+  plan.role = req.role;
+  plan.object = req.object.empty() ? veneer::role_name(req.role) : req.object;
+  plan.exposure = req.exposure;
+  if (plan.exposure.shutter_s <= 0) plan.exposure.shutter_s = options_.exposure.shutter_s;
+  if (plan.exposure.aperture <= 0) plan.exposure.aperture = options_.exposure.aperture;
+  if (plan.exposure.iso <= 0) plan.exposure.iso = options_.exposure.iso;
+  plan.lamp_ids = options_.lamp_ids;
+  plan.lamp_positions = options_.lamp_positions;
+  plan.ambient_warning = options_.ambient_warning;
+  {
+    std::lock_guard lock(mutex_);
+    plan.expected_shot_s = mean_step_s_ > 0 ? mean_step_s_ : options_.settle_ms / 1000.0 + plan.exposure.shutter_s + 0.2;
+  }
+  if (options_.simulated && options_.sim.scenes.size() >= 2) {
+    plan.scene = options_.sim.scenes[req.role == veneer::Role::source ? 1 : 0];
+    if (options_.sim.select_scene) options_.sim.select_scene(req.role, plan.scene);
+  }
+
+  RigEvent started;
+  started.kind = RigEvent::Kind::capture_started;
+  started.set_id = id;
+  started.role = req.role;
+  started.object = plan.object;
+  started.n = n;
+  emit(started);
+  log->info("capture {} started: {} '{}', {} shots", id, veneer::role_name(req.role), plan.object, n);
+
+  CaptureHooks hooks;
+  hooks.cancel = &cancel_;
+  hooks.on_shot = [&](int k, int total, double eta) {
+    RigEvent e;
+    e.kind = RigEvent::Kind::shot_taken;
+    e.set_id = id;
+    e.k = k;
+    e.n = total;
+    e.eta_s = eta;
+    emit(e);
+  };
+
+  veneer::Expected<CaptureResult> result = make_error("not run");
+  {
+    std::lock_guard cam(camera_mutex_);
+    result = run_capture(*dev_.lamps, *dev_.camera, plan, hooks);
+  }
+  veneer::Status stored;
+  if (result) {
+    veneer::ImageSet& set = result->set;
+    if (options_.simulated && options_.sim.finish_set) options_.sim.finish_set(set);
+    if (cancel_) {
+      stored = make_error("cancelled");
+    } else {
+      stored = store_.save(set);
+    }
+  } else {
+    stored = result.error();
+  }
+
+  RigEvent done;
+  done.set_id = id;
+  {
+    std::lock_guard lock(mutex_);
+    capturing_ = false;
+    capture_id_.clear();
+    if (stored) {
+      next_role_ = req.role == veneer::Role::destination ? veneer::Role::source : veneer::Role::destination;
+      mean_step_s_ = result->mean_step_s;
+    }
+  }
+  if (stored) {
+    done.kind = RigEvent::Kind::set_stored;
+    done.role = req.role;
+    done.warnings = result->set.warnings;
+    log->info("set {} stored ({:.2f} s, {:.3f} s per shot)", id, result->seconds, result->mean_step_s);
+    if (dev_.led) dev_.led->show(LedState::done);
+  } else {
+    done.kind = RigEvent::Kind::capture_failed;
+    done.reason = stored.message();
+    done.cancelled = stored.message() == "cancelled";
+    if (done.cancelled) {
+      log->info("capture {} cancelled", id);
+    } else {
+      log->error("capture {} failed: {}", id, done.reason);
+    }
+    if (dev_.led) dev_.led->show(done.cancelled ? LedState::idle : LedState::error);
+  }
+  emit(done);
+}
+
+void Rig::set_lamps(std::vector<bool> on, int brightness, std::function<void(veneer::Status)> done) {
+  {
+    std::lock_guard lock(mutex_);
+    if (capturing_) {
+      if (done) done(make_error("a capture is running; the lamps belong to it"));
+      return;
+    }
+  }
+  post([this, on = std::move(on), brightness, done = std::move(done)]() mutable {
+    const int count = dev_.lamps ? dev_.lamps->count() : 0;
+    if (static_cast<int>(on.size()) > count) {
+      if (done) done(make_error("the rig has " + std::to_string(count) + " lamps, " + std::to_string(on.size()) + " given"));
+      return;
+    }
+    on.resize(count, false);
+    veneer::Status s = dev_.lamps->set(on, brightness);
+    if (s) {
+      {
+        std::lock_guard lock(mutex_);
+        lamps_on_ = on;
+      }
+      RigEvent e;
+      e.kind = RigEvent::Kind::lamp_state;
+      e.lamps_on = on;
+      e.brightness = brightness;
+      emit(e);
+    } else {
+      VLOG_WARN("Lamps", "set lamps failed: {}", s.message());
+    }
+    if (done) done(s);
+  });
+}
+
+veneer::Status Rig::move_hand_lamp(const cv::Vec3d& position) {
+  if (!options_.simulated || !options_.sim.move_hand_lamp) return make_error("only the simulated rig has a hand-held lamp");
+  options_.sim.move_hand_lamp(position);
+  return {};
+}
+
+veneer::Status Rig::delete_set(const std::string& id) {
+  {
+    std::lock_guard lock(mutex_);
+    if (capturing_ && capture_id_ == id) return make_error("set " + id + " is being captured");
+  }
+  if (auto s = store_.remove(id); !s) return s;
+  RigEvent e;
+  e.kind = RigEvent::Kind::set_deleted;
+  e.set_id = id;
+  emit(e);
+  return {};
+}
+
+void Rig::set_live_fps(double fps) {
+  {
+    std::lock_guard lock(live_mutex_);
+    live_fps_ = fps;
+  }
+  live_cv_.notify_all();
+}
+
+void Rig::live_loop() {
+  using Clock = std::chrono::steady_clock;
+  auto next = Clock::now();
+  for (;;) {
+    double fps = 0;
+    {
+      std::unique_lock lock(live_mutex_);
+      live_cv_.wait(lock, [&] { return stopping_ || live_fps_ > 0; });
+      if (stopping_) return;
+      fps = live_fps_;
+    }
+    const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / fps));
+    auto now = Clock::now();
+    if (next < now - period) next = now;  // fell behind: do not burst
+    {
+      std::unique_lock lock(live_mutex_);
+      live_cv_.wait_until(lock, next, [&] { return stopping_.load(); });
+      if (stopping_) return;
+    }
+    next += period;
+    std::unique_lock cam(camera_mutex_, std::try_to_lock);
+    if (!cam.owns_lock() || !dev_.camera) continue;  // a capture holds the camera
+    auto jpeg = dev_.camera->preview();
+    cam.unlock();
+    if (!jpeg) {
+      VLOG_DEBUG("Camera", "live view frame failed: {}", jpeg.message());
+      continue;
+    }
+    auto frame = std::make_shared<LiveFrameData>();
+    frame->jpeg = std::move(*jpeg);
+    frame->seq = ++live_seq_;
+    frame->ts = unix_now();
+    jpeg_size(frame->jpeg, frame->width, frame->height);
+    if (on_live_frame) on_live_frame(frame);
+  }
+}
+
+RigState Rig::state() const {
+  RigState s;
+  s.name = options_.name;
+  s.simulated = options_.simulated;
+  s.lamp_count = dev_.lamps ? dev_.lamps->count() : 0;
+  std::lock_guard lock(mutex_);
+  s.camera_connected = camera_connected_;
+  s.camera_model = camera_model_;
+  s.lamps_on = lamps_on_;
+  s.capturing = capturing_;
+  s.next_role = next_role_;
+  return s;
+}
+
+}  // namespace veneerd

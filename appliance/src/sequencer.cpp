@@ -1,0 +1,167 @@
+#include "veneerd/sequencer.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <ctime>
+#include <sstream>
+
+#include "veneer/util/log.hpp"
+
+namespace veneerd {
+
+using veneer::make_error;
+using Clock = std::chrono::steady_clock;
+
+double mean_level(const cv::Mat& linear) {
+  if (linear.empty()) return 0;
+  cv::Scalar m = cv::mean(linear);
+  double sum = 0;
+  for (int c = 0; c < linear.channels() && c < 4; ++c) sum += m[c];
+  return sum / std::max(1, linear.channels());
+}
+
+std::string utc_now_iso() {
+  std::time_t now = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return buf;
+}
+
+namespace {
+
+double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+
+cv::Mat to_float_bgr(const cv::Mat& in) {
+  if (in.type() == CV_32FC3) return in;
+  cv::Mat out;
+  double scale = in.depth() == CV_16U ? 1.0 / 65535 : in.depth() == CV_8U ? 1.0 / 255 : 1.0;
+  in.convertTo(out, CV_MAKETYPE(CV_32F, in.channels()), scale);
+  if (out.channels() == 1) cv::merge(std::vector<cv::Mat>{out, out, out}, out);
+  return out;
+}
+
+}  // namespace
+
+veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const CapturePlan& plan,
+                                            const CaptureHooks& hooks) {
+  auto log = veneer::log::get("Sequencer");
+  const auto start = Clock::now();
+  const int count = lamps.count();
+  if (count <= 0) return make_error("the lamps back-end reports no lamps");
+  if (plan.lamp_positions.size() != static_cast<size_t>(count)) {
+    return make_error("the rig has " + std::to_string(count) + " lamps but " +
+                      std::to_string(plan.lamp_positions.size()) + " lamp positions are configured");
+  }
+  auto cancelled = [&] { return hooks.cancel != nullptr && hooks.cancel->load(); };
+  auto lamp_name = [&](int i) {
+    std::string s = "lamp " + std::to_string(i + 1);
+    if (static_cast<size_t>(i) < plan.lamp_ids.size()) s += " (id " + plan.lamp_ids[i] + ")";
+    return s;
+  };
+  const int shots = count + 1;
+
+  if (auto s = camera.open(); !s) return make_error("camera: " + s.message());
+  auto saved = lamps.read();
+  if (!saved) return make_error("lamps: cannot read their state before the capture: " + saved.message());
+  // Lamps already unreachable now would only fail later, after the ambient frame.
+  for (int i = 0; i < count && i < static_cast<int>(saved->size()); ++i) {
+    if (!(*saved)[i].reachable) return make_error(lamp_name(i) + " is unreachable; capture not started");
+  }
+
+  CaptureResult result;
+  veneer::ImageSet& set = result.set;
+  set.id = plan.set_id;
+  set.role = plan.role;
+  set.object = plan.object;
+  set.scene = plan.scene;
+  set.created = utc_now_iso();
+
+  auto sequence = [&]() -> veneer::Status {
+    if (auto desc = camera.describe(); desc) set.camera.model = desc->model;
+    if (auto s = camera.set_exposure(plan.exposure); !s) return make_error("camera: cannot set exposure: " + s.message());
+    set.camera.exposure_s = plan.exposure.shutter_s;
+    set.camera.aperture = plan.exposure.aperture;
+    set.camera.iso = plan.exposure.iso;
+
+    double step_total = 0;
+    int steps_done = 0;
+    auto eta = [&](int done) {
+      double per = steps_done > 0 ? step_total / steps_done : plan.expected_shot_s;
+      return per * (shots - done);
+    };
+    for (int k = 0; k < shots; ++k) {
+      if (cancelled()) return make_error("cancelled");
+      const auto step_start = Clock::now();
+      std::vector<bool> on(count, false);
+      if (k > 0) on[k - 1] = true;
+      if (auto s = lamps.set(on, 254); !s) {
+        return make_error((k == 0 ? std::string("lamps: switching all off") : lamp_name(k - 1) + ": switching on") +
+                          " failed: " + s.message());
+      }
+      if (cancelled()) return make_error("cancelled");
+      auto still = camera.capture();
+      if (!still) {
+        return make_error("camera, shot " + std::to_string(k + 1) + " of " + std::to_string(shots) + ": " +
+                          still.message());
+      }
+      cv::Mat photo = to_float_bgr(still->linear);
+      if (photo.empty()) return make_error("camera, shot " + std::to_string(k + 1) + ": empty image");
+      if (set.size.area() == 0) set.size = photo.size();
+      if (photo.size() != set.size) {
+        return make_error("camera, shot " + std::to_string(k + 1) + ": size changed mid-set");
+      }
+      if (k == 0) {
+        set.ambient = photo;
+      } else {
+        set.images.push_back(photo);
+      }
+      step_total += seconds_since(step_start);
+      ++steps_done;
+      log->debug("{}: shot {}/{} in {:.3f} s", plan.set_id, k + 1, shots, seconds_since(step_start));
+      if (hooks.on_shot) hooks.on_shot(k + 1, shots, eta(k + 1));
+    }
+    result.mean_step_s = step_total / std::max(1, steps_done);
+    return {};
+  };
+
+  veneer::Status outcome = sequence();
+
+  // Whatever happened, give the owner's lamps back.
+  if (auto s = lamps.restore(*saved); !s) {
+    log->error("restoring the lamps after {} failed: {}; switching all off", plan.set_id, s.message());
+    if (auto off = lamps.all_off(); !off) log->error("switching the lamps off failed too: {}", off.message());
+    if (outcome) outcome = make_error("lamps: restoring their state after the capture failed: " + s.message());
+  }
+  if (!outcome) return outcome.error();
+
+  // Lights of the set: ring geometry, direction toward the object centre.
+  for (int i = 0; i < count; ++i) {
+    veneer::Light light;
+    light.index = i;
+    light.lamp_id = static_cast<size_t>(i) < plan.lamp_ids.size() ? plan.lamp_ids[i] : "lamp-" + std::to_string(i + 1);
+    light.position_m = plan.lamp_positions[i];
+    double n = cv::norm(plan.lamp_positions[i]);
+    light.direction = n > 0 ? plan.lamp_positions[i] / n : cv::Vec3d(0, 0, 1);
+    light.intensity = cv::Vec3f(1, 1, 1);
+    set.lights.push_back(light);
+  }
+
+  const double ambient = mean_level(set.ambient);
+  double lit = 0;
+  for (const auto& img : set.images) lit += mean_level(img);
+  lit /= std::max<size_t>(1, set.images.size());
+  if (ambient > plan.ambient_warning || (lit > 0 && ambient > 0.25 * lit)) {
+    std::ostringstream w;
+    w.precision(3);
+    w << "bright ambient frame: mean level " << ambient << " of full scale (" << (lit > 0 ? 100.0 * ambient / lit : 0)
+      << "% of a lit shot); room light reaches the object and biases photometric stereo";
+    set.warnings.push_back(w.str());
+    log->warn("{}: {}", plan.set_id, w.str());
+  }
+  result.seconds = seconds_since(start);
+  return result;
+}
+
+}  // namespace veneerd

@@ -1,0 +1,264 @@
+#include "veneerd/store.hpp"
+
+#include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cstring>
+#include <ctime>
+
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/file.h>
+#include <sys/statvfs.h>
+#include <unistd.h>
+
+#include "veneer/io/image_io.hpp"
+#include "veneer/util/log.hpp"
+
+namespace veneerd {
+
+namespace fs = std::filesystem;
+using veneer::make_error;
+
+bool valid_set_id(const std::string& id) {
+  if (id.empty() || id.size() > 96 || id.front() == '.') return false;
+  return std::all_of(id.begin(), id.end(), [](char ch) {
+    return (ch >= 'a' && ch <= 'z') || (ch >= 'A' && ch <= 'Z') || (ch >= '0' && ch <= '9') || ch == '-' ||
+           ch == '_' || ch == '.';
+  });
+}
+
+namespace {
+
+// ".<name>.<kind>-<pid>-<n>": a temporary folder or file left by an atomic writer.
+bool leftover_temp(const std::string& name, long& pid) {
+  if (name.size() < 4 || name[0] != '.') return false;
+  size_t last_dash = name.rfind('-');
+  if (last_dash == std::string::npos || last_dash + 1 >= name.size()) return false;
+  size_t pid_dash = name.rfind('-', last_dash - 1);
+  if (pid_dash == std::string::npos || pid_dash + 1 >= last_dash) return false;
+  std::string n = name.substr(last_dash + 1), p = name.substr(pid_dash + 1, last_dash - pid_dash - 1);
+  if (n.find_first_not_of("0123456789") != std::string::npos) return false;
+  if (p.empty() || p.size() > 9 || p.find_first_not_of("0123456789") != std::string::npos) return false;
+  if (name.rfind('.', pid_dash) == 0) return false;  // needs ".<name>.<kind>-"
+  pid = std::stol(p);
+  return true;
+}
+
+bool process_alive(long pid) {
+  if (pid <= 0) return false;
+  if (pid == ::getpid()) return true;
+  return ::kill(static_cast<pid_t>(pid), 0) == 0 || errno == EPERM;
+}
+
+uint64_t folder_bytes(const fs::path& folder) {
+  uint64_t total = 0;
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(folder, ec); !ec && it != fs::recursive_directory_iterator();
+       it.increment(ec)) {
+    if (it->is_regular_file(ec)) total += it->file_size(ec);
+  }
+  return total;
+}
+
+}  // namespace
+
+veneer::Expected<std::unique_ptr<Store>> Store::open(const fs::path& root) {
+  std::error_code ec;
+  fs::create_directories(root, ec);
+  if (ec) return make_error("store " + root.string() + ": cannot create folder: " + ec.message());
+  if (!fs::is_directory(root)) return make_error("store " + root.string() + ": not a folder");
+  fs::path lock = root / ".lock";
+  int fd = ::open(lock.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0600);
+  if (fd < 0) return make_error("store " + root.string() + ": cannot open " + lock.string() + ": " + std::strerror(errno));
+  if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+    ::close(fd);
+    return make_error("store " + root.string() + " is in use by another veneerd");
+  }
+  std::unique_ptr<Store> store(new Store(root, fd));
+
+  auto log = veneer::log::get("Store");
+  std::vector<std::string> ids;
+  for (const auto& entry : fs::directory_iterator(root, ec)) {
+    std::string name = entry.path().filename().string();
+    long pid = -1;
+    if (leftover_temp(name, pid)) {
+      if (process_alive(pid) && pid != ::getpid()) continue;
+      log->warn("removing leftover temporary {} (an interrupted write)", entry.path().string());
+      fs::remove_all(entry.path(), ec);
+      continue;
+    }
+    if (!entry.is_directory() || !valid_set_id(name)) continue;
+    ids.push_back(name);
+  }
+  for (const auto& id : ids) {
+    auto set = store->scan_one(id);
+    if (!set) {
+      log->warn("ignoring {}: {}", (root / id).string(), set.message());
+      continue;
+    }
+    store->sets_.push_back(std::move(*set));
+  }
+  std::sort(store->sets_.begin(), store->sets_.end(), [](const StoredSet& a, const StoredSet& b) {
+    return a.created != b.created ? a.created < b.created : a.id < b.id;
+  });
+  log->info("store {}: {} set(s)", root.string(), store->sets_.size());
+  return store;
+}
+
+Store::Store(fs::path root, int lock_fd) : root_(std::move(root)), lock_fd_(lock_fd) {}
+
+Store::~Store() {
+  if (lock_fd_ >= 0) ::close(lock_fd_);
+}
+
+veneer::Expected<StoredSet> Store::scan_one(const std::string& id) const {
+  fs::path folder = root_ / id;
+  auto text = veneer::read_file_bytes(folder / "set.json");
+  if (!text) return text.error();
+  auto manifest = veneer::parse_manifest(*text, folder);
+  if (!manifest) return manifest.error();
+  std::error_code ec;
+  for (const auto& f : manifest->image_files) {
+    if (!fs::is_regular_file(folder / f, ec)) return make_error((folder / f).string() + ": missing");
+  }
+  const veneer::ImageSet& s = manifest->set;
+  StoredSet out;
+  out.id = id;
+  out.role = s.role;
+  out.object = s.object;
+  out.created = s.created;
+  out.scene = s.scene;
+  out.size = s.size;
+  out.lights = static_cast<int>(s.lights.size());
+  out.warnings = s.warnings;
+  out.has_truth = fs::exists(folder / "truth" / "normals.pfm", ec);
+  out.bytes = folder_bytes(folder);
+  return out;
+}
+
+std::vector<StoredSet> Store::list() const {
+  std::lock_guard lock(mutex_);
+  return sets_;
+}
+
+veneer::Expected<StoredSet> Store::find(const std::string& id) const {
+  if (!valid_set_id(id)) return make_error("'" + id + "' is not a set id");
+  std::lock_guard lock(mutex_);
+  for (const auto& s : sets_) {
+    if (s.id == id) return s;
+  }
+  return make_error("no set '" + id + "' in the store");
+}
+
+veneer::Expected<std::string> Store::manifest(const std::string& id) const {
+  auto set = find(id);
+  if (!set) return set.error();
+  return veneer::read_file_bytes(root_ / id / "set.json");
+}
+
+veneer::Expected<std::vector<std::string>> Store::files(const std::string& id, bool include_truth) const {
+  auto set = find(id);
+  if (!set) return set.error();
+  fs::path folder = root_ / id;
+  auto text = veneer::read_file_bytes(folder / "set.json");
+  if (!text) return text.error();
+  auto manifest = veneer::parse_manifest(*text, folder);
+  if (!manifest) return manifest.error();
+  std::vector<std::string> out{"set.json"};
+  for (const auto& f : manifest->image_files) out.push_back(f.generic_string());
+  if (!manifest->ambient_file.empty()) out.push_back(manifest->ambient_file.generic_string());
+  if (!manifest->mask_file.empty()) out.push_back(manifest->mask_file.generic_string());
+  if (include_truth) {
+    std::error_code ec;
+    std::vector<std::string> truth;
+    for (const auto& entry : fs::directory_iterator(folder / "truth", ec)) {
+      if (entry.is_regular_file()) truth.push_back("truth/" + entry.path().filename().string());
+    }
+    std::sort(truth.begin(), truth.end());
+    out.insert(out.end(), truth.begin(), truth.end());
+  }
+  return out;
+}
+
+std::string Store::new_id(veneer::Role role, const std::string& object) const {
+  std::time_t now = std::time(nullptr);
+  std::tm tm{};
+  gmtime_r(&now, &tm);
+  char stamp[32];
+  std::strftime(stamp, sizeof stamp, "%Y%m%d-%H%M%S", &tm);
+  std::string base = std::string(stamp) + "-" + veneer::role_name(role);
+  std::string clean;
+  for (char ch : object) {
+    if (clean.size() >= 32) break;
+    bool ok = (ch >= 'a' && ch <= 'z') || (ch >= 'A' && ch <= 'Z') || (ch >= '0' && ch <= '9') || ch == '-' || ch == '_';
+    clean += ok ? ch : '_';
+  }
+  if (!clean.empty()) base += "-" + clean;
+  std::lock_guard lock(mutex_);
+  std::string id = base;
+  std::error_code ec;
+  for (int n = 2;; ++n) {
+    bool taken = fs::exists(root_ / id, ec) ||
+                 std::any_of(sets_.begin(), sets_.end(), [&](const StoredSet& s) { return s.id == id; });
+    if (!taken) return id;
+    id = base + "-" + std::to_string(n);
+  }
+}
+
+uint64_t Store::estimate_bytes(cv::Size size, int photos, bool truth) {
+  uint64_t per_photo = static_cast<uint64_t>(size.area()) * 6 + 4096;  // 16-bit RGB, incompressible bound
+  uint64_t total = per_photo * static_cast<uint64_t>(photos) + 65536;
+  if (truth) total += static_cast<uint64_t>(size.area()) * (12 + 4 + 6 + 1);
+  return total;
+}
+
+uint64_t Store::free_bytes() const {
+  struct statvfs st {};
+  if (::statvfs(root_.c_str(), &st) != 0) return 0;
+  return static_cast<uint64_t>(st.f_bavail) * st.f_frsize;
+}
+
+veneer::Status Store::save(const veneer::ImageSet& set) {
+  if (!valid_set_id(set.id)) return make_error("cannot store a set under the id '" + set.id + "'");
+  const uint64_t need = estimate_bytes(set.size, static_cast<int>(set.images.size()) + (set.ambient.empty() ? 0 : 1),
+                                       set.truth.present());
+  const uint64_t free = free_bytes();
+  if (free < need) {
+    return make_error("store " + root_.string() + " is full: " + std::to_string(free >> 20) +
+                      " MiB free, the set needs about " + std::to_string((need >> 20) + 1) + " MiB; no set stored");
+  }
+  fs::path folder = root_ / set.id;
+  if (auto s = veneer::write_set(set, folder); !s) {
+    return make_error("storing set " + set.id + " failed: " + s.message() + "; no set stored");
+  }
+  auto scanned = scan_one(set.id);
+  if (!scanned) {
+    std::error_code ec;
+    fs::remove_all(folder, ec);
+    return make_error("set " + set.id + " did not read back: " + scanned.message() + "; no set stored");
+  }
+  std::lock_guard lock(mutex_);
+  sets_.push_back(std::move(*scanned));
+  return {};
+}
+
+veneer::Status Store::remove(const std::string& id) {
+  if (auto set = find(id); !set) return set.error();
+  fs::path folder = root_ / id;
+  // Rename first so the set vanishes at once; the bytes go afterwards.
+  fs::path doomed = root_ / ("." + id + ".deleted-" + std::to_string(::getpid()) + "-0");
+  if (::rename(folder.c_str(), doomed.c_str()) != 0) {
+    return make_error("cannot delete set " + id + ": " + std::strerror(errno));
+  }
+  {
+    std::lock_guard lock(mutex_);
+    sets_.erase(std::remove_if(sets_.begin(), sets_.end(), [&](const StoredSet& s) { return s.id == id; }),
+                sets_.end());
+  }
+  std::error_code ec;
+  fs::remove_all(doomed, ec);
+  return {};
+}
+
+}  // namespace veneerd
