@@ -1,0 +1,422 @@
+// Hue bridge setup over libcurl: discovery, pairing, lamp list, flashing.
+#include "veneerd/hw/hue_setup.hpp"
+
+#include <curl/curl.h>
+
+#include <chrono>
+#include <cstdio>
+#include <memory>
+#include <ostream>
+#include <sstream>
+#include <thread>
+
+#include <nlohmann/json.hpp>
+
+#include "veneer/util/log.hpp"
+
+namespace veneerd::hw {
+
+using nlohmann::json;
+
+namespace {
+
+struct HttpAnswer {
+  bool ok = false;  // an HTTP answer arrived
+  long status = 0;
+  std::string body;
+  std::string error;
+};
+
+size_t collect(char* data, size_t size, size_t n, void* user) {
+  auto* out = static_cast<std::string*>(user);
+  if (out->size() + size * n > (4u << 20)) return 0;  // a bridge answer is small; refuse floods
+  out->append(data, size * n);
+  return size * n;
+}
+
+HttpAnswer http(const std::string& method, const std::string& url, const std::string& body, long timeout_ms) {
+  static const bool inited = [] { return curl_global_init(CURL_GLOBAL_DEFAULT) == CURLE_OK; }();
+  HttpAnswer a;
+  if (!inited) {
+    a.error = "libcurl could not be initialised";
+    return a;
+  }
+  std::unique_ptr<CURL, void (*)(CURL*)> curl(curl_easy_init(), curl_easy_cleanup);
+  if (!curl) {
+    a.error = "libcurl could not create a handle";
+    return a;
+  }
+  CURL* c = curl.get();
+  curl_easy_setopt(c, CURLOPT_URL, url.c_str());
+  curl_easy_setopt(c, CURLOPT_TIMEOUT_MS, timeout_ms);
+  curl_easy_setopt(c, CURLOPT_CONNECTTIMEOUT_MS, timeout_ms);
+  curl_easy_setopt(c, CURLOPT_NOSIGNAL, 1L);
+  curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, collect);
+  curl_easy_setopt(c, CURLOPT_WRITEDATA, &a.body);
+  curl_easy_setopt(c, CURLOPT_PROTOCOLS_STR, "http,https");
+  curl_slist* headers = nullptr;
+  if (method != "GET") {
+    curl_easy_setopt(c, CURLOPT_CUSTOMREQUEST, method.c_str());
+    curl_easy_setopt(c, CURLOPT_POSTFIELDS, body.c_str());
+    curl_easy_setopt(c, CURLOPT_POSTFIELDSIZE, long(body.size()));
+    headers = curl_slist_append(headers, "Content-Type: application/json");
+    curl_easy_setopt(c, CURLOPT_HTTPHEADER, headers);
+  }
+  CURLcode r = curl_easy_perform(c);
+  if (headers) curl_slist_free_all(headers);
+  if (r != CURLE_OK) {
+    a.error = curl_easy_strerror(r);
+    return a;
+  }
+  curl_easy_getinfo(c, CURLINFO_RESPONSE_CODE, &a.status);
+  a.ok = true;
+  return a;
+}
+
+std::string url_of(const std::string& address, const std::string& path) {
+  std::string base = address;
+  if (base.rfind("http://", 0) != 0 && base.rfind("https://", 0) != 0) base = "http://" + base;
+  while (!base.empty() && base.back() == '/') base.pop_back();
+  return base + path;
+}
+
+std::string str(const json& j, const char* key) {
+  auto it = j.find(key);
+  return it != j.end() && it->is_string() ? it->get<std::string>() : "";
+}
+
+veneer::Status answer_ok(const HttpAnswer& a, const std::string& address, const std::string& what) {
+  if (!a.ok) return veneer::make_error("Hue bridge " + address + ": " + what + ": no answer (" + a.error + ")");
+  if (a.status != 200)
+    return veneer::make_error("Hue bridge " + address + ": " + what + ": HTTP " + std::to_string(a.status));
+  HueError e = parse_hue_error(a.body);
+  if (e.type == 1)
+    return veneer::make_error("Hue bridge " + address + ": the key is not paired with this bridge (run `veneerd hue pair`)");
+  if (e.type != 0)
+    return veneer::make_error("Hue bridge " + address + ": " + what + ": " + e.description + " (Hue error " +
+                              std::to_string(e.type) + ")");
+  return {};
+}
+
+}  // namespace
+
+HueError parse_hue_error(const std::string& body) {
+  HueError e;
+  json j = json::parse(body, nullptr, false);
+  if (j.is_discarded()) return e;
+  if (j.is_array() && !j.empty()) j = j[0];
+  if (!j.is_object()) return e;
+  auto it = j.find("error");
+  if (it == j.end() || !it->is_object()) return e;
+  auto t = it->find("type");
+  if (t != it->end() && t->is_number_integer()) e.type = int(std::clamp<long long>(t->get<long long>(), -1, 1 << 20));
+  if (e.type == 0) e.type = -1;
+  e.description = str(*it, "description");
+  return e;
+}
+
+veneer::Expected<BridgeInfo> parse_bridge_config(const std::string& body) {
+  json j = json::parse(body, nullptr, false);
+  if (j.is_discarded()) return veneer::make_error("the answer is not JSON");
+  HueError e = parse_hue_error(body);
+  if (e.type != 0) return veneer::make_error("the bridge answered with Hue error " + std::to_string(e.type) + ": " + e.description);
+  if (!j.is_object()) return veneer::make_error("the answer is not a JSON object");
+  BridgeInfo b;
+  b.name = str(j, "name");
+  b.bridgeid = str(j, "bridgeid");
+  b.modelid = str(j, "modelid");
+  b.apiversion = str(j, "apiversion");
+  b.mac = str(j, "mac");
+  if (b.bridgeid.empty() && b.apiversion.empty())
+    return veneer::make_error("the answer has neither bridgeid nor apiversion: not a Hue bridge");
+  return b;
+}
+
+veneer::Expected<std::vector<BridgeLamp>> parse_bridge_lights(const std::string& body) {
+  json j = json::parse(body, nullptr, false);
+  if (j.is_discarded()) return veneer::make_error("the lamp list is not JSON");
+  HueError e = parse_hue_error(body);
+  if (e.type != 0) return veneer::make_error("Hue error " + std::to_string(e.type) + ": " + e.description);
+  if (!j.is_object()) return veneer::make_error("the lamp list is not a JSON object");
+  std::vector<BridgeLamp> out;
+  for (auto it = j.begin(); it != j.end(); ++it) {
+    if (!it->is_object()) continue;
+    BridgeLamp l;
+    l.id = it.key();
+    l.name = str(*it, "name");
+    l.type = str(*it, "type");
+    l.modelid = str(*it, "modelid");
+    auto st = it->find("state");
+    if (st != it->end() && st->is_object()) {
+      if (auto on = st->find("on"); on != st->end() && on->is_boolean()) l.on = on->get<bool>();
+      if (auto r = st->find("reachable"); r != st->end() && r->is_boolean()) l.reachable = r->get<bool>();
+    }
+    out.push_back(std::move(l));
+  }
+  // Numeric ids in numeric order ("2" before "10").
+  std::sort(out.begin(), out.end(), [](const BridgeLamp& a, const BridgeLamp& b) {
+    return a.id.size() != b.id.size() ? a.id.size() < b.id.size() : a.id < b.id;
+  });
+  return out;
+}
+
+veneer::Expected<BridgeInfo> probe_bridge(const std::string& address, long timeout_ms) {
+  HttpAnswer a = http("GET", url_of(address, "/api/config"), "", timeout_ms);
+  if (!a.ok) return veneer::make_error("no Hue bridge answers at " + address + " (" + a.error + ")");
+  if (a.status != 200)
+    return veneer::make_error(address + " answered HTTP " + std::to_string(a.status) + " to /api/config: not a Hue bridge");
+  HueError e = parse_hue_error(a.body);
+  if (e.type == 1) {
+    // Some firmware (and the emulator) want a key even for the short config;
+    // answering in the bridge's error format still identifies a bridge.
+    BridgeInfo b;
+    b.address = address;
+    b.name = "Hue bridge";
+    return b;
+  }
+  auto b = parse_bridge_config(a.body);
+  if (!b) return veneer::make_error(address + ": " + b.message());
+  b->address = address;
+  return b;
+}
+
+std::vector<BridgeInfo> discover_bridges(const DiscoverOptions& o, std::vector<std::string>* notes) {
+  std::vector<BridgeInfo> found;
+  auto note = [&](const std::string& s) {
+    if (notes) notes->push_back(s);
+  };
+  auto add = [&](const std::string& address, const std::string& source) {
+    for (const auto& f : found)
+      if (f.address == address) return;
+    auto b = probe_bridge(address, o.timeout_ms);
+    if (b) {
+      found.push_back(*b);
+      note(source + ": bridge at " + address);
+    } else {
+      note(source + ": " + b.message());
+    }
+  };
+  for (const auto& a : o.addresses) add(a, "manual address");
+  if (o.mdns) {
+    // avahi-browse -p: "=;iface;proto;name;type;domain;host;address;port;txt"
+    FILE* p = ::popen("avahi-browse -rpt _hue._tcp 2>/dev/null", "r");
+    int seen = 0;
+    if (p) {
+      char line[1024];
+      while (std::fgets(line, sizeof line, p)) {
+        std::vector<std::string> f;
+        std::stringstream ss(line);
+        std::string part;
+        while (std::getline(ss, part, ';')) f.push_back(part);
+        if (f.size() >= 9 && f[0] == "=" && f[2] == "IPv4") {
+          ++seen;
+          add(f[7] + (f[8] == "80" ? "" : ":" + f[8]), "mDNS");
+        }
+      }
+      int rc = ::pclose(p);
+      if (rc != 0 && seen == 0) note("mDNS: avahi-browse not available or avahi-daemon not running");
+      else if (seen == 0) note("mDNS: no _hue._tcp service on the network");
+    }
+  }
+  if (o.cloud) {
+    HttpAnswer a = http("GET", "https://discovery.meethue.com/", "", o.timeout_ms);
+    json j = a.ok ? json::parse(a.body, nullptr, false) : json();
+    if (!a.ok) note("cloud discovery: no answer (" + a.error + ")");
+    else if (!j.is_array()) note("cloud discovery: unexpected answer");
+    else
+      for (const auto& e : j)
+        if (e.is_object() && !str(e, "internalipaddress").empty()) add(str(e, "internalipaddress"), "cloud discovery");
+  }
+  return found;
+}
+
+PairAttempt pair_once(const std::string& address, const std::string& devicetype) {
+  PairAttempt p;
+  HttpAnswer a = http("POST", url_of(address, "/api"), json{{"devicetype", devicetype}}.dump(), 3000);
+  if (!a.ok) {
+    p.message = "no Hue bridge answers at " + address + " (" + a.error + ")";
+    return p;
+  }
+  json j = json::parse(a.body, nullptr, false);
+  if (a.status == 200 && j.is_array() && !j.empty() && j[0].is_object() && j[0].contains("success") &&
+      j[0]["success"].is_object() && !str(j[0]["success"], "username").empty()) {
+    p.outcome = PairAttempt::Outcome::paired;
+    p.key = str(j[0]["success"], "username");
+    return p;
+  }
+  HueError e = parse_hue_error(a.body);
+  if (e.type == 101) {
+    p.outcome = PairAttempt::Outcome::press_link_button;
+    p.message = "press the round link button on the Hue bridge";
+    return p;
+  }
+  p.message = "pairing with " + address + " failed: " +
+              (e.type ? e.description + " (Hue error " + std::to_string(e.type) + ")" : "HTTP " + std::to_string(a.status));
+  return p;
+}
+
+veneer::Expected<std::string> pair_bridge(const std::string& address, long timeout_ms, long interval_ms,
+                                          const std::function<void(const std::string&)>& tell,
+                                          const std::string& devicetype) {
+  auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  bool told = false;
+  for (;;) {
+    PairAttempt p = pair_once(address, devicetype);
+    if (p.outcome == PairAttempt::Outcome::paired) return p.key;
+    if (p.outcome == PairAttempt::Outcome::failed) return veneer::make_error(p.message);
+    if (!told && tell) tell("Press the round link button on the Hue bridge at " + address + " now (waiting up to " +
+                            std::to_string(timeout_ms / 1000) + " s)...");
+    told = true;
+    if (std::chrono::steady_clock::now() + std::chrono::milliseconds(interval_ms) > until)
+      return veneer::make_error("the link button on the Hue bridge at " + address + " was not pressed within " +
+                                std::to_string(timeout_ms / 1000) + " s");
+    std::this_thread::sleep_for(std::chrono::milliseconds(interval_ms));
+  }
+}
+
+veneer::Expected<std::vector<BridgeLamp>> list_bridge_lamps(const std::string& address, const std::string& key) {
+  HttpAnswer a = http("GET", url_of(address, "/api/" + key + "/lights"), "", 3000);
+  if (auto s = answer_ok(a, address, "listing lamps"); !s) return s.error();
+  auto lamps = parse_bridge_lights(a.body);
+  if (!lamps) return veneer::make_error("Hue bridge " + address + ": " + lamps.message());
+  return lamps;
+}
+
+veneer::Status flash_lamps_in_turn(const std::string& address, const std::string& key,
+                                   const std::vector<std::string>& ids, long gap_ms,
+                                   const std::function<void(const std::string&, int)>& announce) {
+  for (size_t i = 0; i < ids.size(); ++i) {
+    if (announce) announce(ids[i], int(i));
+    // "on" in the same body: a lamp that is off would not show the alert.
+    HttpAnswer a = http("PUT", url_of(address, "/api/" + key + "/lights/" + ids[i] + "/state"),
+                        json{{"on", true}, {"alert", "select"}}.dump(), 3000);
+    if (auto s = answer_ok(a, address, "flashing lamp " + ids[i]); !s) return s;
+    if (i + 1 < ids.size()) std::this_thread::sleep_for(std::chrono::milliseconds(gap_ms));
+  }
+  return {};
+}
+
+// ------------------------------------------------------------------ CLI
+
+int hue_command(const std::vector<std::string>& args, std::ostream& out, std::ostream& err) {
+  auto usage = [&](const std::string& why) {
+    err << "veneerd hue: " << why << "\n"
+        << "usage: veneerd hue discover [--address A]... [--cloud] [--no-mdns]\n"
+        << "       veneerd hue pair --address A [--timeout S]\n"
+        << "       veneerd hue lamps --address A --key K\n"
+        << "       veneerd hue flash --address A --key K [--lamps 1,2,3] [--gap-ms 2500]\n";
+    return 2;
+  };
+  size_t i = (!args.empty() && args[0] == "hue") ? 1 : 0;
+  if (i >= args.size()) return usage("missing subcommand");
+  std::string cmd = args[i++];
+  std::vector<std::string> addresses;
+  std::string key, lamps_text;
+  bool cloud = false, mdns = true;
+  long timeout_s = 60, gap_ms = 2500;
+  for (; i < args.size(); ++i) {
+    const std::string& a = args[i];
+    auto value = [&](std::string& v) {
+      if (i + 1 >= args.size()) return false;
+      v = args[++i];
+      return true;
+    };
+    std::string v;
+    if (a == "--address") {
+      if (!value(v)) return usage("--address needs a value");
+      addresses.push_back(v);
+    } else if (a == "--key") {
+      if (!value(key)) return usage("--key needs a value");
+    } else if (a == "--lamps") {
+      if (!value(lamps_text)) return usage("--lamps needs a value");
+    } else if (a == "--timeout" || a == "--gap-ms") {
+      if (!value(v)) return usage(a + " needs a value");
+      char* end = nullptr;
+      long n = std::strtol(v.c_str(), &end, 10);
+      if (end == v.c_str() || *end || n < 0 || n > 3600000) return usage(a + ": '" + v + "' is not a number");
+      (a == "--timeout" ? timeout_s : gap_ms) = n;
+    } else if (a == "--cloud") {
+      cloud = true;
+    } else if (a == "--no-mdns") {
+      mdns = false;
+    } else {
+      return usage("unknown option '" + a + "'");
+    }
+  }
+  if (cmd == "discover") {
+    DiscoverOptions o;
+    o.addresses = addresses;
+    o.cloud = cloud;
+    o.mdns = mdns;
+    std::vector<std::string> notes;
+    auto found = discover_bridges(o, &notes);
+    for (const auto& n : notes) err << "  " << n << "\n";
+    for (const auto& b : found)
+      out << b.address << "  " << b.name << (b.bridgeid.empty() ? "" : "  id " + b.bridgeid)
+          << (b.apiversion.empty() ? "" : "  api " + b.apiversion) << "\n";
+    if (found.empty()) {
+      err << "veneerd hue: no Hue bridge found; give its address with --address (the router's list of clients shows it)\n";
+      return 1;
+    }
+    return 0;
+  }
+  if (addresses.size() != 1) return usage(cmd + " needs exactly one --address");
+  const std::string& address = addresses[0];
+  if (cmd == "pair") {
+    auto k = pair_bridge(address, timeout_s * 1000, 1000, [&](const std::string& m) { err << m << std::endl; });
+    if (!k) {
+      err << "veneerd hue: " << k.message() << "\n";
+      return 1;
+    }
+    out << *k << "\n";
+    err << "Paired. Put this key into the config: \"lamps\": {\"backend\": \"hue\", \"bridge\": \"" << address
+        << "\", \"key\": \"" << *k << "\", ...}\n";
+    return 0;
+  }
+  if (key.empty()) return usage(cmd + " needs --key (from `veneerd hue pair`)");
+  auto lamps = list_bridge_lamps(address, key);
+  if (!lamps) {
+    err << "veneerd hue: " << lamps.message() << "\n";
+    return 1;
+  }
+  if (cmd == "lamps") {
+    for (const auto& l : *lamps)
+      out << l.id << "\t" << l.name << "\t" << (l.type.empty() ? "-" : l.type) << "\t"
+          << (l.reachable ? (l.on ? "on" : "off") : "unreachable") << "\n";
+    return 0;
+  }
+  if (cmd == "flash") {
+    std::vector<std::string> ids;
+    if (lamps_text.empty()) {
+      for (const auto& l : *lamps) ids.push_back(l.id);
+    } else {
+      std::stringstream ss(lamps_text);
+      std::string id;
+      while (std::getline(ss, id, ','))
+        if (!id.empty()) ids.push_back(id);
+    }
+    for (const auto& id : ids) {
+      bool known = false;
+      for (const auto& l : *lamps) known = known || l.id == id;
+      if (!known) {
+        err << "veneerd hue: the bridge has no lamp " << id << "\n";
+        return 1;
+      }
+    }
+    auto s = flash_lamps_in_turn(address, key, ids, gap_ms, [&](const std::string& id, int pos) {
+      std::string name;
+      for (const auto& l : *lamps)
+        if (l.id == id) name = l.name;
+      out << "flashing lamp " << id << " (" << name << ") — " << pos + 1 << " of " << ids.size() << std::endl;
+    });
+    if (!s) {
+      err << "veneerd hue: " << s.message() << "\n";
+      return 1;
+    }
+    out << "Write the lamp ids into \"lamps\": {\"lamps\": [...]} in ring order (position 1 first).\n";
+    return 0;
+  }
+  return usage("unknown subcommand '" + cmd + "'");
+}
+
+}  // namespace veneerd::hw

@@ -1,0 +1,61 @@
+// register_hardware_devices(): the real-hardware back-ends of appliance/src/hw/.
+#include <mutex>
+
+#include "veneerd/devices/registry.hpp"
+#include "veneerd/hw/check.hpp"
+#include "veneerd/hw/gphoto2.hpp"
+#include "veneerd/hw/gpio.hpp"
+#include "veneerd/hw/uvc.hpp"
+
+namespace veneerd {
+
+namespace {
+
+template <class Device>
+void add(std::vector<std::pair<std::string, Factory<Device>>>& list, const std::string& name, Factory<Device> f) {
+  for (const auto& [n, existing] : list)
+    if (n == name) return;
+  list.emplace_back(name, std::move(f));
+}
+
+}  // namespace
+
+void register_hardware_devices() {
+  static std::mutex mutex;
+  std::lock_guard lock(mutex);
+  auto& reg = DeviceRegistry::instance();
+  add<Camera>(reg.cameras, "gphoto2", [](const nlohmann::json& s) -> veneer::Expected<std::unique_ptr<Camera>> {
+    auto o = hw::parse_gphoto2_options(s, "camera");
+    if (!o) return o.error();
+    auto cam = std::make_unique<hw::Gphoto2Camera>(hw::make_libgphoto2_api(), hw::make_libusb_hotplug(), *o);
+    // A camera that is not there yet is not fatal: it is opened when it arrives.
+    return std::unique_ptr<Camera>(std::move(cam));
+  });
+  add<Camera>(reg.cameras, "uvc", [](const nlohmann::json& s) -> veneer::Expected<std::unique_ptr<Camera>> {
+    auto o = hw::parse_uvc_options(s, "camera");
+    if (!o) return o.error();
+    return std::unique_ptr<Camera>(std::make_unique<hw::UvcCamera>(*o));
+  });
+  add<Trigger>(reg.triggers, "gpio", [](const nlohmann::json& s) -> veneer::Expected<std::unique_ptr<Trigger>> {
+    if (auto v = validate_device_section("trigger", s); !v) return v.error();
+    auto line = hw::parse_gpio_line(s, "trigger", "button_line");
+    auto timing = hw::parse_gpio_timing(s, "trigger");
+    auto t = hw::GpioTrigger::open(*line, *timing);
+    if (!t) return t.error();
+    if (auto st = (*t)->start(); !st) return st.error();
+    return std::unique_ptr<Trigger>(std::move(*t));
+  });
+  add<StatusLed>(reg.leds, "gpio", [](const nlohmann::json& s) -> veneer::Expected<std::unique_ptr<StatusLed>> {
+    nlohmann::json section = s;
+    // An LED lights when the line is high unless the config says otherwise.
+    if (!section.contains("active_low")) section["active_low"] = false;
+    auto line = hw::parse_gpio_line(section, "led", "led_line");
+    if (!line) return line.error();
+    auto led = hw::GpioLed::open(*line);
+    if (!led) return led.error();
+    if (auto st = (*led)->start(); !st) return st.error();
+    return std::unique_ptr<StatusLed>(std::move(*led));
+  });
+}
+
+}  // namespace veneerd
