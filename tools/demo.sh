@@ -1,0 +1,64 @@
+#!/usr/bin/env bash
+# make demo: the main job on the simulated rig.
+#  1. start veneerd --simulate (Hue bridge emulator, ray-traced camera, button)
+#  2. press the rig's button twice: destination (bull), then source (orange)
+#  3. pull both sets over the rig API
+#  4. photometric stereo on each (normal maps, albedo, masks)
+#  5. correspondence map + the destination repainted in the source's look
+#  6. a few live-view frames of the source, repainted onto the destination
+#  7. the thesis's figures 5.2-5.13 re-made on the simulated pairs
+#  8. with a display: veneer-viewer connected to the simulated rig
+# Everything it writes lands in demo-out/.
+set -euo pipefail
+build="${1:-build}"
+root="$(cd "$(dirname "$0")/.." && pwd)"
+bin="$root/$build/bin"
+out="$root/demo-out"
+size="${VENEER_DEMO_SIZE:-1024x680}"
+rm -rf "$out"; mkdir -p "$out"
+step() { printf '\n== %s\n' "$*"; }
+
+port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
+store="$out/rig-store"
+step "starting the simulated rig on 127.0.0.1:$port (store $store)"
+"$bin/veneerd" --simulate --scenes bull,orange --listen "127.0.0.1:$port" --store "$store" \
+  --size "$size" > "$out/veneerd.log" 2>&1 &
+rig_pid=$!
+cleanup() { kill "$rig_pid" 2>/dev/null || true; wait "$rig_pid" 2>/dev/null || true; }
+trap cleanup EXIT
+for _ in $(seq 100); do [ -f "$store/token" ] && break; sleep 0.1; done
+rig=(--rig "127.0.0.1:$port" --token-file "$store/token")
+"$bin/veneer" rig status "${rig[@]}"
+
+step "button press 1: capture the destination (bull)"
+"$bin/veneer" rig press "${rig[@]}" --wait
+step "button press 2: capture the source (orange)"
+"$bin/veneer" rig press "${rig[@]}" --wait
+"$bin/veneer" rig list "${rig[@]}" | tee "$out/sets.txt"
+dst_id=$(awk 'NR==1{print $1}' "$out/sets.txt")
+src_id=$(awk 'NR==2{print $1}' "$out/sets.txt")
+
+step "pulling both sets"
+"$bin/veneer" rig pull "$dst_id" --out "$out/destination" "${rig[@]}"
+"$bin/veneer" rig pull "$src_id" --out "$out/source" "${rig[@]}"
+
+step "photometric stereo"
+"$bin/veneer" normals "$out/destination" --out "$out/destination-normals"
+"$bin/veneer" normals "$out/source" --out "$out/source-normals"
+
+step "correspondence + repaint (coherent, the default for textured sources)"
+"$bin/veneer" transfer --dst "$out/destination" --src "$out/source" --method coherent --out "$out/transfer"
+"$bin/veneer" inspect --dst "$out/destination" --src "$out/source" --map "$out/transfer" --out "$out/transfer/inspect.png"
+
+step "live view: the source under a moving hand-held lamp, repainted onto the destination"
+"$bin/veneer" rig live "${rig[@]}" --frames 12 --out "$out/live" --map "$out/transfer"
+
+step "the thesis's figures on the simulated pairs"
+"$bin/veneer" figures --out "$out/figures"
+
+if [ -n "${DISPLAY:-}" ] && [ -x "$bin/veneer-viewer" ]; then
+  step "opening veneer-viewer on the simulated rig (close the window to end the demo)"
+  "$bin/veneer-viewer" --rig "127.0.0.1:$port" --token-file "$store/token" \
+    --dst "$out/destination" --src "$out/source" || true
+fi
+step "done: pictures in $out"
