@@ -39,14 +39,19 @@ Primitive random_primitive(std::mt19937& rng, int kind) {
     case 1: return Primitive::box({0.0, 0.1, -0.1}, {u(rng), u(rng), u(rng)}, R);
     case 2: return Primitive::round_cone(random_unit(rng) * 0.8, random_unit(rng) * 0.8, 0.5 * u(rng), 0.3 * u(rng));
     case 3: return Primitive::capsule(random_unit(rng) * 0.8, random_unit(rng) * 0.8, 0.4 * u(rng));
-    default: return Primitive::cylinder(random_unit(rng) * 0.8, random_unit(rng) * 0.8, 0.5 * u(rng));
+    case 4: return Primitive::cylinder(random_unit(rng) * 0.8, random_unit(rng) * 0.8, 0.5 * u(rng));
+    default: {
+      double outer = 0.6 * u(rng);
+      return Primitive::cup(random_unit(rng) * 0.5, random_unit(rng) * 0.9, outer, outer * (0.6 + 0.3 * u(rng)),
+                            0.1 * u(rng));
+    }
   }
 }
 
 TEST(SimGeometry, IntersectionsMatchTheInsideOracle) {
   std::mt19937 rng(20140601);
-  const char* names[] = {"ellipsoid", "box", "round cone", "capsule", "cylinder"};
-  for (int kind = 0; kind < 5; ++kind) {
+  const char* names[] = {"ellipsoid", "box", "round cone", "capsule", "cylinder", "cup"};
+  for (int kind = 0; kind < 6; ++kind) {
     int hits = 0, misses = 0;
     for (int shape = 0; shape < 6; ++shape) {
       Primitive p = random_primitive(rng, kind);
@@ -82,6 +87,38 @@ TEST(SimGeometry, IntersectionsMatchTheInsideOracle) {
   }
 }
 
+// Shadow rays from the inside of a cup start in its hollow: the open cup's
+// routine must find the wall or floor they hit, or nothing when they leave
+// through the opening.
+TEST(SimGeometry, CupRaysFromTheHollow) {
+  std::mt19937 rng(99);
+  Primitive cup = Primitive::cup({0, -0.5, 0}, {0, 0.5, 0}, 0.4, 0.35, 0.05);
+  std::uniform_real_distribution<double> u(-1, 1);
+  int hits = 0, escapes = 0;
+  for (int i = 0; i < 300; ++i) {
+    V3 o{0.3 * u(rng), -0.4 + 0.85 * (0.5 + 0.5 * u(rng)), 0.3 * u(rng)};
+    if (dot(V3{o.x, 0, o.z}, V3{o.x, 0, o.z}) > 0.34 * 0.34) continue;
+    ASSERT_FALSE(cup.inside(o));
+    V3 d = random_unit(rng);
+    V3 n;
+    double t = cup.intersect(o, d, 1e-9, 100, &n);
+    double expected = oracle_hit(cup, o, d, 3.0, 2e-3);
+    if (expected < 0) {
+      if (t > 0) {
+        EXPECT_TRUE(cup.inside(o + d * (t + 1e-7)));
+      }
+      ++escapes;
+      continue;
+    }
+    ASSERT_GT(t, 0) << "ray " << i << " missed; the oracle hits at " << expected;
+    EXPECT_NEAR(t, expected, 2e-6);
+    EXPECT_LT(dot(n, d), 0);
+    ++hits;
+  }
+  EXPECT_GT(hits, 50);
+  EXPECT_GT(escapes, 10);
+}
+
 TEST(SimGeometry, TRangeIsRespected) {
   Primitive s = Primitive::sphere({0, 0, 0}, 1);
   V3 n;
@@ -93,7 +130,7 @@ TEST(SimGeometry, TRangeIsRespected) {
 
 TEST(SimGeometry, MinZIsTheSupportTowardMinusZ) {
   std::mt19937 rng(7);
-  for (int kind = 0; kind < 5; ++kind) {
+  for (int kind = 0; kind < 6; ++kind) {
     Primitive p = random_primitive(rng, kind);
     // the lowest z over a dense cloud of inside points approaches min_z from above
     double lowest = 1e9;

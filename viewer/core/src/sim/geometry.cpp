@@ -94,6 +94,15 @@ Primitive Primitive::cylinder(V3 a, V3 b, double r, int part) {
   return p;
 }
 
+Primitive Primitive::cup(V3 bottom, V3 top, double outer, double inner, double floor, int part) {
+  Primitive p = cylinder(bottom, top, outer, part);
+  p.kind = PrimKind::cup;
+  p.rb = inner;
+  p.h = {floor, 0, 0};
+  p.finish();
+  return p;
+}
+
 void Primitive::finish() {
   switch (kind) {
     case PrimKind::ellipsoid:
@@ -109,6 +118,7 @@ void Primitive::finish() {
       br = length(b - a) * 0.5 + std::max(ra, rb);
       break;
     case PrimKind::cylinder:
+    case PrimKind::cup:
       bc = (a + b) * 0.5;
       br = std::sqrt(dot(b - a, b - a) * 0.25 + ra * ra);
       break;
@@ -126,7 +136,8 @@ double Primitive::min_z() const {
       return c.z - (std::abs(R.r[2].x) * h.x + std::abs(R.r[2].y) * h.y + std::abs(R.r[2].z) * h.z);
     case PrimKind::round_cone:
       return std::min(a.z - ra, b.z - rb);
-    case PrimKind::cylinder: {
+    case PrimKind::cylinder:
+    case PrimKind::cup: {
       V3 w = normalize(b - a);
       double radial = ra * std::sqrt(std::max(0.0, 1.0 - w.z * w.z));
       return std::min(a.z, b.z) - radial;
@@ -279,6 +290,58 @@ double hit_cylinder(const Primitive& p, const V3& o, const V3& d, double t_min, 
   return best;
 }
 
+// The open cup: the nearest of outer wall, rim, inner wall (seen from the
+// hollow), inner floor and outer bottom.
+double hit_cup(const Primitive& p, const V3& o, const V3& d, double t_min, double t_max, V3* n) {
+  V3 ba = p.b - p.a;
+  double L = length(ba);
+  V3 w = ba / L;
+  V3 oc = o - p.a;
+  double oy = dot(oc, w), dy = dot(d, w);
+  V3 op = oc - w * oy, dp = d - w * dy;
+  const double ro = p.ra, ri = p.rb, floor = p.h.x;
+  double best = t_max;
+  V3 nb;
+  auto take = [&](double t, const V3& normal) {
+    if (t > t_min && t < best) {
+      best = t;
+      nb = normal;
+    }
+  };
+  double A = dot(dp, dp), B = dot(op, dp);
+  if (A > 1e-18) {
+    double disc_o = B * B - A * (dot(op, op) - ro * ro);
+    if (disc_o < 0) return kMiss;  // misses the outer cylinder: misses the cup
+    double t = (-B - std::sqrt(disc_o)) / A;  // entering the outer wall
+    double y = oy + t * dy;
+    if (y >= 0 && y <= L) take(t, (op + dp * t) / ro);
+    double disc_i = B * B - A * (dot(op, op) - ri * ri);
+    if (disc_i >= 0) {
+      t = (-B + std::sqrt(disc_i)) / A;  // leaving the hollow through the inner wall
+      y = oy + t * dy;
+      if (y >= floor && y <= L) take(t, -(op + dp * t) / ri);
+    }
+  } else if (dot(op, op) > ro * ro) {
+    return kMiss;
+  }
+  if (std::abs(dy) > 1e-18) {
+    auto radial2 = [&](double t) { V3 q = op + dp * t; return dot(q, q); };
+    if (dy < 0) {
+      double t = (L - oy) / dy;  // rim, from above
+      double r2 = radial2(t);
+      if (r2 <= ro * ro && r2 >= ri * ri) take(t, w);
+      t = (floor - oy) / dy;  // inner floor, from above
+      if (radial2(t) < ri * ri) take(t, w);
+    } else {
+      double t = -oy / dy;  // outer bottom, from below
+      if (radial2(t) <= ro * ro) take(t, -w);
+    }
+  }
+  if (best >= t_max) return kMiss;
+  *n = normalize(nb);
+  return best;
+}
+
 }  // namespace
 
 double Primitive::intersect(const V3& o, const V3& d, double t_min, double t_max, V3* normal) const {
@@ -288,6 +351,7 @@ double Primitive::intersect(const V3& o, const V3& d, double t_min, double t_max
     case PrimKind::box: return hit_box(*this, o, d, t_min, t_max, normal);
     case PrimKind::round_cone: return hit_round_cone(*this, o, d, t_min, t_max, normal);
     case PrimKind::cylinder: return hit_cylinder(*this, o, d, t_min, t_max, normal);
+    case PrimKind::cup: return hit_cup(*this, o, d, t_min, t_max, normal);
   }
   return kMiss;
 }
@@ -321,6 +385,17 @@ bool Primitive::inside(const V3& q) const {
       double y = dot(q - a, w);
       V3 radial = (q - a) - w * y;
       return y > 0 && y < L && dot(radial, radial) < ra * ra;
+    }
+    case PrimKind::cup: {
+      V3 ba = b - a;
+      double L = length(ba);
+      V3 w = ba / L;
+      double y = dot(q - a, w);
+      V3 radial = (q - a) - w * y;
+      double r2 = dot(radial, radial);
+      bool solid = y > 0 && y < L && r2 < ra * ra;
+      bool hollow = y > h.x && r2 < rb * rb;
+      return solid && !hollow;
     }
   }
   return false;

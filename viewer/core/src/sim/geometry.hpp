@@ -46,7 +46,7 @@ struct M3 {
   static M3 rot_z(double rad);
 };
 
-enum class PrimKind : uint8_t { ellipsoid, box, round_cone, cylinder };
+enum class PrimKind : uint8_t { ellipsoid, box, round_cone, cylinder, cup };
 
 // One convex primitive.
 //  ellipsoid:  centre c, rotation R (local->world), radii h.
@@ -54,6 +54,9 @@ enum class PrimKind : uint8_t { ellipsoid, box, round_cone, cylinder };
 //  round_cone: segment a..b, radius ra at a and rb at b (a capsule when equal):
 //              the union of the spheres along the segment with linearly varying radius.
 //  cylinder:   capped, axis a..b, radius ra.
+//  cup:        an open vessel: cylinder a..b of radius ra, hollowed from the top
+//              down to a floor h.x thick, leaving walls ra - rb thick. The one
+//              non-convex primitive: its routine also serves rays starting in the hollow.
 struct Primitive {
   PrimKind kind = PrimKind::ellipsoid;
   V3 c, h{1, 1, 1};
@@ -71,6 +74,7 @@ struct Primitive {
   static Primitive round_cone(V3 a, V3 b, double ra, double rb, int part = 0);
   static Primitive capsule(V3 a, V3 b, double r, int part = 0) { return round_cone(a, b, r, r, part); }
   static Primitive cylinder(V3 a, V3 b, double r, int part = 0);
+  static Primitive cup(V3 bottom, V3 top, double outer, double inner, double floor, int part = 0);
 
   void finish();                   // computes the bounding sphere
   double min_z() const;            // the lowest z of the primitive (its support toward -z)

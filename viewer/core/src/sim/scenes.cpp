@@ -31,6 +31,7 @@ struct Frame {
         break;
       case PrimKind::round_cone:
       case PrimKind::cylinder:
+      case PrimKind::cup:
         p.a = R * p.a + t;
         p.b = R * p.b + t;
         break;
@@ -102,7 +103,7 @@ std::unique_ptr<Scene> orange() {
     out->normal = bump(p, n, height, 4e-5);
     double cells = cellular(p * 560.0, 11).dist;
     double mottle = fbm(p * 110.0, 4, 13);
-    V3 peel = rgb(0.92, 0.43, 0.045) * (0.82 + 0.3 * mottle) * (0.92 + 0.08 * smoothstep(0.1, 0.6, cells));
+    V3 peel = rgb(0.93, 0.37, 0.03) * (0.82 + 0.3 * mottle) * (0.92 + 0.08 * smoothstep(0.1, 0.6, cells));
     // stem scar: a small olive-brown star facing up and toward the camera
     double a = std::acos(std::clamp(dot(normalize(p), stem), -1.0, 1.0));
     double scar = 1.0 - smoothstep(0.06, 0.11, a + 0.03 * std::sin(5 * std::atan2(p.x, p.z) * 3));
@@ -215,14 +216,16 @@ std::unique_ptr<Scene> banana() {
 
 std::unique_ptr<Scene> cup(bool dots) {
   auto s = std::make_unique<Scene>();
-  const Frame f{M3::rot_x(deg(8)) * M3::rot_y(deg(-28)), {-0.008, 0, 0}};
-  const double r = 0.038, half = 0.045;
-  s->shape.prims.push_back(f.place(Primitive::cylinder({0, -half, 0}, {0, half, 0}, r, 0)));
+  // tipped toward the camera so the rim and the inside show, handle to the right
+  const Frame f{M3::rot_x(deg(16)) * M3::rot_y(deg(-28)), {-0.008, 0.002, 0}};
+  const double r = 0.038, inner = 0.0345, half = 0.045;
+  s->shape.prims.push_back(f.place(Primitive::cup({0, -half, 0}, {0, half, 0}, r, inner, 0.006, 0)));
+  // a D-shaped handle whose ends sink into the wall (not through it)
   std::vector<V3> pts;
   std::vector<double> radii;
-  for (int i = 0; i <= 10; ++i) {
-    double a = deg(-78) + deg(156) * i / 10.0;
-    pts.push_back({r - 0.004 + 0.026 * std::cos(a) * 0.9, 0.003 + 0.026 * std::sin(a), 0});
+  for (int i = 0; i <= 24; ++i) {
+    double a = deg(-90) + deg(180) * i / 24.0;
+    pts.push_back({0.0405 + 0.024 * std::cos(a), 0.003 + 0.026 * std::sin(a), 0});
     radii.push_back(0.0052);
   }
   add_chain(s->shape, f, pts, radii, 1);
@@ -233,7 +236,8 @@ std::unique_ptr<Scene> cup(bool dots) {
     out->shininess = 90;
     if (!dots || part != 0) return;
     V3 q = f.to_local(p), nl = f.dir_to_local(n);
-    if (std::abs(nl.y) > 0.9) return;  // top and bottom
+    if (std::abs(nl.y) > 0.9) return;                 // rim, floor, bottom
+    if (nl.x * q.x + nl.z * q.z < 0) return;          // the inner wall is plain
     double u = std::atan2(q.x, q.z) * r, v = q.y;
     const double cell = 0.0155;
     double row = std::floor(v / cell);
@@ -282,24 +286,27 @@ std::unique_ptr<Scene> blocks() {
 
 std::unique_ptr<Scene> stone() {
   auto s = std::make_unique<Scene>();
-  const Frame f{M3::rot_z(deg(14)) * M3::rot_y(deg(30)) * M3::rot_x(deg(18)), {0, 0, 0}};
+  const Frame f{M3::rot_z(deg(14)) * M3::rot_y(deg(30)) * M3::rot_x(deg(18)), {-0.004, 0, 0}};
   s->shape.prims.push_back(f.place(Primitive::ellipsoid({0, 0, 0}, {0.05, 0.032, 0.038})));
   s->material = [f](const V3& p, const V3& n, int, int, SurfaceSample* out) {
     V3 q = f.to_local(p), nl = f.dir_to_local(n);
     auto height = [](const V3& x) {
-      return 0.0016 * fbm(x * 55.0, 5, 61) + 0.00025 * fbm(x * 420.0, 3, 62);
+      // broad lumps, pitted grain
+      return 0.004 * fbm(x * 16.0, 3, 60) + 0.0014 * fbm(x * 55.0, 5, 61) + 0.0001 * fbm(x * 420.0, 3, 62);
     };
     out->normal = f.dir_to_object(bump(q, nl, height, 4e-5));
     double tone = fbm(q * 90.0, 4, 63);
-    V3 c = rgb(0.40, 0.39, 0.37) * (0.72 + 0.5 * tone);
-    // veins: thin bands where a warped noise crosses 0.5
-    V3 warp{fbm(q * 40.0, 3, 64), fbm(q * 40.0, 3, 65), fbm(q * 40.0, 3, 66)};
-    double w1 = fbm(q * 22.0 + warp * 1.4, 4, 67);
-    double vein = 1.0 - smoothstep(0.006, 0.022, std::abs(w1 - 0.5));
-    double w2 = fbm(q * 30.0 - warp, 3, 68);
-    double dark = 1.0 - smoothstep(0.004, 0.014, std::abs(w2 - 0.5));
-    c = lerp(c, rgb(0.86, 0.84, 0.80), vein * 0.9);
-    c = lerp(c, rgb(0.13, 0.12, 0.12), dark * 0.7);
+    V3 c = rgb(0.36, 0.35, 0.34) * (0.75 + 0.5 * tone);
+    // veins: thin bands along warped level sets, as in marble
+    double warp = fbm(q * 22.0, 4, 64);
+    double v1 = std::sin(dot(q, V3{120, 50, -40}) + 8.0 * warp);
+    double vein = 1.0 - smoothstep(0.02, 0.10, std::abs(v1));
+    double v2 = std::sin(dot(q, V3{-40, 150, 70}) + 6.0 * fbm(q * 30.0, 3, 65));
+    double dark = 1.0 - smoothstep(0.015, 0.06, std::abs(v2));
+    double grain = value_noise(q * 1500.0, 69);
+    c = c * (0.85 + 0.3 * grain);
+    c = lerp(c, rgb(0.84, 0.82, 0.78), vein * 0.85);
+    c = lerp(c, rgb(0.12, 0.11, 0.11), dark * 0.6);
     out->albedo = c;
     out->ks = 0.05;
     out->shininess = 12;
@@ -318,13 +325,13 @@ std::unique_ptr<Scene> bull() {
   P.push_back(f.place(Primitive::ellipsoid({0.028, 0.012, 0}, {0.024, 0.025, 0.021}, {}, kHide)));       // shoulders
   P.push_back(f.place(Primitive::ellipsoid({-0.038, 0.008, 0}, {0.018, 0.02, 0.019}, {}, kHide)));       // haunches
   P.push_back(f.place(Primitive::round_cone({0.040, 0.018, 0}, {0.060, 0.014, 0}, 0.016, 0.012, kHide)));  // neck
-  P.push_back(f.place(Primitive::ellipsoid({0.066, 0.010, 0}, {0.013, 0.015, 0.012}, M3::rot_z(deg(-25)), kHide)));
+  P.push_back(f.place(Primitive::ellipsoid({0.066, 0.010, 0}, {0.015, 0.017, 0.0135}, M3::rot_z(deg(-25)), kHide)));
   P.push_back(f.place(Primitive::round_cone({0.068, 0.006, 0}, {0.080, -0.006, 0}, 0.010, 0.0075, kHide)));  // muzzle
   for (double side : {-1.0, 1.0}) {
     add_chain(s->shape, f,
-              {{0.064, 0.020, side * 0.008}, {0.066, 0.027, side * 0.021}, {0.072, 0.037, side * 0.026},
-               {0.081, 0.043, side * 0.020}},
-              {0.0042, 0.0034, 0.0024, 0.0011}, kHorn);
+              {{0.063, 0.021, side * 0.007}, {0.064, 0.026, side * 0.017}, {0.068, 0.032, side * 0.023},
+               {0.075, 0.036, side * 0.024}},
+              {0.0032, 0.0026, 0.0018, 0.0009}, kHorn);
     // legs: front and hind, slightly splayed, hooves below
     for (double x : {0.030, -0.040}) {
       V3 top{x, -0.004, side * 0.011}, knee{x + 0.002, -0.026, side * 0.0125}, foot{x, -0.044, side * 0.0125};
@@ -358,7 +365,7 @@ std::unique_ptr<Scene> bull() {
         // glazed terracotta with a darker wash pooled in the creases
         auto height = [](const V3& x) { return 0.00015 * fbm(x * 350.0, 3, 72); };
         out->normal = f.dir_to_object(bump(q, f.dir_to_local(n), height, 4e-5));
-        out->albedo = rgb(0.58, 0.33, 0.19) * (0.8 + 0.35 * fbm(q * 70.0, 4, 73));
+        out->albedo = rgb(0.46, 0.27, 0.15) * (0.8 + 0.35 * fbm(q * 70.0, 4, 73));
         out->ks = 0.22;
         out->shininess = 35;
       }
