@@ -56,14 +56,14 @@ void print_summary(const ImageSet& set, const fs::path& folder) {
   }
   row("truth", truth.empty() ? "none" : truth);
   row("lights", std::to_string(set.lights.size()));
-  std::printf("  %-3s %-10s %-30s %-22s %s\n", "#", "lamp", "direction (x right, y up, z out)", "intensity r,g,b",
+  std::printf("  %-3s %-10s %-33s %-16s %s\n", "#", "lamp", "direction (x right, y up, z out)", "intensity r,g,b",
               "mean level");
   for (size_t i = 0; i < set.lights.size(); ++i) {
     const Light& l = set.lights[i];
     cv::Scalar mean = cv::mean(set.images[i]);
     char in[64];
     std::snprintf(in, sizeof in, "%.3g, %.3g, %.3g", l.intensity[0], l.intensity[1], l.intensity[2]);
-    std::printf("  %-3d %-10s %-30s %-22s %.4f", l.index, l.lamp_id.empty() ? "-" : l.lamp_id.c_str(),
+    std::printf("  %-3d %-10s %-33s %-16s %.4f", l.index, l.lamp_id.empty() ? "-" : l.lamp_id.c_str(),
                 vec3(l.direction).c_str(), in, (mean[0] + mean[1] + mean[2]) / 3);
     if (l.position_m) std::printf("   at %s m", vec3(*l.position_m).c_str());
     std::printf("\n");

@@ -1,9 +1,11 @@
 // Image sets: veneer-set/1 round trips, atomic writes, DiLiGenT and thesis
 // imports, and one clear error (naming the file) for every kind of bad input.
 #include <csignal>
+#include <cstdio>
 #include <functional>
 
 #include <sys/resource.h>
+#include <sys/wait.h>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -100,6 +102,22 @@ TEST(ImageSet, ManifestOnDiskHasTheDesignFields) {
   auto raw = read_pfm(dir / "s" / "truth/normals.pfm", false);
   ASSERT_TRUE(raw);
   EXPECT_EQ(raw->at<cv::Vec3f>(3, 4)[2], set.truth.normals.at<cv::Vec3f>(3, 4)[0]);
+}
+
+TEST(ImageSet, TextFieldsWithBracketsQuotesAndUnicodeSurvive) {
+  Scratch dir;
+  ImageSet set = synthetic_set({16, 12}, 3, 1, false);
+  set.lights[0].lamp_id = "hue [3, 4] \"left\" \\ back";
+  set.object = "tasse \u00e0 caf\u00e9 [blue]";
+  set.warnings = {"[", "]", "{\"x\": [1, 2]}"};
+  ASSERT_TRUE(write_set(set, dir / "s"));
+  auto back = read_set(dir / "s");
+  ASSERT_TRUE(back) << back.message();
+  EXPECT_EQ(back->lights[0].lamp_id, set.lights[0].lamp_id);
+  EXPECT_EQ(back->object, set.object);
+  EXPECT_EQ(back->warnings, set.warnings);
+  // Number arrays are written on one line.
+  EXPECT_NE(slurp(dir / "s" / "set.json").find("\"size\": [16, 12]"), std::string::npos);
 }
 
 TEST(ImageSet, WritesFillCreatedAndIdAndOmitEmptyParts) {
@@ -598,6 +616,45 @@ TEST(Thesis, BadFoldersNameTheProblem) {
   auto missing = read_set(dir / "nope");
   ASSERT_FALSE(missing);
   EXPECT_NE(missing.message().find("nope"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace veneer
+
+namespace veneer {
+namespace {
+
+// Runs `veneer` (when it has been built) and returns its stdout and exit code.
+std::pair<std::string, int> run_veneer(const std::string& args) {
+  std::string cmd = std::string(VENEER_BIN_DIR) + "/veneer " + args + " 2>&1";
+  std::string out;
+  FILE* pipe = ::popen(cmd.c_str(), "r");
+  if (!pipe) return {"", -1};
+  char buf[4096];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, pipe)) > 0) out.append(buf, n);
+  int status = ::pclose(pipe);
+  return {out, WIFEXITED(status) ? WEXITSTATUS(status) : -1};
+}
+
+TEST(InfoCommand, SummaryJsonAndErrors) {
+  if (!fs::exists(fs::path(VENEER_BIN_DIR) / "veneer")) GTEST_SKIP() << "veneer is not built in " << VENEER_BIN_DIR;
+  Scratch dir;
+  ImageSet set = synthetic_set({32, 24}, 3, 5);
+  ASSERT_TRUE(write_set(set, dir / "s"));
+  auto [summary, rc] = run_veneer("info " + (dir / "s").string());
+  EXPECT_EQ(rc, 0) << summary;
+  for (const char* part : {"veneer-set/1", "destination", "32x24", "sim-2", "normals, mask, albedo, depth",
+                           "ambient frame is bright"})
+    EXPECT_NE(summary.find(part), std::string::npos) << part << " not in:\n" << summary;
+  auto [manifest, rc2] = run_veneer("info --json " + (dir / "s").string());
+  EXPECT_EQ(rc2, 0);
+  EXPECT_EQ(manifest, slurp(dir / "s" / "set.json"));
+  fs::remove(dir / "s" / "light_01.png");
+  auto [error, rc3] = run_veneer("info " + (dir / "s").string());
+  EXPECT_EQ(rc3, 1);
+  EXPECT_EQ(error.rfind("veneer info: ", 0), 0u) << error;
+  EXPECT_NE(error.find("light_01.png"), std::string::npos) << error;
 }
 
 }  // namespace

@@ -598,8 +598,6 @@ Expected<ImageSet> read_thesis(const fs::path& folder) {
 
 // --- writing ---------------------------------------------------------------------
 
-json vec_json(const cv::Vec3d& v) { return json::array({v[0], v[1], v[2]}); }
-
 // Removes temporary folders left beside `target` by writers that died.
 void clean_stale_temps(const fs::path& target) {
   std::error_code ec;
@@ -683,6 +681,49 @@ Status write_contents(const ImageSet& set, const fs::path& dir) {
   return io_detail::fsync_dir(dir);
 }
 
+// Puts arrays of plain values ([w, h], directions, intensities) on one line;
+// nlohmann's pretty printer gives every number its own line.
+std::string compact_arrays(const std::string& pretty) {
+  std::string out;
+  out.reserve(pretty.size());
+  size_t i = 0;
+  while (i < pretty.size()) {
+    char c = pretty[i];
+    if (c == '"') {  // copy a string literal verbatim
+      size_t j = i + 1;
+      while (j < pretty.size() && pretty[j] != '"') j += pretty[j] == '\\' ? 2 : 1;
+      out.append(pretty, i, j + 1 - i);
+      i = j + 1;
+      continue;
+    }
+    if (c == '[') {
+      // Flat if no nested array, object or string before the closing bracket.
+      size_t j = i + 1;
+      while (j < pretty.size() && pretty[j] != ']' && pretty[j] != '[' && pretty[j] != '{' && pretty[j] != '"') ++j;
+      if (j < pretty.size() && pretty[j] == ']') {
+        out.push_back('[');
+        bool space = false;
+        for (size_t k = i + 1; k < j; ++k) {
+          char d = pretty[k];
+          if (d == ' ' || d == '\n') {
+            space = true;
+            continue;
+          }
+          if (space && out.back() == ',') out.push_back(' ');
+          space = false;
+          out.push_back(d);
+        }
+        out.push_back(']');
+        i = j + 1;
+        continue;
+      }
+    }
+    out.push_back(c);
+    ++i;
+  }
+  return out;
+}
+
 }  // namespace
 
 // --- public ----------------------------------------------------------------------
@@ -719,14 +760,15 @@ Expected<Manifest> parse_manifest(const std::string& text, const fs::path& folde
 }
 
 std::string manifest_json(const ImageSet& set) {
-  json root;
+  // ordered_json keeps the fields in DESIGN.md's order, for people reading set.json.
+  nlohmann::ordered_json root;
   root["format"] = kSetFormat;
   root["id"] = set.id;
   root["role"] = role_name(set.role);
   root["object"] = set.object;
   root["created"] = set.created;
-  root["size"] = json::array({set.size.width, set.size.height});
-  json camera;
+  root["size"] = {set.size.width, set.size.height};
+  nlohmann::ordered_json camera;
   camera["model"] = set.camera.model;
   camera["exposure_s"] = set.camera.exposure_s;
   camera["aperture"] = set.camera.aperture;
@@ -737,25 +779,32 @@ std::string manifest_json(const ImageSet& set) {
     camera["cy"] = set.camera.cy;
   }
   root["camera"] = camera;
-  json lights = json::array(), images = json::array();
+  nlohmann::ordered_json lights = nlohmann::ordered_json::array(), images = nlohmann::ordered_json::array();
   for (const Light& l : set.lights) {
-    json jl;
+    nlohmann::ordered_json jl;
     jl["index"] = l.index;
     jl["lamp_id"] = l.lamp_id;
-    if (l.position_m) jl["position_m"] = vec_json(*l.position_m);
-    jl["direction"] = vec_json(l.direction);
-    jl["intensity"] = json::array({l.intensity[0], l.intensity[1], l.intensity[2]});
+    if (l.position_m) jl["position_m"] = {(*l.position_m)[0], (*l.position_m)[1], (*l.position_m)[2]};
+    jl["direction"] = {l.direction[0], l.direction[1], l.direction[2]};
+    jl["intensity"] = {l.intensity[0], l.intensity[1], l.intensity[2]};
     lights.push_back(jl);
-    images.push_back(json{{"light", l.index}, {"file", light_file_name(l.index)}});
+    nlohmann::ordered_json image;
+    image["light"] = l.index;
+    image["file"] = light_file_name(l.index);
+    images.push_back(image);
   }
   root["lights"] = lights;
   root["images"] = images;
-  root["ambient"] = set.ambient.empty() ? json(nullptr) : json("ambient.png");
+  if (set.ambient.empty()) {
+    root["ambient"] = nullptr;
+  } else {
+    root["ambient"] = "ambient.png";
+  }
   if (!set.mask.empty()) root["mask"] = "mask.png";
   if (!set.warnings.empty()) root["warnings"] = set.warnings;
   if (!set.scene.empty()) root["scene"] = set.scene;
   // Non-finite numbers cannot be written as JSON; validate() keeps them out.
-  return root.dump(2, ' ', false, json::error_handler_t::replace) + "\n";
+  return compact_arrays(root.dump(2, ' ', false, nlohmann::ordered_json::error_handler_t::replace)) + "\n";
 }
 
 Status validate(const ImageSet& set) {
