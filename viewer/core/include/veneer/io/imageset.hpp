@@ -73,6 +73,10 @@ struct ImageSet {
   std::filesystem::path origin;  // folder it was read from (diagnostics)
 };
 
+// veneer:   set.json + light_NN.png (+ ambient.png, mask.png, truth/)
+// diligent: filenames.txt, light_directions.txt, optional light_intensities.txt and mask.png
+// thesis:   lights.txt ("x y z [r g b]" per lamp) + images <N>.ppm|.pgm|.pfm|.png taken in
+//           increasing N, optional ambient.*, mask.pgm|.png, normals.pfm (kept as truth)
 enum class SetFormat { automatic, veneer, diligent, thesis };
 
 struct ReadOptions {
