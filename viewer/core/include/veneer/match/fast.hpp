@@ -9,8 +9,8 @@
 //    the full distance (patch mean, then the 3 principal directions) yields
 //    candidates from the same index; they are re-ranked by the exact full
 //    distance, and the answer is certified exact when the next unvisited
-//    candidate's lower bound exceeds it (else the candidate list grows up to a
-//    cap; the share of certified pixels is reported in Stats).
+//    candidate's lower bound exceeds it (else the candidate list grows once,
+//    then the best found is kept; the share certified is reported in Stats).
 //  - Fast patchmatch, regiongrow and candidates with the semantics of the
 //    faithful methods, and the `coherent` method (StyleBlit-style chunks).
 // Every per-pixel stage runs on all cores (TBB).
@@ -34,6 +34,7 @@ struct Stats {
   int projected_dims = 0;        // dims of the candidate search (3), 0 = searched at full dimension
   double explained_variance = 1;  // share of the feature variance kept by the projection
   double certified = 1;          // share of destination pixels whose nearest is proven exact
+  double candidates = 0;         // mean exact distances computed per destination pixel (projected search)
   double seconds = 0;            // wall time of compute_map
 };
 

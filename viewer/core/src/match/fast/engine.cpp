@@ -72,10 +72,10 @@ std::vector<int> row_starts(const Object& o) {
   return at;
 }
 
-// PatchMatch with matcher.cpp's semantics (random init over source object
-// pixels, propagation from the neighbours already visited with the scan
+// PatchMatch with matcher.cpp's semantics (propagation from the neighbours already visited with the scan
 // direction alternating per iteration, random search in windows halving from
-// the source's size, off-object candidates cost +inf), run on horizontal bands
+// the source's size, off-object candidates cost +inf) but a better start (see
+// below), run on horizontal bands
 // in parallel. A band propagates only within itself; the band edges move by
 // half a band every iteration so no seam stays. Random numbers come from a
 // hash of (seed, iteration, pixel), so the map does not depend on threads.
@@ -90,19 +90,36 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
   const float fair = std::max(1e-6f, static_cast<float>(n) / static_cast<float>(ns));
   std::vector<int> uses;
 
-  parallel_rows(n, o.threads, 256, [&](int b, int e) {
-    std::vector<float> buf(dst.dims);
-    for (int d = b; d < e; ++d) {
-      match[d] = static_cast<int>(hash3(o.seed, 0xffffu, static_cast<uint64_t>(d)) % static_cast<uint64_t>(ns));
-      dst.gather(d, buf.data());
-      sq[d] = patch_sq(buf.data(), src, match[d], kInf);
+  // Init: the faithful method starts from random source object pixels; the
+  // fast one starts from each pixel's nearest by its centre value (exact, a
+  // few ms), which leaves the 5 iterations refining instead of searching.
+  {
+    Object d1 = dst, s1 = src;
+    for (Object* o1 : {&d1, &s1}) {
+      o1->patch = 1;
+      o1->dims = o1->channels;
+      o1->slot.assign(o1->rows(), -1);
+      o1->rim.clear();
     }
-  });
+    NearestLists nn;
+    if (auto s = nearest_lists(d1, s1, 1, default_index(), o.threads, p, nn, nullptr); !s) return s.error();
+    parallel_rows(n, o.threads, 256, [&](int b, int e) {
+      std::vector<float> buf(dst.dims);
+      for (int d = b; d < e; ++d) {
+        match[d] = nn.ids[d] >= 0 ? nn.ids[d]
+                                  : static_cast<int>(hash3(o.seed, 0xffffu, static_cast<uint64_t>(d)) %
+                                                     static_cast<uint64_t>(ns));
+        dst.gather(d, buf.data());
+        sq[d] = patch_sq(buf.data(), src, match[d], kInf);
+      }
+    });
+  }
   const std::vector<int> at = row_starts(dst);
   const int h = dst.size.height;
   // With uniformity the use counts must be live for every pixel: one band.
   const int band = u > 0 ? h + 1 : std::max(8, h / 16);
-  const int max_radius = std::max(src.size.width, src.size.height);
+  // Windows halve from the source object's extent (larger ones only land off it).
+  const int max_radius = std::max(src.bbox.width, src.bbox.height);
   for (int it = 0; it < o.iterations; ++it) {
     if (p.cancelled()) return make_error("cancelled during patchmatch");
     p.report(static_cast<double>(it) / o.iterations, "patchmatch");
@@ -174,7 +191,8 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
   return map;
 }
 
-// Region growing with matcher.cpp's semantics (thesis sec. 4.2.2): the direct
+// Region growing with matcher.cpp's semantics (thesis sec. 4.2.2; the match
+// constraint is relative: no more than T worse than the pixel's direct match): the direct
 // matches come from the fast nearest search (parallel, exact when certified);
 // the growth is the same sequential breadth-first pass, with distances read
 // through the fast layout.
@@ -184,10 +202,16 @@ Expected<Map> run_regiongrow(const Object& dst, const Object& src, const MatchOp
   if (auto s = nearest_lists(dst, src, 1, default_index(), o.threads, p, nn, stats); !s) return s.error();
   const int n = dst.rows();
   const float t = static_cast<float>(o.threshold);
-  const float area = static_cast<float>(dst.patch * dst.patch);
   auto rms = [&](float v) { return map_distance(v, dst.patch); };
-  // a squared distance at or above this bound can never pass a constraint
-  const float bound = t * t * area * 1.001f + 1e-12f;
+  // the direct distances, summed in element order (see below)
+  std::vector<float> direct_sq(n);
+  parallel_rows(n, o.threads, 512, [&](int b, int e) {
+    std::vector<float> buf(dst.dims);
+    for (int d = b; d < e; ++d) {
+      dst.gather(d, buf.data());
+      direct_sq[d] = patch_sq_ordered(buf.data(), src, nn.ids[d]);
+    }
+  });
   std::vector<int> match(n, -1);
   std::vector<float> sq(n, kInf);
   std::deque<int> queue;
@@ -197,7 +221,7 @@ Expected<Map> run_regiongrow(const Object& dst, const Object& src, const MatchOp
     if (match[seed] >= 0) continue;
     if ((seed & 4095) == 0 && p.cancelled()) return make_error("cancelled during region growing");
     match[seed] = nn.ids[seed];
-    sq[seed] = nn.sq[seed];
+    sq[seed] = direct_sq[seed];
     if (t <= 0) continue;
     queue.push_back(seed);
     while (!queue.empty()) {
@@ -210,13 +234,15 @@ Expected<Map> run_regiongrow(const Object& dst, const Object& src, const MatchOp
         if (q < 0) continue;
         const int qs = src.row_at(m.x + off.x, m.y + off.y);
         if (qs < 0) continue;
+        // Summed in element order like the faithful method: growth decisions
+        // chain, so rounding must agree bit for bit.
         dst.gather(q, bq.data());
-        const float data = patch_sq(bq.data(), src, qs, std::min(sq[q], bound));
+        const float data = patch_sq_ordered(bq.data(), src, qs);
         if (!(data < sq[q])) continue;  // only a smaller distance overwrites
-        if (!(rms(data) < t)) continue;
-        if (!(rms(patch_sq(bq.data(), dst, d, bound)) < t)) continue;
+        if (!(rms(data) - rms(direct_sq[q]) < t)) continue;  // not much worse than its direct match
+        if (!(rms(patch_sq_ordered(bq.data(), dst, d)) < t)) continue;
         src.gather(qs, bs.data());
-        if (!(rms(patch_sq(bs.data(), src, match[d], bound)) < t)) continue;
+        if (!(rms(patch_sq_ordered(bs.data(), src, match[d])) < t)) continue;
         match[q] = qs;
         sq[q] = data;
         queue.push_back(q);
@@ -268,11 +294,12 @@ Expected<Map> compute_map(const ObjectView& destination, const ObjectView& sourc
     return make_error(std::string("the fast engine does not serve method '") + method_name(options.method) + "'");
   if (auto s = options.check(); !s) return s.error();
   if (auto s = check_pair(destination, source, options.feature); !s) return s.error();
+  // pixel -> row lookups are needed only by the methods that walk the image
   const bool grid_needed = options.method == Method::patchmatch || options.method == Method::regiongrow ||
                            options.method == Method::coherent;
   auto dst = make_object(destination, options.feature, options.patch, grid_needed, options.threads);
   if (!dst) return make_error("destination: " + dst.message());
-  auto src = make_object(source, options.feature, options.patch, true, options.threads);
+  auto src = make_object(source, options.feature, options.patch, grid_needed, options.threads);
   if (!src) return make_error("source: " + src.message());
   Stats local;
   Stats* st = stats ? stats : &local;

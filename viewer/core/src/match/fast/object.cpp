@@ -166,4 +166,17 @@ float patch_sq(const float* a, const Object& src, int s, float bound) {
   return sum;
 }
 
+float patch_sq_ordered(const float* a, const Object& src, int s) {
+  size_t stride;
+  const float* b = src.patch_ptr(s, stride);
+  const int w = src.patch * src.channels;
+  float sum = 0;
+  for (int i = 0; i < src.patch; ++i)
+    for (int j = 0; j < w; ++j) {
+      const float t = a[i * w + j] - b[i * stride + j];
+      sum += t * t;
+    }
+  return sum;
+}
+
 }  // namespace veneer::match::fast
