@@ -28,7 +28,7 @@
 namespace veneerd {
 
 using Clock = std::chrono::steady_clock;
-using json = nlohmann::json;
+using json = nlohmann::ordered_json;  // answers keep the order of the request body, as the bridge's do
 
 namespace {
 

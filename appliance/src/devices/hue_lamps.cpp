@@ -29,7 +29,9 @@ class SlidingWindow {
  public:
   SlidingWindow(double rate_per_s) {
     count_ = std::max(1, static_cast<int>(std::floor(rate_per_s + 1e-9)));
-    window_ = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(count_ / rate_per_s));
+    // The bridge stamps arrivals, not our sends: a quarter second of slack
+    // absorbs network and scheduling jitter that would bunch them up.
+    window_ = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(count_ / rate_per_s + 0.25));
   }
   // When the next event may happen (now or later).
   Clock::time_point next_allowed(Clock::time_point now) {
@@ -187,6 +189,8 @@ struct HueLamps::Impl {
     Clock::time_point not_before{};
     int ticket = 0;
     bool done = false;
+    bool paced = false;  // counted in stats.paced_waits
+    std::string last_error;  // why the last attempt did not count
   };
 
   std::string who(const Command& c) const {
@@ -227,13 +231,17 @@ struct HueLamps::Impl {
         Command* c = *it;
         if (c->attempts == 0) c->deadline = now + timeout;
         if (now >= c->deadline) {
-          failure = veneer::make_error(who(*c) + ": no acknowledgement from the Hue bridge " + options.bridge +
-                                       " within " + ms(timeout) + " (refused or busy; gave up)");
+          failure = veneer::make_error(who(*c) + ": the Hue bridge " + options.bridge + " did not acknowledge PUT " +
+                                       c->path + " within " + ms(timeout) + " (" + std::to_string(c->attempts) +
+                                       " attempts, last: " + c->last_error + ")");
           break;
         }
         Clock::time_point allowed = std::max(c->not_before, (c->group ? group_window : light_window).next_allowed(now));
         if (allowed > now) {
-          if (c->attempts == 0 && allowed > c->not_before) ++stats.paced_waits;
+          if (c->attempts == 0 && !c->paced && allowed > c->not_before) {
+            c->paced = true;
+            ++stats.paced_waits;
+          }
           wake = std::min(wake, allowed);
           ++it;
           continue;
@@ -298,6 +306,7 @@ struct HueLamps::Impl {
             break;
           }
           VLOG_DEBUG(kLog, "{}: {} — retrying in {} ms", who(*c), why, backoff.count());
+          c->last_error = why;
           c->not_before = t + backoff;
           queue.push_front(c);
         }

@@ -1,0 +1,343 @@
+// The "hue" lamps backend against the bridge emulator on loopback: the real
+// libcurl path, pacing, retries, errors, reachability, settle time.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <thread>
+
+#include "veneerd/devices/hue_emulator.hpp"
+#include "veneerd/devices/hue_lamps.hpp"
+#include "veneerd/devices/registry.hpp"
+
+using namespace std::chrono_literals;
+using veneerd::HueBridgeEmulator;
+using veneerd::HueLamps;
+using veneerd::HueLampsOptions;
+using veneerd::LampState;
+
+namespace {
+
+std::vector<bool> one_hot(int n, int i) {
+  std::vector<bool> v(n, false);
+  v[i] = true;
+  return v;
+}
+
+class Lamps : public ::testing::Test {
+ protected:
+  void start(int apply_delay_ms = 0, int latency_ms = 0) {
+    veneerd::HueEmulatorOptions o;
+    o.apply_delay_ms = apply_delay_ms;
+    o.latency_ms = latency_ms;
+    bridge = std::make_unique<HueBridgeEmulator>(o);
+    ASSERT_TRUE(bridge->start().ok());
+  }
+  HueLampsOptions options() const {
+    HueLampsOptions o;
+    o.bridge = bridge->address();
+    o.key = "veneer-sim";
+    o.lamps = {"1", "2", "3", "4", "5", "6", "7"};
+    o.settle_ms = 0;
+    o.timeout_ms = 2000;
+    return o;
+  }
+  std::unique_ptr<HueLamps> make(const HueLampsOptions& o) {
+    auto l = HueLamps::create(o);
+    EXPECT_TRUE(l.ok()) << (l.ok() ? "" : l.message());
+    return l.ok() ? std::move(*l) : nullptr;
+  }
+  void SetUp() override { start(); }
+  void TearDown() override { bridge->stop(); }
+
+  std::unique_ptr<HueBridgeEmulator> bridge;
+};
+
+}  // namespace
+
+TEST_F(Lamps, SetReadRestore) {
+  // The owner left lamps 2 (red, dim) and 5 (rig white) on.
+  bridge->set_lamp("2", LampState{.on = true, .brightness = 80, .x = 0.6, .y = 0.3});
+  bridge->set_lamp("5", LampState{.on = true, .brightness = 254});
+  auto lamps = make(options());
+  ASSERT_TRUE(lamps);
+  EXPECT_EQ(lamps->count(), 7);
+  auto owner = lamps->read();
+  ASSERT_TRUE(owner.ok()) << owner.message();
+  ASSERT_EQ(owner->size(), 7u);
+  EXPECT_TRUE((*owner)[1].on);
+  EXPECT_EQ((*owner)[1].brightness, 80);
+  EXPECT_NEAR((*owner)[1].x, 0.6, 1e-9);
+  EXPECT_TRUE((*owner)[4].on);
+  EXPECT_FALSE((*owner)[0].on);
+
+  ASSERT_TRUE(lamps->all_off().ok());
+  EXPECT_EQ(bridge->on_pattern(), std::vector<bool>(7, false));
+  for (int i = 0; i < 7; ++i) {
+    auto st = lamps->set(one_hot(7, i), 200);
+    ASSERT_TRUE(st.ok()) << st.message();
+    EXPECT_EQ(bridge->on_pattern(), one_hot(7, i));
+    auto s = bridge->lamp(std::to_string(i + 1));
+    EXPECT_EQ(s->brightness, 200);
+    EXPECT_NEAR(s->x, 0.3227, 1e-9);  // rig colour sent with every switch
+  }
+  auto now = lamps->read();
+  ASSERT_TRUE(now.ok());
+  EXPECT_TRUE((*now)[6].on);
+
+  ASSERT_TRUE(lamps->restore(*owner).ok());
+  auto back = bridge->lamps();
+  for (int i = 0; i < 7; ++i) {
+    EXPECT_EQ(back[i].state.on, (*owner)[i].on) << i;
+    if ((*owner)[i].on) {
+      EXPECT_EQ(back[i].state.brightness, (*owner)[i].brightness) << i;
+      EXPECT_NEAR(back[i].state.x, (*owner)[i].x, 1e-9) << i;
+      EXPECT_NEAR(back[i].state.y, (*owner)[i].y, 1e-9) << i;
+    }
+  }
+}
+
+TEST_F(Lamps, SwitchingToTheNextLampCostsTwoLightCommands) {
+  auto lamps = make(options());
+  ASSERT_TRUE(lamps->all_off().ok());
+  ASSERT_TRUE(lamps->set(one_hot(7, 0)).ok());
+  auto before = bridge->counters().light_commands;
+  for (int i = 1; i < 7; ++i) ASSERT_TRUE(lamps->set(one_hot(7, i)).ok());
+  EXPECT_EQ(bridge->counters().light_commands - before, 12u);
+  // The same pattern again costs nothing.
+  ASSERT_TRUE(lamps->set(one_hot(7, 6)).ok());
+  EXPECT_EQ(bridge->counters().light_commands - before, 12u);
+}
+
+TEST_F(Lamps, AllOffUsesTheGroupWhenConfigured) {
+  auto o = options();
+  o.group = "1";
+  auto lamps = make(o);
+  ASSERT_TRUE(lamps->set(std::vector<bool>(7, true)).ok());
+  EXPECT_EQ(bridge->on_pattern(), std::vector<bool>(7, true));
+  auto lights_before = bridge->counters().light_commands;
+  ASSERT_TRUE(lamps->all_off().ok());
+  EXPECT_EQ(bridge->on_pattern(), std::vector<bool>(7, false));
+  EXPECT_EQ(bridge->counters().group_commands, 1u);
+  EXPECT_EQ(bridge->counters().light_commands, lights_before);
+  // A second all-off inside the group's one-second window is paced or done per lamp, never refused.
+  ASSERT_TRUE(lamps->set(one_hot(7, 3)).ok());
+  ASSERT_TRUE(lamps->all_off().ok());
+  EXPECT_EQ(bridge->counters().refused_rate, 0u);
+  EXPECT_EQ(bridge->on_pattern(), std::vector<bool>(7, false));
+}
+
+TEST_F(Lamps, BurstThroughTheBackendIsPacedNotRefused) {
+  auto lamps = make(options());
+  bridge->reset_counters();
+  // 7 + 24 light commands as fast as the caller can ask (lamps 1,2 / 3,4
+  // alternate): more than the bridge takes in a second.
+  for (int i = 0; i < 7; ++i) {
+    std::vector<bool> on(7, false);
+    on[(i % 2) ? 0 : 2] = true;
+    on[(i % 2) ? 1 : 3] = true;
+    auto st = lamps->set(on);
+    ASSERT_TRUE(st.ok()) << st.message();
+  }
+  auto c = bridge->counters();
+  EXPECT_EQ(c.refused_rate, 0u);
+  EXPECT_EQ(c.refused_busy, 0u);
+  EXPECT_EQ(c.light_commands, 7u + 6u * 4u);  // first call: every lamp; then 2 off + 2 on
+  EXPECT_GT(lamps->stats().paced_waits, 0u);
+  EXPECT_EQ(lamps->stats().refused, 0u);
+  EXPECT_LE(c.max_in_flight_seen, 3u);
+}
+
+TEST_F(Lamps, RefusedCommandsAreRetried) {
+  auto lamps = make(options());
+  bridge->fail_next(2, 503);
+  auto st = lamps->set(one_hot(7, 2));
+  ASSERT_TRUE(st.ok()) << st.message();
+  EXPECT_EQ(bridge->on_pattern(), one_hot(7, 2));
+  EXPECT_EQ(lamps->stats().refused, 2u);
+  EXPECT_GE(lamps->stats().retries, 2u);
+
+  bridge->fail_next(1, 429);
+  ASSERT_TRUE(lamps->set(one_hot(7, 3)).ok());
+  EXPECT_EQ(lamps->stats().refused, 3u);
+  EXPECT_EQ(bridge->on_pattern(), one_hot(7, 3));
+}
+
+TEST_F(Lamps, DroppedConnectionIsRetried) {
+  auto lamps = make(options());
+  ASSERT_TRUE(lamps->all_off().ok());
+  bridge->drop_next(1);
+  auto st = lamps->set(one_hot(7, 4));
+  ASSERT_TRUE(st.ok()) << st.message();
+  EXPECT_EQ(bridge->on_pattern(), one_hot(7, 4));
+  EXPECT_EQ(bridge->counters().dropped, 1u);
+}
+
+TEST_F(Lamps, BridgeErrorsAreClearAndBounded) {
+  auto o = options();
+  o.timeout_ms = 600;
+  auto lamps = make(o);
+
+  bridge->fail_next(1000, 500);
+  auto st = lamps->set(one_hot(7, 0));
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.message().find("HTTP 500"), std::string::npos) << st.message();
+  EXPECT_NE(st.message().find("(ring position "), std::string::npos) << st.message();
+  bridge->fail_next(0, 500);
+  // Requests of the abandoned set() that were already on the wire land first.
+  std::this_thread::sleep_for(300ms);
+
+  bridge->hue_error_next(1, 901);
+  st = lamps->set(one_hot(7, 1));
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.message().find("901"), std::string::npos) << st.message();
+
+  // A bridge that keeps refusing: gives up after the timeout with the reason.
+  bridge->fail_next(1000, 503);
+  auto t0 = std::chrono::steady_clock::now();
+  st = lamps->set(one_hot(7, 5));
+  auto took = std::chrono::steady_clock::now() - t0;
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.message().find("HTTP 503"), std::string::npos) << st.message();
+  EXPECT_NE(st.message().find("600 ms"), std::string::npos) << st.message();
+  EXPECT_LT(took, 10s);  // hang check
+  bridge->fail_next(0, 503);
+
+  // Every connection dropped.
+  bridge->drop_next(1000);
+  st = lamps->set(one_hot(7, 6));
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.message().find("(ring position "), std::string::npos) << st.message();
+  EXPECT_NE(st.message().find("600 ms"), std::string::npos) << st.message();
+  bridge->drop_next(0);
+
+  // And it recovers once the bridge behaves.
+  lamps->invalidate();
+  st = lamps->set(one_hot(7, 6));
+  EXPECT_TRUE(st.ok()) << st.message();
+  EXPECT_EQ(bridge->on_pattern(), one_hot(7, 6));
+}
+
+TEST_F(Lamps, SlowBridgeTimesOut) {
+  auto o = options();
+  o.timeout_ms = 300;
+  auto lamps = make(o);
+  bridge->set_latency(3000ms);
+  auto t0 = std::chrono::steady_clock::now();
+  auto st = lamps->set(one_hot(7, 0));
+  auto took = std::chrono::steady_clock::now() - t0;
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.message().find("300 ms"), std::string::npos) << st.message();
+  EXPECT_LT(took, 2500ms);  // gave up before the bridge would have answered
+  auto r = lamps->read();
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.message().find("did not answer"), std::string::npos) << r.message();
+}
+
+TEST_F(Lamps, UnreachableLampIsNamed) {
+  auto lamps = make(options());
+  bridge->set_reachable("3", false);
+  auto st = lamps->set(one_hot(7, 2));
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.message().find("lamp '3' (ring position 3) 'Ring 3' is unreachable"), std::string::npos)
+      << st.message();
+  auto r = lamps->read();
+  ASSERT_TRUE(r.ok());
+  EXPECT_FALSE((*r)[2].reachable);
+}
+
+TEST_F(Lamps, UnauthorizedKeyAndUnknownLamp) {
+  auto o = options();
+  o.key = "not-paired";
+  auto lamps = make(o);
+  auto st = lamps->set(one_hot(7, 0));
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.message().find("unauthorized user"), std::string::npos) << st.message();
+  auto r = lamps->read();
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.message().find("not-paired"), std::string::npos) << r.message();
+
+  auto o2 = options();
+  o2.lamps = {"1", "2", "42"};
+  auto l2 = make(o2);
+  auto r2 = l2->read();
+  ASSERT_FALSE(r2.ok());
+  EXPECT_NE(r2.message().find("lamp '42' (ring position 3)"), std::string::npos) << r2.message();
+}
+
+TEST_F(Lamps, SettleTimeCoversTheAckBeforeChangeDelay) {
+  bridge->stop();
+  start(/*apply_delay_ms=*/400);
+  // Without a settle time the change is not there yet when set() returns...
+  auto fast = make(options());
+  ASSERT_TRUE(fast->set(one_hot(7, 0)).ok());
+  EXPECT_FALSE(bridge->lamp("1")->on);
+  std::this_thread::sleep_for(600ms);
+  EXPECT_TRUE(bridge->lamp("1")->on);
+  // ...with settle_ms above the bridge's delay it is.
+  auto o = options();
+  o.settle_ms = 500;
+  auto settled = make(o);
+  ASSERT_TRUE(settled->set(one_hot(7, 1)).ok());
+  EXPECT_TRUE(bridge->lamp("2")->on);
+  EXPECT_FALSE(bridge->lamp("1")->on);
+}
+
+TEST(HueLampsOptions, ConfigErrorsNameTheField) {
+  using nlohmann::json;
+  auto ok = HueLampsOptions::from_json(
+      json{{"bridge", "127.0.0.1:80"}, {"key", "k"}, {"lamps", {"1", 2}}, {"group", "0"}, {"settle_ms", 150}});
+  ASSERT_TRUE(ok.ok()) << ok.message();
+  EXPECT_EQ(ok->lamps, (std::vector<std::string>{"1", "2"}));
+  EXPECT_EQ(ok->group, "0");
+  EXPECT_EQ(ok->settle_ms, 150);
+
+  auto expect_error = [](const json& j, const std::string& needle) {
+    auto r = HueLampsOptions::from_json(j);
+    ASSERT_FALSE(r.ok()) << j.dump();
+    EXPECT_NE(r.message().find(needle), std::string::npos) << r.message();
+  };
+  expect_error(json{{"key", "k"}, {"lamps", {"1"}}}, "'bridge'");
+  expect_error(json{{"bridge", "h"}, {"lamps", {"1"}}}, "'key'");
+  expect_error(json{{"bridge", "h"}, {"key", "k"}}, "'lamps'");
+  expect_error(json{{"bridge", "h"}, {"key", "k"}, {"lamps", {"1", "1"}}}, "twice");
+  expect_error(json{{"bridge", "h"}, {"key", "k"}, {"lamps", {"1"}}, {"settle_ms", "x"}}, "'settle_ms'");
+  expect_error(json{{"bridge", "h"}, {"key", "k"}, {"lamps", {"1"}}, {"timeout_ms", 1}}, "'timeout_ms'");
+  expect_error(json::array(), "JSON object");
+}
+
+TEST(HueResults, ParsesSuccessAndErrorArrays) {
+  auto r = veneerd::parse_hue_results(
+      R"([{"success":{"/lights/1/state/on":true}},{"error":{"type":201,"address":"/lights/1/state/bri","description":"parameter, bri, is not modifiable. Device is set to off."}}])");
+  ASSERT_TRUE(r.ok());
+  ASSERT_EQ(r->size(), 2u);
+  EXPECT_TRUE((*r)[0].success);
+  EXPECT_EQ((*r)[0].address, "/lights/1/state/on");
+  EXPECT_FALSE((*r)[1].success);
+  EXPECT_EQ((*r)[1].error_type, 201);
+  EXPECT_EQ((*r)[1].address, "/lights/1/state/bri");
+  EXPECT_FALSE(veneerd::parse_hue_results("{}").ok());
+  EXPECT_FALSE(veneerd::parse_hue_results("[1]").ok());
+  EXPECT_FALSE(veneerd::parse_hue_results("nope").ok());
+}
+
+TEST(DeviceRegistry, SimulatedBackendsAreRegistered) {
+  veneerd::register_simulated_devices();
+  veneerd::register_simulated_devices();  // idempotent
+  auto& reg = veneerd::DeviceRegistry::instance();
+  auto count = [](const auto& list, const std::string& name) {
+    int n = 0;
+    for (const auto& [k, f] : list) n += k == name;
+    return n;
+  };
+  EXPECT_EQ(count(reg.lamps, "hue"), 1);
+  EXPECT_EQ(count(reg.cameras, "simulated"), 1);
+  EXPECT_EQ(count(reg.triggers, "simulated"), 1);
+  EXPECT_EQ(count(reg.leds, "simulated"), 1);
+  EXPECT_EQ(count(reg.leds, "none"), 1);
+  auto bad = veneerd::DeviceRegistry::make(reg.lamps, "lamps", "hue", nlohmann::json{{"bridge", "x"}});
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.message().find("'key'"), std::string::npos) << bad.message();
+  auto unknown = veneerd::DeviceRegistry::make(reg.cameras, "camera", "nikon-9000", nlohmann::json::object());
+  ASSERT_FALSE(unknown.ok());
+  EXPECT_NE(unknown.message().find("simulated"), std::string::npos) << unknown.message();
+}
