@@ -210,6 +210,14 @@ TEST(LinearImage, DamagedFilesAreRefusedNamingTheFile) {
   auto r = read_linear_image(dir / "flipped.png");
   ASSERT_FALSE(r);
   EXPECT_NE(r.message().find("flipped.png"), std::string::npos) << r.message();
+  // A header claiming an absurd size is refused before any allocation.
+  std::string wide = good;
+  wide[16] = wide[17] = wide[18] = wide[19] = '\x7f';  // IHDR width
+  spit(dir / "wide.png", wide);
+  auto w = read_linear_image(dir / "wide.png");
+  ASSERT_FALSE(w);
+  EXPECT_NE(w.message().find("wide.png"), std::string::npos) << w.message();
+  EXPECT_NE(w.message().find("out of range"), std::string::npos) << w.message();
   auto missing = read_linear_image(dir / "nope.png");
   ASSERT_FALSE(missing);
   EXPECT_NE(missing.message().find("nope.png"), std::string::npos);
