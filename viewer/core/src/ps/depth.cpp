@@ -13,7 +13,7 @@ namespace veneer::ps {
 
 DepthGrid make_depth_grid(cv::Size size, const cv::Mat& mask, float f, float cx, float cy) {
   DepthGrid g;
-  g.step = std::max(1, (std::max(size.width, size.height) + 127) / 128);
+  g.step = std::max(1, (std::max(size.width, size.height) + 63) / 64);
   g.x0 = std::min(g.step / 2, size.width - 1);
   g.y0 = std::min(g.step / 2, size.height - 1);
   g.cols = (size.width - 1 - g.x0) / g.step + 1;

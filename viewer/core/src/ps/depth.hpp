@@ -18,7 +18,8 @@ struct DepthGrid {
   cv::Mat full_mask;     // CV_8UC1 full-resolution object mask (shared, not copied)
 };
 
-// A grid at most ~128 cells wide over `size`, mask point-sampled, z = 0.
+// A grid at most ~64 cells wide (the depth only steers the light vectors,
+// which vary slowly) over `size`, mask point-sampled, z = 0.
 DepthGrid make_depth_grid(cv::Size size, const cv::Mat& mask, float f, float cx, float cy);
 
 // Integrates grid.normals into grid.z (least squares over neighbouring object

@@ -25,6 +25,7 @@
 #include "depth.hpp"
 #include "veneer/util/log.hpp"
 
+
 namespace veneer::ps {
 
 const char* light_model_name(LightModel m) {
@@ -117,7 +118,7 @@ struct Scratch {
   std::vector<float> acc;  // 12*cap: A00 A01 A02 A11 A12 A22 b0 b1 b2 gx gy gz
   std::vector<float> M, K, a, nx, ny, nz, ok, den, px, py, pz;
   std::vector<uint32_t> pat;
-  std::vector<uint8_t> sat;
+  std::vector<float> sat;  // n*cap: 1 where a channel is saturated
   void resize(int n_, int cap_) {
     n = n_;
     cap = cap_;
@@ -128,7 +129,7 @@ struct Scratch {
     acc.assign(size_t(12) * cap, 0.f);
     for (auto* v : {&M, &K, &a, &nx, &ny, &nz, &ok, &den, &px, &py, &pz}) v->assign(cap, 0.f);
     pat.assign(cap, 0);
-    sat.assign(size_t(n) * cap, 0);
+    sat.assign(size_t(n) * cap, 0.f);
   }
 };
 
@@ -140,9 +141,53 @@ struct RowOut {
   uint8_t* reliable = nullptr;  // count (may be null)
 };
 
+struct LoadArgs {
+  const float* src;
+  const float* amb;
+  int step, count;
+  float e0, e1, e2, satv;
+  float *cb, *cg, *cr, *yy, *st, *M;
+};
+
+// One lamp's row into structure-of-arrays form: ambient removed, divided by the
+// lamp colour, grey, saturation flag; running maximum of grey.
+template <int kStep, bool kAmb>
+inline void load_light(const LoadArgs& a) {
+  const float* __restrict src = a.src;
+  const float* __restrict amb = a.amb;
+  float* __restrict cb = a.cb;
+  float* __restrict cg = a.cg;
+  float* __restrict cr = a.cr;
+  float* __restrict yy = a.yy;
+  float* __restrict st = a.st;
+  float* __restrict M = a.M;
+  const int st3 = kStep > 0 ? kStep * 3 : a.step * 3;
+  const float e0 = a.e0, e1 = a.e1, e2 = a.e2, satv = a.satv;
+#pragma GCC ivdep
+  for (int k = 0; k < a.count; ++k) {
+    const float v0 = src[k * st3], v1 = src[k * st3 + 1], v2 = src[k * st3 + 2];
+    st[k] = float((v0 >= satv) | (v1 >= satv) | (v2 >= satv));
+    float c0 = v0, c1 = v1, c2 = v2;
+    if constexpr (kAmb) {
+      c0 -= amb[k * st3];
+      c1 -= amb[k * st3 + 1];
+      c2 -= amb[k * st3 + 2];
+    }
+    c0 *= e0;
+    c1 *= e1;
+    c2 *= e2;
+    cb[k] = c0;
+    cg[k] = c1;
+    cr[k] = c2;
+    const float g = (c0 + c1 + c2) * (1.f / 3.f);
+    yy[k] = g;
+    M[k] = std::max(M[k], g);
+  }
+}
+
 // Solves `count` pixels of row y: x = x0 + k*step. `z` gives each pixel's
-// surface z (rig frame) for the near model (null = 0). `mask` row pointer
-// sampled with the same step (null = all).
+// surface z (rig frame) for the near model (null = 0). `mask`: the row's mask
+// from x0, sampled with the same step.
 void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, const float* z,
                const uint8_t* mask, const RowOut& out) {
   const int n = s.n;
@@ -152,41 +197,15 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
   float* __restrict M = b.M.data();
   std::fill(M, M + count, 0.f);
   for (int i = 0; i < n; ++i) {
-    const float* __restrict src = s.images[i] + row_off + size_t(x0) * 3;
-    const float* __restrict amb = s.ambient ? s.ambient + row_off + size_t(x0) * 3 : nullptr;
-    float* __restrict cb = b.C.data() + (size_t(i) * 3 + 0) * cap;
-    float* __restrict cg = b.C.data() + (size_t(i) * 3 + 1) * cap;
-    float* __restrict cr = b.C.data() + (size_t(i) * 3 + 2) * cap;
-    float* __restrict yy = b.Y.data() + size_t(i) * cap;
-    uint8_t* __restrict st = b.sat.data() + size_t(i) * cap;
-    const float e0 = s.inv_e[i * 3], e1 = s.inv_e[i * 3 + 1], e2 = s.inv_e[i * 3 + 2];
-    const float satv = s.saturation;
-    const int st3 = step * 3;
-    if (amb) {
-      for (int k = 0; k < count; ++k) {
-        const float v0 = src[k * st3], v1 = src[k * st3 + 1], v2 = src[k * st3 + 2];
-        st[k] = (v0 >= satv) | (v1 >= satv) | (v2 >= satv);
-        const float c0 = (v0 - amb[k * st3]) * e0, c1 = (v1 - amb[k * st3 + 1]) * e1,
-                    c2 = (v2 - amb[k * st3 + 2]) * e2;
-        cb[k] = c0;
-        cg[k] = c1;
-        cr[k] = c2;
-        const float g = (c0 + c1 + c2) * (1.f / 3.f);
-        yy[k] = g;
-        M[k] = std::max(M[k], g);
-      }
+    const float* src = s.images[i] + row_off + size_t(x0) * 3;
+    const float* amb = s.ambient ? s.ambient + row_off + size_t(x0) * 3 : nullptr;
+    LoadArgs a{src, amb, step, count, s.inv_e[i * 3], s.inv_e[i * 3 + 1], s.inv_e[i * 3 + 2], s.saturation,
+               b.C.data() + (size_t(i) * 3 + 0) * cap, b.C.data() + (size_t(i) * 3 + 1) * cap,
+               b.C.data() + (size_t(i) * 3 + 2) * cap, b.Y.data() + size_t(i) * cap, b.sat.data() + size_t(i) * cap, M};
+    if (step == 1) {
+      amb ? load_light<1, true>(a) : load_light<1, false>(a);
     } else {
-      for (int k = 0; k < count; ++k) {
-        const float v0 = src[k * st3], v1 = src[k * st3 + 1], v2 = src[k * st3 + 2];
-        st[k] = (v0 >= satv) | (v1 >= satv) | (v2 >= satv);
-        const float c0 = v0 * e0, c1 = v1 * e1, c2 = v2 * e2;
-        cb[k] = c0;
-        cg[k] = c1;
-        cr[k] = c2;
-        const float g = (c0 + c1 + c2) * (1.f / 3.f);
-        yy[k] = g;
-        M[k] = std::max(M[k], g);
-      }
+      amb ? load_light<0, true>(a) : load_light<0, false>(a);
     }
   }
   // 2. weights: robust drops shadowed and saturated samples; < 3 kept falls back to all.
@@ -196,25 +215,30 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
   if (s.robust) {
     for (int i = 0; i < n; ++i) {
       const float* __restrict yy = b.Y.data() + size_t(i) * cap;
-      const uint8_t* __restrict st = b.sat.data() + size_t(i) * cap;
+      const float* __restrict st = b.sat.data() + size_t(i) * cap;
       float* __restrict w = b.W.data() + size_t(i) * cap;
       const float sf = s.shadow_fraction;
-      for (int k = 0; k < count; ++k) w[k] = float((yy[k] >= sf * M[k]) & (st[k] == 0) & (yy[k] > 0.f));
+#pragma GCC ivdep
+      for (int k = 0; k < count; ++k) w[k] = float((yy[k] >= sf * M[k]) & (st[k] == 0.f) & (yy[k] > 0.f));
     }
     std::fill(K, K + count, 0.f);
     for (int i = 0; i < n; ++i) {
       const float* __restrict w = b.W.data() + size_t(i) * cap;
+#pragma GCC ivdep
       for (int k = 0; k < count; ++k) K[k] += w[k];
     }
+#pragma GCC ivdep
     for (int k = 0; k < count; ++k) okv[k] = K[k] >= 3.f ? 1.f : 0.f;
     if (s.use_cache) {
       std::fill(pat, pat + count, 0u);
       for (int i = 0; i < n; ++i) {
         const float* __restrict w = b.W.data() + size_t(i) * cap;
+#pragma GCC ivdep
         for (int k = 0; k < count; ++k) pat[k] |= uint32_t(w[k] != 0.f) << i;
       }
     }
     // Fallback to every sample where fewer than 3 are kept.
+#pragma GCC ivdep
     for (int k = 0; k < count; ++k) {
       if (okv[k] == 0.f) {
         for (int i = 0; i < n; ++i) b.W[size_t(i) * cap + k] = 1.f;
@@ -242,6 +266,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
       for (int i = 0; i < n; ++i) {
         const float* __restrict yy = b.Y.data() + size_t(i) * cap;
         const float p0 = P[i], p1 = P[n + i], p2 = P[2 * n + i];
+#pragma GCC ivdep
         for (int k = 0; k < count; ++k) {
           gx[k] += p0 * yy[k];
           gy[k] += p1 * yy[k];
@@ -249,6 +274,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
         }
       }
       if (s.robust) {
+#pragma GCC ivdep
         for (int k = 0; k < count; ++k) {
           const uint32_t p = pat[k];
           if (p == s.full) continue;
@@ -271,23 +297,32 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
       }
     } else {
       // Many lamps: per-pixel weighted normal equations with the constant directions.
-      float* __restrict A = b.acc.data();
-      std::fill(A, A + 9 * cap, 0.f);
+      std::fill(b.acc.begin(), b.acc.begin() + 9 * cap, 0.f);
+      float* __restrict a00 = b.acc.data();
+      float* __restrict a01 = a00 + cap;
+      float* __restrict a02 = a00 + 2 * cap;
+      float* __restrict a11 = a00 + 3 * cap;
+      float* __restrict a12 = a00 + 4 * cap;
+      float* __restrict a22 = a00 + 5 * cap;
+      float* __restrict b0 = a00 + 6 * cap;
+      float* __restrict b1 = a00 + 7 * cap;
+      float* __restrict b2 = a00 + 8 * cap;
       for (int i = 0; i < n; ++i) {
         const float* __restrict yy = b.Y.data() + size_t(i) * cap;
         const float* __restrict w = b.W.data() + size_t(i) * cap;
         const float lx = s.dir[i * 3], ly = s.dir[i * 3 + 1], lz = s.dir[i * 3 + 2];
+#pragma GCC ivdep
         for (int k = 0; k < count; ++k) {
           const float wk = w[k], wy = wk * yy[k];
-          A[k] += wk * lx * lx;
-          A[cap + k] += wk * lx * ly;
-          A[2 * cap + k] += wk * lx * lz;
-          A[3 * cap + k] += wk * ly * ly;
-          A[4 * cap + k] += wk * ly * lz;
-          A[5 * cap + k] += wk * lz * lz;
-          A[6 * cap + k] += wy * lx;
-          A[7 * cap + k] += wy * ly;
-          A[8 * cap + k] += wy * lz;
+          a00[k] += wk * lx * lx;
+          a01[k] += wk * lx * ly;
+          a02[k] += wk * lx * lz;
+          a11[k] += wk * ly * ly;
+          a12[k] += wk * ly * lz;
+          a22[k] += wk * lz * lz;
+          b0[k] += wy * lx;
+          b1[k] += wy * ly;
+          b2[k] += wy * lz;
         }
       }
     }
@@ -298,15 +333,26 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
     float* __restrict pz = b.pz.data();
     const float invf = 1.f / s.f;
     const float v = (float(y) - s.cy) * invf;
+#pragma GCC ivdep
+    for (int k = 0; k < count; ++k) pz[k] = z ? z[k] : 0.f;
+#pragma GCC ivdep
     for (int k = 0; k < count; ++k) {
-      const float zz = z ? z[k] : 0.f;
+      const float zz = pz[k];
       const float t = 1.f - zz;
       px[k] = t * (float(x0 + k * step) - s.cx) * invf;
       py[k] = -t * v;
       pz[k] = zz;
     }
-    float* __restrict A = b.acc.data();
-    std::fill(A, A + 9 * cap, 0.f);
+    std::fill(b.acc.begin(), b.acc.begin() + 9 * cap, 0.f);
+    float* __restrict a00 = b.acc.data();
+    float* __restrict a01 = a00 + cap;
+    float* __restrict a02 = a00 + 2 * cap;
+    float* __restrict a11 = a00 + 3 * cap;
+    float* __restrict a12 = a00 + 4 * cap;
+    float* __restrict a22 = a00 + 5 * cap;
+    float* __restrict b0 = a00 + 6 * cap;
+    float* __restrict b1 = a00 + 7 * cap;
+    float* __restrict b2 = a00 + 8 * cap;
     for (int i = 0; i < n; ++i) {
       const float* __restrict yy = b.Y.data() + size_t(i) * cap;
       const float* __restrict w = b.W.data() + size_t(i) * cap;
@@ -314,6 +360,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
       float* __restrict vy = b.V.data() + (size_t(i) * 3 + 1) * cap;
       float* __restrict vz = b.V.data() + (size_t(i) * 3 + 2) * cap;
       const float lx = s.pos[i * 3], ly = s.pos[i * 3 + 1], lz = s.pos[i * 3 + 2], r2 = s.pos_norm2[i];
+#pragma GCC ivdep
       for (int k = 0; k < count; ++k) {
         const float dx = lx - px[k], dy = ly - py[k], dz = lz - pz[k];
         const float d2 = dx * dx + dy * dy + dz * dz;
@@ -324,31 +371,39 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
         vy[k] = ey;
         vz[k] = ez;
         const float wk = w[k], wy = wk * yy[k];
-        A[k] += wk * ex * ex;
-        A[cap + k] += wk * ex * ey;
-        A[2 * cap + k] += wk * ex * ez;
-        A[3 * cap + k] += wk * ey * ey;
-        A[4 * cap + k] += wk * ey * ez;
-        A[5 * cap + k] += wk * ez * ez;
-        A[6 * cap + k] += wy * ex;
-        A[7 * cap + k] += wy * ey;
-        A[8 * cap + k] += wy * ez;
+        a00[k] += wk * ex * ex;
+        a01[k] += wk * ex * ey;
+        a02[k] += wk * ex * ez;
+        a11[k] += wk * ey * ey;
+        a12[k] += wk * ey * ez;
+        a22[k] += wk * ez * ez;
+        b0[k] += wy * ex;
+        b1[k] += wy * ey;
+        b2[k] += wy * ez;
       }
     }
   }
   if (s.near || (s.robust && !s.use_cache)) {
     // 3x3 symmetric solve by cofactors, vectorised.
     const float* __restrict A = b.acc.data();
+    const float* __restrict A1 = A + cap;
+    const float* __restrict A2 = A + 2 * cap;
+    const float* __restrict A3 = A + 3 * cap;
+    const float* __restrict A4 = A + 4 * cap;
+    const float* __restrict A5 = A + 5 * cap;
+    const float* __restrict B0 = A + 6 * cap;
+    const float* __restrict B1 = A + 7 * cap;
+    const float* __restrict B2 = A + 8 * cap;
+#pragma GCC ivdep
     for (int k = 0; k < count; ++k) {
-      const float a00 = A[k], a01 = A[cap + k], a02 = A[2 * cap + k], a11 = A[3 * cap + k],
-                  a12 = A[4 * cap + k], a22 = A[5 * cap + k];
-      const float b0 = A[6 * cap + k], b1 = A[7 * cap + k], b2 = A[8 * cap + k];
+      const float a00 = A[k], a01 = A1[k], a02 = A2[k], a11 = A3[k], a12 = A4[k], a22 = A5[k];
+      const float b0 = B0[k], b1 = B1[k], b2 = B2[k];
       const float c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
       const float c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
       const float det = a00 * c00 + a01 * c01 + a02 * c02;
       const float tr = (a00 + a11 + a22) * (1.f / 3.f);
-      const bool good = det > 1e-5f * tr * tr * tr && tr > 0.f;
-      const float id = good ? 1.f / det : 0.f;
+      const bool good = (det > 1e-5f * tr * tr * tr) & (tr > 0.f);
+      const float id = (good ? 1.f : 0.f) / (good ? det : 1.f);
       gx[k] = (c00 * b0 + c01 * b1 + c02 * b2) * id;
       gy[k] = (c01 * b0 + c11 * b1 + c12 * b2) * id;
       gz[k] = (c02 * b0 + c12 * b1 + c22 * b2) * id;
@@ -361,10 +416,11 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
   float* __restrict nz = b.nz.data();
   float* __restrict ga = b.a.data();
   const float ms = s.min_signal;
+#pragma GCC ivdep
   for (int k = 0; k < count; ++k) {
     const float len = std::sqrt(gx[k] * gx[k] + gy[k] * gy[k] + gz[k] * gz[k]);
-    const bool sig = len > 0.f && M[k] > ms;
-    const float il = sig ? 1.f / len : 0.f;
+    const bool sig = (len > 0.f) & (M[k] > ms);
+    const float il = (sig ? 1.f : 0.f) / (sig ? len : 1.f);
     nx[k] = gx[k] * il;
     ny[k] = gy[k] * il;
     nz[k] = gz[k] * il;
@@ -389,6 +445,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
       const float* __restrict vx = b.V.data() + (size_t(i) * 3 + 0) * cap;
       const float* __restrict vy = b.V.data() + (size_t(i) * 3 + 1) * cap;
       const float* __restrict vz = b.V.data() + (size_t(i) * 3 + 2) * cap;
+#pragma GCC ivdep
       for (int k = 0; k < count; ++k) {
         const float sh = nx[k] * vx[k] + ny[k] * vy[k] + nz[k] * vz[k];
         const float ws = w[k] * sh;
@@ -401,6 +458,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
       }
     } else {
       const float lx = s.dir[i * 3], ly = s.dir[i * 3 + 1], lz = s.dir[i * 3 + 2];
+#pragma GCC ivdep
       for (int k = 0; k < count; ++k) {
         const float sh = nx[k] * lx + ny[k] * ly + nz[k] * lz;
         const float ws = w[k] * sh;
@@ -414,25 +472,38 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
     }
   }
   // 6. write.
+  float* __restrict on = out.normals;
+  const uint8_t* __restrict mk = mask;
+  float* __restrict inside = b.px.data();  // reuse: 1 where the pixel is in the mask
+  for (int k = 0; k < count; ++k) inside[k] = mk[size_t(k) * step] != 0 ? 1.f : 0.f;
+#pragma GCC ivdep
   for (int k = 0; k < count; ++k) {
-    const bool in = mask == nullptr || mask[size_t(k) * step] != 0;
-    const bool sig = ga[k] > 0.f;
-    float* o = out.normals + size_t(k) * 3;
-    o[0] = in ? nx[k] : 0.f;
-    o[1] = in ? ny[k] : 0.f;
-    o[2] = in ? nz[k] : 0.f;
-    if (out.albedo) {
-      const float id = (in && sig && den[k] > 0.f) ? 1.f / den[k] : 0.f;
-      float* al = out.albedo + size_t(k) * 3;
-      al[0] = std::max(0.f, numb[k] * id);
-      al[1] = std::max(0.f, numg[k] * id);
-      al[2] = std::max(0.f, numr[k] * id);
+    on[k * 3] = nx[k] * inside[k];
+    on[k * 3 + 1] = ny[k] * inside[k];
+    on[k * 3 + 2] = nz[k] * inside[k];
+  }
+  if (out.albedo) {
+    float* __restrict al = out.albedo;
+#pragma GCC ivdep
+    for (int k = 0; k < count; ++k) {
+      const bool use = (inside[k] != 0.f) & (ga[k] > 0.f) & (den[k] > 0.f);
+      const float id = (use ? 1.f : 0.f) / (use ? den[k] : 1.f);
+      al[k * 3] = std::max(0.f, numb[k] * id);
+      al[k * 3 + 1] = std::max(0.f, numg[k] * id);
+      al[k * 3 + 2] = std::max(0.f, numr[k] * id);
     }
-    if (out.residual) {
-      const float r = (in && sig) ? std::sqrt(res[k] / std::max(K[k], 1.f)) / M[k] : 0.f;
-      out.residual[k] = r;
+  }
+  if (out.residual) {
+    float* __restrict ro = out.residual;
+#pragma GCC ivdep
+    for (int k = 0; k < count; ++k) {
+      const bool use = (inside[k] != 0.f) & (ga[k] > 0.f);
+      ro[k] = use ? std::sqrt(res[k] / std::max(K[k], 1.f)) / (use ? M[k] : 1.f) : 0.f;
     }
-    if (out.reliable) out.reliable[k] = (in && okv[k] != 0.f) ? 255 : 0;
+  }
+  if (out.reliable) {
+    uint8_t* __restrict rl = out.reliable;
+    for (int k = 0; k < count; ++k) rl[k] = ((inside[k] != 0.f) & (okv[k] != 0.f)) ? 255 : 0;
   }
 }
 
@@ -464,19 +535,29 @@ void run_parallel(int threads, F&& f) {
 
 // Solves every row in [y0, y1) (step 1) in parallel, writing into `result`.
 void solve_rows(const Setup& s, const cv::Mat& mask, const cv::Mat* zmap, int y0, int y1, PsResult& result) {
+  constexpr int kChunk = 256;  // pixels per pass: the scratch rows stay in L1/L2
   tbb::parallel_for(tbb::blocked_range<int>(y0, y1, 4), [&](const tbb::blocked_range<int>& r) {
     Scratch sc;
-    sc.resize(s.n, s.width);
+    sc.resize(s.n, std::min(kChunk, s.width));
     for (int y = r.begin(); y < r.end(); ++y) {
-      RowOut out;
-      out.normals = result.normals.ptr<float>(y);
-      out.albedo = result.albedo.ptr<float>(y);
-      out.residual = result.residual.ptr<float>(y);
-      out.reliable = result.reliable.ptr<uint8_t>(y);
       const uint8_t* mrow = mask.ptr<uint8_t>(y);
-      // Skip rows without object pixels: outputs are already zero.
-      if (std::find_if(mrow, mrow + s.width, [](uint8_t v) { return v != 0; }) == mrow + s.width) continue;
-      solve_row(s, sc, y, 0, 1, s.width, zmap ? zmap->ptr<float>(y) : nullptr, mrow, out);
+      for (int x0 = 0; x0 < s.width; x0 += kChunk) {
+        const int count = std::min(kChunk, s.width - x0);
+        RowOut out;
+        out.normals = result.normals.ptr<float>(y) + size_t(x0) * 3;
+        out.albedo = result.albedo.ptr<float>(y) + size_t(x0) * 3;
+        out.residual = result.residual.ptr<float>(y) + x0;
+        out.reliable = result.reliable.ptr<uint8_t>(y) + x0;
+        // Stretches without object pixels are only cleared.
+        if (std::find_if(mrow + x0, mrow + x0 + count, [](uint8_t v) { return v != 0; }) == mrow + x0 + count) {
+          std::fill(out.normals, out.normals + size_t(count) * 3, 0.f);
+          std::fill(out.albedo, out.albedo + size_t(count) * 3, 0.f);
+          std::fill(out.residual, out.residual + count, 0.f);
+          std::fill(out.reliable, out.reliable + count, uint8_t(0));
+          continue;
+        }
+        solve_row(s, sc, y, x0, 1, count, zmap ? zmap->ptr<float>(y) + x0 : nullptr, mrow + x0, out);
+      }
     }
   });
 }
@@ -615,10 +696,11 @@ Expected<PsResult> photometric_stereo(const ImageSet& set, const cv::Mat& mask_i
   result.model_used = model;
   result.mask = mask.clone();
   result.solved_pixels = solved;
-  result.normals = cv::Mat(size, CV_32FC3, cv::Scalar::all(0));
-  result.albedo = cv::Mat(size, CV_32FC3, cv::Scalar::all(0));
-  result.residual = cv::Mat(size, CV_32FC1, cv::Scalar(0));
-  result.reliable = cv::Mat(size, CV_8UC1, cv::Scalar(0));
+  // Every pixel is written by solve_rows (zeros outside the mask).
+  result.normals.create(size, CV_32FC3);
+  result.albedo.create(size, CV_32FC3);
+  result.residual.create(size, CV_32FC1);
+  result.reliable.create(size, CV_8UC1);
 
   std::atomic<bool> cancelled{false};
   cv::Mat zfull;
