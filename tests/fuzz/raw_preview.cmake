@@ -1,0 +1,1 @@
+veneer_fuzz(raw_preview SOURCES ${CMAKE_CURRENT_SOURCE_DIR}/raw_preview.cpp LIBS veneerd_hw)
