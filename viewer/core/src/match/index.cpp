@@ -11,6 +11,7 @@
 #include <tbb/task_arena.h>
 
 #include "internal.hpp"
+#include "veneer/match/fast.hpp"
 
 namespace veneer::match {
 namespace detail {
@@ -134,7 +135,7 @@ class FlannIndex final : public NearestIndex {
 std::unique_ptr<NearestIndex> make_index(const std::string& kind) {
   if (kind == "linear") return std::make_unique<LinearIndex>();
   if (kind == "flann") return std::make_unique<FlannIndex>();
-  return nullptr;
+  return fast::make_index(kind);  // "grid", "kdtree"
 }
 
 }  // namespace veneer::match

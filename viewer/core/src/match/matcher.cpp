@@ -12,6 +12,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "internal.hpp"
+#include "veneer/match/fast.hpp"
 #include "veneer/match/features.hpp"
 #include "veneer/match/index.hpp"
 #include "veneer/util/log.hpp"
@@ -162,12 +163,13 @@ Expected<Map> run_patchmatch(const FeatureSet& dst, const FeatureSet& src, const
 // matched pixel p -> p' a 4-neighbour q is offered q' = p' + (q - p) and takes
 // it when all three constraints hold strictly under the threshold T (RMS
 // feature distances, the map's scale):
-//   1. the match itself:           D(F_dst(q), F_src(q')) < T
-//   2. smooth in the destination:  D(F_dst(q), F_dst(p))  < T
-//   3. smooth in the source:       D(F_src(q'), F_src(p')) < T
+//   1. the match is nearly as good as q's direct match:  D(q, q') - D(q, direct(q)) < T
+//   2. smooth in the destination:                         D(F_dst(q), F_dst(p)) < T
+//   3. smooth in the source:                              D(F_src(q'), F_src(p')) < T
 // and q is empty or its current match is worse. A pixel the growth never
-// reaches becomes the next seed (scan order). With T = 0 nothing grows, so
-// the result is direct matching.
+// reaches becomes the next seed (scan order). With T = 0 nothing grows (no
+// match beats the direct one by a negative margin), so the result is direct
+// matching.
 Expected<Map> run_regiongrow(const FeatureSet& dst, const FeatureSet& src, const MatchOptions& o,
                              const Progress& p) {
   std::vector<int> direct;
@@ -203,7 +205,7 @@ Expected<Map> run_regiongrow(const FeatureSet& dst, const FeatureSet& src, const
         if (qs < 0) continue;
         const float data = squared_distance(dst.row(q), src.row(qs), dims);
         if (!(data < sq[q])) continue;  // only a smaller distance overwrites
-        if (!(rms(data) < t)) continue;
+        if (!(rms(data) - rms(direct_sq[q]) < t)) continue;
         if (!(rms(squared_distance(dst.row(q), dst.row(d), dims)) < t)) continue;
         if (!(rms(squared_distance(src.row(qs), src.row(match[d]), dims)) < t)) continue;
         match[q] = qs;
@@ -253,8 +255,9 @@ Expected<Map> compute_map(const ObjectView& destination, const ObjectView& sourc
                           const Progress& progress) {
   if (auto s = options.check(); !s) return s.error();
   if (auto s = check_pair(destination, source, options.feature); !s) return s.error();
-  if (options.method == Method::coherent)
-    return make_error("method 'coherent' needs the fast engine (MatchOptions::fast), which is not built in");
+  // The fast engine serves what it supports (and `coherent`, which only it has).
+  if (options.method == Method::coherent || (options.fast && fast::supports(options)))
+    return fast::compute_map(destination, source, options, progress);
   const auto t0 = std::chrono::steady_clock::now();
   auto dst = make_features(destination, options.feature, options.patch);
   if (!dst) return make_error("destination: " + dst.message());

@@ -48,6 +48,13 @@ class Scene;  // opaque: primitives + materials
 std::vector<std::string> scene_names();
 Expected<std::shared_ptr<const Scene>> make_scene(const std::string& name, const RenderOptions& options);
 
+// The shape (and placement) of `shape_scene` with the material of
+// `material_scene`: e.g. the bull made of the red glossy sphere's stuff, the
+// reference of the relighting measure (match/metrics.hpp).
+Expected<std::shared_ptr<const Scene>> make_scene_with_material(const std::string& shape_scene,
+                                                               const std::string& material_scene,
+                                                               const RenderOptions& options);
+
 // Renders linear BGR CV_32FC3 (clipped at 1.0 like a sensor) under `lamps`.
 cv::Mat render(const Scene& scene, const std::vector<Lamp>& lamps, const RenderOptions& options,
                const Progress& progress = {});

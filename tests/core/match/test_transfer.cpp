@@ -1,0 +1,113 @@
+// Transfer end to end on small simulated sets (the simulator's truth is the oracle).
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "veneer/match/metrics.hpp"
+#include "veneer/match/transfer.hpp"
+#include "veneer/sim/simulator.hpp"
+
+namespace veneer::match {
+namespace {
+
+ImageSet simulated(const std::string& scene, Role role, cv::Size size = {160, 106}) {
+  sim::RenderOptions o;
+  o.size = size;
+  auto set = sim::simulate_set(scene, o, role);
+  EXPECT_TRUE(set.ok()) << (set.ok() ? "" : set.message());
+  return set.ok() ? *set : ImageSet{};
+}
+
+TransferOptions options(Method m, bool truth = true) {
+  TransferOptions o;
+  o.match.method = m;
+  o.match.fast = false;
+  o.truth_normals = truth;
+  return o;
+}
+
+TEST(Transfer, WritesEverythingAndMeasuresQuality) {
+  const ImageSet dst = simulated("cup-white", Role::destination);
+  const ImageSet src = simulated("sphere-gray", Role::source);
+  auto r = transfer(dst, src, options(Method::linear));
+  ASSERT_TRUE(r.ok()) << r.message();
+  ASSERT_TRUE(r->quality.has_value());
+  const Quality& q = *r->quality;
+  EXPECT_GT(q.coverage, 0.999);
+  EXPECT_EQ(q.background_hits, 0);
+  // a sphere shows every visible normal: exact matching on true normals agrees closely
+  ASSERT_TRUE(q.normal_mean_deg.has_value());
+  EXPECT_LT(*q.normal_mean_deg, 3.0);
+  ASSERT_TRUE(q.psnr_db.has_value());
+  EXPECT_GT(*q.psnr_db, 20.0);
+  EXPECT_EQ(r->repainted.size(), dst.images.size());
+
+  const auto dir = std::filesystem::temp_directory_path() / ("veneer-transfer-test-" + std::to_string(::getpid()));
+  ASSERT_TRUE(write_transfer(*r, dir).ok());
+  for (const char* f : {"map.pfm", "map.png", "result_light_00.png", "result_median.png", "reuse.png", "metrics.json"})
+    EXPECT_TRUE(std::filesystem::exists(dir / f)) << f;
+  std::ifstream json(dir / "metrics.json");
+  const std::string text((std::istreambuf_iterator<char>(json)), std::istreambuf_iterator<char>());
+  EXPECT_NE(text.find("\"coverage\""), std::string::npos);
+  EXPECT_NE(text.find("\"match_s\""), std::string::npos);
+  auto back = read_map(dir / "map.pfm");
+  ASSERT_TRUE(back.ok());
+  auto again = evaluate_sets(*back, dst, src);
+  ASSERT_TRUE(again.ok()) << again.message();
+  EXPECT_NEAR(again->coverage, q.coverage, 1e-9);
+  EXPECT_NEAR(*again->normal_mean_deg, *q.normal_mean_deg, 1e-6);
+  std::filesystem::remove_all(dir);
+}
+
+TEST(Transfer, RelightingRewardsMatchingNormals) {
+  // the relighting PSNR must tell a normal-matched map from the bounding-box baseline
+  const ImageSet dst = simulated("bull", Role::destination);
+  const ImageSet src = simulated("sphere-red-gloss", Role::source);
+  auto matched = transfer(dst, src, options(Method::linear));
+  auto baseline = transfer(dst, src, options(Method::baseline));
+  ASSERT_TRUE(matched.ok() && baseline.ok());
+  ASSERT_TRUE(matched->quality->psnr_db && baseline->quality->psnr_db);
+  EXPECT_GT(*matched->quality->psnr_db, *baseline->quality->psnr_db + 1.0);
+  EXPECT_LT(*matched->quality->normal_mean_deg, *baseline->quality->normal_mean_deg);
+}
+
+TEST(Transfer, PipelineWithPhotometricStereoAndScale) {
+  const ImageSet dst = simulated("bull", Role::destination, {320, 212});
+  const ImageSet src = simulated("orange", Role::source, {320, 212});
+  auto o = options(Method::flann, false);
+  o.scale = 0.5;
+  auto r = transfer(dst, src, o);
+  ASSERT_TRUE(r.ok()) << r.message();
+  EXPECT_EQ(r->map.xy.cols, 160);
+  ASSERT_TRUE(r->quality.has_value());
+  const Quality& q = *r->quality;
+  std::printf("photometric stereo + segmentation at 160x106: coverage %.3f, background hits %d of %d, normal %.2f deg\n",
+              q.coverage, q.background_hits, q.destination_pixels, *q.normal_mean_deg);
+  // measured against the truth masks: segmentation differs from them only at the rim
+  EXPECT_GT(q.coverage, 0.85);
+  EXPECT_LT(q.background_hits, 0.03 * q.destination_pixels);
+  EXPECT_LT(*q.normal_mean_deg, 15.0);
+}
+
+TEST(Transfer, BadInput) {
+  const ImageSet dst = simulated("apple", Role::destination);
+  ImageSet src = simulated("banana", Role::source);
+  src.images.pop_back();
+  src.lights.pop_back();
+  auto o = options(Method::linear);
+  o.match.feature = Feature::intensities;
+  auto r = transfer(dst, src, o);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.message().find("same lamps"), std::string::npos) << r.message();
+  o.scale = 0;
+  EXPECT_FALSE(transfer(dst, src, o).ok());
+  ImageSet no_truth = dst;
+  no_truth.truth = {};
+  auto t = transfer(no_truth, src, options(Method::linear));
+  ASSERT_FALSE(t.ok());
+  EXPECT_NE(t.message().find("truth"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace veneer::match

@@ -1,0 +1,95 @@
+// veneer eval: quality figures of a map (against the sets' truth), or the
+// quality table of the thesis pairs.
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+
+#include "command.hpp"
+#include "veneer/io/imageset.hpp"
+#include "veneer/match/metrics.hpp"
+#include "veneer/match/transfer.hpp"
+
+namespace veneer::cli {
+namespace {
+
+struct EvalArgs {
+  std::string dst, src, map, out;
+  bool table = false, full = false, truth_normals = false, no_fast = false;
+  std::string size = "512x340";
+};
+
+int fail(const std::string& what, int code = 1) {
+  std::cerr << "veneer eval: " << what << "\n";
+  return code;
+}
+
+int run_table(const EvalArgs& a) {
+  match::TableOptions options;
+  int w = 0, h = 0;
+  if (std::sscanf(a.size.c_str(), "%dx%d", &w, &h) != 2 || w < 32 || h < 32 || w > 4096 || h > 4096)
+    return fail("--size must be WxH (32..4096), got '" + a.size + "'", 2);
+  options.size = {w, h};
+  options.full = a.full;
+  options.truth_normals = a.truth_normals;
+  options.include_fast = !a.no_fast;
+  ProgressBar bar("quality table");
+  Progress progress;
+  progress.on_progress = [&bar](double f, const std::string& stage) { bar.update(f, stage); };
+  auto rows = match::quality_table(options, progress);
+  bar.done();
+  if (!rows) return fail(rows.message());
+  const std::string text = match::format_table(*rows, options);
+  std::fputs(text.c_str(), stdout);
+  if (!a.out.empty()) {
+    std::ofstream f(a.out);
+    f << text;
+    if (!f) return fail("cannot write " + a.out);
+  }
+  return 0;
+}
+
+int run_map(const EvalArgs& a) {
+  if (a.dst.empty() || a.src.empty() || a.map.empty()) return fail("--dst, --src and --map are needed (or --table)", 2);
+  auto dst = read_set(a.dst);
+  if (!dst) return fail(dst.message());
+  auto src = read_set(a.src);
+  if (!src) return fail(src.message());
+  std::filesystem::path file = a.map;
+  if (std::filesystem::is_directory(file)) file /= "map.pfm";
+  auto map = match::read_map(file);
+  if (!map) return fail(map.message());
+  auto q = match::evaluate_sets(*map, *dst, *src);
+  if (!q) return fail(q.message());
+  std::printf("destination object pixels  %d\n", q->destination_pixels);
+  std::printf("coverage                   %.2f %%\n", 100 * q->coverage);
+  std::printf("mapped into background     %d\n", q->background_hits);
+  if (q->normal_mean_deg) {
+    std::printf("normal agreement, mean     %.2f deg\n", *q->normal_mean_deg);
+    std::printf("normal agreement, p95      %.2f deg\n", *q->normal_p95_deg);
+  } else {
+    std::printf("normal agreement           (no truth in both sets)\n");
+  }
+  std::printf("coherence                  %.2f %%\n", 100 * q->coherence);
+  std::printf("reuse, max per source px   %d\n", q->reuse_max);
+  std::printf("source object used         %.2f %%\n", 100 * q->source_used);
+  if (q->psnr_db) std::printf("relighting PSNR            %.2f dB\n", *q->psnr_db);
+  return 0;
+}
+
+}  // namespace
+}  // namespace veneer::cli
+
+VENEER_COMMAND(eval) {
+  auto args = std::make_shared<veneer::cli::EvalArgs>();
+  auto* cmd = app.add_subcommand("eval", "quality of a map against ground truth, or the quality table (--table)");
+  cmd->add_option("--dst", args->dst, "destination image set");
+  cmd->add_option("--src", args->src, "source image set");
+  cmd->add_option("--map", args->map, "transfer output folder (or its map.pfm)");
+  cmd->add_flag("--table", args->table, "simulate the thesis pairs and print the quality table");
+  cmd->add_flag("--full", args->full, "table: every method x feature x patch (slow)");
+  cmd->add_option("--size", args->size, "table: render size WxH (default 512x340)");
+  cmd->add_flag("--truth-normals", args->truth_normals, "table: match on true normals, not photometric stereo");
+  cmd->add_flag("--no-fast", args->no_fast, "table: leave out the fast engine's rows");
+  cmd->add_option("--out", args->out, "table: also write it to this markdown file");
+  return [args] { return args->table ? veneer::cli::run_table(*args) : veneer::cli::run_map(*args); };
+}

@@ -1,0 +1,80 @@
+// veneer inspect: the thesis's origin tool — lines from destination pixels to
+// the source pixels the map took their appearance from.
+#include <cstdio>
+#include <iostream>
+#include <sstream>
+
+#include "command.hpp"
+#include "veneer/io/image_io.hpp"
+#include "veneer/io/imageset.hpp"
+#include "veneer/match/transfer.hpp"
+
+namespace veneer::cli {
+namespace {
+
+struct InspectArgs {
+  std::string dst, src, map, out, points;
+  int count = 16;
+};
+
+int fail(const std::string& what, int code = 1) {
+  std::cerr << "veneer inspect: " << what << "\n";
+  return code;
+}
+
+int run(const InspectArgs& a) {
+  auto dst = read_set(a.dst);
+  if (!dst) return fail(dst.message());
+  auto src = read_set(a.src);
+  if (!src) return fail(src.message());
+  std::filesystem::path file = a.map;
+  if (std::filesystem::is_directory(file)) file /= "map.pfm";
+  auto map = match::read_map(file);
+  if (!map) return fail(map.message());
+  const double scale = match::map_scale(*map, *dst);
+  if (!(scale > 0 && scale <= 1.0001)) return fail("the map is wider than the destination set");
+  match::scale_set(*dst, scale);
+  match::scale_set(*src, scale);
+  std::vector<cv::Point> points;
+  if (!a.points.empty()) {
+    std::stringstream ss(a.points);
+    std::string item;
+    while (std::getline(ss, item, ';')) {
+      int x = 0, y = 0;
+      char comma = 0;
+      std::stringstream is(item);
+      if (!(is >> x >> comma >> y) || comma != ',')
+        return fail("--points wants 'x,y;x,y;...', could not read '" + item + "'", 2);
+      points.emplace_back(static_cast<int>(x * scale), static_cast<int>(y * scale));
+    }
+  } else {
+    points = match::spread_points(*map, a.count);
+  }
+  const cv::Mat picture =
+      match::origin_picture(*map, match::median_photo(dst->images), match::median_photo(src->images), points);
+  if (auto s = write_picture(a.out, picture); !s) return fail(s.message());
+  for (const cv::Point p : points) {
+    if (p.x >= 0 && p.y >= 0 && p.x < map->xy.cols && p.y < map->xy.rows && map->valid(p.x, p.y)) {
+      const cv::Vec2f m = map->xy.at<cv::Vec2f>(p);
+      std::printf("(%d, %d) <- (%.0f, %.0f)  distance %.4f\n", p.x, p.y, m[0], m[1], map->distance.at<float>(p));
+    } else {
+      std::printf("(%d, %d) not mapped\n", p.x, p.y);
+    }
+  }
+  return 0;
+}
+
+}  // namespace
+}  // namespace veneer::cli
+
+VENEER_COMMAND(inspect) {
+  auto args = std::make_shared<veneer::cli::InspectArgs>();
+  auto* cmd = app.add_subcommand("inspect", "side-by-side picture with lines from destination pixels to their source");
+  cmd->add_option("--dst", args->dst, "destination image set")->required();
+  cmd->add_option("--src", args->src, "source image set")->required();
+  cmd->add_option("--map", args->map, "transfer output folder (or its map.pfm)")->required();
+  cmd->add_option("--out", args->out, "picture to write (PNG)")->required();
+  cmd->add_option("--points", args->points, "destination pixels 'x,y;x,y;...' in the set's pixels (default: a grid)");
+  cmd->add_option("--count", args->count, "how many grid points when --points is not given (default 16)");
+  return [args] { return veneer::cli::run(*args); };
+}

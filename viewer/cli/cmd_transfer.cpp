@@ -1,0 +1,94 @@
+// veneer transfer: two image sets in, the correspondence map and the
+// destination repainted with the source's appearance out.
+#include <cstdio>
+#include <iostream>
+
+#include "command.hpp"
+#include "veneer/io/imageset.hpp"
+#include "veneer/match/transfer.hpp"
+
+namespace veneer::cli {
+namespace {
+
+struct TransferArgs {
+  std::string dst, src, out, method = "flann", feature = "normals";
+  int patch = 1, candidates = 10, iterations = 5, threads = 0;
+  double threshold = 0.05, scale = 1.0;
+  unsigned seed = 1;
+  bool faithful = false, truth_normals = false;
+};
+
+int fail(const std::string& what, int code = 1) {
+  std::cerr << "veneer transfer: " << what << "\n";
+  return code;
+}
+
+int run(const TransferArgs& a) {
+  match::TransferOptions options;
+  auto method = match::parse_method(a.method);
+  if (!method) return fail(method.message(), 2);
+  auto feature = match::parse_feature(a.feature);
+  if (!feature) return fail(feature.message(), 2);
+  options.match.method = *method;
+  options.match.feature = *feature;
+  options.match.patch = a.patch;
+  options.match.candidates = a.candidates;
+  options.match.threshold = a.threshold;
+  options.match.iterations = a.iterations;
+  options.match.seed = a.seed;
+  options.match.threads = a.threads;
+  options.match.fast = !a.faithful;
+  options.truth_normals = a.truth_normals;
+  options.scale = a.scale;
+  if (auto s = options.check(); !s) return fail(s.message(), 2);
+
+  auto dst = read_set(a.dst);
+  if (!dst) return fail(dst.message());
+  auto src = read_set(a.src);
+  if (!src) return fail(src.message());
+  ProgressBar bar("transfer");
+  Progress progress;
+  progress.on_progress = [&bar](double f, const std::string& stage) { bar.update(f, stage); };
+  auto result = match::transfer(*dst, *src, options, progress);
+  bar.done();
+  if (!result) return fail(result.message());
+  if (auto s = match::write_transfer(*result, a.out); !s) return fail(s.message());
+
+  std::printf("transfer %s -> %s: %s %s %dx%d, map written to %s\n", a.src.c_str(), a.dst.c_str(), a.method.c_str(),
+              a.feature.c_str(), a.patch, a.patch, a.out.c_str());
+  if (result->quality) {
+    const auto& g = *result->quality;
+    std::printf("  coverage %.1f %%", 100 * g.coverage);
+    if (g.normal_mean_deg) std::printf(", normal agreement %.2f deg mean / %.2f deg p95", *g.normal_mean_deg, *g.normal_p95_deg);
+    std::printf(", coherence %.1f %%, reuse max %d, source used %.1f %%", 100 * g.coherence, g.reuse_max,
+                100 * g.source_used);
+    if (g.psnr_db) std::printf(", relight PSNR %.2f dB", *g.psnr_db);
+    std::printf("\n");
+  }
+  return 0;
+}
+
+}  // namespace
+}  // namespace veneer::cli
+
+VENEER_COMMAND(transfer) {
+  auto args = std::make_shared<veneer::cli::TransferArgs>();
+  auto* cmd = app.add_subcommand("transfer", "correspondence map + destination repainted with the source's look");
+  cmd->add_option("--dst", args->dst, "destination image set (folder)")->required();
+  cmd->add_option("--src", args->src, "source image set (folder)")->required();
+  cmd->add_option("--out", args->out, "output folder (map.pfm, map.png, result_*.png, reuse.png, metrics.json)")
+      ->required();
+  cmd->add_option("--method", args->method,
+                  "linear | flann | candidates | patchmatch | regiongrow | baseline | coherent (default flann)");
+  cmd->add_option("--feature", args->feature, "normals | intensities (default normals)");
+  cmd->add_option("--patch", args->patch, "patch side 1, 3, 5 or 7 (default 1)");
+  cmd->add_option("--candidates", args->candidates, "K for candidates, 1..100 (default 10)");
+  cmd->add_option("--threshold", args->threshold, "regiongrow threshold >= 0 (default 0.05; 0 = direct matching)");
+  cmd->add_option("--iterations", args->iterations, "patchmatch iterations (default 5)");
+  cmd->add_option("--seed", args->seed, "random seed (patchmatch, coherent)");
+  cmd->add_option("--threads", args->threads, "threads, 0 = all cores");
+  cmd->add_option("--scale", args->scale, "resize both sets first, (0, 1] (default 1)");
+  cmd->add_flag("--faithful", args->faithful, "use the thesis's code paths, never the fast engine");
+  cmd->add_flag("--truth-normals", args->truth_normals, "match on truth/ normals and masks (simulated sets)");
+  return [args] { return veneer::cli::run(*args); };
+}

@@ -1,0 +1,84 @@
+#pragma once
+// Quality of a correspondence map, measured against ground truth (simulated
+// sets carry truth/): what a researcher comparing matching methods reads.
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "veneer/io/imageset.hpp"
+#include "veneer/match/matcher.hpp"
+#include "veneer/sim/simulator.hpp"
+#include "veneer/util/expected.hpp"
+#include "veneer/util/progress.hpp"
+
+namespace veneer::match {
+
+struct Quality {
+  int destination_pixels = 0;   // destination object pixels (the mask given)
+  int mapped_pixels = 0;        // of those, mapped onto a source object pixel
+  double coverage = 0;          // mapped / destination object pixels
+  int background_hits = 0;      // mapped onto source background (must be 0)
+  // normal agreement: angle between the destination's true normal and the
+  // source's true normal at the match [degrees]; only with both truths
+  std::optional<double> normal_mean_deg, normal_p95_deg;
+  double coherence = 0;         // share of 4-neighbour destination pairs (both mapped) whose
+                                // matches lie within 1.5 px of each other in the source
+  int reuse_max = 0;            // most destination pixels sharing one source pixel
+  double source_used = 0;       // share of source object pixels used at all
+  std::optional<double> psnr_db;  // relighting under an extra lamp (see relight_psnr)
+};
+
+// `destination_mask` / `source_mask`: the object pixels (CV_8UC1); the truth
+// normals (CV_32FC3) may be empty, then normal agreement is not measured.
+Quality evaluate(const Map& map, const cv::Mat& destination_mask, const cv::Mat& source_mask,
+                 const cv::Mat& destination_normals = {}, const cv::Mat& source_normals = {});
+
+// How many destination pixels use each source pixel (CV_32SC1 of `source_size`).
+cv::Mat reuse_counts(const Map& map, cv::Size source_size);
+
+// PSNR [dB] of `transferred` against `reference` (linear BGR in [0,1], values
+// clipped) over the pixels of `mask`; peak = 1 (full scale).
+double psnr(const cv::Mat& transferred, const cv::Mat& reference, const cv::Mat& mask);
+
+// The extra lamp of the relighting measure: a position off the rig's ring
+// (upper left, closer to the object than the ring), so it took no part in matching.
+cv::Vec3d relight_lamp_position();
+
+// Relighting error: the source scene rendered under the extra lamp, carried
+// through `map` onto the destination, against the destination's shape
+// rendered in the source's material under the same lamp. Needs both sets to be
+// simulated (ImageSet::scene set) and a source whose material is uniform
+// (sphere-red-gloss, sphere-gray); fails otherwise with the reason.
+Expected<double> relight_psnr(const Map& map, const ImageSet& destination, const ImageSet& source,
+                              const cv::Mat& destination_mask);
+bool relight_measurable(const std::string& source_scene);
+
+// The quality table of the thesis pairs (issue 3): simulated sets at a reduced
+// size, every chosen method x feature x patch.
+struct TableOptions {
+  cv::Size size{512, 340};     // render size of both sets [px] (the faithful methods are slow at 1024x680)
+  std::vector<std::pair<std::string, std::string>> pairs;  // (destination, source); empty = the eight of issue 3
+  bool full = false;           // false: a chosen subset of rows per pair (fits a bench); true: all combinations
+  bool truth_normals = false;  // match on true normals instead of photometric stereo
+  int threads = 0;             // 0 = all cores
+  bool include_fast = true;    // add rows of the fast engine where it serves
+};
+struct TableRow {
+  std::string destination, source, method, feature, engine;  // engine: "faithful" | "fast"
+  int patch = 1, candidates = 0;
+  double threshold = 0;
+  int destination_pixels = 0, source_pixels = 0;
+  Quality quality;
+  double seconds = 0;  // compute_map wall time
+  std::string error;   // non-empty when the run failed
+};
+std::vector<std::pair<std::string, std::string>> thesis_pairs();
+// A pair of one object with itself (blocks -> blocks) compares two captures:
+// the source's is moved in the frame and made smaller, like a second shot.
+void second_capture(sim::RenderOptions& options);
+Expected<std::vector<TableRow>> quality_table(const TableOptions& options, const Progress& progress = {});
+std::string format_table(const std::vector<TableRow>& rows, const TableOptions& options);
+
+}  // namespace veneer::match

@@ -1,0 +1,87 @@
+#pragma once
+// Appearance transfer as the thesis shows it: two image sets in, the map and
+// the destination repainted with the source's photos out (DESIGN.md: map.pfm,
+// map.png), plus the reuse heat map and metrics.json.
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "veneer/io/imageset.hpp"
+#include "veneer/match/matcher.hpp"
+#include "veneer/match/metrics.hpp"
+#include "veneer/util/expected.hpp"
+#include "veneer/util/progress.hpp"
+
+namespace veneer::match {
+
+struct TransferOptions {
+  MatchOptions match;          // method, feature, patch, ...
+  bool truth_normals = false;  // use truth/normals.pfm and truth/mask.png (simulated sets) instead of
+                               // photometric stereo and segmentation
+  double scale = 1.0;          // resize both sets first (0 < scale <= 1; 0.5 = half size)
+  Status check() const;
+};
+
+// One object ready for matching, with the stage timings that produced it.
+struct PreparedObject {
+  ObjectView view;          // normals, mask, photos (ambient removed), lamp ids
+  double segment_seconds = 0;
+  double normals_seconds = 0;
+};
+
+// Resizes a set in place (photos by area, masks and truth nearest, normals
+// renormalized, camera intrinsics scaled).
+void scale_set(ImageSet& set, double scale);
+
+Expected<PreparedObject> prepare_object(const ImageSet& set, bool truth_normals, const Progress& progress = {});
+
+struct TransferResult {
+  Map map;
+  cv::Size source_size;
+  std::vector<cv::Mat> repainted;  // per lamp: the destination photo with the source's pasted through the map
+  cv::Mat repainted_median;        // the same from the per-pixel median of all lamps
+  cv::Mat reuse;                   // CV_32SC1 counts per source pixel
+  cv::Mat source_median;           // the source photos' per-pixel median (backdrop of the reuse picture)
+  std::optional<Quality> quality;  // when both sets carry truth
+  std::string metrics_json;        // timings, options, sizes, quality
+};
+
+Expected<TransferResult> transfer(const ImageSet& destination, const ImageSet& source,
+                                  const TransferOptions& options, const Progress& progress = {});
+// Writes map.pfm, map.png, result_light_NN.png, result_median.png, reuse.png,
+// metrics.json into `folder` (created when missing).
+Status write_transfer(const TransferResult& result, const std::filesystem::path& folder);
+
+// Quality of a map between two sets: truth masks and normals when both sets
+// carry truth (else segmentation masks and no normal agreement), relighting
+// PSNR when measurable. Sets are resized to the map's size first when the map
+// was computed at a reduced scale (same factor for the source).
+Expected<Quality> evaluate_sets(const Map& map, const ImageSet& destination, const ImageSet& source);
+// The scale factor a map was computed at relative to `destination` (map width / set width).
+double map_scale(const Map& map, const ImageSet& destination);
+
+// Pieces, for the CLI, the viewer and the figures:
+cv::Mat median_photo(const std::vector<cv::Mat>& photos);  // per-pixel, per-channel median
+// The destination `backdrop` with the source's `photo` pasted through `map`
+// (linear BGR CV_32FC3; backdrop may be empty = black).
+cv::Mat repaint(const Map& map, const cv::Mat& photo, const cv::Mat& backdrop = {});
+// The thesis's picture of a map: R = x / width, G = y / height, B = 1 (8-bit BGR), black unmapped.
+cv::Mat map_picture(const Map& map, cv::Size source_size);
+// Reuse counts as a heat map over the grey source picture (8-bit BGR).
+cv::Mat reuse_picture(const cv::Mat& counts, const cv::Mat& source_photo);
+
+// The thesis's origin tool: destination (left) and source (right) side by
+// side (linear photos, tonemapped), a line from each chosen destination pixel
+// to its source pixel; unmapped points get a red cross.
+cv::Mat origin_picture(const Map& map, const cv::Mat& destination_photo, const cv::Mat& source_photo,
+                       const std::vector<cv::Point>& points);
+// About `count` mapped destination pixels spread over the object (a grid), for origin_picture.
+std::vector<cv::Point> spread_points(const Map& map, int count);
+
+// map.pfm (x, y, distance; -1 unmapped) in and out.
+Status write_map(const std::filesystem::path& file, const Map& map);
+Expected<Map> read_map(const std::filesystem::path& file);
+
+}  // namespace veneer::match

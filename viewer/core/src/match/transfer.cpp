@@ -1,0 +1,359 @@
+// Appearance transfer end to end (transfer.hpp).
+#include "veneer/match/transfer.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "veneer/io/image_io.hpp"
+#include "veneer/ps/photometric_stereo.hpp"
+#include "veneer/ps/segmentation.hpp"
+#include "veneer/util/log.hpp"
+
+namespace veneer::match {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+Progress sub_progress(const Progress& p, double from, double to) {
+  Progress out;
+  out.cancel = p.cancel;
+  if (p.on_progress)
+    out.on_progress = [p, from, to](double f, const std::string& stage) { p.report(from + (to - from) * f, stage); };
+  return out;
+}
+
+nlohmann::json quality_json(const Quality& q) {
+  nlohmann::json j;
+  j["destination_pixels"] = q.destination_pixels;
+  j["mapped_pixels"] = q.mapped_pixels;
+  j["coverage"] = q.coverage;
+  j["background_hits"] = q.background_hits;
+  if (q.normal_mean_deg) j["normal_mean_deg"] = *q.normal_mean_deg;
+  if (q.normal_p95_deg) j["normal_p95_deg"] = *q.normal_p95_deg;
+  j["coherence"] = q.coherence;
+  j["reuse_max"] = q.reuse_max;
+  j["source_used"] = q.source_used;
+  if (q.psnr_db) j["relight_psnr_db"] = *q.psnr_db;
+  return j;
+}
+
+}  // namespace
+
+Status TransferOptions::check() const {
+  if (auto s = match.check(); !s) return s;
+  if (!(scale > 0 && scale <= 1)) return make_error("scale must be in (0, 1], got " + std::to_string(scale));
+  return {};
+}
+
+void scale_set(ImageSet& set, double scale) {
+  if (scale == 1.0) return;
+  const cv::Size size(std::max(1, static_cast<int>(std::lround(set.size.width * scale))),
+                      std::max(1, static_cast<int>(std::lround(set.size.height * scale))));
+  auto area = [&](cv::Mat& m) {
+    if (!m.empty()) cv::resize(m, m, size, 0, 0, cv::INTER_AREA);
+  };
+  auto nearest = [&](cv::Mat& m) {
+    if (!m.empty()) cv::resize(m, m, size, 0, 0, cv::INTER_NEAREST);
+  };
+  for (auto& im : set.images) area(im);
+  area(set.ambient);
+  nearest(set.mask);
+  nearest(set.truth.mask);
+  nearest(set.truth.normals);
+  area(set.truth.albedo);
+  nearest(set.truth.depth);
+  const double sx = static_cast<double>(size.width) / set.size.width;
+  set.camera.focal_px *= sx;
+  set.camera.cx *= sx;
+  set.camera.cy *= static_cast<double>(size.height) / set.size.height;
+  set.size = size;
+}
+
+Expected<PreparedObject> prepare_object(const ImageSet& set, bool truth_normals, const Progress& progress) {
+  PreparedObject out;
+  const std::string who = set.id.empty() ? set.origin.string() : set.id;
+  if (truth_normals) {
+    if (!set.truth.present()) return make_error("set " + who + " has no truth/normals.pfm (needed by truth normals)");
+    out.view.normals = set.truth.normals.clone();
+    out.view.mask = set.truth.mask.empty() ? cv::Mat() : set.truth.mask.clone();
+    if (out.view.mask.empty()) {
+      cv::Mat m;
+      cv::transform(set.truth.normals, m, cv::Matx13f(1, 1, 1));
+      out.view.mask = m != 0;
+    }
+  } else {
+    auto t0 = Clock::now();
+    auto seg = ps::segment(set);
+    if (!seg) return make_error("set " + who + ": segmentation: " + seg.message());
+    out.segment_seconds = since(t0);
+    t0 = Clock::now();
+    auto solved = ps::photometric_stereo(set, seg->mask, {}, progress);
+    if (!solved) return make_error("set " + who + ": photometric stereo: " + solved.message());
+    out.normals_seconds = since(t0);
+    out.view.normals = solved->normals;
+    out.view.mask = seg->mask;
+  }
+  for (const auto& im : set.images) {
+    cv::Mat photo = im.clone();
+    if (!set.ambient.empty() && set.ambient.size() == im.size()) {
+      photo -= set.ambient;
+      photo = cv::max(photo, 0.0);
+    }
+    out.view.images.push_back(photo);
+  }
+  for (const auto& light : set.lights) out.view.lamps.push_back(light.lamp_id);
+  if (out.view.lamps.size() != out.view.images.size()) out.view.lamps.clear();
+  return out;
+}
+
+cv::Mat median_photo(const std::vector<cv::Mat>& photos) {
+  if (photos.empty()) return {};
+  cv::Mat out(photos[0].size(), CV_32FC3);
+  const int n = static_cast<int>(photos.size());
+  std::vector<float> v(n);
+  for (int y = 0; y < out.rows; ++y)
+    for (int x = 0; x < out.cols; ++x)
+      for (int c = 0; c < 3; ++c) {
+        for (int i = 0; i < n; ++i) v[i] = photos[i].at<cv::Vec3f>(y, x)[c];
+        std::nth_element(v.begin(), v.begin() + n / 2, v.end());
+        float m = v[n / 2];
+        if (n % 2 == 0) m = 0.5f * (m + *std::max_element(v.begin(), v.begin() + n / 2));
+        out.at<cv::Vec3f>(y, x)[c] = m;
+      }
+  return out;
+}
+
+cv::Mat repaint(const Map& map, const cv::Mat& photo, const cv::Mat& backdrop) {
+  cv::Mat out = backdrop.empty() ? cv::Mat(map.xy.size(), CV_32FC3, cv::Scalar::all(0)) : backdrop.clone();
+  for (int y = 0; y < map.xy.rows; ++y)
+    for (int x = 0; x < map.xy.cols; ++x) {
+      const cv::Vec2f m = map.xy.at<cv::Vec2f>(y, x);
+      if (m[0] < 0) continue;
+      const int sx = static_cast<int>(std::lround(m[0])), sy = static_cast<int>(std::lround(m[1]));
+      if (sx < photo.cols && sy < photo.rows) out.at<cv::Vec3f>(y, x) = photo.at<cv::Vec3f>(sy, sx);
+    }
+  return out;
+}
+
+cv::Mat map_picture(const Map& map, cv::Size source_size) {
+  cv::Mat out(map.xy.size(), CV_8UC3, cv::Scalar::all(0));
+  for (int y = 0; y < map.xy.rows; ++y)
+    for (int x = 0; x < map.xy.cols; ++x) {
+      const cv::Vec2f m = map.xy.at<cv::Vec2f>(y, x);
+      if (m[0] < 0) continue;
+      out.at<cv::Vec3b>(y, x) = cv::Vec3b(255, cv::saturate_cast<uchar>(255.0 * m[1] / source_size.height),
+                                          cv::saturate_cast<uchar>(255.0 * m[0] / source_size.width));
+    }
+  return out;
+}
+
+cv::Mat reuse_picture(const cv::Mat& counts, const cv::Mat& source_photo) {
+  cv::Mat grey(counts.size(), CV_8UC3, cv::Scalar::all(0));
+  if (!source_photo.empty()) {
+    cv::Mat g;
+    cv::cvtColor(tonemap_picture(source_photo), g, cv::COLOR_BGR2GRAY);
+    g *= 0.45;  // dimmed so the heat stands out
+    cv::cvtColor(g, grey, cv::COLOR_GRAY2BGR);
+  }
+  double max_count = 0;
+  cv::minMaxLoc(counts, nullptr, &max_count);
+  if (max_count <= 0) return grey;
+  cv::Mat level(counts.size(), CV_8UC1, cv::Scalar(0));
+  for (int y = 0; y < counts.rows; ++y)
+    for (int x = 0; x < counts.cols; ++x) {
+      const int c = counts.at<int>(y, x);
+      if (c > 0) level.at<uchar>(y, x) = cv::saturate_cast<uchar>(40 + 215 * std::log1p(c) / std::log1p(max_count));
+    }
+  cv::Mat heat;
+  cv::applyColorMap(level, heat, cv::COLORMAP_INFERNO);
+  heat.copyTo(grey, counts > 0);
+  return grey;
+}
+
+cv::Mat origin_picture(const Map& map, const cv::Mat& destination_photo, const cv::Mat& source_photo,
+                       const std::vector<cv::Point>& points) {
+  const cv::Mat d = tonemap_picture(destination_photo), s = tonemap_picture(source_photo);
+  const int h = std::max(d.rows, s.rows);
+  cv::Mat out(h, d.cols + s.cols, CV_8UC3, cv::Scalar::all(0));
+  d.copyTo(out(cv::Rect(0, 0, d.cols, d.rows)));
+  s.copyTo(out(cv::Rect(d.cols, 0, s.cols, s.rows)));
+  cv::line(out, {d.cols, 0}, {d.cols, h - 1}, cv::Scalar(90, 90, 90), 1);
+  const int r = std::max(2, d.cols / 200);
+  for (size_t i = 0; i < points.size(); ++i) {
+    const cv::Point p = points[i];
+    // distinct hues around the colour wheel
+    cv::Mat hsv(1, 1, CV_8UC3, cv::Scalar(static_cast<double>((i * 37) % 180), 220, 255)), bgr;
+    cv::cvtColor(hsv, bgr, cv::COLOR_HSV2BGR);
+    const cv::Vec3b c = bgr.at<cv::Vec3b>(0, 0);
+    const cv::Scalar colour(c[0], c[1], c[2]);
+    if (p.x < 0 || p.y < 0 || p.x >= map.xy.cols || p.y >= map.xy.rows || !map.valid(p.x, p.y)) {
+      cv::drawMarker(out, p, cv::Scalar(0, 0, 255), cv::MARKER_TILTED_CROSS, 4 * r, 2);
+      continue;
+    }
+    const cv::Vec2f m = map.xy.at<cv::Vec2f>(p);
+    const cv::Point q(d.cols + static_cast<int>(std::lround(m[0])), static_cast<int>(std::lround(m[1])));
+    cv::line(out, p, q, colour, 1, cv::LINE_AA);
+    cv::circle(out, p, r, colour, -1, cv::LINE_AA);
+    cv::circle(out, q, r, colour, -1, cv::LINE_AA);
+  }
+  return out;
+}
+
+std::vector<cv::Point> spread_points(const Map& map, int count) {
+  std::vector<cv::Point> mapped;
+  for (int y = 0; y < map.xy.rows; ++y)
+    for (int x = 0; x < map.xy.cols; ++x)
+      if (map.valid(x, y)) mapped.emplace_back(x, y);
+  if (mapped.empty() || count <= 0) return {};
+  const cv::Rect box = cv::boundingRect(mapped);
+  const int side = std::max(1, static_cast<int>(std::ceil(std::sqrt(static_cast<double>(count)))));
+  std::vector<cv::Point> out;
+  for (int j = 0; j < side; ++j)
+    for (int i = 0; i < side; ++i) {
+      const int x = box.x + (2 * i + 1) * box.width / (2 * side), y = box.y + (2 * j + 1) * box.height / (2 * side);
+      if (x < map.xy.cols && y < map.xy.rows && map.valid(x, y)) out.emplace_back(x, y);
+    }
+  return out;
+}
+
+Status write_map(const std::filesystem::path& file, const Map& map) {
+  std::vector<cv::Mat> channels;
+  cv::split(map.xy, channels);
+  channels.push_back(map.distance);
+  cv::Mat xyd;
+  cv::merge(channels, xyd);
+  return write_pfm(file, xyd, true);
+}
+
+Expected<Map> read_map(const std::filesystem::path& file) {
+  auto m = read_pfm(file, true);
+  if (!m) return m.error();
+  if (m->type() != CV_32FC3) return make_error(file.string() + ": a map has 3 channels (x, y, distance)");
+  std::vector<cv::Mat> ch;
+  cv::split(*m, ch);
+  Map map;
+  cv::merge(std::vector<cv::Mat>{ch[0], ch[1]}, map.xy);
+  map.distance = ch[2];
+  return map;
+}
+
+Expected<TransferResult> transfer(const ImageSet& destination_in, const ImageSet& source_in,
+                                  const TransferOptions& options, const Progress& progress) {
+  if (auto s = options.check(); !s) return s.error();
+  const auto t_all = Clock::now();
+  ImageSet destination = destination_in, source = source_in;
+  scale_set(destination, options.scale);
+  scale_set(source, options.scale);
+  nlohmann::json timings;
+  auto dst = prepare_object(destination, options.truth_normals, sub_progress(progress, 0.0, 0.15));
+  if (!dst) return make_error("destination: " + dst.message());
+  auto src = prepare_object(source, options.truth_normals, sub_progress(progress, 0.15, 0.3));
+  if (!src) return make_error("source: " + src.message());
+  timings["segment_destination_s"] = dst->segment_seconds;
+  timings["normals_destination_s"] = dst->normals_seconds;
+  timings["segment_source_s"] = src->segment_seconds;
+  timings["normals_source_s"] = src->normals_seconds;
+
+  auto t0 = Clock::now();
+  auto map = compute_map(dst->view, src->view, options.match, sub_progress(progress, 0.3, 0.9));
+  if (!map) return map.error();
+  timings["match_s"] = since(t0);
+
+  TransferResult result;
+  result.map = std::move(*map);
+  result.source_size = source.size;
+  t0 = Clock::now();
+  progress.report(0.9, "repaint");
+  for (size_t i = 0; i < src->view.images.size() && i < dst->view.images.size(); ++i)
+    result.repainted.push_back(repaint(result.map, src->view.images[i], dst->view.images[i]));
+  result.source_median = median_photo(src->view.images);
+  result.repainted_median = repaint(result.map, result.source_median, median_photo(dst->view.images));
+  result.reuse = reuse_counts(result.map, source.size);
+  timings["repaint_s"] = since(t0);
+
+  nlohmann::json j;
+  j["destination"] = {{"id", destination.id}, {"scene", destination.scene}, {"size", {destination.size.width, destination.size.height}},
+                      {"object_pixels", cv::countNonZero(dst->view.mask)}};
+  j["source"] = {{"id", source.id}, {"scene", source.scene}, {"size", {source.size.width, source.size.height}},
+                 {"object_pixels", cv::countNonZero(src->view.mask)}};
+  const auto& o = options.match;
+  j["options"] = {{"method", method_name(o.method)}, {"feature", feature_name(o.feature)}, {"patch", o.patch},
+                  {"candidates", o.candidates}, {"threshold", o.threshold}, {"iterations", o.iterations},
+                  {"fast", o.fast}, {"seed", o.seed}, {"truth_normals", options.truth_normals},
+                  {"scale", options.scale}};
+  if (destination.truth.present() && source.truth.present()) {
+    t0 = Clock::now();
+    Quality q = evaluate(result.map, destination.truth.mask, source.truth.mask, destination.truth.normals,
+                         source.truth.normals);
+    if (relight_measurable(source.scene)) {
+      auto p = relight_psnr(result.map, destination, source, destination.truth.mask);
+      if (p) q.psnr_db = *p;
+      else j["relight_error"] = p.message();
+    }
+    result.quality = q;
+    j["quality"] = quality_json(q);
+    timings["quality_s"] = since(t0);
+  }
+  timings["total_s"] = since(t_all);
+  j["timings"] = timings;
+  result.metrics_json = j.dump(2);
+  progress.report(1.0, "done");
+  return result;
+}
+
+double map_scale(const Map& map, const ImageSet& destination) {
+  return destination.size.width > 0 ? static_cast<double>(map.xy.cols) / destination.size.width : 1.0;
+}
+
+Expected<Quality> evaluate_sets(const Map& map, const ImageSet& destination_in, const ImageSet& source_in) {
+  const double scale = map_scale(map, destination_in);
+  if (!(scale > 0 && scale <= 1.0001))
+    return make_error("the map is " + std::to_string(map.xy.cols) + " px wide but the destination set " +
+                      std::to_string(destination_in.size.width));
+  ImageSet destination = destination_in, source = source_in;
+  if (std::abs(scale - 1.0) > 1e-9) {
+    scale_set(destination, scale);
+    scale_set(source, scale);
+  }
+  if (map.xy.size() != destination.size)
+    return make_error("the map's size does not match the destination set's (scaled) size");
+  if (destination.truth.present() && source.truth.present()) {
+    Quality q = evaluate(map, destination.truth.mask, source.truth.mask, destination.truth.normals,
+                         source.truth.normals);
+    if (relight_measurable(source.scene)) {
+      auto p = relight_psnr(map, destination, source, destination.truth.mask);
+      if (!p) return make_error("relighting: " + p.message());
+      q.psnr_db = *p;
+    }
+    return q;
+  }
+  auto dm = ps::segment(destination);
+  if (!dm) return make_error("destination: segmentation: " + dm.message());
+  auto sm = ps::segment(source);
+  if (!sm) return make_error("source: segmentation: " + sm.message());
+  return evaluate(map, dm->mask, sm->mask);
+}
+
+Status write_transfer(const TransferResult& r, const std::filesystem::path& folder) {
+  std::error_code ec;
+  std::filesystem::create_directories(folder, ec);
+  if (ec) return make_error("cannot create " + folder.string() + ": " + ec.message());
+  if (auto s = write_map(folder / "map.pfm", r.map); !s) return s;
+  if (auto s = write_picture(folder / "map.png", map_picture(r.map, r.source_size)); !s) return s;
+  for (size_t i = 0; i < r.repainted.size(); ++i) {
+    char name[64];
+    std::snprintf(name, sizeof name, "result_light_%02zu.png", i);
+    if (auto s = write_picture(folder / name, tonemap_picture(r.repainted[i])); !s) return s;
+  }
+  if (auto s = write_picture(folder / "result_median.png", tonemap_picture(r.repainted_median)); !s) return s;
+  if (auto s = write_picture(folder / "reuse.png", reuse_picture(r.reuse, r.source_median)); !s) return s;
+  return write_file_atomic(folder / "metrics.json", r.metrics_json + "\n");
+}
+
+}  // namespace veneer::match
