@@ -85,6 +85,8 @@ Map fast_map(const ObjectView& d, const ObjectView& s, const MatchOptions& o, fa
 struct Compare {
   int pixels = 0, same_xy = 0, worse = 0;
   double max_rel = 0;
+  double sum = 0, sum_exact = 0;  // distances summed over the object
+  double mean_ratio() const { return sum_exact > 0 ? sum / sum_exact : 1.0; }
 };
 
 // Same pixels mapped; count identical matches; distances relative to the exact.
@@ -100,6 +102,8 @@ Compare compare(const Map& a, const Map& exact_map, const cv::Mat& mask) {
       const cv::Vec2f p = a.xy.at<cv::Vec2f>(y, x), q = exact_map.xy.at<cv::Vec2f>(y, x);
       if (p == q) ++c.same_xy;
       const float da = a.distance.at<float>(y, x), de = exact_map.distance.at<float>(y, x);
+      c.sum += da;
+      c.sum_exact += de;
       if (da > de) {
         ++c.worse;
         c.max_rel = std::max(c.max_rel, static_cast<double>(da - de) / std::max(1e-6f, de));
@@ -197,9 +201,12 @@ TEST_F(FastEngine, IntensitiesOneByOneEqualLinearExactly) {
   EXPECT_GT(st.explained_variance, 0.99);
 }
 
-// Patches: certified re-ranking is exact up to float summation order, so the
-// stated tolerance is 1e-4 relative on every pixel's distance, and at least
-// 99 % identical matches (the rest are equal-distance ties).
+// Patches. Intensities go through the certified re-ranking, exact up to float
+// summation order: tolerance 1e-4 relative on every pixel's distance and at
+// least 99 % identical matches (the rest are equal-distance ties). Normal
+// patches take the fast approximate path (12 nearest patch-mean directions +
+// 2 propagated candidates): at least 95 % identical matches and the mean
+// distance within 1 % of the exact one.
 TEST_F(FastEngine, PatchesMatchLinearWithinTolerance) {
   const ObjectView dst = sphere({60, 50}, {30.f, 26.f}, 19.f, 0.12f, 24, 4);
   const ObjectView src = sphere({70, 60}, {33.f, 30.f}, 23.f, 0.12f, 0, 5);
@@ -211,9 +218,14 @@ TEST_F(FastEngine, PatchesMatchLinearWithinTolerance) {
       const Map e = exact(dst, src, o);
       const Compare c = compare(fm, e, dst.mask);
       SCOPED_TRACE(std::string(feature_name(f)) + " " + std::to_string(patch));
-      EXPECT_LE(c.max_rel, 1e-4);
-      EXPECT_GE(c.same_xy, 0.99 * c.pixels);
-      EXPECT_GT(st.certified, 0.95);
+      if (f == Feature::intensities) {
+        EXPECT_LE(c.max_rel, 1e-4);
+        EXPECT_GE(c.same_xy, 0.99 * c.pixels);
+        EXPECT_GT(st.certified, 0.95);
+      } else {
+        EXPECT_GE(c.same_xy, 0.95 * c.pixels);
+        EXPECT_LE(c.mean_ratio(), 1.01);
+      }
     }
 }
 
@@ -229,7 +241,8 @@ TEST_F(FastEngine, CandidatesEqualTheFaithfulMethod) {
   o.candidates = 1;
   const Compare c = compare(fast_map(dst, src, o), exact(dst, src, opts(Method::linear, Feature::normals, 3, false)),
                             dst.mask);
-  EXPECT_GE(c.same_xy, 0.99 * c.pixels);
+  EXPECT_GE(c.same_xy, 0.95 * c.pixels);  // the approximate patch path's tolerance
+  EXPECT_LE(c.mean_ratio(), 1.01);
 }
 
 TEST_F(FastEngine, RegionGrowAtZeroIsDirectAndFollowsTheFaithfulMethod) {
@@ -237,10 +250,19 @@ TEST_F(FastEngine, RegionGrowAtZeroIsDirectAndFollowsTheFaithfulMethod) {
   o.threshold = 0;
   Compare c = compare(fast_map(dst, src, o), exact(dst, src, opts(Method::linear, Feature::normals, 3, false)),
                       dst.mask);
-  EXPECT_GE(c.same_xy, 0.99 * c.pixels);
+  EXPECT_GE(c.same_xy, 0.95 * c.pixels);  // seeds from the approximate patch path
+  EXPECT_LE(c.mean_ratio(), 1.01);
+  // Growth decisions chain, so a few different seeds move whole regions: the
+  // tolerance is 93 % identical and the mean distance within 5 %.
   o.threshold = 0.08;
   c = compare(fast_map(dst, src, o), exact(dst, src, o), dst.mask);
-  EXPECT_GE(c.same_xy, 0.99 * c.pixels);
+  EXPECT_GE(c.same_xy, 0.93 * c.pixels);
+  EXPECT_LE(c.mean_ratio(), 1.05);
+  // with 1x1 normals (exact seeds) the growth is the faithful one, pixel for pixel
+  auto o1 = opts(Method::regiongrow, Feature::normals, 1, true);
+  o1.threshold = 0.05;
+  c = compare(fast_map(dst, src, o1), exact(dst, src, o1), dst.mask);
+  EXPECT_EQ(c.same_xy, c.pixels);
 }
 
 // PatchMatch is approximate; the stated tolerance: its mean distance within

@@ -2,12 +2,13 @@
 // StyleBlit (Sýkora et al., Eurographics 2019).
 //
 // Every destination pixel first gets its nearest source pixel by the chosen
-// feature (the fast exact/certified search). Then, for jittered seed grids of
+// feature (the fast exact search); for normals both objects are first
+// low-passed (masked 5x5 mean: the guide) and the patch size is not used. Then, for jittered seed grids of
 // spacing 2^L ... 4, 2 (coarse to fine), a pixel p looks up the nearest seed
 // s of the grid (among the 3x3 cells around its own), proposes the source
 // pixel m(s) + (p - s) -- the seed's match shifted by p's offset from the seed,
 // i.e. a whole chunk of source copied rigidly -- and keeps the coarsest
-// proposal that lands on the source object with a per-pixel feature error
+// proposal that lands on the source object with a per-pixel guide error
 // (RMS, the map's scale; |dn| for normals) under options.coherent_threshold.
 // Pixels no level accepts keep their nearest match. Jitter comes from a hash
 // of (seed, level, cell): the same options give the same map, and a small
@@ -21,13 +22,48 @@
 #include <algorithm>
 #include <cmath>
 
+#include <opencv2/imgproc.hpp>
+
 #include "engine.hpp"
 #include "nearest.hpp"
 
 namespace veneer::match::fast {
 
-Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOptions& o, const Progress& p,
+namespace {
+
+// The guide for normals: a masked 5x5 mean of the normals, renormalised. Fine
+// relief (an orange's dimples, a stone's grain) is appearance to carry along,
+// not shape to match; judged on raw normals, every chunk would break on it.
+Object normal_guide(const Object& o) {
+  Object g = o;
+  cv::Mat on = o.row_of >= 0, weight, masked = cv::Mat::zeros(o.size, CV_32FC3), sum, count;
+  o.values.copyTo(masked, on);
+  on.convertTo(weight, CV_32F, 1.0 / 255.0);
+  cv::boxFilter(masked, sum, -1, cv::Size(5, 5), cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
+  cv::boxFilter(weight, count, -1, cv::Size(5, 5), cv::Point(-1, -1), false, cv::BORDER_CONSTANT);
+  g.values = sum;
+  g.patch = 1;
+  g.dims = 3;
+  g.slot.assign(g.rows(), -1);
+  g.rim.clear();
+  for (int i = 0; i < g.rows(); ++i) {
+    const cv::Point q = g.pixels[i];
+    cv::Vec3f v = sum.at<cv::Vec3f>(q.y, q.x) / std::max(1e-6f, count.at<float>(q.y, q.x));
+    const float len = static_cast<float>(cv::norm(v));
+    if (len > 1e-6f) v /= len;
+    g.values.at<cv::Vec3f>(q.y, q.x) = v;
+    for (int k = 0; k < 3; ++k) g.flat[static_cast<size_t>(i) * 3 + k] = v[k];
+  }
+  return g;
+}
+
+}  // namespace
+
+Expected<Map> run_coherent(const Object& dst_raw, const Object& src_raw, const MatchOptions& o, const Progress& p,
                            Stats* stats) {
+  const bool guided = o.feature == Feature::normals;
+  const Object dst = guided ? normal_guide(dst_raw) : dst_raw;
+  const Object src = guided ? normal_guide(src_raw) : src_raw;
   const float u = static_cast<float>(o.uniformity);
   const int k = u > 0 ? std::min(16, src.rows()) : 1;
   NearestLists nn;
@@ -164,7 +200,12 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
     if (s < 0) continue;
     const cv::Point pt = dst.pixels[d], q = src.pixels[s];
     map.xy.at<cv::Vec2f>(pt.y, pt.x) = cv::Vec2f(static_cast<float>(q.x), static_cast<float>(q.y));
-    map.distance.at<float>(pt.y, pt.x) = std::sqrt(pixel_sq(d, s));
+    // the distance of the raw features (the guide only steers the chunks)
+    const float* a = dst_raw.flat.data() + static_cast<size_t>(d) * c;
+    const float* b = src_raw.flat.data() + static_cast<size_t>(s) * c;
+    float v = 0;
+    for (int i = 0; i < c; ++i) v += (a[i] - b[i]) * (a[i] - b[i]);
+    map.distance.at<float>(pt.y, pt.x) = std::sqrt(v);
   }
   return map;
 }

@@ -294,9 +294,11 @@ Expected<Map> compute_map(const ObjectView& destination, const ObjectView& sourc
     return make_error(std::string("the fast engine does not serve method '") + method_name(options.method) + "'");
   if (auto s = options.check(); !s) return s.error();
   if (auto s = check_pair(destination, source, options.feature); !s) return s.error();
-  // pixel -> row lookups are needed only by the methods that walk the image
+  // pixel -> row lookups: for the methods that walk the image, and for the
+  // propagation candidates of the patch search
   const bool grid_needed = options.method == Method::patchmatch || options.method == Method::regiongrow ||
-                           options.method == Method::coherent;
+                           options.method == Method::coherent ||
+                           (options.patch > 1 && options.feature == Feature::normals);
   auto dst = make_object(destination, options.feature, options.patch, grid_needed, options.threads);
   if (!dst) return make_error("destination: " + dst.message());
   auto src = make_object(source, options.feature, options.patch, grid_needed, options.threads);

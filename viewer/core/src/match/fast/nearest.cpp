@@ -9,9 +9,9 @@
 // the projected distance is a lower bound of the true one. The kd-tree over y
 // gives candidates in order of that bound; they are re-ranked by the exact
 // distance, and the k-th exact distance is proven final once it is below the
-// bound of the first candidate not taken. Otherwise the list grows (x4, at
-// most twice), after which the best found is kept (counted as not certified:
-// approximate, see Stats::certified).
+// bound of the first candidate not taken. Otherwise the list grows once (x4),
+// after which the best found is kept (counted as not certified: approximate,
+// see Stats::certified).
 // Intensities at 1x1 whose 3 principal directions keep less than 99 % of the
 // variance are searched at full dimension by the exact kd-tree instead.
 #include "nearest.hpp"
@@ -113,6 +113,81 @@ void project(const std::vector<float>& m, int c, int parts, const cv::Mat& w, st
 
 }  // namespace
 
+// Nearest normal patch, approximate and fast: candidates are the 12 source
+// rows whose patch-mean direction is nearest (the grid), plus the matches of
+// the left and upper neighbours shifted by one pixel (as in PatchMatch's
+// propagation); the exact patch distance picks among them. Rows are taken in
+// fixed blocks, each in scan order, so the result does not depend on threads.
+// The 9-D certified search (below) is exact but its kd-tree costs ~10 us per
+// query; this path trades that for a stated tolerance (tests).
+Status nearest_patch_normals(const Object& dst, const Object& src, int threads, const Progress& progress,
+                             NearestLists& out, Stats* stats) {
+  const int n = dst.rows(), ns = src.rows();
+  std::vector<float> md, ms;
+  int per_row = 0;
+  patch_moments(dst, threads, md, per_row);
+  patch_moments(src, threads, ms, per_row);
+  // unit mean directions (rows of 3)
+  auto directions = [&](const std::vector<float>& m, int rows) {
+    std::vector<float> y(static_cast<size_t>(rows) * 3);
+    for (int i = 0; i < rows; ++i) {
+      const float* v = m.data() + static_cast<size_t>(i) * per_row;
+      const float len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+      for (int j = 0; j < 3; ++j) y[static_cast<size_t>(i) * 3 + j] = len > 1e-9f ? v[j] / len : 0.0f;
+      if (!(len > 1e-9f)) y[static_cast<size_t>(i) * 3 + 2] = 1.0f;
+    }
+    return y;
+  };
+  const std::vector<float> yd = directions(md, n), ys = directions(ms, ns);
+  OctGridIndex grid;
+  grid.build(ys.data(), ns, 3);
+  const int kc = std::min(ns, 12);
+  const int block = 1024, blocks = (n + block - 1) / block;
+  std::atomic<bool> stop{false};
+  parallel_rows(blocks, threads, 1, [&](int bb, int be) {
+    std::vector<float> buf(static_cast<size_t>(dst.dims));
+    std::vector<int> cid(kc);
+    std::vector<float> cd(kc);
+    for (int blk = bb; blk < be; ++blk) {
+      if (progress.cancelled()) stop = true;
+      if (stop) return;
+      const int r0 = blk * block, r1 = std::min(n, r0 + block);
+      for (int d = r0; d < r1; ++d) {
+        dst.gather(d, buf.data());
+        grid.knn(&yd[static_cast<size_t>(d) * 3], kc, cid.data(), cd.data());
+        int best = -1;
+        float best_sq = std::numeric_limits<float>::infinity();
+        auto offer = [&](int s) {
+          if (s < 0 || s == best) return;
+          const float v = patch_sq(buf.data(), src, s, best_sq);
+          if (v < best_sq || (v == best_sq && s < best)) best_sq = v, best = s;
+        };
+        for (int j = 0; j < kc; ++j) offer(cid[j]);
+        if (!src.row_of.empty() && !dst.row_of.empty()) {
+          const cv::Point pt = dst.pixels[d];
+          for (const cv::Point off : {cv::Point(-1, 0), cv::Point(0, -1)}) {
+            const int nb = dst.row_at(pt.x + off.x, pt.y + off.y);
+            if (nb < r0 || nb >= d) continue;  // only rows this block already matched
+            const cv::Point m = src.pixels[out.ids[nb]];
+            offer(src.row_at(m.x - off.x, m.y - off.y));
+          }
+        }
+        out.ids[d] = best;
+        out.sq[d] = best_sq;
+      }
+    }
+  });
+  if (stop) return make_error("cancelled during nearest search");
+  if (stats) {
+    stats->index = "grid";
+    stats->projected_dims = 3;
+    stats->explained_variance = 1;
+    stats->certified = 0;  // approximate by design
+    stats->candidates = kc + 2;
+  }
+  return {};
+}
+
 Status nearest_lists(const Object& dst, const Object& src, int k, const std::string& index_kind, int threads,
                      const Progress& progress, NearestLists& out, Stats* stats) {
   const int n = dst.rows(), ns = src.rows();
@@ -153,6 +228,7 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
     return direct(*index, k > 16 || index_kind != "grid" ? "kdtree" : "grid");
   }
 
+  if (dst.channels == 3 && dst.patch > 1 && k == 1) return nearest_patch_normals(dst, src, threads, progress, out, stats);
   std::vector<float> md, ms;
   int per_row = 0;
   patch_moments(dst, threads, md, per_row);
@@ -181,9 +257,9 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
   const int ydims = 3 * parts;
   auto index = make_kdtree();
   index->build(ys.data(), ns, ydims);
-  // Up to two growth steps (x4); past them the best found is kept (not certified).
-  const int first = std::min(ns, std::max(16, 2 * k + 8));
-  const int cap = std::min(ns, 4 * first);
+  // One growth step (x4); past it the best found is kept (not certified).
+  const int first = std::min(ns, std::max(12, 2 * k + 8));
+  const int cap = std::min(ns, (k > 1 ? 4 : 2) * first);
   std::atomic<int> certified{0};
   std::atomic<long> exact_distances{0};
   parallel_rows(n, threads, 128, [&](int b, int e) {
