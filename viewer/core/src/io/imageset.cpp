@@ -167,7 +167,7 @@ Expected<Manifest> parse_manifest_json(const json& root, const fs::path& folder)
     return make_error("format is \"" + format.substr(0, 64) + "\", expected \"" + kSetFormat + "\"");
 
   if (auto e = get_string(root, "id", set.id, false); !e.empty()) return make_error(e);
-  if (set.id.empty()) set.id = folder.filename().string();
+  if (set.id.empty()) set.id = (folder.has_filename() ? folder : folder.parent_path()).filename().string();
   std::string role = "unknown";
   if (auto e = get_string(root, "role", role, false); !e.empty()) return make_error(e);
   auto parsed_role = parse_role(role);
