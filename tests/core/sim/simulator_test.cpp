@@ -384,6 +384,21 @@ TEST(Simulator, RedIsRedInBgr) {
   EXPECT_NEAR(a[0], 0.05f, 1e-6);
 }
 
+TEST(Simulator, ShapeInAnotherMaterialKeepsItsNormals) {
+  RenderOptions o = small_options();
+  auto bull = scene_or_die("bull", o);
+  auto red_bull = make_scene_with_material("bull", "sphere-red-gloss", o);
+  ASSERT_TRUE(bull && red_bull.ok());
+  Truth a = render_truth(*bull, o), b = render_truth(**red_bull, o);
+  EXPECT_EQ(cv::countNonZero(a.mask != b.mask), 0);
+  EXPECT_EQ(cv::norm(a.normals, b.normals, cv::NORM_INF), 0.0);
+  cv::Scalar mean = cv::mean(b.albedo, b.mask);
+  EXPECT_NEAR(mean[2], 0.70, 1e-6);  // R
+  EXPECT_NEAR(mean[0], 0.05, 1e-6);  // B
+  EXPECT_FALSE(make_scene_with_material("bull", "teapot", o).ok());
+  EXPECT_FALSE(make_scene_with_material("teapot", "bull", o).ok());
+}
+
 TEST(Simulator, WrittenSetReadsBackWithItsTruth) {
   RenderOptions o = small_options();
   o.noise_sigma = 0.005;

@@ -114,7 +114,8 @@ std::vector<Lamp> thesis_rig() {
     if (socket == 4) continue;
     double a = socket * std::numbers::pi / 4;
     Lamp lamp;
-    lamp.position_m = {kRingRadius * std::sin(a), kRingRadius * std::cos(a), kCameraZ};
+    auto snap = [](double v) { return std::abs(v) < 1e-12 ? 0.0 : v; };  // exact zeros on the axes
+    lamp.position_m = {snap(kRingRadius * std::sin(a)), snap(kRingRadius * std::cos(a)), kCameraZ};
     lamps.push_back(lamp);
   }
   return lamps;

@@ -23,20 +23,28 @@ struct Lamp {
 };
 
 // The thesis rig: 8 sockets on a 0.47 m circle around the camera at (0,0,1),
-// the bottom socket empty, so 7 lamps. Index order is the order used in sets.
+// the bottom socket empty, so 7 lamps. Index order is the order used in sets:
+// starting at the top socket and going clockwise as seen in the picture (from
+// the camera looking at the object): 0 top, 1 top-right, 2 right, 3 bottom-right,
+// 4 bottom-left, 5 left, 6 top-left. A lamp at full white delivers irradiance 1
+// at the origin (its radiant intensity is |position|^2 = 1 + 0.47^2).
 std::vector<Lamp> thesis_rig();
 
 struct RenderOptions {
   cv::Size size{1024, 680};     // image size [px]
-  double focal_px = 0;          // pinhole focal length [px]; 0 = the rig default for `size`
+  double focal_px = 0;          // pinhole focal length [px]; 0 = the rig default, 2 x width: an 8 cm
+                                // object covers ~21 000 px at 1024x680 as in the thesis, and smaller
+                                // renders show the same framing. Principal point: the image centre.
   double exposure = 1.0;        // linear gain on radiance (1 = a well-exposed rig shot)
-  double noise_sigma = 0.0;     // sensor noise, std-dev as a fraction of full scale
+  double noise_sigma = 0.0;     // sensor noise, std-dev as a fraction of full scale (Gaussian, added
+                                // after exposure, before clipping; `veneer simulate` defaults to 0.005)
   double ambient = 0.0;         // uniform ambient light level (room light leaking in)
   uint64_t seed = 1;            // noise seed; same seed, same bytes
   uint32_t shot = 0;            // noise stream within a seed: shots with different `shot` get
                                 // independent noise (simulate_set: light index; ambient frame 255)
-  cv::Vec3d offset_m{0, 0, 0};  // moves the whole object in the rig frame
-  double scale = 1.0;           // scales the object about its base
+  cv::Vec3d offset_m{0, 0, 0};  // moves the whole object (and its table) in the rig frame [m]
+  double scale = 1.0;           // scales the object about its base (the point where it rests on
+                                // the table behind it); 2.7 fills a 1024x680 frame (~150 000 px)
   int threads = 0;              // 0 = all cores
   Status check() const;
 };
@@ -55,15 +63,25 @@ Expected<std::shared_ptr<const Scene>> make_scene_with_material(const std::strin
                                                                const std::string& material_scene,
                                                                const RenderOptions& options);
 
-// Renders linear BGR CV_32FC3 (clipped at 1.0 like a sensor) under `lamps`.
+// Renders linear BGR CV_32FC3 (clipped at 1.0 like a sensor) under `lamps`
+// (all on at once; none = the ambient frame). The object's placement (offset_m,
+// scale) is the one given to make_scene; here size, focal_px, exposure, noise,
+// ambient, seed, shot and threads apply. Camera rays are cast once per image
+// geometry and cached in the scene, so repeated renders only shade. Pixel
+// value = exposure * (sum over lamps of albedo * E * max(0, n.l) + Blinn-Phong
+// lobe * E, unless shadowed; + ambient * albedo) + noise, with E = the lamp's
+// irradiance at the point (1/r^2). Thread-safe; empty when cancelled.
 cv::Mat render(const Scene& scene, const std::vector<Lamp>& lamps, const RenderOptions& options,
                const Progress& progress = {});
 // Truth for the scene as seen by the camera: normals, mask, albedo, depth.
 Truth render_truth(const Scene& scene, const RenderOptions& options);
 
 // A whole image set as the thesis rig would capture it: ambient frame + one shot
-// per lamp, lights filled in with positions and directions (toward the object
-// centre), truth attached.
+// per lamp, lights filled in with positions, directions (unit, origin -> lamp)
+// and intensities (irradiance at the origin in image units, exposure folded in,
+// so photometric stereo recovers the truth albedo), camera focal length and
+// principal point, truth attached. Noise stream per shot: light index, 255 for
+// the ambient frame. `created` honours SOURCE_DATE_EPOCH (byte-identical reruns).
 Expected<ImageSet> simulate_set(const std::string& scene_name, const RenderOptions& options,
                                 Role role = Role::unknown, const Progress& progress = {});
 
