@@ -1,0 +1,290 @@
+// veneer rig status|capture|press|list|pull|delete|lamps|live|events — the rig
+// client for scripts and tests, against --rig host:port --token-file F.
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <mutex>
+#include <sstream>
+
+#include "command.hpp"
+#include "veneer/rig/client.hpp"
+
+namespace veneer::cli {
+namespace {
+
+struct RigArgs {
+  std::string rig = "127.0.0.1:7878";
+  std::string token_file = "veneer-sets/token";
+  double timeout_s = 120;
+};
+
+int fail(const std::string& cmd, const std::string& what, int code = 1) {
+  std::cerr << "veneer rig " << cmd << ": " << what << "\n";
+  return code;
+}
+
+Expected<std::unique_ptr<rig::Client>> open_rig(const RigArgs& a) {
+  auto endpoint = rig::Endpoint::parse(a.rig);
+  if (!endpoint) return endpoint.error();
+  auto token = rig::read_token_file(a.token_file);
+  if (!token) return token.error();
+  rig::ConnectOptions o;
+  o.client_name = "veneer-cli";
+  o.request_timeout_s = 30;
+  return rig::Client::connect(*endpoint, *token, o);
+}
+
+std::string human_bytes(uint64_t b) {
+  char buf[32];
+  if (b >= (1ull << 30)) std::snprintf(buf, sizeof buf, "%.1f GiB", b / 1073741824.0);
+  else if (b >= (1ull << 20)) std::snprintf(buf, sizeof buf, "%.1f MiB", b / 1048576.0);
+  else std::snprintf(buf, sizeof buf, "%.0f KiB", b / 1024.0);
+  return buf;
+}
+
+// Waits for the outcome of capture `id`, printing progress events on stderr.
+int await_capture(const std::string& cmd, rig::Client& client, const std::string& id, double timeout_s) {
+  auto outcome = client.wait_event(
+      [&](const rig::Event& e) {
+        if (e.set_id != id) return false;
+        if (e.kind == rig::Event::Kind::shot_taken || e.kind == rig::Event::Kind::capture_started) {
+          std::cerr << rig::describe(e) << "\n";
+          return false;
+        }
+        return e.kind == rig::Event::Kind::set_stored || e.kind == rig::Event::Kind::capture_failed;
+      },
+      timeout_s);
+  if (!outcome) return fail(cmd, outcome.message());
+  if (outcome->kind == rig::Event::Kind::capture_failed) {
+    return fail(cmd, outcome->cancelled ? "capture " + id + " cancelled" : "capture " + id + " failed: " + outcome->reason);
+  }
+  for (const auto& w : outcome->warnings) std::cerr << "warning: " << w << "\n";
+  std::cout << id << "\n";
+  return 0;
+}
+
+Expected<std::vector<bool>> parse_lamps(const std::string& text, int count) {
+  std::vector<bool> on(std::max(count, 0), false);
+  if (text.empty() || text == "none") return on;
+  if (text == "all") return std::vector<bool>(std::max(count, 0), true);
+  std::istringstream in(text);
+  std::string item;
+  while (std::getline(in, item, ',')) {
+    int i = 0;
+    try {
+      size_t used = 0;
+      i = std::stoi(item, &used);
+      if (used != item.size()) throw std::invalid_argument(item);
+    } catch (const std::exception&) {
+      return make_error("--on: '" + item + "' is not a lamp number");
+    }
+    if (i < 1 || i > count) return make_error("--on: lamp " + item + " does not exist (lamps 1.." + std::to_string(count) + ")");
+    on[i - 1] = true;
+  }
+  return on;
+}
+
+}  // namespace
+}  // namespace veneer::cli
+
+VENEER_COMMAND(rig) {
+  using namespace veneer;
+  using namespace veneer::cli;
+  auto* rig_cmd = app.add_subcommand("rig", "talk to a capture rig (veneerd): status, capture, pull sets, lamps, live view");
+  rig_cmd->require_subcommand(1);
+  rig_cmd->fallthrough();
+  auto args = std::make_shared<RigArgs>();
+  rig_cmd->add_option("--rig", args->rig, "rig address host:port")->capture_default_str();
+  rig_cmd->add_option("--token-file", args->token_file, "the rig's access token file (<store>/token on the rig)")
+      ->capture_default_str();
+  rig_cmd->add_option("--timeout", args->timeout_s, "seconds to wait for a capture or download")->capture_default_str();
+
+  auto* status = rig_cmd->add_subcommand("status", "the rig's state");
+  auto* list = rig_cmd->add_subcommand("list", "stored sets, one a line, id first");
+
+  auto* capture = rig_cmd->add_subcommand("capture", "capture a set and wait until it is stored (prints its id)");
+  auto copts = std::make_shared<rig::CaptureOptions>();
+  auto role = std::make_shared<std::string>();
+  auto no_wait = std::make_shared<bool>(false);
+  capture->add_option("--role", *role, "destination or source (default: the rig's next)");
+  capture->add_option("--object", copts->object, "object name");
+  capture->add_option("--shutter", copts->shutter_s, "shutter time [s]");
+  capture->add_option("--aperture", copts->aperture, "f-number");
+  capture->add_option("--iso", copts->iso, "ISO");
+  capture->add_flag("--no-wait", *no_wait, "return once the capture started");
+
+  auto* press = rig_cmd->add_subcommand("press", "press the capture button (simulated rig)");
+  auto long_press = std::make_shared<bool>(false);
+  auto press_wait = std::make_shared<bool>(false);
+  press->add_flag("--long", *long_press, "a long press (cancels a running capture)");
+  press->add_flag("--wait", *press_wait, "wait until the capture it starts is stored (prints the set id)");
+
+  auto* cancel = rig_cmd->add_subcommand("cancel", "cancel the running capture");
+
+  auto* pull = rig_cmd->add_subcommand("pull", "download a set as a veneer-set/1 folder");
+  auto set_id = std::make_shared<std::string>();
+  auto out = std::make_shared<std::string>();
+  auto no_truth = std::make_shared<bool>(false);
+  auto force = std::make_shared<bool>(false);
+  pull->add_option("SET", *set_id, "set id (see `veneer rig list`)")->required();
+  pull->add_option("--out", *out, "folder to create")->required();
+  pull->add_flag("--no-truth", *no_truth, "leave out truth/ of simulated sets");
+  pull->add_flag("--force", *force, "replace --out if it exists");
+
+  auto* del = rig_cmd->add_subcommand("delete", "delete a stored set");
+  auto del_id = std::make_shared<std::string>();
+  del->add_option("SET", *del_id, "set id")->required();
+
+  auto* lamps = rig_cmd->add_subcommand("lamps", "switch lamps: --on 1,3 | all | none");
+  auto lamps_on = std::make_shared<std::string>();
+  auto brightness = std::make_shared<int>(254);
+  lamps->add_option("--on", *lamps_on, "lamps to switch on (1-based ring positions), 'all' or 'none'")->required();
+  lamps->add_option("--brightness", *brightness, "1..254")->capture_default_str()->check(CLI::Range(1, 254));
+
+  auto* live = rig_cmd->add_subcommand("live", "save live-view frames as JPEG files");
+  auto frames = std::make_shared<int>(10);
+  auto fps = std::make_shared<double>(10);
+  auto live_out = std::make_shared<std::string>();
+  live->add_option("--frames", *frames, "how many frames")->capture_default_str()->check(CLI::Range(1, 100000));
+  live->add_option("--fps", *fps, "frames per second asked for")->capture_default_str()->check(CLI::Range(0.1, 60.0));
+  live->add_option("--out", *live_out, "folder for frame_NNNN.jpg")->required();
+
+  auto* events = rig_cmd->add_subcommand("events", "print the rig's events, one a line");
+  auto count = std::make_shared<int>(0);
+  events->add_option("--count", *count, "stop after this many (0 = until --timeout)");
+
+  return [=]() -> int {
+    auto client_or = open_rig(*args);
+    std::string which = rig_cmd->get_subcommands().empty() ? "" : rig_cmd->get_subcommands().front()->get_name();
+    if (!client_or) return fail(which, client_or.message());
+    rig::Client& client = **client_or;
+
+    if (status->parsed()) {
+      auto s = client.status();
+      if (!s) return fail("status", s.message());
+      std::cout << "rig:        " << s->name << (s->simulated ? " (simulated)" : "") << "\n"
+                << "camera:     " << (s->camera_connected ? s->camera_model : "not connected") << "\n"
+                << "lamps:      " << s->lamp_count << " (on: ";
+      bool any = false;
+      for (size_t i = 0; i < s->lamps_on.size(); ++i) {
+        if (s->lamps_on[i]) std::cout << (any ? "," : "") << i + 1, any = true;
+      }
+      std::cout << (any ? "" : "none") << ")\n"
+                << "capturing:  " << (s->capturing ? "yes" : "no") << "\n"
+                << "next press: " << role_name(s->next_role) << "\n"
+                << "sets:       " << s->sets_stored << " stored, " << human_bytes(s->free_bytes) << " free\n"
+                << "clients:    " << s->clients << (s->controller_taken ? ", one controls the rig" : "") << "\n";
+      return 0;
+    }
+    if (list->parsed()) {
+      auto sets = client.list_sets();
+      if (!sets) return fail("list", sets.message());
+      for (const auto& s : *sets) {
+        std::cout << s.id << "  " << role_name(s.role) << "  " << s.object << "  " << s.created << "  " << s.size.width
+                  << "x" << s.size.height << "  " << s.lights << " lights  " << human_bytes(s.bytes)
+                  << (s.has_truth ? "  truth" : "") << (s.warnings.empty() ? "" : "  WARNING: " + s.warnings.front())
+                  << "\n";
+      }
+      return 0;
+    }
+    if (capture->parsed()) {
+      rig::CaptureOptions o = *copts;
+      if (!role->empty()) {
+        auto r = parse_role(*role);
+        if (!r || *r == Role::unknown) return fail("capture", "--role '" + *role + "': expected destination or source", 2);
+        o.role = *r;
+      }
+      auto id = client.capture(o);
+      if (!id) return fail("capture", id.message());
+      if (*no_wait) {
+        std::cout << *id << "\n";
+        return 0;
+      }
+      return await_capture("capture", client, *id, args->timeout_s);
+    }
+    if (press->parsed()) {
+      if (auto s = client.press_button(*long_press); !s) return fail("press", s.message());
+      if (!*press_wait || *long_press) return 0;
+      auto started = client.wait_event(
+          [](const rig::Event& e) {
+            return e.kind == rig::Event::Kind::capture_started || e.kind == rig::Event::Kind::capture_failed;
+          },
+          30);
+      if (!started) return fail("press", started.message());
+      if (started->kind == rig::Event::Kind::capture_failed) return fail("press", "capture failed: " + started->reason);
+      std::cerr << rig::describe(*started) << "\n";
+      return await_capture("press", client, started->set_id, args->timeout_s);
+    }
+    if (cancel->parsed()) {
+      if (auto s = client.cancel_capture(); !s) return fail("cancel", s.message());
+      return 0;
+    }
+    if (pull->parsed()) {
+      ProgressBar bar("pull " + *set_id);
+      Progress progress;
+      progress.on_progress = [&bar](double f, const std::string& stage) { bar.update(f, stage); };
+      if (auto s = client.pull(*set_id, *out, !*no_truth, *force, progress); !s) return fail("pull", s.message());
+      bar.done();
+      std::cout << *out << "\n";
+      return 0;
+    }
+    if (del->parsed()) {
+      if (auto s = client.delete_set(*del_id); !s) return fail("delete", s.message());
+      return 0;
+    }
+    if (lamps->parsed()) {
+      auto on = parse_lamps(*lamps_on, client.hello_status().lamp_count);
+      if (!on) return fail("lamps", on.message(), 2);
+      if (auto s = client.set_lamps(*on, *brightness); !s) return fail("lamps", s.message());
+      return 0;
+    }
+    if (live->parsed()) {
+      std::error_code ec;
+      std::filesystem::create_directories(*live_out, ec);
+      if (ec) return fail("live", *live_out + ": cannot create: " + ec.message());
+      std::mutex m;
+      std::condition_variable cv;
+      int saved = 0;
+      std::string error;
+      client.on_live_frame = [&](const rig::LiveFrame& f) {
+        std::lock_guard lock(m);
+        if (saved >= *frames || !error.empty()) return;
+        char name[32];
+        std::snprintf(name, sizeof name, "frame_%04d.jpg", saved);
+        std::ofstream file(std::filesystem::path(*live_out) / name, std::ios::binary);
+        file.write(reinterpret_cast<const char*>(f.jpeg.data()), static_cast<std::streamsize>(f.jpeg.size()));
+        if (!file) error = std::string(name) + ": write failed";
+        ++saved;
+        cv.notify_all();
+      };
+      if (auto s = client.start_live_view(*fps); !s) return fail("live", s.message());
+      std::unique_lock lock(m);
+      bool done = cv.wait_for(lock, std::chrono::duration<double>(args->timeout_s),
+                              [&] { return saved >= *frames || !error.empty() || !client.connected(); });
+      lock.unlock();
+      (void)client.stop_live_view();
+      client.on_live_frame = nullptr;
+      if (!error.empty()) return fail("live", error);
+      if (!done || saved < *frames) return fail("live", "got " + std::to_string(saved) + " of " + std::to_string(*frames) + " frames");
+      std::cout << saved << " frames in " << *live_out << "\n";
+      return 0;
+    }
+    if (events->parsed()) {
+      int seen = 0;
+      auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(args->timeout_s);
+      while (*count == 0 || seen < *count) {
+        double left = std::chrono::duration<double>(deadline - std::chrono::steady_clock::now()).count();
+        if (left <= 0) break;
+        auto e = client.wait_event([](const rig::Event&) { return true; }, left);
+        if (!e) break;
+        std::cout << rig::describe(*e) << std::endl;
+        ++seen;
+      }
+      return *count == 0 || seen >= *count ? 0 : fail("events", "got " + std::to_string(seen) + " of " + std::to_string(*count) + " events");
+    }
+    return fail("", "no rig command given", 2);
+  };
+}

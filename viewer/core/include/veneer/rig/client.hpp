@@ -1,0 +1,165 @@
+#pragma once
+// The rig client: talks to veneerd over its protobuf/TCP API (Qt-free; used by
+// the `veneer rig` commands and the desktop viewer).
+//
+//   auto rig = veneer::rig::Client::connect({"127.0.0.1", 7878}, token);
+//   if (!rig) fail(rig.message());
+//   (*rig)->on_event = [](const veneer::rig::Event& e) { ... };   // reader thread
+//   auto sets = (*rig)->list_sets();
+//   (*rig)->pull(sets->front().id, "out/dest");
+//
+// Requests block until their response arrives (or the timeout); events and
+// live frames are delivered on the client's reader thread through the
+// callbacks, which must return quickly. Set callbacks before issuing requests.
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "veneer/io/imageset.hpp"
+#include "veneer/util/expected.hpp"
+#include "veneer/util/progress.hpp"
+
+namespace veneer::rig {
+
+constexpr uint16_t kDefaultPort = 7878;
+
+struct Endpoint {
+  std::string host = "127.0.0.1";
+  uint16_t port = kDefaultPort;
+  // "host:port", "host" or ":port".
+  static Expected<Endpoint> parse(const std::string& text);
+  std::string str() const { return host + ":" + std::to_string(port); }
+};
+
+// Reads an access token file (the rig keeps it in <store>/token).
+Expected<std::string> read_token_file(const std::filesystem::path& file);
+
+struct RigStatus {
+  std::string name;
+  bool simulated = false;
+  bool camera_connected = false;
+  std::string camera_model;
+  int lamp_count = 0;
+  std::vector<bool> lamps_on;
+  bool capturing = false;
+  bool you_control = false;
+  bool controller_taken = false;
+  int sets_stored = 0;
+  Role next_role = Role::destination;
+  uint64_t free_bytes = 0;
+  int clients = 0;
+};
+
+struct SetSummary {
+  std::string id;
+  Role role = Role::unknown;
+  std::string object;
+  std::string created;
+  cv::Size size;
+  int lights = 0;
+  std::vector<std::string> warnings;
+  bool has_truth = false;
+  uint64_t bytes = 0;
+  std::string scene;
+};
+
+struct Event {
+  enum class Kind {
+    button_pressed, capture_started, shot_taken, set_stored, capture_failed,
+    lamp_state, camera_connected, camera_lost, set_deleted,
+  };
+  Kind kind = Kind::button_pressed;
+  uint64_t seq = 0;
+  std::string set_id;
+  Role role = Role::unknown;
+  std::string object;
+  int k = 0, n = 0;            // shot_taken (n also for capture_started)
+  double eta_s = 0;
+  std::vector<std::string> warnings;
+  std::string reason;          // capture_failed, camera_lost
+  bool cancelled = false;
+  bool long_press = false;
+  std::vector<bool> lamps_on;  // lamp_state
+  int brightness = 0;
+  std::string camera_model;
+};
+const char* event_name(Event::Kind kind);
+std::string describe(const Event& event);  // one line for logs and the CLI
+
+struct LiveFrame {
+  std::vector<unsigned char> jpeg;
+  uint64_t seq = 0;
+  double ts = 0;  // Unix time [s] when the rig took it
+  int width = 0, height = 0;
+};
+
+struct CaptureOptions {
+  Role role = Role::unknown;  // unknown = the rig's next role
+  std::string object;         // empty = the rig decides
+  double shutter_s = 0;       // 0 = the rig's configured exposure
+  double aperture = 0;
+  int iso = 0;
+};
+
+struct ConnectOptions {
+  std::string client_name = "veneer";
+  double connect_timeout_s = 5;
+  double request_timeout_s = 30;
+};
+
+class Client {
+ public:
+  // Connects and says hello; fails with the rig's reason (wrong token, ...).
+  static Expected<std::unique_ptr<Client>> connect(const Endpoint& endpoint, const std::string& token,
+                                                   const ConnectOptions& options = {});
+  ~Client();
+  Client(const Client&) = delete;
+  Client& operator=(const Client&) = delete;
+
+  // Callbacks (reader thread).
+  std::function<void(const Event&)> on_event;
+  std::function<void(const LiveFrame&)> on_live_frame;
+  std::function<void(const std::string& why)> on_disconnect;
+
+  bool connected() const;
+  const RigStatus& hello_status() const;  // the status the rig sent with its hello answer
+
+  Expected<RigStatus> status();
+  Expected<std::vector<SetSummary>> list_sets();
+  Expected<std::string> manifest(const std::string& set_id);  // set.json text
+  // Downloads a set into `folder` as a veneer-set/1 folder (with truth/ when
+  // asked and present), atomically: a temporary sibling renamed into place.
+  Status pull(const std::string& set_id, const std::filesystem::path& folder, bool include_truth = true,
+              bool overwrite = false, const Progress& progress = {});
+  Status delete_set(const std::string& set_id);
+  // Starts a capture; returns the id the set will be stored under. Progress
+  // and the outcome arrive as events (capture_started, shot_taken, set_stored
+  // or capture_failed).
+  Expected<std::string> capture(const CaptureOptions& options = {});
+  Status cancel_capture();
+  Status set_lamps(const std::vector<bool>& on, int brightness = 254);
+  Status start_live_view(double fps);
+  Status stop_live_view();
+  Status press_button(bool long_press = false);  // simulated rig only
+  Status move_hand_lamp(const cv::Vec3d& position_m);  // simulated rig only
+
+  // Waits until an event satisfying `match` arrives (events seen since the
+  // last wait are kept, so none is missed between a request and the wait).
+  Expected<Event> wait_event(const std::function<bool(const Event&)>& match, double timeout_s);
+
+  void close();
+
+  struct Impl;  // public so the reader in client.cpp can name it
+
+ private:
+  Client();
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace veneer::rig

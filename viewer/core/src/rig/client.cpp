@@ -1,0 +1,724 @@
+#include "veneer/rig/client.hpp"
+
+#include <array>
+#include <atomic>
+#include <cerrno>
+#include <chrono>
+#include <condition_variable>
+#include <cstring>
+#include <deque>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <thread>
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <asio.hpp>
+
+#include "veneer/proto/framing.hpp"
+#include "veneer/util/log.hpp"
+#include "veneer/v1/rig.pb.h"
+
+namespace veneer::rig {
+
+namespace pb = veneer::v1;
+namespace fs = std::filesystem;
+using asio::ip::tcp;
+using Clock = std::chrono::steady_clock;
+
+Expected<Endpoint> Endpoint::parse(const std::string& text) {
+  Endpoint e;
+  std::string host = text;
+  const auto colon = text.rfind(':');
+  const auto bracket = text.find(']');
+  const bool has_port = colon != std::string::npos &&
+                        (bracket == std::string::npos ? text.find(':') == colon : colon > bracket);
+  if (has_port) {
+    host = text.substr(0, colon);
+    std::string digits = text.substr(colon + 1);
+    if (digits.empty() || digits.size() > 5 || digits.find_first_not_of("0123456789") != std::string::npos ||
+        std::stol(digits) > 65535 || std::stol(digits) == 0) {
+      return make_error("rig address '" + text + "': '" + digits + "' is not a port number");
+    }
+    e.port = static_cast<uint16_t>(std::stol(digits));
+  }
+  if (host.size() > 2 && host.front() == '[' && host.back() == ']') host = host.substr(1, host.size() - 2);
+  if (!host.empty()) e.host = host;
+  return e;
+}
+
+Expected<std::string> read_token_file(const fs::path& file) {
+  std::ifstream in(file);
+  if (!in) return make_error(file.string() + ": cannot read the rig's access token");
+  std::string token;
+  std::getline(in, token);
+  while (!token.empty() && (token.back() == '\r' || token.back() == ' ' || token.back() == '\t')) token.pop_back();
+  if (token.empty()) return make_error(file.string() + ": the token file is empty");
+  return token;
+}
+
+const char* event_name(Event::Kind kind) {
+  switch (kind) {
+    case Event::Kind::button_pressed: return "button_pressed";
+    case Event::Kind::capture_started: return "capture_started";
+    case Event::Kind::shot_taken: return "shot_taken";
+    case Event::Kind::set_stored: return "set_stored";
+    case Event::Kind::capture_failed: return "capture_failed";
+    case Event::Kind::lamp_state: return "lamp_state";
+    case Event::Kind::camera_connected: return "camera_connected";
+    case Event::Kind::camera_lost: return "camera_lost";
+    case Event::Kind::set_deleted: return "set_deleted";
+  }
+  return "?";
+}
+
+std::string describe(const Event& e) {
+  std::string s = event_name(e.kind);
+  switch (e.kind) {
+    case Event::Kind::button_pressed: s += e.long_press ? " long" : " short"; break;
+    case Event::Kind::capture_started:
+      s += " " + e.set_id + " " + role_name(e.role) + " '" + e.object + "' " + std::to_string(e.n) + " shots";
+      break;
+    case Event::Kind::shot_taken: {
+      char eta[32];
+      std::snprintf(eta, sizeof eta, "%.1f", e.eta_s);
+      s += " " + e.set_id + " " + std::to_string(e.k) + "/" + std::to_string(e.n) + " eta " + eta + " s";
+      break;
+    }
+    case Event::Kind::set_stored:
+      s += " " + e.set_id;
+      for (const auto& w : e.warnings) s += " [warning: " + w + "]";
+      break;
+    case Event::Kind::capture_failed: s += " " + e.set_id + (e.cancelled ? " cancelled" : ": " + e.reason); break;
+    case Event::Kind::lamp_state: {
+      s += " ";
+      for (bool on : e.lamps_on) s += on ? '1' : '0';
+      s += " bri " + std::to_string(e.brightness);
+      break;
+    }
+    case Event::Kind::camera_connected: s += " " + e.camera_model; break;
+    case Event::Kind::camera_lost: s += " " + e.reason; break;
+    case Event::Kind::set_deleted: s += " " + e.set_id; break;
+  }
+  return s;
+}
+
+namespace {
+
+Role from_wire(int role) {
+  return role == pb::ROLE_DESTINATION ? Role::destination : role == pb::ROLE_SOURCE ? Role::source : Role::unknown;
+}
+pb::Role to_wire(Role role) {
+  return role == Role::destination ? pb::ROLE_DESTINATION : role == Role::source ? pb::ROLE_SOURCE : pb::ROLE_UNSPECIFIED;
+}
+
+RigStatus convert(const pb::RigStatus& s) {
+  RigStatus r;
+  r.name = s.rig_name();
+  r.simulated = s.simulated();
+  r.camera_connected = s.camera_connected();
+  r.camera_model = s.camera_model();
+  r.lamp_count = static_cast<int>(s.lamp_count());
+  r.lamps_on.assign(s.lamps_on().begin(), s.lamps_on().end());
+  r.capturing = s.capturing();
+  r.you_control = s.you_control();
+  r.controller_taken = s.controller_taken();
+  r.sets_stored = static_cast<int>(s.sets_stored());
+  r.next_role = from_wire(s.next_role());
+  r.free_bytes = s.free_bytes();
+  r.clients = static_cast<int>(s.clients());
+  return r;
+}
+
+Event convert(const pb::Event& w) {
+  Event e;
+  e.seq = w.seq();
+  switch (w.kind_case()) {
+    case pb::Event::kButtonPressed:
+      e.kind = Event::Kind::button_pressed;
+      e.long_press = w.button_pressed().long_press();
+      break;
+    case pb::Event::kCaptureStarted:
+      e.kind = Event::Kind::capture_started;
+      e.set_id = w.capture_started().set_id();
+      e.role = from_wire(w.capture_started().role());
+      e.object = w.capture_started().object();
+      e.n = static_cast<int>(w.capture_started().shots());
+      break;
+    case pb::Event::kShotTaken:
+      e.kind = Event::Kind::shot_taken;
+      e.set_id = w.shot_taken().set_id();
+      e.k = static_cast<int>(w.shot_taken().k());
+      e.n = static_cast<int>(w.shot_taken().n());
+      e.eta_s = w.shot_taken().eta_s();
+      break;
+    case pb::Event::kSetStored:
+      e.kind = Event::Kind::set_stored;
+      e.set_id = w.set_stored().id();
+      e.warnings.assign(w.set_stored().warnings().begin(), w.set_stored().warnings().end());
+      break;
+    case pb::Event::kCaptureFailed:
+      e.kind = Event::Kind::capture_failed;
+      e.set_id = w.capture_failed().set_id();
+      e.reason = w.capture_failed().reason();
+      e.cancelled = w.capture_failed().cancelled();
+      break;
+    case pb::Event::kLampState:
+      e.kind = Event::Kind::lamp_state;
+      e.lamps_on.assign(w.lamp_state().on().begin(), w.lamp_state().on().end());
+      e.brightness = static_cast<int>(w.lamp_state().brightness());
+      break;
+    case pb::Event::kCameraConnected:
+      e.kind = Event::Kind::camera_connected;
+      e.camera_model = w.camera_connected().model();
+      break;
+    case pb::Event::kCameraLost:
+      e.kind = Event::Kind::camera_lost;
+      e.reason = w.camera_lost().reason();
+      break;
+    case pb::Event::kSetDeleted:
+      e.kind = Event::Kind::set_deleted;
+      e.set_id = w.set_deleted().id();
+      break;
+    case pb::Event::KIND_NOT_SET:
+      break;
+  }
+  return e;
+}
+
+// A file path sent by the rig must stay inside the set folder.
+bool safe_relative(const std::string& rel) {
+  if (rel.empty() || rel.size() > 200 || rel.front() == '/') return false;
+  for (char ch : rel) {
+    bool ok = (ch >= 'a' && ch <= 'z') || (ch >= 'A' && ch <= 'Z') || (ch >= '0' && ch <= '9') || ch == '-' ||
+              ch == '_' || ch == '.' || ch == '/';
+    if (!ok) return false;
+  }
+  for (const auto& part : fs::path(rel)) {
+    if (part == ".." || part == "." || part.empty()) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+// ------------------------------------------------------------------ Impl
+
+struct Client::Impl {
+  struct Download {
+    fs::path temp;
+    std::map<std::string, uint64_t> expected;  // file -> size, from FetchStarted
+    std::map<std::string, uint64_t> received;  // file -> bytes written
+    std::string current;
+    int fd = -1;
+    uint64_t total = 0, got = 0;
+    bool done = false;
+    bool abandoned = false;
+    std::string error;
+    Clock::time_point last_activity = Clock::now();
+    const Progress* progress = nullptr;
+  };
+
+  Client* owner = nullptr;
+  asio::io_context io;
+  tcp::socket sock{io};
+  std::thread reader;
+  std::mutex write_mutex;
+
+  std::mutex mutex;  // guards everything below
+  std::condition_variable cv;
+  std::map<uint64_t, std::optional<pb::Response>> pending;
+  std::map<uint64_t, std::shared_ptr<Download>> downloads;
+  std::deque<Event> events;
+  bool closed = false;
+  std::string close_reason;
+  std::atomic<uint64_t> next_id{1};
+  ConnectOptions options;
+  RigStatus hello;
+
+  ~Impl() { shutdown("client closed"); }
+
+  void shutdown(const std::string& why) {
+    {
+      std::lock_guard lock(mutex);
+      if (!closed) {
+        closed = true;
+        close_reason = why;
+      }
+    }
+    std::error_code ec;
+    sock.shutdown(tcp::socket::shutdown_both, ec);
+    if (reader.joinable() && reader.get_id() != std::this_thread::get_id()) reader.join();
+    sock.close(ec);
+    cv.notify_all();
+  }
+
+  Status send(const pb::ClientMessage& m) {
+    std::string bytes = veneer::wire::encode_delimited(m);
+    std::lock_guard lock(write_mutex);
+    std::error_code ec;
+    asio::write(sock, asio::buffer(bytes), ec);
+    if (ec) return make_error("rig connection: " + ec.message());
+    return {};
+  }
+
+  // Sends a request and waits for its response.
+  Expected<pb::Response> request(pb::ClientMessage& m, uint64_t id = 0) {
+    if (id == 0) id = next_id++;
+    m.set_id(id);
+    {
+      std::lock_guard lock(mutex);
+      if (closed) return make_error("rig connection closed: " + close_reason);
+      pending[id];
+    }
+    if (auto s = send(m); !s) {
+      std::lock_guard lock(mutex);
+      pending.erase(id);
+      return s.error();
+    }
+    std::unique_lock lock(mutex);
+    auto deadline = Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                       std::chrono::duration<double>(options.request_timeout_s));
+    bool got = cv.wait_until(lock, deadline, [&] { return pending[id].has_value() || closed; });
+    std::optional<pb::Response> response = std::move(pending[id]);
+    pending.erase(id);
+    if (!response) {
+      if (closed) return make_error("rig connection closed: " + close_reason);
+      if (!got) return make_error("the rig did not answer within " + std::to_string(options.request_timeout_s) + " s");
+      return make_error("no response");
+    }
+    if (!response->ok()) return make_error(response->error().empty() ? "the rig refused the request" : response->error());
+    return std::move(*response);
+  }
+
+  void read_loop() {
+    veneer::wire::FrameBuffer in;
+    std::array<char, 64 * 1024> buf;
+    std::string why = "connection closed by the rig";
+    for (;;) {
+      std::error_code ec;
+      size_t n = sock.read_some(asio::buffer(buf), ec);
+      if (ec) {
+        if (ec != asio::error::eof) why = "connection lost: " + ec.message();
+        break;
+      }
+      in.feed(buf.data(), n);
+      bool broken = false;
+      for (;;) {
+        pb::RigMessage m;
+        auto r = in.next(m);
+        if (r == veneer::wire::ReadResult::need_more) break;
+        if (r == veneer::wire::ReadResult::error) {
+          why = "bad data from the rig: " + in.error();
+          broken = true;
+          break;
+        }
+        dispatch(m, why);
+      }
+      if (broken) break;
+    }
+    std::function<void(const std::string&)> notify;
+    {
+      std::lock_guard lock(mutex);
+      if (!closed) {
+        closed = true;
+        close_reason = why;
+      }
+      for (auto& [id, d] : downloads) {
+        if (!d->done && d->error.empty()) d->error = "rig connection closed during the download: " + close_reason;
+      }
+    }
+    cv.notify_all();
+    if (owner->on_disconnect) owner->on_disconnect(why);
+  }
+
+  void dispatch(pb::RigMessage& m, std::string& why) {
+    switch (m.body_case()) {
+      case pb::RigMessage::kResponse: {
+        std::lock_guard lock(mutex);
+        auto it = pending.find(m.response().id());
+        if (it != pending.end()) {
+          it->second = std::move(*m.mutable_response());
+        } else if (!m.response().ok()) {
+          why = "the rig said: " + m.response().error();  // e.g. before it closes the connection
+          VLOG_WARN("Rig", "{}", why);
+        }
+        cv.notify_all();
+        break;
+      }
+      case pb::RigMessage::kEvent: {
+        Event e = convert(m.event());
+        {
+          std::lock_guard lock(mutex);
+          events.push_back(e);
+          while (events.size() > 4096) events.pop_front();
+        }
+        cv.notify_all();
+        if (owner->on_event) owner->on_event(e);
+        break;
+      }
+      case pb::RigMessage::kChunk: on_chunk(*m.mutable_chunk()); break;
+      case pb::RigMessage::kFrame: {
+        if (!owner->on_live_frame) break;
+        LiveFrame f;
+        const auto& w = m.frame();
+        f.jpeg.assign(w.jpeg().begin(), w.jpeg().end());
+        f.seq = w.seq();
+        f.ts = w.ts();
+        f.width = static_cast<int>(w.width());
+        f.height = static_cast<int>(w.height());
+        owner->on_live_frame(f);
+        break;
+      }
+      case pb::RigMessage::BODY_NOT_SET: break;
+    }
+  }
+
+  void on_chunk(pb::ImageChunk& c) {
+    std::shared_ptr<Download> d;
+    {
+      std::lock_guard lock(mutex);
+      auto it = downloads.find(c.request_id());
+      if (it == downloads.end()) return;
+      d = it->second;
+    }
+    auto fail = [&](const std::string& what) {
+      std::lock_guard lock(mutex);
+      if (d->error.empty()) d->error = what;
+      if (d->fd >= 0) ::close(d->fd);
+      d->fd = -1;
+      cv.notify_all();
+    };
+    if (d->abandoned || !d->error.empty() || d->done) return;
+    d->last_activity = Clock::now();
+    const std::string& rel = c.file();
+    if (!safe_relative(rel)) return fail("the rig sent a file name outside the set: '" + rel.substr(0, 60) + "'");
+    if (rel != d->current) {
+      if (d->fd >= 0) return fail("the rig switched files before finishing " + d->current);
+      if (d->received.count(rel)) return fail("the rig sent " + rel + " twice");
+      if (c.offset() != 0) return fail(rel + ": first chunk at offset " + std::to_string(c.offset()));
+      fs::path target = d->temp / rel;
+      std::error_code ec;
+      fs::create_directories(target.parent_path(), ec);
+      d->fd = ::open(target.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+      if (d->fd < 0) return fail(target.string() + ": cannot create: " + std::strerror(errno));
+      d->current = rel;
+      d->received[rel] = 0;
+    }
+    if (c.offset() != d->received[rel]) return fail(rel + ": chunk at offset " + std::to_string(c.offset()) + ", expected " + std::to_string(d->received[rel]));
+    const std::string& data = c.data();
+    size_t done = 0;
+    while (done < data.size()) {
+      ssize_t n = ::write(d->fd, data.data() + done, data.size() - done);
+      if (n < 0) {
+        if (errno == EINTR) continue;
+        return fail((d->temp / rel).string() + ": write failed: " + std::strerror(errno));
+      }
+      done += static_cast<size_t>(n);
+    }
+    d->received[rel] += data.size();
+    d->got += data.size();
+    if (d->progress) d->progress->report(d->total > 0 ? static_cast<double>(d->got) / d->total : 0, rel);
+    if (c.last()) {
+      if (::fsync(d->fd) != 0 || ::close(d->fd) != 0) {
+        d->fd = -1;
+        return fail((d->temp / rel).string() + ": cannot sync");
+      }
+      d->fd = -1;
+      d->current.clear();
+      if (c.file_size() != d->received[rel]) return fail(rel + ": received " + std::to_string(d->received[rel]) + " of " + std::to_string(c.file_size()) + " bytes");
+    }
+    if (c.end_of_set()) {
+      std::lock_guard lock(mutex);
+      d->done = true;
+      cv.notify_all();
+    }
+  }
+};
+
+// ------------------------------------------------------------------ Client
+
+Client::Client() : impl_(std::make_unique<Impl>()) { impl_->owner = this; }
+
+Client::~Client() { close(); }
+
+void Client::close() {
+  if (impl_) impl_->shutdown("client closed");
+}
+
+Expected<std::unique_ptr<Client>> Client::connect(const Endpoint& endpoint, const std::string& token,
+                                                  const ConnectOptions& options) {
+  std::unique_ptr<Client> client(new Client());
+  Impl& d = *client->impl_;
+  d.options = options;
+  std::error_code ec;
+  tcp::resolver resolver(d.io);
+  auto results = resolver.resolve(endpoint.host, std::to_string(endpoint.port), ec);
+  if (ec) return make_error("rig " + endpoint.str() + ": cannot resolve: " + ec.message());
+  std::error_code connect_ec = asio::error::timed_out;
+  asio::async_connect(d.sock, results, [&](std::error_code e, const tcp::endpoint&) { connect_ec = e; });
+  d.io.run_for(std::chrono::duration_cast<std::chrono::milliseconds>(
+      std::chrono::duration<double>(options.connect_timeout_s)));
+  if (connect_ec) {
+    d.sock.close(ec);
+    return make_error("rig " + endpoint.str() + ": cannot connect: " + connect_ec.message());
+  }
+  d.sock.set_option(tcp::no_delay(true), ec);
+  d.reader = std::thread([&d] { d.read_loop(); });
+
+  pb::ClientMessage m;
+  auto* h = m.mutable_hello();
+  h->set_protocol_version(veneer::wire::kProtocolVersion);
+  h->set_token(token);
+  h->set_client_name(options.client_name);
+  auto r = d.request(m);
+  if (!r) return make_error("rig " + endpoint.str() + ": " + r.message());
+  d.hello = convert(r->status());
+  return client;
+}
+
+bool Client::connected() const {
+  std::lock_guard lock(impl_->mutex);
+  return !impl_->closed;
+}
+
+const RigStatus& Client::hello_status() const { return impl_->hello; }
+
+Expected<RigStatus> Client::status() {
+  pb::ClientMessage m;
+  m.mutable_status();
+  auto r = impl_->request(m);
+  if (!r) return r.error();
+  return convert(r->status());
+}
+
+Expected<std::vector<SetSummary>> Client::list_sets() {
+  pb::ClientMessage m;
+  m.mutable_list_sets();
+  auto r = impl_->request(m);
+  if (!r) return r.error();
+  std::vector<SetSummary> out;
+  for (const auto& s : r->sets().sets()) {
+    SetSummary x;
+    x.id = s.id();
+    x.role = from_wire(s.role());
+    x.object = s.object();
+    x.created = s.created();
+    x.size = cv::Size(static_cast<int>(s.width()), static_cast<int>(s.height()));
+    x.lights = static_cast<int>(s.lights());
+    x.warnings.assign(s.warnings().begin(), s.warnings().end());
+    x.has_truth = s.has_truth();
+    x.bytes = s.bytes();
+    x.scene = s.scene();
+    out.push_back(std::move(x));
+  }
+  return out;
+}
+
+Expected<std::string> Client::manifest(const std::string& set_id) {
+  pb::ClientMessage m;
+  m.mutable_get_manifest()->set_set_id(set_id);
+  auto r = impl_->request(m);
+  if (!r) return r.error();
+  return r->manifest().json();
+}
+
+Status Client::pull(const std::string& set_id, const fs::path& folder, bool include_truth, bool overwrite,
+                    const Progress& progress) {
+  Impl& d = *impl_;
+  std::error_code ec;
+  fs::path target = folder.has_filename() ? folder : folder.parent_path();
+  if (fs::exists(target, ec) && !overwrite) return make_error(target.string() + " exists (pull into a new folder)");
+  fs::path parent = target.parent_path().empty() ? fs::path(".") : target.parent_path();
+  fs::create_directories(parent, ec);
+  if (ec) return make_error(parent.string() + ": cannot create: " + ec.message());
+  static std::atomic<unsigned> counter{0};
+  auto dl = std::make_shared<Impl::Download>();
+  dl->temp = parent / ("." + target.filename().string() + ".pull-" + std::to_string(::getpid()) + "-" +
+                       std::to_string(counter++));
+  fs::create_directories(dl->temp, ec);
+  if (ec) return make_error(dl->temp.string() + ": cannot create: " + ec.message());
+  dl->progress = &progress;
+  auto cleanup = [&] {
+    {
+      std::lock_guard lock(d.mutex);
+      dl->abandoned = true;
+      if (dl->fd >= 0) ::close(dl->fd);
+      dl->fd = -1;
+    }
+    std::error_code e;
+    fs::remove_all(dl->temp, e);
+  };
+
+  const uint64_t id = d.next_id++;
+  {
+    std::lock_guard lock(d.mutex);
+    d.downloads[id] = dl;
+  }
+  struct Unregister {
+    Impl& d;
+    uint64_t id;
+    ~Unregister() {
+      std::lock_guard lock(d.mutex);
+      d.downloads.erase(id);
+    }
+  } unregister{d, id};
+
+  pb::ClientMessage m;
+  auto* f = m.mutable_fetch_images();
+  f->set_set_id(set_id);
+  f->set_include_truth(include_truth);
+  auto r = d.request(m, id);
+  if (!r) {
+    cleanup();
+    return make_error("pull " + set_id + ": " + r.message());
+  }
+  {
+    std::lock_guard lock(d.mutex);
+    for (const auto& file : r->fetch().files()) dl->expected[file] = 0;
+    dl->total = r->fetch().total_bytes();
+  }
+
+  std::unique_lock lock(d.mutex);
+  const auto stall = std::chrono::duration<double>(d.options.request_timeout_s);
+  for (;;) {
+    if (dl->done || !dl->error.empty()) break;
+    if (progress.cancelled()) {
+      lock.unlock();
+      cleanup();
+      return make_error("pull " + set_id + ": cancelled");
+    }
+    if (Clock::now() - dl->last_activity > stall) {
+      dl->error = "the rig sent nothing for " + std::to_string(d.options.request_timeout_s) + " s";
+      break;
+    }
+    if (d.closed && !dl->done) {
+      if (dl->error.empty()) dl->error = "rig connection closed during the download: " + d.close_reason;
+      break;
+    }
+    d.cv.wait_for(lock, std::chrono::milliseconds(100));
+  }
+  std::string error = dl->error;
+  lock.unlock();
+  if (error.empty()) {
+    for (const auto& [file, size] : dl->expected) {
+      if (!dl->received.count(file)) error = "the rig did not send " + file;
+    }
+  }
+  if (!error.empty()) {
+    cleanup();
+    return make_error("pull " + set_id + ": " + error);
+  }
+  // Sync the folder tree, then move it into place in one rename.
+  for (auto& dir : {dl->temp / "truth", dl->temp}) {
+    int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (fd >= 0) {
+      (void)::fsync(fd);
+      ::close(fd);
+    }
+  }
+  if (overwrite && fs::exists(target, ec)) fs::remove_all(target, ec);
+  if (::rename(dl->temp.c_str(), target.c_str()) != 0) {
+    std::string why = std::strerror(errno);
+    cleanup();
+    return make_error("pull " + set_id + ": cannot move the set to " + target.string() + ": " + why);
+  }
+  int pfd = ::open(parent.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (pfd >= 0) {
+    (void)::fsync(pfd);
+    ::close(pfd);
+  }
+  progress.report(1.0, "done");
+  return {};
+}
+
+Status Client::delete_set(const std::string& set_id) {
+  pb::ClientMessage m;
+  m.mutable_delete_set()->set_set_id(set_id);
+  auto r = impl_->request(m);
+  if (!r) return r.error();
+  return {};
+}
+
+Expected<std::string> Client::capture(const CaptureOptions& o) {
+  pb::ClientMessage m;
+  auto* c = m.mutable_capture();
+  c->set_role(to_wire(o.role));
+  c->set_object(o.object);
+  c->mutable_exposure()->set_shutter_s(o.shutter_s);
+  c->mutable_exposure()->set_aperture(o.aperture);
+  c->mutable_exposure()->set_iso(static_cast<uint32_t>(std::max(0, o.iso)));
+  auto r = impl_->request(m);
+  if (!r) return r.error();
+  return r->capture_set_id();
+}
+
+namespace {
+Status simple(Client::Impl& d, pb::ClientMessage& m) {
+  auto r = d.request(m);
+  if (!r) return r.error();
+  return {};
+}
+}  // namespace
+
+Status Client::cancel_capture() {
+  pb::ClientMessage m;
+  m.mutable_cancel_capture();
+  return simple(*impl_, m);
+}
+
+Status Client::set_lamps(const std::vector<bool>& on, int brightness) {
+  pb::ClientMessage m;
+  auto* l = m.mutable_set_lamps();
+  for (bool b : on) l->add_on(b);
+  l->set_brightness(static_cast<uint32_t>(std::clamp(brightness, 1, 254)));
+  return simple(*impl_, m);
+}
+
+Status Client::start_live_view(double fps) {
+  pb::ClientMessage m;
+  m.mutable_start_live_view()->set_fps(fps);
+  return simple(*impl_, m);
+}
+
+Status Client::stop_live_view() {
+  pb::ClientMessage m;
+  m.mutable_stop_live_view();
+  return simple(*impl_, m);
+}
+
+Status Client::press_button(bool long_press) {
+  pb::ClientMessage m;
+  m.mutable_press_button()->set_long_press(long_press);
+  return simple(*impl_, m);
+}
+
+Status Client::move_hand_lamp(const cv::Vec3d& p) {
+  pb::ClientMessage m;
+  auto* pos = m.mutable_move_hand_lamp()->mutable_position();
+  pos->set_x(p[0]);
+  pos->set_y(p[1]);
+  pos->set_z(p[2]);
+  return simple(*impl_, m);
+}
+
+Expected<Event> Client::wait_event(const std::function<bool(const Event&)>& match, double timeout_s) {
+  Impl& d = *impl_;
+  std::unique_lock lock(d.mutex);
+  auto deadline = Clock::now() + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(timeout_s));
+  for (;;) {
+    while (!d.events.empty()) {
+      Event e = std::move(d.events.front());
+      d.events.pop_front();
+      if (match(e)) return e;
+    }
+    if (d.closed) return make_error("rig connection closed: " + d.close_reason);
+    if (d.cv.wait_until(lock, deadline) == std::cv_status::timeout && d.events.empty()) {
+      return make_error("no such event from the rig within " + std::to_string(timeout_s) + " s");
+    }
+  }
+}
+
+}  // namespace veneer::rig
