@@ -197,7 +197,7 @@ int max_reuse(const Map& m, const cv::Mat& mask) {
 
 int main(int argc, char** argv) {
   const bool quick = argc > 1 && std::strcmp(argv[1], "--quick") == 0;
-  const int runs = quick ? 1 : 7;
+  const int runs = quick ? 1 : 5;
   struct Pair {
     std::string name;
     ObjectView dst, src;
@@ -333,7 +333,17 @@ int main(int argc, char** argv) {
              {"normals 7x7", opt(Method::flann, Feature::normals, 7)},
              {"patchmatch 7x7", opt(Method::patchmatch, Feature::normals, 7)},
              {"regiongrow 3x3", opt(Method::regiongrow, Feature::normals, 3)},
-             {"coherent", opt(Method::coherent, Feature::normals, 1)},
+             {"coherent, threshold 0.05", [&] {
+                auto o = opt(Method::coherent, Feature::normals, 1);
+                o.coherent_threshold = 0.05;
+                return o;
+              }()},
+             {"coherent (threshold 0.10, the default)", opt(Method::coherent, Feature::normals, 1)},
+             {"coherent, threshold 0.20", [&] {
+                auto o = opt(Method::coherent, Feature::normals, 1);
+                o.coherent_threshold = 0.20;
+                return o;
+              }()},
              {"coherent, uniformity 0.5", [&] {
                 auto o = opt(Method::coherent, Feature::normals, 1);
                 o.uniformity = 0.5;

@@ -12,8 +12,9 @@
 // bound of the first candidate not taken. Otherwise the list grows once (x4),
 // after which the best found is kept (counted as not certified: approximate,
 // see Stats::certified).
-// Intensities at 1x1 whose 3 principal directions keep less than 99 % of the
-// variance are searched at full dimension by the exact kd-tree instead.
+// Intensities at 1x1 stay exact: a pixel the projection does not certify is
+// looked up by the exact kd-tree at full dimension, and when the 3 principal
+// directions keep less than 99 % of the variance every pixel is.
 #include "nearest.hpp"
 
 #include <algorithm>
@@ -237,7 +238,7 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
   double explained = 1;
   if (dst.patch == 1 && c > 3) {
     const cv::Mat w = principal3(md, ms, c, per_row, explained);
-    if (explained < 0.99) {
+    if (explained < 0.99) {  // the projection keeps too little: full dimension
       auto index = make_kdtree();
       auto s = direct(*index, "kdtree");
       if (stats) stats->explained_variance = explained;
@@ -262,6 +263,13 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
   const int cap = std::min(ns, (k > 1 ? 4 : 2) * first);
   std::atomic<int> certified{0};
   std::atomic<long> exact_distances{0};
+  // 1x1 intensities stay exact: a pixel the projection cannot certify asks the
+  // exact kd-tree at full dimension.
+  std::unique_ptr<NearestIndex> full;
+  if (dst.patch == 1) {
+    full = make_kdtree();
+    full->build(src.flat.data(), ns, c);
+  }
   parallel_rows(n, threads, 128, [&](int b, int e) {
     if (cancelled()) return;
     std::vector<float> buf(static_cast<size_t>(dst.dims));
@@ -289,6 +297,11 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
         const bool proven = all || clb[want - 1] * (1.0f - 1e-4f) > top.worst();
         if (proven) ++local_certified;
         local_exact += want;
+        if (!proven && full) {
+          full->knn(dst.flat.data() + static_cast<size_t>(d) * c, k, ids, sq);
+          ++local_certified;  // exact all the same
+          break;
+        }
         if (proven || want >= cap) break;
       }
     }
