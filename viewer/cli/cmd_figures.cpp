@@ -81,6 +81,7 @@ struct Figures {
     if (objects.count(k)) return {};
     sim::RenderOptions ro;
     ro.size = size;
+    ro.noise_sigma = 0.005;  // `veneer simulate`'s default sensor noise
     if (second) second_capture(ro);
     auto set = sim::simulate_set(scene, ro);
     if (!set) return make_error("simulating " + scene + ": " + set.message());

@@ -25,6 +25,13 @@ sim::RenderOptions render_options_for(const ImageSet& set) {
 
 Expected<double> relight_psnr(const Map& map, const ImageSet& destination, const ImageSet& source,
                               const cv::Mat& destination_mask) {
+  auto r = relight(map, destination, source, destination_mask);
+  if (!r) return r.error();
+  return r->psnr_db;
+}
+
+Expected<Relit> relight(const Map& map, const ImageSet& destination, const ImageSet& source,
+                        const cv::Mat& destination_mask) {
   if (!relight_measurable(source.scene))
     return make_error("relighting is measured with a source of uniform material (sphere-red-gloss, sphere-gray), not '" +
                       source.scene + "'");
@@ -37,8 +44,11 @@ Expected<double> relight_psnr(const Map& map, const ImageSet& destination, const
   const auto dst_options = render_options_for(destination);
   auto reference_scene = sim::make_scene_with_material(destination.scene, source.scene, dst_options);
   if (!reference_scene) return reference_scene.error();
-  const cv::Mat reference = sim::render(**reference_scene, lamp, dst_options);
-  return psnr(repaint(map, lit_source), reference, destination_mask);
+  Relit out;
+  out.reference = sim::render(**reference_scene, lamp, dst_options);
+  out.transferred = repaint(map, lit_source);
+  out.psnr_db = psnr(out.transferred, out.reference, destination_mask);
+  return out;
 }
 
 std::vector<std::pair<std::string, std::string>> thesis_pairs() {
@@ -111,6 +121,7 @@ Expected<std::vector<TableRow>> quality_table(const TableOptions& options, const
     sim::RenderOptions ro;
     ro.size = options.size;
     ro.threads = options.threads;
+    ro.noise_sigma = options.noise;
     if (second) second_capture(ro);
     auto set = sim::simulate_set(scene, ro, second ? Role::source : Role::destination);
     if (!set) return make_error("simulating " + scene + ": " + set.message());
@@ -175,11 +186,11 @@ Expected<std::vector<TableRow>> quality_table(const TableOptions& options, const
 
 std::string format_table(const std::vector<TableRow>& rows, const TableOptions& options) {
   std::ostringstream out;
-  char buf[512];
+  char buf[1024];
   std::snprintf(buf, sizeof buf,
                 "Quality of the correspondence methods on simulated pairs, rendered at %dx%d (reduced from 1024x680 so "
-                "the faithful methods finish), normals from %s; quality measured against the simulator's truth (masks, normals). blocks <- blocks compares two captures (the source moved and smaller). Coherence counts neighbours matched within 1.5 px, so one source pixel stamped over a region also counts as coherent: read it with reuse.\n\n",
-                options.size.width, options.size.height,
+                "the faithful methods finish) with sensor noise %.3f, normals from %s; quality measured against the simulator's truth (masks, normals). blocks <- blocks compares two captures (the source moved and smaller). Coherence counts neighbours matched within 1.5 px, so one source pixel stamped over a region also counts as coherent: read it with reuse.\n\n",
+                options.size.width, options.size.height, options.noise,
                 options.truth_normals ? "the truth" : "photometric stereo");
   out << buf;
   out << "| destination <- source | px dst/src | method | engine | feature | patch | coverage | normal mean / p95 "

@@ -116,16 +116,18 @@ cv::Mat median_photo(const std::vector<cv::Mat>& photos) {
   if (photos.empty()) return {};
   cv::Mat out(photos[0].size(), CV_32FC3);
   const int n = static_cast<int>(photos.size());
-  std::vector<float> v(n);
-  for (int y = 0; y < out.rows; ++y)
-    for (int x = 0; x < out.cols; ++x)
-      for (int c = 0; c < 3; ++c) {
-        for (int i = 0; i < n; ++i) v[i] = photos[i].at<cv::Vec3f>(y, x)[c];
-        std::nth_element(v.begin(), v.begin() + n / 2, v.end());
-        float m = v[n / 2];
-        if (n % 2 == 0) m = 0.5f * (m + *std::max_element(v.begin(), v.begin() + n / 2));
-        out.at<cv::Vec3f>(y, x)[c] = m;
-      }
+  cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& rows) {
+    std::vector<float> v(n);
+    for (int y = rows.start; y < rows.end; ++y)
+      for (int x = 0; x < out.cols; ++x)
+        for (int c = 0; c < 3; ++c) {
+          for (int i = 0; i < n; ++i) v[i] = photos[i].at<cv::Vec3f>(y, x)[c];
+          std::nth_element(v.begin(), v.begin() + n / 2, v.end());
+          float m = v[n / 2];
+          if (n % 2 == 0) m = 0.5f * (m + *std::max_element(v.begin(), v.begin() + n / 2));
+          out.at<cv::Vec3f>(y, x)[c] = m;
+        }
+  });
   return out;
 }
 
@@ -292,9 +294,13 @@ Expected<TransferResult> transfer(const ImageSet& destination_in, const ImageSet
     Quality q = evaluate(result.map, destination.truth.mask, source.truth.mask, destination.truth.normals,
                          source.truth.normals);
     if (relight_measurable(source.scene)) {
-      auto p = relight_psnr(result.map, destination, source, destination.truth.mask);
-      if (p) q.psnr_db = *p;
-      else j["relight_error"] = p.message();
+      auto relit = relight(result.map, destination, source, destination.truth.mask);
+      if (relit) {
+        q.psnr_db = relit->psnr_db;
+        result.relit = std::move(*relit);
+      } else {
+        j["relight_error"] = relit.message();
+      }
     }
     result.quality = q;
     j["quality"] = quality_json(q);
@@ -353,6 +359,15 @@ Status write_transfer(const TransferResult& r, const std::filesystem::path& fold
   }
   if (auto s = write_picture(folder / "result_median.png", tonemap_picture(r.repainted_median)); !s) return s;
   if (auto s = write_picture(folder / "reuse.png", reuse_picture(r.reuse, r.source_median)); !s) return s;
+  if (r.relit) {
+    // one exposure for both, so that they compare
+    cv::Mat both;
+    cv::hconcat(r.relit->transferred, r.relit->reference, both);
+    const cv::Mat pic = tonemap_picture(both);
+    const int w = r.relit->transferred.cols;
+    if (auto s = write_picture(folder / "relight_transferred.png", pic(cv::Rect(0, 0, w, pic.rows)).clone()); !s) return s;
+    if (auto s = write_picture(folder / "relight_reference.png", pic(cv::Rect(w, 0, w, pic.rows)).clone()); !s) return s;
+  }
   return write_file_atomic(folder / "metrics.json", r.metrics_json + "\n");
 }
 

@@ -53,6 +53,13 @@ cv::Vec3d relight_lamp_position();
 // (sphere-red-gloss, sphere-gray); fails otherwise with the reason.
 Expected<double> relight_psnr(const Map& map, const ImageSet& destination, const ImageSet& source,
                               const cv::Mat& destination_mask);
+struct Relit {
+  cv::Mat transferred;  // linear BGR: the source under the extra lamp, carried through the map (black unmapped)
+  cv::Mat reference;    // linear BGR: the destination's shape in the source's material under the extra lamp
+  double psnr_db = 0;
+};
+Expected<Relit> relight(const Map& map, const ImageSet& destination, const ImageSet& source,
+                        const cv::Mat& destination_mask);
 bool relight_measurable(const std::string& source_scene);
 
 // The quality table of the thesis pairs (issue 3): simulated sets at a reduced
@@ -62,6 +69,7 @@ struct TableOptions {
   std::vector<std::pair<std::string, std::string>> pairs;  // (destination, source); empty = the eight of issue 3
   bool full = false;           // false: a chosen subset of rows per pair (fits a bench); true: all combinations
   bool truth_normals = false;  // match on true normals instead of photometric stereo
+  double noise = 0.005;        // sensor noise of the simulated sets (fraction of full scale; `veneer simulate`'s default)
   int threads = 0;             // 0 = all cores
   bool include_fast = true;    // add rows of the fast engine where it serves
 };

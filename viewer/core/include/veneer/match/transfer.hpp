@@ -45,13 +45,15 @@ struct TransferResult {
   cv::Mat reuse;                   // CV_32SC1 counts per source pixel
   cv::Mat source_median;           // the source photos' per-pixel median (backdrop of the reuse picture)
   std::optional<Quality> quality;  // when both sets carry truth
+  std::optional<Relit> relit;      // the relighting measure's pictures, when measured
   std::string metrics_json;        // timings, options, sizes, quality
 };
 
 Expected<TransferResult> transfer(const ImageSet& destination, const ImageSet& source,
                                   const TransferOptions& options, const Progress& progress = {});
 // Writes map.pfm, map.png, result_light_NN.png, result_median.png, reuse.png,
-// metrics.json into `folder` (created when missing).
+// metrics.json (and relight_transferred.png / relight_reference.png when the
+// relighting was measured) into `folder` (created when missing).
 Status write_transfer(const TransferResult& result, const std::filesystem::path& folder);
 
 // Quality of a map between two sets: truth masks and normals when both sets
