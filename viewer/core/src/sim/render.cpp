@@ -191,9 +191,9 @@ std::shared_ptr<const GBuffer> Scene::gbuffer(cv::Size size, double focal, int t
       } else if (d.z < 0) {
         double t = (table_z_world - camera.z) / d.z;
         V3 p = camera + d * t;
-        // a faint cloth texture so the background is dark but never flat zero
-        V3 q = p * 900.0;
-        double v = 0.85 + 0.3 * value_noise(q, 991);
+        // a faint speckled cloth (cells of 0.5 mm, about a pixel): dark, never flat zero
+        double v = 0.85 + 0.3 * cell_rand(static_cast<int>(std::floor(p.x * 2000)),
+                                          static_cast<int>(std::floor(p.y * 2000)), 0, 991);
         set3(g.p, p);
         set3(g.ng, {0, 0, 1});
         set3(g.n, {0, 0, 1});

@@ -94,14 +94,24 @@ std::unique_ptr<Scene> orange() {
   s->shape.prims.push_back(Primitive::sphere({0, 0, 0}, 0.04));
   const V3 stem = normalize({0.1, 0.62, 0.78});
   s->material = [stem](const V3& p, const V3& n, int, int, SurfaceSample* out) {
-    // peel: pits of oil glands (cells of ~1.8 mm) on a gently lumpy surface
-    auto height = [](const V3& q) {
-      Cell c = cellular(q * 560.0, 11);
-      double pit = 1.0 - smoothstep(0.0, 0.55, c.dist);
-      return -0.00022 * pit * pit + 0.0005 * fbm(q * 60.0, 3, 12);
-    };
-    out->normal = bump(p, n, height, 4e-5);
-    double cells = cellular(p * 560.0, 11).dist;
+    // peel: pits of oil glands (cells of ~1.8 mm) on a gently lumpy surface.
+    // Pit depth h = -A (1 - smoothstep(0, R, d))^2 of the distance d to the
+    // cell's gland: its gradient is analytic, h'(d) (p - gland) / d.
+    const double freq = 560.0, A = 0.00022, R = 0.55;
+    Cell cell = cellular(p * freq, 11);
+    V3 grad{0, 0, 0};
+    if (cell.dist < R && cell.dist > 1e-9) {
+      double t = cell.dist / R;
+      double s = t * t * (3 - 2 * t), ds = 6 * t * (1 - t) / R;  // smoothstep and its derivative in d
+      double dh_dd = -A * 2 * (1 - s) * (-ds);                    // per unit of d (cell units)
+      grad = (-cell.offset / cell.dist) * (dh_dd * freq);         // d(d)/dp = -offset / d, in cell units per metre
+    }
+    auto lumps = [](const V3& q) { return 0.0005 * fbm(q * 60.0, 3, 12); };
+    const double eps = 4e-5;
+    double l0 = lumps(p);
+    grad += V3{lumps(p + V3{eps, 0, 0}) - l0, lumps(p + V3{0, eps, 0}) - l0, lumps(p + V3{0, 0, eps}) - l0} / eps;
+    out->normal = normalize(n - (grad - n * dot(grad, n)));
+    double cells = cell.dist;
     double mottle = fbm(p * 110.0, 4, 13);
     V3 peel = rgb(0.93, 0.37, 0.03) * (0.82 + 0.3 * mottle) * (0.92 + 0.08 * smoothstep(0.1, 0.6, cells));
     // stem scar: a small olive-brown star facing up and toward the camera
