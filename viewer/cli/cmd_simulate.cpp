@@ -105,7 +105,7 @@ VENEER_COMMAND(simulate) {
                   "sensor noise std-dev as a fraction of full scale (0.005 ~ a DSLR at ISO 100 in 16-bit linear)")
       ->capture_default_str();
   cmd->add_option("--offset", args->offset, "move the object by x,y,z metres in the rig frame")->capture_default_str();
-  cmd->add_option("--scale", args->scale, "scale the object (2.7 fills the frame, ~150 000 pixels)")
+  cmd->add_option("--scale", args->scale, "scale the object about its base (2.5 fills the frame, ~150 000 pixels at 1024x680)")
       ->capture_default_str();
   cmd->add_option("--focal", args->focal, "focal length in pixels (0 = 2 x width, the thesis framing)")
       ->capture_default_str();

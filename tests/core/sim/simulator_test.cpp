@@ -4,6 +4,8 @@
 #include <cstring>
 #include <filesystem>
 #include <numeric>
+#include <set>
+#include <tuple>
 
 #include <unistd.h>
 
@@ -202,6 +204,83 @@ TEST(Simulator, SpecularHighlightSaturatesOnTheGlossySphere) {
   cv::split(g, ch);
   cv::minMaxLoc(ch[1], nullptr, &maxv);
   EXPECT_LT(maxv, 0.6 * kRigIntensity / (0.9 * 0.9) + 1e-3);
+}
+
+// The scenes are what their names promise (the properties the thesis chose them for).
+TEST(Simulator, ScenesHaveTheirCharacter) {
+  RenderOptions o = small_options();
+  auto truth_of = [&](const std::string& name) {
+    auto scene = scene_or_die(name, o);
+    return scene ? render_truth(*scene, o) : Truth{};
+  };
+  auto distinct_albedos = [](const Truth& t) {
+    std::set<std::tuple<int, int, int>> colours;
+    for (int y = 0; y < t.mask.rows; ++y)
+      for (int x = 0; x < t.mask.cols; ++x)
+        if (t.mask.at<uint8_t>(y, x)) {
+          cv::Vec3f a = t.albedo.at<cv::Vec3f>(y, x);
+          colours.insert({static_cast<int>(a[0] * 8), static_cast<int>(a[1] * 8), static_cast<int>(a[2] * 8)});
+        }
+    return colours.size();
+  };
+  // blocks: few normal orientations (each brick shows the same three faces)
+  {
+    Truth t = truth_of("blocks");
+    std::vector<cv::Vec3f> dirs;
+    int pixels = 0, explained = 0;
+    for (int y = 0; y < t.mask.rows; ++y)
+      for (int x = 0; x < t.mask.cols; ++x) {
+        if (!t.mask.at<uint8_t>(y, x)) continue;
+        ++pixels;
+        cv::Vec3f n = t.normals.at<cv::Vec3f>(y, x);
+        bool known = false;
+        for (const auto& d : dirs) known = known || n.dot(d) > 0.999f;
+        if (known) ++explained;
+        else if (dirs.size() < 3) dirs.push_back(n), ++explained;
+      }
+    EXPECT_EQ(explained, pixels) << "every block pixel faces one of three directions";
+    EXPECT_EQ(dirs.size(), 3u);
+    EXPECT_GE(distinct_albedos(t), 4u) << "bricks of four colours";
+  }
+  // two-spheres: two separate objects of different colours
+  {
+    Truth t = truth_of("two-spheres");
+    cv::Mat labels;
+    EXPECT_EQ(cv::connectedComponents(t.mask, labels) - 1, 2);
+    EXPECT_EQ(distinct_albedos(t), 2u);
+  }
+  // the cups: the same shape; one plain, one dotted in four colours
+  {
+    Truth white = truth_of("cup-white"), dots = truth_of("cup-dots");
+    EXPECT_EQ(cv::countNonZero(white.mask != dots.mask), 0);
+    EXPECT_EQ(distinct_albedos(white), 1u);
+    EXPECT_GE(distinct_albedos(dots), 5u);
+  }
+  // uniform spheres for measuring; textured fruit and stone
+  EXPECT_EQ(distinct_albedos(truth_of("sphere-gray")), 1u);
+  EXPECT_EQ(distinct_albedos(truth_of("sphere-red-gloss")), 1u);
+  for (const char* name : {"orange", "apple", "banana", "stone"}) EXPECT_GE(distinct_albedos(truth_of(name)), 4u) << name;
+  // the stone is rough: its normals deviate from a smoothed version of themselves
+  {
+    Truth t = truth_of("stone"), s = truth_of("sphere-gray");
+    auto roughness = [](const Truth& tr) {
+      cv::Mat blurred;
+      cv::GaussianBlur(tr.normals, blurred, cv::Size(7, 7), 0);
+      cv::Mat inner;
+      cv::erode(tr.mask, inner, cv::Mat(), cv::Point(-1, -1), 4);
+      double sum = 0;
+      int n = 0;
+      for (int y = 0; y < tr.mask.rows; ++y)
+        for (int x = 0; x < tr.mask.cols; ++x)
+          if (inner.at<uint8_t>(y, x)) {
+            cv::Vec3f a = tr.normals.at<cv::Vec3f>(y, x), b = blurred.at<cv::Vec3f>(y, x);
+            sum += std::acos(std::clamp(static_cast<double>(a.dot(b) / cv::norm(b)), -1.0, 1.0));
+            ++n;
+          }
+      return sum / n * 180 / CV_PI;
+    };
+    EXPECT_GT(roughness(t), 3 * roughness(s));
+  }
 }
 
 TEST(Simulator, TruthNormalsAreUnitInsideAndZeroOutside) {

@@ -44,7 +44,7 @@ struct RenderOptions {
                                 // independent noise (simulate_set: light index; ambient frame 255)
   cv::Vec3d offset_m{0, 0, 0};  // moves the whole object (and its table) in the rig frame [m]
   double scale = 1.0;           // scales the object about its base (the point where it rests on
-                                // the table behind it); 2.7 fills a 1024x680 frame (~150 000 px)
+                                // the table behind it); 2.5 fills a 1024x680 frame (~150 000 px)
   int threads = 0;              // 0 = all cores
   Status check() const;
 };
