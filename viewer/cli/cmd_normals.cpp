@@ -1,0 +1,187 @@
+// veneer normals — photometric stereo on one set: normals (PFM + picture),
+// albedo, mask, residual/confidence picture, and, for simulated sets with
+// truth/, the angular error against it (printed and in metrics.json).
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <sstream>
+#include <string>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+
+#include "command.hpp"
+#include "veneer/io/image_io.hpp"
+#include "veneer/io/imageset.hpp"
+#include "veneer/ps/photometric_stereo.hpp"
+#include "veneer/ps/segmentation.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct NormalsArgs {
+  std::string set, out, rect, model = "automatic";
+  bool robust = false, plain = false, near_light = false, distant = false, otsu = false;
+  double threshold = -1;
+  bool supplied_mask = false, no_clean = false;
+  float shadow = 0.10f, saturation = 0.98f;
+  int iterations = 2, threads = 0;
+};
+
+int fail(int code, const std::string& message) {
+  std::cerr << "veneer normals: " << message << "\n";
+  return code;
+}
+
+bool parse_rect(const std::string& text, cv::Rect* r) {
+  std::istringstream in(text);
+  int x = 0, y = 0, w = 0, h = 0;
+  char a = 0, b = 0, c = 0, extra = 0;
+  if (!(in >> x >> a >> y >> b >> w >> c >> h) || a != ',' || b != ',' || c != ',' || (in >> extra)) return false;
+  *r = {x, y, w, h};
+  return true;
+}
+
+// Albedo is relative to a white Lambertian surface (1.0): shown as an sRGB picture.
+cv::Mat albedo_picture(const cv::Mat& albedo) {
+  cv::Mat out(albedo.size(), CV_8UC3);
+  for (int y = 0; y < albedo.rows; ++y) {
+    const cv::Vec3f* a = albedo.ptr<cv::Vec3f>(y);
+    cv::Vec3b* o = out.ptr<cv::Vec3b>(y);
+    for (int x = 0; x < albedo.cols; ++x)
+      for (int c = 0; c < 3; ++c) {
+        const float v = std::clamp(a[x][c], 0.f, 1.f);
+        const float s = v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1.f / 2.4f) - 0.055f;
+        o[x][c] = static_cast<uint8_t>(std::lround(s * 255.f));
+      }
+  }
+  return out;
+}
+
+int run_normals(const NormalsArgs& a) {
+  if (a.set.empty()) return fail(2, "a SET folder is required");
+  if (a.out.empty()) return fail(2, "--out is required");
+  if (a.near_light && a.distant) return fail(2, "--near-light and --distant exclude each other");
+  if (a.robust && a.plain) return fail(2, "--robust and --plain exclude each other");
+  if (a.otsu && a.threshold >= 0) return fail(2, "--otsu and --threshold exclude each other");
+
+  veneer::ps::PsOptions po;
+  po.robust = !a.plain;
+  po.light_model = a.near_light ? veneer::ps::LightModel::near
+                   : a.distant  ? veneer::ps::LightModel::distant
+                                : veneer::ps::LightModel::automatic;
+  po.shadow_fraction = a.shadow;
+  po.saturation = a.saturation;
+  po.near_iterations = a.iterations;
+  po.threads = a.threads;
+  if (auto st = po.check(); !st) return fail(2, st.message());
+
+  veneer::ps::SegmentOptions so;
+  if (a.otsu) so.method = veneer::ps::SegmentMethod::otsu;
+  if (a.threshold >= 0) {
+    so.method = veneer::ps::SegmentMethod::threshold;
+    so.threshold = a.threshold;
+  }
+  if (a.supplied_mask) so.method = veneer::ps::SegmentMethod::supplied;
+  so.clean = !a.no_clean;
+  if (!a.rect.empty()) {
+    cv::Rect r;
+    if (!parse_rect(a.rect, &r)) return fail(2, "--rect '" + a.rect + "': expected x,y,w,h in pixels");
+    so.rect = r;
+  }
+  if (auto st = so.check(); !st) return fail(2, st.message());
+
+  veneer::cli::ProgressBar bar("normals");
+  bar.update(0.0, "reading " + a.set);
+  auto set = veneer::read_set(a.set);
+  if (!set) return fail(1, set.message());
+  bar.update(0.3, "segmenting");
+  auto seg = veneer::ps::segment(*set, so);
+  if (!seg) return fail(1, seg.message());
+  veneer::Progress progress;
+  progress.on_progress = [&bar](double f, const std::string& stage) { bar.update(0.35 + 0.45 * f, stage); };
+  auto res = veneer::ps::photometric_stereo(*set, seg->mask, po, progress);
+  if (!res) return fail(1, res.message());
+
+  bar.update(0.85, "writing " + a.out);
+  std::error_code ec;
+  fs::create_directories(a.out, ec);
+  if (ec) return fail(1, "cannot create " + a.out + ": " + ec.message());
+  const fs::path out(a.out);
+  if (auto st = veneer::write_pfm(out / "normals.pfm", res->normals, true); !st) return fail(1, st.message());
+  if (auto st = veneer::write_picture(out / "normals.png", veneer::normals_picture(res->normals)); !st)
+    return fail(1, st.message());
+  if (auto st = veneer::write_pfm(out / "albedo.pfm", res->albedo, false); !st) return fail(1, st.message());
+  if (auto st = veneer::write_picture(out / "albedo.png", albedo_picture(res->albedo)); !st) return fail(1, st.message());
+  if (auto st = veneer::write_picture(out / "mask.png", res->mask); !st) return fail(1, st.message());
+  if (auto st = veneer::write_picture(out / "reliable.png", res->reliable); !st) return fail(1, st.message());
+  if (auto st = veneer::write_pfm(out / "residual.pfm", res->residual, false); !st) return fail(1, st.message());
+  if (auto st = veneer::write_picture(out / "residual.png", veneer::ps::residual_picture(*res)); !st)
+    return fail(1, st.message());
+  if (!res->depth.empty()) {
+    if (auto st = veneer::write_pfm(out / "depth.pfm", res->depth, false); !st) return fail(1, st.message());
+  }
+
+  nlohmann::json m;
+  m["set"] = a.set;
+  m["size"] = {res->normals.cols, res->normals.rows};
+  m["lights"] = set->images.size();
+  m["light_model"] = veneer::ps::light_model_name(res->model_used);
+  m["robust"] = po.robust;
+  m["segmentation"] = veneer::ps::segment_method_name(seg->method_used);
+  m["threshold"] = seg->threshold;
+  m["object_pixels"] = res->solved_pixels;
+  m["unreliable_pixels"] = res->unreliable_pixels;
+  m["mean_residual"] = cv::mean(res->residual, res->mask)[0];
+  bar.update(1.0, "done");
+  bar.done();
+  std::printf("normals: %s, %d object pixels (%s), %s lights%s, %d unreliable\n", a.set.c_str(), res->solved_pixels,
+              veneer::ps::segment_method_name(seg->method_used), veneer::ps::light_model_name(res->model_used),
+              po.robust ? ", robust" : "", res->unreliable_pixels);
+  if (set->truth.present()) {
+    const cv::Mat& tm = set->truth.mask.empty() ? res->mask : set->truth.mask;
+    cv::Mat both;
+    cv::bitwise_and(tm, res->mask, both);
+    auto e = veneer::ps::angular_error(res->normals, set->truth.normals, both);
+    m["angular_error_deg"] = {{"mean", e.mean_deg}, {"median", e.median_deg}, {"p95", e.p95_deg},
+                              {"max", e.max_deg},   {"pixels", e.pixels}};
+    std::printf("angular error vs truth: mean %.2f deg, median %.2f, 95th percentile %.2f (%d pixels)\n", e.mean_deg,
+                e.median_deg, e.p95_deg, e.pixels);
+  }
+  if (auto st = veneer::write_file_atomic(out / "metrics.json", m.dump(2) + "\n"); !st) return fail(1, st.message());
+  std::printf("wrote %s: normals.pfm normals.png albedo.png mask.png reliable.png residual.png metrics.json\n",
+              a.out.c_str());
+  return 0;
+}
+
+}  // namespace
+
+VENEER_COMMAND(normals) {
+  auto args = std::make_shared<NormalsArgs>();
+  auto* cmd = app.add_subcommand(
+      "normals",
+      "photometric stereo on a set: normals (PFM + picture), albedo, mask, residual; angular error when the set "
+      "has truth/. Default: robust, near-light when the lamp positions and focal length are known, the set's "
+      "own mask if it has one, else Otsu");
+  cmd->add_option("SET", args->set, "image set folder (veneer-set/1, DiLiGenT or thesis layout)");
+  cmd->add_option("--out", args->out, "output folder");
+  cmd->add_flag("--robust", args->robust, "drop shadowed and saturated samples per pixel (the default)");
+  cmd->add_flag("--plain", args->plain, "plain least squares over every sample");
+  cmd->add_flag("--near-light", args->near_light, "per-pixel light vectors from the lamp positions, 1/r^2 falloff");
+  cmd->add_flag("--distant", args->distant, "one light direction per lamp for the whole image");
+  cmd->add_option("--threshold", args->threshold,
+                  "segment by the mean intensity over lamps (the thesis's summed-intensity threshold), 0..1");
+  cmd->add_flag("--otsu", args->otsu, "segment by Otsu's threshold on the summed intensity");
+  cmd->add_flag("--supplied-mask", args->supplied_mask, "use the set's own mask (fail when it has none)");
+  cmd->add_option("--rect", args->rect, "limit the object to the rectangle x,y,w,h (pixels)");
+  cmd->add_flag("--no-clean", args->no_clean, "keep specks and holes in a thresholded mask");
+  cmd->add_option("--shadow", args->shadow, "robust: shadow threshold as a fraction of the pixel's brightest sample")
+      ->capture_default_str();
+  cmd->add_option("--saturation", args->saturation, "robust: a sample at or above this level is saturated")
+      ->capture_default_str();
+  cmd->add_option("--iterations", args->iterations, "near-light depth refinements (0..5)")->capture_default_str();
+  cmd->add_option("--threads", args->threads, "worker threads (0 = all cores)")->capture_default_str();
+  return [args] { return run_normals(*args); };
+}
