@@ -339,3 +339,40 @@ TEST_F(FastEngine, BadInputIsAnError) {
 }
 
 }  // namespace
+
+namespace {
+
+TEST(FastBlend, KeepsChunksSharpAndFadesSeams) {
+  const cv::Size size(40, 30);
+  cv::Mat dmask(size, CV_8UC1, cv::Scalar(255)), smask(size, CV_8UC1, cv::Scalar(255));
+  cv::Mat photo(size, CV_32FC3);
+  cv::randu(photo, cv::Scalar::all(0), cv::Scalar::all(1));
+  // Two chunks: the left half copies the source shifted by (+2, +1), the right half by (-3, 0).
+  Map map;
+  map.xy.create(size, CV_32FC2);
+  map.distance = cv::Mat::zeros(size, CV_32FC1);
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x) {
+      const bool left = x < 20;
+      int qx = std::clamp(x + (left ? 2 : -3), 0, size.width - 1), qy = std::clamp(y + (left ? 1 : 0), 0, size.height - 1);
+      map.xy.at<cv::Vec2f>(y, x) = cv::Vec2f(static_cast<float>(qx), static_cast<float>(qy));
+    }
+  auto plain = fast::blend_repaint(map, dmask, photo, smask, 0);
+  auto blended = fast::blend_repaint(map, dmask, photo, smask, 2);
+  ASSERT_TRUE(plain.ok() && blended.ok());
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x) {
+      const cv::Vec2f q = map.xy.at<cv::Vec2f>(y, x);
+      EXPECT_EQ(plain->at<cv::Vec3f>(y, x), photo.at<cv::Vec3f>(static_cast<int>(q[1]), static_cast<int>(q[0])));
+    }
+  // well inside a chunk (away from the seam and the borders) blending changes nothing
+  for (int y = 5; y < 25; ++y)
+    for (int x : {8, 30}) EXPECT_LT(cv::norm(blended->at<cv::Vec3f>(y, x) - plain->at<cv::Vec3f>(y, x)), 1e-5);
+  // at the seam it mixes both chunks
+  double diff = 0;
+  for (int y = 5; y < 25; ++y) diff += cv::norm(blended->at<cv::Vec3f>(y, 20) - plain->at<cv::Vec3f>(y, 20));
+  EXPECT_GT(diff, 0.1);
+  EXPECT_FALSE(fast::blend_repaint(map, dmask, photo, smask, -1).ok());
+}
+
+}  // namespace

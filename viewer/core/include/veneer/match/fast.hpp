@@ -15,6 +15,8 @@
 //    faithful methods, and the `coherent` method (StyleBlit-style chunks).
 // Every per-pixel stage runs on all cores (TBB).
 #include <memory>
+
+#include <opencv2/core.hpp>
 #include <string>
 
 #include "veneer/match/index.hpp"
@@ -46,6 +48,16 @@ Expected<Map> compute_map(const ObjectView& destination, const ObjectView& sourc
 // "grid" (octahedral lookup, exact for any 3-D points, fastest on normals) or
 // "kdtree" (nanoflann, exact, any dimension); nullptr for other names.
 std::unique_ptr<NearestIndex> make_index(const std::string& kind);
+
+// Repaint with the overlapping chunks blended (StyleBlit's optional blending,
+// done as voting): each destination pixel averages, Gaussian-weighted, the
+// source colours that its neighbours within `radius` propose for it -- their
+// match shifted back by their offset. Inside a coherent chunk every proposal
+// is the same pixel, so texture stays sharp; across a seam the chunks fade
+// into each other. radius 0 = plain lookup. Returns CV_32FC3, zero where the
+// destination is not mapped.
+Expected<cv::Mat> blend_repaint(const Map& map, const cv::Mat& destination_mask, const cv::Mat& source_photo,
+                                const cv::Mat& source_mask, int radius = 2, int threads = 0);
 
 // The index kind compute_map uses for nearest normals (the faster one as measured).
 const char* default_index();
