@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <array>
 #include <map>
 #include <mutex>
 
@@ -106,6 +107,12 @@ veneer::Expected<SimulatedCameraOptions> SimulatedCameraOptions::from_json(const
       return veneer::make_error("simulated camera: 'preview_quality' must be an integer");
     o.preview_quality = static_cast<int>(std::clamp<int64_t>(s["preview_quality"].get<int64_t>(), -1, 1000));
   }
+  if (s.contains("preview_render")) {
+    const json& v = s["preview_render"];
+    if (!v.is_string() || (v.get<std::string>() != "fast" && v.get<std::string>() != "full"))
+      return veneer::make_error("simulated camera: 'preview_render' must be \"fast\" or \"full\"");
+    o.preview_full_render = v.get<std::string>() == "full";
+  }
   if (auto st = o.check(); !st) return st.error();
   return o;
 }
@@ -118,10 +125,54 @@ json SimulatedCameraOptions::to_json() const {
   j["preview_size"] = {preview_size.width, preview_size.height};
   j["noise_sigma"] = noise_sigma;
   j["preview_quality"] = preview_quality;
+  j["preview_render"] = preview_full_render ? "full" : "fast";
   return j;
 }
 
 // --- the camera ------------------------------------------------------------
+
+// What the fast live view shades from: per pixel of the object, its position
+// in the rig frame, normal and albedo (from the simulator's truth).
+struct PreviewBuffer {
+  std::string scene;
+  cv::Size size;
+  std::vector<int> index;            // pixel index of each object pixel
+  std::vector<cv::Vec3f> position;   // rig frame [m]
+  std::vector<cv::Vec3f> normal;
+  std::vector<cv::Vec3f> albedo;     // BGR
+};
+
+std::shared_ptr<const PreviewBuffer> make_preview_buffer(const veneer::sim::Scene& scene, const std::string& name,
+                                                         const veneer::sim::RenderOptions& r) {
+  veneer::Truth t = veneer::sim::render_truth(scene, r);
+  auto b = std::make_shared<PreviewBuffer>();
+  b->scene = name;
+  b->size = r.size;
+  if (!t.present()) return b;
+  const double f = r.focal_px, cx = (r.size.width - 1) * 0.5, cy = (r.size.height - 1) * 0.5;
+  for (int y = 0; y < r.size.height; ++y) {
+    for (int x = 0; x < r.size.width; ++x) {
+      if (!t.mask.at<uint8_t>(y, x)) continue;
+      double d = t.depth.at<float>(y, x);  // along -z from the camera at z = 1
+      b->index.push_back(y * r.size.width + x);
+      b->position.emplace_back(static_cast<float>((x - cx) / f * d), static_cast<float>(-(y - cy) / f * d),
+                               static_cast<float>(1.0 - d));
+      b->normal.push_back(t.normals.at<cv::Vec3f>(y, x));
+      b->albedo.push_back(t.albedo.at<cv::Vec3f>(y, x));
+    }
+  }
+  return b;
+}
+
+// Linear [0, 1] -> display 8-bit (gamma 1/2.2), 4096 steps.
+const std::array<uint8_t, 4096>& gamma_lut() {
+  static const std::array<uint8_t, 4096> lut = [] {
+    std::array<uint8_t, 4096> l{};
+    for (int i = 0; i < 4096; ++i) l[i] = static_cast<uint8_t>(std::lround(255.0 * std::pow(i / 4095.0, 1.0 / 2.2)));
+    return l;
+  }();
+  return lut;
+}
 
 struct SimulatedCamera::Impl {
   SimulatedCameraOptions options;
@@ -139,6 +190,7 @@ struct SimulatedCamera::Impl {
   std::vector<veneer::sim::Lamp> last_lamps;
   // Scenes keep their G-buffer for one size: stills and live view use separate objects.
   std::map<std::string, std::shared_ptr<const veneer::sim::Scene>> still_scenes, preview_scenes;
+  std::shared_ptr<const PreviewBuffer> preview_buffer;  // fast live view of preview_scene
 
   double gain_locked() const {
     return (exposure.shutter_s / kRefShutter) * (kRefAperture / exposure.aperture) * (kRefAperture / exposure.aperture) *
@@ -291,14 +343,48 @@ veneer::Expected<std::vector<unsigned char>> SimulatedCamera::preview() {
   }
   auto scene = impl_->scene_for(impl_->preview_scenes, scene_name, r);
   if (!scene) return veneer::make_error("simulated camera: " + scene.message());
-  cv::Mat linear = veneer::sim::render(**scene, {hand}, r);
-  if (linear.empty()) return veneer::make_error("simulated camera: the simulator rendered no live-view frame");
-  // Display encoding: sRGB-like gamma on the linear frame.
-  cv::Mat gamma;
-  cv::max(linear, 0.0, gamma);
-  cv::pow(gamma, 1.0 / 2.2, gamma);
   cv::Mat bytes8;
-  gamma.convertTo(bytes8, CV_8UC3, 255.0);
+  if (impl_->options.preview_full_render) {
+    cv::Mat linear = veneer::sim::render(**scene, {hand}, r);
+    if (linear.empty()) return veneer::make_error("simulated camera: the simulator rendered no live-view frame");
+    bytes8.create(linear.size(), CV_8UC3);
+    const auto& lut = gamma_lut();
+    for (int y = 0; y < linear.rows; ++y) {
+      const auto* in = linear.ptr<cv::Vec3f>(y);
+      auto* out = bytes8.ptr<cv::Vec3b>(y);
+      for (int x = 0; x < linear.cols; ++x)
+        for (int c = 0; c < 3; ++c) out[x][c] = lut[static_cast<int>(std::clamp(in[x][c], 0.0f, 1.0f) * 4095.0f)];
+    }
+  } else {
+    std::shared_ptr<const PreviewBuffer> buffer;
+    {
+      std::lock_guard lock(impl_->mutex);
+      buffer = impl_->preview_buffer;
+    }
+    if (!buffer || buffer->scene != scene_name || buffer->size != r.size) {
+      buffer = make_preview_buffer(**scene, scene_name, r);
+      std::lock_guard lock(impl_->mutex);
+      impl_->preview_buffer = buffer;
+    }
+    // The simulator's convention: a rig lamp at full white delivers irradiance 1
+    // at the rig origin, i.e. radiant intensity |lamp|^2.
+    const cv::Vec3d rig0 = veneer::sim::thesis_rig().front().position_m;
+    const double radiant = rig0.dot(rig0) * hand.brightness * r.exposure;
+    const cv::Vec3f lamp(static_cast<float>(hand.position_m[0]), static_cast<float>(hand.position_m[1]),
+                         static_cast<float>(hand.position_m[2]));
+    bytes8 = cv::Mat(r.size, CV_8UC3, cv::Scalar::all(0));
+    auto* out = bytes8.ptr<cv::Vec3b>(0);
+    const auto& lut = gamma_lut();
+    for (std::size_t k = 0; k < buffer->index.size(); ++k) {
+      cv::Vec3f L = lamp - buffer->position[k];
+      float r2 = L.dot(L);
+      float ndl = buffer->normal[k].dot(L) / std::sqrt(r2);
+      if (!(ndl > 0)) continue;
+      float e = static_cast<float>(radiant) * ndl / r2;
+      cv::Vec3b& px = out[buffer->index[k]];
+      for (int c = 0; c < 3; ++c) px[c] = lut[static_cast<int>(std::clamp(buffer->albedo[k][c] * e, 0.0f, 1.0f) * 4095.0f)];
+    }
+  }
   std::vector<unsigned char> jpeg;
   if (!cv::imencode(".jpg", bytes8, jpeg, {cv::IMWRITE_JPEG_QUALITY, quality}))
     return veneer::make_error("simulated camera: JPEG encoding of the live-view frame failed");

@@ -169,6 +169,51 @@ TEST_F(Camera, PreviewIsAJpegOfTheSourceUnderTheHandLamp) {
   EXPECT_GT(cv::mean(diff)[0] + cv::mean(diff)[1] + cv::mean(diff)[2], 1.0);  // the light moved
 }
 
+TEST(SimulatedCameraPreview, FastLiveViewAgreesWithTheFullRender) {
+  auto o = small_rig();
+  o.scenes = {"sphere-gray"};
+  auto rig = SimulatedRig::start(o);
+  ASSERT_TRUE(rig.ok());
+  auto fast_cfg = (*rig)->camera_config();
+  auto full_cfg = fast_cfg;
+  full_cfg["preview_render"] = "full";
+  auto fast_o = veneerd::SimulatedCameraOptions::from_json(fast_cfg);
+  auto full_o = veneerd::SimulatedCameraOptions::from_json(full_cfg);
+  ASSERT_TRUE(fast_o.ok() && full_o.ok());
+  EXPECT_FALSE(fast_o->preview_full_render);
+  EXPECT_TRUE(full_o->preview_full_render);
+  auto fast = veneerd::SimulatedCamera::create(*fast_o);
+  auto full = veneerd::SimulatedCamera::create(*full_o);
+  ASSERT_TRUE(fast.ok() && full.ok());
+  veneer::sim::RenderOptions r;
+  r.size = o.preview_size;
+  r.focal_px = 2.0 * r.size.width;
+  auto scene = veneer::sim::make_scene("sphere-gray", r);
+  ASSERT_TRUE(scene.ok());
+  cv::Mat object = veneer::sim::render_truth(**scene, r).mask;
+  for (cv::Vec3d pos : {cv::Vec3d{0.3, 0.3, 0.7}, cv::Vec3d{-0.4, 0.0, 0.5}}) {
+    (*fast)->set_hand_lamp(pos);
+    (*full)->set_hand_lamp(pos);
+    auto a = (*fast)->preview();
+    auto b = (*full)->preview();
+    ASSERT_TRUE(a.ok() && b.ok());
+    cv::Mat ia = cv::imdecode(*a, cv::IMREAD_GRAYSCALE), ib = cv::imdecode(*b, cv::IMREAD_GRAYSCALE);
+    ASSERT_EQ(ia.size(), ib.size());
+    cv::Mat lit = (ib > 20) & object;  // the sphere where the full render sees it lit
+    ASSERT_GT(cv::countNonZero(lit), 200);
+    cv::Mat background;
+    cv::bitwise_not(object, background);
+    EXPECT_LT(cv::mean(ia, background)[0], 2.0);  // fast view: the object only (JPEG ringing aside)
+    cv::Mat diff;
+    cv::absdiff(ia, ib, diff);
+    EXPECT_LT(cv::mean(diff, lit)[0], 12.0) << "hand lamp at " << pos;
+    EXPECT_GT(cv::mean(ia, lit)[0], 30.0);
+  }
+  auto bad = full_cfg;
+  bad["preview_render"] = "raytraced";
+  EXPECT_FALSE(veneerd::SimulatedCameraOptions::from_json(bad).ok());
+}
+
 TEST_F(Camera, FailsOnShotKAndSurvives) {
   ASSERT_TRUE(lamps->set(one_hot(7, 3)).ok());
   camera->fail_on_shot(2);

@@ -7,7 +7,8 @@
 //
 // Config section (JSON): the "hue" lamps section (bridge, key, lamps, ...) plus
 //   {"scene": "bull", "preview_scene": "stone", "size": [1024, 680],
-//    "preview_size": [1024, 680], "noise_sigma": 0.002, "preview_quality": 80}
+//    "preview_size": [1024, 680], "noise_sigma": 0.002, "preview_quality": 80,
+//    "preview_render": "fast" | "full"}
 // Exposure: gain = (shutter / (1/30 s)) * (8 / f-number)^2 * (ISO / 100), so
 // 1/30 s, f/8, ISO 100 is the simulator's well-exposed shot (gain 1).
 #include <atomic>
@@ -36,6 +37,11 @@ struct SimulatedCameraOptions {
   cv::Size preview_size{1024, 680};  // live-view size [px]
   double noise_sigma = 0.002;        // sensor noise, fraction of full scale
   int preview_quality = 80;          // JPEG quality 1..100
+  // Live view: "fast" shades the cached G-buffer of the preview scene's object
+  // (diffuse, attached shadows, 1/r^2; no cast shadows, highlights or table:
+  // the background stays black) so 1024x680 frames keep up with 15 fps;
+  // "full" runs the simulator's renderer per frame.
+  bool preview_full_render = false;
   veneer::Status check() const;
   static veneer::Expected<SimulatedCameraOptions> from_json(const nlohmann::json& section);
   nlohmann::json to_json() const;
