@@ -1,0 +1,32 @@
+// veneer-viewer — the desktop program.
+#include <QApplication>
+#include <QCommandLineParser>
+
+#include "main_window.hpp"
+
+int main(int argc, char** argv) {
+  QApplication app(argc, argv);
+  QApplication::setApplicationName("veneer-viewer");
+  QApplication::setOrganizationName("veneer");
+  QCommandLineParser parser;
+  parser.setApplicationDescription("Veneer: transfer the look of one object onto another, live.");
+  parser.addHelpOption();
+  QCommandLineOption rig("rig", "rig to connect to at start (host:port)", "host:port");
+  QCommandLineOption token("token-file", "the rig's access token file", "file");
+  QCommandLineOption dst("dst", "destination image set to load", "folder");
+  QCommandLineOption src("src", "source image set to load", "folder");
+  QCommandLineOption workdir("workdir", "where pulled sets are kept", "folder");
+  QCommandLineOption compute("compute", "compute the transfer once both sets are loaded");
+  parser.addOptions({rig, token, dst, src, workdir, compute});
+  parser.process(app);
+  veneer::app::MainWindow::Options o;
+  o.rig = parser.value(rig);
+  o.token_file = parser.value(token);
+  o.destination = parser.value(dst);
+  o.source = parser.value(src);
+  o.workdir = parser.value(workdir);
+  veneer::app::MainWindow window(o);
+  window.show();
+  if (parser.isSet(compute)) window.startTransfer();
+  return app.exec();
+}

@@ -1,0 +1,965 @@
+#include "main_window.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include <QApplication>
+#include <QCheckBox>
+#include <QComboBox>
+#include <QDir>
+#include <QDoubleSpinBox>
+#include <QFileDialog>
+#include <QFormLayout>
+#include <QGroupBox>
+#include <QHBoxLayout>
+#include <QLabel>
+#include <QLineEdit>
+#include <QMenuBar>
+#include <QProgressBar>
+#include <QPushButton>
+#include <QScrollArea>
+#include <QSpinBox>
+#include <QSplitter>
+#include <QStandardPaths>
+#include <QStatusBar>
+#include <QTabWidget>
+#include <QTreeWidget>
+#include <QVBoxLayout>
+#include <QtConcurrent/QtConcurrentRun>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include "veneer/io/image_io.hpp"
+#include "veneer/ps/segmentation.hpp"
+
+namespace veneer::app {
+namespace {
+
+const char* kMethods[] = {"coherent", "linear", "flann", "candidates", "patchmatch", "regiongrow", "baseline"};
+
+QPushButton* button(const QString& text, const QString& name, QWidget* parent) {
+  auto* b = new QPushButton(text, parent);
+  b->setObjectName(name);
+  return b;
+}
+
+cv::Mat picture_of(const cv::Mat& linear) { return linear.empty() ? cv::Mat() : tonemap_picture(linear); }
+
+}  // namespace
+
+MainWindow::MainWindow(const Options& options, QWidget* parent)
+    : QMainWindow(parent), settings_("veneer", "veneer-viewer") {
+  workdir_ = options.workdir.isEmpty()
+                 ? QStandardPaths::writableLocation(QStandardPaths::AppLocalDataLocation)
+                 : options.workdir;
+  QDir().mkpath(workdir_ + "/sets");
+  buildUi();
+  buildMenus();
+
+  connect(&rig_, &RigLink::connectedChanged, this, [this](bool ok, QString msg) {
+    message(msg, !ok);
+    connect_btn_->setText(ok ? tr("Disconnect") : tr("Connect"));
+    if (ok) rememberRig(rig_.endpoint());
+    if (!ok) rig_root_->takeChildren();
+    updateStatusLine();
+  });
+  connect(&rig_, &RigLink::statusUpdated, this, [this](veneer::rig::RigStatus) { updateStatusLine(); });
+  connect(&rig_, &RigLink::setsListed, this, &MainWindow::onSetsListed);
+  connect(&rig_, &RigLink::rigEvent, this, &MainWindow::onRigEvent);
+  connect(&rig_, &RigLink::liveFrame, this, &MainWindow::onLiveFrame);
+  connect(&rig_, &RigLink::failed, this, [this](QString what, QString msg) { message(what + ": " + msg, true); });
+  connect(&rig_, &RigLink::pullProgress, this, [this](QString, double f) {
+    pull_bar_->setVisible(true);
+    pull_bar_->setValue(static_cast<int>(f * 100));
+  });
+  connect(&rig_, &RigLink::pulled, this, [this](QString id, QString folder) {
+    pull_bar_->setValue(100);
+    message(tr("pulled %1 into %2").arg(id, folder));
+    auto read = veneer::read_set(folder.toStdString());
+    if (read) addLocalItem(folder, *read);
+  });
+  connect(&transfer_watch_, &QFutureWatcher<void>::finished, this, &MainWindow::onTransferDone);
+
+  if (!options.destination.isEmpty()) loadLocalSet(options.destination, veneer::Role::destination);
+  if (!options.source.isEmpty()) loadLocalSet(options.source, veneer::Role::source);
+  if (!options.rig.isEmpty()) connectToRig(options.rig, options.token_file);
+}
+
+MainWindow::~MainWindow() {
+  cancel_ = true;
+  transfer_watch_.waitForFinished();
+}
+
+// ---------------------------------------------------------------- layout
+
+void MainWindow::buildUi() {
+  setWindowTitle(tr("Veneer"));
+  auto* split = new QSplitter(this);
+  auto* side = new QWidget;
+  auto* side_layout = new QVBoxLayout(side);
+  side_layout->addWidget(buildConnectPanel());
+  side_layout->addWidget(buildCapturePanel());
+  side_layout->addWidget(buildSetsPanel(), 1);
+  side_layout->addWidget(buildTransferPanel());
+  auto* scroll = new QScrollArea;
+  scroll->setWidget(side);
+  scroll->setWidgetResizable(true);
+  scroll->setMinimumWidth(330);
+  split->addWidget(scroll);
+
+  tabs_ = new QTabWidget;
+  tabs_->setObjectName("tabs");
+  tabs_->addTab(buildLookTab(), tr("Look"));
+  tabs_->addTab(buildLiveTab(), tr("Live"));
+  tabs_->addTab(buildRelightTab(), tr("Relight"));
+  split->addWidget(tabs_);
+  split->setStretchFactor(1, 1);
+  setCentralWidget(split);
+
+  status_label_ = new QLabel(tr("no rig"));
+  status_label_->setObjectName("rigStatus");
+  statusBar()->addPermanentWidget(status_label_);
+  message_label_ = new QLabel;
+  message_label_->setObjectName("message");
+  statusBar()->addWidget(message_label_, 1);
+  resize(1400, 860);
+}
+
+QWidget* MainWindow::buildConnectPanel() {
+  auto* box = new QGroupBox(tr("Rig"));
+  auto* form = new QFormLayout(box);
+  rig_edit_ = new QLineEdit(settings_.value("rig/last", "127.0.0.1:7878").toString());
+  rig_edit_->setObjectName("rigAddress");
+  token_edit_ = new QLineEdit(settings_.value("rig/token_file").toString());
+  token_edit_->setObjectName("tokenFile");
+  token_edit_->setPlaceholderText(tr("token file (the rig's <store>/token)"));
+  recent_ = new QComboBox;
+  recent_->setObjectName("recentRigs");
+  recent_->addItems(settings_.value("rig/recent").toStringList());
+  connect(recent_, &QComboBox::textActivated, rig_edit_, &QLineEdit::setText);
+  connect_btn_ = button(tr("Connect"), "connect", box);
+  connect(connect_btn_, &QPushButton::clicked, this, [this] {
+    if (rig_.isConnected()) {
+      rig_.disconnectFromRig();
+    } else {
+      connectToRig(rig_edit_->text(), token_edit_->text());
+    }
+  });
+  auto* browse = button(tr("…"), "browseToken", box);
+  connect(browse, &QPushButton::clicked, this, [this] {
+    QString f = QFileDialog::getOpenFileName(this, tr("Token file"));
+    if (!f.isEmpty()) token_edit_->setText(f);
+  });
+  auto* token_row = new QHBoxLayout;
+  token_row->addWidget(token_edit_);
+  token_row->addWidget(browse);
+  form->addRow(tr("Address"), rig_edit_);
+  form->addRow(tr("Recent"), recent_);
+  form->addRow(tr("Token"), token_row);
+  form->addRow(connect_btn_);
+  return box;
+}
+
+QWidget* MainWindow::buildCapturePanel() {
+  auto* box = new QGroupBox(tr("Capture"));
+  auto* form = new QFormLayout(box);
+  object_edit_ = new QLineEdit;
+  object_edit_->setObjectName("objectName");
+  object_edit_->setPlaceholderText(tr("object name (optional)"));
+  shutter_ = new QDoubleSpinBox;
+  shutter_->setObjectName("shutter");
+  shutter_->setRange(0, 30);
+  shutter_->setDecimals(4);
+  shutter_->setSpecialValueText(tr("rig default"));
+  aperture_ = new QDoubleSpinBox;
+  aperture_->setObjectName("aperture");
+  aperture_->setRange(0, 32);
+  aperture_->setSpecialValueText(tr("rig default"));
+  iso_ = new QSpinBox;
+  iso_->setObjectName("iso");
+  iso_->setRange(0, 25600);
+  iso_->setSpecialValueText(tr("rig default"));
+  form->addRow(tr("Object"), object_edit_);
+  form->addRow(tr("Shutter [s]"), shutter_);
+  form->addRow(tr("Aperture f/"), aperture_);
+  form->addRow(tr("ISO"), iso_);
+  auto capture = [this](veneer::Role role) {
+    veneer::rig::CaptureOptions o;
+    o.role = role;
+    o.object = object_edit_->text().toStdString();
+    o.shutter_s = shutter_->value();
+    o.aperture = aperture_->value();
+    o.iso = iso_->value();
+    pending_role_ = veneer::role_name(role);
+    rig_.capture(o);
+  };
+  auto* cap_dst = button(tr("Capture destination"), "captureDestination", box);
+  auto* cap_src = button(tr("Capture source"), "captureSource", box);
+  connect(cap_dst, &QPushButton::clicked, this, [capture] { capture(veneer::Role::destination); });
+  connect(cap_src, &QPushButton::clicked, this, [capture] { capture(veneer::Role::source); });
+  auto* press = button(tr("Press rig button"), "pressButton", box);
+  connect(press, &QPushButton::clicked, this, [this] { rig_.pressButton(false); });
+  auto* cancel = button(tr("Cancel capture"), "cancelCapture", box);
+  connect(cancel, &QPushButton::clicked, this, [this] { rig_.cancelCapture(); });
+  auto* row1 = new QHBoxLayout;
+  row1->addWidget(cap_dst);
+  row1->addWidget(cap_src);
+  auto* row2 = new QHBoxLayout;
+  row2->addWidget(press);
+  row2->addWidget(cancel);
+  form->addRow(row1);
+  form->addRow(row2);
+  shot_bar_ = new QProgressBar;
+  shot_bar_->setObjectName("shotProgress");
+  shot_bar_->setFormat(tr("shot %v of %m"));
+  shot_bar_->setValue(0);
+  capture_label_ = new QLabel(tr("idle"));
+  capture_label_->setObjectName("captureStatus");
+  capture_label_->setWordWrap(true);
+  form->addRow(shot_bar_);
+  form->addRow(capture_label_);
+  return box;
+}
+
+QWidget* MainWindow::buildSetsPanel() {
+  auto* box = new QGroupBox(tr("Sets"));
+  auto* layout = new QVBoxLayout(box);
+  sets_tree_ = new QTreeWidget;
+  sets_tree_->setObjectName("sets");
+  sets_tree_->setHeaderLabels({tr("Set"), tr("Role"), tr("Object")});
+  sets_tree_->setIconSize(QSize(64, 42));
+  rig_root_ = new QTreeWidgetItem(sets_tree_, {tr("On the rig")});
+  local_root_ = new QTreeWidgetItem(sets_tree_, {tr("On this computer")});
+  rig_root_->setExpanded(true);
+  local_root_->setExpanded(true);
+  layout->addWidget(sets_tree_, 1);
+  pull_bar_ = new QProgressBar;
+  pull_bar_->setObjectName("pullProgress");
+  pull_bar_->setVisible(false);
+  layout->addWidget(pull_bar_);
+  auto* row = new QHBoxLayout;
+  auto* open = button(tr("Open folder…"), "openLocal", box);
+  auto* pull = button(tr("Pull"), "pullSet", box);
+  auto* del = button(tr("Delete"), "deleteSet", box);
+  auto* use_dst = button(tr("→ Destination"), "useDestination", box);
+  auto* use_src = button(tr("→ Source"), "useSource", box);
+  for (auto* b : {open, pull, del}) row->addWidget(b);
+  auto* row2 = new QHBoxLayout;
+  row2->addWidget(use_dst);
+  row2->addWidget(use_src);
+  layout->addLayout(row);
+  layout->addLayout(row2);
+  connect(open, &QPushButton::clicked, this, [this] {
+    QString dir = QFileDialog::getExistingDirectory(this, tr("Image set folder"));
+    if (dir.isEmpty()) return;
+    auto read = veneer::read_set(dir.toStdString());
+    if (!read) {
+      message(qs(read.message()), true);
+      return;
+    }
+    addLocalItem(dir, *read);
+  });
+  connect(pull, &QPushButton::clicked, this, &MainWindow::pullSelected);
+  connect(del, &QPushButton::clicked, this, [this] {
+    QTreeWidgetItem* item = selectedItem();
+    if (!item) return;
+    if (item->parent() == rig_root_) {
+      rig_.deleteSet(item->text(0));
+    } else if (item->parent() == local_root_) {
+      delete item;  // forgets it here; the folder on disk stays
+    }
+  });
+  connect(use_dst, &QPushButton::clicked, this, [this] { useSelected(veneer::Role::destination); });
+  connect(use_src, &QPushButton::clicked, this, [this] { useSelected(veneer::Role::source); });
+  connect(sets_tree_, &QTreeWidget::itemDoubleClicked, this, [this](QTreeWidgetItem* item) {
+    if (item->parent() == local_root_) {
+      useSelected(item->text(1) == "source" ? veneer::Role::source : veneer::Role::destination);
+    } else if (item->parent() == rig_root_) {
+      pullSelected();
+    }
+  });
+  return box;
+}
+
+QWidget* MainWindow::buildTransferPanel() {
+  auto* box = new QGroupBox(tr("Transfer"));
+  auto* form = new QFormLayout(box);
+  method_ = new QComboBox;
+  method_->setObjectName("method");
+  for (const char* m : kMethods) method_->addItem(m);
+  feature_ = new QComboBox;
+  feature_->setObjectName("feature");
+  feature_->addItems({"normals", "intensities"});
+  patch_ = new QComboBox;
+  patch_->setObjectName("patch");
+  patch_->addItems({"1", "3", "5", "7"});
+  candidates_ = new QSpinBox;
+  candidates_->setObjectName("candidates");
+  candidates_->setRange(1, 100);
+  candidates_->setValue(10);
+  threshold_ = new QDoubleSpinBox;
+  threshold_->setObjectName("threshold");
+  threshold_->setRange(0, 2);
+  threshold_->setDecimals(3);
+  threshold_->setSingleStep(0.01);
+  threshold_->setValue(0.05);
+  iterations_ = new QSpinBox;
+  iterations_->setObjectName("iterations");
+  iterations_->setRange(1, 50);
+  iterations_->setValue(5);
+  coherent_threshold_ = new QDoubleSpinBox;
+  coherent_threshold_->setObjectName("coherentThreshold");
+  coherent_threshold_->setRange(0, 2);
+  coherent_threshold_->setDecimals(3);
+  coherent_threshold_->setSingleStep(0.01);
+  coherent_threshold_->setValue(veneer::match::MatchOptions{}.coherent_threshold);
+  uniformity_ = new QDoubleSpinBox;
+  uniformity_->setObjectName("uniformity");
+  uniformity_->setRange(0, 10);
+  uniformity_->setSingleStep(0.1);
+  fast_ = new QCheckBox(tr("fast engine"));
+  fast_->setObjectName("fast");
+  fast_->setChecked(true);
+  truth_normals_ = new QCheckBox(tr("truth normals (simulated sets)"));
+  truth_normals_->setObjectName("truthNormals");
+  seg_method_ = new QComboBox;
+  seg_method_->setObjectName("segMethod");
+  seg_method_->addItems({"automatic", "otsu", "threshold"});
+  seg_threshold_ = new QDoubleSpinBox;
+  seg_threshold_->setObjectName("segThreshold");
+  seg_threshold_->setRange(0, 0.99);
+  seg_threshold_->setDecimals(3);
+  seg_threshold_->setSingleStep(0.005);
+  seg_threshold_->setValue(0.02);
+  rect_label_ = new QLabel(tr("no rectangle (shift+drag on the destination)"));
+  rect_label_->setWordWrap(true);
+  form->addRow(tr("Method"), method_);
+  form->addRow(tr("Feature"), feature_);
+  form->addRow(tr("Patch"), patch_);
+  form->addRow(tr("Candidates K"), candidates_);
+  form->addRow(tr("Region threshold"), threshold_);
+  form->addRow(tr("PatchMatch iterations"), iterations_);
+  form->addRow(tr("Coherent threshold"), coherent_threshold_);
+  form->addRow(tr("Uniformity"), uniformity_);
+  form->addRow(fast_);
+  form->addRow(truth_normals_);
+  form->addRow(tr("Segmentation"), seg_method_);
+  form->addRow(tr("Seg. threshold"), seg_threshold_);
+  form->addRow(rect_label_);
+  compute_btn_ = button(tr("Compute"), "compute", box);
+  cancel_btn_ = button(tr("Cancel"), "cancelTransfer", box);
+  cancel_btn_->setEnabled(false);
+  connect(compute_btn_, &QPushButton::clicked, this, &MainWindow::startTransfer);
+  connect(cancel_btn_, &QPushButton::clicked, this, &MainWindow::cancelTransfer);
+  auto* row = new QHBoxLayout;
+  row->addWidget(compute_btn_);
+  row->addWidget(cancel_btn_);
+  form->addRow(row);
+  transfer_bar_ = new QProgressBar;
+  transfer_bar_->setObjectName("transferProgress");
+  transfer_label_ = new QLabel;
+  transfer_label_->setObjectName("transferStatus");
+  transfer_label_->setWordWrap(true);
+  form->addRow(transfer_bar_);
+  form->addRow(transfer_label_);
+  return box;
+}
+
+QWidget* MainWindow::buildLookTab() {
+  auto* w = new QWidget;
+  auto* layout = new QVBoxLayout(w);
+  auto* top = new QHBoxLayout;
+  look_what_ = new QComboBox;
+  look_what_->setObjectName("lookWhat");
+  look_what_->addItems({tr("median of all lamps"), tr("normals"), tr("albedo"), tr("mask"),
+                        tr("correspondence map"), tr("source reuse")});
+  connect(look_what_, &QComboBox::currentIndexChanged, this, [this] { refreshLook(); });
+  top->addWidget(new QLabel(tr("Show")));
+  top->addWidget(look_what_);
+  auto* reset = button(tr("Fit"), "fitViews", w);
+  connect(reset, &QPushButton::clicked, this, [this] { sync_.reset(); });
+  top->addWidget(reset);
+  top->addStretch();
+  layout->addLayout(top);
+  auto* row = new QHBoxLayout;
+  dst_view_ = new ImageView(tr("destination"));
+  src_view_ = new ImageView(tr("source"));
+  result_view_ = new ImageView(tr("result"));
+  for (auto* v : {dst_view_, src_view_, result_view_}) {
+    v->setSync(&sync_);
+    row->addWidget(v);
+  }
+  layout->addLayout(row, 3);
+  origin_view_ = new ImageView(tr("origin: click a destination or result pixel"));
+  layout->addWidget(origin_view_, 2);
+  connect(dst_view_, &ImageView::pixelClicked, this, &MainWindow::showOrigin);
+  connect(result_view_, &ImageView::pixelClicked, this, &MainWindow::showOrigin);
+  connect(dst_view_, &ImageView::rectDrawn, this, [this](QRect r) {
+    seg_rect_ = r;
+    rect_label_->setText(r.isEmpty() ? tr("no rectangle")
+                                     : tr("rectangle %1,%2 %3x%4").arg(r.x()).arg(r.y()).arg(r.width()).arg(r.height()));
+  });
+  return w;
+}
+
+QWidget* MainWindow::buildLiveTab() {
+  auto* w = new QWidget;
+  auto* layout = new QVBoxLayout(w);
+  auto* top = new QHBoxLayout;
+  live_btn_ = button(tr("Start live view"), "liveToggle", w);
+  live_btn_->setCheckable(true);
+  fps_ = new QDoubleSpinBox;
+  fps_->setObjectName("liveFps");
+  fps_->setRange(1, 60);
+  fps_->setValue(15);
+  connect(live_btn_, &QPushButton::toggled, this, [this](bool on) {
+    live_btn_->setText(on ? tr("Stop live view") : tr("Start live view"));
+    if (on) {
+      live_clock_.start();
+      live_frames_ = 0;
+      rig_.startLive(fps_->value());
+    } else {
+      rig_.stopLive();
+    }
+  });
+  top->addWidget(live_btn_);
+  top->addWidget(new QLabel(tr("fps")));
+  top->addWidget(fps_);
+  top->addWidget(new QLabel(tr("Lamps:")));
+  for (int i = 0; i < 7; ++i) {
+    auto* box = new QCheckBox(QString::number(i + 1));
+    box->setObjectName(QString("lamp%1").arg(i + 1));
+    lamp_boxes_.push_back(box);
+    top->addWidget(box);
+    connect(box, &QCheckBox::toggled, this, [this] {
+      std::vector<bool> on;
+      for (auto* b : lamp_boxes_) on.push_back(b->isChecked());
+      on.resize(std::max<size_t>(on.size(), static_cast<size_t>(rig_.lastStatus().lamp_count)), false);
+      if (rig_.lastStatus().lamp_count > 0) on.resize(static_cast<size_t>(rig_.lastStatus().lamp_count));
+      rig_.setLamps(on, 254);
+    });
+  }
+  top->addStretch();
+  live_label_ = new QLabel;
+  live_label_->setObjectName("liveStatus");
+  top->addWidget(live_label_);
+  layout->addLayout(top);
+  auto* row = new QHBoxLayout;
+  live_src_view_ = new ImageView(tr("source, live"));
+  live_dst_view_ = new ImageView(tr("destination, repainted live"));
+  row->addWidget(live_src_view_, 3);
+  row->addWidget(live_dst_view_, 3);
+  auto* pad_box = new QVBoxLayout;
+  pad_box->addWidget(new QLabel(tr("hand-held lamp\n(simulated rig)")));
+  hand_pad_ = new SpherePad;
+  hand_pad_->setObjectName("handLamp");
+  connect(hand_pad_, &SpherePad::directionChanged, this, [this](cv::Vec3d d) {
+    // The lamp 0.6 m from the object in the chosen direction.
+    rig_.moveHandLamp(d * 0.6);
+  });
+  pad_box->addWidget(hand_pad_);
+  pad_box->addStretch();
+  row->addLayout(pad_box, 1);
+  layout->addLayout(row, 1);
+  return w;
+}
+
+QWidget* MainWindow::buildRelightTab() {
+  auto* w = new QWidget;
+  auto* layout = new QHBoxLayout(w);
+  auto* left = new QVBoxLayout;
+  left->addWidget(new QLabel(tr("Drag the light over the sphere")));
+  relight_pad_ = new SpherePad;
+  relight_pad_->setObjectName("relightPad");
+  relight_pad_->setDirection(cv::Vec3d(-0.4, 0.4, std::sqrt(1 - 0.32)));
+  connect(relight_pad_, &SpherePad::directionChanged, this, [this] { refreshRelight(); });
+  left->addWidget(relight_pad_);
+  relight_label_ = new QLabel;
+  relight_label_->setWordWrap(true);
+  left->addWidget(relight_label_);
+  left->addStretch();
+  layout->addLayout(left, 1);
+  relight_src_view_ = new ImageView(tr("source under the virtual light"));
+  relight_view_ = new ImageView(tr("destination relit in the source's material"));
+  layout->addWidget(relight_src_view_, 3);
+  layout->addWidget(relight_view_, 3);
+  return w;
+}
+
+void MainWindow::buildMenus() {
+  QMenu* file = menuBar()->addMenu(tr("&File"));
+  file->addAction(tr("Open set folder…"), this, [this] {
+    QString dir = QFileDialog::getExistingDirectory(this, tr("Image set folder"));
+    if (!dir.isEmpty()) loadLocalSet(dir, veneer::Role::destination);
+  });
+  QMenu* exp = menuBar()->addMenu(tr("&Export"));
+  exp->addAction(tr("Map (map.pfm, map.png)…"), this, &MainWindow::exportMap);
+  exp->addAction(tr("Result pictures…"), this, &MainWindow::exportResults);
+  exp->addAction(tr("Relight sweep video…"), this, &MainWindow::exportRelightVideo);
+  file->addSeparator();
+  file->addAction(tr("Quit"), qApp, &QApplication::quit);
+}
+
+// ---------------------------------------------------------------- rig
+
+void MainWindow::message(const QString& text, bool error) {
+  last_message_ = text;
+  message_label_->setText(text);
+  message_label_->setStyleSheet(error ? "color: #e05050;" : "");
+}
+
+void MainWindow::connectToRig(const QString& endpoint, const QString& token_file) {
+  rig_edit_->setText(endpoint);
+  token_edit_->setText(token_file);
+  if (token_file.isEmpty()) {
+    message(tr("no token file given: the rig's token is in its store folder (<store>/token)"), true);
+    return;
+  }
+  auto token = veneer::rig::read_token_file(token_file.toStdString());
+  if (!token) {
+    message(qs(token.message()), true);
+    return;
+  }
+  settings_.setValue("rig/token_file", token_file);
+  message(tr("connecting to %1…").arg(endpoint));
+  rig_.connectTo(endpoint, qs(*token));
+}
+
+void MainWindow::rememberRig(const QString& endpoint) {
+  QStringList recent = settings_.value("rig/recent").toStringList();
+  recent.removeAll(endpoint);
+  recent.prepend(endpoint);
+  while (recent.size() > 8) recent.removeLast();
+  settings_.setValue("rig/recent", recent);
+  settings_.setValue("rig/last", endpoint);
+  recent_->clear();
+  recent_->addItems(recent);
+}
+
+void MainWindow::updateStatusLine() {
+  if (!rig_.isConnected()) {
+    status_label_->setText(tr("no rig"));
+    return;
+  }
+  const auto& s = rig_.lastStatus();
+  int on = static_cast<int>(std::count(s.lamps_on.begin(), s.lamps_on.end(), true));
+  status_label_->setText(tr("%1%2 · camera: %3 · lamps: %4 (%5 on) · storage: %6 GB free · %7 · %8 sets")
+                             .arg(rig_.endpoint(), s.simulated ? tr(" (simulated)") : QString(),
+                                  s.camera_connected ? qs(s.camera_model) : tr("missing"))
+                             .arg(s.lamp_count)
+                             .arg(on)
+                             .arg(s.free_bytes / 1e9, 0, 'f', 1)
+                             .arg(s.you_control ? tr("you control")
+                                                : (s.controller_taken ? tr("another client controls") : tr("free")))
+                             .arg(s.sets_stored));
+}
+
+void MainWindow::onRigEvent(const veneer::rig::Event& e) {
+  using K = veneer::rig::Event::Kind;
+  switch (e.kind) {
+    case K::button_pressed:
+      capture_label_->setText(e.long_press ? tr("rig button: long press (cancel)") : tr("rig button pressed"));
+      break;
+    case K::capture_started:
+      shot_bar_->setRange(0, std::max(1, e.n));
+      shot_bar_->setValue(0);
+      capture_label_->setText(tr("capturing %1 (%2)…").arg(qs(veneer::role_name(e.role)), qs(e.object)));
+      break;
+    case K::shot_taken:
+      shot_bar_->setRange(0, std::max(1, e.n));
+      shot_bar_->setValue(e.k);
+      capture_label_->setText(tr("shot %1 of %2 · %3 s left").arg(e.k).arg(e.n).arg(e.eta_s, 0, 'f', 1));
+      break;
+    case K::set_stored: {
+      shot_bar_->setValue(shot_bar_->maximum());
+      QString text = tr("stored %1 (%2)").arg(qs(e.set_id), qs(veneer::role_name(e.role)));
+      for (const auto& w : e.warnings) text += "\n⚠ " + qs(w);
+      capture_label_->setText(text);
+      pending_role_.clear();
+      rig_.listSets();
+      rig_.refreshStatus();
+      break;
+    }
+    case K::capture_failed:
+      capture_label_->setText(e.cancelled ? tr("capture cancelled") : tr("capture failed: %1").arg(qs(e.reason)));
+      message(capture_label_->text(), !e.cancelled);
+      pending_role_.clear();
+      rig_.refreshStatus();
+      break;
+    case K::lamp_state:
+      for (size_t i = 0; i < lamp_boxes_.size() && i < e.lamps_on.size(); ++i) {
+        QSignalBlocker block(lamp_boxes_[i]);
+        lamp_boxes_[i]->setChecked(e.lamps_on[i]);
+      }
+      break;
+    case K::camera_connected:
+    case K::camera_lost:
+      message(qs(veneer::rig::describe(e)), e.kind == K::camera_lost);
+      rig_.refreshStatus();
+      break;
+    case K::set_deleted:
+      rig_.listSets();
+      break;
+  }
+}
+
+void MainWindow::onSetsListed(const std::vector<veneer::rig::SetSummary>& sets) {
+  rig_root_->takeChildren();
+  for (const auto& s : sets) {
+    auto* item = new QTreeWidgetItem(rig_root_, {qs(s.id), qs(veneer::role_name(s.role)), qs(s.object)});
+    QString tip = tr("%1x%2, %3 lamps, %4").arg(s.size.width).arg(s.size.height).arg(s.lights).arg(qs(s.created));
+    for (const auto& w : s.warnings) tip += "\n⚠ " + qs(w);
+    item->setToolTip(0, tip);
+  }
+  rig_root_->setExpanded(true);
+}
+
+QTreeWidgetItem* MainWindow::selectedItem() const {
+  auto items = sets_tree_->selectedItems();
+  if (items.isEmpty() || !items.front()->parent()) return nullptr;
+  return items.front();
+}
+
+void MainWindow::pullSelected() {
+  QTreeWidgetItem* item = selectedItem();
+  if (!item || item->parent() != rig_root_) {
+    message(tr("choose a set on the rig to pull"), true);
+    return;
+  }
+  pull_bar_->setVisible(true);
+  pull_bar_->setValue(0);
+  rig_.pull(item->text(0), workdir_ + "/sets/" + item->text(0));
+}
+
+void MainWindow::addLocalItem(const QString& folder, const veneer::ImageSet& set) {
+  for (int i = 0; i < local_root_->childCount(); ++i)
+    if (local_root_->child(i)->data(0, Qt::UserRole).toString() == folder) delete local_root_->child(i);
+  auto* item = new QTreeWidgetItem(local_root_, {QFileInfo(folder).fileName(), qs(veneer::role_name(set.role)),
+                                                 qs(set.object)});
+  item->setData(0, Qt::UserRole, folder);
+  item->setToolTip(0, folder);
+  if (!set.images.empty()) {
+    cv::Mat small;
+    cv::resize(set.images.front(), small, cv::Size(96, std::max(1, 96 * set.size.height / std::max(1, set.size.width))),
+               0, 0, cv::INTER_AREA);
+    item->setIcon(0, QIcon(QPixmap::fromImage(to_qimage(small))));
+  }
+  local_root_->setExpanded(true);
+}
+
+void MainWindow::useSelected(veneer::Role as) {
+  QTreeWidgetItem* item = selectedItem();
+  if (!item || item->parent() != local_root_) {
+    message(tr("choose a set on this computer (pull rig sets first)"), true);
+    return;
+  }
+  loadLocalSet(item->data(0, Qt::UserRole).toString(), as);
+}
+
+bool MainWindow::loadLocalSet(const QString& folder, veneer::Role as) {
+  auto read = veneer::read_set(folder.toStdString());
+  if (!read) {
+    message(qs(read.message()), true);
+    return false;
+  }
+  auto loaded = std::make_shared<LoadedSet>();
+  loaded->folder = folder;
+  loaded->set = std::move(*read);
+  loaded->median = veneer::match::median_photo(loaded->set.images);
+  addLocalItem(folder, loaded->set);
+  setLoaded(loaded, as);
+  computeNormals(loaded);
+  message(tr("loaded %1 as the %2").arg(folder, qs(veneer::role_name(as))));
+  return true;
+}
+
+void MainWindow::setLoaded(std::shared_ptr<LoadedSet> loaded, veneer::Role as) {
+  if (as == veneer::Role::source) {
+    src_ = loaded;
+  } else {
+    dst_ = loaded;
+  }
+  result_.reset();
+  relighter_.reset();
+  repainter_ = {};
+  refreshLook();
+}
+
+void MainWindow::computeNormals(std::shared_ptr<LoadedSet> loaded) {
+  QPointer<MainWindow> self(this);
+  (void)QtConcurrent::run([self, loaded] {
+    auto seg = veneer::ps::segment(loaded->set);
+    if (!seg) return;
+    auto ps = veneer::ps::photometric_stereo(loaded->set, seg->mask);
+    if (!ps) return;
+    auto result = std::make_shared<veneer::ps::PsResult>(std::move(*ps));
+    if (!self) return;
+    QMetaObject::invokeMethod(self.data(), [self, loaded, result] {
+      if (!self) return;
+      loaded->normals = *result;
+      self->refreshLook();
+    });
+  });
+}
+
+// ---------------------------------------------------------------- transfer
+
+void MainWindow::startTransfer() {
+  if (computing_) return;
+  if (!dst_ || !src_) {
+    message(tr("load a destination and a source set first"), true);
+    return;
+  }
+  veneer::match::TransferOptions options;
+  auto method = veneer::match::parse_method(method_->currentText().toStdString());
+  auto feature = veneer::match::parse_feature(feature_->currentText().toStdString());
+  if (!method || !feature) {
+    message(qs(!method ? method.message() : feature.message()), true);
+    return;
+  }
+  options.match.method = *method;
+  options.match.feature = *feature;
+  options.match.patch = patch_->currentText().toInt();
+  options.match.candidates = candidates_->value();
+  options.match.threshold = threshold_->value();
+  options.match.iterations = iterations_->value();
+  options.match.coherent_threshold = coherent_threshold_->value();
+  options.match.uniformity = uniformity_->value();
+  options.match.fast = fast_->isChecked();
+  options.truth_normals = truth_normals_->isChecked();
+  if (auto ok = options.check(); !ok) {
+    message(qs(ok.message()), true);
+    return;
+  }
+  veneer::ps::SegmentOptions seg;
+  seg.method = seg_method_->currentText() == "otsu"        ? veneer::ps::SegmentMethod::otsu
+               : seg_method_->currentText() == "threshold" ? veneer::ps::SegmentMethod::threshold
+                                                           : veneer::ps::SegmentMethod::automatic;
+  seg.threshold = seg_threshold_->value();
+  if (!seg_rect_.isEmpty()) seg.rect = cv::Rect(seg_rect_.x(), seg_rect_.y(), seg_rect_.width(), seg_rect_.height());
+  const bool custom_segmentation = seg.method != veneer::ps::SegmentMethod::automatic || seg.rect.has_value();
+
+  computing_ = true;
+  cancel_ = false;
+  compute_btn_->setEnabled(false);
+  cancel_btn_->setEnabled(true);
+  transfer_bar_->setValue(0);
+  transfer_label_->setText(tr("computing…"));
+  transfer_error_.clear();
+  pending_result_.reset();
+  pending_relighter_.reset();
+  auto dst = dst_, src = src_;
+  QPointer<MainWindow> self(this);
+  transfer_watch_.setFuture(QtConcurrent::run([this, self, dst, src, options, seg, custom_segmentation] {
+    veneer::Progress progress;
+    progress.cancel = &cancel_;
+    progress.on_progress = [self](double f, const std::string& stage) {
+      const QString s = qs(stage);
+      if (self)
+        QMetaObject::invokeMethod(self.data(), [self, f, s] {
+          if (!self) return;
+          self->transfer_bar_->setValue(static_cast<int>(f * 100));
+          self->transfer_label_->setText(s);
+        });
+    };
+    veneer::ImageSet d = dst->set;
+    if (custom_segmentation) {
+      // The user's threshold / rectangle decide the destination's object pixels.
+      auto m = veneer::ps::segment(d, seg);
+      if (!m) {
+        transfer_error_ = tr("segmentation: %1").arg(qs(m.message()));
+        return;
+      }
+      d.mask = m->mask;
+    }
+    auto result = veneer::match::transfer(d, src->set, options, progress);
+    if (!result) {
+      transfer_error_ = qs(result.message());
+      return;
+    }
+    pending_result_ = std::make_shared<veneer::match::TransferResult>(std::move(*result));
+    auto relighter = veneer::match::Relighter::fit(src->set);
+    if (relighter) pending_relighter_ = std::make_shared<veneer::match::Relighter>(std::move(*relighter));
+  }));
+}
+
+void MainWindow::cancelTransfer() {
+  if (!computing_) return;
+  cancel_ = true;
+  transfer_label_->setText(tr("cancelling…"));
+}
+
+void MainWindow::onTransferDone() {
+  computing_ = false;
+  compute_btn_->setEnabled(true);
+  cancel_btn_->setEnabled(false);
+  if (!pending_result_) {
+    const bool cancelled = cancel_.load();
+    transfer_label_->setText(cancelled ? tr("cancelled") : tr("failed: %1").arg(transfer_error_));
+    message(cancelled ? tr("transfer cancelled") : tr("transfer failed: %1").arg(transfer_error_), !cancelled);
+    transfer_bar_->setValue(0);
+    return;
+  }
+  result_ = pending_result_;
+  relighter_ = pending_relighter_;
+  transfer_bar_->setValue(100);
+  QString text = tr("done");
+  if (result_->quality) {
+    const auto& q = *result_->quality;
+    text += tr(" · coverage %1% · coherence %2%").arg(q.coverage * 100, 0, 'f', 1).arg(q.coherence * 100, 0, 'f', 1);
+    if (q.normal_mean_deg) text += tr(" · normals %1°").arg(*q.normal_mean_deg, 0, 'f', 2);
+  }
+  transfer_label_->setText(text);
+  message(tr("transfer done (%1)").arg(method_->currentText()));
+  cv::Mat backdrop = dst_ ? picture_of(dst_->median) : cv::Mat();
+  repainter_ = veneer::match::LiveRepainter(result_->map, result_->source_size, backdrop);
+  look_what_->setCurrentIndex(0);
+  refreshLook();
+  refreshRelight();
+}
+
+// ---------------------------------------------------------------- views
+
+void MainWindow::refreshLook() {
+  const int what = look_what_->currentIndex();
+  auto pick = [what](const std::shared_ptr<LoadedSet>& s) -> cv::Mat {
+    if (!s) return {};
+    switch (what) {
+      case 1: return s->normals ? normals_picture(s->normals->normals) : cv::Mat();
+      case 2: return s->normals ? picture_of(s->normals->albedo) : cv::Mat();
+      case 3: return s->normals ? s->normals->mask : cv::Mat();
+      default: return picture_of(s->median);
+    }
+  };
+  dst_view_->setImage(to_qimage(pick(dst_)));
+  src_view_->setImage(to_qimage(pick(src_)));
+  if (result_) {
+    cv::Mat r;
+    if (what == 4) {
+      r = veneer::match::map_picture(result_->map, result_->source_size);
+    } else if (what == 5) {
+      r = veneer::match::reuse_picture(result_->reuse, result_->source_median);
+      src_view_->setImage(to_qimage(r));
+      r = picture_of(result_->repainted_median);
+    } else {
+      r = picture_of(result_->repainted_median);
+    }
+    result_view_->setImage(to_qimage(r));
+  } else {
+    result_view_->setImage({});
+  }
+}
+
+void MainWindow::showOrigin(QPoint p) {
+  if (!result_ || !dst_ || !src_) {
+    message(tr("compute a transfer first; then a click shows where a pixel's look comes from"), true);
+    return;
+  }
+  const auto& map = result_->map;
+  if (p.x() >= map.xy.cols || p.y() >= map.xy.rows) return;
+  const cv::Vec2f m = map.xy.at<cv::Vec2f>(p.y(), p.x());
+  std::vector<ImageView::Marker> dst_markers{{QPointF(p), QColor(0, 220, 255), m[0] < 0}};
+  dst_view_->setMarkers(dst_markers);
+  result_view_->setMarkers(dst_markers);
+  if (m[0] >= 0) {
+    src_view_->setMarkers({{QPointF(m[0], m[1]), QColor(0, 220, 255), false}});
+    message(tr("destination (%1, %2) ← source (%3, %4), distance %5")
+                .arg(p.x()).arg(p.y()).arg(m[0], 0, 'f', 0).arg(m[1], 0, 'f', 0)
+                .arg(map.distance.at<float>(p.y(), p.x()), 0, 'g', 3));
+  } else {
+    src_view_->setMarkers({});
+    message(tr("destination (%1, %2) is not mapped").arg(p.x()).arg(p.y()));
+  }
+  origin_view_->setImage(to_qimage(
+      veneer::match::origin_picture(map, dst_->median, src_->median, {cv::Point(p.x(), p.y())})));
+}
+
+void MainWindow::refreshRelight() {
+  if (!result_ || !relighter_ || !dst_) {
+    relight_label_->setText(tr("compute a transfer first"));
+    return;
+  }
+  const cv::Vec3d d = relight_pad_->direction();
+  cv::Mat backdrop = dst_->median * 0.25;  // the destination dimmed where nothing is mapped
+  relight_view_->setImage(to_qimage(relighter_->render(result_->map, d, backdrop)));
+  relight_src_view_->setImage(to_qimage(relighter_->render_source(d)));
+  relight_label_->setText(tr("light (%1, %2, %3)\nper-pixel fit RMS %4")
+                              .arg(d[0], 0, 'f', 2).arg(d[1], 0, 'f', 2).arg(d[2], 0, 'f', 2)
+                              .arg(relighter_->fit_rms(), 0, 'f', 4));
+}
+
+void MainWindow::onLiveFrame(const veneer::rig::LiveFrame& frame) {
+  cv::Mat decoded = cv::imdecode(frame.jpeg, cv::IMREAD_COLOR);
+  if (decoded.empty()) {
+    message(tr("live view: a frame that is not a JPEG was dropped"), true);
+    return;
+  }
+  live_frame_ = decoded;
+  ++live_frames_;
+  if (live_clock_.isValid() && live_clock_.elapsed() > 0) live_fps_ = live_frames_ * 1000.0 / live_clock_.elapsed();
+  live_src_view_->setImage(to_qimage(decoded));
+  if (repainter_.ready()) {
+    live_repainted_ = repainter_.apply(decoded);
+    live_dst_view_->setImage(to_qimage(live_repainted_));
+  }
+  live_label_->setText(tr("frame %1 · %2 fps").arg(frame.seq).arg(live_fps_, 0, 'f', 1));
+}
+
+// ---------------------------------------------------------------- export
+
+void MainWindow::exportMap() {
+  if (!result_) return message(tr("nothing to export: compute a transfer first"), true);
+  QString dir = QFileDialog::getExistingDirectory(this, tr("Export the map into"));
+  if (dir.isEmpty()) return;
+  auto s = veneer::match::write_map((dir + "/map.pfm").toStdString(), result_->map);
+  if (!s) return message(qs(s.message()), true);
+  cv::imwrite((dir + "/map.png").toStdString(), veneer::match::map_picture(result_->map, result_->source_size));
+  message(tr("map written to %1").arg(dir));
+}
+
+void MainWindow::exportResults() {
+  if (!result_) return message(tr("nothing to export: compute a transfer first"), true);
+  QString dir = QFileDialog::getExistingDirectory(this, tr("Export the results into"));
+  if (dir.isEmpty()) return;
+  auto s = veneer::match::write_transfer(*result_, dir.toStdString());
+  message(s ? tr("results written to %1").arg(dir) : qs(s.message()), !s);
+}
+
+void MainWindow::exportRelightVideo() {
+  if (!result_ || !relighter_ || !dst_) return message(tr("nothing to export: compute a transfer first"), true);
+  QString file = QFileDialog::getSaveFileName(this, tr("Relight sweep video"), "relight.avi", "AVI (*.avi)");
+  if (file.isEmpty()) return;
+  const cv::Size size = result_->map.xy.size();
+  cv::VideoWriter writer(file.toStdString(), cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 25, size);
+  if (!writer.isOpened()) return message(tr("cannot write a video to %1").arg(file), true);
+  cv::Mat backdrop = dst_->median * 0.25;
+  for (int i = 0; i < 100; ++i) {
+    const double a = 2 * M_PI * i / 100.0;
+    const cv::Vec3d d = veneer::match::direction_on_sphere(0.7 * std::cos(a), 0.7 * std::sin(a));
+    writer << tonemap_picture(relighter_->render(result_->map, d, backdrop));
+  }
+  message(tr("relight sweep written to %1").arg(file));
+}
+
+QStringList MainWindow::saveScreenshots(const QString& dir) {
+  QDir().mkpath(dir);
+  QStringList files;
+  const int current = tabs_->currentIndex();
+  for (int i = 0; i < tabs_->count(); ++i) {
+    tabs_->setCurrentIndex(i);
+    QApplication::processEvents();
+    const QString f = dir + "/" + tabs_->tabText(i).toLower() + ".png";
+    if (grab().save(f)) files << f;
+  }
+  tabs_->setCurrentIndex(current);
+  return files;
+}
+
+void MainWindow::showTab(const QString& name) {
+  for (int i = 0; i < tabs_->count(); ++i)
+    if (tabs_->tabText(i).compare(name, Qt::CaseInsensitive) == 0) tabs_->setCurrentIndex(i);
+}
+
+}  // namespace veneer::app

@@ -1,0 +1,153 @@
+#pragma once
+// veneer-viewer's window: connect to a rig, capture, browse and pull sets,
+// compute a transfer in the background, look at every picture, watch the live
+// view repainted onto the destination, relight, export. Every computation is a
+// call into viewer/core, run off the GUI thread; this file only wires widgets.
+#include <atomic>
+#include <memory>
+#include <optional>
+
+#include <QElapsedTimer>
+#include <QFutureWatcher>
+#include <QMainWindow>
+#include <QSettings>
+
+#include "image_view.hpp"
+#include "rig_link.hpp"
+#include "sphere_pad.hpp"
+#include "veneer/io/imageset.hpp"
+#include "veneer/match/live.hpp"
+#include "veneer/match/relight.hpp"
+#include "veneer/match/transfer.hpp"
+#include "veneer/ps/photometric_stereo.hpp"
+
+class QCheckBox;
+class QComboBox;
+class QDoubleSpinBox;
+class QLabel;
+class QLineEdit;
+class QProgressBar;
+class QPushButton;
+class QSpinBox;
+class QTabWidget;
+class QTreeWidget;
+class QTreeWidgetItem;
+
+namespace veneer::app {
+
+// One object the window has loaded: the set and what photometric stereo says of it.
+struct LoadedSet {
+  QString folder;
+  veneer::ImageSet set;
+  std::optional<veneer::ps::PsResult> normals;  // filled in the background after loading
+  cv::Mat median;                               // per-pixel median photo (linear BGR)
+};
+
+class MainWindow : public QMainWindow {
+  Q_OBJECT
+ public:
+  struct Options {
+    QString rig;         // host:port to connect to at start (empty = none)
+    QString token_file;  // the rig's token file
+    QString destination, source;  // local sets to load at start
+    QString workdir;     // where pulled sets go (default: the app's data folder)
+  };
+  explicit MainWindow(const Options& options, QWidget* parent = nullptr);
+  ~MainWindow() override;
+
+  // What the tests and scripts drive (the buttons call the same).
+  RigLink& rig() { return rig_; }
+  void connectToRig(const QString& endpoint, const QString& token_file);
+  bool loadLocalSet(const QString& folder, veneer::Role as);
+  void startTransfer();
+  void cancelTransfer();
+  bool computing() const { return computing_; }
+  const veneer::match::TransferResult* result() const { return result_.get(); }
+  const LoadedSet* destination() const { return dst_.get(); }
+  const LoadedSet* source() const { return src_.get(); }
+  QString lastMessage() const { return last_message_; }
+  cv::Mat lastLiveFrame() const { return live_frame_; }
+  cv::Mat lastRepaintedFrame() const { return live_repainted_; }
+  int liveFramesShown() const { return live_frames_; }
+  double liveFps() const { return live_fps_; }
+  QString workdir() const { return workdir_; }
+  // Grabs every view as <dir>/<tab>.png; returns the files written.
+  QStringList saveScreenshots(const QString& dir);
+  void showTab(const QString& name);
+
+ private:
+  void buildUi();
+  QWidget* buildConnectPanel();
+  QWidget* buildCapturePanel();
+  QWidget* buildSetsPanel();
+  QWidget* buildTransferPanel();
+  QWidget* buildLookTab();
+  QWidget* buildLiveTab();
+  QWidget* buildRelightTab();
+  void buildMenus();
+
+  void message(const QString& text, bool error = false);
+  void updateStatusLine();
+  void onRigEvent(const veneer::rig::Event& e);
+  void onSetsListed(const std::vector<veneer::rig::SetSummary>& sets);
+  void onLiveFrame(const veneer::rig::LiveFrame& frame);
+  void onTransferDone();
+  void refreshLook();
+  void showOrigin(QPoint destination_pixel);
+  void refreshRelight();
+  void setLoaded(std::shared_ptr<LoadedSet> loaded, veneer::Role as);
+  void computeNormals(std::shared_ptr<LoadedSet> loaded);
+  void addLocalItem(const QString& folder, const veneer::ImageSet& set);
+  QTreeWidgetItem* selectedItem() const;
+  void pullSelected();
+  void useSelected(veneer::Role as);
+  void exportMap();
+  void exportResults();
+  void exportRelightVideo();
+  void rememberRig(const QString& endpoint);
+
+  RigLink rig_;
+  ViewSync sync_;
+  QSettings settings_;
+  QString workdir_, last_message_;
+  std::shared_ptr<LoadedSet> dst_, src_;
+  std::shared_ptr<veneer::match::TransferResult> result_;
+  std::shared_ptr<veneer::match::Relighter> relighter_;
+  veneer::match::LiveRepainter repainter_;
+  std::atomic<bool> cancel_{false};
+  bool computing_ = false;
+  QFutureWatcher<void> transfer_watch_;
+  QString transfer_error_;
+  std::shared_ptr<veneer::match::TransferResult> pending_result_;
+  std::shared_ptr<veneer::match::Relighter> pending_relighter_;
+  cv::Mat live_frame_, live_repainted_;
+  int live_frames_ = 0;
+  double live_fps_ = 0;
+  QElapsedTimer live_clock_;
+  QRect seg_rect_;
+  QString pending_role_;  // "destination"/"source" while a UI capture runs
+
+  // widgets
+  QTabWidget* tabs_ = nullptr;
+  QLineEdit *rig_edit_ = nullptr, *token_edit_ = nullptr, *object_edit_ = nullptr;
+  QPushButton *connect_btn_ = nullptr, *compute_btn_ = nullptr, *cancel_btn_ = nullptr;
+  QLabel *status_label_ = nullptr, *capture_label_ = nullptr, *transfer_label_ = nullptr,
+         *message_label_ = nullptr, *live_label_ = nullptr, *rect_label_ = nullptr, *relight_label_ = nullptr;
+  QProgressBar *shot_bar_ = nullptr, *transfer_bar_ = nullptr, *pull_bar_ = nullptr;
+  QDoubleSpinBox *shutter_ = nullptr, *aperture_ = nullptr, *threshold_ = nullptr, *coherent_threshold_ = nullptr,
+                 *uniformity_ = nullptr, *seg_threshold_ = nullptr, *fps_ = nullptr;
+  QSpinBox *iso_ = nullptr, *candidates_ = nullptr, *iterations_ = nullptr;
+  QComboBox *method_ = nullptr, *feature_ = nullptr, *patch_ = nullptr, *seg_method_ = nullptr, *look_what_ = nullptr,
+            *recent_ = nullptr;
+  QCheckBox *fast_ = nullptr, *truth_normals_ = nullptr;
+  QTreeWidget* sets_tree_ = nullptr;
+  QTreeWidgetItem *rig_root_ = nullptr, *local_root_ = nullptr;
+  ImageView *dst_view_ = nullptr, *src_view_ = nullptr, *result_view_ = nullptr, *origin_view_ = nullptr,
+            *live_src_view_ = nullptr, *live_dst_view_ = nullptr, *relight_view_ = nullptr,
+            *relight_src_view_ = nullptr;
+  SpherePad *relight_pad_ = nullptr, *hand_pad_ = nullptr;
+  std::vector<QCheckBox*> lamp_boxes_;
+  QPushButton* live_btn_ = nullptr;
+};
+
+}  // namespace veneer::app

@@ -1,0 +1,246 @@
+#include "rig_link.hpp"
+
+#include <QPointer>
+#include <QtConcurrent/QtConcurrentRun>
+
+namespace veneer::app {
+
+RigLink::RigLink(QObject* parent) : QObject(parent) {
+  qRegisterMetaType<veneer::rig::Event>();
+  qRegisterMetaType<veneer::rig::RigStatus>();
+  qRegisterMetaType<veneer::rig::LiveFrame>();
+  qRegisterMetaType<std::vector<veneer::rig::SetSummary>>();
+  reconnect_timer_.setInterval(2000);
+  reconnect_timer_.setSingleShot(true);
+  connect(&reconnect_timer_, &QTimer::timeout, this, &RigLink::tryConnect);
+}
+
+RigLink::~RigLink() {
+  wanted_ = false;
+  ClientPtr c;
+  {
+    std::lock_guard lock(mutex_);
+    c.swap(client_);
+  }
+  if (c) {
+    c->on_event = nullptr;
+    c->on_live_frame = nullptr;
+    c->on_disconnect = nullptr;
+    c->close();
+  }
+}
+
+bool RigLink::isConnected() const {
+  auto c = client();
+  return c && c->connected();
+}
+
+RigLink::ClientPtr RigLink::client() const {
+  std::lock_guard lock(mutex_);
+  return client_;
+}
+
+void RigLink::connectTo(const QString& endpoint, const QString& token) {
+  disconnectFromRig();
+  endpoint_ = endpoint;
+  token_ = token;
+  wanted_ = true;
+  tryConnect();
+}
+
+void RigLink::disconnectFromRig() {
+  wanted_ = false;
+  reconnect_timer_.stop();
+  ++generation_;
+  ClientPtr c;
+  {
+    std::lock_guard lock(mutex_);
+    c.swap(client_);
+  }
+  if (c) {
+    c->on_disconnect = nullptr;
+    c->on_event = nullptr;
+    c->on_live_frame = nullptr;
+    (void)QtConcurrent::run([c] { c->close(); });
+    emit connectedChanged(false, tr("disconnected from %1").arg(endpoint_));
+  }
+}
+
+void RigLink::tryConnect() {
+  if (!wanted_ || connecting_) return;
+  connecting_ = true;
+  const int gen = generation_;
+  const std::string endpoint = endpoint_.toStdString(), token = token_.toStdString();
+  QPointer<RigLink> self(this);
+  (void)QtConcurrent::run([self, gen, endpoint, token] {
+    auto ep = veneer::rig::Endpoint::parse(endpoint);
+    veneer::Expected<std::unique_ptr<veneer::rig::Client>> result =
+        ep ? veneer::rig::Client::connect(*ep, token, {"veneer-viewer", 3.0, 30.0})
+           : veneer::Expected<std::unique_ptr<veneer::rig::Client>>(ep.error());
+    std::shared_ptr<veneer::rig::Client> client;
+    QString message;
+    if (result) {
+      client = std::shared_ptr<veneer::rig::Client>(std::move(*result));
+    } else {
+      message = qs(result.message());
+    }
+    QMetaObject::invokeMethod(
+        self.data(),
+        [self, gen, client, message] {
+          if (!self) return;
+          self->connecting_ = false;
+          if (gen != self->generation_ || !self->wanted_) {
+            if (client) (void)QtConcurrent::run([client] { client->close(); });
+            return;
+          }
+          if (!client) {
+            emit self->connectedChanged(false, tr("cannot connect to %1: %2").arg(self->endpoint_, message));
+            // A wrong token or a bad address will not fix itself; a rig that is
+            // down or a network drop might.
+            const bool permanent = message.contains("token", Qt::CaseInsensitive) ||
+                                   message.contains("address", Qt::CaseInsensitive);
+            if (self->auto_reconnect_ && !permanent) self->reconnect_timer_.start();
+            return;
+          }
+          QPointer<RigLink> weak(self);
+          client->on_event = [weak](const veneer::rig::Event& e) {
+            if (weak) emit weak->rigEvent(e);
+          };
+          client->on_live_frame = [weak](const veneer::rig::LiveFrame& f) {
+            if (weak) emit weak->liveFrame(f);
+          };
+          client->on_disconnect = [weak](const std::string& why) {
+            QString w = qs(why);
+            if (weak) QMetaObject::invokeMethod(weak.data(), [weak, w] { if (weak) weak->onDropped(w); });
+          };
+          {
+            std::lock_guard lock(self->mutex_);
+            self->client_ = client;
+          }
+          self->status_ = client->hello_status();
+          emit self->connectedChanged(true, tr("connected to %1").arg(self->endpoint_));
+          emit self->statusUpdated(self->status_);
+          self->listSets();
+        },
+        Qt::QueuedConnection);
+  });
+}
+
+void RigLink::onDropped(const QString& why) {
+  {
+    std::lock_guard lock(mutex_);
+    client_.reset();
+  }
+  if (!wanted_) return;
+  emit connectedChanged(false, tr("lost the rig at %1 (%2) — reconnecting…").arg(endpoint_, why));
+  if (auto_reconnect_) reconnect_timer_.start();
+}
+
+void RigLink::run(const QString& what, std::function<veneer::Status(veneer::rig::Client&)> job,
+                  std::function<void()> on_ok) {
+  auto c = client();
+  if (!c) {
+    emit failed(what, tr("not connected to a rig"));
+    return;
+  }
+  QPointer<RigLink> self(this);
+  (void)QtConcurrent::run([self, c, what, job, on_ok] {
+    veneer::Status s = job(*c);
+    QString msg = s ? QString() : qs(s.message());
+    QMetaObject::invokeMethod(
+        self.data(),
+        [self, what, msg, ok = s.ok(), on_ok] {
+          if (!self) return;
+          if (!ok) {
+            emit self->failed(what, msg);
+          } else if (on_ok) {
+            on_ok();
+          }
+        },
+        Qt::QueuedConnection);
+  });
+}
+
+void RigLink::refreshStatus() {
+  QPointer<RigLink> self(this);
+  run(tr("status"), [self](veneer::rig::Client& c) -> veneer::Status {
+    auto s = c.status();
+    if (!s) return s.error();
+    auto st = *s;
+    QMetaObject::invokeMethod(self.data(), [self, st] {
+      if (!self) return;
+      self->status_ = st;
+      emit self->statusUpdated(st);
+    });
+    return {};
+  });
+}
+
+void RigLink::listSets() {
+  QPointer<RigLink> self(this);
+  run(tr("list sets"), [self](veneer::rig::Client& c) -> veneer::Status {
+    auto sets = c.list_sets();
+    if (!sets) return sets.error();
+    auto v = *sets;
+    QMetaObject::invokeMethod(self.data(), [self, v] {
+      if (self) emit self->setsListed(v);
+    });
+    return {};
+  });
+}
+
+void RigLink::capture(const veneer::rig::CaptureOptions& options) {
+  run(tr("capture"), [options](veneer::rig::Client& c) -> veneer::Status {
+    auto id = c.capture(options);
+    return id ? veneer::Status() : veneer::Status(id.error());
+  });
+}
+
+void RigLink::cancelCapture() {
+  run(tr("cancel capture"), [](veneer::rig::Client& c) { return c.cancel_capture(); });
+}
+
+void RigLink::pressButton(bool long_press) {
+  run(tr("press button"), [long_press](veneer::rig::Client& c) { return c.press_button(long_press); });
+}
+
+void RigLink::setLamps(const std::vector<bool>& on, int brightness) {
+  run(tr("lamps"), [on, brightness](veneer::rig::Client& c) { return c.set_lamps(on, brightness); });
+}
+
+void RigLink::startLive(double fps) {
+  run(tr("live view"), [fps](veneer::rig::Client& c) { return c.start_live_view(fps); });
+}
+
+void RigLink::stopLive() {
+  run(tr("stop live view"), [](veneer::rig::Client& c) { return c.stop_live_view(); });
+}
+
+void RigLink::moveHandLamp(const cv::Vec3d& position) {
+  run(tr("hand lamp"), [position](veneer::rig::Client& c) { return c.move_hand_lamp(position); });
+}
+
+void RigLink::deleteSet(const QString& id) {
+  const std::string sid = id.toStdString();
+  run(tr("delete %1").arg(id), [sid](veneer::rig::Client& c) { return c.delete_set(sid); },
+      [this] { listSets(); });
+}
+
+void RigLink::pull(const QString& id, const QString& folder) {
+  QPointer<RigLink> self(this);
+  const std::string sid = id.toStdString(), dir = folder.toStdString();
+  run(
+      tr("pull %1").arg(id),
+      [self, id, sid, dir](veneer::rig::Client& c) {
+        veneer::Progress progress;
+        progress.on_progress = [self, id](double f, const std::string&) {
+          QMetaObject::invokeMethod(self.data(), [self, id, f] {
+            if (self) emit self->pullProgress(id, f);
+          });
+        };
+        return c.pull(sid, dir, true, true, progress);
+      },
+      [this, id, folder] { emit pulled(id, folder); });
+}
+
+}  // namespace veneer::app

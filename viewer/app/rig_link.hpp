@@ -1,0 +1,75 @@
+#pragma once
+// The viewer's link to a rig: wraps the Qt-free veneer::rig::Client, runs its
+// blocking requests on worker threads and hands every answer, event and live
+// frame to the GUI thread as a signal. Reconnects by itself after a drop.
+#include <functional>
+#include <memory>
+#include <mutex>
+
+#include <QObject>
+#include <QString>
+#include <QTimer>
+
+#include "qt_convert.hpp"
+#include "veneer/rig/client.hpp"
+
+namespace veneer::app {
+
+class RigLink : public QObject {
+  Q_OBJECT
+ public:
+  explicit RigLink(QObject* parent = nullptr);
+  ~RigLink() override;
+
+  bool isConnected() const;
+  QString endpoint() const { return endpoint_; }
+  const veneer::rig::RigStatus& lastStatus() const { return status_; }
+
+  // Connects (in the background); `token` is the rig's access token.
+  void connectTo(const QString& endpoint, const QString& token);
+  void disconnectFromRig();
+  void setAutoReconnect(bool on) { auto_reconnect_ = on; }
+
+  // Requests (each answers with a signal; failures with failed(what, message)).
+  void refreshStatus();
+  void listSets();
+  void capture(const veneer::rig::CaptureOptions& options);
+  void cancelCapture();
+  void pressButton(bool long_press);
+  void setLamps(const std::vector<bool>& on, int brightness);
+  void startLive(double fps);
+  void stopLive();
+  void moveHandLamp(const cv::Vec3d& position);
+  void deleteSet(const QString& id);
+  void pull(const QString& id, const QString& folder);
+
+ signals:
+  void connectedChanged(bool connected, QString message);
+  void statusUpdated(veneer::rig::RigStatus status);
+  void setsListed(std::vector<veneer::rig::SetSummary> sets);
+  void rigEvent(veneer::rig::Event event);
+  void liveFrame(veneer::rig::LiveFrame frame);
+  void pullProgress(QString id, double fraction);
+  void pulled(QString id, QString folder);
+  void failed(QString what, QString message);
+  void info(QString message);
+
+ private:
+  using ClientPtr = std::shared_ptr<veneer::rig::Client>;
+  // Runs `job` on a worker with the current client; reports failure as failed(what).
+  void run(const QString& what, std::function<veneer::Status(veneer::rig::Client&)> job,
+           std::function<void()> on_ok = {});
+  ClientPtr client() const;
+  void tryConnect();
+  void onDropped(const QString& why);
+
+  mutable std::mutex mutex_;
+  ClientPtr client_;
+  QString endpoint_, token_;
+  bool wanted_ = false, auto_reconnect_ = true, connecting_ = false;
+  int generation_ = 0;
+  QTimer reconnect_timer_;
+  veneer::rig::RigStatus status_;
+};
+
+}  // namespace veneer::app

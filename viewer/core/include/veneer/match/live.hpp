@@ -1,0 +1,39 @@
+#pragma once
+// Live repaint: every frame of the source's live video, carried through the
+// map onto the destination. The map is turned once into gather tables scaled
+// to the frame size, so each frame costs one parallel gather (cv::remap with
+// nearest neighbour) and stays within a couple of milliseconds at 1024x680.
+#include <opencv2/core.hpp>
+
+#include "veneer/match/matcher.hpp"
+
+namespace veneer::match {
+
+class LiveRepainter {
+ public:
+  LiveRepainter() = default;
+  // `map` was computed against a source of `source_size` pixels. `backdrop`
+  // (8-bit BGR, any size; resized to the map's) shows where the destination
+  // is not mapped — usually the destination's own picture; empty = black.
+  LiveRepainter(const Map& map, cv::Size source_size, const cv::Mat& backdrop = {});
+
+  bool ready() const { return !map_xy_.empty(); }
+  cv::Size destination_size() const { return map_xy_.size(); }
+
+  // `frame`: 8-bit BGR (or CV_32FC3) of the source, any size with the source's
+  // aspect (coordinates are scaled by frame/source size). Returns the
+  // destination-sized picture of the same type as `frame`.
+  cv::Mat apply(const cv::Mat& frame);
+
+ private:
+  void prepare(cv::Size frame_size);
+
+  cv::Mat map_xy_;        // CV_32FC2 source coordinates at source_size_, -1 unmapped
+  cv::Size source_size_;
+  cv::Mat backdrop_;      // 8-bit BGR at the destination size
+  cv::Mat mask_;          // CV_8UC1 255 where mapped
+  cv::Size prepared_for_;
+  cv::Mat table_x_, table_y_;  // CV_32FC1 gather tables for the current frame size
+};
+
+}  // namespace veneer::match

@@ -1,0 +1,47 @@
+#pragma once
+// Relighting without the live video (beyond the thesis): the source's photos
+// under the rig's lamps say how each source pixel answers to light. A
+// biquadratic polynomial texture map (PTM, Malzbender et al. 2001) is fitted
+// per source pixel and colour channel over the lamps' directions,
+//   I(l) = a0 lu^2 + a1 lv^2 + a2 lu lv + a3 lu + a4 lv + a5,
+// with one pseudo-inverse for the whole image. Carried through the map, it
+// shows the destination under any virtual light direction in the source's
+// material. Needs at least 6 lamps (the thesis rig has 7).
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "veneer/io/imageset.hpp"
+#include "veneer/match/matcher.hpp"
+#include "veneer/util/expected.hpp"
+
+namespace veneer::match {
+
+class Relighter {
+ public:
+  // Fits the source's PTM from its photos (ambient removed when present).
+  static Expected<Relighter> fit(const ImageSet& source);
+
+  // The source itself under a light from `direction` (unit, rig frame):
+  // linear BGR CV_32FC3 at the source size.
+  cv::Mat render_source(const cv::Vec3d& direction) const;
+  // The destination relit: each mapped pixel shows its source pixel's PTM at
+  // `direction`; unmapped pixels come from `backdrop` (linear BGR, may be empty = black).
+  cv::Mat render(const Map& map, const cv::Vec3d& direction, const cv::Mat& backdrop = {}) const;
+
+  cv::Size source_size() const { return size_; }
+  // RMS of the fit over the lamps (linear units), a measure of how well the
+  // model explains the source (specular highlights fit worst).
+  double fit_rms() const { return fit_rms_; }
+
+ private:
+  cv::Size size_;
+  std::vector<cv::Mat> coeffs_;  // 6 planes, each CV_32FC3
+  double fit_rms_ = 0;
+};
+
+// The light direction for a point (u, v) on a unit disc as the user drags it
+// over a sphere picture: (u, v, sqrt(1 - u^2 - v^2)), clamped onto the sphere.
+cv::Vec3d direction_on_sphere(double u, double v);
+
+}  // namespace veneer::match

@@ -1,0 +1,59 @@
+#include "veneer/match/live.hpp"
+
+#include <opencv2/imgproc.hpp>
+
+namespace veneer::match {
+
+LiveRepainter::LiveRepainter(const Map& map, cv::Size source_size, const cv::Mat& backdrop)
+    : map_xy_(map.xy.clone()), source_size_(source_size) {
+  cv::Mat channels[2];
+  cv::split(map_xy_, channels);
+  mask_ = channels[0] >= 0;
+  if (!backdrop.empty()) {
+    cv::Mat b = backdrop;
+    if (b.type() != CV_8UC3) b.convertTo(b, CV_8UC3, 255.0);
+    if (b.size() != map_xy_.size()) cv::resize(b, b, map_xy_.size(), 0, 0, cv::INTER_AREA);
+    backdrop_ = b;
+  }
+}
+
+void LiveRepainter::prepare(cv::Size frame_size) {
+  const float sx = static_cast<float>(frame_size.width) / static_cast<float>(source_size_.width);
+  const float sy = static_cast<float>(frame_size.height) / static_cast<float>(source_size_.height);
+  table_x_.create(map_xy_.size(), CV_32FC1);
+  table_y_.create(map_xy_.size(), CV_32FC1);
+  for (int y = 0; y < map_xy_.rows; ++y) {
+    const cv::Vec2f* m = map_xy_.ptr<cv::Vec2f>(y);
+    float* tx = table_x_.ptr<float>(y);
+    float* ty = table_y_.ptr<float>(y);
+    for (int x = 0; x < map_xy_.cols; ++x) {
+      // Pixel centres: source pixel (u, v) covers [u, u+1) at source size, so
+      // its centre lands at (u + 0.5) * s - 0.5 in the frame.
+      const bool mapped = m[x][0] >= 0;
+      tx[x] = mapped ? (m[x][0] + 0.5f) * sx - 0.5f : -1e6f;
+      ty[x] = mapped ? (m[x][1] + 0.5f) * sy - 0.5f : -1e6f;
+    }
+  }
+  prepared_for_ = frame_size;
+}
+
+cv::Mat LiveRepainter::apply(const cv::Mat& frame) {
+  if (!ready() || frame.empty()) return {};
+  if (frame.size() != prepared_for_) prepare(frame.size());
+  cv::Mat background;
+  if (!backdrop_.empty()) {
+    if (frame.type() == CV_8UC3) {
+      background = backdrop_.clone();
+    } else {
+      backdrop_.convertTo(background, frame.type(), 1.0 / 255.0);
+    }
+  } else {
+    background = cv::Mat(map_xy_.size(), frame.type(), cv::Scalar::all(0));
+  }
+  // Unmapped pixels point far outside the frame, so BORDER_TRANSPARENT keeps
+  // the backdrop there; mapped ones gather their source pixel.
+  cv::remap(frame, background, table_x_, table_y_, cv::INTER_NEAREST, cv::BORDER_TRANSPARENT);
+  return background;
+}
+
+}  // namespace veneer::match
