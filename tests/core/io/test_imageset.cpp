@@ -3,6 +3,7 @@
 #include <csignal>
 #include <cstdio>
 #include <functional>
+#include <thread>
 
 #include <sys/resource.h>
 #include <sys/wait.h>
@@ -191,6 +192,25 @@ TEST(ImageSet, FailedWriteLeavesNoFolderAndNoTemporary) {
   auto still = read_set(dir / "s");
   ASSERT_TRUE(still) << still.message();
   EXPECT_EQ(still->lights.size(), 3u);
+  EXPECT_TRUE(others(dir.path(), "s").empty());
+}
+
+TEST(ImageSet, ConcurrentWritersOfOneFolderOneWins) {
+  Scratch dir;
+  ImageSet a = synthetic_set({32, 24}, 3, 1, false), b = synthetic_set({32, 24}, 4, 2, false);
+  Status sa, sb;
+  std::thread ta([&] { sa = write_set(a, dir / "s"); });
+  std::thread tb([&] { sb = write_set(b, dir / "s"); });
+  ta.join();
+  tb.join();
+  EXPECT_NE(sa.ok(), sb.ok()) << "exactly one writer must win";
+  const Status& lost = sa.ok() ? sb : sa;
+  if (!lost.ok()) {
+    EXPECT_NE(lost.message().find("already exists"), std::string::npos) << lost.message();
+  }
+  auto back = read_set(dir / "s");
+  ASSERT_TRUE(back) << back.message();
+  EXPECT_EQ(back->lights.size(), sa.ok() ? 3u : 4u);
   EXPECT_TRUE(others(dir.path(), "s").empty());
 }
 

@@ -56,6 +56,7 @@ namespace {
 
 constexpr int kMaxSide = 1 << 16;
 constexpr size_t kMaxLights = 1024;
+constexpr uintmax_t kMaxManifestBytes = 16u << 20;
 
 std::string fmt_vec(const cv::Vec3d& v) {
   char buf[96];
@@ -352,6 +353,9 @@ Status load_truth(const fs::path& truth_dir, ImageSet& set) {
 
 Expected<ImageSet> read_veneer(const fs::path& folder, const ReadOptions& options) {
   const fs::path manifest_file = folder / "set.json";
+  std::error_code ec;
+  if (auto bytes = fs::file_size(manifest_file, ec); !ec && bytes > kMaxManifestBytes)
+    return make_error(manifest_file.string() + ": " + std::to_string(bytes) + " bytes is too large for a manifest");
   auto text = read_file_bytes(manifest_file);
   if (!text) return text.error();
   auto manifest = parse_manifest(*text, folder);
