@@ -3,6 +3,7 @@
 // loading time, and the angular-error table of every simulated scene.
 #include <algorithm>
 #include <chrono>
+#include <ctime>
 #include <cstdio>
 #include <filesystem>
 #include <string>
@@ -24,16 +25,39 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 
+double cpu_ms() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
+}
+
+// Median wall-clock time of `runs` calls; *cpu gets the median process CPU
+// time (all threads), which a loaded machine inflates much less.
 template <class F>
-double median_ms(int runs, F&& f) {
-  std::vector<double> t;
+double median_ms(int runs, F&& f, double* cpu = nullptr) {
+  std::vector<double> t, c;
   for (int i = 0; i < runs; ++i) {
+    const double c0 = cpu_ms();
     auto a = Clock::now();
     f();
     t.push_back(std::chrono::duration<double, std::milli>(Clock::now() - a).count());
+    c.push_back(cpu_ms() - c0);
   }
   std::sort(t.begin(), t.end());
+  std::sort(c.begin(), c.end());
+  if (cpu) *cpu = c[c.size() / 2];
   return t[t.size() / 2];
+}
+
+std::string load_average() {
+  std::FILE* f = std::fopen("/proc/loadavg", "r");
+  if (!f) return "?";
+  char buf[64] = {};
+  const bool ok = std::fgets(buf, sizeof buf, f) != nullptr;
+  std::fclose(f);
+  if (!ok) return "?";
+  std::string s(buf);
+  return s.substr(0, s.find(' '));
 }
 
 // The straightforward way: for every object pixel, the n x 3 system solved by
@@ -63,8 +87,8 @@ cv::Mat solve_loop(const ImageSet& set, const cv::Mat& mask) {
 
 int main() {
   const cv::Size size(1024, 680);
-  std::printf("# bench_ps — photometric stereo, %dx%d, 7 lamps, %d threads\n\n", size.width, size.height,
-              tbb::info::default_concurrency());
+  std::printf("# bench_ps — photometric stereo, %dx%d, 7 lamps, %d threads (load average %s)\n\n", size.width,
+              size.height, tbb::info::default_concurrency(), load_average().c_str());
 
   // ---- speed ----
   sim::RenderOptions ro;
@@ -105,20 +129,30 @@ int main() {
       {"sphere filling the frame", &big, big_mask, cv::countNonZero(big_mask)},
       {"every pixel of the frame", &set, full, int(full.total())},
   };
-  std::printf("## Speed (median of 15 runs, ms)\n\n");
-  std::printf("| input | pixels | distant | distant robust | robust + near | cv::solve loop | loop / distant | loop / robust+near |\n");
-  std::printf("|---|---:|---:|---:|---:|---:|---:|---:|\n");
+  std::printf("## Speed (median of 15 runs; wall ms, with process CPU ms over all threads in brackets)\n\n");
+  std::printf("Output buffers reused between runs; the \"fresh\" column allocates a new result each call.\n\n");
+  std::printf("| input | pixels | distant | distant robust | robust + near | robust + near, fresh | cv::solve loop | loop / distant | loop / robust+near |\n");
+  std::printf("|---|---:|---:|---:|---:|---:|---:|---:|---:|\n");
   for (const Row& r : rows) {
-    auto run = [&](const ps::PsOptions& o) {
-      return median_ms(15, [&] {
-        auto res = ps::photometric_stereo(*r.s, r.mask, o);
-        if (!res) std::fprintf(stderr, "bench_ps: %s\n", res.message().c_str());
-      });
+    ps::PsResult reused;  // output buffers reused between runs, as a live viewer would
+    auto run = [&](const ps::PsOptions& o, double* cpu) {
+      return median_ms(
+          15,
+          [&] {
+            if (Status st = ps::photometric_stereo_into(*r.s, r.mask, o, {}, reused); !st)
+              std::fprintf(stderr, "bench_ps: %s\n", st.message().c_str());
+          },
+          cpu);
     };
-    const double td = run(distant), tdr = run(distant_robust), tn = run(near_robust);
-    const double tl = median_ms(1, [&] { solve_loop(*r.s, r.mask); });
-    std::printf("| %s | %d | %.2f | %.2f | %.2f | %.0f | %.0fx | %.0fx |\n", r.what.c_str(), r.pixels, td, tdr, tn, tl,
-                tl / td, tl / tn);
+    double cd = 0, cdr = 0, cn = 0, cl = 0;
+    const double td = run(distant, &cd), tdr = run(distant_robust, &cdr), tn = run(near_robust, &cn);
+    const double tl = median_ms(1, [&] { solve_loop(*r.s, r.mask); }, &cl);
+    double cfresh = 0;
+    const double tfresh = median_ms(
+        15, [&] { (void)ps::photometric_stereo(*r.s, r.mask, near_robust); }, &cfresh);
+    std::printf("| %s | %d | %.2f (%.1f) | %.2f (%.1f) | %.2f (%.1f) | %.2f (%.1f) | %.0f (%.0f) | %.0fx | %.0fx |\n",
+                r.what.c_str(), r.pixels, td, cd, tdr, cdr, tn, cn, tfresh, cfresh, tl, cl, tl / td, tl / tn);
+    std::fflush(stdout);
   }
   const double tseg = median_ms(9, [&] {
     ps::SegmentOptions o;

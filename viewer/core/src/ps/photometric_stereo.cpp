@@ -564,8 +564,15 @@ void solve_rows(const Setup& s, const cv::Mat& mask, const cv::Mat* zmap, int y0
 
 }  // namespace
 
-Expected<PsResult> photometric_stereo(const ImageSet& set, const cv::Mat& mask_in, const PsOptions& options,
+Expected<PsResult> photometric_stereo(const ImageSet& set, const cv::Mat& mask, const PsOptions& options,
                                       const Progress& progress) {
+  PsResult result;
+  if (Status st = photometric_stereo_into(set, mask, options, progress, result); !st) return st.error();
+  return result;
+}
+
+Status photometric_stereo_into(const ImageSet& set, const cv::Mat& mask_in, const PsOptions& options,
+                               const Progress& progress, PsResult& result) {
   if (Status st = options.check(); !st) return make_error("photometric stereo options: " + st.message());
   const int n = static_cast<int>(set.images.size());
   if (n < 3)
@@ -692,9 +699,8 @@ Expected<PsResult> photometric_stereo(const ImageSet& set, const cv::Mat& mask_i
     s.ambient = ambient.ptr<float>();
   }
 
-  PsResult result;
   result.model_used = model;
-  result.mask = mask.clone();
+  if (result.mask.data != mask.data) mask.copyTo(result.mask);
   result.solved_pixels = solved;
   // Every pixel is written by solve_rows (zeros outside the mask).
   result.normals.create(size, CV_32FC3);
@@ -753,13 +759,16 @@ Expected<PsResult> photometric_stereo(const ImageSet& set, const cv::Mat& mask_i
   if (cancelled) return make_error("photometric stereo cancelled");
   if (failed_depth) VLOG_WARN("PS", "near-light depth refinement did not converge; kept the previous depth");
   if (s.near) {
-    result.depth = cv::Mat(size, CV_32FC1, cv::Scalar(0));
+    result.depth.create(size, CV_32FC1);
+    result.depth.setTo(0);
     // Depth along -z from the camera at z = 1.
     cv::subtract(cv::Scalar(1.0), zfull, result.depth, mask);
+  } else {
+    result.depth.release();
   }
   result.unreliable_pixels = solved - cv::countNonZero(result.reliable);
   progress.report(1.0, "normals");
-  return result;
+  return Status::success();
 }
 
 AngularError angular_error(const cv::Mat& normals, const cv::Mat& truth, const cv::Mat& mask) {
