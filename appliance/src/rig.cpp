@@ -115,13 +115,34 @@ void Rig::worker_loop() {
     std::function<void()> job;
     {
       std::unique_lock lock(jobs_mutex_);
-      jobs_cv_.wait(lock, [&] { return stopping_ || !jobs_.empty(); });
+      if (pending_restore_.needed) {
+        // The bridge was down when a capture ended: try again every second.
+        jobs_cv_.wait_for(lock, std::chrono::seconds(1), [&] { return stopping_ || !jobs_.empty(); });
+      } else {
+        jobs_cv_.wait(lock, [&] { return stopping_ || !jobs_.empty(); });
+      }
       if (stopping_) return;
-      job = std::move(jobs_.front());
-      jobs_.pop_front();
+      if (!jobs_.empty()) {
+        job = std::move(jobs_.front());
+        jobs_.pop_front();
+      }
     }
-    job();
+    if (job) {
+      job();
+    } else {
+      retry_restore();
+    }
   }
+}
+
+void Rig::retry_restore() {
+  if (!pending_restore_.needed || !dev_.lamps) return;
+  if (auto s = dev_.lamps->restore(pending_restore_.states); !s) {
+    VLOG_DEBUG("Lamps", "restoring the lamps still fails: {}", s.message());
+    return;
+  }
+  pending_restore_.needed = false;
+  VLOG_INFO("Lamps", "the bridge answers again: lamps restored to their state before the capture");
 }
 
 veneer::Expected<std::string> Rig::capture(const CaptureRequest& request) {
@@ -218,10 +239,25 @@ void Rig::run_capture_job(const std::string& id, CaptureRequest req) {
     emit(e);
   };
 
+  retry_restore();
+  if (pending_restore_.needed) {
+    RigEvent failed;
+    failed.kind = RigEvent::Kind::capture_failed;
+    failed.set_id = id;
+    failed.reason = "lamps: the bridge does not answer (the lamps from the last capture are not restored yet)";
+    {
+      std::lock_guard lock(mutex_);
+      capturing_ = false;
+      capture_id_.clear();
+    }
+    if (dev_.led) dev_.led->show(LedState::error);
+    emit(failed);
+    return;
+  }
   veneer::Expected<CaptureResult> result = make_error("not run");
   {
     std::lock_guard cam(camera_mutex_);
-    result = run_capture(*dev_.lamps, *dev_.camera, plan, hooks);
+    result = run_capture(*dev_.lamps, *dev_.camera, plan, hooks, &pending_restore_);
   }
   veneer::Status stored;
   if (result) {
@@ -284,6 +320,7 @@ void Rig::set_lamps(std::vector<bool> on, int brightness, std::function<void(ven
     on.resize(count, false);
     veneer::Status s = dev_.lamps->set(on, brightness);
     if (s) {
+      pending_restore_.needed = false;  // the controller's own setting wins
       {
         std::lock_guard lock(mutex_);
         lamps_on_ = on;

@@ -45,7 +45,7 @@ cv::Mat to_float_bgr(const cv::Mat& in) {
 }  // namespace
 
 veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const CapturePlan& plan,
-                                            const CaptureHooks& hooks) {
+                                            const CaptureHooks& hooks, PendingRestore* pending) {
   auto log = veneer::log::get("Sequencer");
   const auto start = Clock::now();
   const int count = lamps.count();
@@ -132,6 +132,10 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
   if (auto s = lamps.restore(*saved); !s) {
     log->error("restoring the lamps after {} failed: {}; switching all off", plan.set_id, s.message());
     if (auto off = lamps.all_off(); !off) log->error("switching the lamps off failed too: {}", off.message());
+    if (pending) {
+      pending->states = *saved;
+      pending->needed = true;
+    }
     if (outcome) outcome = make_error("lamps: restoring their state after the capture failed: " + s.message());
   }
   if (!outcome) return outcome.error();

@@ -20,6 +20,7 @@
 #include "veneerd/devices/camera.hpp"
 #include "veneerd/devices/lamps.hpp"
 #include "veneerd/devices/trigger.hpp"
+#include "veneerd/sequencer.hpp"
 #include "veneerd/store.hpp"
 
 namespace veneerd {
@@ -134,6 +135,7 @@ class Rig {
   void emit(RigEvent event);
   void post(std::function<void()> job);
   void worker_loop();
+  void retry_restore();
   void live_loop();
   void run_capture_job(const std::string& id, CaptureRequest request);
 
@@ -149,6 +151,7 @@ class Rig {
   std::string camera_model_;
   bool camera_connected_ = false;
   double mean_step_s_ = 0;
+  PendingRestore pending_restore_;  // worker thread only
 
   std::atomic<bool> cancel_{false};
   std::atomic<bool> stopping_{false};

@@ -36,6 +36,15 @@ struct CaptureHooks {
   const std::atomic<bool>* cancel = nullptr;
 };
 
+struct CaptureResult;
+
+// What run_capture leaves to its caller when it could not give the lamps back
+// (the bridge is down): the states to restore once the bridge answers again.
+struct PendingRestore {
+  std::vector<LampState> states;
+  bool needed = false;
+};
+
 struct CaptureResult {
   veneer::ImageSet set;      // lights, images, ambient, camera info, warnings; no truth
   double seconds = 0;        // wall time of the whole sequence
@@ -44,8 +53,10 @@ struct CaptureResult {
 
 // Runs the sequence. Errors name the step ("lamp 3 (Hue id 5): ...",
 // "camera, shot 4 of 8: ..."); "cancelled" when the cancel flag was raised.
+// When the lamps cannot be restored at the end, `pending` (if given) receives
+// the owner's states so the caller can restore them later.
 veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const CapturePlan& plan,
-                                            const CaptureHooks& hooks = {});
+                                            const CaptureHooks& hooks = {}, PendingRestore* pending = nullptr);
 
 // The mean linear level of a photo (all channels), used for the ambient check.
 double mean_level(const cv::Mat& linear);

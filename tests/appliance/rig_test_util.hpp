@@ -1,0 +1,220 @@
+#pragma once
+// Helpers for the rig tests: run the real veneerd binary on loopback, run the
+// `veneer` CLI, and talk raw bytes to the API.
+#include <poll.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <arpa/inet.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <random>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "veneer/proto/framing.hpp"
+#include "veneer/v1/rig.pb.h"
+
+namespace rigtest {
+
+namespace fs = std::filesystem;
+
+inline fs::path temp_dir(const std::string& name) {
+  fs::path p = fs::temp_directory_path() /
+               ("veneer-rigtest-" + name + "-" + std::to_string(::getpid()) + "-" + std::to_string(std::random_device{}()));
+  fs::remove_all(p);
+  fs::create_directories(p);
+  return p;
+}
+
+// The real daemon in its own process.
+class DaemonProcess {
+ public:
+  // Starts build/bin/veneerd --simulate --listen 127.0.0.1:0 --store STORE [extra...].
+  static std::unique_ptr<DaemonProcess> start(const fs::path& store, std::vector<std::string> extra = {}) {
+    int out[2];
+    if (::pipe(out) != 0) return nullptr;
+    std::vector<std::string> args = {VENEER_BIN_DIR "/veneerd", "--simulate", "--listen", "127.0.0.1:0", "--store",
+                                     store.string()};
+    args.insert(args.end(), extra.begin(), extra.end());
+    fs::path log = store.parent_path() / (store.filename().string() + ".log");
+    pid_t pid = ::fork();
+    if (pid == 0) {
+      ::dup2(out[1], 1);
+      FILE* err = std::fopen(log.c_str(), "a");
+      if (err) ::dup2(::fileno(err), 2);
+      ::close(out[0]);
+      std::vector<char*> argv;
+      for (auto& a : args) argv.push_back(a.data());
+      argv.push_back(nullptr);
+      ::execv(argv[0], argv.data());
+      ::_exit(127);
+    }
+    ::close(out[1]);
+    auto d = std::unique_ptr<DaemonProcess>(new DaemonProcess());
+    d->pid_ = pid;
+    d->log_ = log;
+    // First stdout line: "veneerd: listening on 127.0.0.1:<port>, ..."
+    std::string line;
+    auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+    while (line.find('\n') == std::string::npos && std::chrono::steady_clock::now() < deadline) {
+      pollfd p{out[0], POLLIN, 0};
+      if (::poll(&p, 1, 200) <= 0) continue;
+      char buf[256];
+      ssize_t n = ::read(out[0], buf, sizeof buf);
+      if (n <= 0) break;
+      line.append(buf, static_cast<size_t>(n));
+    }
+    ::close(out[0]);
+    auto at = line.find("listening on 127.0.0.1:");
+    if (at == std::string::npos) return d;  // port stays 0: the test fails with the log
+    d->port_ = static_cast<uint16_t>(std::stoi(line.substr(at + 23)));
+    return d;
+  }
+
+  ~DaemonProcess() { stop(SIGTERM); }
+
+  uint16_t port() const { return port_; }
+  std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
+  bool alive() const { return pid_ > 0 && ::waitpid(pid_, nullptr, WNOHANG) == 0; }
+  std::string log() const {
+    FILE* f = std::fopen(log_.c_str(), "r");
+    if (!f) return "";
+    std::string s;
+    char buf[4096];
+    size_t n;
+    while ((n = std::fread(buf, 1, sizeof buf, f)) > 0) s.append(buf, n);
+    std::fclose(f);
+    return s.size() > 6000 ? s.substr(s.size() - 6000) : s;
+  }
+  // Stops the daemon; SIGKILL simulates a crash / power cut.
+  void stop(int sig) {
+    if (pid_ <= 0) return;
+    ::kill(pid_, sig);
+    int status = 0;
+    for (int i = 0; i < 100; ++i) {
+      if (::waitpid(pid_, &status, WNOHANG) == pid_) {
+        pid_ = -1;
+        return;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    ::kill(pid_, SIGKILL);
+    ::waitpid(pid_, &status, 0);
+    pid_ = -1;
+  }
+
+ private:
+  DaemonProcess() = default;
+  pid_t pid_ = -1;
+  uint16_t port_ = 0;
+  fs::path log_;
+};
+
+// Runs a command through the shell; returns its exit code and stdout.
+struct RunResult {
+  int code = -1;
+  std::string out;
+};
+inline RunResult run(const std::string& command) {
+  RunResult r;
+  FILE* p = ::popen((command + " 2>&1").c_str(), "r");
+  if (!p) return r;
+  char buf[4096];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) r.out.append(buf, n);
+  int status = ::pclose(p);
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+inline std::string veneer_cli() { return VENEER_BIN_DIR "/veneer"; }
+
+// A raw TCP connection speaking (or mis-speaking) the protocol.
+class RawConnection {
+ public:
+  explicit RawConnection(uint16_t port) {
+    fd_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    sockaddr_in a{};
+    a.sin_family = AF_INET;
+    a.sin_port = htons(port);
+    a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    if (::connect(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) {
+      ::close(fd_);
+      fd_ = -1;
+    }
+  }
+  ~RawConnection() { close(); }
+  bool ok() const { return fd_ >= 0; }
+  void close() {
+    if (fd_ >= 0) ::close(fd_);
+    fd_ = -1;
+  }
+  bool send_bytes(const std::string& bytes) {
+    return ::send(fd_, bytes.data(), bytes.size(), MSG_NOSIGNAL) == static_cast<ssize_t>(bytes.size());
+  }
+  bool send(const veneer::v1::ClientMessage& m) { return send_bytes(veneer::wire::encode_delimited(m)); }
+  bool hello(const std::string& token, uint64_t id = 1) {
+    veneer::v1::ClientMessage m;
+    m.set_id(id);
+    m.mutable_hello()->set_protocol_version(veneer::wire::kProtocolVersion);
+    m.mutable_hello()->set_token(token);
+    if (!send(m)) return false;
+    auto r = next_response(id);
+    return r && r->ok();
+  }
+  // The next message, or nullopt on timeout / closed connection.
+  std::optional<veneer::v1::RigMessage> next(double timeout_s = 10) {
+    auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+    for (;;) {
+      veneer::v1::RigMessage m;
+      auto r = in_.next(m);
+      if (r == veneer::wire::ReadResult::message) return m;
+      if (r == veneer::wire::ReadResult::error) return std::nullopt;
+      auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+      if (left.count() <= 0 || fd_ < 0) return std::nullopt;
+      pollfd p{fd_, POLLIN, 0};
+      if (::poll(&p, 1, static_cast<int>(left.count())) <= 0) return std::nullopt;
+      char buf[65536];
+      ssize_t n = ::recv(fd_, buf, sizeof buf, 0);
+      if (n <= 0) {
+        closed_ = true;
+        return std::nullopt;
+      }
+      in_.feed(buf, static_cast<size_t>(n));
+    }
+  }
+  std::optional<veneer::v1::Response> next_response(uint64_t id, double timeout_s = 10) {
+    for (;;) {
+      auto m = next(timeout_s);
+      if (!m) return std::nullopt;
+      if (m->has_response() && m->response().id() == id) return m->response();
+    }
+  }
+  // True when the peer closed the connection within the timeout.
+  bool closed_by_peer(double timeout_s = 5) {
+    auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+    while (!closed_ && std::chrono::steady_clock::now() < deadline) {
+      pollfd p{fd_, POLLIN, 0};
+      if (::poll(&p, 1, 100) <= 0) continue;
+      char buf[65536];
+      ssize_t n = ::recv(fd_, buf, sizeof buf, 0);
+      if (n <= 0) closed_ = true;
+    }
+    return closed_;
+  }
+
+ private:
+  int fd_ = -1;
+  bool closed_ = false;
+  veneer::wire::FrameBuffer in_;
+};
+
+}  // namespace rigtest

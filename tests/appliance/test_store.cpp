@@ -1,0 +1,72 @@
+#include <gtest/gtest.h>
+
+#include "rig_test_util.hpp"
+#include "veneerd/store.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+veneer::ImageSet tiny_set(const std::string& id, veneer::Role role) {
+  veneer::ImageSet s;
+  s.id = id;
+  s.role = role;
+  s.object = "cube";
+  s.created = "2026-11-22T08:00:00Z";
+  s.size = {8, 6};
+  for (int i = 0; i < 3; ++i) {
+    veneer::Light l;
+    l.index = i;
+    l.lamp_id = std::to_string(i + 1);
+    l.direction = cv::Vec3d(0.1 * i, 0, 1) / cv::norm(cv::Vec3d(0.1 * i, 0, 1));
+    s.lights.push_back(l);
+    s.images.push_back(cv::Mat(s.size, CV_32FC3, cv::Scalar(0.1 * (i + 1), 0.2, 0.3)));
+  }
+  s.ambient = cv::Mat(s.size, CV_32FC3, cv::Scalar(0.01, 0.01, 0.01));
+  return s;
+}
+}  // namespace
+
+TEST(Store, SavesListsAndFindsSetsAfterReopening) {
+  fs::path root = rigtest::temp_dir("store");
+  {
+    auto store = veneerd::Store::open(root);
+    ASSERT_TRUE(store) << store.message();
+    std::string id = (*store)->new_id(veneer::Role::destination, "my cube!");
+    EXPECT_TRUE(veneerd::valid_set_id(id)) << id;
+    EXPECT_NE(id.find("destination-my_cube_"), std::string::npos) << id;
+    ASSERT_TRUE((*store)->save(tiny_set("a1", veneer::Role::destination)));
+    ASSERT_TRUE((*store)->save(tiny_set("b2", veneer::Role::source)));
+    EXPECT_FALSE((*store)->save(tiny_set("a1", veneer::Role::destination))) << "ids are unique";
+    // A second daemon on the same store is refused.
+    auto second = veneerd::Store::open(root);
+    EXPECT_FALSE(second);
+  }
+  // A crashed writer's leftovers and the debris of an interrupted delete.
+  fs::create_directories(root / ".c3.tmp-999999-0" / "truth");
+  fs::create_directories(root / ".a0.deleted-999998-0");
+  auto store = veneerd::Store::open(root);
+  ASSERT_TRUE(store) << store.message();
+  auto sets = (*store)->list();
+  ASSERT_EQ(sets.size(), 2u);
+  EXPECT_EQ(sets[0].id, "a1");
+  EXPECT_EQ(sets[0].lights, 3);
+  EXPECT_EQ(sets[1].role, veneer::Role::source);
+  EXPECT_FALSE(fs::exists(root / ".c3.tmp-999999-0"));
+  EXPECT_FALSE(fs::exists(root / ".a0.deleted-999998-0"));
+  auto files = (*store)->files("a1", true);
+  ASSERT_TRUE(files);
+  EXPECT_EQ(files->front(), "set.json");
+  EXPECT_EQ(files->size(), 5u);  // set.json, 3 photos, ambient
+  ASSERT_TRUE((*store)->remove("a1"));
+  EXPECT_FALSE((*store)->find("a1"));
+  EXPECT_FALSE(fs::exists(root / "a1"));
+  EXPECT_FALSE((*store)->find("../etc"));
+  fs::remove_all(root);
+}
+
+TEST(Store, IdsThatAreNotFileNamesAreRefused) {
+  for (const char* bad : {"", ".", "..", "a/b", "../x", ".hidden", "a b", "x\n"}) {
+    EXPECT_FALSE(veneerd::valid_set_id(bad)) << bad;
+  }
+  EXPECT_TRUE(veneerd::valid_set_id("20261122-081530-destination-bull-2"));
+}
