@@ -1,5 +1,7 @@
 // The scene simulator: analytic shading, shadows, falloff, truth, placement,
 // determinism, and that every scene renders a plausible object.
+#include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -476,6 +478,23 @@ TEST(Simulator, ShapeInAnotherMaterialKeepsItsNormals) {
   EXPECT_NEAR(mean[0], 0.05, 1e-6);  // B
   EXPECT_FALSE(make_scene_with_material("bull", "teapot", o).ok());
   EXPECT_FALSE(make_scene_with_material("teapot", "bull", o).ok());
+}
+
+TEST(Simulator, ProgressIsReportedAndCancelStops) {
+  RenderOptions o = small_options();
+  std::vector<double> fractions;
+  Progress progress;
+  progress.on_progress = [&](double f, const std::string&) { fractions.push_back(f); };
+  ASSERT_TRUE(simulate_set("orange", o, Role::destination, progress).ok());
+  ASSERT_GE(fractions.size(), 8u);
+  EXPECT_TRUE(std::is_sorted(fractions.begin(), fractions.end()));
+  EXPECT_EQ(fractions.back(), 1.0);
+  std::atomic<bool> cancel{true};
+  Progress cancelled;
+  cancelled.cancel = &cancel;
+  auto set = simulate_set("orange", o, Role::destination, cancelled);
+  ASSERT_FALSE(set.ok());
+  EXPECT_NE(set.message().find("cancelled"), std::string::npos);
 }
 
 TEST(Simulator, WrittenSetReadsBackWithItsTruth) {

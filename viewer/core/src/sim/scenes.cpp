@@ -152,17 +152,17 @@ std::unique_ptr<Scene> apple() {
     out->normal = f.dir_to_object(nb);
     // streaks along the meridians: noise fast in longitude, slow in latitude
     double lon = std::atan2(q.x, q.z);
-    V3 sq{std::cos(lon) * 9.0, std::sin(lon) * 9.0, q.y * 40.0};
+    V3 sq{std::cos(lon) * 13.0, std::sin(lon) * 13.0, q.y * 45.0};
     double streak = fbm(sq, 4, 23);
     double blush = fbm(q * 35.0, 3, 24);
-    V3 red = rgb(0.60, 0.045, 0.04), yellow = rgb(0.78, 0.62, 0.13), green = rgb(0.42, 0.52, 0.10);
-    V3 c = lerp(red, yellow, smoothstep(0.42, 0.68, streak) * 0.7 + smoothstep(0.55, 0.8, blush) * 0.3);
+    V3 red = rgb(0.58, 0.04, 0.035), yellow = rgb(0.78, 0.60, 0.13), green = rgb(0.42, 0.52, 0.10);
+    V3 c = lerp(red, yellow, smoothstep(0.53, 0.72, streak) * 0.6 + smoothstep(0.62, 0.85, blush) * 0.3);
     double polar = std::abs(q.y) / ry;
     c = lerp(c, green, smoothstep(0.78, 0.97, polar) * 0.8);
     // lenticels: tiny pale dots
     Cell cell = cellular(q * 900.0, 25);
     double dot_mask = 1.0 - smoothstep(0.10, 0.18, cell.dist);
-    out->albedo = lerp(c, rgb(0.85, 0.78, 0.45), dot_mask * 0.6);
+    out->albedo = lerp(c, rgb(0.85, 0.78, 0.45), dot_mask * 0.35);
     out->ks = 0.32;
     out->shininess = 45;
   };
