@@ -24,6 +24,7 @@
 #include <vector>
 
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
 #include "veneer/match/fast.hpp"
 #include "veneer/match/features.hpp"
@@ -220,8 +221,13 @@ void write_pictures(const std::string& dir, const std::string& name, const Map& 
           repaint.at<cv::Vec3b>(y, x)[k] = cv::saturate_cast<uchar>(255 * std::pow(c[k] / std::max(1e-6, peak), 1 / 2.2));
       }
     }
+  // cropped to the destination object (with a margin), scaled up to be seen
+  std::vector<cv::Point> pts;
+  cv::findNonZero(dst.mask, pts);
+  const cv::Rect box = (cv::boundingRect(pts) + cv::Size(20, 20) - cv::Point(10, 10)) & cv::Rect(cv::Point(0, 0), dst.mask.size());
   cv::Mat both;
-  cv::hconcat(picture, repaint, both);
+  cv::hconcat(picture(box), repaint(box), both);
+  if (both.rows < 400) cv::resize(both, both, cv::Size(), 2.0, 2.0, cv::INTER_NEAREST);
   cv::imwrite(dir + "/" + name + ".png", both);
 }
 
