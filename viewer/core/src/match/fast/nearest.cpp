@@ -12,9 +12,10 @@
 // bound of the first candidate not taken. Otherwise the list grows once (x4),
 // after which the best found is kept (counted as not certified: approximate,
 // see Stats::certified).
-// Intensities at 1x1 stay exact: a pixel the projection does not certify is
-// looked up by the exact kd-tree at full dimension, and when the 3 principal
-// directions keep less than 99 % of the variance every pixel is.
+// Intensities at 1x1: when the 3 principal directions keep >= 99 % of the
+// variance, a pixel the projection does not certify is looked up by the exact
+// kd-tree at full dimension (exact); between 90 and 99 % the grown list's best
+// is kept (approximate); below 90 % every pixel goes to the full-dimension tree.
 #include "nearest.hpp"
 
 #include <algorithm>
@@ -238,7 +239,7 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
   double explained = 1;
   if (dst.patch == 1 && c > 3) {
     const cv::Mat w = principal3(md, ms, c, per_row, explained);
-    if (explained < 0.99) {  // the projection keeps too little: full dimension
+    if (explained < 0.9) {  // the projection keeps too little: full dimension
       auto index = make_kdtree();
       auto s = direct(*index, "kdtree");
       if (stats) stats->explained_variance = explained;
@@ -263,10 +264,12 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
   const int cap = std::min(ns, (k > 1 ? 4 : 2) * first);
   std::atomic<int> certified{0};
   std::atomic<long> exact_distances{0};
-  // 1x1 intensities stay exact: a pixel the projection cannot certify asks the
-  // exact kd-tree at full dimension.
+  // With nearly all variance kept (Lambertian sets), a pixel the projection
+  // cannot certify asks the exact kd-tree at full dimension; otherwise (shadows,
+  // highlights) that would be most pixels at ~10 us each, and the grown
+  // candidate list's best is kept instead (approximate, counted in Stats).
   std::unique_ptr<NearestIndex> full;
-  if (dst.patch == 1) {
+  if (dst.patch == 1 && explained >= 0.99) {
     full = make_kdtree();
     full->build(src.flat.data(), ns, c);
   }
