@@ -6,6 +6,17 @@
 #include <cstdlib>
 #include <cstring>
 
+#if defined(__SANITIZE_ADDRESS__)
+#include <sanitizer/lsan_interface.h>
+// libgphoto2 2.5.30's USB port library leaks a libusb device list for every
+// camera model it probes during autodetection (~2500 small blocks per call,
+// in a module it unloads again, so no suppression can name it). Not ours to
+// fix; keep the leak checker quiet for exactly that call.
+#define VENEER_LIBRARY_LEAKS_HERE __lsan::ScopedDisabler lsan_off_for_libgphoto2
+#else
+#define VENEER_LIBRARY_LEAKS_HERE
+#endif
+
 #include "veneerd/hw/gphoto2.hpp"
 
 namespace veneerd::hw {
@@ -224,7 +235,10 @@ class LibGphoto2 final : public Gphoto2Api {
     CameraList* list = nullptr;
     int r = gp_list_new(&list);
     if (r < GP_OK) return r;
-    r = gp_camera_autodetect(list, ctx_);
+    {
+      VENEER_LIBRARY_LEAKS_HERE;
+      r = gp_camera_autodetect(list, ctx_);
+    }
     for (int i = 0; r >= GP_OK && i < gp_list_count(list); ++i) {
       const char* name = nullptr;
       const char* value = nullptr;

@@ -7,6 +7,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
 #include <cstring>
 
@@ -191,7 +192,7 @@ struct GpioTrigger::Impl {
   int fd = -1;
   bool own_fd = false;
   bool active_low = true;
-  bool dead = false;
+  std::atomic<bool> dead{false};  // read by fd() from the polling thread
   bool real_clock = true;
   std::function<uint64_t()> clock;
   vf_button button{};
