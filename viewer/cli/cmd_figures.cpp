@@ -32,20 +32,20 @@ int fail(const std::string& what, int code = 1) {
 struct Tile {
   std::string label;
   cv::Mat picture;  // 8-bit BGR
+  cv::Rect crop;    // empty = the figure's crop (the destination object)
 };
 
-// One row of tiles cropped to `crop`, each with its label above.
+// One row of tiles, each cropped and scaled to the same height, its label above.
 cv::Mat montage(const std::vector<Tile>& tiles, const cv::Rect& crop) {
-  const int label_h = 22, gap = 4;
+  const int label_h = 22, gap = 4, height = 320;
   std::vector<cv::Mat> cols;
   for (const auto& t : tiles) {
-    const cv::Rect r = crop & cv::Rect(0, 0, t.picture.cols, t.picture.rows);
-    // small crops are enlarged so that speckle and texture can be seen
-    const int zoom = std::max(1, 320 / std::max(1, r.height));
+    const cv::Rect r = (t.crop.area() > 0 ? t.crop : crop) & cv::Rect(0, 0, t.picture.cols, t.picture.rows);
+    const double zoom = static_cast<double>(height) / std::max(1, r.height);
     cv::Mat view;
-    cv::resize(t.picture(r), view, {}, zoom, zoom, cv::INTER_NEAREST);
-    cv::Mat cell(view.rows + label_h, std::max(view.cols, 150), CV_8UC3, cv::Scalar(30, 30, 30));
-    view.copyTo(cell(cv::Rect(0, label_h, view.cols, view.rows)));
+    cv::resize(t.picture(r), view, {}, zoom, zoom, zoom >= 1 ? cv::INTER_NEAREST : cv::INTER_AREA);
+    cv::Mat cell(height + label_h, std::max(view.cols, 150), CV_8UC3, cv::Scalar(30, 30, 30));
+    view.copyTo(cell(cv::Rect(0, label_h, view.cols, std::min(view.rows, height))));
     cv::putText(cell, t.label, {4, 15}, cv::FONT_HERSHEY_SIMPLEX, 0.42, cv::Scalar(235, 235, 235), 1, cv::LINE_AA);
     cols.push_back(cell);
     cols.emplace_back(cell.rows, gap, CV_8UC3, cv::Scalar(0, 0, 0));
@@ -101,11 +101,17 @@ struct Figures {
     return compute_map(objects[d].view, objects[key(s, second)].view, o);
   }
 
+  // The source's photo, cropped to its own object, with the destination's crop's aspect.
+  Tile source_tile(const std::string& s, bool second = false) {
+    const std::string k = key(s, second);
+    return Tile{"source " + s, tonemap_picture(medians[k]), object_crop(objects[k].view.mask, 12)};
+  }
+
   // The destination repainted with the source's median photo.
   Expected<Tile> result(const std::string& d, const std::string& s, const MatchOptions& o, const std::string& label) {
     auto m = map(d, s, o);
     if (!m) return m.error();
-    return Tile{label, tonemap_picture(repaint(*m, medians[key(s, d == s)], medians[d]))};
+    return Tile{label, tonemap_picture(repaint(*m, medians[key(s, d == s)], medians[d])), cv::Rect()};
   }
 
   Status write(const std::string& name, const std::string& caption, const std::vector<Tile>& tiles,
@@ -153,8 +159,9 @@ int run(const FiguresArgs& a) {
       std::vector<Tile> tiles;
       for (const char* s : {"orange", "bull", "stone", "two-spheres", "blocks"}) {
         check(F.load(s));
-        tiles.push_back({std::string(s) + " photo", tonemap_picture(F.medians[s])});
-        tiles.push_back({std::string(s) + " normals", normals_picture(F.objects[s].view.normals)});
+        const cv::Rect crop = object_crop(F.objects[s].view.mask, 12);
+        tiles.push_back({std::string(s) + " photo", tonemap_picture(F.medians[s]), crop});
+        tiles.push_back({std::string(s) + " normals", normals_picture(F.objects[s].view.normals), crop});
       }
       check(F.write("fig5_02_objects", "objects of the simulated rig: median photo and photometric-stereo normals",
                     tiles, "bull"));
@@ -166,14 +173,14 @@ int run(const FiguresArgs& a) {
                        Method::regiongrow}) {
         auto mp = F.map("bull", "orange", opts(m));
         if (!mp) return fail(mp.message());
-        tiles.push_back({method_name(m), map_picture(*mp, F.sets["orange"].size)});
+        tiles.push_back({method_name(m), map_picture(*mp, F.sets["orange"].size), cv::Rect()});
       }
       check(F.write("fig5_03_maps", "correspondence maps orange -> bull (R = source x, G = source y, B = 1)", tiles,
                     "bull"));
     }
     // 5.4 normals vs intensities, orange -> bull
     check(F.write("fig5_04_features", "orange -> bull: source, normals 1x1, intensities 1x1, normals 3x3, intensities 3x3",
-                  {{"source orange", tonemap_picture(F.medians["orange"])},
+                  {F.source_tile("orange"),
                    tile(F.result("bull", "orange", opts(Method::flann), "normals 1x1")),
                    tile(F.result("bull", "orange", opts(Method::flann, Feature::intensities), "intensities 1x1")),
                    tile(F.result("bull", "orange", opts(Method::flann, Feature::normals, 3), "normals 3x3")),
@@ -193,7 +200,7 @@ int run(const FiguresArgs& a) {
                                    {"fig5_07_candidates_blocks", "blocks"}}) {
       const bool second = src == "blocks";
       check(F.load(src, second));
-      std::vector<Tile> tiles{{"source " + src, tonemap_picture(F.medians[Figures::key(src, second)])}};
+      std::vector<Tile> tiles{F.source_tile(src, second)};
       for (int k : {1, 10, 100}) {
         auto o = opts(Method::candidates);
         o.candidates = k;
@@ -203,7 +210,8 @@ int run(const FiguresArgs& a) {
     }
     // 5.8 region growing on stone -> bull
     {
-      std::vector<Tile> tiles{{"source stone", tonemap_picture(F.medians["stone"])}};
+      check(F.load("stone"));
+      std::vector<Tile> tiles{F.source_tile("stone")};
       for (double t : {0.0, 0.02, 0.05, 0.1}) {
         auto o = opts(Method::regiongrow, Feature::normals, 3);
         o.threshold = t;
@@ -229,7 +237,7 @@ int run(const FiguresArgs& a) {
     // 5.10 baseline vs matching, apple -> banana
     check(F.load("apple"));
     check(F.write("fig5_10_baseline", "apple -> banana: source, bounding-box baseline, flann normals, regiongrow",
-                  {{"source apple", tonemap_picture(F.medians["apple"])},
+                  {F.source_tile("apple"),
                    tile(F.result("banana", "apple", opts(Method::baseline), "baseline")),
                    tile(F.result("banana", "apple", opts(Method::flann), "flann normals")),
                    tile(F.result("banana", "apple", opts(Method::regiongrow, Feature::normals, 3), "regiongrow 3x3"))},
@@ -237,7 +245,7 @@ int run(const FiguresArgs& a) {
     // 5.11 cup-dots -> cup-white per method
     {
       check(F.load("cup-dots"));
-      std::vector<Tile> tiles{{"source cup-dots", tonemap_picture(F.medians["cup-dots"])}};
+      std::vector<Tile> tiles{F.source_tile("cup-dots")};
       for (Method m : {Method::flann, Method::candidates, Method::patchmatch, Method::regiongrow})
         tiles.push_back(tile(F.result("cup-white", "cup-dots", opts(m, Feature::normals, 3),
                                       std::string(method_name(m)) + " 3x3")));
@@ -251,7 +259,7 @@ int run(const FiguresArgs& a) {
       const auto& src = F.objects["sphere-red-gloss"].view.images;
       const auto& dst = F.objects["bull"].view.images;
       for (size_t i = 0; i < src.size(); i += 2)
-        tiles.push_back({"lamp " + std::to_string(i), tonemap_picture(repaint(*mp, src[i], dst[i]))});
+        tiles.push_back({"lamp " + std::to_string(i), tonemap_picture(repaint(*mp, src[i], dst[i])), cv::Rect()});
       check(F.write("fig5_12_relight", "sphere-red-gloss -> bull: the bull relit by the source's photos, lamp by lamp",
                     tiles, "bull"));
     }
