@@ -77,6 +77,10 @@ struct BoxMapping {
   }
 };
 
+// Candidate lists (thesis eq. 4.2): the K nearest by feature, then the one
+// nearest in the image to where the destination pixel lands in the source's
+// bounding box. The lists come from the exact search, so K = 1 is exactly
+// direct matching and the method's own effect is measured without FLANN's.
 Expected<Map> run_candidates(const FeatureSet& dst, const FeatureSet& src, const MatchOptions& o,
                              const Progress& p) {
   const int k = o.candidates;
