@@ -1,5 +1,6 @@
 // veneer simulate — renders a scene under the thesis rig and writes a
 // veneer-set/1 folder with its truth/ (normals, mask, albedo, depth).
+#include <algorithm>
 #include <cstdio>
 #include <iostream>
 #include <sstream>
@@ -48,7 +49,11 @@ struct SimulateArgs {
 
 int run_simulate(const SimulateArgs& a) {
   if (a.list) {
-    for (const auto& name : veneer::sim::scene_names()) std::cout << name << "\n";
+    for (const auto& name : veneer::sim::scene_names()) {
+      std::string padded = name;
+      padded.resize(std::max<size_t>(padded.size() + 2, 18), ' ');
+      std::cout << padded << veneer::sim::scene_description(name) << "\n";
+    }
     return 0;
   }
   if (a.scene.empty()) return fail(2, "--scene is required (see --list)");

@@ -288,6 +288,7 @@ TEST(Simulator, ScenesHaveTheirCharacter) {
 TEST(Simulator, TruthNormalsAreUnitInsideAndZeroOutside) {
   RenderOptions o = small_options();
   for (const auto& name : scene_names()) {
+    EXPECT_FALSE(scene_description(name).empty()) << name;
     auto scene = scene_or_die(name, o);
     ASSERT_TRUE(scene);
     Truth t = render_truth(*scene, o);

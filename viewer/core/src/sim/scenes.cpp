@@ -5,6 +5,7 @@
 // show; textures and bumps are evaluated in that local frame, so they stick
 // to the object whatever its placement.
 #include <array>
+#include <utility>
 #include <cmath>
 #include <numbers>
 
@@ -389,6 +390,25 @@ std::unique_ptr<Scene> bull() {
 std::vector<std::string> scene_names() {
   return {"orange", "apple",  "banana", "cup-dots",    "cup-white",       "two-spheres",
           "blocks", "stone",  "bull",   "sphere-gray", "sphere-red-gloss"};
+}
+
+std::string scene_description(const std::string& name) {
+  static const std::pair<const char*, const char*> descriptions[] = {
+      {"orange", "an orange, 8 cm: dimpled peel, mottled colour, stem scar"},
+      {"apple", "an apple, slightly flattened: red with yellow streaks, green shoulders, stem in a dimple"},
+      {"banana", "a curved banana, 18 cm: yellow with brown sugar spots, faint ridges, stalk"},
+      {"cup-dots", "a white glazed cup with coloured dots and a handle, tipped to show its inside"},
+      {"cup-white", "the same cup, plain white"},
+      {"two-spheres", "two spheres side by side, blue and yellow"},
+      {"blocks", "a stack of bricks in four colours: few normal orientations"},
+      {"stone", "a rough grey stone with light and dark veins"},
+      {"bull", "a statue of a bull on a plinth: concave, casts shadows on itself"},
+      {"sphere-gray", "a uniform matte grey sphere (albedo 0.6), for measuring"},
+      {"sphere-red-gloss", "a uniform red sphere with a strong specular lobe, for measuring"},
+  };
+  for (const auto& [n, d] : descriptions)
+    if (name == n) return d;
+  return {};
 }
 
 std::unique_ptr<Scene> build_scene(const std::string& name) {

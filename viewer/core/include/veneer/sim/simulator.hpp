@@ -54,6 +54,8 @@ class Scene;  // opaque: primitives + materials
 // Names: orange apple banana cup-dots cup-white two-spheres blocks stone bull
 // sphere-gray sphere-red-gloss.
 std::vector<std::string> scene_names();
+// One line saying what the scene is (empty for an unknown name).
+std::string scene_description(const std::string& name);
 Expected<std::shared_ptr<const Scene>> make_scene(const std::string& name, const RenderOptions& options);
 
 // The shape (and placement) of `shape_scene` with the material of
