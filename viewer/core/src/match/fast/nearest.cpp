@@ -12,9 +12,9 @@
 // bound of the first candidate not taken. Otherwise the list grows once (x4),
 // after which the best found is kept (counted as not certified: approximate,
 // see Stats::certified).
-// Intensities at 1x1: when the 3 principal directions keep >= 99 % of the
+// Intensities at 1x1: when the 3 principal directions keep >= 99.9 % of the
 // variance, a pixel the projection does not certify is looked up by the exact
-// kd-tree at full dimension (exact); between 90 and 99 % the grown list's best
+// kd-tree at full dimension (exact); between 90 and 99.9 % the grown list's best
 // is kept (approximate); below 90 % every pixel goes to the full-dimension tree.
 #include "nearest.hpp"
 
@@ -264,12 +264,12 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
   const int cap = std::min(ns, (k > 1 ? 4 : 2) * first);
   std::atomic<int> certified{0};
   std::atomic<long> exact_distances{0};
-  // With nearly all variance kept (Lambertian sets), a pixel the projection
+  // With nearly all variance kept (>= 99.9 %: Lambertian sets), a pixel the projection
   // cannot certify asks the exact kd-tree at full dimension; otherwise (shadows,
   // highlights) that would be most pixels at ~10 us each, and the grown
   // candidate list's best is kept instead (approximate, counted in Stats).
   std::unique_ptr<NearestIndex> full;
-  if (dst.patch == 1 && explained >= 0.99) {
+  if (dst.patch == 1 && explained >= 0.999) {
     full = make_kdtree();
     full->build(src.flat.data(), ns, c);
   }
