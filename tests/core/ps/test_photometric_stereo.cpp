@@ -2,6 +2,8 @@
 // near-light modes, bad input.
 #include <gtest/gtest.h>
 
+#include <opencv2/imgproc.hpp>
+
 #include "synth.hpp"
 #include "veneer/ps/photometric_stereo.hpp"
 
@@ -126,6 +128,29 @@ TEST(PhotometricStereo, SaturatedSamplesAreDropped) {
   AngularError er = solve_error(set, robust), ep = solve_error(set, plain);
   EXPECT_LT(er.mean_deg, 0.5);
   EXPECT_LT(er.mean_deg, ep.mean_deg);
+}
+
+TEST(PhotometricStereo, OutlierSampleIsDropped) {
+  // A highlight-like bright patch in one photo: the robust fit drops it.
+  SynthOptions o;
+  o.distant = true;
+  ImageSet set = synth_sphere(o);
+  cv::Mat patch(set.images[0].size(), CV_8UC1, cv::Scalar(0));
+  cv::circle(patch, {128, 85}, 8, cv::Scalar(255), cv::FILLED);
+  for (int y = 0; y < patch.rows; ++y)
+    for (int x = 0; x < patch.cols; ++x)
+      if (patch.at<uint8_t>(y, x)) set.images[2].at<cv::Vec3f>(y, x) += cv::Vec3f(0.3f, 0.3f, 0.3f);
+  PsOptions with, without;
+  with.light_model = without.light_model = LightModel::distant;
+  without.outlier_fraction = 0.f;
+  cv::Mat m;
+  cv::bitwise_and(patch, set.truth.mask, m);
+  auto rw = photometric_stereo(set, set.truth.mask, with), ro = photometric_stereo(set, set.truth.mask, without);
+  ASSERT_TRUE(rw.ok() && ro.ok());
+  const double ew = angular_error(rw->normals, set.truth.normals, m).mean_deg;
+  const double eo = angular_error(ro->normals, set.truth.normals, m).mean_deg;
+  EXPECT_LT(ew, 0.5);
+  EXPECT_GT(eo, 4 * ew) << "with " << ew << " without " << eo;
 }
 
 TEST(PhotometricStereo, UnreliablePixelsAreMarked) {

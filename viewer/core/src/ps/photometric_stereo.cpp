@@ -50,6 +50,8 @@ Status PsOptions::check() const {
   if (!(saturation > 0.f && saturation <= 1.f))
     return make_error("saturation must be in (0, 1], got " + std::to_string(saturation));
   if (!(min_signal >= 0.f)) return make_error("min_signal must be >= 0, got " + std::to_string(min_signal));
+  if (!(outlier_fraction >= 0.f && outlier_fraction < 1.f))
+    return make_error("outlier_fraction must be in [0, 1), got " + std::to_string(outlier_fraction));
   if (near_iterations < 0 || near_iterations > 5)
     return make_error("near_iterations must be in 0..5, got " + std::to_string(near_iterations));
   if (threads < 0) return make_error("threads must be >= 0, got " + std::to_string(threads));
@@ -66,7 +68,7 @@ struct Setup {
   int width = 0, height = 0;
   bool near = false;
   bool robust = true;
-  float shadow_fraction = 0.1f, saturation = 0.98f, min_signal = 1e-3f;
+  float shadow_fraction = 0.1f, saturation = 0.98f, min_signal = 1e-3f, outlier_fraction = 0.1f;
   std::vector<float> dir;        // n*3 distant directions
   std::vector<float> pos;        // n*3 lamp positions (near)
   std::vector<float> pos_norm2;  // n: |position|^2 (intensity reference distance)
@@ -255,48 +257,101 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
   float* __restrict gx = b.acc.data() + 9 * cap;
   float* __restrict gy = b.acc.data() + 10 * cap;
   float* __restrict gz = b.acc.data() + 11 * cap;
-  // 3. solve g = albedo * n.
-  if (!s.near) {
-    if (s.use_cache || !s.robust) {
-      // Full pattern for everybody (vectorised), then the other patterns pixel by pixel.
-      const float* P = s.pinv.data() + size_t(s.use_cache ? s.full : 0) * 3 * n;
-      std::fill(gx, gx + count, 0.f);
-      std::fill(gy, gy + count, 0.f);
-      std::fill(gz, gz + count, 0.f);
-      for (int i = 0; i < n; ++i) {
-        const float* __restrict yy = b.Y.data() + size_t(i) * cap;
-        const float p0 = P[i], p1 = P[n + i], p2 = P[2 * n + i];
+  float* __restrict nx = b.nx.data();
+  float* __restrict ny = b.ny.data();
+  float* __restrict nz = b.nz.data();
+  float* __restrict ga = b.a.data();
+  const float ms = s.min_signal;
+  // 3-4 run once, or twice when outliers were dropped after the first fit.
+  for (int pass = 0; pass < 2; ++pass) {
+    // 3. solve g = albedo * n.
+    if (!s.near) {
+      if (s.use_cache || !s.robust) {
+        // Full pattern for everybody (vectorised), then the other patterns pixel by pixel.
+        const float* P = s.pinv.data() + size_t(s.use_cache ? s.full : 0) * 3 * n;
+        std::fill(gx, gx + count, 0.f);
+        std::fill(gy, gy + count, 0.f);
+        std::fill(gz, gz + count, 0.f);
+        for (int i = 0; i < n; ++i) {
+          const float* __restrict yy = b.Y.data() + size_t(i) * cap;
+          const float p0 = P[i], p1 = P[n + i], p2 = P[2 * n + i];
 #pragma GCC ivdep
-        for (int k = 0; k < count; ++k) {
-          gx[k] += p0 * yy[k];
-          gy[k] += p1 * yy[k];
-          gz[k] += p2 * yy[k];
+          for (int k = 0; k < count; ++k) {
+            gx[k] += p0 * yy[k];
+            gy[k] += p1 * yy[k];
+            gz[k] += p2 * yy[k];
+          }
         }
-      }
-      if (s.robust) {
+        if (s.robust) {
 #pragma GCC ivdep
-        for (int k = 0; k < count; ++k) {
-          const uint32_t p = pat[k];
-          if (p == s.full) continue;
-          if (!s.pinv_ok[p]) {
-            okv[k] = 0.f;
-            continue;
+          for (int k = 0; k < count; ++k) {
+            const uint32_t p = pat[k];
+            if (p == s.full) continue;
+            if (!s.pinv_ok[p]) {
+              okv[k] = 0.f;
+              continue;
+            }
+            const float* Q = s.pinv.data() + size_t(p) * 3 * n;
+            float x = 0, yv = 0, zv = 0;
+            for (int i = 0; i < n; ++i) {
+              const float v = b.Y[size_t(i) * cap + k];
+              x += Q[i] * v;
+              yv += Q[n + i] * v;
+              zv += Q[2 * n + i] * v;
+            }
+            gx[k] = x;
+            gy[k] = yv;
+            gz[k] = zv;
           }
-          const float* Q = s.pinv.data() + size_t(p) * 3 * n;
-          float x = 0, yv = 0, zv = 0;
-          for (int i = 0; i < n; ++i) {
-            const float v = b.Y[size_t(i) * cap + k];
-            x += Q[i] * v;
-            yv += Q[n + i] * v;
-            zv += Q[2 * n + i] * v;
+        }
+      } else {
+        // Many lamps: per-pixel weighted normal equations with the constant directions.
+        std::fill(b.acc.begin(), b.acc.begin() + 9 * cap, 0.f);
+        float* __restrict a00 = b.acc.data();
+        float* __restrict a01 = a00 + cap;
+        float* __restrict a02 = a00 + 2 * cap;
+        float* __restrict a11 = a00 + 3 * cap;
+        float* __restrict a12 = a00 + 4 * cap;
+        float* __restrict a22 = a00 + 5 * cap;
+        float* __restrict b0 = a00 + 6 * cap;
+        float* __restrict b1 = a00 + 7 * cap;
+        float* __restrict b2 = a00 + 8 * cap;
+        for (int i = 0; i < n; ++i) {
+          const float* __restrict yy = b.Y.data() + size_t(i) * cap;
+          const float* __restrict w = b.W.data() + size_t(i) * cap;
+          const float lx = s.dir[i * 3], ly = s.dir[i * 3 + 1], lz = s.dir[i * 3 + 2];
+#pragma GCC ivdep
+          for (int k = 0; k < count; ++k) {
+            const float wk = w[k], wy = wk * yy[k];
+            a00[k] += wk * lx * lx;
+            a01[k] += wk * lx * ly;
+            a02[k] += wk * lx * lz;
+            a11[k] += wk * ly * ly;
+            a12[k] += wk * ly * lz;
+            a22[k] += wk * lz * lz;
+            b0[k] += wy * lx;
+            b1[k] += wy * ly;
+            b2[k] += wy * lz;
           }
-          gx[k] = x;
-          gy[k] = yv;
-          gz[k] = zv;
         }
       }
     } else {
-      // Many lamps: per-pixel weighted normal equations with the constant directions.
+      // Near model: per-pixel light vectors V_i = f_i * l_i from the back-projected point.
+      float* __restrict px = b.px.data();
+      float* __restrict py = b.py.data();
+      float* __restrict pz = b.pz.data();
+      const float invf = 1.f / s.f;
+      const float v = (float(y) - s.cy) * invf;
+#pragma GCC ivdep
+      for (int k = 0; k < count; ++k) pz[k] = z ? z[k] : 0.f;
+#pragma GCC ivdep
+      for (int k = 0; k < count; ++k) {
+        const float zz = pz[k];
+        const float t = 1.f - zz;
+        px[k] = t * (float(x0 + k * step) - s.cx) * invf;
+        py[k] = -t * v;
+        pz[k] = zz;
+      }
       std::fill(b.acc.begin(), b.acc.begin() + 9 * cap, 0.f);
       float* __restrict a00 = b.acc.data();
       float* __restrict a01 = a00 + cap;
@@ -310,122 +365,118 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
       for (int i = 0; i < n; ++i) {
         const float* __restrict yy = b.Y.data() + size_t(i) * cap;
         const float* __restrict w = b.W.data() + size_t(i) * cap;
-        const float lx = s.dir[i * 3], ly = s.dir[i * 3 + 1], lz = s.dir[i * 3 + 2];
+        float* __restrict vx = b.V.data() + (size_t(i) * 3 + 0) * cap;
+        float* __restrict vy = b.V.data() + (size_t(i) * 3 + 1) * cap;
+        float* __restrict vz = b.V.data() + (size_t(i) * 3 + 2) * cap;
+        const float lx = s.pos[i * 3], ly = s.pos[i * 3 + 1], lz = s.pos[i * 3 + 2], r2 = s.pos_norm2[i];
 #pragma GCC ivdep
         for (int k = 0; k < count; ++k) {
+          const float dx = lx - px[k], dy = ly - py[k], dz = lz - pz[k];
+          const float d2 = dx * dx + dy * dy + dz * dz;
+          const float inv = 1.f / std::sqrt(d2);
+          const float sc = r2 * inv * inv * inv;  // falloff |L|^2/d^2 times 1/d normalisation
+          const float ex = dx * sc, ey = dy * sc, ez = dz * sc;
+          vx[k] = ex;
+          vy[k] = ey;
+          vz[k] = ez;
           const float wk = w[k], wy = wk * yy[k];
-          a00[k] += wk * lx * lx;
-          a01[k] += wk * lx * ly;
-          a02[k] += wk * lx * lz;
-          a11[k] += wk * ly * ly;
-          a12[k] += wk * ly * lz;
-          a22[k] += wk * lz * lz;
-          b0[k] += wy * lx;
-          b1[k] += wy * ly;
-          b2[k] += wy * lz;
+          a00[k] += wk * ex * ex;
+          a01[k] += wk * ex * ey;
+          a02[k] += wk * ex * ez;
+          a11[k] += wk * ey * ey;
+          a12[k] += wk * ey * ez;
+          a22[k] += wk * ez * ez;
+          b0[k] += wy * ex;
+          b1[k] += wy * ey;
+          b2[k] += wy * ez;
         }
       }
     }
-  } else {
-    // Near model: per-pixel light vectors V_i = f_i * l_i from the back-projected point.
-    float* __restrict px = b.px.data();
-    float* __restrict py = b.py.data();
-    float* __restrict pz = b.pz.data();
-    const float invf = 1.f / s.f;
-    const float v = (float(y) - s.cy) * invf;
+    if (s.near || (s.robust && !s.use_cache)) {
+      // 3x3 symmetric solve by cofactors, vectorised.
+      const float* __restrict A = b.acc.data();
+      const float* __restrict A1 = A + cap;
+      const float* __restrict A2 = A + 2 * cap;
+      const float* __restrict A3 = A + 3 * cap;
+      const float* __restrict A4 = A + 4 * cap;
+      const float* __restrict A5 = A + 5 * cap;
+      const float* __restrict B0 = A + 6 * cap;
+      const float* __restrict B1 = A + 7 * cap;
+      const float* __restrict B2 = A + 8 * cap;
 #pragma GCC ivdep
-    for (int k = 0; k < count; ++k) pz[k] = z ? z[k] : 0.f;
+      for (int k = 0; k < count; ++k) {
+        const float a00 = A[k], a01 = A1[k], a02 = A2[k], a11 = A3[k], a12 = A4[k], a22 = A5[k];
+        const float b0 = B0[k], b1 = B1[k], b2 = B2[k];
+        const float c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
+        const float c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
+        const float det = a00 * c00 + a01 * c01 + a02 * c02;
+        const float tr = (a00 + a11 + a22) * (1.f / 3.f);
+        const bool good = (det > 1e-5f * tr * tr * tr) & (tr > 0.f);
+        const float id = (good ? 1.f : 0.f) / (good ? det : 1.f);
+        gx[k] = (c00 * b0 + c01 * b1 + c02 * b2) * id;
+        gy[k] = (c01 * b0 + c11 * b1 + c12 * b2) * id;
+        gz[k] = (c02 * b0 + c12 * b1 + c22 * b2) * id;
+        okv[k] = good ? okv[k] : 0.f;
+      }
+    }
+    // 4. normal and grey albedo.
 #pragma GCC ivdep
     for (int k = 0; k < count; ++k) {
-      const float zz = pz[k];
-      const float t = 1.f - zz;
-      px[k] = t * (float(x0 + k * step) - s.cx) * invf;
-      py[k] = -t * v;
-      pz[k] = zz;
+      const float len = std::sqrt(gx[k] * gx[k] + gy[k] * gy[k] + gz[k] * gz[k]);
+      const bool sig = (len > 0.f) & (M[k] > ms);
+      const float il = (sig ? 1.f : 0.f) / (sig ? len : 1.f);
+      nx[k] = gx[k] * il;
+      ny[k] = gy[k] * il;
+      nz[k] = gz[k] * il;
+      ga[k] = sig ? len : 0.f;
+      okv[k] = sig ? okv[k] : 0.f;
     }
-    std::fill(b.acc.begin(), b.acc.begin() + 9 * cap, 0.f);
-    float* __restrict a00 = b.acc.data();
-    float* __restrict a01 = a00 + cap;
-    float* __restrict a02 = a00 + 2 * cap;
-    float* __restrict a11 = a00 + 3 * cap;
-    float* __restrict a12 = a00 + 4 * cap;
-    float* __restrict a22 = a00 + 5 * cap;
-    float* __restrict b0 = a00 + 6 * cap;
-    float* __restrict b1 = a00 + 7 * cap;
-    float* __restrict b2 = a00 + 8 * cap;
+    if (pass == 1 || !s.robust || !(s.outlier_fraction > 0.f)) break;
+    // Outliers: the sample farthest from the first fit (a specular highlight,
+    // a cast shadow) is dropped when it is off by more than outlier_fraction of
+    // the pixel's brightest sample and 4+ samples remain; then solve again.
+    float* __restrict best = b.den.data();
+    float* __restrict best_i = b.acc.data();  // the normal equations are rebuilt in the next pass
+    std::fill(best, best + count, 0.f);
+    std::fill(best_i, best_i + count, -1.f);
     for (int i = 0; i < n; ++i) {
       const float* __restrict yy = b.Y.data() + size_t(i) * cap;
       const float* __restrict w = b.W.data() + size_t(i) * cap;
-      float* __restrict vx = b.V.data() + (size_t(i) * 3 + 0) * cap;
-      float* __restrict vy = b.V.data() + (size_t(i) * 3 + 1) * cap;
-      float* __restrict vz = b.V.data() + (size_t(i) * 3 + 2) * cap;
-      const float lx = s.pos[i * 3], ly = s.pos[i * 3 + 1], lz = s.pos[i * 3 + 2], r2 = s.pos_norm2[i];
+      const float* __restrict vx = b.V.data() + (size_t(i) * 3 + 0) * cap;
+      const float* __restrict vy = b.V.data() + (size_t(i) * 3 + 1) * cap;
+      const float* __restrict vz = b.V.data() + (size_t(i) * 3 + 2) * cap;
+      const float lx = s.dir[i * 3], ly = s.dir[i * 3 + 1], lz = s.dir[i * 3 + 2];
+      const bool near = s.near;
 #pragma GCC ivdep
       for (int k = 0; k < count; ++k) {
-        const float dx = lx - px[k], dy = ly - py[k], dz = lz - pz[k];
-        const float d2 = dx * dx + dy * dy + dz * dz;
-        const float inv = 1.f / std::sqrt(d2);
-        const float sc = r2 * inv * inv * inv;  // falloff |L|^2/d^2 times 1/d normalisation
-        const float ex = dx * sc, ey = dy * sc, ez = dz * sc;
-        vx[k] = ex;
-        vy[k] = ey;
-        vz[k] = ez;
-        const float wk = w[k], wy = wk * yy[k];
-        a00[k] += wk * ex * ex;
-        a01[k] += wk * ex * ey;
-        a02[k] += wk * ex * ez;
-        a11[k] += wk * ey * ey;
-        a12[k] += wk * ey * ez;
-        a22[k] += wk * ez * ez;
-        b0[k] += wy * ex;
-        b1[k] += wy * ey;
-        b2[k] += wy * ez;
+        const float sh = near ? nx[k] * vx[k] + ny[k] * vy[k] + nz[k] * vz[k] : nx[k] * lx + ny[k] * ly + nz[k] * lz;
+        const float r = std::abs(yy[k] - ga[k] * sh) * w[k];
+        const bool sel = r > best[k];
+        best[k] = sel ? r : best[k];
+        best_i[k] = sel ? float(i) : best_i[k];
       }
     }
-  }
-  if (s.near || (s.robust && !s.use_cache)) {
-    // 3x3 symmetric solve by cofactors, vectorised.
-    const float* __restrict A = b.acc.data();
-    const float* __restrict A1 = A + cap;
-    const float* __restrict A2 = A + 2 * cap;
-    const float* __restrict A3 = A + 3 * cap;
-    const float* __restrict A4 = A + 4 * cap;
-    const float* __restrict A5 = A + 5 * cap;
-    const float* __restrict B0 = A + 6 * cap;
-    const float* __restrict B1 = A + 7 * cap;
-    const float* __restrict B2 = A + 8 * cap;
-#pragma GCC ivdep
+    int drops = 0;
+    const float of = s.outlier_fraction;
     for (int k = 0; k < count; ++k) {
-      const float a00 = A[k], a01 = A1[k], a02 = A2[k], a11 = A3[k], a12 = A4[k], a22 = A5[k];
-      const float b0 = B0[k], b1 = B1[k], b2 = B2[k];
-      const float c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
-      const float c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
-      const float det = a00 * c00 + a01 * c01 + a02 * c02;
-      const float tr = (a00 + a11 + a22) * (1.f / 3.f);
-      const bool good = (det > 1e-5f * tr * tr * tr) & (tr > 0.f);
-      const float id = (good ? 1.f : 0.f) / (good ? det : 1.f);
-      gx[k] = (c00 * b0 + c01 * b1 + c02 * b2) * id;
-      gy[k] = (c01 * b0 + c11 * b1 + c12 * b2) * id;
-      gz[k] = (c02 * b0 + c12 * b1 + c22 * b2) * id;
-      okv[k] = good ? okv[k] : 0.f;
+      const bool drop = (best[k] > of * M[k]) & (K[k] >= 4.f) & (ga[k] > 0.f);
+      best_i[k] = drop ? best_i[k] : -1.f;
+      K[k] -= drop ? 1.f : 0.f;
+      drops += drop;
     }
-  }
-  // 4. normal and grey albedo.
-  float* __restrict nx = b.nx.data();
-  float* __restrict ny = b.ny.data();
-  float* __restrict nz = b.nz.data();
-  float* __restrict ga = b.a.data();
-  const float ms = s.min_signal;
+    if (drops == 0) break;
+    for (int i = 0; i < n; ++i) {
+      float* __restrict w = b.W.data() + size_t(i) * cap;
 #pragma GCC ivdep
-  for (int k = 0; k < count; ++k) {
-    const float len = std::sqrt(gx[k] * gx[k] + gy[k] * gy[k] + gz[k] * gz[k]);
-    const bool sig = (len > 0.f) & (M[k] > ms);
-    const float il = (sig ? 1.f : 0.f) / (sig ? len : 1.f);
-    nx[k] = gx[k] * il;
-    ny[k] = gy[k] * il;
-    nz[k] = gz[k] * il;
-    ga[k] = sig ? len : 0.f;
-    okv[k] = sig ? okv[k] : 0.f;
+      for (int k = 0; k < count; ++k) w[k] = best_i[k] == float(i) ? 0.f : w[k];
+    }
+    if (s.use_cache) {
+      std::fill(pat, pat + count, 0u);
+      for (int i = 0; i < n; ++i) {
+        const float* __restrict w = b.W.data() + size_t(i) * cap;
+        for (int k = 0; k < count; ++k) pat[k] |= uint32_t(w[k] != 0.f) << i;
+      }
+    }
   }
   // 5. per-channel albedo and residual over the kept samples, with shading S_i = n . V_i.
   float* __restrict den = b.den.data();
@@ -611,6 +662,7 @@ Status photometric_stereo_into(const ImageSet& set, const cv::Mat& mask_in, cons
   s.shadow_fraction = options.shadow_fraction;
   s.saturation = options.saturation;
   s.min_signal = options.min_signal;
+  s.outlier_fraction = options.outlier_fraction;
   s.dir.resize(size_t(n) * 3);
   s.inv_e.resize(size_t(n) * 3);
   bool have_positions = true;
