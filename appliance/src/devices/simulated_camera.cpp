@@ -161,6 +161,37 @@ std::shared_ptr<const PreviewBuffer> make_preview_buffer(const veneer::sim::Scen
       b->albedo.push_back(t.albedo.at<cv::Vec3f>(y, x));
     }
   }
+  // The table behind the object: a plane facing the camera, placed at the
+  // object's deepest visible point. Its reflectance comes from one full render
+  // under a lamp at the camera (which hides the object's shadow behind it).
+  if (b->index.empty()) return b;
+  float table_z = b->position.front()[2];
+  for (const auto& p : b->position) table_z = std::min(table_z, p[2]);
+  const cv::Vec3f head(0, 0, 1);
+  veneer::sim::Lamp at_camera;
+  at_camera.position_m = {0, 0, 1};
+  veneer::sim::RenderOptions plain = r;
+  plain.noise_sigma = 0;
+  plain.exposure = 1;
+  cv::Mat plate = veneer::sim::render(scene, {at_camera}, plain);
+  if (plate.empty()) return b;
+  const cv::Vec3d rig0 = veneer::sim::thesis_rig().front().position_m;
+  const double d = 1.0 - table_z;
+  for (int y = 0; y < r.size.height; ++y) {
+    for (int x = 0; x < r.size.width; ++x) {
+      if (t.mask.at<uint8_t>(y, x)) continue;
+      cv::Vec3f p(static_cast<float>((x - cx) / f * d), static_cast<float>(-(y - cy) / f * d), table_z);
+      cv::Vec3f L = head - p;
+      float r2 = L.dot(L);
+      float e0 = static_cast<float>(rig0.dot(rig0)) * L[2] / std::sqrt(r2) / r2;  // irradiance from the camera lamp
+      cv::Vec3f c = plate.at<cv::Vec3f>(y, x);
+      if (!(e0 > 0) || c == cv::Vec3f(0, 0, 0)) continue;
+      b->index.push_back(y * r.size.width + x);
+      b->position.push_back(p);
+      b->normal.emplace_back(0.f, 0.f, 1.f);
+      b->albedo.push_back(c / e0);
+    }
+  }
   return b;
 }
 
@@ -370,20 +401,31 @@ veneer::Expected<std::vector<unsigned char>> SimulatedCamera::preview() {
     // at the rig origin, i.e. radiant intensity |lamp|^2.
     const cv::Vec3d rig0 = veneer::sim::thesis_rig().front().position_m;
     const double radiant = rig0.dot(rig0) * hand.brightness * r.exposure;
-    const cv::Vec3f lamp(static_cast<float>(hand.position_m[0]), static_cast<float>(hand.position_m[1]),
-                         static_cast<float>(hand.position_m[2]));
     bytes8 = cv::Mat(r.size, CV_8UC3, cv::Scalar::all(0));
-    auto* out = bytes8.ptr<cv::Vec3b>(0);
-    const auto& lut = gamma_lut();
-    for (std::size_t k = 0; k < buffer->index.size(); ++k) {
-      cv::Vec3f L = lamp - buffer->position[k];
-      float r2 = L.dot(L);
-      float ndl = buffer->normal[k].dot(L) / std::sqrt(r2);
-      if (!(ndl > 0)) continue;
-      float e = static_cast<float>(radiant) * ndl / r2;
-      cv::Vec3b& px = out[buffer->index[k]];
-      for (int c = 0; c < 3; ++c) px[c] = lut[static_cast<int>(std::clamp(buffer->albedo[k][c] * e, 0.0f, 1.0f) * 4095.0f)];
-    }
+    uint8_t* out = bytes8.ptr<uint8_t>(0);
+    const uint8_t* lut = gamma_lut().data();
+    const float lx = static_cast<float>(hand.position_m[0]), ly = static_cast<float>(hand.position_m[1]),
+                lz = static_cast<float>(hand.position_m[2]), k = static_cast<float>(radiant);
+    const int n = static_cast<int>(buffer->index.size());
+    const int* index = buffer->index.data();
+    const float* pos = n ? &buffer->position[0][0] : nullptr;
+    const float* nrm = n ? &buffer->normal[0][0] : nullptr;
+    const float* alb = n ? &buffer->albedo[0][0] : nullptr;
+    // Independent pixels, disjoint writes: shade in stripes on every core.
+    if (n > 0) cv::parallel_for_(cv::Range(0, n), [&](const cv::Range& range) {
+      for (int i = range.start; i < range.end; ++i) {
+        const float* p = pos + 3 * i;
+        const float* nn = nrm + 3 * i;
+        float Lx = lx - p[0], Ly = ly - p[1], Lz = lz - p[2];
+        float r2 = Lx * Lx + Ly * Ly + Lz * Lz;
+        float ndl = nn[0] * Lx + nn[1] * Ly + nn[2] * Lz;
+        if (!(ndl > 0)) continue;
+        float e = k * ndl / (r2 * std::sqrt(r2)) * 4095.0f;
+        const float* a = alb + 3 * i;
+        uint8_t* px = out + 3 * static_cast<std::size_t>(index[i]);
+        for (int c = 0; c < 3; ++c) px[c] = lut[static_cast<int>(std::min(a[c] * e, 4095.0f))];
+      }
+    }, 4);
   }
   std::vector<unsigned char> jpeg;
   if (!cv::imencode(".jpg", bytes8, jpeg, {cv::IMWRITE_JPEG_QUALITY, quality}))

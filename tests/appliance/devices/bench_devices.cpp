@@ -7,11 +7,14 @@
 //  3. Simulated camera: still render and live-view JPEG frames at 1024x680.
 #include <algorithm>
 #include <chrono>
+#include <ctime>
 #include <cstdio>
 #include <numeric>
 #include <thread>
 #include <cmath>
 #include <vector>
+
+#include <opencv2/imgcodecs.hpp>
 
 #include "veneerd/devices/simulated_rig.hpp"
 
@@ -41,7 +44,9 @@ std::vector<bool> one_hot(int n, int i) {
 
 }  // namespace
 
-int main() {
+int main(int argc, char** argv) {
+  // Optional: a folder to write what the simulated camera saw (PNG shots, JPEG live view).
+  const std::string out_dir = argc > 1 ? argv[1] : "";
   veneerd::SimulatedRigOptions o;
   o.scenes = {"bull", "stone"};
   o.size = {1024, 680};
@@ -130,6 +135,11 @@ int main() {
       auto still = (*camera)->capture();
       double r = ms_since(t1);
       if (!st || !still) std::fprintf(stderr, "shot failed\n");
+      if (still && !out_dir.empty() && (i == -1 || i == 0 || i == 3)) {
+        cv::Mat png;
+        still->linear.convertTo(png, CV_16UC3, 65535.0);
+        cv::imwrite(out_dir + "/shot_" + (*camera)->scene() + "_" + (i < 0 ? std::string("ambient") : "lamp" + std::to_string(i + 1)) + ".png", png);
+      }
       lamp_ms.push_back(l);
       render_ms.push_back(r);
       shot_ms.push_back(l + r);
@@ -155,7 +165,8 @@ int main() {
 
   // --- 3. live view --------------------------------------------------------
   std::printf("\n### Live view (source scene under the moving hand lamp), 1024x680 JPEG\n\n");
-  std::printf("| live view | frames | median ms/frame | max ms | fps | mean KiB/frame |\n|---|---:|---:|---:|---:|---:|\n");
+  std::printf("| live view | frames | median ms/frame | max ms | fps | CPU ms/frame (all threads) | mean KiB/frame |\n"
+              "|---|---:|---:|---:|---:|---:|---:|\n");
   double fast_fps = 0, full_fps = 0;
   for (bool full : {false, true}) {
     auto cfg = (*rig)->camera_config();
@@ -167,17 +178,21 @@ int main() {
     std::size_t bytes = 0;
     int frames = full ? 8 : 60;
     auto lv0 = Clock::now();
+    std::clock_t cpu0 = std::clock();
     for (int f = 0; f < frames; ++f) {
       (*cam)->set_hand_lamp({0.4 * std::cos(f * 0.2), 0.4 * std::sin(f * 0.2), 0.6});
       auto t0 = Clock::now();
       auto jpeg = (*cam)->preview();
       frame_ms.push_back(ms_since(t0));
       if (jpeg) bytes += jpeg->size();
+      if (jpeg && !out_dir.empty() && f == frames / 2)
+        cv::imwrite(out_dir + (full ? "/liveview_full.png" : "/liveview_fast.png"), cv::imdecode(*jpeg, cv::IMREAD_COLOR));
     }
     double fps = 1000.0 * frame_ms.size() / ms_since(lv0);
+    double cpu_ms = 1000.0 * static_cast<double>(std::clock() - cpu0) / CLOCKS_PER_SEC / frames;
     (full ? full_fps : fast_fps) = fps;
-    std::printf("| %s | %zu | %.1f | %.1f | %.1f | %.0f |\n", full ? "full render (peer)" : "fast G-buffer shading",
-                frame_ms.size(), median(frame_ms), maxv(frame_ms), fps, bytes / 1024.0 / frame_ms.size());
+    std::printf("| %s | %zu | %.1f | %.1f | %.1f | %.1f | %.0f |\n", full ? "full render (peer)" : "fast G-buffer shading",
+                frame_ms.size(), median(frame_ms), maxv(frame_ms), fps, cpu_ms, bytes / 1024.0 / frame_ms.size());
   }
   std::printf("\nfast / full live-view frame rate: %.1fx\n", fast_fps / std::max(1e-9, full_fps));
   return 0;

@@ -37,9 +37,9 @@ struct SimulatedCameraOptions {
   cv::Size preview_size{1024, 680};  // live-view size [px]
   double noise_sigma = 0.002;        // sensor noise, fraction of full scale
   int preview_quality = 80;          // JPEG quality 1..100
-  // Live view: "fast" shades the cached G-buffer of the preview scene's object
-  // (diffuse, attached shadows, 1/r^2; no cast shadows, highlights or table:
-  // the background stays black) so 1024x680 frames keep up with 15 fps;
+  // Live view: "fast" shades a cached G-buffer of the preview scene (the
+  // object's truth plus the table as a plane; diffuse, attached shadows, 1/r^2;
+  // no cast shadows or highlights) so 1024x680 frames keep up with 15 fps;
   // "full" runs the simulator's renderer per frame.
   bool preview_full_render = false;
   veneer::Status check() const;
