@@ -1,0 +1,302 @@
+// The real veneerd binary on loopback with the simulated rig (Hue bridge
+// emulator + libcurl lamps + ray-cast camera), driven by the real `veneer`
+// CLI and the rig client library.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <mutex>
+#include <sstream>
+
+#include "rig_test_util.hpp"
+#include "veneer/io/image_io.hpp"
+#include "veneer/io/imageset.hpp"
+#include "veneer/rig/client.hpp"
+#include "veneer/ps/photometric_stereo.hpp"
+#include "veneer/sim/simulator.hpp"
+
+namespace fs = std::filesystem;
+using rigtest::DaemonProcess;
+using rigtest::run;
+namespace pb = veneer::v1;
+
+namespace {
+
+const std::vector<std::string> kSmall = {"--size", "256x170", "--noise", "0"};
+
+std::string rig_args(const DaemonProcess& d, const fs::path& store) {
+  return " rig --rig " + d.address() + " --token-file " + (store / "token").string();
+}
+
+std::unique_ptr<veneer::rig::Client> connect(const DaemonProcess& d, const fs::path& store) {
+  auto token = veneer::rig::read_token_file(store / "token");
+  if (!token) return nullptr;
+  auto c = veneer::rig::Client::connect({"127.0.0.1", d.port()}, *token);
+  return c ? std::move(*c) : nullptr;
+}
+
+// Angle in degrees between two unit normals.
+double angle_deg(const cv::Vec3f& a, const cv::Vec3f& b) {
+  double c = std::clamp(static_cast<double>(a.dot(b)) / (cv::norm(a) * cv::norm(b) + 1e-12), -1.0, 1.0);
+  return std::acos(c) * 180.0 / CV_PI;
+}
+
+}  // namespace
+
+TEST(Daemon, TwoPressesStoreTwoSetsThatPullWithTheRenderedPixelsAndTrueNormals) {
+  fs::path dir = rigtest::temp_dir("flow");
+  fs::path store = dir / "store";
+  auto d = DaemonProcess::start(store, kSmall);
+  ASSERT_TRUE(d && d->port() != 0) << (d ? d->log() : "no process");
+  EXPECT_EQ(fs::status(store / "token").permissions() & (fs::perms::group_all | fs::perms::others_all), fs::perms::none);
+
+  // A watcher records every event.
+  auto watcher = connect(*d, store);
+  ASSERT_TRUE(watcher);
+  std::mutex m;
+  std::vector<veneer::rig::Event> events;
+  watcher->on_event = [&](const veneer::rig::Event& e) {
+    std::lock_guard lock(m);
+    events.push_back(e);
+  };
+
+  std::string rig = rigtest::veneer_cli() + rig_args(*d, store);
+  auto first = run(rig + " press --wait");
+  ASSERT_EQ(first.code, 0) << first.out << d->log();
+  auto second = run(rig + " press --wait");
+  ASSERT_EQ(second.code, 0) << second.out << d->log();
+
+  auto list = run(rig + " list");
+  ASSERT_EQ(list.code, 0) << list.out;
+  std::vector<std::string> ids;
+  std::istringstream lines(list.out);
+  for (std::string line; std::getline(lines, line);) {
+    if (!line.empty()) ids.push_back(line.substr(0, line.find(' ')));
+  }
+  ASSERT_EQ(ids.size(), 2u) << list.out;
+  EXPECT_NE(ids[0].find("destination-bull"), std::string::npos);
+  EXPECT_NE(ids[1].find("source-stone"), std::string::npos);
+
+  // Events, in order, for each set: press, started, 8 shots, stored.
+  {
+    std::lock_guard lock(m);
+    using K = veneer::rig::Event::Kind;
+    std::vector<std::string> seen;
+    for (const auto& e : events) {
+      if (e.kind == K::lamp_state) continue;
+      seen.push_back(std::string(veneer::rig::event_name(e.kind)) + (e.kind == K::shot_taken ? std::to_string(e.k) : ""));
+    }
+    std::vector<std::string> want;
+    for (int set = 0; set < 2; ++set) {
+      want.push_back("button_pressed");
+      want.push_back("capture_started");
+      for (int k = 1; k <= 8; ++k) want.push_back("shot_taken" + std::to_string(k));
+      want.push_back("set_stored");
+    }
+    EXPECT_EQ(seen, want);
+    for (size_t i = 1; i < events.size(); ++i) EXPECT_EQ(events[i].seq, events[i - 1].seq + 1);
+  }
+
+  // Pull both with the CLI and compare with an independent render.
+  const std::vector<std::string> scenes = {"bull", "stone"};
+  for (int s = 0; s < 2; ++s) {
+    fs::path out = dir / ("pulled-" + std::to_string(s));
+    auto pull = run(rig + " pull " + ids[s] + " --out " + out.string());
+    ASSERT_EQ(pull.code, 0) << pull.out;
+    auto set = veneer::read_set(out);
+    ASSERT_TRUE(set) << set.message();
+    EXPECT_EQ(set->role, s == 0 ? veneer::Role::destination : veneer::Role::source);
+    ASSERT_EQ(set->images.size(), 7u);
+    ASSERT_TRUE(set->truth.present());
+    ASSERT_FALSE(set->ambient.empty());
+
+    veneer::sim::RenderOptions o;
+    o.size = {256, 170};
+    o.noise_sigma = 0;
+    auto scene = veneer::sim::make_scene(scenes[s], o);
+    ASSERT_TRUE(scene) << scene.message();
+    auto ring = veneer::sim::thesis_rig();
+    for (int i = 0; i < 7; ++i) {
+      cv::Mat expect = veneer::sim::render(**scene, {ring[i]}, o);
+      // Through the same 16-bit quantisation as the set's PNGs.
+      cv::Mat e16, g16;
+      expect.convertTo(e16, CV_16UC3, 65535.0);
+      set->images[i].convertTo(g16, CV_16UC3, 65535.0);
+      cv::Mat diff;
+      cv::absdiff(e16, g16, diff);
+      double worst = 0;
+      cv::minMaxLoc(diff.reshape(1), nullptr, &worst);
+      EXPECT_LE(worst, 1.0) << scenes[s] << " lamp " << i << ": pixels differ from the render by " << worst << " LSB";
+    }
+  }
+
+  // Photometric stereo (the ps module behind `veneer normals`) on the pulled
+  // destination: within 3 degrees of the truth.
+  auto pulled = veneer::read_set(dir / "pulled-0");
+  ASSERT_TRUE(pulled) << pulled.message();
+  auto ps = veneer::ps::photometric_stereo(*pulled, pulled->truth.mask);
+  ASSERT_TRUE(ps) << ps.message();
+  const cv::Mat* n = &ps->normals;
+  const cv::Mat* t = &pulled->truth.normals;
+  std::vector<double> err;
+  for (int y = 0; y < n->rows; ++y) {
+    for (int x = 0; x < n->cols; ++x) {
+      cv::Vec3f a = n->at<cv::Vec3f>(y, x), b = t->at<cv::Vec3f>(y, x);
+      if (cv::norm(a) > 0.5 && cv::norm(b) > 0.5) err.push_back(angle_deg(a, b));
+    }
+  }
+  ASSERT_GT(err.size(), 500u);
+  std::nth_element(err.begin(), err.begin() + err.size() / 2, err.end());
+  EXPECT_LT(err[err.size() / 2], 3.0) << "median angular error of the recovered normals";
+  fs::remove_all(dir);
+}
+
+TEST(Daemon, BadInputGetsAnErrorOrAClosedConnectionAndTheDaemonServesOthers) {
+  fs::path dir = rigtest::temp_dir("bad");
+  fs::path store = dir / "store";
+  auto d = DaemonProcess::start(store, kSmall);
+  ASSERT_TRUE(d && d->port() != 0) << (d ? d->log() : "");
+  auto token = veneer::rig::read_token_file(store / "token");
+  ASSERT_TRUE(token);
+  // A well-behaved client stays connected through all of it.
+  auto good = connect(*d, store);
+  ASSERT_TRUE(good);
+
+  {  // garbage bytes
+    rigtest::RawConnection c(d->port());
+    ASSERT_TRUE(c.ok());
+    c.send_bytes(std::string("\x05\x00\xff\xff\xff\xffGET / HTTP/1.1\r\n\r\n", 23));
+    EXPECT_TRUE(c.closed_by_peer());
+  }
+  {  // a 4 GiB length prefix: refused without reading (or allocating) it
+    rigtest::RawConnection c(d->port());
+    c.send_bytes(std::string("\x80\x80\x80\x80\x10", 5));
+    auto r = c.next_response(0);
+    ASSERT_TRUE(r);
+    EXPECT_NE(r->error().find("exceeds the limit"), std::string::npos) << r->error();
+    EXPECT_TRUE(c.closed_by_peer());
+  }
+  for (std::string bad_token : {std::string("not-the-token"), std::string()}) {  // wrong or missing token
+    rigtest::RawConnection c(d->port());
+    pb::ClientMessage m;
+    m.set_id(1);
+    m.mutable_hello()->set_protocol_version(veneer::wire::kProtocolVersion);
+    m.mutable_hello()->set_token(bad_token);
+    c.send(m);
+    auto r = c.next_response(1);
+    ASSERT_TRUE(r);
+    EXPECT_FALSE(r->ok());
+    EXPECT_NE(r->error().find(bad_token.empty() ? "no access token" : "wrong access token"), std::string::npos);
+    EXPECT_TRUE(c.closed_by_peer());
+  }
+  {  // a request before hello
+    rigtest::RawConnection c(d->port());
+    pb::ClientMessage m;
+    m.set_id(4);
+    m.mutable_list_sets();
+    c.send(m);
+    auto r = c.next_response(4);
+    ASSERT_TRUE(r);
+    EXPECT_FALSE(r->ok());
+    EXPECT_NE(r->error().find("first request must be a hello"), std::string::npos);
+    EXPECT_TRUE(c.closed_by_peer());
+  }
+  {  // an unknown message after hello: an error, the connection stays usable
+    rigtest::RawConnection c(d->port());
+    ASSERT_TRUE(c.hello(*token));
+    c.send_bytes(std::string("\x07\x08\x09\x9a\x06\x02hi", 8));
+    auto r = c.next_response(9);
+    ASSERT_TRUE(r);
+    EXPECT_FALSE(r->ok());
+    EXPECT_NE(r->error().find("unknown"), std::string::npos);
+    pb::ClientMessage m;
+    m.set_id(10);
+    m.mutable_status();
+    c.send(m);
+    auto s = c.next_response(10);
+    ASSERT_TRUE(s);
+    EXPECT_TRUE(s->ok());
+  }
+  {  // a second controller is refused; when the first leaves, it may control
+    auto first = connect(*d, store);
+    auto second = connect(*d, store);
+    ASSERT_TRUE(first && second);
+    ASSERT_TRUE(first->set_lamps({true, false, true}));
+    auto refused = second->set_lamps({false, true});
+    ASSERT_FALSE(refused);
+    EXPECT_NE(refused.message().find("controls the rig"), std::string::npos) << refused.message();
+    EXPECT_TRUE(second->status());  // watching is fine
+    first->close();
+    veneer::Status later = veneer::make_error("never tried");
+    for (int i = 0; i < 50 && !later; ++i) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      later = second->set_lamps({false, false});
+    }
+    EXPECT_TRUE(later) << later.message();
+  }
+  EXPECT_TRUE(d->alive());
+  auto status = good->status();
+  ASSERT_TRUE(status) << status.message();
+  EXPECT_EQ(status->lamp_count, 7);
+  fs::remove_all(dir);
+}
+
+TEST(Daemon, KillDuringACaptureLeavesNoPartialSetAndEarlierSetsIntact) {
+  fs::path dir = rigtest::temp_dir("kill");
+  fs::path store = dir / "store";
+  std::string first_id;
+  {
+    auto d = DaemonProcess::start(store, kSmall);
+    ASSERT_TRUE(d && d->port() != 0);
+    auto first = run(rigtest::veneer_cli() + rig_args(*d, store) + " press --wait");
+    ASSERT_EQ(first.code, 0) << first.out;
+    first_id = first.out.substr(first.out.rfind('\n', first.out.size() - 2) + 1);
+    first_id.erase(first_id.find_last_not_of("\n") + 1);
+    auto c = connect(*d, store);
+    ASSERT_TRUE(c);
+    ASSERT_TRUE(c->press_button());
+    auto shot = c->wait_event([](const veneer::rig::Event& e) { return e.kind == veneer::rig::Event::Kind::shot_taken && e.k == 4; }, 30);
+    ASSERT_TRUE(shot) << shot.message();
+    d->stop(SIGKILL);
+  }
+  // What a crash while writing leaves: a temporary folder beside the sets.
+  fs::create_directories(store / ".20261122-000000-source-stone.tmp-999999-0" / "truth");
+  auto d = DaemonProcess::start(store, kSmall);
+  ASSERT_TRUE(d && d->port() != 0) << (d ? d->log() : "");
+  auto list = run(rigtest::veneer_cli() + rig_args(*d, store) + " list");
+  ASSERT_EQ(list.code, 0) << list.out;
+  EXPECT_EQ(std::count(list.out.begin(), list.out.end(), '\n'), 1) << list.out;
+  EXPECT_EQ(list.out.substr(0, list.out.find(' ')), first_id);
+  for (const auto& entry : fs::directory_iterator(store)) {
+    std::string name = entry.path().filename().string();
+    EXPECT_TRUE(name == "token" || name == ".lock" || name == first_id) << "left behind: " << name;
+  }
+  auto set = veneer::read_set(store / first_id);
+  EXPECT_TRUE(set) << set.message();
+  fs::remove_all(dir);
+}
+
+TEST(Daemon, DiskFullFailsTheCaptureClearlyAndStoresNothing) {
+  fs::path dir = rigtest::temp_dir("full");
+  fs::path store = dir / "store";
+  fs::create_directories(store);
+  { std::ofstream(store / "token") << "t0ken\n"; }
+  fs::permissions(store / "token", fs::perms::owner_read | fs::perms::owner_write);
+  // Files beyond 64 KiB fail with EFBIG, as on a full disk.
+  auto extra = kSmall;
+  extra.insert(extra.end(), {"--max-file-bytes", "65536"});
+  auto d = DaemonProcess::start(store, extra);
+  ASSERT_TRUE(d && d->port() != 0) << (d ? d->log() : "");
+  auto press = run(rigtest::veneer_cli() + rig_args(*d, store) + " press --wait");
+  EXPECT_EQ(press.code, 1) << press.out;
+  EXPECT_NE(press.out.find("no set stored"), std::string::npos) << press.out;
+  EXPECT_NE(press.out.find("File too large"), std::string::npos) << press.out;
+  auto list = run(rigtest::veneer_cli() + rig_args(*d, store) + " list");
+  EXPECT_EQ(list.code, 0);
+  EXPECT_EQ(list.out, "");
+  for (const auto& entry : fs::directory_iterator(store)) {
+    std::string name = entry.path().filename().string();
+    EXPECT_TRUE(name == "token" || name == ".lock") << "left behind: " << name;
+  }
+  EXPECT_TRUE(d->alive());
+  fs::remove_all(dir);
+}

@@ -1,0 +1,210 @@
+// Device and peer faults, with the whole rig in this process so the test can
+// reach into the simulated devices: the bridge emulator fails or stalls mid-set,
+// the camera fails on shot k, a client vanishes during a download. The lamps
+// still go through libcurl to the emulator and the client through TCP.
+#include <gtest/gtest.h>
+
+#include <thread>
+
+#include "rig_test_util.hpp"
+#include "veneer/io/imageset.hpp"
+#include "veneer/rig/client.hpp"
+#include "veneerd/daemon.hpp"
+#include "veneerd/devices/simulated_camera.hpp"
+#include "veneerd/devices/simulated_rig.hpp"
+
+namespace fs = std::filesystem;
+using Kind = veneer::rig::Event::Kind;
+
+namespace {
+
+struct InProcessRig {
+  fs::path dir;
+  std::unique_ptr<veneerd::Daemon> daemon;
+  std::unique_ptr<veneer::rig::Client> client;
+
+  explicit InProcessRig(const std::string& name) {
+    dir = rigtest::temp_dir(name);
+    veneerd::DaemonOptions o;
+    o.simulate = true;
+    o.size = {128, 85};
+    o.noise_sigma = 0;
+    o.listen = "127.0.0.1:0";
+    o.store = dir / "store";
+    auto d = veneerd::Daemon::create(o);
+    if (!d) {
+      ADD_FAILURE() << d.message();
+      return;
+    }
+    daemon = std::move(*d);
+    if (auto s = daemon->start(); !s) {
+      ADD_FAILURE() << s.message();
+      return;
+    }
+    auto c = veneer::rig::Client::connect({"127.0.0.1", daemon->port()}, daemon->token());
+    if (!c) {
+      ADD_FAILURE() << c.message();
+      return;
+    }
+    client = std::move(*c);
+  }
+  ~InProcessRig() {
+    client.reset();
+    daemon.reset();
+    fs::remove_all(dir);
+  }
+  veneerd::HueBridgeEmulator& bridge() { return daemon->simulated()->bridge(); }
+
+  // Runs a capture, calling `at_shot` when shot k is reported; returns the final event.
+  veneer::Expected<veneer::rig::Event> capture(int k, const std::function<void()>& at_shot) {
+    auto id = client->capture();
+    if (!id) return id.error();
+    return client->wait_event(
+        [&](const veneer::rig::Event& e) {
+          if (e.kind == Kind::shot_taken && e.k == k && at_shot) at_shot();
+          return e.set_id == *id && (e.kind == Kind::set_stored || e.kind == Kind::capture_failed);
+        },
+        60);
+  }
+  bool store_is_clean() {
+    for (const auto& entry : fs::directory_iterator(dir / "store")) {
+      std::string name = entry.path().filename().string();
+      if (name != "token" && name != ".lock" && !daemon->store().find(name)) return false;
+    }
+    return true;
+  }
+  // Waits until the emulated lamps show `want` (the bridge applies changes late).
+  bool lamps_become(const std::vector<bool>& want, double timeout_s = 10) {
+    auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+    while (std::chrono::steady_clock::now() < deadline) {
+      if (bridge().on_pattern() == want) return true;
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    return false;
+  }
+};
+
+}  // namespace
+
+TEST(Faults, BridgeErrorsMidSetFailTheCaptureAndLampsComeBackWhenTheBridgeDoes) {
+  InProcessRig rig("bridge-errors");
+  ASSERT_TRUE(rig.client);
+  // The rig switches every lamp off when it starts; wait for that first.
+  ASSERT_TRUE(rig.lamps_become(std::vector<bool>(7, false)));
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  // The owner had lamp 2 on (another app set it).
+  veneerd::LampState owner;
+  owner.on = true;
+  owner.brightness = 120;
+  rig.bridge().set_lamp("2", owner);
+  std::vector<bool> owners_pattern(7, false);
+  owners_pattern[1] = true;
+  ASSERT_TRUE(rig.lamps_become(owners_pattern));
+
+  auto outcome = rig.capture(3, [&] { rig.bridge().fail_next(1000, 503); });
+  ASSERT_TRUE(outcome) << outcome.message();
+  ASSERT_EQ(outcome->kind, Kind::capture_failed);
+  EXPECT_NE(outcome->reason.find("lamp"), std::string::npos) << outcome->reason;
+  EXPECT_TRUE(rig.daemon->store().list().empty()) << "no partial set";
+  EXPECT_TRUE(rig.store_is_clean());
+  // The bridge comes back: the rig gives the owner's lamps back by itself.
+  rig.bridge().fail_next(0, 503);
+  EXPECT_TRUE(rig.lamps_become(owners_pattern)) << "lamps restored when the bridge is back";
+  // And the rig captures again.
+  auto again = rig.capture(0, nullptr);
+  ASSERT_TRUE(again) << again.message();
+  EXPECT_EQ(again->kind, Kind::set_stored) << again->reason;
+}
+
+TEST(Faults, BridgeTimeoutMidSetFailsTheCaptureCleanly) {
+  InProcessRig rig("bridge-timeout");
+  ASSERT_TRUE(rig.client);
+  auto outcome = rig.capture(2, [&] { rig.bridge().set_latency(std::chrono::milliseconds(3000)); });
+  ASSERT_TRUE(outcome) << outcome.message();
+  ASSERT_EQ(outcome->kind, Kind::capture_failed);
+  EXPECT_TRUE(rig.daemon->store().list().empty());
+  EXPECT_TRUE(rig.store_is_clean());
+  rig.bridge().set_latency(std::chrono::milliseconds(0));
+  EXPECT_TRUE(rig.lamps_become(std::vector<bool>(7, false)));
+}
+
+TEST(Faults, CameraFailingOnShotKFailsTheCaptureAndRestoresTheLamps) {
+  InProcessRig rig("camera");
+  ASSERT_TRUE(rig.client);
+  auto* camera = rig.daemon->simulated_camera();
+  ASSERT_NE(camera, nullptr);
+  camera->fail_on_shot(5);
+  auto outcome = rig.capture(0, nullptr);
+  ASSERT_TRUE(outcome) << outcome.message();
+  ASSERT_EQ(outcome->kind, Kind::capture_failed);
+  EXPECT_NE(outcome->reason.find("shot 5 of 8"), std::string::npos) << outcome->reason;
+  EXPECT_TRUE(rig.daemon->store().list().empty());
+  EXPECT_TRUE(rig.store_is_clean());
+  EXPECT_TRUE(rig.lamps_become(std::vector<bool>(7, false)));
+}
+
+TEST(Faults, CancelByLongPressStoresNothing) {
+  InProcessRig rig("cancel");
+  ASSERT_TRUE(rig.client);
+  auto outcome = rig.capture(2, [&] { rig.daemon->rig().press(veneerd::Press::long_press); });
+  ASSERT_TRUE(outcome) << outcome.message();
+  ASSERT_EQ(outcome->kind, Kind::capture_failed);
+  EXPECT_TRUE(outcome->cancelled);
+  EXPECT_TRUE(rig.daemon->store().list().empty());
+  EXPECT_TRUE(rig.store_is_clean());
+}
+
+TEST(Faults, ClientVanishingDuringADownloadHarmsNobody) {
+  InProcessRig rig("download");
+  ASSERT_TRUE(rig.client);
+  auto stored = rig.capture(0, nullptr);
+  ASSERT_TRUE(stored && stored->kind == Kind::set_stored);
+  const std::string id = stored->set_id;
+
+  {  // raw client: asks for the set in 1 KiB chunks, reads two, hangs up
+    rigtest::RawConnection c(rig.daemon->port());
+    ASSERT_TRUE(c.hello(rig.daemon->token()));
+    veneer::v1::ClientMessage m;
+    m.set_id(2);
+    m.mutable_fetch_images()->set_set_id(id);
+    m.mutable_fetch_images()->set_chunk_size(1024);
+    m.mutable_fetch_images()->set_include_truth(true);
+    c.send(m);
+    int chunks = 0;
+    while (chunks < 2) {
+      auto msg = c.next();
+      ASSERT_TRUE(msg);
+      if (msg->has_chunk()) ++chunks;
+    }
+  }
+  {  // library client: closed from another thread mid-pull
+    auto token = rig.daemon->token();
+    auto c = veneer::rig::Client::connect({"127.0.0.1", rig.daemon->port()}, token);
+    ASSERT_TRUE(c);
+    veneer::rig::Client* raw = c->get();
+    std::atomic<bool> closed{false};
+    std::thread closer;
+    veneer::Progress progress;
+    progress.on_progress = [&](double f, const std::string&) {
+      if (f > 0.1 && !closed.exchange(true)) closer = std::thread([raw] { raw->close(); });
+    };
+    fs::path out = rig.dir / "half";
+    auto s = raw->pull(id, out, true, false, progress);
+    if (closer.joinable()) closer.join();
+    EXPECT_FALSE(s);
+    EXPECT_FALSE(fs::exists(out)) << "no half set at the destination";
+    for (const auto& entry : fs::directory_iterator(rig.dir)) {
+      EXPECT_EQ(entry.path().filename().string().find(".half.pull-"), std::string::npos) << "temporary left";
+    }
+  }
+  // The rig keeps serving: a full download by the first client works.
+  fs::path out = rig.dir / "whole";
+  ASSERT_TRUE(rig.client->pull(id, out));
+  auto set = veneer::read_set(out);
+  ASSERT_TRUE(set) << set.message();
+  EXPECT_EQ(set->images.size(), 7u);
+  EXPECT_TRUE(set->truth.present());
+  auto again = rig.capture(0, nullptr);
+  ASSERT_TRUE(again);
+  EXPECT_EQ(again->kind, Kind::set_stored);
+}
