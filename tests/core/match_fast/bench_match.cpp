@@ -236,6 +236,9 @@ int main(int argc, char** argv) {
   std::string pictures;  // --pictures DIR: also write what the maps look like
   for (int i = 1; i + 1 < argc; ++i)
     if (std::strcmp(argv[i], "--pictures") == 0) pictures = argv[i + 1];
+  std::string only;  // --only STEP: time one row (for profiling), skip the other tables
+  for (int i = 1; i + 1 < argc; ++i)
+    if (std::strcmp(argv[i], "--only") == 0) only = argv[i + 1];
   const int runs = quick ? 1 : 5;
   struct Pair {
     std::string name;
@@ -296,6 +299,7 @@ int main(int argc, char** argv) {
     std::printf("| step | thesis (s) | fast wall (ms) | fast CPU, both cores (ms) | FLANN peer CPU (ms) | FLANN / fast wall | FLANN / fast CPU | target wall (ms) | nearest search |\n");
     std::printf("|---|---|---|---|---|---|---|---|---|\n");
     for (const Row& r : rows) {
+      if (!only.empty() && r.step != only) continue;
       fast::Stats st;
       std::vector<double> t;
       bool ok = true;
@@ -330,6 +334,7 @@ int main(int argc, char** argv) {
       std::fflush(stdout);
     }
     std::printf("\n");
+    if (!only.empty()) continue;
 
     // The nearest-normal index alone: build + all queries (1x1 normals).
     std::vector<float> sp, dp;

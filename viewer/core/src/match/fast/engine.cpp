@@ -35,8 +35,10 @@ Expected<Map> run_direct(const Object& dst, const Object& src, const MatchOption
   NearestLists nn;
   if (auto s = nearest_lists(dst, src, 1, default_index(), o.threads, p, nn, stats); !s) return s.error();
   Map map = new_map(dst.size);
-  for (int d = 0; d < dst.rows(); ++d)
-    if (nn.ids[d] >= 0) put(map, dst, src, d, nn.ids[d], nn.sq[d]);
+  parallel_rows(dst.rows(), o.threads, 4096, [&](int b, int e) {
+    for (int d = b; d < e; ++d)
+      if (nn.ids[d] >= 0) put(map, dst, src, d, nn.ids[d], nn.sq[d]);
+  });
   return map;
 }
 

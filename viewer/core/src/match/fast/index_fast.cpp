@@ -219,8 +219,10 @@ void OctGridIndex::build(const float* points, int n, int dims) {
   // ~2 points per used cell (normals seen by a camera fill half the diamond);
   // 0.7 sqrt(n) measured best by bench_match between 0.35 and 1.4.
   side_ = fixed_side_ > 0 ? fixed_side_ : std::clamp(static_cast<int>(0.7 * std::sqrt(1.0 * n_)), 8, 512);
-  const int layer = side_ * side_;
-  start_.assign(static_cast<size_t>(2 * layer + 1), 0);
+  // CSR over (uv cell, layer) with the two layers of a uv cell adjacent, so
+  // a query reads one contiguous run per uv cell.
+  const int cells = side_ * side_;
+  start_.assign(static_cast<size_t>(2 * cells + 1), 0);
   std::vector<int> cell(static_cast<size_t>(n_));
   const float scale = 0.5f * static_cast<float>(side_);
   for (int i = 0; i < n_; ++i) {
@@ -229,13 +231,11 @@ void OctGridIndex::build(const float* points, int n, int dims) {
     oct_uv(p[0], p[1], p[2], u, v);
     const int cx = std::clamp(static_cast<int>((u + 1.0f) * scale), 0, side_ - 1);
     const int cy = std::clamp(static_cast<int>((v + 1.0f) * scale), 0, side_ - 1);
-    const int c = (p[2] < 0 ? layer : 0) + cy * side_ + cx;
+    const int c = 2 * (cy * side_ + cx) + (p[2] < 0 ? 1 : 0);
     cell[i] = c;
     ++start_[c + 1];
   }
   for (size_t c = 1; c < start_.size(); ++c) start_[c] += start_[c - 1];
-  layer_used_[0] = start_[layer] > 0;
-  layer_used_[1] = start_[2 * layer] > start_[layer];
   xs_.resize(n_);
   ys_.resize(n_);
   zs_.resize(n_);
@@ -279,13 +279,16 @@ void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_d
   const float h = 1.0f / scale;  // cell size in uv
   const int ci = std::clamp(static_cast<int>((u + 1.0f) * scale), 0, side_ - 1);
   const int cj = std::clamp(static_cast<int>((v + 1.0f) * scale), 0, side_ - 1);
-  const int layer = side_ * side_;
   constexpr float kL = 1.7f;  // > the map's peak stretch, (1 + sqrt(5)) / 2
 
+  // k = 1: the best pair in two scalars (the common case); else Best.
+  const bool one = k == 1;
+  float best_d = kInf;
+  int best_id = std::numeric_limits<int>::max();
   // Largest uv distance at which a point could still beat the k-th best.
   float uv_reach = kInf;
   auto update_reach = [&] {
-    const float w = best.worst();
+    const float w = one ? best_d : best.worst();
     if (!(w < kInf)) {
       uv_reach = kInf;
       return;
@@ -311,27 +314,34 @@ void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_d
     const float dx = std::max({0.0f, x0 - u, u - (x0 + h)});
     const float dy = std::max({0.0f, y0 - v, v - (y0 + h)});
     if (dx * dx + dy * dy > uv_reach * uv_reach) return;
-    for (int l = 0; l < 2; ++l) {
-      if (!layer_used_[l]) continue;
-      const int c = l * layer + cy * side_ + cx;
-      const int b = start_[c], e = start_[c + 1];
-      if (b == e) continue;
-      bool improved = false;
+    const int c = 2 * (cy * side_ + cx);
+    const int b = start_[c], e = start_[c + 2];
+    if (b == e) return;
+    if (one) {
+      const float before = best_d;
       for (int i = b; i < e; ++i) {
         const float d = sq3(xs_[i], ys_[i], zs_[i], qx, qy, qz);
-        if (d < best.worst() || (d == best.worst() && ids_[i] < best.worst_id())) {
-          best.add(d, ids_[i]);
-          improved = true;
-        }
+        if (d < best_d || (d == best_d && ids_[i] < best_id)) best_d = d, best_id = ids_[i];
       }
-      if (improved) update_reach();
+      if (best_d < before) update_reach();
+      return;
     }
+    bool improved = false;
+    for (int i = b; i < e; ++i) {
+      const float d = sq3(xs_[i], ys_[i], zs_[i], qx, qy, qz);
+      if (d < best.worst() || (d == best.worst() && ids_[i] < best.worst_id())) {
+        best.add(d, ids_[i]);
+        improved = true;
+      }
+    }
+    if (improved) update_reach();
   };
   if (hint >= 0 && hint < n_ && k == 1) {
     // A point known to be near (the previous pixel's match) bounds the search
     // from the start; meeting it again in its cell changes nothing.
     const float* p = points_ + static_cast<size_t>(hint) * 3;
-    best.add(sq3(p[0], p[1], p[2], qx, qy, qz), hint);
+    best_d = sq3(p[0], p[1], p[2], qx, qy, qz);
+    best_id = hint;
     update_reach();
   }
   for (int r = 0;; ++r) {
@@ -356,6 +366,7 @@ void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_d
       }
     }
   }
+  if (one && best_d < kInf) ids[0] = best_id, sq_dists[0] = best_d;
   best.finish();
 }
 

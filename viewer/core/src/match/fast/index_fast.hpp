@@ -25,11 +25,10 @@ class OctGridIndex final : public NearestIndex {
  private:
   int fixed_side_ = 0, side_ = 0, n_ = 0, dims_ = 0;
   float eps_ = 0;
-  bool layer_used_[2] = {false, false};
   const float* points_ = nullptr;
   std::vector<float> xs_, ys_, zs_;  // points sorted by cell (SoA)
   std::vector<int> ids_;
-  std::vector<int> start_;  // 2 layers x side^2 cells, CSR offsets
+  std::vector<int> start_;  // side^2 uv cells x 2 layers (adjacent), CSR offsets
   std::unique_ptr<NearestIndex> fallback_;
 };
 
