@@ -26,7 +26,7 @@ struct NormalsArgs {
   bool robust = false, plain = false, near_light = false, distant = false, otsu = false;
   double threshold = -1;
   bool supplied_mask = false, no_clean = false;
-  float shadow = 0.10f, saturation = 0.98f;
+  float shadow = 0.10f, saturation = 0.98f, outliers = 0.10f;
   int iterations = 2, threads = 0;
 };
 
@@ -74,6 +74,7 @@ int run_normals(const NormalsArgs& a) {
                                 : veneer::ps::LightModel::automatic;
   po.shadow_fraction = a.shadow;
   po.saturation = a.saturation;
+  po.outlier_fraction = a.outliers;
   po.near_iterations = a.iterations;
   po.threads = a.threads;
   if (auto st = po.check(); !st) return fail(2, st.message());
@@ -180,6 +181,10 @@ VENEER_COMMAND(normals) {
   cmd->add_option("--shadow", args->shadow, "robust: shadow threshold as a fraction of the pixel's brightest sample")
       ->capture_default_str();
   cmd->add_option("--saturation", args->saturation, "robust: a sample at or above this level is saturated")
+      ->capture_default_str();
+  cmd->add_option("--outliers", args->outliers,
+                  "robust: drop the sample farthest from a first fit when off by more than this fraction of the "
+                  "pixel's brightest sample (highlights, cast shadows); 0 = off")
       ->capture_default_str();
   cmd->add_option("--iterations", args->iterations, "near-light depth refinements (0..5)")->capture_default_str();
   cmd->add_option("--threads", args->threads, "worker threads (0 = all cores)")->capture_default_str();

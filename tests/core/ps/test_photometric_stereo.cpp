@@ -142,6 +142,7 @@ TEST(PhotometricStereo, OutlierSampleIsDropped) {
       if (patch.at<uint8_t>(y, x)) set.images[2].at<cv::Vec3f>(y, x) += cv::Vec3f(0.3f, 0.3f, 0.3f);
   PsOptions with, without;
   with.light_model = without.light_model = LightModel::distant;
+  with.outlier_fraction = 0.1f;
   without.outlier_fraction = 0.f;
   cv::Mat m;
   cv::bitwise_and(patch, set.truth.mask, m);

@@ -68,7 +68,7 @@ struct Setup {
   int width = 0, height = 0;
   bool near = false;
   bool robust = true;
-  float shadow_fraction = 0.1f, saturation = 0.98f, min_signal = 1e-3f, outlier_fraction = 0.1f;
+  float shadow_fraction = 0.1f, saturation = 0.98f, min_signal = 1e-3f, outlier_fraction = 0.0f;
   std::vector<float> dir;        // n*3 distant directions
   std::vector<float> pos;        // n*3 lamp positions (near)
   std::vector<float> pos_norm2;  // n: |position|^2 (intensity reference distance)
@@ -268,25 +268,30 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
     if (!s.near) {
       if (s.use_cache || !s.robust) {
         // Full pattern for everybody (vectorised), then the other patterns pixel by pixel.
+        // The second pass only re-solves the pixels that dropped an outlier.
         const float* P = s.pinv.data() + size_t(s.use_cache ? s.full : 0) * 3 * n;
-        std::fill(gx, gx + count, 0.f);
-        std::fill(gy, gy + count, 0.f);
-        std::fill(gz, gz + count, 0.f);
-        for (int i = 0; i < n; ++i) {
-          const float* __restrict yy = b.Y.data() + size_t(i) * cap;
-          const float p0 = P[i], p1 = P[n + i], p2 = P[2 * n + i];
+        if (pass == 0) {
+          std::fill(gx, gx + count, 0.f);
+          std::fill(gy, gy + count, 0.f);
+          std::fill(gz, gz + count, 0.f);
+          for (int i = 0; i < n; ++i) {
+            const float* __restrict yy = b.Y.data() + size_t(i) * cap;
+            const float p0 = P[i], p1 = P[n + i], p2 = P[2 * n + i];
 #pragma GCC ivdep
-          for (int k = 0; k < count; ++k) {
-            gx[k] += p0 * yy[k];
-            gy[k] += p1 * yy[k];
-            gz[k] += p2 * yy[k];
+            for (int k = 0; k < count; ++k) {
+              gx[k] += p0 * yy[k];
+              gy[k] += p1 * yy[k];
+              gz[k] += p2 * yy[k];
+            }
           }
         }
         if (s.robust) {
+          const float* dropped = b.acc.data();  // best_i of the outlier step: -1 = kept all
 #pragma GCC ivdep
           for (int k = 0; k < count; ++k) {
             const uint32_t p = pat[k];
             if (p == s.full) continue;
+            if (pass == 1 && dropped[k] < 0.f) continue;
             if (!s.pinv_ok[p]) {
               okv[k] = 0.f;
               continue;
@@ -459,7 +464,8 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
     int drops = 0;
     const float of = s.outlier_fraction;
     for (int k = 0; k < count; ++k) {
-      const bool drop = (best[k] > of * M[k]) & (K[k] >= 4.f) & (ga[k] > 0.f);
+      // Dark pixels (brightest sample < 0.2) need an absolute 0.02 of full scale: sensor noise.
+      const bool drop = (best[k] > of * std::max(M[k], 0.2f)) & (K[k] >= 4.f) & (ga[k] > 0.f);
       best_i[k] = drop ? best_i[k] : -1.f;
       K[k] -= drop ? 1.f : 0.f;
       drops += drop;
