@@ -301,9 +301,11 @@ Expected<Map> compute_map(const ObjectView& destination, const ObjectView& sourc
   const bool grid_needed = options.method == Method::patchmatch || options.method == Method::regiongrow ||
                            options.method == Method::coherent ||
                            (options.patch > 1 && options.feature == Feature::normals);
-  auto dst = make_object(destination, options.feature, options.patch, grid_needed, options.threads);
+  // `coherent` on normals judges single pixels: patches are not built
+  const int patch = options.method == Method::coherent && options.feature == Feature::normals ? 1 : options.patch;
+  auto dst = make_object(destination, options.feature, patch, grid_needed, options.threads);
   if (!dst) return make_error("destination: " + dst.message());
-  auto src = make_object(source, options.feature, options.patch, grid_needed, options.threads);
+  auto src = make_object(source, options.feature, patch, grid_needed, options.threads);
   if (!src) return make_error("source: " + src.message());
   Stats local;
   Stats* st = stats ? stats : &local;
