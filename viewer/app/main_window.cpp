@@ -634,10 +634,14 @@ void MainWindow::pullSelected() {
 }
 
 void MainWindow::addLocalItem(const QString& folder, const veneer::ImageSet& set) {
-  for (int i = 0; i < local_root_->childCount(); ++i)
-    if (local_root_->child(i)->data(0, Qt::UserRole).toString() == folder) delete local_root_->child(i);
-  auto* item = new QTreeWidgetItem(local_root_, {QFileInfo(folder).fileName(), qs(veneer::role_name(set.role)),
-                                                 qs(set.object)});
+  // A folder already listed is updated in place (its row keeps its position).
+  QTreeWidgetItem* item = nullptr;
+  for (int i = 0; i < local_root_->childCount() && !item; ++i)
+    if (local_root_->child(i)->data(0, Qt::UserRole).toString() == folder) item = local_root_->child(i);
+  if (!item) item = new QTreeWidgetItem(local_root_);
+  item->setText(0, QFileInfo(folder).fileName());
+  item->setText(1, qs(veneer::role_name(set.role)));
+  item->setText(2, qs(set.object));
   item->setData(0, Qt::UserRole, folder);
   item->setToolTip(0, folder);
   if (!set.images.empty()) {

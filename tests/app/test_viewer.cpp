@@ -1,0 +1,266 @@
+// app/viewer: the window against a real simulated rig (veneerd --simulate),
+// driven through its buttons under Qt's offscreen platform.
+#include <filesystem>
+#include <random>
+
+#include <QApplication>
+#include <QCheckBox>
+#include <QComboBox>
+#include <QLabel>
+#include <QProcess>
+#include <QProgressBar>
+#include <QPushButton>
+#include <QSignalSpy>
+#include <QTcpServer>
+#include <QTemporaryDir>
+#include <QTest>
+#include <QTreeWidget>
+
+#include <gtest/gtest.h>
+
+#include "main_window.hpp"
+#include "veneer/sim/simulator.hpp"
+
+namespace fs = std::filesystem;
+using veneer::app::MainWindow;
+
+namespace {
+
+// Waits (processing events) until `cond` holds or `ms` pass.
+template <class F>
+bool wait_for(F cond, int ms) {
+  QElapsedTimer t;
+  t.start();
+  while (!cond()) {
+    if (t.elapsed() > ms) return false;
+    QTest::qWait(20);
+  }
+  return true;
+}
+
+int free_port() {
+  QTcpServer s;
+  s.listen(QHostAddress::LocalHost, 0);
+  return s.serverPort();
+}
+
+class SimulatedRig {
+ public:
+  SimulatedRig() {
+    store_ = dir_.path() + "/store";
+    process_.setProcessChannelMode(QProcess::MergedChannels);
+    // Port 0: the daemon picks a free port and says which on its first line.
+    process_.start(VENEER_BIN_DIR "/veneerd", {"--simulate", "--scenes", "bull,orange", "--size", "256x170",
+                                               "--listen", "127.0.0.1:0", "--store", store_});
+    started_ = process_.waitForStarted(5000) && wait_for(
+                                                    [&] {
+                                                      output_ += QString::fromUtf8(process_.readAll());
+                                                      const int at = output_.indexOf("veneerd: listening on 127.0.0.1:");
+                                                      if (at < 0) return false;
+                                                      port_ = output_.mid(at + 32).section(',', 0, 0).toInt();
+                                                      return port_ > 0;
+                                                    },
+                                                    20000);
+  }
+  ~SimulatedRig() {
+    process_.kill();
+    process_.waitForFinished(5000);
+  }
+  bool started() const { return started_; }
+  QString endpoint() const { return QString("127.0.0.1:%1").arg(port_); }
+  QString token_file() const { return store_ + "/token"; }
+  QString log() { return output_ + QString::fromUtf8(process_.readAll()); }
+
+ private:
+  QTemporaryDir dir_;
+  QString store_, output_;
+  QProcess process_;
+  int port_ = 0;
+  bool started_ = false;
+};
+
+template <class T>
+T* child(MainWindow& w, const char* name) {
+  T* c = w.findChild<T*>(name);
+  EXPECT_NE(c, nullptr) << "no widget named " << name;
+  return c;
+}
+
+void select_item(QTreeWidget* tree, QTreeWidgetItem* item) {
+  tree->clearSelection();
+  item->setSelected(true);
+}
+
+// A small simulated pair written as local sets.
+void write_pair(const QString& dir, QString& dst, QString& src) {
+  veneer::sim::RenderOptions o;
+  o.size = cv::Size(256, 170);
+  o.noise_sigma = 0.002;
+  auto d = veneer::sim::simulate_set("bull", o, veneer::Role::destination);
+  auto s = veneer::sim::simulate_set("orange", o, veneer::Role::source);
+  ASSERT_TRUE(d.ok() && s.ok());
+  dst = dir + "/bull";
+  src = dir + "/orange";
+  ASSERT_TRUE(veneer::write_set(*d, dst.toStdString()).ok());
+  ASSERT_TRUE(veneer::write_set(*s, src.toStdString()).ok());
+}
+
+}  // namespace
+
+TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
+  SimulatedRig rig;
+  ASSERT_TRUE(rig.started()) << rig.log().toStdString();
+  QTemporaryDir work;
+  MainWindow w({QString(), QString(), QString(), QString(), work.path()});
+  w.show();
+  w.connectToRig(rig.endpoint(), rig.token_file());
+  ASSERT_TRUE(wait_for([&] { return w.rig().isConnected(); }, 10000)) << w.lastMessage().toStdString();
+  EXPECT_TRUE(w.lastMessage().contains("connected"));
+  EXPECT_TRUE(child<QLabel>(w, "rigStatus")->text().contains("simulated"));
+
+  // The rig's button captures the destination, the UI's button the source.
+  QTest::mouseClick(child<QPushButton>(w, "pressButton"), Qt::LeftButton);
+  auto* tree = child<QTreeWidget>(w, "sets");
+  QTreeWidgetItem* on_rig = tree->topLevelItem(0);
+  ASSERT_TRUE(wait_for([&] { return on_rig->childCount() >= 1; }, 60000)) << w.lastMessage().toStdString();
+  EXPECT_TRUE(child<QLabel>(w, "captureStatus")->text().contains("stored"));
+  QTest::mouseClick(child<QPushButton>(w, "captureSource"), Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { return on_rig->childCount() >= 2; }, 60000)) << w.lastMessage().toStdString();
+  auto* shots = child<QProgressBar>(w, "shotProgress");
+  EXPECT_EQ(shots->value(), shots->maximum());
+
+  // Pull both into the work folder.
+  QTreeWidgetItem* local = tree->topLevelItem(1);
+  QString roles[2];
+  for (int i = 0; i < 2; ++i) {
+    select_item(tree, on_rig->child(i));
+    roles[i] = on_rig->child(i)->text(1);
+    QTest::mouseClick(child<QPushButton>(w, "pullSet"), Qt::LeftButton);
+    ASSERT_TRUE(wait_for([&] { return local->childCount() >= i + 1; }, 30000)) << w.lastMessage().toStdString();
+  }
+  EXPECT_TRUE(roles[0] != roles[1]) << "one destination and one source";
+  for (int i = 0; i < 2; ++i) {
+    select_item(tree, local->child(i));
+    const bool is_source = local->child(i)->text(1) == "source";
+    QTest::mouseClick(child<QPushButton>(w, is_source ? "useSource" : "useDestination"), Qt::LeftButton);
+  }
+  ASSERT_NE(w.destination(), nullptr) << local->child(0)->text(1).toStdString() << " " << local->child(1)->text(1).toStdString();
+  ASSERT_NE(w.source(), nullptr) << local->child(0)->text(1).toStdString() << " " << local->child(1)->text(1).toStdString();
+  EXPECT_EQ(w.destination()->set.role, veneer::Role::destination);
+  EXPECT_EQ(w.source()->set.role, veneer::Role::source);
+
+  // Transfer in the background.
+  QTest::mouseClick(child<QPushButton>(w, "compute"), Qt::LeftButton);
+  EXPECT_TRUE(w.computing());
+  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 120000));
+  ASSERT_NE(w.result(), nullptr) << w.lastMessage().toStdString();
+  const auto& map = w.result()->map;
+  cv::Mat xy[2];
+  cv::split(map.xy, xy);
+  const int mapped = cv::countNonZero(xy[0] >= 0);
+  EXPECT_GT(mapped, 200);
+
+  // Live frames repainted through the map, checked against the map applied by hand.
+  w.showTab("Live");
+  child<QPushButton>(w, "liveToggle")->setChecked(true);
+  ASSERT_TRUE(wait_for([&] { return w.liveFramesShown() >= 3 && !w.lastRepaintedFrame().empty(); }, 20000))
+      << w.lastMessage().toStdString();
+  const cv::Mat frame = w.lastLiveFrame().clone(), shown = w.lastRepaintedFrame().clone();
+  ASSERT_EQ(shown.size(), map.xy.size());
+  const double fx = double(frame.cols) / w.result()->source_size.width;
+  const double fy = double(frame.rows) / w.result()->source_size.height;
+  int checked = 0, wrong = 0;
+  for (int y = 0; y < map.xy.rows; ++y)
+    for (int x = 0; x < map.xy.cols; ++x) {
+      const cv::Vec2f m = map.xy.at<cv::Vec2f>(y, x);
+      if (m[0] < 0) continue;
+      const int sx = std::clamp(int(std::lround((m[0] + 0.5) * fx - 0.5)), 0, frame.cols - 1);
+      const int sy = std::clamp(int(std::lround((m[1] + 0.5) * fy - 0.5)), 0, frame.rows - 1);
+      ++checked;
+      if (shown.at<cv::Vec3b>(y, x) != frame.at<cv::Vec3b>(sy, sx)) ++wrong;
+    }
+  EXPECT_GT(checked, 200);
+  EXPECT_EQ(wrong, 0) << "of " << checked;
+  child<QPushButton>(w, "liveToggle")->setChecked(false);
+
+  // Screenshots of every view, for people to look at.
+  w.showTab("Look");
+  const QStringList shots_written = w.saveScreenshots(VENEER_SCREENSHOT_DIR);
+  EXPECT_EQ(shots_written.size(), 3);
+}
+
+TEST(Viewer, CancelledComputationLeavesUiUsable) {
+  QTemporaryDir dir;
+  QString dst, src;
+  write_pair(dir.path(), dst, src);
+  MainWindow w({QString(), QString(), dst, src, dir.path()});
+  ASSERT_NE(w.destination(), nullptr);
+  ASSERT_NE(w.source(), nullptr);
+  // The faithful exhaustive search with 7x7 patches is slow enough to cancel.
+  child<QComboBox>(w, "method")->setCurrentText("linear");
+  child<QComboBox>(w, "patch")->setCurrentText("7");
+  child<QCheckBox>(w, "fast")->setChecked(false);
+  QTest::mouseClick(child<QPushButton>(w, "compute"), Qt::LeftButton);
+  ASSERT_TRUE(w.computing());
+  QTest::mouseClick(child<QPushButton>(w, "cancelTransfer"), Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
+  EXPECT_EQ(w.result(), nullptr);
+  EXPECT_TRUE(child<QLabel>(w, "transferStatus")->text().contains("cancel"));
+  EXPECT_TRUE(child<QPushButton>(w, "compute")->isEnabled());
+  // Still usable: a fast transfer now completes.
+  child<QComboBox>(w, "method")->setCurrentText("coherent");
+  child<QComboBox>(w, "patch")->setCurrentText("1");
+  child<QCheckBox>(w, "fast")->setChecked(true);
+  QTest::mouseClick(child<QPushButton>(w, "compute"), Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
+  ASSERT_NE(w.result(), nullptr) << w.lastMessage().toStdString();
+  ASSERT_TRUE(w.result()->quality.has_value());
+  EXPECT_GT(w.result()->quality->coverage, 0.9);
+}
+
+TEST(Viewer, BadInputGivesClearMessages) {
+  QTemporaryDir dir;
+  MainWindow w({QString(), QString(), QString(), QString(), dir.path()});
+  // A rig that is not there.
+  QFile token(dir.path() + "/token");
+  ASSERT_TRUE(token.open(QIODevice::WriteOnly));
+  token.write("0123456789abcdef0123456789abcdef\n");
+  token.close();
+  w.rig().setAutoReconnect(false);
+  w.connectToRig(QString("127.0.0.1:%1").arg(free_port()), token.fileName());
+  ASSERT_TRUE(wait_for([&] { return w.lastMessage().contains("cannot connect"); }, 10000))
+      << w.lastMessage().toStdString();
+  EXPECT_FALSE(w.rig().isConnected());
+
+  // A wrong token.
+  SimulatedRig rig;
+  ASSERT_TRUE(rig.started());
+  w.connectToRig(rig.endpoint(), token.fileName());
+  ASSERT_TRUE(wait_for([&] { return w.lastMessage().contains("cannot connect"); }, 10000))
+      << w.lastMessage().toStdString();
+  EXPECT_TRUE(w.lastMessage().contains("token", Qt::CaseInsensitive)) << w.lastMessage().toStdString();
+  EXPECT_FALSE(w.rig().isConnected());
+
+  // A missing token file.
+  w.connectToRig(rig.endpoint(), dir.path() + "/no-such-token");
+  EXPECT_TRUE(w.lastMessage().contains("no-such-token")) << w.lastMessage().toStdString();
+
+  // A folder that is not a set.
+  QDir(dir.path()).mkpath("not-a-set");
+  EXPECT_FALSE(w.loadLocalSet(dir.path() + "/not-a-set", veneer::Role::destination));
+  EXPECT_TRUE(w.lastMessage().contains("not-a-set")) << w.lastMessage().toStdString();
+  EXPECT_EQ(w.destination(), nullptr);
+
+  // Transfer without sets.
+  w.startTransfer();
+  EXPECT_FALSE(w.computing());
+  EXPECT_TRUE(w.lastMessage().contains("load a destination"));
+}
+
+int main(int argc, char** argv) {
+  if (qEnvironmentVariableIsEmpty("QT_QPA_PLATFORM")) qputenv("QT_QPA_PLATFORM", "offscreen");
+  QApplication app(argc, argv);
+  QApplication::setOrganizationName("veneer-tests");
+  ::testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();
+}
