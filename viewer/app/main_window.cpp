@@ -752,6 +752,7 @@ void MainWindow::startTransfer() {
   transfer_bar_->setValue(0);
   transfer_label_->setText(tr("computing…"));
   transfer_error_.clear();
+  relight_error_.clear();
   pending_result_.reset();
   pending_relighter_.reset();
   auto dst = dst_, src = src_;
@@ -785,7 +786,11 @@ void MainWindow::startTransfer() {
     }
     pending_result_ = std::make_shared<veneer::match::TransferResult>(std::move(*result));
     auto relighter = veneer::match::Relighter::fit(src->set);
-    if (relighter) pending_relighter_ = std::make_shared<veneer::match::Relighter>(std::move(*relighter));
+    if (relighter) {
+      pending_relighter_ = std::make_shared<veneer::match::Relighter>(std::move(*relighter));
+    } else {
+      relight_error_ = qs(relighter.message());
+    }
   }));
 }
 
@@ -881,6 +886,10 @@ void MainWindow::showOrigin(QPoint p) {
 }
 
 void MainWindow::refreshRelight() {
+  if (result_ && !relight_error_.isEmpty()) {
+    relight_label_->setText(relight_error_);
+    return;
+  }
   if (!result_ || !relighter_ || !dst_) {
     relight_label_->setText(tr("compute a transfer first"));
     return;
@@ -889,8 +898,9 @@ void MainWindow::refreshRelight() {
   cv::Mat backdrop = dst_->median * 0.25;  // the destination dimmed where nothing is mapped
   relight_view_->setImage(to_qimage(relighter_->render(result_->map, d, backdrop)));
   relight_src_view_->setImage(to_qimage(relighter_->render_source(d)));
-  relight_label_->setText(tr("light (%1, %2, %3)\nper-pixel fit RMS %4")
+  relight_label_->setText(tr("light (%1, %2, %3)\n%4 fit, RMS %5")
                               .arg(d[0], 0, 'f', 2).arg(d[1], 0, 'f', 2).arg(d[2], 0, 'f', 2)
+                              .arg(relighter_->basis_name())
                               .arg(relighter_->fit_rms(), 0, 'f', 4));
 }
 

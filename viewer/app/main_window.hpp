@@ -117,7 +117,7 @@ class MainWindow : public QMainWindow {
   std::atomic<bool> cancel_{false};
   bool computing_ = false;
   QFutureWatcher<void> transfer_watch_;
-  QString transfer_error_;
+  QString transfer_error_, relight_error_;
   std::shared_ptr<veneer::match::TransferResult> pending_result_;
   std::shared_ptr<veneer::match::Relighter> pending_relighter_;
   cv::Mat live_frame_, live_repainted_;

@@ -7,17 +7,32 @@
 namespace veneer::match {
 namespace {
 
-void basis(const cv::Vec3d& d, double out[6]) {
-  const double lu = d[0], lv = d[1];
-  out[0] = lu * lu;
-  out[1] = lv * lv;
-  out[2] = lu * lv;
-  out[3] = lu;
-  out[4] = lv;
-  out[5] = 1.0;
+// Smallest over largest singular value of the lamps' basis matrix.
+double conditioning(const cv::Mat& A) {
+  cv::Mat w;
+  cv::SVD::compute(A, w);
+  return w.at<double>(w.rows - 1) / std::max(1e-300, w.at<double>(0));
 }
 
 }  // namespace
+
+void Relighter::basis(Basis b, const cv::Vec3d& d, double* out) {
+  const double lu = d[0], lv = d[1];
+  if (b == Basis::ptm6) {
+    out[0] = lu * lu;
+    out[1] = lv * lv;
+    out[2] = lu * lv;
+    out[3] = lu;
+    out[4] = lv;
+    out[5] = 1.0;
+  } else {
+    out[0] = lu;
+    out[1] = lv;
+    out[2] = d[2];
+    out[3] = lu * lv;
+    out[4] = lu * lu - lv * lv;
+  }
+}
 
 cv::Vec3d direction_on_sphere(double u, double v) {
   double r2 = u * u + v * v;
@@ -32,25 +47,28 @@ cv::Vec3d direction_on_sphere(double u, double v) {
 
 Expected<Relighter> Relighter::fit(const ImageSet& source) {
   const int n = static_cast<int>(source.images.size());
-  if (n < 6) {
+  if (n < 5) {
     return make_error("relight: the source set '" + source.id + "' has " + std::to_string(n) +
-                      " lamps; the per-pixel fit needs at least 6");
+                      " lamps; the per-pixel fit needs at least 5");
   }
-  cv::Mat A(n, 6, CV_64F);
-  for (int i = 0; i < n; ++i) basis(source.lights[i].direction, A.ptr<double>(i));
+  auto matrix = [&](Basis b) {
+    cv::Mat A(n, terms(b), CV_64F);
+    for (int i = 0; i < n; ++i) basis(b, source.lights[i].direction, A.ptr<double>(i));
+    return A;
+  };
+  Basis chosen = Basis::ptm6;
+  cv::Mat A;
+  if (n >= 6 && conditioning(A = matrix(Basis::ptm6)) > 1e-4) {
+    chosen = Basis::ptm6;
+  } else if (conditioning(A = matrix(Basis::ring5)) > 1e-4) {
+    chosen = Basis::ring5;
+  } else {
+    return make_error("relight: the lamp directions of '" + source.id + "' are too alike for a per-pixel fit");
+  }
   cv::Mat pinv;
-  if (cv::invert(A, pinv, cv::DECOMP_SVD) == 0.0) {
-    return make_error("relight: the lamp directions of '" + source.id + "' do not support a per-pixel fit");
-  }
-  {
-    // Degenerate directions show up as a rank-deficient basis.
-    cv::Mat w;
-    cv::SVD::compute(A, w);
-    if (w.at<double>(5) < 1e-6 * w.at<double>(0)) {
-      return make_error("relight: the lamp directions of '" + source.id + "' are too alike for a per-pixel fit");
-    }
-  }
+  cv::invert(A, pinv, cv::DECOMP_SVD);
   Relighter r;
+  r.basis_ = chosen;
   r.size_ = source.size;
   std::vector<cv::Mat> photos(n);
   for (int i = 0; i < n; ++i) {
@@ -61,7 +79,7 @@ Expected<Relighter> Relighter::fit(const ImageSet& source) {
                                        1.0 / std::max(1e-6f, in[0])),
                  photos[i]);
   }
-  for (int k = 0; k < 6; ++k) {
+  for (int k = 0; k < terms(chosen); ++k) {
     cv::Mat c(source.size, CV_32FC3, cv::Scalar::all(0));
     for (int i = 0; i < n; ++i) cv::scaleAdd(photos[i], pinv.at<double>(k, i), c, c);
     r.coeffs_.push_back(c);
@@ -78,9 +96,9 @@ Expected<Relighter> Relighter::fit(const ImageSet& source) {
 
 cv::Mat Relighter::render_source(const cv::Vec3d& direction) const {
   double b[6];
-  basis(direction, b);
+  basis(basis_, direction, b);
   cv::Mat out(size_, CV_32FC3, cv::Scalar::all(0));
-  for (int k = 0; k < 6; ++k) cv::scaleAdd(coeffs_[k], b[k], out, out);
+  for (int k = 0; k < terms(basis_); ++k) cv::scaleAdd(coeffs_[k], b[k], out, out);
   cv::max(out, cv::Scalar::all(0), out);
   return out;
 }

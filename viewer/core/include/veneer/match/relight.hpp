@@ -6,7 +6,13 @@
 //   I(l) = a0 lu^2 + a1 lv^2 + a2 lu lv + a3 lu + a4 lv + a5,
 // with one pseudo-inverse for the whole image. Carried through the map, it
 // shows the destination under any virtual light direction in the source's
-// material. Needs at least 6 lamps (the thesis rig has 7).
+// material.
+//
+// The biquadratic basis needs lamps at several elevations: on a rig whose
+// lamps sit on one ring (the thesis rig), lu^2 + lv^2 is the same for every
+// lamp and the fit is degenerate. Then the basis falls back to the five terms
+// such a ring does determine, (lx, ly, lz, lx ly, lx^2 - ly^2) — a Lambertian
+// pseudo-normal plus the second-order terms that carry highlights' shape.
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -33,10 +39,15 @@ class Relighter {
   // RMS of the fit over the lamps (linear units), a measure of how well the
   // model explains the source (specular highlights fit worst).
   double fit_rms() const { return fit_rms_; }
+  const char* basis_name() const { return basis_ == Basis::ptm6 ? "biquadratic PTM" : "ring (lx, ly, lz, lx ly, lx^2-ly^2)"; }
 
  private:
   cv::Size size_;
-  std::vector<cv::Mat> coeffs_;  // 6 planes, each CV_32FC3
+  enum class Basis { ptm6, ring5 };
+  static int terms(Basis b) { return b == Basis::ptm6 ? 6 : 5; }
+  static void basis(Basis b, const cv::Vec3d& d, double* out);
+  Basis basis_ = Basis::ptm6;
+  std::vector<cv::Mat> coeffs_;  // one plane per basis term, each CV_32FC3
   double fit_rms_ = 0;
 };
 

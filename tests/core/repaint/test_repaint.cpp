@@ -1,0 +1,109 @@
+// core/repaint: the live repaint's gather tables and the per-pixel relighting fit.
+#include <random>
+
+#include <gtest/gtest.h>
+#include <opencv2/imgproc.hpp>
+
+#include "veneer/match/live.hpp"
+#include "veneer/match/metrics.hpp"
+#include "veneer/match/relight.hpp"
+#include "veneer/sim/simulator.hpp"
+
+using namespace veneer;
+
+namespace {
+
+match::Map random_map(cv::Size dst, cv::Size src, unsigned seed) {
+  std::mt19937 rng(seed);
+  match::Map m;
+  m.xy.create(dst, CV_32FC2);
+  m.distance.create(dst, CV_32F);
+  for (int y = 0; y < dst.height; ++y)
+    for (int x = 0; x < dst.width; ++x) {
+      const bool mapped = rng() % 4 != 0;
+      m.xy.at<cv::Vec2f>(y, x) = mapped ? cv::Vec2f(float(rng() % src.width), float(rng() % src.height))
+                                        : cv::Vec2f(-1, -1);
+      m.distance.at<float>(y, x) = 0;
+    }
+  return m;
+}
+
+}  // namespace
+
+TEST(LiveRepaint, EqualsTheMapAppliedByHandAtSourceSize) {
+  const cv::Size dst(64, 40), src(50, 30);
+  const match::Map map = random_map(dst, src, 7);
+  cv::Mat frame(src, CV_8UC3);
+  cv::randu(frame, 0, 255);
+  cv::Mat backdrop(dst, CV_8UC3, cv::Scalar(1, 2, 3));
+  match::LiveRepainter live(map, src, backdrop);
+  const cv::Mat out = live.apply(frame);
+  ASSERT_EQ(out.size(), dst);
+  for (int y = 0; y < dst.height; ++y)
+    for (int x = 0; x < dst.width; ++x) {
+      const cv::Vec2f m = map.xy.at<cv::Vec2f>(y, x);
+      const cv::Vec3b want = m[0] < 0 ? backdrop.at<cv::Vec3b>(y, x) : frame.at<cv::Vec3b>(int(m[1]), int(m[0]));
+      ASSERT_EQ(out.at<cv::Vec3b>(y, x), want) << x << "," << y;
+    }
+}
+
+TEST(LiveRepaint, ScalesCoordinatesToTheFrameSize) {
+  // A live frame at twice the stills' size: each source pixel is a 2x2 block.
+  const cv::Size dst(32, 20), src(25, 15);
+  const match::Map map = random_map(dst, src, 3);
+  cv::Mat small(src, CV_8UC3);
+  cv::randu(small, 0, 255);
+  cv::Mat big;
+  cv::resize(small, big, src * 2, 0, 0, cv::INTER_NEAREST);
+  match::LiveRepainter live(map, src);
+  const cv::Mat a = live.apply(small), b = live.apply(big);
+  EXPECT_EQ(cv::norm(a, b, cv::NORM_INF), 0.0);
+}
+
+TEST(Relight, FitsTheThesisRingAndPredictsAnUnseenLamp) {
+  sim::RenderOptions o;
+  o.size = cv::Size(160, 106);
+  o.noise_sigma = 0;
+  auto set = sim::simulate_set("sphere-gray", o, Role::source);
+  ASSERT_TRUE(set.ok()) << set.message();
+  auto relit = match::Relighter::fit(*set);
+  ASSERT_TRUE(relit.ok()) << relit.message();
+  // The thesis's lamps sit on one ring, so the fit falls back to the ring basis.
+  EXPECT_STREQ(relit->basis_name(), "ring (lx, ly, lz, lx ly, lx^2-ly^2)");
+  // Under a rig lamp it reproduces that lamp's photo closely.
+  const cv::Mat mask = set->truth.mask;
+  const cv::Mat again = relit->render_source(set->lights[2].direction);
+  EXPECT_GT(match::psnr(again, set->images[2], mask), 30.0);
+  // Under a lamp between two ring lamps (not in the set) it beats the nearest
+  // lamp's photo as a prediction.
+  auto scene = sim::make_scene("sphere-gray", o);
+  ASSERT_TRUE(scene.ok());
+  const auto rig = sim::thesis_rig();
+  sim::Lamp between = rig[1];
+  between.position_m = (rig[1].position_m + rig[2].position_m) * 0.5;
+  const cv::Vec3d dir = cv::normalize(between.position_m);
+  between.position_m = dir * cv::norm(rig[1].position_m);
+  const cv::Mat truth = sim::render(**scene, {between}, o);
+  const double predicted = match::psnr(relit->render_source(dir), truth, mask);
+  const double nearest = match::psnr(set->images[1], truth, mask);
+  EXPECT_GT(predicted, nearest);
+  EXPECT_GT(predicted, 25.0);
+}
+
+TEST(Relight, RefusesTooFewOrAlikeLamps) {
+  ImageSet set;
+  set.id = "few";
+  set.size = cv::Size(4, 4);
+  for (int i = 0; i < 4; ++i) {
+    set.lights.push_back(Light{});
+    set.images.push_back(cv::Mat(4, 4, CV_32FC3, cv::Scalar::all(0.5)));
+  }
+  auto r = match::Relighter::fit(set);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.message().find("at least 5"), std::string::npos);
+  set.lights.push_back(Light{});
+  set.images.push_back(set.images[0]);
+  auto same = match::Relighter::fit(set);  // five identical directions
+  ASSERT_FALSE(same.ok());
+  EXPECT_NE(same.message().find("too alike"), std::string::npos);
+}
