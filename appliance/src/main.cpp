@@ -15,6 +15,8 @@
 
 #include "veneer/util/log.hpp"
 #include "veneerd/daemon.hpp"
+#include "veneerd/hw/hue_setup.hpp"
+#include "veneerd/hw/sd_notify.hpp"
 #if __has_include("veneerd/hw/check.hpp")
 #include "veneerd/hw/check.hpp"
 #define VENEERD_HAVE_HW_CHECK 1
@@ -46,6 +48,10 @@ std::vector<std::string> split(const std::string& text) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // `veneerd hue discover|pair|lamps|flash ...`: setting up the Hue bridge.
+  if (argc > 1 && std::string(argv[1]) == "hue") {
+    return veneerd::hw::hue_command({argv + 1, argv + argc}, std::cout, std::cerr);
+  }
   CLI::App app{"veneerd — the Veneer capture rig daemon (camera, ring of lamps, button; protobuf API on TCP)"};
   veneerd::DaemonOptions o;
   bool check_hardware = false;
@@ -127,8 +133,20 @@ int main(int argc, char** argv) {
               static_cast<unsigned>((*daemon)->port()), c.store.c_str(), c.token_path().c_str());
   std::fflush(stdout);
 
+  // systemd (Type=notify, WatchdogSec): ready now, then a ping at half the
+  // watchdog interval for as long as the daemon runs. Outside systemd these
+  // are no-ops.
+  veneerd::hw::sd_ready();
+  const auto watchdog = veneerd::hw::sd_watchdog_interval();
   int sig = 0;
-  sigwait(&stop_signals, &sig);
+  if (watchdog) {
+    const auto half = *watchdog / 2;
+    struct timespec wait {static_cast<time_t>(half.count() / 1000000), static_cast<long>(half.count() % 1000000) * 1000};
+    while ((sig = sigtimedwait(&stop_signals, nullptr, &wait)) < 0) veneerd::hw::sd_watchdog();
+  } else {
+    sigwait(&stop_signals, &sig);
+  }
+  veneerd::hw::sd_stopping();
   VLOG_INFO("Rig", "signal {}: stopping", sig);
   (*daemon)->stop();
   return 0;
