@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include "index_fast.hpp"
 #include "veneer/match/fast.hpp"
 
 namespace {
@@ -124,3 +125,41 @@ TEST(FastIndex, NonNormalPointsAndHigherDimensions) {
 }
 
 }  // namespace
+
+// nearest_from with a hint (the previous pixel's match, as the engine seeds
+// it): near hints take the direct box path, far or random ones the rings; the
+// answer is the brute force's either way, ties included.
+TEST(FastIndex, GridSeededWithAHintEqualsBruteForce) {
+  std::mt19937 rng(23);
+  const auto src = unit_normals(4000, rng, true, 800);
+  // queries along a slow walk over the sphere (like neighbouring pixels), plus
+  // random jumps, slightly off unit length
+  std::vector<float> queries;
+  std::normal_distribution<float> g(0, 1);
+  float x = 0.1f, y = 0.2f, z = 0.97f;
+  for (int i = 0; i < 3000; ++i) {
+    const float step = i % 97 == 0 ? 1.0f : 0.02f;
+    x += step * g(rng), y += step * g(rng), z += step * g(rng);
+    const float l = std::sqrt(x * x + y * y + z * z);
+    x /= l, y /= l, z /= l;
+    const float len = 1.0f + 0.003f * g(rng);
+    queries.insert(queries.end(), {x * len, y * len, z * len});
+  }
+  veneer::match::fast::OctGridIndex grid;
+  const int n = static_cast<int>(src.size()) / 3;
+  grid.build(src.data(), n, 3);
+  std::vector<int> bids;
+  std::vector<float> bd;
+  int hint = -1;
+  for (size_t i = 0; i < queries.size() / 3; ++i) {
+    const float* q = &queries[i * 3];
+    int id;
+    float d;
+    const int h = i % 13 == 5 ? static_cast<int>(rng() % n) : hint;  // now and then a wrong hint
+    grid.nearest_from(q, 1, &id, &d, h);
+    brute_knn(src, 3, q, 1, bids, bd);
+    ASSERT_EQ(id, bids[0]) << "query " << i << " hint " << h;
+    ASSERT_EQ(d, bd[0]) << "query " << i;
+    hint = id;
+  }
+}
