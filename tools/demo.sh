@@ -51,7 +51,8 @@ step "correspondence + repaint (coherent, the default for textured sources)"
 "$bin/veneer" inspect --dst "$out/destination" --src "$out/source" --map "$out/transfer" --out "$out/transfer/inspect.png"
 
 step "live view: the source under a moving hand-held lamp, repainted onto the destination"
-"$bin/veneer" rig live "${rig[@]}" --frames 12 --out "$out/live" --map "$out/transfer"
+"$bin/veneer" rig live "${rig[@]}" --frames 12 --fps 6 --out "$out/live" --sweep \
+  --map "$out/transfer" --src "$out/source" --dst "$out/destination"
 
 step "the thesis's figures on the simulated pairs"
 "$bin/veneer" figures --out "$out/figures"

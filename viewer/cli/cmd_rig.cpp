@@ -7,9 +7,15 @@
 #include <fstream>
 #include <iostream>
 #include <mutex>
+#include <optional>
+
+#include <opencv2/imgcodecs.hpp>
 #include <sstream>
 
 #include "command.hpp"
+#include "veneer/io/image_io.hpp"
+#include "veneer/match/live.hpp"
+#include "veneer/match/transfer.hpp"
 #include "veneer/rig/client.hpp"
 
 namespace veneer::cli {
@@ -151,6 +157,14 @@ VENEER_COMMAND(rig) {
   live->add_option("--frames", *frames, "how many frames")->capture_default_str()->check(CLI::Range(1, 100000));
   live->add_option("--fps", *fps, "frames per second asked for")->capture_default_str()->check(CLI::Range(0.1, 60.0));
   live->add_option("--out", *live_out, "folder for frame_NNNN.jpg")->required();
+  auto live_map = std::make_shared<std::string>();
+  auto live_src = std::make_shared<std::string>();
+  auto live_dst = std::make_shared<std::string>();
+  auto live_sweep = std::make_shared<bool>(false);
+  live->add_option("--map", *live_map, "also write repainted_NNNN.png: each frame carried through this map (a transfer folder or map.pfm)");
+  live->add_option("--src", *live_src, "with --map: the source set the map was computed against (for its size)");
+  live->add_option("--dst", *live_dst, "with --map: the destination set (its picture shows where nothing is mapped)");
+  live->add_flag("--sweep", *live_sweep, "simulated rig: move the hand-held lamp round the source while recording");
 
   auto* events = rig_cmd->add_subcommand("events", "print the rig's events, one a line");
   auto count = std::make_shared<int>(0);
@@ -242,6 +256,24 @@ VENEER_COMMAND(rig) {
       return 0;
     }
     if (live->parsed()) {
+      // With --map, frames are repainted onto the destination as they would be in the viewer.
+      std::optional<match::LiveRepainter> repainter;
+      if (!live_map->empty()) {
+        if (live_src->empty()) return fail("live", "--map needs --src (the source set the map was computed against)", 2);
+        std::filesystem::path mp(*live_map);
+        if (std::filesystem::is_directory(mp)) mp /= "map.pfm";
+        auto map = match::read_map(mp);
+        if (!map) return fail("live", map.message());
+        auto src = read_set(*live_src);
+        if (!src) return fail("live", src.message());
+        cv::Mat backdrop;
+        if (!live_dst->empty()) {
+          auto dst = read_set(*live_dst);
+          if (!dst) return fail("live", dst.message());
+          backdrop = tonemap_picture(match::median_photo(dst->images));
+        }
+        repainter.emplace(*map, src->size, backdrop);
+      }
       std::error_code ec;
       std::filesystem::create_directories(*live_out, ec);
       if (ec) return fail("live", *live_out + ": cannot create: " + ec.message());
@@ -257,14 +289,31 @@ VENEER_COMMAND(rig) {
         std::ofstream file(std::filesystem::path(*live_out) / name, std::ios::binary);
         file.write(reinterpret_cast<const char*>(f.jpeg.data()), static_cast<std::streamsize>(f.jpeg.size()));
         if (!file) error = std::string(name) + ": write failed";
+        if (repainter && error.empty()) {
+          const cv::Mat frame = cv::imdecode(f.jpeg, cv::IMREAD_COLOR);
+          std::snprintf(name, sizeof name, "repainted_%04d.png", saved);
+          if (frame.empty()) {
+            error = "frame " + std::to_string(f.seq) + " is not a JPEG";
+          } else if (!cv::imwrite((std::filesystem::path(*live_out) / name).string(), repainter->apply(frame))) {
+            error = std::string(name) + ": write failed";
+          }
+        }
         ++saved;
         cv.notify_all();
       };
       if (auto s = client.start_live_view(*fps); !s) return fail("live", s.message());
-      std::unique_lock lock(m);
-      bool done = cv.wait_for(lock, std::chrono::duration<double>(args->timeout_s),
-                              [&] { return saved >= *frames || !error.empty() || !client.connected(); });
-      lock.unlock();
+      bool done = false;
+      const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(args->timeout_s);
+      for (int step = 0; !done && std::chrono::steady_clock::now() < deadline; ++step) {
+        if (*live_sweep) {
+          // The hand-held lamp goes round the source once over the recording.
+          const double a = 2 * M_PI * step / std::max(1, *frames);
+          (void)client.move_hand_lamp(cv::Vec3d(0.45 * std::cos(a), 0.45 * std::sin(a), 0.55));
+        }
+        std::unique_lock lock(m);
+        done = cv.wait_for(lock, std::chrono::duration<double>(1.0 / *fps),
+                           [&] { return saved >= *frames || !error.empty() || !client.connected(); });
+      }
       (void)client.stop_live_view();
       client.on_live_frame = nullptr;
       if (!error.empty()) return fail("live", error);
