@@ -73,7 +73,9 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
     // Seeds: one jittered point per cell; its destination row and source match.
     std::vector<cv::Point> seed_at(static_cast<size_t>(gx) * gy);
     std::vector<int> seed_match(seed_at.size(), -1);
-    for (int j = 0; j < gy; ++j)
+    // seed rows [jb, je); in parallel unless the reuse counts chain them
+    auto make_seeds = [&](int jb, int je) {
+    for (int j = jb; j < je; ++j)
       for (int i = 0; i < gx; ++i) {
         const uint64_t r = hash3(o.seed, static_cast<uint64_t>(level), static_cast<uint64_t>(j) * gx + i);
         const cv::Point at(box.x + i * s + static_cast<int>((r & 0xffff) % s),
@@ -101,13 +103,20 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
           for (int x = std::max(0, q.x - s / 2); x < std::min(src.size.width, q.x + s / 2 + 1); ++x)
             ++uses[static_cast<size_t>(y) * src.size.width + x];
       }
+    };
+    if (u <= 0)
+      parallel_rows(gy, o.threads, 4, make_seeds);
+    else
+      make_seeds(0, gy);
     if (u <= 0) {
       // Chunks: the unassigned pixels sharing a nearest seed. Each seed's
       // source position is the one of its nearest normals (kc of them) that
       // fits its whole chunk best (mean error, off-object = 1); the chunk is
       // taken whole when that mean passes the threshold and no pixel in it
       // errs more than `cap` times the threshold.
-      std::vector<int> owner(n, -1);
+      // (k = 1: one proposal per pixel, so no per-chunk lists are needed)
+      std::vector<int> owner(n, -1), prop(n, -1);
+      std::vector<float> err(n, 0.0f);
       parallel_rows(n, o.threads, 512, [&](int b, int e) {
         for (int d = b; d < e; ++d) {
           if (chosen[d] >= 0) continue;
@@ -122,51 +131,30 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
               const int d2 = (a.x - pt.x) * (a.x - pt.x) + (a.y - pt.y) * (a.y - pt.y);
               if (d2 < best_d2) best_d2 = d2, best_cell = cell;
             }
+          if (best_cell < 0) continue;
           owner[d] = best_cell;
+          const cv::Point m = src.pixels[seed_match[best_cell]];
+          const cv::Point a = seed_at[best_cell];
+          const int row = src.row_at(m.x + pt.x - a.x, m.y + pt.y - a.y);
+          prop[d] = row;
+          err[d] = row < 0 ? 1.0f : std::min(1.0f, std::sqrt(pixel_sq(d, row)));
         }
       });
-      const int cells = static_cast<int>(seed_at.size());
-      std::vector<int> first(cells + 1, 0), members(n);
+      std::vector<double> sum(seed_at.size(), 0.0);
+      std::vector<float> worst(seed_at.size(), 0.0f);
+      std::vector<int> cnt(seed_at.size(), 0);
       for (int d = 0; d < n; ++d)
-        if (owner[d] >= 0) ++first[owner[d] + 1];
-      for (int c0 = 0; c0 < cells; ++c0) first[c0 + 1] += first[c0];
-      {
-        std::vector<int> fill(first.begin(), first.end() - 1);
-        for (int d = 0; d < n; ++d)
-          if (owner[d] >= 0) members[fill[owner[d]]++] = d;
-      }
+        if (owner[d] >= 0) {
+          sum[owner[d]] += err[d];
+          worst[owner[d]] = std::max(worst[owner[d]], err[d]);
+          ++cnt[owner[d]];
+        }
       const double thr = o.coherent_threshold;
-      parallel_rows(cells, o.threads, 16, [&](int cb, int ce) {
-        for (int c0 = cb; c0 < ce; ++c0) {
-          if (first[c0] == first[c0 + 1]) continue;
-          const cv::Point a = seed_at[c0];
-          const int seed_row = dst.row_at(a.x, a.y);
-          int best_id = -1;
-          double best_mean = std::numeric_limits<double>::infinity(), best_worst = 0;
-          for (int m = 0; m < k; ++m) {
-            const int id = nn.ids[static_cast<size_t>(seed_row) * k + m];
-            if (id < 0) break;
-            const cv::Point q = src.pixels[id];
-            double sum = 0, worst = 0;
-            for (int t = first[c0]; t < first[c0 + 1]; ++t) {
-              const int d = members[t];
-              const cv::Point pt = dst.pixels[d];
-              const int row = src.row_at(q.x + pt.x - a.x, q.y + pt.y - a.y);
-              const double e = row < 0 ? 1.0 : std::min(1.0, std::sqrt(static_cast<double>(pixel_sq(d, row))));
-              sum += e;
-              worst = std::max(worst, e);
-            }
-            const double mean = sum / (first[c0 + 1] - first[c0]);
-            if (mean < best_mean) best_mean = mean, best_worst = worst, best_id = id;
-          }
-          if (best_id < 0 || !(best_mean < thr && best_worst < cap * thr)) continue;
-          const cv::Point q = src.pixels[best_id];
-          for (int t = first[c0]; t < first[c0 + 1]; ++t) {
-            const int d = members[t];
-            const cv::Point pt = dst.pixels[d];
-            const int row = src.row_at(q.x + pt.x - a.x, q.y + pt.y - a.y);
-            if (row >= 0) chosen[d] = row;
-          }
+      parallel_rows(n, o.threads, 1024, [&](int b, int e) {
+        for (int d = b; d < e; ++d) {
+          const int c0 = owner[d];
+          if (c0 < 0 || prop[d] < 0) continue;
+          if (sum[c0] / cnt[c0] < thr && worst[c0] < cap * thr) chosen[d] = prop[d];
         }
       });
       continue;
