@@ -147,7 +147,8 @@ veneer::Expected<Gphoto2Options> parse_gphoto2_options(const nlohmann::json& s, 
   if (!s.is_object()) return veneer::make_error(where + ": expected an object");
   static const char* known[] = {"backend", "model", "port", "manual_mode", "autofocus_off", "keep_on_card",
                                 "reopen_delay_ms", "paired_jpeg_wait_ms", "still_size"};
-  for (const auto& [key, value] : s.items()) {
+  for (const auto& item : s.items()) {
+    const std::string& key = item.key();  // a named variable: clang 14 cannot capture structured bindings
     if (std::find_if(std::begin(known), std::end(known), [&](const char* k) { return key == k; }) == std::end(known))
       return veneer::make_error(where + ": unknown field '" + key + "' for the gphoto2 camera");
   }
