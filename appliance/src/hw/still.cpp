@@ -69,11 +69,50 @@ size_t jpeg_end(const std::vector<unsigned char>& d, size_t start) {
   return 0;
 }
 
+// Width and height the first frame header (SOFn) of a JPEG declares; empty
+// when there is none before the first scan. Bytes between segments are
+// skipped the way libjpeg resynchronises, so it finds what the decoder finds.
+cv::Size jpeg_declared_size(const std::vector<unsigned char>& d) {
+  const size_t n = d.size();
+  size_t i = 2;
+  while (i + 4 <= n) {
+    if (d[i] != 0xFF || d[i + 1] == 0xFF || d[i + 1] == 0x00) {
+      ++i;
+      continue;
+    }
+    unsigned char m = d[i + 1];
+    if (m == 0xD8 || m == 0x01 || (m >= 0xD0 && m <= 0xD7)) {  // no length
+      i += 2;
+      continue;
+    }
+    if (m == 0xD9 || m == 0xDA) break;
+    size_t len = (size_t(d[i + 2]) << 8) | d[i + 3];
+    if (len < 2 || i + 2 + len > n) break;
+    bool sof = m >= 0xC0 && m <= 0xCF && m != 0xC4 && m != 0xC8 && m != 0xCC;
+    if (sof && len >= 8) return cv::Size(int((d[i + 7] << 8) | d[i + 8]), int((d[i + 5] << 8) | d[i + 6]));
+    i += 2 + len;
+  }
+  return {};
+}
+
+// Most pixels decoded at once (~1 GB as 8-bit plus float). A JPEG may declare
+// up to 65535x65535 in a few hundred bytes; larger ones are decoded at 1/2,
+// 1/4 or 1/8 scale (65535^2 / 64 still fits).
+constexpr long long kMaxDecodePixels = 1LL << 26;
+
 }  // namespace
 
 veneer::Expected<cv::Mat> decode_jpeg_linear(const std::vector<unsigned char>& jpeg, cv::Size size) {
   if (jpeg.empty()) return veneer::make_error("empty image file");
-  cv::Mat img = cv::imdecode(jpeg, cv::IMREAD_COLOR);
+  const cv::Size declared = jpeg_declared_size(jpeg);
+  const long long pixels = (long long)declared.width * declared.height;
+  int flags = cv::IMREAD_COLOR;
+  if (pixels > kMaxDecodePixels) {
+    if (pixels / 4 <= kMaxDecodePixels) flags = cv::IMREAD_REDUCED_COLOR_2;
+    else if (pixels / 16 <= kMaxDecodePixels) flags = cv::IMREAD_REDUCED_COLOR_4;
+    else flags = cv::IMREAD_REDUCED_COLOR_8;
+  }
+  cv::Mat img = cv::imdecode(jpeg, flags);
   if (img.empty() || img.depth() != CV_8U) return veneer::make_error("not a JPEG the decoder can read");
   return linearize_srgb8(img, size);
 }
