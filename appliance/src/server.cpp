@@ -500,7 +500,11 @@ class Session : public std::enable_shared_from_this<Session> {
 };
 
 void Server::Impl::accept() {
-  acceptor.async_accept([self = shared_from_this()](std::error_code ec, tcp::socket socket) {
+  // Handlers hold the Impl weakly: one left in the stopped io_context (which the
+  // Impl owns) must not keep the Impl alive, or neither is ever freed.
+  acceptor.async_accept([weak = weak_from_this()](std::error_code ec, tcp::socket socket) {
+    auto self = weak.lock();
+    if (!self) return;
     if (ec) {
       if (ec != asio::error::operation_aborted) {
         VLOG_WARN("Server", "accept failed: {}", ec.message());
@@ -540,10 +544,16 @@ void Server::Impl::update_live_rate() {
 Server::Server(Rig& rig, ServerOptions options) : impl_(std::make_shared<Impl>(rig, std::move(options))) {
   std::weak_ptr<Impl> weak = impl_;
   rig.on_event = [weak](const RigEvent& e) {
-    if (auto impl = weak.lock()) asio::post(impl->io, [impl, e] { impl->on_event(e); });
+    if (auto impl = weak.lock())
+      asio::post(impl->io, [weak, e] {
+        if (auto i = weak.lock()) i->on_event(e);
+      });
   };
   rig.on_live_frame = [weak](std::shared_ptr<const LiveFrameData> f) {
-    if (auto impl = weak.lock()) asio::post(impl->io, [impl, f] { impl->on_live(f); });
+    if (auto impl = weak.lock())
+      asio::post(impl->io, [weak, f] {
+        if (auto i = weak.lock()) i->on_live(f);
+      });
   };
 }
 
