@@ -126,6 +126,12 @@ int main(int argc, char** argv) {
   w.findChild<QPushButton*>("liveToggle")->setChecked(true);
   wait_for([&] { return w.liveFramesShown() > 5; }, 10000);
 
+  // The stream's own rate with nothing computing, as the peer of the rate below.
+  const int idle_before = w.liveFramesShown();
+  const double idle_t0 = now_ms();
+  QTest::qWait(3000);
+  const double idle_fps = (w.liveFramesShown() - idle_before) * 1000.0 / (now_ms() - idle_t0);
+
   // Heartbeat: the longest gap between 10 ms timer ticks is the GUI's worst stall.
   double last = now_ms(), worst = 0;
   QTimer beat;
@@ -152,11 +158,14 @@ int main(int argc, char** argv) {
   beat.stop();
   w.cancelTransfer();
   wait_for([&] { return !w.computing(); }, 60000);
-  std::printf("## Live view while a transfer computes (rig at 15 fps, 1024x680 frames)\n\n");
+  std::printf("## Live view while a transfer computes (rig asked for 15 fps, 1024x680 frames; the simulated\n"
+              "## rig renders its frames on the same 2 cores as the transfer, a real rig does not)\n\n");
   std::printf("| measure | value | target |\n|---|---|---|\n");
   std::printf("| computing during the window | %s | yes |\n", still_computing ? "yes (cancelled after)" : "finished early");
   std::printf("| frames shown | %d in %.1f s | |\n", frames, window_ms / 1000.0);
-  std::printf("| live view rate | %.1f fps | >= 15 fps |\n", frames * 1000.0 / window_ms);
+  std::printf("| live view rate, nothing computing (same run) | %.1f fps | |\n", idle_fps);
+  std::printf("| live view rate while computing | %.1f fps | >= 15 fps |\n", frames * 1000.0 / window_ms);
+  std::printf("| while computing / nothing computing | %.2f | |\n", frames * 1000.0 / window_ms / std::max(1e-9, idle_fps));
   std::printf("| longest GUI stall (10 ms heartbeat) | %.1f ms | < 100 ms |\n", worst);
   rig.kill();
   rig.waitForFinished(3000);
