@@ -62,7 +62,7 @@ MainWindow::MainWindow(const Options& options, QWidget* parent)
     message(msg, !ok);
     connect_btn_->setText(ok ? tr("Disconnect") : tr("Connect"));
     if (ok) rememberRig(rig_.endpoint());
-    if (!ok) rig_root_->takeChildren();
+    if (!ok) qDeleteAll(rig_root_->takeChildren());
     updateStatusLine();
   });
   connect(&rig_, &RigLink::statusUpdated, this, [this](veneer::rig::RigStatus) { updateStatusLine(); });
@@ -606,7 +606,7 @@ void MainWindow::onRigEvent(const veneer::rig::Event& e) {
 }
 
 void MainWindow::onSetsListed(const std::vector<veneer::rig::SetSummary>& sets) {
-  rig_root_->takeChildren();
+  qDeleteAll(rig_root_->takeChildren());
   for (const auto& s : sets) {
     auto* item = new QTreeWidgetItem(rig_root_, {qs(s.id), qs(veneer::role_name(s.role)), qs(s.object)});
     QString tip = tr("%1x%2, %3 lamps, %4").arg(s.size.width).arg(s.size.height).arg(s.lights).arg(qs(s.created));
