@@ -8,42 +8,31 @@
 
 namespace veneerd {
 
-namespace {
-
-template <class Device>
-void add(std::vector<std::pair<std::string, Factory<Device>>>& list, const std::string& name, Factory<Device> f) {
-  for (const auto& [n, existing] : list)
-    if (n == name) return;
-  list.emplace_back(name, std::move(f));
-}
-
-}  // namespace
-
 void register_simulated_devices() {
   static std::mutex mutex;
   std::lock_guard lock(mutex);
   auto& reg = DeviceRegistry::instance();
-  add<Lamps>(reg.lamps, "hue", [](const nlohmann::json& section) -> veneer::Expected<std::unique_ptr<Lamps>> {
+  DeviceRegistry::add<Lamps>(reg.lamps, "hue", [](const nlohmann::json& section) -> veneer::Expected<std::unique_ptr<Lamps>> {
     auto o = HueLampsOptions::from_json(section);
     if (!o) return o.error();
     auto lamps = HueLamps::create(*o);
     if (!lamps) return lamps.error();
     return std::unique_ptr<Lamps>(std::move(*lamps));
   });
-  add<Camera>(reg.cameras, "simulated", [](const nlohmann::json& section) -> veneer::Expected<std::unique_ptr<Camera>> {
+  DeviceRegistry::add<Camera>(reg.cameras, "simulated", [](const nlohmann::json& section) -> veneer::Expected<std::unique_ptr<Camera>> {
     auto o = SimulatedCameraOptions::from_json(section);
     if (!o) return o.error();
     auto camera = SimulatedCamera::create(*o);
     if (!camera) return camera.error();
     return std::unique_ptr<Camera>(std::move(*camera));
   });
-  add<Trigger>(reg.triggers, "simulated", [](const nlohmann::json&) -> veneer::Expected<std::unique_ptr<Trigger>> {
+  DeviceRegistry::add<Trigger>(reg.triggers, "simulated", [](const nlohmann::json&) -> veneer::Expected<std::unique_ptr<Trigger>> {
     return std::unique_ptr<Trigger>(std::make_unique<SimulatedTrigger>());
   });
-  add<StatusLed>(reg.leds, "simulated", [](const nlohmann::json&) -> veneer::Expected<std::unique_ptr<StatusLed>> {
+  DeviceRegistry::add<StatusLed>(reg.leds, "simulated", [](const nlohmann::json&) -> veneer::Expected<std::unique_ptr<StatusLed>> {
     return std::unique_ptr<StatusLed>(std::make_unique<SimulatedLed>());
   });
-  add<StatusLed>(reg.leds, "none", [](const nlohmann::json&) -> veneer::Expected<std::unique_ptr<StatusLed>> {
+  DeviceRegistry::add<StatusLed>(reg.leds, "none", [](const nlohmann::json&) -> veneer::Expected<std::unique_ptr<StatusLed>> {
     return std::unique_ptr<StatusLed>(std::make_unique<NoLed>());
   });
 }

@@ -9,34 +9,23 @@
 
 namespace veneerd {
 
-namespace {
-
-template <class Device>
-void add(std::vector<std::pair<std::string, Factory<Device>>>& list, const std::string& name, Factory<Device> f) {
-  for (const auto& [n, existing] : list)
-    if (n == name) return;
-  list.emplace_back(name, std::move(f));
-}
-
-}  // namespace
-
 void register_hardware_devices() {
   static std::mutex mutex;
   std::lock_guard lock(mutex);
   auto& reg = DeviceRegistry::instance();
-  add<Camera>(reg.cameras, "gphoto2", [](const nlohmann::json& s) -> veneer::Expected<std::unique_ptr<Camera>> {
+  DeviceRegistry::add<Camera>(reg.cameras, "gphoto2", [](const nlohmann::json& s) -> veneer::Expected<std::unique_ptr<Camera>> {
     auto o = hw::parse_gphoto2_options(s, "camera");
     if (!o) return o.error();
     auto cam = std::make_unique<hw::Gphoto2Camera>(hw::make_libgphoto2_api(), hw::make_libusb_hotplug(), *o);
     // A camera that is not there yet is not fatal: it is opened when it arrives.
     return std::unique_ptr<Camera>(std::move(cam));
   });
-  add<Camera>(reg.cameras, "uvc", [](const nlohmann::json& s) -> veneer::Expected<std::unique_ptr<Camera>> {
+  DeviceRegistry::add<Camera>(reg.cameras, "uvc", [](const nlohmann::json& s) -> veneer::Expected<std::unique_ptr<Camera>> {
     auto o = hw::parse_uvc_options(s, "camera");
     if (!o) return o.error();
     return std::unique_ptr<Camera>(std::make_unique<hw::UvcCamera>(*o));
   });
-  add<Trigger>(reg.triggers, "gpio", [](const nlohmann::json& s) -> veneer::Expected<std::unique_ptr<Trigger>> {
+  DeviceRegistry::add<Trigger>(reg.triggers, "gpio", [](const nlohmann::json& s) -> veneer::Expected<std::unique_ptr<Trigger>> {
     if (auto v = validate_device_section("trigger", s); !v) return v.error();
     auto line = hw::parse_gpio_line(s, "trigger", "button_line");
     auto timing = hw::parse_gpio_timing(s, "trigger");
@@ -45,7 +34,7 @@ void register_hardware_devices() {
     if (auto st = (*t)->start(); !st) return st.error();
     return std::unique_ptr<Trigger>(std::move(*t));
   });
-  add<StatusLed>(reg.leds, "gpio", [](const nlohmann::json& s) -> veneer::Expected<std::unique_ptr<StatusLed>> {
+  DeviceRegistry::add<StatusLed>(reg.leds, "gpio", [](const nlohmann::json& s) -> veneer::Expected<std::unique_ptr<StatusLed>> {
     nlohmann::json section = s;
     // An LED lights when the line is high unless the config says otherwise.
     if (!section.contains("active_low")) section["active_low"] = false;

@@ -35,6 +35,14 @@ struct DeviceRegistry {
     static DeviceRegistry r;
     return r;
   }
+  // Adds a factory under `name` unless one is registered already (registration may run twice).
+  template <class Device>
+  static void add(std::vector<std::pair<std::string, Factory<Device>>>& list, const std::string& name,
+                  Factory<Device> factory) {
+    for (const auto& entry : list)
+      if (entry.first == name) return;
+    list.emplace_back(name, std::move(factory));
+  }
   // Looks `name` up in `list`; the error lists the names that exist.
   template <class Device>
   static veneer::Expected<std::unique_ptr<Device>> make(
