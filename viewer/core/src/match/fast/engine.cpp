@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <deque>
 #include <limits>
 #include <mutex>
@@ -84,6 +86,7 @@ std::vector<int> row_starts(const Object& o) {
 // hash of (seed, iteration, pixel), so the map does not depend on threads.
 // uniformity u > 0 adds u * uses(s) / fair_share to the RMS distance, with
 // live use counts; that makes the scan sequential (one band).
+static long dbg_tries[8][16], dbg_wins[8][16], dbg_c[8];
 Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOptions& o, const Progress& p) {
   const int n = dst.rows(), ns = src.rows();
   std::vector<int> match(n);
@@ -97,25 +100,42 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
   // fast one starts from each pixel's nearest by its centre value (exact, a
   // few ms), which leaves the 5 iterations refining instead of searching.
   {
-    Object d1 = dst, s1 = src;
-    for (Object* o1 : {&d1, &s1}) {
-      o1->patch = 1;
-      o1->dims = o1->channels;
-      o1->slot.assign(o1->rows(), -1);
-      o1->rim.clear();
+    std::vector<int> ids;
+    if (dst.channels == 3) {
+      if (auto s = nearest_centres(dst, src, o.threads, p, ids); !s) return s.error();
+    } else {
+      Object d1 = dst, s1 = src;
+      for (Object* o1 : {&d1, &s1}) {
+        o1->patch = 1;
+        o1->dims = o1->channels;
+        o1->slot.assign(o1->rows(), -1);
+        o1->rim.clear();
+        o1->box.clear();
+      }
+      NearestLists nn;
+      if (auto s = nearest_lists(d1, s1, 1, default_index(), o.threads, p, nn, nullptr); !s) return s.error();
+      ids = std::move(nn.ids);
     }
-    NearestLists nn;
-    if (auto s = nearest_lists(d1, s1, 1, default_index(), o.threads, p, nn, nullptr); !s) return s.error();
     parallel_rows(n, o.threads, 256, [&](int b, int e) {
       std::vector<float> buf(dst.dims);
       for (int d = b; d < e; ++d) {
-        match[d] = nn.ids[d] >= 0 ? nn.ids[d]
-                                  : static_cast<int>(hash3(o.seed, 0xffffu, static_cast<uint64_t>(d)) %
-                                                     static_cast<uint64_t>(ns));
+        match[d] = ids[d] >= 0 ? ids[d]
+                               : static_cast<int>(hash3(o.seed, 0xffffu, static_cast<uint64_t>(d)) %
+                                                  static_cast<uint64_t>(ns));
         dst.gather(d, buf.data());
         sq[d] = patch_sq(buf.data(), src, match[d], kInf);
       }
     });
+  }
+  // Patch moments (nearest.hpp): their distance is a lower bound of the patch
+  // distance, read from one cache line where the patch spans a dozen, so most
+  // random-search candidates are turned down without touching their patch.
+  std::vector<float> md, ms;
+  int per_row = 0;
+  const bool use_lb = dst.patch > 1 && !getenv("PK_NOLB");
+  if (use_lb) {
+    patch_moments(dst, o.threads, md, per_row);
+    patch_moments(src, o.threads, ms, per_row);
   }
   const std::vector<int> at = row_starts(dst);
   const int h = dst.size.height;
@@ -153,13 +173,27 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
           const cv::Point pt = dst.pixels[d];
           dst.gather(d, buf.data());
           float best = total(sq[d], match[d]);
+          const float* qm = use_lb ? &md[static_cast<size_t>(d) * per_row] : nullptr;
           auto offer = [&](int x, int y) {
             const int s = src.row_at(x, y);
-            if (s < 0) return;
+            ++dbg_c[0];
+            if (s < 0) ++dbg_c[3];
+            if (s == match[d]) ++dbg_c[4];
+            if (s < 0 || s == match[d]) return;  // off the source, or no change
             const float pen = penalty(s);
             const float room = best - pen;
             if (room <= 0) return;
             const float bound = room * room * area;
+            if (qm) {
+              const float* sm = &ms[static_cast<size_t>(s) * per_row];
+              float lb = 0;
+              for (int j = 0; j < per_row; ++j) {
+                const float t = qm[j] - sm[j];
+                lb += t * t;
+              }
+              if (lb * (1.0f - 1e-4f) > bound) { ++dbg_c[1]; return; }  // the patch distance would be larger still
+            }
+            ++dbg_c[2];
             const float v = patch_sq(buf.data(), src, s, bound);
             if (v > bound) return;
             const float t = std::sqrt(v / area) + pen;
@@ -177,17 +211,30 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
             offer(m.x - off.x, m.y - off.y);
           }
           uint64_t r = hash3(o.seed, static_cast<uint64_t>(it), static_cast<uint64_t>(d));
-          for (int radius = max_radius; radius >= 1; radius /= 2) {
+          int lvl = 0;
+          for (int radius = max_radius; radius >= 1; radius /= 2, ++lvl) {
+            const int before = match[d];
             const cv::Point c = src.pixels[match[d]];
             r = mix64(r);
             const int span = 2 * radius + 1;
-            const int ox = static_cast<int>((r & 0xffffffffu) % static_cast<uint64_t>(span)) - radius;
-            const int oy = static_cast<int>((r >> 32) % static_cast<uint64_t>(span)) - radius;
+            // uniform in [0, span) by multiply-shift (no division)
+            const int ox = static_cast<int>(((r & 0xffffffffu) * static_cast<uint64_t>(span)) >> 32) - radius;
+            const int oy = static_cast<int>(((r >> 32) * static_cast<uint64_t>(span)) >> 32) - radius;
             offer(c.x + ox, c.y + oy);
+            dbg_tries[it][lvl]++;
+            if (match[d] != before) dbg_wins[it][lvl]++;
           }
         }
       }
     });
+  }
+  if (getenv("PK_DBG")) {
+    fprintf(stderr, "offers %ld off %ld same %ld lbrej %ld exact %ld\n", dbg_c[0], dbg_c[3], dbg_c[4], dbg_c[1], dbg_c[2]);
+    for (int it = 0; it < o.iterations && it < 8; ++it) {
+      fprintf(stderr, "it %d:", it);
+      for (int l = 0; l < 12; ++l) fprintf(stderr, " %.4f", dbg_tries[it][l] ? 1.0 * dbg_wins[it][l] / dbg_tries[it][l] : 0.0);
+      fprintf(stderr, "\n");
+    }
   }
   Map map = new_map(dst.size);
   for (int d = 0; d < n; ++d) put(map, dst, src, d, match[d], sq[d]);

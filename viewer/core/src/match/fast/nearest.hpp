@@ -20,4 +20,15 @@ struct NearestLists {
 Status nearest_lists(const Object& dst, const Object& src, int k, const std::string& index_kind, int threads,
                      const Progress& progress, NearestLists& out, Stats* stats);
 
+// Per row, the patch's coefficients on orthonormal spatial functions, per
+// channel: the mean (times P), and for P > 1 unless `means_only` the x and y
+// ramps; rows of `per_row` = (1 or 3) x channels values. Orthonormal, so the
+// distance of two rows' coefficients is a lower bound of their patch distance.
+void patch_moments(const Object& o, int threads, std::vector<float>& out, int& per_row, bool means_only = false);
+
+// The exact nearest source row of each destination row by the centre values
+// (3 per pixel), whatever the patch size: the octahedral grid.
+Status nearest_centres(const Object& dst, const Object& src, int threads, const Progress& progress,
+                       std::vector<int>& ids);
+
 }  // namespace veneer::match::fast

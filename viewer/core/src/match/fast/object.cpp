@@ -3,6 +3,10 @@
 
 #include <algorithm>
 
+#ifdef __AVX2__
+#include <immintrin.h>
+#endif
+
 #include <opencv2/imgproc.hpp>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -51,7 +55,6 @@ Expected<Object> make_object(const ObjectView& view, Feature feature, int patch,
   const int n = per_row[h];
   if (n == 0) return make_error("the mask is empty (no object pixels)");
   o.pixels.resize(n);
-  if (need_row_of) o.row_of.create(o.size, CV_32SC1);
   if (feature == Feature::intensities) o.values.create(o.size, CV_32FC(o.channels));
   const int c = o.channels;
   o.flat.resize(static_cast<size_t>(n) * c);
@@ -60,14 +63,9 @@ Expected<Object> make_object(const ObjectView& view, Feature feature, int patch,
     std::vector<float> grey(c);
     for (int y = b; y < e; ++y) {
       const uchar* m = view.mask.ptr<uchar>(y);
-      int* ro = need_row_of ? o.row_of.ptr<int>(y) : nullptr;
       int at = per_row[y];
       for (int x = 0; x < w; ++x) {
-        if (!m[x]) {
-          if (ro) ro[x] = -1;
-          continue;
-        }
-        if (ro) ro[x] = at;
+        if (!m[x]) continue;
         row_min[y] = std::min(row_min[y], x);
         row_max[y] = x;
         o.pixels[at] = cv::Point(x, y);
@@ -99,9 +97,31 @@ Expected<Object> make_object(const ObjectView& view, Feature feature, int patch,
     x1 = std::max(x1, row_max[y]);
   }
   o.bbox = cv::Rect(x0, y0, x1 - x0 + 1, y1 - y0 + 1);
+  if (need_row_of) {  // dense over the bounding box (a few hundred KB, not the frame's MBs)
+    o.row_of.create(o.bbox.height, o.bbox.width, CV_32SC1);
+    parallel_rows(o.bbox.height, threads, 16, [&](int b, int e) {
+      for (int y = b; y < e; ++y) {
+        int* ro = o.row_of.ptr<int>(y);
+        std::fill(ro, ro + o.bbox.width, -1);
+        for (int i = per_row[o.bbox.y + y]; i < per_row[o.bbox.y + y + 1]; ++i) ro[o.pixels[i].x - o.bbox.x] = i;
+      }
+    });
+  }
 
   o.slot.assign(n, -1);
   if (patch == 1) return o;
+  {
+    const size_t line = 16;  // floats per cache line
+    size_t lines = (static_cast<size_t>(o.bbox.width) * c + line - 1) / line;
+    if (lines % 2 == 0) ++lines;
+    o.box_stride = lines * line;
+    o.box.resize(o.box_stride * o.bbox.height);
+    parallel_rows(o.bbox.height, threads, 32, [&](int b, int e) {
+      for (int y = b; y < e; ++y)
+        std::copy_n(o.values.ptr<float>(o.bbox.y + y) + static_cast<size_t>(o.bbox.x) * c,
+                    static_cast<size_t>(o.bbox.width) * c, o.box.data() + y * o.box_stride);
+    });
+  }
   // Interior: the whole patch window lies on the object.
   cv::Mat on = view.mask != 0, interior;
   cv::erode(on, interior, cv::Mat::ones(patch, patch, CV_8U), cv::Point(-1, -1), 1, cv::BORDER_CONSTANT,
@@ -135,6 +155,7 @@ Expected<Object> make_object(const ObjectView& view, Feature feature, int patch,
 }
 
 namespace {
+#ifndef __AVX2__
 // Sum of squared differences of `len` floats in 8 independent lanes (the
 // compiler vectorises this without reassociating a single sum).
 inline float ssd(const float* a, const float* b, int len) {
@@ -152,18 +173,49 @@ inline float ssd(const float* a, const float* b, int len) {
   }
   return s + ((lane[0] + lane[1]) + (lane[2] + lane[3])) + ((lane[4] + lane[5]) + (lane[6] + lane[7]));
 }
+#endif
 }  // namespace
 
 float patch_sq(const float* a, const Object& src, int s, float bound) {
   size_t stride;
   const float* b = src.patch_ptr(s, stride);
   const int w = src.patch * src.channels;
+#ifdef __AVX2__
+  // 8 lanes per step, the row's tail through a masked load (lanes past the
+  // row are neither read nor counted); the bound is checked every second row.
+  const int full = w & ~7, tail = w - full;
+  const __m256i tail_mask = _mm256_cmpgt_epi32(_mm256_set1_epi32(tail), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+  __m256 acc = _mm256_setzero_ps();
+  auto total = [](__m256 v) {
+    const __m128 q = _mm_add_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1));
+    const __m128 h = _mm_add_ps(q, _mm_movehl_ps(q, q));
+    return _mm_cvtss_f32(_mm_add_ss(h, _mm_shuffle_ps(h, h, 1)));
+  };
+  for (int i = 0; i < src.patch; ++i) {
+    const float* ar = a + static_cast<size_t>(i) * w;
+    const float* br = b + i * stride;
+    for (int j = 0; j < full; j += 8) {
+      const __m256 t = _mm256_sub_ps(_mm256_loadu_ps(ar + j), _mm256_loadu_ps(br + j));
+      acc = _mm256_fmadd_ps(t, t, acc);
+    }
+    if (tail) {
+      const __m256 t = _mm256_sub_ps(_mm256_maskload_ps(ar + full, tail_mask), _mm256_maskload_ps(br + full, tail_mask));
+      acc = _mm256_fmadd_ps(t, t, acc);
+    }
+    if (i % 3 == 1 && i + 1 < src.patch) {
+      const float sum = total(acc);
+      if (sum > bound) return sum;
+    }
+  }
+  return total(acc);
+#else
   float sum = 0;
   for (int i = 0; i < src.patch; ++i) {
     sum += ssd(a + static_cast<size_t>(i) * w, b + i * stride, w);
     if (sum > bound) return sum;
   }
   return sum;
+#endif
 }
 
 float patch_sq_ordered(const float* a, const Object& src, int s) {

@@ -26,16 +26,26 @@ struct Object {
   cv::Size size;
   cv::Mat values;                 // CV_32FC(channels); read only at object pixels
   std::vector<cv::Point> pixels;  // row -> pixel
-  cv::Mat row_of;                 // CV_32S pixel -> row (-1 off the object)
+  cv::Mat row_of;                 // CV_32S pixel -> row (-1 off the object), over bbox only (row_at)
   cv::Rect bbox;
   std::vector<float> flat;        // rows x channels, the centre values (contiguous)
   std::vector<int> slot;          // row -> index into rim, -1 = interior (read from values)
   std::vector<float> rim;         // stored patches of rim rows, dims floats each
+  // patch > 1: the values over bbox, copied densely (rows of box_stride floats,
+  // an odd number of cache lines so that a patch's rows do not share cache
+  // sets as the full image's 12 KB rows do); interior patches read from here
+  std::vector<float> box;
+  size_t box_stride = 0;
 
   int rows() const { return static_cast<int>(pixels.size()); }
+  // -1 off the object (and outside the image)
   int row_at(int x, int y) const {
-    if (x < 0 || y < 0 || x >= size.width || y >= size.height) return -1;
-    return row_of.at<int>(y, x);
+    x -= bbox.x;
+    y -= bbox.y;
+    if (static_cast<unsigned>(x) >= static_cast<unsigned>(bbox.width) ||
+        static_cast<unsigned>(y) >= static_cast<unsigned>(bbox.height))
+      return -1;
+    return reinterpret_cast<const int*>(row_of.data)[static_cast<size_t>(y) * bbox.width + x];
   }
   // First patch row of `row` and the stride between patch rows (in floats).
   const float* patch_ptr(int row, size_t& stride) const {
@@ -43,8 +53,9 @@ struct Object {
     if (s < 0) {
       const cv::Point p = pixels[row];
       const int r = patch / 2;
-      stride = values.step1();
-      return values.ptr<float>(p.y - r) + static_cast<size_t>(p.x - r) * channels;
+      stride = box_stride;
+      return box.data() + static_cast<size_t>(p.y - r - bbox.y) * box_stride +
+             static_cast<size_t>(p.x - r - bbox.x) * channels;
     }
     stride = static_cast<size_t>(patch) * channels;
     return rim.data() + static_cast<size_t>(s) * dims;
