@@ -231,4 +231,36 @@ float patch_sq_ordered(const float* a, const Object& src, int s) {
   return sum;
 }
 
+void patch_sq_ordered_pairs(const Object& a, const int* ra, const Object& b, const int* rb, int count, float* out) {
+  const float* pa[4];
+  const float* pb[4];
+  size_t sa[4], sb[4];
+  for (int k = 0; k < 4; ++k) {
+    const int at = k < count ? k : 0;  // unused lanes repeat the first pair
+    pa[k] = a.patch_ptr(ra[at], sa[k]);
+    pb[k] = b.patch_ptr(rb[at], sb[k]);
+  }
+  const int w = b.patch * b.channels;
+  float s0 = 0, s1 = 0, s2 = 0, s3 = 0;
+  for (int i = 0; i < b.patch; ++i) {
+    const float* a0 = pa[0] + i * sa[0];
+    const float* a1 = pa[1] + i * sa[1];
+    const float* a2 = pa[2] + i * sa[2];
+    const float* a3 = pa[3] + i * sa[3];
+    const float* b0 = pb[0] + i * sb[0];
+    const float* b1 = pb[1] + i * sb[1];
+    const float* b2 = pb[2] + i * sb[2];
+    const float* b3 = pb[3] + i * sb[3];
+    for (int j = 0; j < w; ++j) {
+      const float t0 = a0[j] - b0[j], t1 = a1[j] - b1[j], t2 = a2[j] - b2[j], t3 = a3[j] - b3[j];
+      s0 += t0 * t0;
+      s1 += t1 * t1;
+      s2 += t2 * t2;
+      s3 += t3 * t3;
+    }
+  }
+  const float s[4] = {s0, s1, s2, s3};
+  for (int k = 0; k < count; ++k) out[k] = s[k];
+}
+
 }  // namespace veneer::match::fast

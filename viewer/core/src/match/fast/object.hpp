@@ -106,5 +106,9 @@ float patch_sq(const float* a, const Object& src, int s, float bound);
 // The same sum in strict element order, bit-identical to features.hpp's
 // squared_distance() (for methods whose decisions chain, like region growing).
 float patch_sq_ordered(const float* a, const Object& src, int s);
+// patch_sq_ordered for `count` (<= 4) pairs at once, row ra[k] of `a` against
+// row rb[k] of `b`: each sum bit-identical to patch_sq_ordered's, the chains
+// interleaved so that their add latencies overlap.
+void patch_sq_ordered_pairs(const Object& a, const int* ra, const Object& b, const int* rb, int count, float* out);
 
 }  // namespace veneer::match::fast
