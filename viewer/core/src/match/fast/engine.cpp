@@ -4,8 +4,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 #include <deque>
 #include <limits>
 #include <mutex>
@@ -86,7 +84,6 @@ std::vector<int> row_starts(const Object& o) {
 // hash of (seed, iteration, pixel), so the map does not depend on threads.
 // uniformity u > 0 adds u * uses(s) / fair_share to the RMS distance, with
 // live use counts; that makes the scan sequential (one band).
-static long dbg_tries[8][16], dbg_wins[8][16], dbg_c[8];
 Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOptions& o, const Progress& p) {
   const int n = dst.rows(), ns = src.rows();
   std::vector<int> match(n);
@@ -132,7 +129,7 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
   // random-search candidates are turned down without touching their patch.
   std::vector<float> md, ms;
   int per_row = 0;
-  const bool use_lb = dst.patch > 1 && !getenv("PK_NOLB");
+  const bool use_lb = dst.patch > 1;
   if (use_lb) {
     patch_moments(dst, o.threads, md, per_row);
     patch_moments(src, o.threads, ms, per_row);
@@ -176,9 +173,6 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
           const float* qm = use_lb ? &md[static_cast<size_t>(d) * per_row] : nullptr;
           auto offer = [&](int x, int y) {
             const int s = src.row_at(x, y);
-            ++dbg_c[0];
-            if (s < 0) ++dbg_c[3];
-            if (s == match[d]) ++dbg_c[4];
             if (s < 0 || s == match[d]) return;  // off the source, or no change
             const float pen = penalty(s);
             const float room = best - pen;
@@ -191,9 +185,8 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
                 const float t = qm[j] - sm[j];
                 lb += t * t;
               }
-              if (lb * (1.0f - 1e-4f) > bound) { ++dbg_c[1]; return; }  // the patch distance would be larger still
+              if (lb * (1.0f - 1e-4f) > bound) return;  // the patch distance would be larger still
             }
-            ++dbg_c[2];
             const float v = patch_sq(buf.data(), src, s, bound);
             if (v > bound) return;
             const float t = std::sqrt(v / area) + pen;
@@ -211,9 +204,7 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
             offer(m.x - off.x, m.y - off.y);
           }
           uint64_t r = hash3(o.seed, static_cast<uint64_t>(it), static_cast<uint64_t>(d));
-          int lvl = 0;
-          for (int radius = max_radius; radius >= 1; radius /= 2, ++lvl) {
-            const int before = match[d];
+          for (int radius = max_radius; radius >= 1; radius /= 2) {
             const cv::Point c = src.pixels[match[d]];
             r = mix64(r);
             const int span = 2 * radius + 1;
@@ -221,20 +212,10 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
             const int ox = static_cast<int>(((r & 0xffffffffu) * static_cast<uint64_t>(span)) >> 32) - radius;
             const int oy = static_cast<int>(((r >> 32) * static_cast<uint64_t>(span)) >> 32) - radius;
             offer(c.x + ox, c.y + oy);
-            dbg_tries[it][lvl]++;
-            if (match[d] != before) dbg_wins[it][lvl]++;
           }
         }
       }
     });
-  }
-  if (getenv("PK_DBG")) {
-    fprintf(stderr, "offers %ld off %ld same %ld lbrej %ld exact %ld\n", dbg_c[0], dbg_c[3], dbg_c[4], dbg_c[1], dbg_c[2]);
-    for (int it = 0; it < o.iterations && it < 8; ++it) {
-      fprintf(stderr, "it %d:", it);
-      for (int l = 0; l < 12; ++l) fprintf(stderr, " %.4f", dbg_tries[it][l] ? 1.0 * dbg_wins[it][l] / dbg_tries[it][l] : 0.0);
-      fprintf(stderr, "\n");
-    }
   }
   Map map = new_map(dst.size);
   for (int d = 0; d < n; ++d) put(map, dst, src, d, match[d], sq[d]);
@@ -246,7 +227,6 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
 // matches come from the fast nearest search (parallel, exact when certified);
 // the growth is the same sequential breadth-first pass, with distances read
 // through the fast layout.
-static long rg_c[4];
 Expected<Map> run_regiongrow(const Object& dst, const Object& src, const MatchOptions& o, const Progress& p,
                              Stats* stats) {
   NearestLists nn;
@@ -347,7 +327,6 @@ Expected<Map> run_regiongrow(const Object& dst, const Object& src, const MatchOp
       }
     }
   }
-  if (getenv("PK_DBG")) fprintf(stderr, "rg n %d: %ld %ld %ld %ld\n", n, rg_c[0], rg_c[1], rg_c[2], rg_c[3]);
   Map map = new_map(dst.size);
   for (int d = 0; d < n; ++d) put(map, dst, src, d, match[d], sq[d]);
   return map;

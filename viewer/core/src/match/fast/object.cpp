@@ -180,6 +180,7 @@ float patch_sq(const float* a, const Object& src, int s, float bound) {
   size_t stride;
   const float* b = src.patch_ptr(s, stride);
   const int w = src.patch * src.channels;
+  if (src.patch == 1) return patch_sq_ordered(a, src, s);  // one pixel: the faithful sum, bit for bit
 #ifdef __AVX2__
   // 8 lanes per step, the row's tail through a masked load (lanes past the
   // row are neither read nor counted); the bound is checked every second row.

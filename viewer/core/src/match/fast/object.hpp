@@ -50,6 +50,10 @@ struct Object {
   // First patch row of `row` and the stride between patch rows (in floats).
   const float* patch_ptr(int row, size_t& stride) const {
     const int s = slot[row];
+    if (patch == 1) {  // the pixel's own values
+      stride = static_cast<size_t>(channels);
+      return flat.data() + static_cast<size_t>(row) * channels;
+    }
     if (s < 0) {
       const cv::Point p = pixels[row];
       const int r = patch / 2;
