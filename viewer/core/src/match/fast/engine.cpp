@@ -124,16 +124,6 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
       }
     });
   }
-  // Patch moments (nearest.hpp): their distance is a lower bound of the patch
-  // distance, read from one cache line where the patch spans a dozen, so most
-  // random-search candidates are turned down without touching their patch.
-  std::vector<float> md, ms;
-  int per_row = 0;
-  const bool use_lb = dst.patch > 1;
-  if (use_lb) {
-    patch_moments(dst, o.threads, md, per_row);
-    patch_moments(src, o.threads, ms, per_row);
-  }
   const std::vector<int> at = row_starts(dst);
   const int h = dst.size.height;
   // With uniformity the use counts must be live for every pixel: one band.
@@ -170,7 +160,6 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
           const cv::Point pt = dst.pixels[d];
           dst.gather(d, buf.data());
           float best = total(sq[d], match[d]);
-          const float* qm = use_lb ? &md[static_cast<size_t>(d) * per_row] : nullptr;
           auto offer = [&](int x, int y) {
             const int s = src.row_at(x, y);
             if (s < 0 || s == match[d]) return;  // off the source, or no change
@@ -178,15 +167,6 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
             const float room = best - pen;
             if (room <= 0) return;
             const float bound = room * room * area;
-            if (qm) {
-              const float* sm = &ms[static_cast<size_t>(s) * per_row];
-              float lb = 0;
-              for (int j = 0; j < per_row; ++j) {
-                const float t = qm[j] - sm[j];
-                lb += t * t;
-              }
-              if (lb * (1.0f - 1e-4f) > bound) return;  // the patch distance would be larger still
-            }
             const float v = patch_sq(buf.data(), src, s, bound);
             if (v > bound) return;
             const float t = std::sqrt(v / area) + pen;

@@ -183,7 +183,8 @@ float patch_sq(const float* a, const Object& src, int s, float bound) {
   if (src.patch == 1) return patch_sq_ordered(a, src, s);  // one pixel: the faithful sum, bit for bit
 #ifdef __AVX2__
   // 8 lanes per step, the row's tail through a masked load (lanes past the
-  // row are neither read nor counted); the bound is checked every second row.
+  // row are neither read nor counted); the bound is checked after rows 2 and 5
+  // (measured a little faster than after every row or every second one).
   const int full = w & ~7, tail = w - full;
   const __m256i tail_mask = _mm256_cmpgt_epi32(_mm256_set1_epi32(tail), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
   __m256 acc = _mm256_setzero_ps();
