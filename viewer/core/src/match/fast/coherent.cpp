@@ -254,6 +254,31 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
         }
     }
   }
+  // The chunks then grow into the pixels none took: sweeping forward (from
+  // the left and upper neighbours) and back (right, lower), a pixel continues
+  // the neighbour's chunk whose proposal errs least, if under the threshold.
+  if (u <= 0 && o.coherent_grow && !active.empty()) {
+    const float t2 = thr2;
+    for (int sweep = 0; sweep < 2; ++sweep) {
+      const int step = sweep == 0 ? 1 : -1;
+      const int na = static_cast<int>(active.size());
+      for (int i = 0; i < na; ++i) {
+        const int d = active[sweep == 0 ? i : na - 1 - i];
+        if (chosen[d] >= 0 && sweep == 0) continue;
+        const cv::Point pt = dst.pixels[d];
+        float best = chosen[d] >= 0 ? pixel_sq(d, chosen[d]) : t2;
+        for (const cv::Point off : {cv::Point(-step, 0), cv::Point(0, -step)}) {
+          const int nb = dst.row_at(pt.x + off.x, pt.y + off.y);
+          if (nb < 0 || chosen[nb] < 0) continue;
+          const cv::Point m = src.pixels[chosen[nb]];
+          const int row = src.row_at(m.x - off.x, m.y - off.y);
+          if (row < 0) continue;
+          const float v = pixel_sq(d, row);
+          if (v < best) best = v, chosen[d] = row;
+        }
+      }
+    }
+  }
   // Pixels no chunk took keep their nearest; with uniformity, the nearest of
   // their 16 by distance + reuse penalty (live counts, scan order).
   for (int d = 0; d < n; ++d) {
