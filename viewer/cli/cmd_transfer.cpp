@@ -13,7 +13,8 @@ namespace {
 struct TransferArgs {
   std::string dst, src, out, method = "flann", feature = "normals";
   int patch = 1, candidates = 10, iterations = 5, threads = 0;
-  double threshold = 0.05, scale = 1.0;
+  double threshold = 0.05, scale = 1.0, coherent_threshold = 0.10, uniformity = 0.0;
+  bool no_grow = false;
   unsigned seed = 1;
   bool faithful = false, truth_normals = false;
 };
@@ -35,6 +36,9 @@ int run(const TransferArgs& a) {
   options.match.candidates = a.candidates;
   options.match.threshold = a.threshold;
   options.match.iterations = a.iterations;
+  options.match.coherent_threshold = a.coherent_threshold;
+  options.match.uniformity = a.uniformity;
+  options.match.coherent_grow = !a.no_grow;
   options.match.seed = a.seed;
   options.match.threads = a.threads;
   options.match.fast = !a.faithful;
@@ -85,6 +89,12 @@ VENEER_COMMAND(transfer) {
   cmd->add_option("--candidates", args->candidates, "K for candidates, 1..100 (default 10)");
   cmd->add_option("--threshold", args->threshold, "regiongrow threshold >= 0 (default 0.05; 0 = direct matching)");
   cmd->add_option("--iterations", args->iterations, "patchmatch iterations (default 5)");
+  cmd->add_option("--coherent-threshold", args->coherent_threshold,
+                  "coherent: normal error |dn| a chunk may make, >= 0 (default 0.10, about 6 degrees; larger = "
+                  "larger chunks, more texture kept whole, less exact shading)");
+  cmd->add_option("--uniformity", args->uniformity,
+                  "coherent, patchmatch: penalty for reusing the same source pixel, >= 0 (default 0 = off)");
+  cmd->add_flag("--no-grow", args->no_grow, "coherent: do not grow chunks into the pixels no chunk took");
   cmd->add_option("--seed", args->seed, "random seed (patchmatch, coherent)");
   cmd->add_option("--threads", args->threads, "threads, 0 = all cores");
   cmd->add_option("--scale", args->scale, "resize both sets first, (0, 1] (default 1)");

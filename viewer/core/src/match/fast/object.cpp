@@ -2,6 +2,8 @@
 #include "object.hpp"
 
 #include <algorithm>
+#include <cstdint>
+#include <cstring>
 
 #ifdef __AVX2__
 #include <immintrin.h>
@@ -55,6 +57,7 @@ Expected<Object> make_object(const ObjectView& view, Feature feature, int patch,
   const int n = per_row[h];
   if (n == 0) return make_error("the mask is empty (no object pixels)");
   o.pixels.resize(n);
+  if (need_row_of) o.row_of.create(o.size, CV_32SC1);
   if (feature == Feature::intensities) o.values.create(o.size, CV_32FC(o.channels));
   const int c = o.channels;
   o.flat.resize(static_cast<size_t>(n) * c);
@@ -63,10 +66,23 @@ Expected<Object> make_object(const ObjectView& view, Feature feature, int patch,
     std::vector<float> grey(c);
     for (int y = b; y < e; ++y) {
       const uchar* m = view.mask.ptr<uchar>(y);
+      int* ro = need_row_of ? o.row_of.ptr<int>(y) : nullptr;
       int at = per_row[y];
+      if (ro) std::fill(ro, ro + w, -1);
+      if (per_row[y + 1] == at) continue;  // nothing on this row
       for (int x = 0; x < w; ++x) {
+        // background is most of a frame: skip it 8 mask bytes at a time
+        if (x + 8 <= w) {
+          uint64_t eight;
+          std::memcpy(&eight, m + x, 8);
+          if (!eight) {
+            x += 7;
+            continue;
+          }
+        }
         if (!m[x]) continue;
-        row_min[y] = std::min(row_min[y], x);
+        if (ro) ro[x] = at;
+        if (row_max[y] < 0) row_min[y] = x;
         row_max[y] = x;
         o.pixels[at] = cv::Point(x, y);
         float* f = o.flat.data() + static_cast<size_t>(at) * c;
@@ -97,16 +113,6 @@ Expected<Object> make_object(const ObjectView& view, Feature feature, int patch,
     x1 = std::max(x1, row_max[y]);
   }
   o.bbox = cv::Rect(x0, y0, x1 - x0 + 1, y1 - y0 + 1);
-  if (need_row_of) {  // dense over the bounding box (a few hundred KB, not the frame's MBs)
-    o.row_of.create(o.bbox.height, o.bbox.width, CV_32SC1);
-    parallel_rows(o.bbox.height, threads, 16, [&](int b, int e) {
-      for (int y = b; y < e; ++y) {
-        int* ro = o.row_of.ptr<int>(y);
-        std::fill(ro, ro + o.bbox.width, -1);
-        for (int i = per_row[o.bbox.y + y]; i < per_row[o.bbox.y + y + 1]; ++i) ro[o.pixels[i].x - o.bbox.x] = i;
-      }
-    });
-  }
 
   o.slot.assign(n, -1);
   if (patch == 1) return o;

@@ -26,7 +26,7 @@ struct Object {
   cv::Size size;
   cv::Mat values;                 // CV_32FC(channels); read only at object pixels
   std::vector<cv::Point> pixels;  // row -> pixel
-  cv::Mat row_of;                 // CV_32S pixel -> row (-1 off the object), over bbox only (row_at)
+  cv::Mat row_of;                 // CV_32S pixel -> row (-1 off the object)
   cv::Rect bbox;
   std::vector<float> flat;        // rows x channels, the centre values (contiguous)
   std::vector<int> slot;          // row -> index into rim, -1 = interior (read from values)
@@ -38,14 +38,9 @@ struct Object {
   size_t box_stride = 0;
 
   int rows() const { return static_cast<int>(pixels.size()); }
-  // -1 off the object (and outside the image)
   int row_at(int x, int y) const {
-    x -= bbox.x;
-    y -= bbox.y;
-    if (static_cast<unsigned>(x) >= static_cast<unsigned>(bbox.width) ||
-        static_cast<unsigned>(y) >= static_cast<unsigned>(bbox.height))
-      return -1;
-    return reinterpret_cast<const int*>(row_of.data)[static_cast<size_t>(y) * bbox.width + x];
+    if (x < 0 || y < 0 || x >= size.width || y >= size.height) return -1;
+    return row_of.at<int>(y, x);
   }
   // First patch row of `row` and the stride between patch rows (in floats).
   const float* patch_ptr(int row, size_t& stride) const {
