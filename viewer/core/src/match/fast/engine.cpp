@@ -130,6 +130,23 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
   }
   const std::vector<int> at = row_starts(dst);
   const int h = dst.size.height;
+  // The source's pixel -> row lookup, dense over its bounding box: random
+  // search reads it at random places, and the frame-wide row_of puts every
+  // image row 4 KB apart (a TLB entry each, the same cache sets).
+  const cv::Rect sb = src.bbox;
+  std::vector<int> src_rows(static_cast<size_t>(sb.area()), -1);
+  for (int i = 0; i < ns; ++i) {
+    const cv::Point q = src.pixels[i];
+    src_rows[static_cast<size_t>(q.y - sb.y) * sb.width + (q.x - sb.x)] = i;
+  }
+  auto src_row_at = [&](int x, int y) {
+    x -= sb.x;
+    y -= sb.y;
+    if (static_cast<unsigned>(x) >= static_cast<unsigned>(sb.width) ||
+        static_cast<unsigned>(y) >= static_cast<unsigned>(sb.height))
+      return -1;
+    return src_rows[static_cast<size_t>(y) * sb.width + x];
+  };
   // With uniformity the use counts must be live for every pixel: one band.
   const int band = u > 0 ? h + 1 : std::max(8, h / 16);
   // Windows halve from the source object's extent (larger ones only land off it).
@@ -146,7 +163,6 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
     const int shift = (it % 2) * (band / 2);
     const int bands = (h + shift + band - 1) / band;
     parallel_rows(bands, o.threads, 1, [&](int bb, int be) {
-      std::vector<float> buf(dst.dims);
       // this band's own changes to the use counts, applied live
       std::unordered_map<int, int> delta;
       auto penalty = [&](int s) {
@@ -162,16 +178,17 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
         for (int i = r0; i < r1; ++i) {
           const int d = forward ? i : r1 - 1 + r0 - i;
           const cv::Point pt = dst.pixels[d];
-          dst.gather(d, buf.data());
+          size_t a_stride;
+          const float* a = dst.patch_ptr(d, a_stride);  // read in place, not copied
           float best = total(sq[d], match[d]);
           auto offer = [&](int x, int y) {
-            const int s = src.row_at(x, y);
+            const int s = src_row_at(x, y);
             if (s < 0 || s == match[d]) return;  // off the source, or no change
             const float pen = penalty(s);
             const float room = best - pen;
             if (room <= 0) return;
             const float bound = room * room * area;
-            const float v = patch_sq(buf.data(), src, s, bound);
+            const float v = patch_sq_strided(a, a_stride, src, s, bound);
             if (v > bound) return;
             const float t = std::sqrt(v / area) + pen;
             if (t < best) {

@@ -183,6 +183,10 @@ inline float ssd(const float* a, const float* b, int len) {
 }  // namespace
 
 float patch_sq(const float* a, const Object& src, int s, float bound) {
+  return patch_sq_strided(a, static_cast<size_t>(src.patch) * src.channels, src, s, bound);
+}
+
+float patch_sq_strided(const float* a, size_t a_stride, const Object& src, int s, float bound) {
   size_t stride;
   const float* b = src.patch_ptr(s, stride);
   const int w = src.patch * src.channels;
@@ -200,7 +204,7 @@ float patch_sq(const float* a, const Object& src, int s, float bound) {
     return _mm_cvtss_f32(_mm_add_ss(h, _mm_shuffle_ps(h, h, 1)));
   };
   for (int i = 0; i < src.patch; ++i) {
-    const float* ar = a + static_cast<size_t>(i) * w;
+    const float* ar = a + i * a_stride;
     const float* br = b + i * stride;
     for (int j = 0; j < full; j += 8) {
       const __m256 t = _mm256_sub_ps(_mm256_loadu_ps(ar + j), _mm256_loadu_ps(br + j));
@@ -219,7 +223,7 @@ float patch_sq(const float* a, const Object& src, int s, float bound) {
 #else
   float sum = 0;
   for (int i = 0; i < src.patch; ++i) {
-    sum += ssd(a + static_cast<size_t>(i) * w, b + i * stride, w);
+    sum += ssd(a + i * a_stride, b + i * stride, w);
     if (sum > bound) return sum;
   }
   return sum;

@@ -102,6 +102,8 @@ Expected<Object> make_object(const ObjectView& view, Feature feature, int patch,
 // Squared distance of a contiguous patch `a` (dims floats) to `src` row `s`;
 // stops early and returns something > `bound` once the sum exceeds it.
 float patch_sq(const float* a, const Object& src, int s, float bound);
+// The same with `a`'s patch rows a_stride floats apart (a patch read in place).
+float patch_sq_strided(const float* a, size_t a_stride, const Object& src, int s, float bound);
 // The same sum in strict element order, bit-identical to features.hpp's
 // squared_distance() (for methods whose decisions chain, like region growing).
 float patch_sq_ordered(const float* a, const Object& src, int s);
