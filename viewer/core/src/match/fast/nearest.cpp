@@ -329,12 +329,14 @@ Status nearest_patch_normals(const Object& dst, const Object& src, int threads, 
     patch_moments(o, threads, m, per_row, true);
     const int rows = o.rows();
     std::vector<float> y(static_cast<size_t>(rows) * 3);
-    for (int i = 0; i < rows; ++i) {
-      const float* v = m.data() + static_cast<size_t>(i) * per_row;
-      const float len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-      for (int j = 0; j < 3; ++j) y[static_cast<size_t>(i) * 3 + j] = len > 1e-9f ? v[j] / len : 0.0f;
-      if (!(len > 1e-9f)) y[static_cast<size_t>(i) * 3 + 2] = 1.0f;
-    }
+    parallel_rows(rows, threads, 4096, [&](int b, int e) {
+      for (int i = b; i < e; ++i) {
+        const float* v = m.data() + static_cast<size_t>(i) * per_row;
+        const float len = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+        for (int j = 0; j < 3; ++j) y[static_cast<size_t>(i) * 3 + j] = len > 1e-9f ? v[j] / len : 0.0f;
+        if (!(len > 1e-9f)) y[static_cast<size_t>(i) * 3 + 2] = 1.0f;
+      }
+    });
     return y;
   };
   const std::vector<float> yd = directions(dst), ys = directions(src);
@@ -345,7 +347,6 @@ Status nearest_patch_normals(const Object& dst, const Object& src, int threads, 
   const bool walk = !src.row_of.empty() && !dst.row_of.empty();
   std::atomic<bool> stop{false};
   parallel_rows(blocks, threads, 1, [&](int bb, int be) {
-    std::vector<float> buf(static_cast<size_t>(dst.dims));
     std::vector<int> cid(kc);
     DirectionBuckets::Scratch scratch;
     for (int blk = bb; blk < be; ++blk) {
@@ -355,12 +356,13 @@ Status nearest_patch_normals(const Object& dst, const Object& src, int threads, 
       for (int d = r0; d < r1; ++d) {
         const cv::Point pt = dst.pixels[d];
         buckets.knn(&yd[static_cast<size_t>(d) * 3], kc, cid.data(), scratch);
-        dst.gather(d, buf.data());
+        size_t a_stride;
+        const float* a = dst.patch_ptr(d, a_stride);  // read in place
         int best = -1;
         float best_sq = std::numeric_limits<float>::infinity();
         auto offer = [&](int s) {
           if (s < 0 || s == best) return;
-          const float v = patch_sq(buf.data(), src, s, best_sq);
+          const float v = patch_sq_strided(a, a_stride, src, s, best_sq);
           if (v < best_sq || (v == best_sq && s < best)) best_sq = v, best = s;
         };
         if (walk) {
