@@ -33,6 +33,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <x86intrin.h>
 #include <limits>
 #include <chrono>
 #include <cstdio>
@@ -45,6 +46,9 @@ namespace {
 constexpr int kLeaf = 24;        // rows per tree leaf at most
 constexpr int kBlock = 1024;     // sorted queries per work block
 constexpr float kSlack = 1e-5f;  // relative margin on radii (float rounding)
+constexpr float kGuess = 1.15f;  // first radius of a query / the previous K-th distance (estimated)
+constexpr float kWaste = 1.5f;   // regather when the group is this much wider than a new one
+constexpr float kReach = 1.6f;   // radius of a group / the radius of the query that gathers it
 
 uint32_t spread10(uint32_t v) {
   v &= 0x3ffu;
@@ -90,6 +94,7 @@ struct Node {
 struct Tree {
   std::vector<float> xs, ys, zs;  // values in tree order
   std::vector<uint32_t> ids;      // tree order -> source row
+  std::vector<float> px, py;      // the source pixel of each, in tree order
   std::vector<uint32_t> codes;
   std::vector<Node> nodes;
 
@@ -152,10 +157,28 @@ inline float dist_of(uint64_t key) {
   return d;
 }
 
-// Appends the keys of every row within squared distance r2 of q to buf;
-// returns the number of distances computed.
-int ball(const Tree& t, const float* q, float r2, std::vector<uint64_t>& buf) {
+// The source rows within a ball around a centre, copied out of the tree
+// (SoA): the rows every query near the centre scans.
+struct Group {
+  float c[3] = {0, 0, 0};
+  float radius = -1;  // < 0: empty
+  std::vector<float> x, y, z, px, py;
+  std::vector<uint32_t> id;
+  int size = 0;
+  void reserve(size_t n) {
+    if (x.size() >= n) return;
+    for (auto* v : {&x, &y, &z, &px, &py}) v->resize(n);
+    id.resize(n);
+  }
+};
+
+// Fills g with every row within `radius` of q; returns the distances computed.
+int gather(const Tree& t, const float* q, float radius, Group& g) {
+  const float r2 = radius * radius * (1 + 4 * kSlack);
   const float box_r2 = r2 * (1 + 4 * kSlack);
+  g.c[0] = q[0], g.c[1] = q[1], g.c[2] = q[2];
+  g.radius = radius;
+  g.size = 0;
   int stack[128];
   int top = 0, tested = 0;
   stack[top++] = 0;
@@ -164,8 +187,8 @@ int ball(const Tree& t, const float* q, float r2, std::vector<uint64_t>& buf) {
     const Node& n = t.nodes[stack[--top]];
     float lb = 0;
     for (int a = 0; a < 3; ++a) {
-      const float g = std::max({0.0f, n.lo[a] - q[a], q[a] - n.hi[a]});
-      lb += g * g;
+      const float e = std::max({0.0f, n.lo[a] - q[a], q[a] - n.hi[a]});
+      lb += e * e;
     }
     if (lb > box_r2) continue;
     if (n.left >= 0) {
@@ -175,17 +198,98 @@ int ball(const Tree& t, const float* q, float r2, std::vector<uint64_t>& buf) {
     }
     const int cnt = n.end - n.begin;
     tested += cnt;
-    size_t at = buf.size();
-    buf.resize(at + cnt);
-    uint64_t* out = buf.data();
+    g.reserve(static_cast<size_t>(g.size + cnt) * 2);
+    int at = g.size;
     for (int i = n.begin; i < n.end; ++i) {
       const float d = sq3(t.xs[i], t.ys[i], t.zs[i], qx, qy, qz);
-      out[at] = key_of(d, t.ids[i]);
+      g.x[at] = t.xs[i], g.y[at] = t.ys[i], g.z[at] = t.zs[i];
+      g.px[at] = t.px[i], g.py[at] = t.py[i];
+      g.id[at] = t.ids[i];
       at += d <= r2;
     }
-    buf.resize(at);
+    g.size = at;
   }
   return tested;
+}
+
+// Per-thread scratch of one query.
+struct Scratch {
+  std::vector<float> d, im;      // per group row
+  std::vector<int64_t> keys;     // collected: (distance bits, id)
+  std::vector<float> ims;        // collected: image distance
+  void reserve(size_t n) {
+    if (d.size() >= n) return;
+    d.resize(n), im.resize(n), keys.resize(n), ims.resize(n);
+  }
+};
+
+// Collects the group's rows within squared distance r2 of q (keys and image
+// distances to `target`); returns how many.
+int scan(const Group& g, const float* q, float r2, cv::Point2f target, Scratch& s) {
+  const int n = g.size;
+  s.reserve(static_cast<size_t>(n));
+  float* d = s.d.data();
+  float* im = s.im.data();
+  const float qx = q[0], qy = q[1], qz = q[2];
+  const float* gx = g.x.data();
+  const float* gy = g.y.data();
+  const float* gz = g.z.data();
+  for (int j = 0; j < n; ++j) d[j] = sq3(gx[j], gy[j], gz[j], qx, qy, qz);
+  const float* px = g.px.data();
+  const float* py = g.py.data();
+  for (int j = 0; j < n; ++j) {
+    const float dx = px[j] - target.x, dy = py[j] - target.y;
+    im[j] = dx * dx + dy * dy;  // the faithful method's expression
+  }
+  int64_t* keys = s.keys.data();
+  float* ims = s.ims.data();
+  const uint32_t* ids = g.id.data();
+  int c = 0;
+  for (int j = 0; j < n; ++j) {
+    keys[c] = static_cast<int64_t>(key_of(d[j], ids[j]));
+    ims[c] = im[j];
+    c += d[j] <= r2;
+  }
+  return c;
+}
+
+// Among the kk smallest keys of the c collected, the index of the one with
+// the smallest (image distance, key). Walks the collected rows by image
+// distance and takes the first whose key ranks below kk (distance bits are
+// non-negative floats, so keys order as (distance, id)).
+int select(Scratch& s, int c, int kk) {
+  int64_t* keys = s.keys.data();
+  float* ims = s.ims.data();
+  if (c == kk) {
+    int best = 0;
+    for (int j = 1; j < c; ++j)
+      if (ims[j] < ims[best] || (ims[j] == ims[best] && keys[j] < keys[best])) best = j;
+    return best;
+  }
+  for (int round = 0; round < 12; ++round) {
+    int best = 0;
+    for (int j = 1; j < c; ++j)
+      if (ims[j] < ims[best] || (ims[j] == ims[best] && keys[j] < keys[best])) best = j;
+    const float v = ims[best];
+    if (v == std::numeric_limits<float>::infinity()) break;
+    const int64_t kb = keys[best];
+    int rank = 0;
+    for (int j = 0; j < c; ++j) rank += keys[j] < kb;
+    if (rank < kk) return best;
+    // every row at this image distance has a larger key: none is in the set
+    for (int j = 0; j < c; ++j)
+      if (ims[j] == v) ims[j] = std::numeric_limits<float>::infinity();
+  }
+  // many near rows outside the set: find the set's bound and scan it
+  std::vector<int64_t> sorted(keys, keys + c);
+  std::nth_element(sorted.begin(), sorted.begin() + (kk - 1), sorted.end());
+  const int64_t tau = sorted[kk - 1];
+  int best = -1;
+  for (int j = 0; j < c; ++j) {
+    if (keys[j] > tau) continue;
+    if (best < 0 || ims[j] < ims[best] || (ims[j] == ims[best] && keys[j] < keys[best])) best = j;
+  }
+  return best;
 }
 
 }  // namespace
@@ -240,11 +344,13 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
     });
     sort_by_code(order);
     t.xs.resize(n), t.ys.resize(n), t.zs.resize(n), t.ids.resize(n), t.codes.resize(n);
+    t.px.resize(n), t.py.resize(n);
     for (int i = 0; i < n; ++i) {
       const uint32_t id = static_cast<uint32_t>(order[i]);
       t.ids[i] = id;
       t.codes[i] = static_cast<uint32_t>(order[i] >> 32);
       t.xs[i] = sv[3 * id], t.ys[i] = sv[3 * id + 1], t.zs[i] = sv[3 * id + 2];
+      t.px[i] = static_cast<float>(src.pixels[id].x), t.py[i] = static_cast<float>(src.pixels[id].y);
     }
     t.nodes.reserve(4 * (n / kLeaf + 1));
     t.build(0, n);
@@ -265,63 +371,71 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
   const int blocks = (m + kBlock - 1) / kBlock;
   std::atomic<bool> stop{false};
   std::atomic<long long> computed{0};
+  std::atomic<long long> regathers{0};
   parallel_rows(blocks, threads, 1, [&](int bb, int be) {
-    std::vector<uint64_t> buf;
-    buf.reserve(4096);
-    long long local = 0;
+    Group g;
+    Scratch sc;
+    unsigned long long cyc_g = 0, cyc_s = 0, cyc_x = 0, gsize = 0;
+    long long local = 0, local_regathers = 0, local_retries = 0, local_collected = 0;
     for (int blk = bb; blk < be && !stop; ++blk) {
       if (progress.cancelled()) {
         stop = true;
         break;
       }
       const int qb = blk * kBlock, qe = std::min(m, qb + kBlock);
-      float prev_r = -1;  // previous query's K-th distance (not squared); < 0: none yet
-      const float* prev_q = nullptr;
+      g.radius = -1;  // each block starts afresh: results do not depend on the split
+      float r_est = r_first;
       for (int qi = qb; qi < qe; ++qi) {
         const int d = static_cast<int>(static_cast<uint32_t>(queries[qi]));
         const float* q = dv + 3 * d;
-        float r;
-        if (prev_r < 0) {
-          r = r_first;
-        } else {
-          const float dx = q[0] - prev_q[0], dy = q[1] - prev_q[1], dz = q[2] - prev_q[2];
-          const float delta = std::sqrt(dx * dx + dy * dy + dz * dz);
-          // a far jump: guess the local radius is alike and grow if not
-          r = prev_r + std::min(delta, std::max(prev_r, r_floor));
-          r = r * (1 + kSlack) + 1e-12f;
-        }
+        float r = std::max(r_est * kGuess, r_floor);
+        int c;
         for (;;) {
-          buf.clear();
-          local += ball(t, q, r * r, buf);
-          if (static_cast<int>(buf.size()) >= kk) break;
-          ++retries;
-          r = std::max(2 * r, r_floor);
-          if (!std::isfinite(r * r)) r = std::numeric_limits<float>::infinity();
+          // the group must hold the whole ball of radius r around q
+          float dqc = 0;
+          if (g.radius >= 0) {
+            const float dx = q[0] - g.c[0], dy = q[1] - g.c[1], dz = q[2] - g.c[2];
+            dqc = std::sqrt(dx * dx + dy * dy + dz * dz);
+          }
+          // regather when the ball is not inside the group, or the group is much wider than needed
+          if (g.radius < 0 || r * (1 + 8 * kSlack) > (g.radius - dqc) * (1 - 8 * kSlack) ||
+              g.radius > kWaste * kReach * r) {
+            ++local_regathers;
+            const auto c0 = __rdtsc();
+            local += gather(t, q, r * kReach, g);
+            cyc_g += __rdtsc() - c0;
+          }
+          local += g.size;
+          const auto c1 = __rdtsc();
+          c = scan(g, q, r * r, targets[d], sc);
+          cyc_s += __rdtsc() - c1;
+          gsize += g.size;
+          if (c >= kk) break;
+          ++local_retries;
+          const float grow = c > 0 ? std::sqrt(static_cast<float>(kk) / static_cast<float>(c)) * 1.1f : 2.0f;
+          r = std::max(r * std::clamp(grow, 1.25f, 4.0f), r_floor);
+          if (!std::isfinite(r * r * kReach * kReach)) r = std::numeric_limits<float>::infinity();
         }
-        collected += static_cast<long long>(buf.size());
-        std::nth_element(buf.begin(), buf.begin() + (kk - 1), buf.end());
-        // buf[0, kk) is the K set; choose by image distance, ties to the smaller key
-        const cv::Point2f target = targets[d];
-        float best = std::numeric_limits<float>::infinity();
-        uint64_t best_key = std::numeric_limits<uint64_t>::max();
-        for (int j = 0; j < kk; ++j) {
-          const uint64_t key = buf[j];
-          const cv::Point p = src.pixels[static_cast<uint32_t>(key)];
-          const float dx = p.x - target.x, dy = p.y - target.y;
-          const float image_d = dx * dx + dy * dy;
-          if (image_d < best || (image_d == best && key < best_key)) best = image_d, best_key = key;
-        }
-        chosen[d] = static_cast<int>(static_cast<uint32_t>(best_key));
-        chosen_sq[d] = dist_of(best_key);
-        prev_r = std::sqrt(dist_of(buf[kk - 1]));
-        prev_q = q;
+        local_collected += c;
+        const auto c2 = __rdtsc();
+        const int j = select(sc, c, kk);
+        cyc_x += __rdtsc() - c2;
+        const uint64_t key = static_cast<uint64_t>(sc.keys[j]);
+        chosen[d] = static_cast<int>(static_cast<uint32_t>(key));
+        chosen_sq[d] = dist_of(key);
+        // the K-th distance, estimated from the count (values on a surface: count ~ r^2)
+        r_est = r * std::sqrt(static_cast<float>(kk) / static_cast<float>(c));
       }
     }
     computed += local;
+    regathers += local_regathers;
+    if (prof) std::fprintf(stderr, "  thread: gather %.1f scan %.1f select %.1f Mcycles, group %.1f\n", cyc_g / 1e6, cyc_s / 1e6, cyc_x / 1e6, double(gsize) / (be - bb) / kBlock);
+    retries += local_retries;
+    collected += local_collected;
   });
   lap("queries");
-  if (prof) std::fprintf(stderr, "  n=%d m=%d tested/q=%.1f collected/q=%.1f retries=%lld nodes=%zu\n", n, m,
-                         double(computed.load()) / m, double(collected.load()) / m, retries.load(), t.nodes.size());
+  if (prof) std::fprintf(stderr, "  n=%d m=%d tested/q=%.1f collected/q=%.1f retries=%lld regathers=%lld nodes=%zu\n", n, m,
+                         double(computed.load()) / m, double(collected.load()) / m, retries.load(), regathers.load(), t.nodes.size());
   if (stop) return make_error("cancelled during candidate lists");
   if (tested) *tested = static_cast<double>(computed.load()) / m;
   return {};
