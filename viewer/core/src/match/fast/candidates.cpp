@@ -33,6 +33,10 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <ctime>
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
 #include <x86intrin.h>
 #include <limits>
 #include <chrono>
@@ -43,12 +47,12 @@ namespace veneer::match::fast {
 
 namespace {
 
-constexpr int kLeaf = 24;        // rows per tree leaf at most
+static int kLeaf = std::getenv("CL") ? std::atoi(std::getenv("CL")) : 24;        // rows per tree leaf at most
 constexpr int kBlock = 1024;     // sorted queries per work block
 constexpr float kSlack = 1e-5f;  // relative margin on radii (float rounding)
-constexpr float kGuess = 1.15f;  // first radius of a query / the previous K-th distance (estimated)
-constexpr float kWaste = 1.5f;   // regather when the group is this much wider than a new one
-constexpr float kReach = 1.6f;   // radius of a group / the radius of the query that gathers it
+static float kGuess = std::getenv("CG") ? std::atof(std::getenv("CG")) : 1.15f;  // first radius of a query / the previous K-th distance (estimated)
+static float kWaste = std::getenv("CW") ? std::atof(std::getenv("CW")) : 1.5f;   // regather when the group is this much wider than a new one
+static float kReach = std::getenv("CR") ? std::atof(std::getenv("CR")) : 1.6f;   // radius of a group / the radius of the query that gathers it
 
 uint32_t spread10(uint32_t v) {
   v &= 0x3ffu;
@@ -157,34 +161,30 @@ inline float dist_of(uint64_t key) {
   return d;
 }
 
-// The source rows within a ball around a centre, copied out of the tree
-// (SoA): the rows every query near the centre scans.
+// The tree leaves that meet a ball around a centre: the rows every query
+// near the centre scans.
 struct Group {
   float c[3] = {0, 0, 0};
-  float radius = -1;  // < 0: empty
-  std::vector<float> x, y, z, px, py;
-  std::vector<uint32_t> id;
-  int size = 0;
-  void reserve(size_t n) {
-    if (x.size() >= n) return;
-    for (auto* v : {&x, &y, &z, &px, &py}) v->resize(n);
-    id.resize(n);
-  }
+  float radius = -1;              // < 0: empty
+  std::vector<int> begin, end;    // leaf row ranges (tree order)
+  int rows = 0;
 };
 
-// Fills g with every row within `radius` of q; returns the distances computed.
+// Fills g with the leaves meeting the ball of `radius` around q; returns the
+// nodes visited.
 int gather(const Tree& t, const float* q, float radius, Group& g) {
-  const float r2 = radius * radius * (1 + 4 * kSlack);
-  const float box_r2 = r2 * (1 + 4 * kSlack);
+  const float box_r2 = radius * radius * (1 + 8 * kSlack);
   g.c[0] = q[0], g.c[1] = q[1], g.c[2] = q[2];
   g.radius = radius;
-  g.size = 0;
+  g.begin.clear();
+  g.end.clear();
+  g.rows = 0;
   int stack[128];
-  int top = 0, tested = 0;
+  int top = 0, visited = 0;
   stack[top++] = 0;
-  const float qx = q[0], qy = q[1], qz = q[2];
   while (top > 0) {
     const Node& n = t.nodes[stack[--top]];
+    ++visited;
     float lb = 0;
     for (int a = 0; a < 3; ++a) {
       const float e = std::max({0.0f, n.lo[a] - q[a], q[a] - n.hi[a]});
@@ -196,59 +196,99 @@ int gather(const Tree& t, const float* q, float radius, Group& g) {
       stack[top++] = n.left;
       continue;
     }
-    const int cnt = n.end - n.begin;
-    tested += cnt;
-    g.reserve(static_cast<size_t>(g.size + cnt) * 2);
-    int at = g.size;
-    for (int i = n.begin; i < n.end; ++i) {
-      const float d = sq3(t.xs[i], t.ys[i], t.zs[i], qx, qy, qz);
-      g.x[at] = t.xs[i], g.y[at] = t.ys[i], g.z[at] = t.zs[i];
-      g.px[at] = t.px[i], g.py[at] = t.py[i];
-      g.id[at] = t.ids[i];
-      at += d <= r2;
+    // adjacent leaves merge into one range
+    if (!g.end.empty() && g.end.back() == n.begin) {
+      g.end.back() = n.end;
+    } else {
+      g.begin.push_back(n.begin);
+      g.end.push_back(n.end);
     }
-    g.size = at;
+    g.rows += n.end - n.begin;
   }
-  return tested;
+  return visited;
 }
 
 // Per-thread scratch of one query.
 struct Scratch {
-  std::vector<float> d, im;      // per group row
-  std::vector<int64_t> keys;     // collected: (distance bits, id)
-  std::vector<float> ims;        // collected: image distance
+  std::vector<float> d;      // per scanned row: value distance
+  std::vector<int> at;       // per scanned row: tree index
+  std::vector<int> sel;      // collected: tree index
+  std::vector<float> seld;   // collected: value distance
+  std::vector<int64_t> keys; // collected: (distance bits, id)
+  std::vector<float> ims;    // collected: image distance
   void reserve(size_t n) {
+    n += 8;  // the packing stores whole vectors
     if (d.size() >= n) return;
-    d.resize(n), im.resize(n), keys.resize(n), ims.resize(n);
+    d.resize(n), at.resize(n), sel.resize(n), seld.resize(n), keys.resize(n), ims.resize(n);
   }
 };
 
+#if defined(__AVX2__)
+// Lane permutations that move the lanes set in an 8-bit mask to the front.
+struct PackTable {
+  alignas(32) int lanes[256][8];
+  PackTable() {
+    for (int m = 0; m < 256; ++m) {
+      int c = 0;
+      for (int j = 0; j < 8; ++j)
+        if (m & (1 << j)) lanes[m][c++] = j;
+      for (; c < 8; ++c) lanes[m][c] = 0;
+    }
+  }
+};
+const PackTable kPack;
+#endif
+
 // Collects the group's rows within squared distance r2 of q (keys and image
 // distances to `target`); returns how many.
-int scan(const Group& g, const float* q, float r2, cv::Point2f target, Scratch& s) {
-  const int n = g.size;
-  s.reserve(static_cast<size_t>(n));
+int scan(const Tree& t, const Group& g, const float* q, float r2, cv::Point2f target, Scratch& s) {
+  s.reserve(static_cast<size_t>(g.rows));
   float* d = s.d.data();
-  float* im = s.im.data();
+  int* at = s.at.data();
   const float qx = q[0], qy = q[1], qz = q[2];
-  const float* gx = g.x.data();
-  const float* gy = g.y.data();
-  const float* gz = g.z.data();
-  for (int j = 0; j < n; ++j) d[j] = sq3(gx[j], gy[j], gz[j], qx, qy, qz);
-  const float* px = g.px.data();
-  const float* py = g.py.data();
-  for (int j = 0; j < n; ++j) {
-    const float dx = px[j] - target.x, dy = py[j] - target.y;
-    im[j] = dx * dx + dy * dy;  // the faithful method's expression
+  const float* xs = t.xs.data();
+  const float* ys = t.ys.data();
+  const float* zs = t.zs.data();
+  int n = 0;
+  for (size_t r = 0; r < g.begin.size(); ++r) {
+    const int b = g.begin[r], e = g.end[r];
+    float* dd = d + n;
+    int* aa = at + n;
+    for (int i = b; i < e; ++i) dd[i - b] = sq3(xs[i], ys[i], zs[i], qx, qy, qz);
+    for (int i = b; i < e; ++i) aa[i - b] = i;
+    n += e - b;
+  }
+  int* sel = s.sel.data();
+  float* seld = s.seld.data();
+  int c = 0, j = 0;
+#if defined(__AVX2__)
+  const __m256 lim = _mm256_set1_ps(r2);
+  for (; j + 8 <= n; j += 8) {
+    const __m256 dv = _mm256_loadu_ps(d + j);
+    const int mask = _mm256_movemask_ps(_mm256_cmp_ps(dv, lim, _CMP_LE_OQ));
+    if (mask == 0) continue;
+    const __m256i perm = _mm256_load_si256(reinterpret_cast<const __m256i*>(kPack.lanes[mask]));
+    const __m256i av = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(at + j));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(sel + c), _mm256_permutevar8x32_epi32(av, perm));
+    _mm256_storeu_ps(seld + c, _mm256_permutevar8x32_ps(dv, perm));
+    c += __builtin_popcount(static_cast<unsigned>(mask));
+  }
+#endif
+  for (; j < n; ++j) {
+    sel[c] = at[j];
+    seld[c] = d[j];
+    c += d[j] <= r2;
   }
   int64_t* keys = s.keys.data();
   float* ims = s.ims.data();
-  const uint32_t* ids = g.id.data();
-  int c = 0;
-  for (int j = 0; j < n; ++j) {
-    keys[c] = static_cast<int64_t>(key_of(d[j], ids[j]));
-    ims[c] = im[j];
-    c += d[j] <= r2;
+  const uint32_t* ids = t.ids.data();
+  const float* px = t.px.data();
+  const float* py = t.py.data();
+  for (int k = 0; k < c; ++k) {
+    const int i = sel[k];
+    keys[k] = static_cast<int64_t>(key_of(seld[k], ids[i]));
+    const float dx = px[i] - target.x, dy = py[i] - target.y;
+    ims[k] = dx * dx + dy * dy;  // the faithful method's expression
   }
   return c;
 }
@@ -316,11 +356,19 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
   using PClock = std::chrono::steady_clock;
   const bool prof = std::getenv("VENEER_CAND_PROFILE") != nullptr;
   auto pt0 = PClock::now();
+  auto cpu_now = [] {
+    timespec ts;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return ts.tv_sec * 1e3 + ts.tv_nsec / 1e6;
+  };
+  double pc0 = cpu_now();
   auto lap = [&](const char* what) {
     if (!prof) return;
     const auto now = PClock::now();
-    std::fprintf(stderr, "  %s %.2f ms\n", what, std::chrono::duration<double, std::milli>(now - pt0).count());
+    const double c = cpu_now();
+    std::fprintf(stderr, "  %s %.2f ms wall %.2f ms cpu\n", what, std::chrono::duration<double, std::milli>(now - pt0).count(), c - pc0);
     pt0 = now;
+    pc0 = c;
   };
   std::atomic<long long> retries{0}, collected{0};
   // quantisation over the source's box
@@ -405,11 +453,11 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
             local += gather(t, q, r * kReach, g);
             cyc_g += __rdtsc() - c0;
           }
-          local += g.size;
+          local += g.rows;
           const auto c1 = __rdtsc();
-          c = scan(g, q, r * r, targets[d], sc);
+          c = scan(t, g, q, r * r, targets[d], sc);
           cyc_s += __rdtsc() - c1;
-          gsize += g.size;
+          gsize += g.rows;
           if (c >= kk) break;
           ++local_retries;
           const float grow = c > 0 ? std::sqrt(static_cast<float>(kk) / static_cast<float>(c)) * 1.1f : 2.0f;
