@@ -99,6 +99,7 @@ struct Tree {
   std::vector<float> xs, ys, zs;  // values in tree order
   std::vector<uint32_t> ids;      // tree order -> source row
   std::vector<float> px, py;      // the source pixel of each, in tree order
+  std::vector<int> at;            // 0, 1, 2, ...: tree indices, for packing
   std::vector<uint32_t> codes;
   std::vector<Node> nodes;
 
@@ -161,68 +162,6 @@ inline float dist_of(uint64_t key) {
   return d;
 }
 
-// The tree leaves that meet a ball around a centre: the rows every query
-// near the centre scans.
-struct Group {
-  float c[3] = {0, 0, 0};
-  float radius = -1;              // < 0: empty
-  std::vector<int> begin, end;    // leaf row ranges (tree order)
-  int rows = 0;
-};
-
-// Fills g with the leaves meeting the ball of `radius` around q; returns the
-// nodes visited.
-int gather(const Tree& t, const float* q, float radius, Group& g) {
-  const float box_r2 = radius * radius * (1 + 8 * kSlack);
-  g.c[0] = q[0], g.c[1] = q[1], g.c[2] = q[2];
-  g.radius = radius;
-  g.begin.clear();
-  g.end.clear();
-  g.rows = 0;
-  int stack[128];
-  int top = 0, visited = 0;
-  stack[top++] = 0;
-  while (top > 0) {
-    const Node& n = t.nodes[stack[--top]];
-    ++visited;
-    float lb = 0;
-    for (int a = 0; a < 3; ++a) {
-      const float e = std::max({0.0f, n.lo[a] - q[a], q[a] - n.hi[a]});
-      lb += e * e;
-    }
-    if (lb > box_r2) continue;
-    if (n.left >= 0) {
-      stack[top++] = n.right;
-      stack[top++] = n.left;
-      continue;
-    }
-    // adjacent leaves merge into one range
-    if (!g.end.empty() && g.end.back() == n.begin) {
-      g.end.back() = n.end;
-    } else {
-      g.begin.push_back(n.begin);
-      g.end.push_back(n.end);
-    }
-    g.rows += n.end - n.begin;
-  }
-  return visited;
-}
-
-// Per-thread scratch of one query.
-struct Scratch {
-  std::vector<float> d;      // per scanned row: value distance
-  std::vector<int> at;       // per scanned row: tree index
-  std::vector<int> sel;      // collected: tree index
-  std::vector<float> seld;   // collected: value distance
-  std::vector<int64_t> keys; // collected: (distance bits, id)
-  std::vector<float> ims;    // collected: image distance
-  void reserve(size_t n) {
-    n += 8;  // the packing stores whole vectors
-    if (d.size() >= n) return;
-    d.resize(n), at.resize(n), sel.resize(n), seld.resize(n), keys.resize(n), ims.resize(n);
-  }
-};
-
 #if defined(__AVX2__)
 // Lane permutations that move the lanes set in an 8-bit mask to the front.
 struct PackTable {
@@ -239,95 +178,169 @@ struct PackTable {
 const PackTable kPack;
 #endif
 
-// Collects the group's rows within squared distance r2 of q (keys and image
-// distances to `target`); returns how many.
-int scan(const Tree& t, const Group& g, const float* q, float r2, cv::Point2f target, Scratch& s) {
-  s.reserve(static_cast<size_t>(g.rows));
-  float* d = s.d.data();
-  int* at = s.at.data();
-  const float qx = q[0], qy = q[1], qz = q[2];
-  const float* xs = t.xs.data();
-  const float* ys = t.ys.data();
-  const float* zs = t.zs.data();
-  int n = 0;
-  for (size_t r = 0; r < g.begin.size(); ++r) {
-    const int b = g.begin[r], e = g.end[r];
-    float* dd = d + n;
-    int* aa = at + n;
-    for (int i = b; i < e; ++i) dd[i - b] = sq3(xs[i], ys[i], zs[i], qx, qy, qz);
-    for (int i = b; i < e; ++i) aa[i - b] = i;
-    n += e - b;
-  }
-  int* sel = s.sel.data();
-  float* seld = s.seld.data();
+// Packs the lanes of [0, n) with d[j] <= lim to the front of the outputs
+// (outputs have room for n + 8); returns how many. `f` arrays are float,
+// `i` arrays int; nf/ni of them.
+template <int NF, int NI>
+int pack(int n, const float* d, float lim, const float* const (&fin)[NF], float* const (&fout)[NF],
+         const int* const (&iin)[NI], int* const (&iout)[NI]) {
   int c = 0, j = 0;
 #if defined(__AVX2__)
-  const __m256 lim = _mm256_set1_ps(r2);
+  const __m256 limv = _mm256_set1_ps(lim);
   for (; j + 8 <= n; j += 8) {
-    const __m256 dv = _mm256_loadu_ps(d + j);
-    const int mask = _mm256_movemask_ps(_mm256_cmp_ps(dv, lim, _CMP_LE_OQ));
+    const int mask = _mm256_movemask_ps(_mm256_cmp_ps(_mm256_loadu_ps(d + j), limv, _CMP_LE_OQ));
     if (mask == 0) continue;
     const __m256i perm = _mm256_load_si256(reinterpret_cast<const __m256i*>(kPack.lanes[mask]));
-    const __m256i av = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(at + j));
-    _mm256_storeu_si256(reinterpret_cast<__m256i*>(sel + c), _mm256_permutevar8x32_epi32(av, perm));
-    _mm256_storeu_ps(seld + c, _mm256_permutevar8x32_ps(dv, perm));
+    for (int a = 0; a < NF; ++a)
+      _mm256_storeu_ps(fout[a] + c, _mm256_permutevar8x32_ps(_mm256_loadu_ps(fin[a] + j), perm));
+    for (int a = 0; a < NI; ++a)
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(iout[a] + c),
+                          _mm256_permutevar8x32_epi32(
+                              _mm256_loadu_si256(reinterpret_cast<const __m256i*>(iin[a] + j)), perm));
     c += __builtin_popcount(static_cast<unsigned>(mask));
   }
 #endif
   for (; j < n; ++j) {
-    sel[c] = at[j];
-    seld[c] = d[j];
-    c += d[j] <= r2;
-  }
-  int64_t* keys = s.keys.data();
-  float* ims = s.ims.data();
-  const uint32_t* ids = t.ids.data();
-  const float* px = t.px.data();
-  const float* py = t.py.data();
-  for (int k = 0; k < c; ++k) {
-    const int i = sel[k];
-    keys[k] = static_cast<int64_t>(key_of(seld[k], ids[i]));
-    const float dx = px[i] - target.x, dy = py[i] - target.y;
-    ims[k] = dx * dx + dy * dy;  // the faithful method's expression
+    for (int a = 0; a < NF; ++a) fout[a][c] = fin[a][j];
+    for (int a = 0; a < NI; ++a) iout[a][c] = iin[a][j];
+    c += d[j] <= lim;
   }
   return c;
 }
 
-// Among the kk smallest keys of the c collected, the index of the one with
-// the smallest (image distance, key). Walks the collected rows by image
-// distance and takes the first whose key ranks below kk (distance bits are
-// non-negative floats, so keys order as (distance, id)).
-int select(Scratch& s, int c, int kk) {
-  int64_t* keys = s.keys.data();
-  float* ims = s.ims.data();
-  if (c == kk) {
-    int best = 0;
-    for (int j = 1; j < c; ++j)
-      if (ims[j] < ims[best] || (ims[j] == ims[best] && keys[j] < keys[best])) best = j;
-    return best;
+// The source rows within a ball around a centre, copied out of the tree
+// (SoA): the rows every query near the centre scans.
+struct Group {
+  float c[3] = {0, 0, 0};
+  float radius = -1;  // < 0: empty
+  std::vector<float> x, y, z, px, py, d;
+  std::vector<int> at;  // tree index
+  std::vector<int> iota;
+  int size = 0;
+  void reserve(size_t n) {
+    n += 8;
+    if (x.size() >= n) return;
+    n *= 2;
+    for (auto* v : {&x, &y, &z, &px, &py, &d}) v->resize(n);
+    at.resize(n);
   }
-  for (int round = 0; round < 12; ++round) {
-    int best = 0;
-    for (int j = 1; j < c; ++j)
-      if (ims[j] < ims[best] || (ims[j] == ims[best] && keys[j] < keys[best])) best = j;
-    const float v = ims[best];
-    if (v == std::numeric_limits<float>::infinity()) break;
-    const int64_t kb = keys[best];
-    int rank = 0;
-    for (int j = 0; j < c; ++j) rank += keys[j] < kb;
-    if (rank < kk) return best;
-    // every row at this image distance has a larger key: none is in the set
+};
+
+// Fills g with every row within `radius` of q; returns the rows tested.
+int gather(const Tree& t, const float* q, float radius, Group& g) {
+  const float r2 = radius * radius * (1 + 8 * kSlack);
+  const float box_r2 = r2 * (1 + 8 * kSlack);
+  g.c[0] = q[0], g.c[1] = q[1], g.c[2] = q[2];
+  g.radius = radius;
+  g.size = 0;
+  int stack[128];
+  int top = 0, tested = 0;
+  stack[top++] = 0;
+  const float qx = q[0], qy = q[1], qz = q[2];
+  while (top > 0) {
+    const Node& n = t.nodes[stack[--top]];
+    float lb = 0;
+    for (int a = 0; a < 3; ++a) {
+      const float e = std::max({0.0f, n.lo[a] - q[a], q[a] - n.hi[a]});
+      lb += e * e;
+    }
+    if (lb > box_r2) continue;
+    if (n.left >= 0) {
+      stack[top++] = n.right;
+      stack[top++] = n.left;
+      continue;
+    }
+    const int b = n.begin, cnt = n.end - n.begin;
+    tested += cnt;
+    g.reserve(static_cast<size_t>(g.size + cnt));
+    float* d = g.d.data() + g.size;  // scratch past the packed rows
+    for (int i = 0; i < cnt; ++i) d[i] = sq3(t.xs[b + i], t.ys[b + i], t.zs[b + i], qx, qy, qz);
+    const int s = g.size;
+    g.size += pack<5, 1>(cnt, d, r2, {t.xs.data() + b, t.ys.data() + b, t.zs.data() + b, t.px.data() + b, t.py.data() + b},
+                         {g.x.data() + s, g.y.data() + s, g.z.data() + s, g.px.data() + s, g.py.data() + s},
+                         {t.at.data() + b}, {g.at.data() + s});
+  }
+  return tested;
+}
+
+// Per-thread scratch of one query.
+struct Scratch {
+  std::vector<float> d, im;  // per group row
+  std::vector<float> sd, sim;  // collected: value and image distance
+  std::vector<int> sat;        // collected: tree index
+  void reserve(size_t n) {
+    n += 8;
+    if (d.size() >= n) return;
+    n *= 2;
+    for (auto* v : {&d, &im, &sd, &sim}) v->resize(n);
+    sat.resize(n);
+  }
+};
+
+// Collects the group's rows within squared distance r2 of q (value and image
+// distances to `target`, tree indices); returns how many.
+int scan(const Group& g, const float* q, float r2, cv::Point2f target, Scratch& s) {
+  const int n = g.size;
+  s.reserve(static_cast<size_t>(n));
+  float* d = s.d.data();
+  float* im = s.im.data();
+  const float qx = q[0], qy = q[1], qz = q[2];
+  const float* gx = g.x.data();
+  const float* gy = g.y.data();
+  const float* gz = g.z.data();
+  for (int j = 0; j < n; ++j) d[j] = sq3(gx[j], gy[j], gz[j], qx, qy, qz);
+  const float* px = g.px.data();
+  const float* py = g.py.data();
+  const float tx = target.x, ty = target.y;
+  for (int j = 0; j < n; ++j) {
+    const float dx = px[j] - tx, dy = py[j] - ty;
+    im[j] = dx * dx + dy * dy;  // the faithful method's expression
+  }
+  return pack<2, 1>(n, d, r2, {d, im}, {s.sd.data(), s.sim.data()}, {g.at.data()}, {s.sat.data()});
+}
+
+// Among the kk nearest (distance, id) of the c collected, the index of the one
+// with the smallest (image distance, distance, id). Walks the collected rows
+// by image distance and takes the first whose (distance, id) ranks below kk.
+int select(const Tree& t, Scratch& s, int c, int kk) {
+  float* sd = s.sd.data();
+  float* sim = s.sim.data();
+  const int* sat = s.sat.data();
+  constexpr float inf = std::numeric_limits<float>::infinity();
+  auto before = [&](int a, int b) {  // (distance, id) order
+    return sd[a] < sd[b] || (sd[a] == sd[b] && t.ids[sat[a]] < t.ids[sat[b]]);
+  };
+  for (int round = 0; round < 16; ++round) {
+    float v = inf;
+    for (int j = 0; j < c; ++j) v = std::min(v, sim[j]);
+    if (v == inf) break;
+    int best = -1;
     for (int j = 0; j < c; ++j)
-      if (ims[j] == v) ims[j] = std::numeric_limits<float>::infinity();
+      if (sim[j] == v && (best < 0 || before(j, best))) best = j;
+    if (c == kk) return best;
+    // rank of best in (distance, id) order
+    const float db = sd[best];
+    int rank = 0, ties = 0;
+    for (int j = 0; j < c; ++j) rank += sd[j] < db, ties += sd[j] == db;
+    if (ties > 1) {
+      const uint32_t ib = t.ids[sat[best]];
+      for (int j = 0; j < c; ++j) rank += sd[j] == db && t.ids[sat[j]] < ib;
+    }
+    if (rank < kk) return best;
+    // every other row at this image distance comes later: none is in the set
+    for (int j = 0; j < c; ++j)
+      if (sim[j] == v) sim[j] = inf;
   }
   // many near rows outside the set: find the set's bound and scan it
-  std::vector<int64_t> sorted(keys, keys + c);
-  std::nth_element(sorted.begin(), sorted.begin() + (kk - 1), sorted.end());
-  const int64_t tau = sorted[kk - 1];
+  std::vector<int> order(c);
+  for (int j = 0; j < c; ++j) order[j] = j;
+  std::nth_element(order.begin(), order.begin() + (kk - 1), order.end(), before);
+  const int tau = order[kk - 1];
   int best = -1;
   for (int j = 0; j < c; ++j) {
-    if (keys[j] > tau) continue;
-    if (best < 0 || ims[j] < ims[best] || (ims[j] == ims[best] && keys[j] < keys[best])) best = j;
+    if (before(tau, j)) continue;
+    if (sim[j] == inf) continue;  // taken out above: not in the set
+    if (best < 0 || sim[j] < sim[best] || (sim[j] == sim[best] && before(j, best))) best = j;
   }
   return best;
 }
@@ -392,13 +405,14 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
     });
     sort_by_code(order);
     t.xs.resize(n), t.ys.resize(n), t.zs.resize(n), t.ids.resize(n), t.codes.resize(n);
-    t.px.resize(n), t.py.resize(n);
+    t.px.resize(n), t.py.resize(n), t.at.resize(n);
     for (int i = 0; i < n; ++i) {
       const uint32_t id = static_cast<uint32_t>(order[i]);
       t.ids[i] = id;
       t.codes[i] = static_cast<uint32_t>(order[i] >> 32);
       t.xs[i] = sv[3 * id], t.ys[i] = sv[3 * id + 1], t.zs[i] = sv[3 * id + 2];
       t.px[i] = static_cast<float>(src.pixels[id].x), t.py[i] = static_cast<float>(src.pixels[id].y);
+      t.at[i] = i;
     }
     t.nodes.reserve(4 * (n / kLeaf + 1));
     t.build(0, n);
@@ -453,11 +467,11 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
             local += gather(t, q, r * kReach, g);
             cyc_g += __rdtsc() - c0;
           }
-          local += g.rows;
+          local += g.size;
           const auto c1 = __rdtsc();
-          c = scan(t, g, q, r * r, targets[d], sc);
+          c = scan(g, q, r * r, targets[d], sc);
           cyc_s += __rdtsc() - c1;
-          gsize += g.rows;
+          gsize += g.size;
           if (c >= kk) break;
           ++local_retries;
           const float grow = c > 0 ? std::sqrt(static_cast<float>(kk) / static_cast<float>(c)) * 1.1f : 2.0f;
@@ -466,11 +480,10 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
         }
         local_collected += c;
         const auto c2 = __rdtsc();
-        const int j = select(sc, c, kk);
+        const int j = select(t, sc, c, kk);
         cyc_x += __rdtsc() - c2;
-        const uint64_t key = static_cast<uint64_t>(sc.keys[j]);
-        chosen[d] = static_cast<int>(static_cast<uint32_t>(key));
-        chosen_sq[d] = dist_of(key);
+        chosen[d] = static_cast<int>(t.ids[sc.sat[j]]);
+        chosen_sq[d] = sc.sd[j];
         // the K-th distance, estimated from the count (values on a surface: count ~ r^2)
         r_est = r * std::sqrt(static_cast<float>(kk) / static_cast<float>(c));
       }
