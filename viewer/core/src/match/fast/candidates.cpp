@@ -17,7 +17,7 @@
 // their values, so delta is small and a query collects little more than K.
 //
 // The tree: source rows sorted by the Morton code of their quantised values
-// (10 bits per axis), split where the code's highest differing bit flips (an
+// (8 bits per axis), split where the code's highest differing bit flips (an
 // octree in binary form), leaves of at most kLeaf rows, values stored SoA in
 // tree order with tight boxes per node. Distances are computed in the order of
 // features.hpp's squared_distance(), so they are bit-identical to the faithful
@@ -49,42 +49,43 @@ namespace {
 
 static int kLeaf = std::getenv("CL") ? std::atoi(std::getenv("CL")) : 24;        // rows per tree leaf at most
 constexpr int kBlock = 1024;     // sorted queries per work block
+static int kAhead = std::getenv("CA") ? std::atoi(std::getenv("CA")) : 64;  // queries looked ahead for a group
 constexpr float kSlack = 1e-5f;  // relative margin on radii (float rounding)
 static float kGuess = std::getenv("CG") ? std::atof(std::getenv("CG")) : 1.15f;  // first radius of a query / the previous K-th distance (estimated)
 static float kWaste = std::getenv("CW") ? std::atof(std::getenv("CW")) : 1.5f;   // regather when the group is this much wider than a new one
 static float kReach = std::getenv("CR") ? std::atof(std::getenv("CR")) : 1.6f;   // radius of a group / the radius of the query that gathers it
 
-uint32_t spread10(uint32_t v) {
-  v &= 0x3ffu;
-  v = (v | (v << 16)) & 0x030000ffu;
-  v = (v | (v << 8)) & 0x0300f00fu;
-  v = (v | (v << 4)) & 0x030c30c3u;
-  v = (v | (v << 2)) & 0x09249249u;
+uint32_t spread8(uint32_t v) {
+  v &= 0xffu;
+  v = (v | (v << 8)) & 0x0000f00fu;
+  v = (v | (v << 4)) & 0x000c30c3u;
+  v = (v | (v << 2)) & 0x00249249u;
   return v;
 }
 
-// Quantises 3-D values onto a 1024^3 lattice over the source's box (values
+// Quantises 3-D values onto a 256^3 lattice over the source's box (values
 // outside are clamped: the code only orders work, it never decides results).
 struct Morton {
   float lo[3] = {0, 0, 0}, scale[3] = {0, 0, 0};
   uint32_t operator()(const float* p) const {
     uint32_t c = 0;
     for (int a = 0; a < 3; ++a) {
-      const float t = std::clamp((p[a] - lo[a]) * scale[a], 0.0f, 1023.0f);
-      c |= spread10(static_cast<uint32_t>(t)) << a;
+      const float t = std::clamp((p[a] - lo[a]) * scale[a], 0.0f, 255.0f);
+      c |= spread8(static_cast<uint32_t>(t)) << a;
     }
     return c;
   }
 };
 
-// Stable LSD radix sort of (code << 32 | index) pairs by their 30-bit code.
+// Stable LSD radix sort of (code << 32 | index) pairs by their 24-bit code.
 void sort_by_code(std::vector<uint64_t>& a) {
   std::vector<uint64_t> tmp(a.size());
-  for (int shift = 32; shift < 62; shift += 10) {
-    uint32_t count[1025] = {};
-    for (uint64_t v : a) ++count[((v >> shift) & 1023u) + 1];
-    for (int i = 0; i < 1024; ++i) count[i + 1] += count[i];
-    for (uint64_t v : a) tmp[count[(v >> shift) & 1023u]++] = v;
+  std::vector<uint32_t> count(4097);
+  for (int shift = 32; shift < 56; shift += 12) {
+    std::fill(count.begin(), count.end(), 0u);
+    for (uint64_t v : a) ++count[((v >> shift) & 4095u) + 1];
+    for (int i = 0; i < 4096; ++i) count[i + 1] += count[i];
+    for (uint64_t v : a) tmp[count[(v >> shift) & 4095u]++] = v;
     a.swap(tmp);
   }
 }
@@ -226,8 +227,9 @@ struct Group {
   }
 };
 
+thread_local long long g_nodes = 0, g_leaves = 0;
 // Fills g with every row within `radius` of q; returns the rows tested.
-int gather(const Tree& t, const float* q, float radius, Group& g) {
+__attribute__((noinline)) int gather(const Tree& t, const float* q, float radius, Group& g) {
   const float r2 = radius * radius * (1 + 8 * kSlack);
   const float box_r2 = r2 * (1 + 8 * kSlack);
   g.c[0] = q[0], g.c[1] = q[1], g.c[2] = q[2];
@@ -239,6 +241,7 @@ int gather(const Tree& t, const float* q, float radius, Group& g) {
   const float qx = q[0], qy = q[1], qz = q[2];
   while (top > 0) {
     const Node& n = t.nodes[stack[--top]];
+    ++g_nodes;
     float lb = 0;
     for (int a = 0; a < 3; ++a) {
       const float e = std::max({0.0f, n.lo[a] - q[a], q[a] - n.hi[a]});
@@ -250,6 +253,7 @@ int gather(const Tree& t, const float* q, float radius, Group& g) {
       stack[top++] = n.left;
       continue;
     }
+    ++g_leaves;
     const int b = n.begin, cnt = n.end - n.begin;
     tested += cnt;
     g.reserve(static_cast<size_t>(g.size + cnt));
@@ -279,7 +283,7 @@ struct Scratch {
 
 // Collects the group's rows within squared distance r2 of q (value and image
 // distances to `target`, tree indices); returns how many.
-int scan(const Group& g, const float* q, float r2, cv::Point2f target, Scratch& s) {
+__attribute__((noinline)) int scan(const Group& g, const float* q, float r2, cv::Point2f target, Scratch& s) {
   const int n = g.size;
   s.reserve(static_cast<size_t>(n));
   float* d = s.d.data();
@@ -302,26 +306,64 @@ int scan(const Group& g, const float* q, float r2, cv::Point2f target, Scratch& 
 // Among the kk nearest (distance, id) of the c collected, the index of the one
 // with the smallest (image distance, distance, id). Walks the collected rows
 // by image distance and takes the first whose (distance, id) ranks below kk.
-int select(const Tree& t, Scratch& s, int c, int kk) {
+// The collected arrays have room for 8 more entries (padding is written).
+__attribute__((noinline)) int select(const Tree& t, Scratch& s, int c, int kk) {
   float* sd = s.sd.data();
   float* sim = s.sim.data();
   const int* sat = s.sat.data();
   constexpr float inf = std::numeric_limits<float>::infinity();
+  for (int j = c; j < c + 8; ++j) sd[j] = inf, sim[j] = inf;
   auto before = [&](int a, int b) {  // (distance, id) order
     return sd[a] < sd[b] || (sd[a] == sd[b] && t.ids[sat[a]] < t.ids[sat[b]]);
   };
+  const int blocks = (c + 7) / 8;
   for (int round = 0; round < 16; ++round) {
     float v = inf;
+#if defined(__AVX2__)
+    {
+      __m256 mv = _mm256_set1_ps(inf);
+      for (int b = 0; b < blocks; ++b) mv = _mm256_min_ps(mv, _mm256_loadu_ps(sim + 8 * b));
+      alignas(32) float lanes[8];
+      _mm256_store_ps(lanes, mv);
+      for (float x : lanes) v = std::min(v, x);
+    }
+#else
     for (int j = 0; j < c; ++j) v = std::min(v, sim[j]);
+#endif
     if (v == inf) break;
     int best = -1;
+#if defined(__AVX2__)
+    {
+      const __m256 vv = _mm256_set1_ps(v);
+      for (int b = 0; b < blocks; ++b) {
+        unsigned mask = static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(_mm256_loadu_ps(sim + 8 * b), vv, _CMP_EQ_OQ)));
+        while (mask) {
+          const int j = 8 * b + std::countr_zero(mask);
+          mask &= mask - 1;
+          if (best < 0 || before(j, best)) best = j;
+        }
+      }
+    }
+#else
     for (int j = 0; j < c; ++j)
       if (sim[j] == v && (best < 0 || before(j, best))) best = j;
+#endif
     if (c == kk) return best;
     // rank of best in (distance, id) order
     const float db = sd[best];
     int rank = 0, ties = 0;
+#if defined(__AVX2__)
+    {
+      const __m256 dbv = _mm256_set1_ps(db);
+      for (int b = 0; b < blocks; ++b) {
+        const __m256 x = _mm256_loadu_ps(sd + 8 * b);
+        rank += std::popcount(static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(x, dbv, _CMP_LT_OQ))));
+        ties += std::popcount(static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(x, dbv, _CMP_EQ_OQ))));
+      }
+    }
+#else
     for (int j = 0; j < c; ++j) rank += sd[j] < db, ties += sd[j] == db;
+#endif
     if (ties > 1) {
       const uint32_t ib = t.ids[sat[best]];
       for (int j = 0; j < c; ++j) rank += sd[j] == db && t.ids[sat[j]] < ib;
@@ -393,27 +435,33 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
   float extent = 0;
   for (int a = 0; a < 3; ++a) {
     code.lo[a] = lo[a];
-    code.scale[a] = hi[a] > lo[a] ? 1023.0f / (hi[a] - lo[a]) : 0.0f;
+    code.scale[a] = hi[a] > lo[a] ? 255.0f / (hi[a] - lo[a]) : 0.0f;
     extent = std::max(extent, hi[a] - lo[a]);
   }
 
+  lap("box");
   Tree t;
   {
     std::vector<uint64_t> order(n);
     parallel_rows(n, threads, 8192, [&](int b, int e) {
       for (int i = b; i < e; ++i) order[i] = (static_cast<uint64_t>(code(sv + 3 * i)) << 32) | static_cast<uint32_t>(i);
     });
+    lap(" codes");
     sort_by_code(order);
+    lap(" sort");
     t.xs.resize(n), t.ys.resize(n), t.zs.resize(n), t.ids.resize(n), t.codes.resize(n);
     t.px.resize(n), t.py.resize(n), t.at.resize(n);
-    for (int i = 0; i < n; ++i) {
-      const uint32_t id = static_cast<uint32_t>(order[i]);
-      t.ids[i] = id;
-      t.codes[i] = static_cast<uint32_t>(order[i] >> 32);
-      t.xs[i] = sv[3 * id], t.ys[i] = sv[3 * id + 1], t.zs[i] = sv[3 * id + 2];
-      t.px[i] = static_cast<float>(src.pixels[id].x), t.py[i] = static_cast<float>(src.pixels[id].y);
-      t.at[i] = i;
-    }
+    parallel_rows(n, threads, 8192, [&](int b, int e) {
+      for (int i = b; i < e; ++i) {
+        const uint32_t id = static_cast<uint32_t>(order[i]);
+        t.ids[i] = id;
+        t.codes[i] = static_cast<uint32_t>(order[i] >> 32);
+        t.xs[i] = sv[3 * id], t.ys[i] = sv[3 * id + 1], t.zs[i] = sv[3 * id + 2];
+        t.px[i] = static_cast<float>(src.pixels[id].x), t.py[i] = static_cast<float>(src.pixels[id].y);
+        t.at[i] = i;
+      }
+    });
+    lap(" fill");
     t.nodes.reserve(4 * (n / kLeaf + 1));
     t.build(0, n);
   }
@@ -437,6 +485,7 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
   parallel_rows(blocks, threads, 1, [&](int bb, int be) {
     Group g;
     Scratch sc;
+    std::vector<char> done;
     unsigned long long cyc_g = 0, cyc_s = 0, cyc_x = 0, gsize = 0;
     long long local = 0, local_regathers = 0, local_retries = 0, local_collected = 0;
     for (int blk = bb; blk < be && !stop; ++blk) {
@@ -447,7 +496,10 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
       const int qb = blk * kBlock, qe = std::min(m, qb + kBlock);
       g.radius = -1;  // each block starts afresh: results do not depend on the split
       float r_est = r_first;
-      for (int qi = qb; qi < qe; ++qi) {
+      done.assign(static_cast<size_t>(qe - qb), 0);
+      // one query: returns whether it gathered a new group
+      auto run = [&](int qi) {
+        bool regathered = false;
         const int d = static_cast<int>(static_cast<uint32_t>(queries[qi]));
         const float* q = dv + 3 * d;
         float r = std::max(r_est * kGuess, r_floor);
@@ -463,6 +515,7 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
           if (g.radius < 0 || r * (1 + 8 * kSlack) > (g.radius - dqc) * (1 - 8 * kSlack) ||
               g.radius > kWaste * kReach * r) {
             ++local_regathers;
+            regathered = true;
             const auto c0 = __rdtsc();
             local += gather(t, q, r * kReach, g);
             cyc_g += __rdtsc() - c0;
@@ -486,10 +539,27 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
         chosen_sq[d] = sc.sd[j];
         // the K-th distance, estimated from the count (values on a surface: count ~ r^2)
         r_est = r * std::sqrt(static_cast<float>(kk) / static_cast<float>(c));
+        done[qi - qb] = 1;
+        return regathered;
+      };
+      for (int qi = qb; qi < qe; ++qi) {
+        if (done[qi - qb]) continue;
+        if (!run(qi)) continue;
+        // a new group: serve the queries a little ahead that fall well inside it
+        const int ahead = std::min(qe, qi + kAhead);
+        for (int qj = qi + 1; qj < ahead; ++qj) {
+          if (done[qj - qb]) continue;
+          const float* q = dv + 3 * static_cast<uint32_t>(queries[qj]);
+          const float dx = q[0] - g.c[0], dy = q[1] - g.c[1], dz = q[2] - g.c[2];
+          const float need = std::max(r_est * kGuess, r_floor) * (1 + 8 * kSlack);
+          if (need + std::sqrt(dx * dx + dy * dy + dz * dz) < g.radius * (1 - 8 * kSlack)) run(qj);
+        }
       }
     }
     computed += local;
     regathers += local_regathers;
+    if (prof) std::fprintf(stderr, "  nodes/gather %.1f leaves/gather %.1f size %.1f\n", double(g_nodes) / local_regathers, double(g_leaves) / local_regathers, double(gsize)/ (be-bb) / kBlock);
+    g_nodes = g_leaves = 0;
     if (prof) std::fprintf(stderr, "  thread: gather %.1f scan %.1f select %.1f Mcycles, group %.1f\n", cyc_g / 1e6, cyc_s / 1e6, cyc_x / 1e6, double(gsize) / (be - bb) / kBlock);
     retries += local_retries;
     collected += local_collected;
