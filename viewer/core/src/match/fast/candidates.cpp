@@ -440,15 +440,15 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
   }
 
   lap("box");
+  // the tree over the source and the queries in Morton order, side by side
   Tree t;
-  {
+  std::vector<uint64_t> queries(m);
+  auto build_tree = [&] {
     std::vector<uint64_t> order(n);
     parallel_rows(n, threads, 8192, [&](int b, int e) {
       for (int i = b; i < e; ++i) order[i] = (static_cast<uint64_t>(code(sv + 3 * i)) << 32) | static_cast<uint32_t>(i);
     });
-    lap(" codes");
     sort_by_code(order);
-    lap(" sort");
     t.xs.resize(n), t.ys.resize(n), t.zs.resize(n), t.ids.resize(n), t.codes.resize(n);
     t.px.resize(n), t.py.resize(n), t.at.resize(n);
     parallel_rows(n, threads, 8192, [&](int b, int e) {
@@ -461,19 +461,18 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
         t.at[i] = i;
       }
     });
-    lap(" fill");
     t.nodes.reserve(4 * (n / kLeaf + 1));
     t.build(0, n);
-  }
-
-  lap("tree");
-  // queries in Morton order
-  std::vector<uint64_t> queries(m);
-  parallel_rows(m, threads, 8192, [&](int b, int e) {
-    for (int i = b; i < e; ++i) queries[i] = (static_cast<uint64_t>(code(dv + 3 * i)) << 32) | static_cast<uint32_t>(i);
+  };
+  auto sort_queries = [&] {
+    parallel_rows(m, threads, 8192, [&](int b, int e) {
+      for (int i = b; i < e; ++i) queries[i] = (static_cast<uint64_t>(code(dv + 3 * i)) << 32) | static_cast<uint32_t>(i);
+    });
+    sort_by_code(queries);
+  };
+  parallel_rows(2, threads, 1, [&](int b, int e) {
+    for (int i = b; i < e; ++i) i == 0 ? build_tree() : sort_queries();
   });
-  sort_by_code(queries);
-
   lap("query sort");
   // a first radius: K of n values spread over a surface of the box's size
   const float r_first = std::max(extent * std::sqrt(static_cast<float>(kk) / static_cast<float>(n)), 1e-6f);
