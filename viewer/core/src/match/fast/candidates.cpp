@@ -48,8 +48,6 @@ namespace veneer::match::fast {
 namespace {
 
 static int kLeaf = std::getenv("CL") ? std::atoi(std::getenv("CL")) : 24;        // rows per tree leaf at most
-static bool kNoShells = std::getenv("CS") != nullptr;
-constexpr int kShells = 8;       // radial shells of a group
 constexpr int kBlock = 1024;     // sorted queries per work block
 static int kAhead = std::getenv("CA") ? std::atoi(std::getenv("CA")) : 64;  // queries looked ahead for a group
 constexpr float kSlack = 1e-5f;  // relative margin on radii (float rounding)
@@ -216,33 +214,16 @@ int pack(int n, const float* d, float lim, const float* const (&fin)[NF], float*
 struct Group {
   float c[3] = {0, 0, 0};
   float radius = -1;  // < 0: empty
-  std::vector<float> x, y, z, px, py, dc;  // dc: squared distance to the centre
-  std::vector<int> at;                      // tree index
-  std::vector<float> d;                     // scratch
+  std::vector<float> x, y, z, px, py, d;
+  std::vector<int> at;  // tree index
+  std::vector<int> iota;
   int size = 0;
-  // Rows ordered by shells of equal area around the centre: shell s holds
-  // dc in [s, s + 1) * radius^2 / kShells (the last one also the rest);
-  // shell_end[s] = end of shell s.
-  int shell_end[kShells] = {};
-  float shell_scale = 0;  // kShells / (gathered squared radius)
-  Group* spare = nullptr;  // same layout, for reordering
-  std::vector<int> scratch;
-  int* order_scratch(int n) {
-    if (scratch.size() < static_cast<size_t>(n)) scratch.resize(static_cast<size_t>(n) * 2);
-    return scratch.data();
-  }
   void reserve(size_t n) {
-    n += 8;  // the packing stores whole vectors
-    for (auto* v : {&x, &y, &z, &px, &py, &dc, &d})
-      if (v->size() < n) v->resize(2 * n);
-    if (at.size() < n) at.resize(2 * n);
-  }
-  // Rows that can lie within sqrt(need2) of the centre: [0, return).
-  int rows_within(float need2) const {
-    if (kNoShells) return size;
-    const float s = need2 * shell_scale * (1 + 16 * kSlack);
-    if (!(s < kShells)) return size;
-    return shell_end[static_cast<int>(s)];
+    n += 8;
+    if (x.size() >= n) return;
+    n *= 2;
+    for (auto* v : {&x, &y, &z, &px, &py, &d}) v->resize(n);
+    at.resize(n);
   }
 };
 
@@ -279,32 +260,10 @@ __attribute__((noinline)) int gather(const Tree& t, const float* q, float radius
     float* d = g.d.data() + g.size;  // scratch past the packed rows
     for (int i = 0; i < cnt; ++i) d[i] = sq3(t.xs[b + i], t.ys[b + i], t.zs[b + i], qx, qy, qz);
     const int s = g.size;
-    g.size += pack<6, 1>(cnt, d, r2,
-                         {t.xs.data() + b, t.ys.data() + b, t.zs.data() + b, t.px.data() + b, t.py.data() + b, d},
-                         {g.x.data() + s, g.y.data() + s, g.z.data() + s, g.px.data() + s, g.py.data() + s,
-                          g.dc.data() + s},
+    g.size += pack<5, 1>(cnt, d, r2, {t.xs.data() + b, t.ys.data() + b, t.zs.data() + b, t.px.data() + b, t.py.data() + b},
+                         {g.x.data() + s, g.y.data() + s, g.z.data() + s, g.px.data() + s, g.py.data() + s},
                          {t.at.data() + b}, {g.at.data() + s});
   }
-  // order the rows by shell (a counting sort through the spare arrays)
-  Group& o = *g.spare;
-  o.reserve(static_cast<size_t>(g.size));
-  g.shell_scale = kShells / r2;
-  int start[kShells + 1] = {};
-  int* where = o.order_scratch(g.size);
-  for (int j = 0; j < g.size; ++j) {
-    const int sh = std::min(kShells - 1, static_cast<int>(g.dc[j] * g.shell_scale));
-    where[j] = sh;
-    ++start[sh + 1];
-  }
-  for (int k = 0; k < kShells; ++k) start[k + 1] += start[k];
-  for (int k = 0; k < kShells; ++k) g.shell_end[k] = start[k + 1];
-  for (int j = 0; j < g.size; ++j) {
-    const int w = start[where[j]]++;
-    o.x[w] = g.x[j], o.y[w] = g.y[j], o.z[w] = g.z[j], o.px[w] = g.px[j], o.py[w] = g.py[j];
-    o.dc[w] = g.dc[j], o.at[w] = g.at[j];
-  }
-  std::swap(g.x, o.x), std::swap(g.y, o.y), std::swap(g.z, o.z), std::swap(g.px, o.px), std::swap(g.py, o.py);
-  std::swap(g.dc, o.dc), std::swap(g.at, o.at);
   return tested;
 }
 
@@ -324,8 +283,8 @@ struct Scratch {
 
 // Collects the group's rows within squared distance r2 of q (value and image
 // distances to `target`, tree indices); returns how many.
-__attribute__((noinline)) int scan(const Group& g, const float* q, float r2, float need2, cv::Point2f target, Scratch& s) {
-  const int n = g.rows_within(need2);
+__attribute__((noinline)) int scan(const Group& g, const float* q, float r2, cv::Point2f target, Scratch& s) {
+  const int n = g.size;
   s.reserve(static_cast<size_t>(n));
   float* d = s.d.data();
   float* im = s.im.data();
@@ -523,8 +482,7 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
   std::atomic<long long> computed{0};
   std::atomic<long long> regathers{0};
   parallel_rows(blocks, threads, 1, [&](int bb, int be) {
-    Group g, g_spare;
-    g.spare = &g_spare;
+    Group g;
     Scratch sc;
     std::vector<char> done;
     unsigned long long cyc_g = 0, cyc_s = 0, cyc_x = 0, gsize = 0;
@@ -560,14 +518,12 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
             const auto c0 = __rdtsc();
             local += gather(t, q, r * kReach, g);
             cyc_g += __rdtsc() - c0;
-            dqc = 0;
           }
-          const float need = r + dqc;
+          local += g.size;
           const auto c1 = __rdtsc();
-          c = scan(g, q, r * r, need * need, targets[d], sc);
+          c = scan(g, q, r * r, targets[d], sc);
           cyc_s += __rdtsc() - c1;
-          gsize += g.rows_within(need * need);
-          local += g.rows_within(need * need);
+          gsize += g.size;
           if (c >= kk) break;
           ++local_retries;
           const float grow = c > 0 ? std::sqrt(static_cast<float>(kk) / static_cast<float>(c)) * 1.1f : 2.0f;
