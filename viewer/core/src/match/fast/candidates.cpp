@@ -1,30 +1,31 @@
 // Candidate lists (candidates.hpp) without sorted K-nearest lists.
 //
 // The choice only needs the *set* of the K nearest source rows, not its order:
-// with tau the K-th smallest (distance, id) pair, the answer is the minimum of
-// (image distance, value distance, id) over the pairs <= tau. So each query
-// collects every source row whose value distance is within a radius R (a ball
-// query in a bounding-box tree over the source values), takes the K-th pair
-// of what it collected with nth_element, and scans those K for the image
-// distance. That is exact whenever at least K rows were collected: every row
-// not collected is farther than R, hence than each of the K taken. Otherwise
-// R grows and the query is repeated; R only decides the speed.
+// it is the row with the smallest (image distance, value distance, id) among
+// the K smallest (value distance, id). So a query collects every source row
+// within a radius r of its value (r guessed from the previous query), and if
+// it got at least K rows, the K nearest are among them: every row left out is
+// farther than r, hence than each of those K. With fewer than K, r grows and
+// the query is repeated; r only decides the speed, never the result. Among
+// the collected rows, the one nearest in the image is taken if its (distance,
+// id) ranks below K among them; otherwise the next nearest in the image, and
+// so on (rarely more than two steps; after 16 the K-th pair is found with
+// nth_element). No list is ever sorted.
 //
-// R comes from the previous query: if the previous query's K-th distance was
-// r and the two queries are delta apart, the previous K rows all lie within
-// r + delta of this one (triangle inequality), so R = r + delta holds at
-// least K rows (slack covers float rounding). Queries run in Morton order of
-// their values, so delta is small and a query collects little more than K.
+// The source rows live in a bounding-box tree: sorted by the Morton code of
+// their quantised values (8 bits per axis), split where the code's highest
+// differing bit flips (an octree in binary form), leaves of at most kLeaf rows,
+// values stored SoA in tree order. Queries run in Morton order of their
+// values, so neighbours in that order have nearly the same K sets: a query
+// gathers the rows within kReach * r of its value into a small contiguous
+// group, and the queries that follow (or lie a little ahead) whose ball fits
+// inside it scan only that group. Collecting is an AVX2 left-pack of the rows
+// passing the distance test.
 //
-// The tree: source rows sorted by the Morton code of their quantised values
-// (8 bits per axis), split where the code's highest differing bit flips (an
-// octree in binary form), leaves of at most kLeaf rows, values stored SoA in
-// tree order with tight boxes per node. Distances are computed in the order of
-// features.hpp's squared_distance(), so they are bit-identical to the faithful
-// method's and ties break alike.
-//
-// Work is split into fixed blocks of the sorted queries (each starts with its
-// own radius estimate), so the result does not depend on the thread count.
+// Distances are computed in the order of features.hpp's squared_distance()
+// and image distances by the faithful method's expression, so ties break as
+// in matcher.cpp. Work is split into fixed blocks of the sorted queries (each
+// starts afresh), so the result does not depend on the thread count.
 #include "candidates.hpp"
 
 #include <algorithm>
@@ -33,27 +34,23 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
-#include <ctime>
+#include <limits>
 #if defined(__AVX2__)
 #include <immintrin.h>
 #endif
-#include <x86intrin.h>
-#include <limits>
-#include <chrono>
-#include <cstdio>
-#include <cstdlib>
 
 namespace veneer::match::fast {
 
 namespace {
 
-static int kLeaf = std::getenv("CL") ? std::atoi(std::getenv("CL")) : 24;        // rows per tree leaf at most
+// Measured on bench_match's objects (21k and 174k px); the result never depends on them.
+constexpr int kLeaf = 24;        // rows per tree leaf at most
 constexpr int kBlock = 1024;     // sorted queries per work block
-static int kAhead = std::getenv("CA") ? std::atoi(std::getenv("CA")) : 64;  // queries looked ahead for a group
+constexpr int kAhead = 64;       // queries looked ahead for one that fits a new group
 constexpr float kSlack = 1e-5f;  // relative margin on radii (float rounding)
-static float kGuess = std::getenv("CG") ? std::atof(std::getenv("CG")) : 1.15f;  // first radius of a query / the previous K-th distance (estimated)
-static float kWaste = std::getenv("CW") ? std::atof(std::getenv("CW")) : 1.5f;   // regather when the group is this much wider than a new one
-static float kReach = std::getenv("CR") ? std::atof(std::getenv("CR")) : 1.6f;   // radius of a group / the radius of the query that gathers it
+constexpr float kGuess = 1.15f;  // a query's first radius / the previous query's estimated K-th distance
+constexpr float kReach = 1.6f;   // a group's radius / the radius of the query that gathers it
+constexpr float kWaste = 1.5f;   // regather when the group is this much wider than a new one
 
 uint32_t spread8(uint32_t v) {
   v &= 0xffu;
@@ -227,9 +224,8 @@ struct Group {
   }
 };
 
-thread_local long long g_nodes = 0, g_leaves = 0;
 // Fills g with every row within `radius` of q; returns the rows tested.
-__attribute__((noinline)) int gather(const Tree& t, const float* q, float radius, Group& g) {
+int gather(const Tree& t, const float* q, float radius, Group& g) {
   const float r2 = radius * radius * (1 + 8 * kSlack);
   const float box_r2 = r2 * (1 + 8 * kSlack);
   g.c[0] = q[0], g.c[1] = q[1], g.c[2] = q[2];
@@ -241,7 +237,6 @@ __attribute__((noinline)) int gather(const Tree& t, const float* q, float radius
   const float qx = q[0], qy = q[1], qz = q[2];
   while (top > 0) {
     const Node& n = t.nodes[stack[--top]];
-    ++g_nodes;
     float lb = 0;
     for (int a = 0; a < 3; ++a) {
       const float e = std::max({0.0f, n.lo[a] - q[a], q[a] - n.hi[a]});
@@ -253,7 +248,6 @@ __attribute__((noinline)) int gather(const Tree& t, const float* q, float radius
       stack[top++] = n.left;
       continue;
     }
-    ++g_leaves;
     const int b = n.begin, cnt = n.end - n.begin;
     tested += cnt;
     g.reserve(static_cast<size_t>(g.size + cnt));
@@ -283,7 +277,7 @@ struct Scratch {
 
 // Collects the group's rows within squared distance r2 of q (value and image
 // distances to `target`, tree indices); returns how many.
-__attribute__((noinline)) int scan(const Group& g, const float* q, float r2, cv::Point2f target, Scratch& s) {
+int scan(const Group& g, const float* q, float r2, cv::Point2f target, Scratch& s) {
   const int n = g.size;
   s.reserve(static_cast<size_t>(n));
   float* d = s.d.data();
@@ -307,7 +301,7 @@ __attribute__((noinline)) int scan(const Group& g, const float* q, float r2, cv:
 // with the smallest (image distance, distance, id). Walks the collected rows
 // by image distance and takes the first whose (distance, id) ranks below kk.
 // The collected arrays have room for 8 more entries (padding is written).
-__attribute__((noinline)) int select(const Tree& t, Scratch& s, int c, int kk) {
+int select(const Tree& t, Scratch& s, int c, int kk) {
   float* sd = s.sd.data();
   float* sim = s.sim.data();
   const int* sat = s.sat.data();
@@ -316,7 +310,7 @@ __attribute__((noinline)) int select(const Tree& t, Scratch& s, int c, int kk) {
   auto before = [&](int a, int b) {  // (distance, id) order
     return sd[a] < sd[b] || (sd[a] == sd[b] && t.ids[sat[a]] < t.ids[sat[b]]);
   };
-  const int blocks = (c + 7) / 8;
+  [[maybe_unused]] const int blocks = (c + 7) / 8;  // vectors of 8 (AVX2 paths)
   for (int round = 0; round < 16; ++round) {
     float v = inf;
 #if defined(__AVX2__)
@@ -408,24 +402,6 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
   const float* sv = src.flat.data();
   const float* dv = dst.flat.data();
 
-  using PClock = std::chrono::steady_clock;
-  const bool prof = std::getenv("VENEER_CAND_PROFILE") != nullptr;
-  auto pt0 = PClock::now();
-  auto cpu_now = [] {
-    timespec ts;
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec / 1e6;
-  };
-  double pc0 = cpu_now();
-  auto lap = [&](const char* what) {
-    if (!prof) return;
-    const auto now = PClock::now();
-    const double c = cpu_now();
-    std::fprintf(stderr, "  %s %.2f ms wall %.2f ms cpu\n", what, std::chrono::duration<double, std::milli>(now - pt0).count(), c - pc0);
-    pt0 = now;
-    pc0 = c;
-  };
-  std::atomic<long long> retries{0}, collected{0};
   // quantisation over the source's box
   Morton code;
   float lo[3], hi[3];
@@ -439,7 +415,6 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
     extent = std::max(extent, hi[a] - lo[a]);
   }
 
-  lap("box");
   // the tree over the source and the queries in Morton order, side by side
   Tree t;
   std::vector<uint64_t> queries(m);
@@ -473,20 +448,17 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
   parallel_rows(2, threads, 1, [&](int b, int e) {
     for (int i = b; i < e; ++i) i == 0 ? build_tree() : sort_queries();
   });
-  lap("query sort");
   // a first radius: K of n values spread over a surface of the box's size
   const float r_first = std::max(extent * std::sqrt(static_cast<float>(kk) / static_cast<float>(n)), 1e-6f);
   const float r_floor = std::max(extent * 1e-4f, 1e-7f);
   const int blocks = (m + kBlock - 1) / kBlock;
   std::atomic<bool> stop{false};
   std::atomic<long long> computed{0};
-  std::atomic<long long> regathers{0};
   parallel_rows(blocks, threads, 1, [&](int bb, int be) {
     Group g;
     Scratch sc;
     std::vector<char> done;
-    unsigned long long cyc_g = 0, cyc_s = 0, cyc_x = 0, gsize = 0;
-    long long local = 0, local_regathers = 0, local_retries = 0, local_collected = 0;
+    long long local = 0;
     for (int blk = bb; blk < be && !stop; ++blk) {
       if (progress.cancelled()) {
         stop = true;
@@ -513,27 +485,17 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
           // regather when the ball is not inside the group, or the group is much wider than needed
           if (g.radius < 0 || r * (1 + 8 * kSlack) > (g.radius - dqc) * (1 - 8 * kSlack) ||
               g.radius > kWaste * kReach * r) {
-            ++local_regathers;
             regathered = true;
-            const auto c0 = __rdtsc();
             local += gather(t, q, r * kReach, g);
-            cyc_g += __rdtsc() - c0;
           }
           local += g.size;
-          const auto c1 = __rdtsc();
           c = scan(g, q, r * r, targets[d], sc);
-          cyc_s += __rdtsc() - c1;
-          gsize += g.size;
           if (c >= kk) break;
-          ++local_retries;
           const float grow = c > 0 ? std::sqrt(static_cast<float>(kk) / static_cast<float>(c)) * 1.1f : 2.0f;
           r = std::max(r * std::clamp(grow, 1.25f, 4.0f), r_floor);
           if (!std::isfinite(r * r * kReach * kReach)) r = std::numeric_limits<float>::infinity();
         }
-        local_collected += c;
-        const auto c2 = __rdtsc();
         const int j = select(t, sc, c, kk);
-        cyc_x += __rdtsc() - c2;
         chosen[d] = static_cast<int>(t.ids[sc.sat[j]]);
         chosen_sq[d] = sc.sd[j];
         // the K-th distance, estimated from the count (values on a surface: count ~ r^2)
@@ -556,16 +518,7 @@ Status choose_candidates3(const Object& dst, const Object& src, int k, const std
       }
     }
     computed += local;
-    regathers += local_regathers;
-    if (prof) std::fprintf(stderr, "  nodes/gather %.1f leaves/gather %.1f size %.1f\n", double(g_nodes) / local_regathers, double(g_leaves) / local_regathers, double(gsize)/ (be-bb) / kBlock);
-    g_nodes = g_leaves = 0;
-    if (prof) std::fprintf(stderr, "  thread: gather %.1f scan %.1f select %.1f Mcycles, group %.1f\n", cyc_g / 1e6, cyc_s / 1e6, cyc_x / 1e6, double(gsize) / (be - bb) / kBlock);
-    retries += local_retries;
-    collected += local_collected;
   });
-  lap("queries");
-  if (prof) std::fprintf(stderr, "  n=%d m=%d tested/q=%.1f collected/q=%.1f retries=%lld regathers=%lld nodes=%zu\n", n, m,
-                         double(computed.load()) / m, double(collected.load()) / m, retries.load(), regathers.load(), t.nodes.size());
   if (stop) return make_error("cancelled during candidate lists");
   if (tested) *tested = static_cast<double>(computed.load()) / m;
   return {};
