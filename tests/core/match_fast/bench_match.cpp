@@ -7,13 +7,14 @@
 // known normals (a bumpy ellipsoid onto a bumpy sphere) and Lambertian photos
 // under the thesis's 7-lamp ring.
 //
-// Usage: bench_match [--quick] [--pictures DIR]
+// Usage: bench_match [--quick] [--pictures DIR] [--only STEP [--runs N]]
 //   --quick: 1 run per row, small object only; --pictures: PNGs of the maps
 //   (thesis colouring) beside the destination repainted with the source's photo.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cctype>
 #include <cstring>
 #include <ctime>
@@ -239,7 +240,9 @@ int main(int argc, char** argv) {
   std::string only;  // --only STEP: time one row (for profiling), skip the other tables
   for (int i = 1; i + 1 < argc; ++i)
     if (std::strcmp(argv[i], "--only") == 0) only = argv[i + 1];
-  const int runs = quick ? 1 : 5;
+  int runs = quick ? 1 : 5;
+  for (int i = 1; i + 1 < argc; ++i)  // --runs N: more runs per row (for profiling with --only)
+    if (std::strcmp(argv[i], "--runs") == 0) runs = std::max(1, std::atoi(argv[i + 1]));
   struct Pair {
     std::string name;
     ObjectView dst, src;
@@ -304,7 +307,7 @@ int main(int argc, char** argv) {
       std::vector<double> t;
       bool ok = true;
       std::vector<double> cpu;
-      const int reps = pr.large ? std::min(runs, 3) : runs;
+      const int reps = pr.large && only.empty() ? std::min(runs, 3) : runs;
       for (int i = 0; i <= reps; ++i) {  // run 0 warms caches and the thread pool
         const auto t0 = Clock::now();
         const double c0 = process_cpu_ms();
@@ -328,6 +331,7 @@ int main(int argc, char** argv) {
                   fmt(peer > 0 ? peer / fast_cpu : -1, 0).c_str(),
                   target > 0 ? ("≤ " + fmt(target, 0)).c_str() : "—",
                   r.options.method == Method::patchmatch || r.options.method == Method::coherent ? "—"
+                  : st.index == "lookup" ? "lookup (own cell)"
                   : !st.projected_dims ? "exact"
                   : st.certified > 0 ? (fmt(100 * st.certified, 1) + " %").c_str()
                                      : "approximate");

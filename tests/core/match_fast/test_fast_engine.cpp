@@ -188,6 +188,21 @@ TEST_F(FastEngine, NormalsOneByOneEqualLinearExactly) {
   EXPECT_EQ(st.certified, 1.0);
 }
 
+// `flann` on normals is the lookup (the thesis's flann is approximate too):
+// most pixels get the exact nearest, and the rest one nearly as near.
+TEST_F(FastEngine, NormalsOneByOneFlannIsTheLookup) {
+  const auto o = opts(Method::flann, Feature::normals, 1, true);
+  fast::Stats st;
+  const Map f = fast_map(dst, src, o, &st);
+  const Map e = exact(dst, src, opts(Method::linear, Feature::normals, 1, false));
+  const Compare c = compare(f, e, dst.mask);
+  EXPECT_EQ(st.index, "lookup");
+  EXPECT_EQ(st.certified, 0.0);
+  EXPECT_GE(c.same_xy, 0.6 * c.pixels);
+  EXPECT_LE(c.mean_ratio(), 1.15);
+  EXPECT_EQ(c.pixels, cv::countNonZero(dst.mask));
+}
+
 TEST_F(FastEngine, IntensitiesOneByOneEqualLinearExactly) {
   const auto o = opts(Method::linear, Feature::intensities, 1, true);
   fast::Stats st;

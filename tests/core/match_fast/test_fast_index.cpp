@@ -163,3 +163,63 @@ TEST(FastIndex, GridSeededWithAHintEqualsBruteForce) {
     hint = id;
   }
 }
+
+// The engine's scan: nearest_slot carries the previous result's place from
+// query to query. Exact mode equals the brute force, ties included; the
+// lookup (own cell's entries and the previous result only) may miss a nearer
+// point across a cell edge, but never by more than a cell, and rarely.
+TEST(FastIndex, GridScanBySlotExactAndLookup) {
+  std::mt19937 rng(29);
+  const auto src = unit_normals(6000, rng, true, 600);
+  std::vector<float> queries;
+  std::normal_distribution<float> g(0, 1);
+  // a walk over the hemisphere the camera sees (like neighbouring pixels),
+  // with jumps; every 50th query faces away from the camera
+  float x = -0.2f, y = 0.1f, z = 0.97f;
+  for (int i = 0; i < 4000; ++i) {
+    const float step = i % 211 == 0 ? 1.0f : 0.015f;
+    x += step * g(rng), y += step * g(rng), z = std::fabs(z + step * g(rng));
+    const float l = std::sqrt(x * x + y * y + z * z);
+    x /= l, y /= l, z /= l;
+    queries.insert(queries.end(), {x, y, i % 50 == 49 ? -z : z});
+  }
+  veneer::match::fast::OctGridIndex grid;
+  const int n = static_cast<int>(src.size()) / 3;
+  grid.build(src.data(), n, 3);
+  auto angle = [&](const float* q, int id) {
+    const float* p = &src[static_cast<size_t>(id) * 3];
+    const float c = (q[0] * p[0] + q[1] * p[1] + q[2] * p[2]) / std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+    return std::acos(std::clamp(c, -1.0f, 1.0f)) * 57.29578f;
+  };
+  std::vector<int> bids;
+  std::vector<float> bd;
+  int exact_slot = -1, lookup_slot = -1, served = 0, same = 0;
+  double excess = 0, worst = 0;
+  const int nq = static_cast<int>(queries.size()) / 3;
+  for (int i = 0; i < nq; ++i) {
+    const float* q = &queries[static_cast<size_t>(i) * 3];
+    brute_knn(src, 3, q, 1, bids, bd);
+    int id;
+    float d;
+    if (grid.nearest_slot(q, exact_slot, id, d, true)) {
+      ++served;
+      ASSERT_EQ(id, bids[0]) << "query " << i;
+      ASSERT_EQ(d, bd[0]) << "query " << i;
+    } else {
+      exact_slot = -1;
+    }
+    if (!grid.nearest_slot(q, lookup_slot, id, d, false)) {
+      lookup_slot = -1;
+      grid.nearest_from(q, 1, &id, &d, -1);
+    }
+    ASSERT_GE(d, bd[0]) << "query " << i;  // never nearer than the nearest
+    if (id == bids[0]) ++same;
+    const double e = angle(q, id) - angle(q, bids[0]);
+    excess += e;
+    worst = std::max(worst, e);
+  }
+  EXPECT_GT(served, nq * 9 / 10);  // the scan path serves nearly every query
+  EXPECT_GT(same, nq * 7 / 10);
+  EXPECT_LT(excess / nq, 0.5);      // degrees, mean
+  EXPECT_LT(worst, 15.0);           // within a couple of cells of this grid (34 x 34 over the square)
+}

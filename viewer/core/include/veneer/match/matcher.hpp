@@ -44,6 +44,7 @@ struct MatchOptions {
   int iterations = 5;                  // `patchmatch` iterations
   double coherent_threshold = 0.10;    // `coherent` normal error allowed for a chunk, radians-ish (|dn|)
   double uniformity = 0.0;             // reuse penalty weight for `coherent`/`patchmatch` (0 = off)
+  bool coherent_grow = true;           // `coherent`: chunks grow into the pixels no chunk took
   bool fast = true;                    // use the fast engine where it applies (false = faithful thesis code)
   unsigned seed = 1;                   // random init/jitter seed (same seed, same map)
   int threads = 0;                     // 0 = all cores

@@ -26,6 +26,9 @@
 // good source region is not stamped everywhere; with it each pixel is judged
 // on its own error plus the reuse penalty.
 #include <algorithm>
+#include <bit>
+#include <atomic>
+#include <cstdint>
 #include <cmath>
 
 #include "engine.hpp"
@@ -57,6 +60,15 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
   };
 
   std::vector<int> chosen(n, -1);
+  // (no uniformity) the rows still unassigned, and per one of them its chunk
+  // (seed cell), proposal and error at the current level
+  std::vector<int> active, owner, prop;
+  if (u <= 0) {
+    active.resize(n);
+    for (int d = 0; d < n; ++d) active[d] = d;
+    owner.resize(n);
+    prop.resize(n);
+  }
   const cv::Rect box = dst.bbox;
   int spacing = 2;
   while (spacing * 2 <= std::max(box.width, box.height) / 2 && spacing < 256) spacing *= 2;
@@ -68,7 +80,7 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
   for (int level = 0; spacing >= 2; ++level, spacing /= 2) {
     if (p.cancelled()) return make_error("cancelled during coherent transfer");
     p.report(0.5 + 0.5 * level / 8.0, "coherent chunks");
-    const int s = spacing;
+    const int s = spacing, shift = std::countr_zero(static_cast<unsigned>(spacing));  // a power of two
     const int gx = box.width / s + 1, gy = box.height / s + 1;
     // Seeds: one jittered point per cell; its destination row and source match.
     std::vector<cv::Point> seed_at(static_cast<size_t>(gx) * gy);
@@ -115,13 +127,26 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
       // taken whole when that mean passes the threshold and no pixel in it
       // errs more than `cap` times the threshold.
       // (k = 1: one proposal per pixel, so no per-chunk lists are needed)
-      std::vector<int> owner(n, -1), prop(n, -1);
-      std::vector<float> err(n, 0.0f);
-      parallel_rows(n, o.threads, 512, [&](int b, int e) {
-        for (int d = b; d < e; ++d) {
-          if (chosen[d] >= 0) continue;
+      // Over the pixels still unassigned (`active`), in parallel. The chunk
+      // sums are kept in fixed point (errors in [0, 1] times 2^20) so that
+      // they come out the same whatever order the threads add in.
+      const size_t seeds = seed_at.size();
+      std::vector<std::atomic<uint64_t>> sum(seeds);
+      std::vector<std::atomic<uint32_t>> worst(seeds), cnt(seeds);
+      const int na = static_cast<int>(active.size());
+      // Chunks of 16 px and more are judged on the pixels of a 1-in-4 grid
+      // (x and y multiples of 4): a sixteenth of the source reads where most
+      // chunks fail, and still hundreds of pixels per chunk.
+      const bool sampled = s >= 16;
+      parallel_rows(na, o.threads, 512, [&](int b, int e) {
+        // first each pixel's chunk and the source position it proposes
+        // (prop: y * width + x, -1 off the frame, -2 not judged), then the
+        // source reads, each a cache miss: prefetched a few pixels ahead
+        for (int ai = b; ai < e; ++ai) {
+          const int d = active[ai];
+          owner[ai] = -1;
           const cv::Point pt = dst.pixels[d];
-          const int ci = (pt.x - box.x) / s, cj = (pt.y - box.y) / s;
+          const int ci = (pt.x - box.x) >> shift, cj = (pt.y - box.y) >> shift;
           int best_cell = -1, best_d2 = std::numeric_limits<int>::max();
           for (int j = std::max(0, cj - 1); j <= std::min(gy - 1, cj + 1); ++j)
             for (int i = std::max(0, ci - 1); i <= std::min(gx - 1, ci + 1); ++i) {
@@ -132,38 +157,62 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
               if (d2 < best_d2) best_d2 = d2, best_cell = cell;
             }
           if (best_cell < 0) continue;
-          owner[d] = best_cell;
+          owner[ai] = best_cell;
+          prop[ai] = -2;  // not judged (see `sampled`)
+          if (sampled && ((pt.x | pt.y) & 3) != 0) continue;
           const cv::Point m = src.pixels[seed_match[best_cell]];
           const cv::Point a = seed_at[best_cell];
-          const int row = src.row_at(m.x + pt.x - a.x, m.y + pt.y - a.y);
-          prop[d] = row;
-          err[d] = row < 0 ? 1.0f : std::min(1.0f, std::sqrt(pixel_sq(d, row)));
+          const int x = m.x + pt.x - a.x, y = m.y + pt.y - a.y;
+          prop[ai] = x < 0 || y < 0 || x >= src.size.width || y >= src.size.height ? -1 : y * src.size.width + x;
+        }
+        const int* row_of = src.row_of.ptr<int>();
+        constexpr int ahead = 8;
+        for (int ai = b; ai < e; ++ai) {
+          if (ai + ahead < e && prop[ai + ahead] >= 0) __builtin_prefetch(row_of + prop[ai + ahead]);
+          const int c0 = owner[ai];
+          if (c0 < 0 || prop[ai] == -2) continue;
+          const int row = prop[ai] >= 0 ? row_of[prop[ai]] : -1;
+          prop[ai] = row;
+          const float err = row < 0 ? 1.0f : std::min(1.0f, std::sqrt(pixel_sq(active[ai], row)));
+          const uint32_t q = static_cast<uint32_t>(err * 1048576.0f);
+          sum[c0].fetch_add(q, std::memory_order_relaxed);
+          cnt[c0].fetch_add(1, std::memory_order_relaxed);
+          uint32_t w = worst[c0].load(std::memory_order_relaxed);
+          while (q > w && !worst[c0].compare_exchange_weak(w, q, std::memory_order_relaxed)) {
+          }
         }
       });
-      std::vector<double> sum(seed_at.size(), 0.0);
-      std::vector<float> worst(seed_at.size(), 0.0f);
-      std::vector<int> cnt(seed_at.size(), 0);
-      for (int d = 0; d < n; ++d)
-        if (owner[d] >= 0) {
-          sum[owner[d]] += err[d];
-          worst[owner[d]] = std::max(worst[owner[d]], err[d]);
-          ++cnt[owner[d]];
-        }
-      const double thr = o.coherent_threshold;
-      parallel_rows(n, o.threads, 1024, [&](int b, int e) {
-        for (int d = b; d < e; ++d) {
-          const int c0 = owner[d];
-          if (c0 < 0 || prop[d] < 0) continue;
-          if (sum[c0] / cnt[c0] < thr && worst[c0] < cap * thr) chosen[d] = prop[d];
+      const double thr = o.coherent_threshold * 1048576.0;
+      parallel_rows(na, o.threads, 1024, [&](int b, int e) {
+        for (int ai = b; ai < e; ++ai) {
+          const int c0 = owner[ai];
+          if (c0 < 0 || prop[ai] == -1) continue;
+          const uint32_t judged = cnt[c0].load(std::memory_order_relaxed);
+          if (judged == 0 || !(static_cast<double>(sum[c0].load(std::memory_order_relaxed)) / judged < thr &&
+                               worst[c0].load(std::memory_order_relaxed) < cap * thr))
+            continue;
+          int row = prop[ai];
+          if (row == -2) {  // in an accepted chunk but not among the pixels judged
+            const int d = active[ai];
+            const cv::Point pt = dst.pixels[d], m = src.pixels[seed_match[c0]], a = seed_at[c0];
+            row = src.row_at(m.x + pt.x - a.x, m.y + pt.y - a.y);
+            if (row < 0) continue;
+          }
+          chosen[active[ai]] = row;
         }
       });
+      // the pixels still unassigned, in row order
+      size_t kept = 0;
+      for (int ai = 0; ai < na; ++ai)
+        if (chosen[active[ai]] < 0) active[kept++] = active[ai];
+      active.resize(kept);
       continue;
     }
     parallel_rows(n, o.threads, 512, [&](int b, int e) {
       for (int d = b; d < e; ++d) {
         if (chosen[d] >= 0) continue;
         const cv::Point pt = dst.pixels[d];
-        const int ci = (pt.x - box.x) / s, cj = (pt.y - box.y) / s;
+        const int ci = (pt.x - box.x) >> shift, cj = (pt.y - box.y) >> shift;
         // seeds of the 3x3 cells around, nearest first (ties in cell order)
         int cells[9], d2s[9], count = 0;
         for (int j = std::max(0, cj - 1); j <= std::min(gy - 1, cj + 1); ++j)
@@ -205,6 +254,31 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
         }
     }
   }
+  // The chunks then grow into the pixels none took: sweeping forward (from
+  // the left and upper neighbours) and back (right, lower), a pixel continues
+  // the neighbour's chunk whose proposal errs least, if under the threshold.
+  if (u <= 0 && o.coherent_grow && !active.empty()) {
+    const float t2 = thr2;
+    for (int sweep = 0; sweep < 2; ++sweep) {
+      const int step = sweep == 0 ? 1 : -1;
+      const int na = static_cast<int>(active.size());
+      for (int i = 0; i < na; ++i) {
+        const int d = active[sweep == 0 ? i : na - 1 - i];
+        if (chosen[d] >= 0 && sweep == 0) continue;
+        const cv::Point pt = dst.pixels[d];
+        float best = chosen[d] >= 0 ? pixel_sq(d, chosen[d]) : t2;
+        for (const cv::Point off : {cv::Point(-step, 0), cv::Point(0, -step)}) {
+          const int nb = dst.row_at(pt.x + off.x, pt.y + off.y);
+          if (nb < 0 || chosen[nb] < 0) continue;
+          const cv::Point m = src.pixels[chosen[nb]];
+          const int row = src.row_at(m.x - off.x, m.y - off.y);
+          if (row < 0) continue;
+          const float v = pixel_sq(d, row);
+          if (v < best) best = v, chosen[d] = row;
+        }
+      }
+    }
+  }
   // Pixels no chunk took keep their nearest; with uniformity, the nearest of
   // their 16 by distance + reuse penalty (live counts, scan order).
   for (int d = 0; d < n; ++d) {
@@ -228,18 +302,15 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
     }
   }
   Map map = new_map(dst.size);
-  for (int d = 0; d < n; ++d) {
-    const int s = chosen[d];
-    if (s < 0) continue;
-    const cv::Point pt = dst.pixels[d], q = src.pixels[s];
-    map.xy.at<cv::Vec2f>(pt.y, pt.x) = cv::Vec2f(static_cast<float>(q.x), static_cast<float>(q.y));
-    // the feature distance
-    const float* a = dst.flat.data() + static_cast<size_t>(d) * c;
-    const float* b = src.flat.data() + static_cast<size_t>(s) * c;
-    float v = 0;
-    for (int i = 0; i < c; ++i) v += (a[i] - b[i]) * (a[i] - b[i]);
-    map.distance.at<float>(pt.y, pt.x) = std::sqrt(v);
-  }
+  parallel_rows(n, o.threads, 4096, [&](int b, int e) {
+    for (int d = b; d < e; ++d) {
+      const int s = chosen[d];
+      if (s < 0) continue;
+      const cv::Point pt = dst.pixels[d], q = src.pixels[s];
+      map.xy.at<cv::Vec2f>(pt.y, pt.x) = cv::Vec2f(static_cast<float>(q.x), static_cast<float>(q.y));
+      map.distance.at<float>(pt.y, pt.x) = std::sqrt(pixel_sq(d, s));  // the feature distance
+    }
+  });
   return map;
 }
 

@@ -2,12 +2,15 @@
 // the sphere of normals and the nanoflann kd-tree.
 #include "index_fast.hpp"
 
+#include "object.hpp"  // parallel_rows
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <utility>
 #include <vector>
 
+#include <immintrin.h>
 #include <nanoflann.hpp>
 
 namespace veneer::match::fast {
@@ -70,14 +73,18 @@ struct Best {
 // Same arithmetic, in the same order, as squared_distance() of features.hpp,
 // so that exact indices report bit-identical distances to the brute force.
 inline float sq3(float ax, float ay, float az, float bx, float by, float bz) {
+  const float tx = ax - bx, ty = ay - by, tz = az - bz;
+#ifdef __FMA__
+  // what the compiler makes of that loop with fused multiply-adds (-mfma),
+  // spelled out so the vector scan can match it bit for bit
+  return std::fma(tz, tz, std::fma(ty, ty, tx * tx));
+#else
   float s = 0;
-  float t = ax - bx;
-  s += t * t;
-  t = ay - by;
-  s += t * t;
-  t = az - bz;
-  s += t * t;
+  s += tx * tx;
+  s += ty * ty;
+  s += tz * tz;
   return s;
+#endif
 }
 
 // ---------------------------------------------------------------------------
@@ -202,14 +209,35 @@ void OctGridIndex::build(const float* points, int n, int dims) {
   ids_.clear();
   start_.clear();
   if (n_ == 0) return;
-  float eps = 0;
+  // Per point: its distance from unit length and its cell (in parallel).
+  std::vector<int> cell(static_cast<size_t>(n_));
   bool usable = dims == 3;
+  float eps = 0;
   if (usable) {
-    for (int i = 0; i < n_; ++i) {
-      const float* p = points + static_cast<size_t>(i) * 3;
-      const float len = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
-      eps = std::max(eps, std::fabs(len - 1.0f));
-    }
+    // ~4 points per used cell (normals seen by a camera fill half the diamond);
+    // 0.5 sqrt(n) measured best between 0.35 and 2 (bull <- orange, 21k and 211k
+    // source points, queries in scan order seeded with the previous match).
+    side_ = fixed_side_ > 0 ? fixed_side_ : std::clamp(static_cast<int>(0.5 * std::sqrt(1.0 * n_)), 8, 512);
+    const float scale = 0.5f * static_cast<float>(side_);
+    const int chunk = 8192, chunks = (n_ + chunk - 1) / chunk;
+    std::vector<float> eps_of(chunks, 0.0f);
+    parallel_rows(chunks, 0, 1, [&](int cb, int ce) {
+      for (int ch = cb; ch < ce; ++ch) {
+        float e = 0;
+        for (int i = ch * chunk; i < std::min(n_, (ch + 1) * chunk); ++i) {
+          const float* p = points + static_cast<size_t>(i) * 3;
+          const float len = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+          e = std::max(e, std::fabs(len - 1.0f));
+          float u, v;
+          oct_uv(p[0], p[1], p[2], u, v);
+          const int cx = std::clamp(static_cast<int>((u + 1.0f) * scale), 0, side_ - 1);
+          const int cy = std::clamp(static_cast<int>((v + 1.0f) * scale), 0, side_ - 1);
+          cell[i] = 2 * (cy * side_ + cx) + (p[2] < 0 ? 1 : 0);
+        }
+        eps_of[ch] = std::isnan(e) ? 1e30f : e;
+      }
+    });
+    for (float e : eps_of) eps = std::max(eps, e);
     // Far-from-unit points (or zeros) make the sphere lookup pointless: exact
     // still, but the kd-tree is the better tool for them.
     usable = eps <= 0.05f;
@@ -220,31 +248,18 @@ void OctGridIndex::build(const float* points, int n, int dims) {
     return;
   }
   eps_ = eps + 1e-6f;
-  // ~4 points per used cell (normals seen by a camera fill half the diamond);
-  // 0.5 sqrt(n) measured best between 0.35 and 2 (bull <- orange, 21k and 211k
-  // source points, queries in scan order seeded with the previous match).
-  side_ = fixed_side_ > 0 ? fixed_side_ : std::clamp(static_cast<int>(0.5 * std::sqrt(1.0 * n_)), 8, 512);
   // CSR over (uv cell, layer) with the two layers of a uv cell adjacent, so
   // a query reads one contiguous run per uv cell.
   const int cells = side_ * side_;
   start_.assign(static_cast<size_t>(2 * cells + 1), 0);
-  std::vector<int> cell(static_cast<size_t>(n_));
-  const float scale = 0.5f * static_cast<float>(side_);
-  for (int i = 0; i < n_; ++i) {
-    const float* p = points + static_cast<size_t>(i) * 3;
-    float u, v;
-    oct_uv(p[0], p[1], p[2], u, v);
-    const int cx = std::clamp(static_cast<int>((u + 1.0f) * scale), 0, side_ - 1);
-    const int cy = std::clamp(static_cast<int>((v + 1.0f) * scale), 0, side_ - 1);
-    const int c = 2 * (cy * side_ + cx) + (p[2] < 0 ? 1 : 0);
-    cell[i] = c;
-    ++start_[c + 1];
-  }
+  for (int i = 0; i < n_; ++i) ++start_[cell[i] + 1];
   for (size_t c = 1; c < start_.size(); ++c) start_[c] += start_[c - 1];
-  xs_.resize(n_);
-  ys_.resize(n_);
-  zs_.resize(n_);
-  ids_.resize(n_);
+  // 8 far points of padding: scan_run reads whole groups of 8
+  xs_.assign(static_cast<size_t>(n_) + 8, 1e18f);
+  ys_.assign(static_cast<size_t>(n_) + 8, 1e18f);
+  zs_.assign(static_cast<size_t>(n_) + 8, 1e18f);
+  ids_.assign(static_cast<size_t>(n_) + 8, std::numeric_limits<int>::max());
+  slot_of_.resize(n_);
   std::vector<int> fill(start_.begin(), start_.end() - 1);
   for (int i = 0; i < n_; ++i) {  // ascending ids within a cell
     const int at = fill[cell[i]]++;
@@ -253,8 +268,171 @@ void OctGridIndex::build(const float* points, int n, int dims) {
     ys_[at] = p[1];
     zs_[at] = p[2];
     ids_[at] = i;
+    slot_of_[i] = at;
   }
   points_ = points;
+  // For the lookup: each (uv cell, layer) without points sends its queries to
+  // the nearest one (in cells, breadth first) that has some. Within a layer
+  // cells are 4-neighbours; the layers meet at the diamond's rim (the equator),
+  // where a cell touching it neighbours the same cell of the other layer.
+  near_.assign(static_cast<size_t>(2 * cells), -1);
+  std::vector<int> queue;
+  queue.reserve(static_cast<size_t>(2 * cells));
+  for (int c = 0; c < 2 * cells; ++c)
+    if (start_[c] < start_[c + 1]) near_[c] = c, queue.push_back(c);
+  const float h = 2.0f / static_cast<float>(side_);
+  auto edge = [&](int i) { return std::max(std::fabs(-1.0f + i * h), std::fabs(-1.0f + (i + 1) * h)); };
+  for (size_t qi = 0; qi < queue.size(); ++qi) {
+    const int node = queue[qi], layer = node & 1, c = node >> 1, cx = c % side_, cy = c / side_;
+    const int nb[5] = {cx > 0 ? node - 2 : -1, cx + 1 < side_ ? node + 2 : -1, cy > 0 ? node - 2 * side_ : -1,
+                       cy + 1 < side_ ? node + 2 * side_ : -1, edge(cx) + edge(cy) >= 1.0f ? (node ^ 1) : -1};
+    (void)layer;
+    for (int t : nb)
+      if (t >= 0 && near_[t] < 0) near_[t] = near_[node], queue.push_back(t);
+  }
+  // |u| is largest at a column's outer edge; the gain grows with |u|
+  gain_col_.resize(side_);
+  for (int i = 0; i < side_; ++i) {
+    const float a = std::max(std::fabs(-1.0f + 2.0f * i / side_), std::fabs(-1.0f + 2.0f * (i + 1) / side_));
+    gain_col_[i] = std::sqrt((1.0f + a) * (1.0f + a) + 2.0f * a * a) * 1.0001f;
+  }
+  gain_row_ = gain_col_;
+}
+
+// Largest box of cells the k = 1 path reads as rows of runs (else the cell
+// by cell search of nearest_from).
+constexpr int kRunCells = 49;
+
+// Points [b, e) against q, 8 at a time (AVX2), each lane keeping its best
+// (distance, id) pair with the lower-id rule, without branches; the caller
+// reduces the lanes at the end (best_of). The arrays are padded past n with
+// far points, so the last group reads valid memory and never wins. Distances
+// are the same fused sums as sq3's, bit for bit.
+struct Lanes {
+  __m256 d;
+  __m256i id, slot;
+};
+
+static inline void scan_lanes(const float* xs, const float* ys, const float* zs, const int* ids, int b, int e,
+                              __m256 vx, __m256 vy, __m256 vz, Lanes& l) {
+  const __m256i step = _mm256_set1_epi32(8);
+  __m256i slot = _mm256_add_epi32(_mm256_set1_epi32(b), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+  const __m256i end = _mm256_set1_epi32(e);
+  for (int i = b; i < e; i += 8) {
+    const __m256 tx = _mm256_sub_ps(_mm256_loadu_ps(xs + i), vx);
+    const __m256 ty = _mm256_sub_ps(_mm256_loadu_ps(ys + i), vy);
+    const __m256 tz = _mm256_sub_ps(_mm256_loadu_ps(zs + i), vz);
+    const __m256 d = _mm256_fmadd_ps(tz, tz, _mm256_fmadd_ps(ty, ty, _mm256_mul_ps(tx, tx)));
+    const __m256i id = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(ids + i));
+    // this lane wins: inside the run, and (d, id) below the lane's best
+    const __m256i inside = _mm256_cmpgt_epi32(end, slot);
+    const __m256i less = _mm256_castps_si256(_mm256_cmp_ps(d, l.d, _CMP_LT_OQ));
+    const __m256i tie = _mm256_and_si256(_mm256_castps_si256(_mm256_cmp_ps(d, l.d, _CMP_EQ_OQ)), _mm256_cmpgt_epi32(l.id, id));
+    const __m256i take = _mm256_and_si256(inside, _mm256_or_si256(less, tie));
+    l.d = _mm256_blendv_ps(l.d, d, _mm256_castsi256_ps(take));
+    l.id = _mm256_blendv_epi8(l.id, id, take);
+    l.slot = _mm256_blendv_epi8(l.slot, slot, take);
+    slot = _mm256_add_epi32(slot, step);
+  }
+}
+
+// The lanes' best (distance, id) pair; false when no lane has one.
+static inline bool best_of(const Lanes& l, float& best_d, int& best_slot) {
+  alignas(32) float d[8];
+  alignas(32) int id[8], slot[8];
+  _mm256_store_ps(d, l.d);
+  _mm256_store_si256(reinterpret_cast<__m256i*>(id), l.id);
+  _mm256_store_si256(reinterpret_cast<__m256i*>(slot), l.slot);
+  int j = -1;
+  for (int t = 0; t < 8; ++t)
+    if (slot[t] >= 0 && (j < 0 || d[t] < d[j] || (d[t] == d[j] && id[t] < id[j]))) j = t;
+  if (j < 0) return false;
+  best_d = d[j];
+  best_slot = slot[j];
+  return true;
+}
+
+// k = 1 for a query of near-unit length (the engine's normals): the hint (a
+// point likely near, e.g. the previous pixel's match) and the query's own
+// cell first; then every cell within
+// reach of that best, read as one run of points per row of cells. Exact by the
+// bound explained above; false (nothing written) when the box would be large,
+// the query far from unit length, or there is nothing to start from.
+bool OctGridIndex::nearest1(const float* query, int& slot, int& id, float& sq, bool exact) const {
+  const float qx = query[0], qy = query[1], qz = query[2];
+  const float q2 = qx * qx + qy * qy + qz * qz;
+  if (!(q2 > 0.81f && q2 < 1.21f)) return false;
+  // | |q| - 1 | = |q2 - 1| / (|q| + 1), and |q| + 1 > 1.9
+  const float dq = std::fabs(q2 - 1.0f) * (1.0f / 1.9f);
+  const float s = std::fabs(qx) + std::fabs(qy) + std::fabs(qz);
+  const float inv = 1.0f / s;
+  const float u = qx * inv, v = qy * inv;
+  const float scale = 0.5f * static_cast<float>(side_);
+  const int ci = std::clamp(static_cast<int>((u + 1.0f) * scale), 0, side_ - 1);
+  const int cj = std::clamp(static_cast<int>((v + 1.0f) * scale), 0, side_ - 1);
+  const __m256 vx = _mm256_set1_ps(qx), vy = _mm256_set1_ps(qy), vz = _mm256_set1_ps(qz);
+  Lanes lanes{_mm256_set1_ps(kInf), _mm256_set1_epi32(std::numeric_limits<int>::max()), _mm256_set1_epi32(-1)};
+  const float* xs = xs_.data();
+  const float* ys = ys_.data();
+  const float* zs = zs_.data();
+  const int* ids = ids_.data();
+  if (slot >= 0 && slot < n_) scan_lanes(xs, ys, zs, ids, slot, slot + 1, vx, vy, vz, lanes);  // a bound from the start
+  const int own = 2 * (cj * side_ + ci);
+  if (!exact) {
+    // the lookup: the best of the query's own cell in its layer (or the
+    // nearest cell with points, when it has none) and the hint, no more
+    const int node = near_[own + (qz < 0 ? 1 : 0)];
+    scan_lanes(xs, ys, zs, ids, start_[node], start_[node + 1], vx, vy, vz, lanes);
+    float d;
+    int best;
+    if (!best_of(lanes, d, best)) return false;
+    slot = best;
+    id = ids_[best];
+    sq = d;
+    return true;
+  }
+  scan_lanes(xs, ys, zs, ids, start_[own], start_[own + 2], vx, vy, vz, lanes);
+  // the smallest distance over the lanes
+  __m128 m = _mm_min_ps(_mm256_castps256_ps128(lanes.d), _mm256_extractf128_ps(lanes.d, 1));
+  m = _mm_min_ps(m, _mm_movehl_ps(m, m));
+  m = _mm_min_ss(m, _mm_shuffle_ps(m, m, 1));
+  const float best_d = _mm_cvtss_f32(m);
+  if (!(best_d < kInf)) return false;
+  // A point that could still win is within r of q, hence its unit direction
+  // within r + eps + | |q| - 1 | of q's (the chord c of the bound above); the
+  // gains are their largest over the query's cell column / row (tables).
+  const float c = (std::sqrt(best_d) + eps_ + dq) * 1.0001f + 1e-6f;
+  const float s_q = s / (1.0f + dq);  // <= s / |q|
+  const float shrink = 1.0001f / std::max(1.0f, s_q - 1.7320509f * c);
+  const float reach_u = c * gain_col_[ci] * shrink + 1e-5f;
+  const float reach_v = c * gain_row_[cj] * shrink + 1e-5f;
+  // (truncation instead of floor: a negative value clamps to 0 either way)
+  const int x0 = std::clamp(static_cast<int>((u - reach_u + 1.0f) * scale), 0, side_ - 1);
+  const int x1 = std::clamp(static_cast<int>((u + reach_u + 1.0f) * scale), 0, side_ - 1);
+  const int y0 = std::clamp(static_cast<int>((v - reach_v + 1.0f) * scale), 0, side_ - 1);
+  const int y1 = std::clamp(static_cast<int>((v + reach_v + 1.0f) * scale), 0, side_ - 1);
+  if ((x1 - x0 + 1) * (y1 - y0 + 1) > kRunCells) return false;
+  for (int cy = y0; cy <= y1; ++cy) {
+    const int row = 2 * cy * side_;
+    if (cy == cj) {  // around the cell already read
+      if (x0 < ci) scan_lanes(xs, ys, zs, ids, start_[row + 2 * x0], start_[row + 2 * ci], vx, vy, vz, lanes);
+      if (ci < x1) scan_lanes(xs, ys, zs, ids, start_[row + 2 * ci + 2], start_[row + 2 * x1 + 2], vx, vy, vz, lanes);
+      continue;
+    }
+    scan_lanes(xs, ys, zs, ids, start_[row + 2 * x0], start_[row + 2 * x1 + 2], vx, vy, vz, lanes);
+  }
+  float d = best_d;
+  int best = 0;
+  best_of(lanes, d, best);
+  slot = best;
+  id = ids_[best];
+  sq = d;
+  return true;
+}
+
+bool OctGridIndex::nearest_slot(const float* query, int& slot, int& id, float& sq, bool exact) const {
+  if (fallback_ || n_ == 0) return false;
+  return nearest1(query, slot, id, sq, exact);
 }
 
 void OctGridIndex::knn(const float* query, int k, int* ids, float* sq_dists) const {
@@ -265,6 +443,10 @@ void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_d
   if (fallback_) {
     fallback_->knn(query, k, ids, sq_dists);
     return;
+  }
+  if (k == 1 && n_ > 0 && !fallback_) {
+    int slot = hint >= 0 && hint < n_ ? slot_of_[hint] : -1;
+    if (nearest1(query, slot, ids[0], sq_dists[0], true)) return;
   }
   Best best(k, ids, sq_dists);
   if (n_ == 0 || k <= 0) return;

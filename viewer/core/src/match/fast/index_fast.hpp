@@ -21,13 +21,24 @@ class OctGridIndex final : public NearestIndex {
   std::string name() const override { return "grid"; }
   // knn, seeded with `hint` (a source id likely to be near; k = 1 only).
   void nearest_from(const float* query, int k, int* ids, float* sq_dists, int hint) const;
+  // k = 1 for a scan of near-unit queries: `slot` carries the previous
+  // result's place in the index from call to call (-1 at the start); false
+  // when this query needs knn() (far from unit length, or a wide search).
+  // exact = false is the lookup: the best among the query's own cell's
+  // entries and the previous result (when the cell has entries), which misses
+  // a nearer point just across a cell edge (bench_match measures the cost).
+  bool nearest_slot(const float* query, int& slot, int& id, float& sq, bool exact = true) const;
 
  private:
+  bool nearest1(const float* query, int& slot, int& id, float& sq, bool exact) const;
   int fixed_side_ = 0, side_ = 0, n_ = 0, dims_ = 0;
   float eps_ = 0;
   const float* points_ = nullptr;
   std::vector<float> xs_, ys_, zs_;  // points sorted by cell (SoA)
   std::vector<int> ids_;
+  std::vector<int> slot_of_;
+  std::vector<int> near_;  // uv cell -> the nearest uv cell with points (itself when it has some)
+  std::vector<float> gain_col_, gain_row_;  // per column / row of cells: the bound's stretch (index_fast.cpp)  // id -> its place in the sorted arrays
   std::vector<int> start_;  // side^2 uv cells x 2 layers (adjacent), CSR offsets
   std::unique_ptr<NearestIndex> fallback_;
 };

@@ -203,31 +203,43 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
   };
 
   // Direct exact search over the pixel values.
-  auto direct = [&](NearestIndex& index, const char* name) -> Status {
+  auto direct = [&](NearestIndex& index, const char* name, bool exact = true) -> Status {
     index.build(src.flat.data(), ns, src.channels);
     const auto* grid = dynamic_cast<const OctGridIndex*>(&index);
     parallel_rows(n, threads, 256, [&](int b, int e) {
       if (cancelled()) return;
+      int slot = -1;
       for (int d = b; d < e; ++d) {
         const float* q = dst.flat.data() + static_cast<size_t>(d) * dst.channels;
         int* ids = &out.ids[static_cast<size_t>(d) * k];
         float* sq = &out.sq[static_cast<size_t>(d) * k];
         // neighbouring pixels have neighbouring normals: start from the last match
-        if (grid && k == 1)
-          grid->nearest_from(q, k, ids, sq, d > b ? out.ids[d - 1] : -1);
-        else
+        if (grid && k == 1) {
+          if (!grid->nearest_slot(q, slot, ids[0], sq[0], exact)) {
+            grid->nearest_from(q, k, ids, sq, d > b ? out.ids[d - 1] : -1);
+            slot = -1;
+          }
+        } else {
           index.knn(q, k, ids, sq);
+        }
       }
     });
     if (stop) return make_error("cancelled during nearest search");
-    if (stats) stats->index = name, stats->projected_dims = 0, stats->certified = 1, stats->explained_variance = 1;
+    if (stats)
+      stats->index = name, stats->projected_dims = 0, stats->certified = exact ? 1 : 0, stats->explained_variance = 1;
     return {};
   };
   if (dst.patch == 1 && dst.channels == 3) {
+    if (index_kind != "grid" && index_kind != "lookup" && index_kind != "kdtree")
+      return make_error("unknown fast index '" + index_kind + "' (grid, lookup, kdtree)");
     // long lists: the kd-tree (measured faster at k = 100 by bench_match)
-    auto index = make_index(k > 16 ? std::string("kdtree") : index_kind);
-    if (!index) return make_error("unknown fast index '" + index_kind + "' (grid, kdtree)");
-    return direct(*index, k > 16 || index_kind != "grid" ? "kdtree" : "grid");
+    if (k > 16 || index_kind == "kdtree") {
+      auto index = make_kdtree();
+      return direct(*index, "kdtree");
+    }
+    OctGridIndex grid;
+    if (index_kind == "lookup" && k == 1) return direct(grid, "lookup", false);
+    return direct(grid, "grid");
   }
 
   if (dst.channels == 3 && dst.patch > 1 && k == 1) return nearest_patch_normals(dst, src, threads, progress, out, stats);

@@ -2,6 +2,8 @@
 #include "object.hpp"
 
 #include <algorithm>
+#include <cstdint>
+#include <cstring>
 
 #include <opencv2/imgproc.hpp>
 #include <tbb/blocked_range.h>
@@ -62,13 +64,21 @@ Expected<Object> make_object(const ObjectView& view, Feature feature, int patch,
       const uchar* m = view.mask.ptr<uchar>(y);
       int* ro = need_row_of ? o.row_of.ptr<int>(y) : nullptr;
       int at = per_row[y];
+      if (ro) std::fill(ro, ro + w, -1);
+      if (per_row[y + 1] == at) continue;  // nothing on this row
       for (int x = 0; x < w; ++x) {
-        if (!m[x]) {
-          if (ro) ro[x] = -1;
-          continue;
+        // background is most of a frame: skip it 8 mask bytes at a time
+        if (x + 8 <= w) {
+          uint64_t eight;
+          std::memcpy(&eight, m + x, 8);
+          if (!eight) {
+            x += 7;
+            continue;
+          }
         }
+        if (!m[x]) continue;
         if (ro) ro[x] = at;
-        row_min[y] = std::min(row_min[y], x);
+        if (row_max[y] < 0) row_min[y] = x;
         row_max[y] = x;
         o.pixels[at] = cv::Point(x, y);
         float* f = o.flat.data() + static_cast<size_t>(at) * c;
