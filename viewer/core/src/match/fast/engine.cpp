@@ -53,7 +53,8 @@ Expected<Map> run_candidates(const Object& dst, const Object& src, const MatchOp
   const int k = o.candidates;
   Map map = new_map(dst.size);
   if (candidates3_applies(dst, src)) {
-    // 3 values per pixel: the K sets by ball queries, never sorted (candidates.cpp)
+    // 3 values per pixel: the K sets by ball queries, never sorted (candidates.cpp; exact)
+    stats->index = "morton-tree";
     std::vector<cv::Point2f> targets(dst.rows());
     parallel_rows(dst.rows(), o.threads, 8192, [&](int b, int e) {
       for (int d = b; d < e; ++d) targets[d] = box_map(dst.bbox, src.bbox, dst.pixels[d]);
@@ -68,6 +69,7 @@ Expected<Map> run_candidates(const Object& dst, const Object& src, const MatchOp
     });
     return map;
   }
+  stats->index = "grid";
   NearestLists nn;
   if (auto s = nearest_lists(dst, src, k, "grid", o.threads, p, nn, stats); !s) return s.error();
   for (int d = 0; d < dst.rows(); ++d) {
