@@ -260,6 +260,39 @@ TEST_F(FastEngine, CandidatesEqualTheFaithfulMethod) {
   EXPECT_LE(c.mean_ratio(), 1.01);
 }
 
+// Ties and edge cases of the candidate sets: normals quantised coarsely so
+// that many source pixels share one normal (and destination normals equal
+// source ones: zero distances), K larger than the source, and a result that
+// does not depend on the thread count.
+TEST_F(FastEngine, CandidatesKeepTiesAndEdgeCases) {
+  const ObjectView coarse_dst = sphere({70, 60}, {34.f, 29.f}, 22.f, 0.1f, 3, 7);
+  const ObjectView coarse_src = sphere({80, 70}, {40.f, 33.f}, 26.f, 0.1f, 3, 8);
+  ObjectView tiny_src = sphere({40, 30}, {20.f, 15.f}, 4.f, 0.0f, 0, 9);
+  const int tiny = cv::countNonZero(tiny_src.mask);
+  ASSERT_GT(tiny, 10);
+  ASSERT_LT(tiny, 100);
+  struct Case {
+    const ObjectView *d, *s;
+    int k;
+  };
+  const Case cases[] = {{&coarse_dst, &coarse_src, 1},   {&coarse_dst, &coarse_src, 7},
+                        {&coarse_dst, &coarse_src, 100}, {&coarse_dst, &tiny_src, 5},
+                        {&coarse_dst, &tiny_src, 100},   {&dst, &coarse_src, 33},
+                        {&coarse_src, &coarse_src, 100}};
+  for (const Case& c : cases) {
+    auto o = opts(Method::candidates, Feature::normals, 1, true);
+    o.candidates = c.k;
+    o.threads = 2;
+    const Map f = fast_map(*c.d, *c.s, o);
+    const Map e = exact(*c.d, *c.s, o);
+    const Compare cmp = compare(f, e, c.d->mask);
+    EXPECT_EQ(cmp.same_xy, cmp.pixels) << "K=" << c.k;
+    EXPECT_EQ(cmp.sum, cmp.sum_exact) << "K=" << c.k;
+    o.threads = 1;
+    EXPECT_TRUE(same_map(fast_map(*c.d, *c.s, o), f)) << "K=" << c.k;
+  }
+}
+
 TEST_F(FastEngine, RegionGrowAtZeroIsDirectAndFollowsTheFaithfulMethod) {
   auto o = opts(Method::regiongrow, Feature::normals, 3, true);
   o.threshold = 0;
