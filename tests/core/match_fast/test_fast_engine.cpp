@@ -216,6 +216,39 @@ TEST_F(FastEngine, IntensitiesOneByOneEqualLinearExactly) {
   EXPECT_GT(st.explained_variance, 0.99);
 }
 
+// With highlights and noise the intensities leave the 3-D subspace: the
+// projection cannot certify every pixel, and `linear` must then ask the exact
+// search (it used to keep an approximate best).
+TEST_F(FastEngine, IntensitiesOneByOneLinearStaysExactWithHighlights) {
+  auto glossy = [](ObjectView v, unsigned seed) {
+    std::mt19937 rng(seed);
+    std::normal_distribution<float> noise(0, 0.02f);
+    for (size_t lamp = 0; lamp < v.images.size(); ++lamp) {
+      const float a = 6.2832f * static_cast<float>(lamp) / 8 + 0.4f;
+      cv::Vec3f h(0.24f * std::cos(a), 0.24f * std::sin(a), 1.0f);
+      h /= cv::norm(h);
+      cv::Mat im = v.images[lamp].clone();
+      for (int y = 0; y < im.rows; ++y)
+        for (int x = 0; x < im.cols; ++x) {
+          if (!v.mask.at<uchar>(y, x)) continue;
+          const float spec = std::pow(std::max(0.0f, v.normals.at<cv::Vec3f>(y, x).dot(h)), 60.0f);
+          im.at<cv::Vec3f>(y, x) += cv::Vec3f::all(0.8f * spec + noise(rng));
+        }
+      v.images[lamp] = im;
+    }
+    return v;
+  };
+  const ObjectView d = glossy(dst, 7), s = glossy(src, 8);
+  const auto o = opts(Method::linear, Feature::intensities, 1, true);
+  fast::Stats st;
+  const Map f = fast_map(d, s, o, &st);
+  const Compare c = compare(f, exact(d, s, o), d.mask);
+  EXPECT_LT(st.explained_variance, 0.999);  // the case being tested
+  EXPECT_EQ(c.same_xy, c.pixels);
+  EXPECT_EQ(c.worse, 0);
+  EXPECT_EQ(st.certified, 1.0);
+}
+
 // Patches. Intensities go through the certified re-ranking, exact up to float
 // summation order: tolerance 1e-4 relative on every pixel's distance and at
 // least 99 % identical matches (the rest are equal-distance ties). Normal
