@@ -216,6 +216,39 @@ TEST_F(FastEngine, IntensitiesOneByOneEqualLinearExactly) {
   EXPECT_GT(st.explained_variance, 0.99);
 }
 
+// With highlights and noise the intensities leave the 3-D subspace: the
+// projection cannot certify every pixel, and `linear` must then ask the exact
+// search (it used to keep an approximate best).
+TEST_F(FastEngine, IntensitiesOneByOneLinearStaysExactWithHighlights) {
+  auto glossy = [](ObjectView v, unsigned seed) {
+    std::mt19937 rng(seed);
+    std::normal_distribution<float> noise(0, 0.02f);
+    for (size_t lamp = 0; lamp < v.images.size(); ++lamp) {
+      const float a = 6.2832f * static_cast<float>(lamp) / 8 + 0.4f;
+      cv::Vec3f h(0.24f * std::cos(a), 0.24f * std::sin(a), 1.0f);
+      h /= cv::norm(h);
+      cv::Mat im = v.images[lamp].clone();
+      for (int y = 0; y < im.rows; ++y)
+        for (int x = 0; x < im.cols; ++x) {
+          if (!v.mask.at<uchar>(y, x)) continue;
+          const float spec = std::pow(std::max(0.0f, v.normals.at<cv::Vec3f>(y, x).dot(h)), 60.0f);
+          im.at<cv::Vec3f>(y, x) += cv::Vec3f::all(0.8f * spec + noise(rng));
+        }
+      v.images[lamp] = im;
+    }
+    return v;
+  };
+  const ObjectView d = glossy(dst, 7), s = glossy(src, 8);
+  const auto o = opts(Method::linear, Feature::intensities, 1, true);
+  fast::Stats st;
+  const Map f = fast_map(d, s, o, &st);
+  const Compare c = compare(f, exact(d, s, o), d.mask);
+  EXPECT_LT(st.explained_variance, 0.999);  // the case being tested
+  EXPECT_EQ(c.same_xy, c.pixels);
+  EXPECT_EQ(c.worse, 0);
+  EXPECT_EQ(st.certified, 1.0);
+}
+
 // Patches. Intensities go through the certified re-ranking, exact up to float
 // summation order: tolerance 1e-4 relative on every pixel's distance and at
 // least 99 % identical matches (the rest are equal-distance ties). Normal
@@ -258,6 +291,39 @@ TEST_F(FastEngine, CandidatesEqualTheFaithfulMethod) {
                             dst.mask);
   EXPECT_GE(c.same_xy, 0.95 * c.pixels);  // the approximate patch path's tolerance
   EXPECT_LE(c.mean_ratio(), 1.01);
+}
+
+// Ties and edge cases of the candidate sets: normals quantised coarsely so
+// that many source pixels share one normal (and destination normals equal
+// source ones: zero distances), K larger than the source, and a result that
+// does not depend on the thread count.
+TEST_F(FastEngine, CandidatesKeepTiesAndEdgeCases) {
+  const ObjectView coarse_dst = sphere({70, 60}, {34.f, 29.f}, 22.f, 0.1f, 3, 7);
+  const ObjectView coarse_src = sphere({80, 70}, {40.f, 33.f}, 26.f, 0.1f, 3, 8);
+  ObjectView tiny_src = sphere({40, 30}, {20.f, 15.f}, 4.f, 0.0f, 0, 9);
+  const int tiny = cv::countNonZero(tiny_src.mask);
+  ASSERT_GT(tiny, 10);
+  ASSERT_LT(tiny, 100);
+  struct Case {
+    const ObjectView *d, *s;
+    int k;
+  };
+  const Case cases[] = {{&coarse_dst, &coarse_src, 1},   {&coarse_dst, &coarse_src, 7},
+                        {&coarse_dst, &coarse_src, 100}, {&coarse_dst, &tiny_src, 5},
+                        {&coarse_dst, &tiny_src, 100},   {&dst, &coarse_src, 33},
+                        {&coarse_src, &coarse_src, 100}};
+  for (const Case& c : cases) {
+    auto o = opts(Method::candidates, Feature::normals, 1, true);
+    o.candidates = c.k;
+    o.threads = 2;
+    const Map f = fast_map(*c.d, *c.s, o);
+    const Map e = exact(*c.d, *c.s, o);
+    const Compare cmp = compare(f, e, c.d->mask);
+    EXPECT_EQ(cmp.same_xy, cmp.pixels) << "K=" << c.k;
+    EXPECT_EQ(cmp.sum, cmp.sum_exact) << "K=" << c.k;
+    o.threads = 1;
+    EXPECT_TRUE(same_map(fast_map(*c.d, *c.s, o), f)) << "K=" << c.k;
+  }
 }
 
 TEST_F(FastEngine, RegionGrowAtZeroIsDirectAndFollowsTheFaithfulMethod) {

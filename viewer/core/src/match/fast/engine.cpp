@@ -9,6 +9,7 @@
 #include <mutex>
 #include <unordered_map>
 
+#include "candidates.hpp"
 #include "engine.hpp"
 #include "index_fast.hpp"
 #include "nearest.hpp"
@@ -50,9 +51,27 @@ Expected<Map> run_direct(const Object& dst, const Object& src, const MatchOption
 Expected<Map> run_candidates(const Object& dst, const Object& src, const MatchOptions& o, const Progress& p,
                              Stats* stats) {
   const int k = o.candidates;
+  Map map = new_map(dst.size);
+  if (candidates3_applies(dst, src)) {
+    // 3 values per pixel: the K sets by ball queries, never sorted (candidates.cpp; exact)
+    stats->index = "morton-tree";
+    std::vector<cv::Point2f> targets(dst.rows());
+    parallel_rows(dst.rows(), o.threads, 8192, [&](int b, int e) {
+      for (int d = b; d < e; ++d) targets[d] = box_map(dst.bbox, src.bbox, dst.pixels[d]);
+    });
+    std::vector<int> chosen;
+    std::vector<float> chosen_sq;
+    if (auto s = choose_candidates3(dst, src, k, targets, o.threads, p, chosen, chosen_sq, &stats->candidates); !s)
+      return s.error();
+    parallel_rows(dst.rows(), o.threads, 4096, [&](int b, int e) {
+      for (int d = b; d < e; ++d)
+        if (chosen[d] >= 0) put(map, dst, src, d, chosen[d], chosen_sq[d]);
+    });
+    return map;
+  }
+  stats->index = "grid";
   NearestLists nn;
   if (auto s = nearest_lists(dst, src, k, "grid", o.threads, p, nn, stats); !s) return s.error();
-  Map map = new_map(dst.size);
   for (int d = 0; d < dst.rows(); ++d) {
     const cv::Point2f target = box_map(dst.bbox, src.bbox, dst.pixels[d]);
     float best = kInf;

@@ -15,7 +15,8 @@
 // Intensities at 1x1: when the 3 principal directions keep >= 99.9 % of the
 // variance, a pixel the projection does not certify is looked up by the exact
 // kd-tree at full dimension (exact); between 90 and 99.9 % the grown list's best
-// is kept (approximate); below 90 % every pixel goes to the full-dimension tree.
+// is kept (approximate) -- except for `linear`, which always gets the exact
+// nearest; below 90 % every pixel goes to the full-dimension tree.
 #include "nearest.hpp"
 
 #include <algorithm>
@@ -500,7 +501,9 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
   // highlights) that would be most pixels at ~10 us each, and the grown
   // candidate list's best is kept instead (approximate, counted in Stats).
   std::unique_ptr<NearestIndex> full;
-  if (dst.patch == 1 && explained >= 0.999) {
+  // `linear` (any index but the lookup) asks for the exact nearest whatever it costs
+  const bool exact = index_kind != "lookup";
+  if (dst.patch == 1 && (explained >= 0.999 || exact)) {
     full = make_kdtree();
     full->build(src.flat.data(), ns, c);
   }
