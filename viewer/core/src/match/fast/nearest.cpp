@@ -1,6 +1,8 @@
 // k nearest by the full feature distance (nearest.hpp).
 //
 // 1x1 features of 3 values (normals): the exact index over the values.
+// Normal patches, k = 1: the approximate candidate search of
+// nearest_patch_normals (below).
 // Everything else: each patch vector v (P*P pixels x C channels) is projected
 // on orthonormal functions -- per channel the patch mean (times P) and, for
 // P > 1, its x and y ramps -- and the C channels of each onto their 3
