@@ -3,6 +3,8 @@
 #include <filesystem>
 #include <random>
 
+#include <memory>
+
 #include <QApplication>
 #include <QCheckBox>
 #include <QComboBox>
@@ -106,6 +108,18 @@ void write_pair(const QString& dir, QString& dst, QString& src) {
   ASSERT_TRUE(veneer::write_set(*s, src.toStdString()).ok());
 }
 
+// A window with a small simulated pair loaded from local sets in `dir`
+// (nullptr, with a failure recorded, when they do not load).
+std::unique_ptr<MainWindow> open_pair(const QTemporaryDir& dir) {
+  QString dst, src;
+  write_pair(dir.path(), dst, src);
+  auto w = std::make_unique<MainWindow>(MainWindow::Options{QString(), QString(), dst, src, dir.path()});
+  EXPECT_NE(w->destination(), nullptr);
+  EXPECT_NE(w->source(), nullptr);
+  if (!w->destination() || !w->source()) return nullptr;
+  return w;
+}
+
 }  // namespace
 
 TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
@@ -192,11 +206,9 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
 
 TEST(Viewer, CancelledComputationLeavesUiUsable) {
   QTemporaryDir dir;
-  QString dst, src;
-  write_pair(dir.path(), dst, src);
-  MainWindow w({QString(), QString(), dst, src, dir.path()});
-  ASSERT_NE(w.destination(), nullptr);
-  ASSERT_NE(w.source(), nullptr);
+  auto window = open_pair(dir);
+  ASSERT_TRUE(window);
+  MainWindow& w = *window;
   // The faithful exhaustive search with 7x7 patches is slow enough to cancel.
   child<QComboBox>(w, "method")->setCurrentText("linear");
   child<QComboBox>(w, "patch")->setCurrentText("7");
@@ -271,11 +283,9 @@ int main(int argc, char** argv) {
 // runs end in one run with the latest value.
 TEST(Viewer, MatchingOptionChangesRecomputeTheMap) {
   QTemporaryDir dir;
-  QString dst, src;
-  write_pair(dir.path(), dst, src);
-  MainWindow w({QString(), QString(), dst, src, dir.path()});
-  ASSERT_NE(w.destination(), nullptr);
-  ASSERT_NE(w.source(), nullptr);
+  auto window = open_pair(dir);
+  ASSERT_TRUE(window);
+  MainWindow& w = *window;
   child<QComboBox>(w, "method")->setCurrentText("coherent");
   EXPECT_FALSE(w.computing());  // nothing shown yet: no recomputation
   QTest::mouseClick(child<QPushButton>(w, "compute"), Qt::LeftButton);
