@@ -3,9 +3,12 @@
 #include <filesystem>
 #include <random>
 
+#include <memory>
+
 #include <QApplication>
 #include <QCheckBox>
 #include <QComboBox>
+#include <QDoubleSpinBox>
 #include <QLabel>
 #include <QProcess>
 #include <QProgressBar>
@@ -105,6 +108,18 @@ void write_pair(const QString& dir, QString& dst, QString& src) {
   ASSERT_TRUE(veneer::write_set(*s, src.toStdString()).ok());
 }
 
+// A window with a small simulated pair loaded from local sets in `dir`
+// (nullptr, with a failure recorded, when they do not load).
+std::unique_ptr<MainWindow> open_pair(const QTemporaryDir& dir) {
+  QString dst, src;
+  write_pair(dir.path(), dst, src);
+  auto w = std::make_unique<MainWindow>(MainWindow::Options{QString(), QString(), dst, src, dir.path()});
+  EXPECT_NE(w->destination(), nullptr);
+  EXPECT_NE(w->source(), nullptr);
+  if (!w->destination() || !w->source()) return nullptr;
+  return w;
+}
+
 }  // namespace
 
 TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
@@ -191,11 +206,9 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
 
 TEST(Viewer, CancelledComputationLeavesUiUsable) {
   QTemporaryDir dir;
-  QString dst, src;
-  write_pair(dir.path(), dst, src);
-  MainWindow w({QString(), QString(), dst, src, dir.path()});
-  ASSERT_NE(w.destination(), nullptr);
-  ASSERT_NE(w.source(), nullptr);
+  auto window = open_pair(dir);
+  ASSERT_TRUE(window);
+  MainWindow& w = *window;
   // The faithful exhaustive search with 7x7 patches is slow enough to cancel.
   child<QComboBox>(w, "method")->setCurrentText("linear");
   child<QComboBox>(w, "patch")->setCurrentText("7");
@@ -263,4 +276,41 @@ int main(int argc, char** argv) {
   QApplication::setOrganizationName("veneer-tests");
   ::testing::InitGoogleTest(&argc, argv);
   return RUN_ALL_TESTS();
+}
+
+// After a first Compute, changing a matching option recomputes the map alone
+// (normals and masks kept), as a slider is dragged: several changes while one
+// runs end in one run with the latest value.
+TEST(Viewer, MatchingOptionChangesRecomputeTheMap) {
+  QTemporaryDir dir;
+  auto window = open_pair(dir);
+  ASSERT_TRUE(window);
+  MainWindow& w = *window;
+  child<QComboBox>(w, "method")->setCurrentText("coherent");
+  EXPECT_FALSE(w.computing());  // nothing shown yet: no recomputation
+  QTest::mouseClick(child<QPushButton>(w, "compute"), Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
+  ASSERT_NE(w.result(), nullptr) << w.lastMessage().toStdString();
+  const cv::Mat first = w.result()->map.xy.clone();
+  EXPECT_EQ(w.mapOnlyRuns(), 0);
+
+  auto* thr = child<QDoubleSpinBox>(w, "coherentThreshold");
+  for (double t : {0.15, 0.2, 0.3}) thr->setValue(t);  // dragged
+  ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.mapOnlyRuns() >= 1; }, 60000));
+  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
+  EXPECT_LE(w.mapOnlyRuns(), 3);
+  ASSERT_NE(w.result(), nullptr) << w.lastMessage().toStdString();
+  // the map shown is the one for the last value
+  EXPECT_NE(w.result()->metrics_json.find("\"coherent_threshold\": 0.3"), std::string::npos);
+  cv::Mat diff;
+  cv::absdiff(first, w.result()->map.xy, diff);
+  EXPECT_GT(cv::countNonZero(diff.reshape(1) > 0.5), 0) << "a larger threshold makes other chunks";
+  EXPECT_TRUE(child<QLabel>(w, "transferStatus")->text().contains("map"));
+
+  // switched off: a change does nothing until Compute
+  const int runs = w.mapOnlyRuns();
+  child<QCheckBox>(w, "liveUpdate")->setChecked(false);
+  thr->setValue(0.05);
+  EXPECT_FALSE(w.computing());
+  EXPECT_EQ(w.mapOnlyRuns(), runs);
 }

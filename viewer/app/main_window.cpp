@@ -345,6 +345,12 @@ QWidget* MainWindow::buildTransferPanel() {
   form->addRow(tr("Uniformity"), uniformity_);
   form->addRow(fast_);
   form->addRow(truth_normals_);
+  live_update_ = new QCheckBox(tr("recompute as options change"));
+  live_update_->setObjectName("liveUpdate");
+  live_update_->setChecked(true);
+  live_update_->setToolTip(tr("after a first Compute, changing a matching option recomputes the map alone "
+                              "(normals and masks are kept)"));
+  form->addRow(live_update_);
   form->addRow(tr("Segmentation"), seg_method_);
   form->addRow(tr("Seg. threshold"), seg_threshold_);
   form->addRow(rect_label_);
@@ -353,6 +359,13 @@ QWidget* MainWindow::buildTransferPanel() {
   cancel_btn_->setEnabled(false);
   connect(compute_btn_, &QPushButton::clicked, this, &MainWindow::startTransfer);
   connect(cancel_btn_, &QPushButton::clicked, this, &MainWindow::cancelTransfer);
+  for (QComboBox* c : {method_, feature_, patch_})
+    connect(c, &QComboBox::currentIndexChanged, this, &MainWindow::matchOptionChanged);
+  for (QSpinBox* b : {candidates_, iterations_})
+    connect(b, &QSpinBox::valueChanged, this, &MainWindow::matchOptionChanged);
+  for (QDoubleSpinBox* b : {threshold_, coherent_threshold_, uniformity_})
+    connect(b, &QDoubleSpinBox::valueChanged, this, &MainWindow::matchOptionChanged);
+  connect(fast_, &QCheckBox::toggled, this, &MainWindow::matchOptionChanged);
   auto* row = new QHBoxLayout;
   row->addWidget(compute_btn_);
   row->addWidget(cancel_btn_);
@@ -682,8 +695,10 @@ bool MainWindow::loadLocalSet(const QString& folder, veneer::Role as) {
 void MainWindow::setLoaded(std::shared_ptr<LoadedSet> loaded, veneer::Role as) {
   if (as == veneer::Role::source) {
     src_ = loaded;
+    ++sets_loaded_;
   } else {
     dst_ = loaded;
+    ++sets_loaded_;
   }
   result_.reset();
   relighter_.reset();
@@ -756,8 +771,16 @@ void MainWindow::startTransfer() {
   pending_result_.reset();
   pending_relighter_.reset();
   auto dst = dst_, src = src_;
+  // the prepared objects are kept while what made them stays the same
+  const QString key = preparationKey();
+  auto cached = key == prepared_key_ ? prepared_ : nullptr;
+  auto relighter = cached ? relighter_ : nullptr;
+  if (cached) ++map_only_runs_;
+  pending_prepared_.reset();
+  pending_key_ = key;
   QPointer<MainWindow> self(this);
-  transfer_watch_.setFuture(QtConcurrent::run([this, self, dst, src, options, seg, custom_segmentation] {
+  transfer_watch_.setFuture(QtConcurrent::run([this, self, dst, src, options, seg, custom_segmentation, cached,
+                                               relighter] {
     veneer::Progress progress;
     progress.cancel = &cancel_;
     progress.on_progress = [self](double f, const std::string& stage) {
@@ -769,27 +792,41 @@ void MainWindow::startTransfer() {
           self->transfer_label_->setText(s);
         });
     };
-    veneer::ImageSet d = dst->set;
-    if (custom_segmentation) {
-      // The user's threshold / rectangle decide the destination's object pixels.
-      auto m = veneer::ps::segment(d, seg);
-      if (!m) {
-        transfer_error_ = tr("segmentation: %1").arg(qs(m.message()));
+    std::shared_ptr<const veneer::match::PreparedPair> pair = cached;
+    if (!pair) {
+      veneer::ImageSet d = dst->set;
+      if (custom_segmentation) {
+        // The user's threshold / rectangle decide the destination's object pixels.
+        auto m = veneer::ps::segment(d, seg);
+        if (!m) {
+          transfer_error_ = tr("segmentation: %1").arg(qs(m.message()));
+          return;
+        }
+        d.mask = m->mask;
+      }
+      auto prepared = veneer::match::prepare_pair(d, src->set, options, progress);
+      if (!prepared) {
+        transfer_error_ = qs(prepared.message());
         return;
       }
-      d.mask = m->mask;
+      pair = std::make_shared<const veneer::match::PreparedPair>(std::move(*prepared));
+      pending_prepared_ = pair;
     }
-    auto result = veneer::match::transfer(d, src->set, options, progress);
+    auto result = veneer::match::transfer(*pair, options, progress);
     if (!result) {
       transfer_error_ = qs(result.message());
       return;
     }
     pending_result_ = std::make_shared<veneer::match::TransferResult>(std::move(*result));
-    auto relighter = veneer::match::Relighter::fit(src->set);
-    if (relighter) {
-      pending_relighter_ = std::make_shared<veneer::match::Relighter>(std::move(*relighter));
+    if (relighter) {  // same source as last time
+      pending_relighter_ = relighter;
+      return;
+    }
+    auto fitted = veneer::match::Relighter::fit(src->set);
+    if (fitted) {
+      pending_relighter_ = std::make_shared<veneer::match::Relighter>(std::move(*fitted));
     } else {
-      relight_error_ = qs(relighter.message());
+      relight_error_ = qs(fitted.message());
     }
   }));
 }
@@ -800,10 +837,49 @@ void MainWindow::cancelTransfer() {
   transfer_label_->setText(tr("cancelling…"));
 }
 
+// What the prepared objects depend on: the sets loaded, truth normals, the
+// segmentation settings. Anything else is a matching option.
+QString MainWindow::preparationKey() const {
+  return QString("%1|%2|%3|%4|%5,%6,%7,%8")
+      .arg(sets_loaded_)  // a set (re)loaded: everything is prepared again
+      .arg(truth_normals_->isChecked())
+      .arg(seg_method_->currentText())
+      .arg(seg_threshold_->value())
+      .arg(seg_rect_.x())
+      .arg(seg_rect_.y())
+      .arg(seg_rect_.width())
+      .arg(seg_rect_.height());
+}
+
+// A matching option changed: once a transfer has been shown, recompute (the
+// map alone, the objects are kept); while one runs, once more when it ends.
+void MainWindow::matchOptionChanged() {
+  if (!live_update_ || !live_update_->isChecked() || !result_) return;
+  if (computing_) {
+    rerun_ = true;
+    return;
+  }
+  startTransfer();
+}
+
 void MainWindow::onTransferDone() {
   computing_ = false;
   compute_btn_->setEnabled(true);
   cancel_btn_->setEnabled(false);
+  if (pending_prepared_) {
+    prepared_ = pending_prepared_;
+    prepared_key_ = pending_key_;
+    pending_prepared_.reset();
+  }
+  if (rerun_) {  // the options moved on while this ran: show the latest
+    rerun_ = false;
+    if (pending_result_) {
+      result_ = pending_result_;
+      relighter_ = pending_relighter_;
+    }
+    startTransfer();
+    return;
+  }
   if (!pending_result_) {
     const bool cancelled = cancel_.load();
     transfer_label_->setText(cancelled ? tr("cancelled") : tr("failed: %1").arg(transfer_error_));
@@ -820,6 +896,7 @@ void MainWindow::onTransferDone() {
     text += tr(" · coverage %1% · coherence %2%").arg(q.coverage * 100, 0, 'f', 1).arg(q.coherence * 100, 0, 'f', 1);
     if (q.normal_mean_deg) text += tr(" · normals %1°").arg(*q.normal_mean_deg, 0, 'f', 2);
   }
+  text += tr(" · map %1 ms").arg(result_->match_seconds * 1000, 0, 'f', 1);
   transfer_label_->setText(text);
   message(tr("transfer done (%1)").arg(method_->currentText()));
   cv::Mat backdrop = dst_ ? picture_of(dst_->median) : cv::Mat();

@@ -69,6 +69,9 @@ class MainWindow : public QMainWindow {
   cv::Mat lastLiveFrame() const { return live_frame_; }
   cv::Mat lastRepaintedFrame() const { return live_repainted_; }
   int liveFramesShown() const { return live_frames_; }
+  // Transfers that reused the prepared objects (normals, masks) and
+  // recomputed only the map: what a change of a matching option triggers.
+  int mapOnlyRuns() const { return map_only_runs_; }
   double liveFps() const { return live_fps_; }
   QString workdir() const { return workdir_; }
   // Grabs every view as <dir>/<tab>.png; returns the files written.
@@ -92,6 +95,8 @@ class MainWindow : public QMainWindow {
   void onSetsListed(const std::vector<veneer::rig::SetSummary>& sets);
   void onLiveFrame(const veneer::rig::LiveFrame& frame);
   void onTransferDone();
+  void matchOptionChanged();
+  QString preparationKey() const;
   void refreshLook();
   void showOrigin(QPoint destination_pixel);
   void refreshRelight();
@@ -116,6 +121,13 @@ class MainWindow : public QMainWindow {
   veneer::match::LiveRepainter repainter_;
   std::atomic<bool> cancel_{false};
   bool computing_ = false;
+  bool rerun_ = false;  // a matching option changed while computing: run again when done
+  int map_only_runs_ = 0;
+  int sets_loaded_ = 0;  // counts every set loaded as destination or source
+  // The objects prepared for the last transfer and what they were made from
+  // (preparationKey); reused while only matching options change.
+  std::shared_ptr<const veneer::match::PreparedPair> prepared_, pending_prepared_;
+  QString prepared_key_, pending_key_;
   QFutureWatcher<void> transfer_watch_;
   QString transfer_error_, relight_error_;
   std::shared_ptr<veneer::match::TransferResult> pending_result_;
@@ -139,7 +151,7 @@ class MainWindow : public QMainWindow {
   QSpinBox *iso_ = nullptr, *candidates_ = nullptr, *iterations_ = nullptr;
   QComboBox *method_ = nullptr, *feature_ = nullptr, *patch_ = nullptr, *seg_method_ = nullptr, *look_what_ = nullptr,
             *recent_ = nullptr;
-  QCheckBox *fast_ = nullptr, *truth_normals_ = nullptr;
+  QCheckBox *fast_ = nullptr, *truth_normals_ = nullptr, *live_update_ = nullptr;
   QTreeWidget* sets_tree_ = nullptr;
   QTreeWidgetItem *rig_root_ = nullptr, *local_root_ = nullptr;
   ImageView *dst_view_ = nullptr, *src_view_ = nullptr, *result_view_ = nullptr, *origin_view_ = nullptr,

@@ -245,37 +245,73 @@ Expected<Map> read_map(const std::filesystem::path& file) {
   return map;
 }
 
+Expected<PreparedPair> prepare_pair(const ImageSet& destination_in, const ImageSet& source_in,
+                                    const TransferOptions& options, const Progress& progress) {
+  if (auto s = options.check(); !s) return s.error();
+  PreparedPair pair;
+  pair.destination = destination_in;
+  pair.source = source_in;
+  pair.scale = options.scale;
+  pair.truth_normals = options.truth_normals;
+  scale_set(pair.destination, options.scale);
+  scale_set(pair.source, options.scale);
+  auto dst = prepare_object(pair.destination, options.truth_normals, sub_progress(progress, 0.0, 0.5));
+  if (!dst) return make_error("destination: " + dst.message());
+  auto src = prepare_object(pair.source, options.truth_normals, sub_progress(progress, 0.5, 1.0));
+  if (!src) return make_error("source: " + src.message());
+  pair.dst = std::move(*dst);
+  pair.src = std::move(*src);
+  pair.destination_median = median_photo(pair.dst.view.images);
+  pair.source_median = median_photo(pair.src.view.images);
+  return pair;
+}
+
 Expected<TransferResult> transfer(const ImageSet& destination_in, const ImageSet& source_in,
                                   const TransferOptions& options, const Progress& progress) {
-  if (auto s = options.check(); !s) return s.error();
   const auto t_all = Clock::now();
-  ImageSet destination = destination_in, source = source_in;
-  scale_set(destination, options.scale);
-  scale_set(source, options.scale);
+  auto pair = prepare_pair(destination_in, source_in, options, sub_progress(progress, 0.0, 0.3));
+  if (!pair) return pair.error();
+  auto result = transfer(*pair, options, sub_progress(progress, 0.3, 1.0));
+  if (!result) return result;
+  // the total includes the preparation
+  auto j = nlohmann::json::parse(result->metrics_json);
+  j["timings"]["total_s"] = since(t_all);
+  result->metrics_json = j.dump(2);
+  return result;
+}
+
+Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOptions& options, const Progress& progress) {
+  if (auto s = options.check(); !s) return s.error();
+  if (options.scale != pair.scale || options.truth_normals != pair.truth_normals)
+    return make_error("the prepared pair was made with scale " + std::to_string(pair.scale) + " and truth normals " +
+                      (pair.truth_normals ? "on" : "off") + ", the options ask for scale " +
+                      std::to_string(options.scale) + " and truth normals " + (options.truth_normals ? "on" : "off"));
+  const auto t_all = Clock::now();
+  const ImageSet& destination = pair.destination;
+  const ImageSet& source = pair.source;
+  const PreparedObject* dst = &pair.dst;
+  const PreparedObject* src = &pair.src;
   nlohmann::json timings;
-  auto dst = prepare_object(destination, options.truth_normals, sub_progress(progress, 0.0, 0.15));
-  if (!dst) return make_error("destination: " + dst.message());
-  auto src = prepare_object(source, options.truth_normals, sub_progress(progress, 0.15, 0.3));
-  if (!src) return make_error("source: " + src.message());
   timings["segment_destination_s"] = dst->segment_seconds;
   timings["normals_destination_s"] = dst->normals_seconds;
   timings["segment_source_s"] = src->segment_seconds;
   timings["normals_source_s"] = src->normals_seconds;
 
   auto t0 = Clock::now();
-  auto map = compute_map(dst->view, src->view, options.match, sub_progress(progress, 0.3, 0.9));
+  auto map = compute_map(dst->view, src->view, options.match, sub_progress(progress, 0.0, 0.85));
   if (!map) return map.error();
   timings["match_s"] = since(t0);
 
   TransferResult result;
+  result.match_seconds = timings["match_s"].get<double>();
   result.map = std::move(*map);
   result.source_size = source.size;
   t0 = Clock::now();
   progress.report(0.9, "repaint");
   for (size_t i = 0; i < src->view.images.size() && i < dst->view.images.size(); ++i)
     result.repainted.push_back(repaint(result.map, src->view.images[i], dst->view.images[i]));
-  result.source_median = median_photo(src->view.images);
-  result.repainted_median = repaint(result.map, result.source_median, median_photo(dst->view.images));
+  result.source_median = pair.source_median;
+  result.repainted_median = repaint(result.map, pair.source_median, pair.destination_median);
   result.reuse = reuse_counts(result.map, source.size);
   timings["repaint_s"] = since(t0);
 
@@ -287,7 +323,9 @@ Expected<TransferResult> transfer(const ImageSet& destination_in, const ImageSet
   const auto& o = options.match;
   j["options"] = {{"method", method_name(o.method)}, {"feature", feature_name(o.feature)}, {"patch", o.patch},
                   {"candidates", o.candidates}, {"threshold", o.threshold}, {"iterations", o.iterations},
-                  {"fast", o.fast}, {"seed", o.seed}, {"truth_normals", options.truth_normals},
+                  {"coherent_threshold", o.coherent_threshold}, {"uniformity", o.uniformity},
+                  {"coherent_grow", o.coherent_grow}, {"fast", o.fast}, {"seed", o.seed},
+                  {"truth_normals", options.truth_normals},
                   {"scale", options.scale}};
   if (destination.truth.present() && source.truth.present()) {
     t0 = Clock::now();

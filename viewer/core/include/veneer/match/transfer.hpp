@@ -47,10 +47,28 @@ struct TransferResult {
   std::optional<Quality> quality;  // when both sets carry truth
   std::optional<Relit> relit;      // the relighting measure's pictures, when measured
   std::string metrics_json;        // timings, options, sizes, quality
+  double match_seconds = 0;        // the map's computation alone (wall)
 };
 
 Expected<TransferResult> transfer(const ImageSet& destination, const ImageSet& source,
                                   const TransferOptions& options, const Progress& progress = {});
+
+// The same in two steps: the objects prepared once (sets scaled, segmented,
+// normals), then the map and the rest. A caller that keeps the pair
+// recomputes only the map when a matching option changes -- the viewer does,
+// while the user drags a slider. `options` must have the pair's scale and
+// truth_normals (else an error names the difference).
+struct PreparedPair {
+  ImageSet destination, source;  // as scaled
+  PreparedObject dst, src;
+  cv::Mat destination_median, source_median;  // per-pixel medians of the photos
+  double scale = 1.0;
+  bool truth_normals = false;
+};
+Expected<PreparedPair> prepare_pair(const ImageSet& destination, const ImageSet& source,
+                                    const TransferOptions& options, const Progress& progress = {});
+Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOptions& options,
+                                  const Progress& progress = {});
 // Writes map.pfm, map.png, result_light_NN.png, result_median.png, reuse.png,
 // metrics.json (and relight_transferred.png / relight_reference.png when the
 // relighting was measured) into `folder` (created when missing).
