@@ -9,6 +9,8 @@
 #include <mutex>
 #include <unordered_map>
 
+#include <tbb/parallel_invoke.h>
+
 #include "candidates.hpp"
 #include "engine.hpp"
 #include "index_fast.hpp"
@@ -39,12 +41,14 @@ Expected<Map> run_direct(const Object& dst, const Object& src, const MatchOption
                          Stats* stats) {
   NearestLists nn;
   const char* index = o.method == Method::flann ? default_index() : "grid";
-  if (auto s = nearest_lists(dst, src, 1, index, o.threads, p, nn, stats); !s) return s.error();
+  // the map is written block by block as the search fills it
   Map map = new_map(dst.size);
-  parallel_rows(dst.rows(), o.threads, 4096, [&](int b, int e) {
+  nn.on_rows = [&](int b, int e) {
     for (int d = b; d < e; ++d)
       if (nn.ids[d] >= 0) put(map, dst, src, d, nn.ids[d], nn.sq[d]);
-  });
+  };
+  if (auto s = nearest_lists(dst, src, 1, index, o.threads, p, nn, stats); !s) return s.error();
+  if (!nn.rows_reported) parallel_rows(dst.rows(), o.threads, 4096, nn.on_rows);
   return map;
 }
 
@@ -424,9 +428,17 @@ Expected<Map> compute_map(const ObjectView& destination, const ObjectView& sourc
                            (options.patch > 1 && options.feature == Feature::normals);
   // `coherent` on normals judges single pixels: patches are not built
   const int patch = options.method == Method::coherent && options.feature == Feature::normals ? 1 : options.patch;
-  auto dst = make_object(destination, options.feature, patch, grid_needed, options.threads);
+  // both objects at once (each is parallel inside too; their serial parts overlap)
+  Expected<Object> dst = make_error("unreachable"), src = make_error("unreachable");
+  auto make_dst = [&] { dst = make_object(destination, options.feature, patch, grid_needed, options.threads); };
+  auto make_src = [&] { src = make_object(source, options.feature, patch, grid_needed, options.threads); };
+  if (options.threads == 1) {
+    make_dst();
+    make_src();
+  } else {
+    tbb::parallel_invoke(make_dst, make_src);
+  }
   if (!dst) return make_error("destination: " + dst.message());
-  auto src = make_object(source, options.feature, patch, grid_needed, options.threads);
   if (!src) return make_error("source: " + src.message());
   Stats local;
   Stats* st = stats ? stats : &local;

@@ -252,24 +252,50 @@ void OctGridIndex::build(const float* points, int n, int dims) {
   // a query reads one contiguous run per uv cell.
   const int cells = side_ * side_;
   start_.assign(static_cast<size_t>(2 * cells + 1), 0);
-  for (int i = 0; i < n_; ++i) ++start_[cell[i] + 1];
-  for (size_t c = 1; c < start_.size(); ++c) start_[c] += start_[c - 1];
-  // 8 far points of padding: scan_run reads whole groups of 8
-  xs_.assign(static_cast<size_t>(n_) + 8, 1e18f);
-  ys_.assign(static_cast<size_t>(n_) + 8, 1e18f);
-  zs_.assign(static_cast<size_t>(n_) + 8, 1e18f);
-  ids_.assign(static_cast<size_t>(n_) + 8, std::numeric_limits<int>::max());
-  slot_of_.resize(n_);
-  std::vector<int> fill(start_.begin(), start_.end() - 1);
-  for (int i = 0; i < n_; ++i) {  // ascending ids within a cell
-    const int at = fill[cell[i]]++;
-    const float* p = points + static_cast<size_t>(i) * 3;
-    xs_[at] = p[0];
-    ys_[at] = p[1];
-    zs_[at] = p[2];
-    ids_[at] = i;
-    slot_of_[i] = at;
+  // Counting sort by cell in kParts fixed runs of ids (a fixed split: the
+  // layout does not depend on the thread count): per-run counts, then every
+  // run scatters its points in parallel after the earlier runs' points of the
+  // same cell, so ids ascend within a cell.
+  constexpr int kParts = 4;
+  const int nodes = 2 * cells, part = (n_ + kParts - 1) / kParts;
+  std::vector<int> count(static_cast<size_t>(kParts) * nodes, 0);
+  parallel_rows(kParts, 0, 1, [&](int pb, int pe) {
+    for (int k = pb; k < pe; ++k) {
+      int* c = count.data() + static_cast<size_t>(k) * nodes;
+      for (int i = k * part; i < std::min(n_, (k + 1) * part); ++i) ++c[cell[i]];
+    }
+  });
+  for (int c = 0, at = 0; c < nodes; ++c) {
+    start_[c] = at;
+    for (int k = 0; k < kParts; ++k) {
+      int& v = count[static_cast<size_t>(k) * nodes + c];
+      const int here = v;
+      v = at;  // this run's first place in the cell
+      at += here;
+    }
   }
+  start_[nodes] = n_;
+  // 8 far points of padding: scan_run reads whole groups of 8
+  xs_.resize(static_cast<size_t>(n_) + 8);
+  ys_.resize(static_cast<size_t>(n_) + 8);
+  zs_.resize(static_cast<size_t>(n_) + 8);
+  ids_.resize(static_cast<size_t>(n_) + 8);
+  for (int i = n_; i < n_ + 8; ++i) xs_[i] = ys_[i] = zs_[i] = 1e18f, ids_[i] = std::numeric_limits<int>::max();
+  slot_of_.resize(n_);
+  parallel_rows(kParts, 0, 1, [&](int pb, int pe) {
+    for (int k = pb; k < pe; ++k) {
+      int* fill = count.data() + static_cast<size_t>(k) * nodes;
+      for (int i = k * part; i < std::min(n_, (k + 1) * part); ++i) {
+        const int at = fill[cell[i]]++;
+        const float* p = points + static_cast<size_t>(i) * 3;
+        xs_[at] = p[0];
+        ys_[at] = p[1];
+        zs_[at] = p[2];
+        ids_[at] = i;
+        slot_of_[i] = at;
+      }
+    }
+  });
   points_ = points;
   // For the lookup: each (uv cell, layer) without points sends its queries to
   // the nearest one (in cells, breadth first) that has some. Within a layer
@@ -282,13 +308,18 @@ void OctGridIndex::build(const float* points, int n, int dims) {
     if (start_[c] < start_[c + 1]) near_[c] = c, queue.push_back(c);
   const float h = 2.0f / static_cast<float>(side_);
   auto edge = [&](int i) { return std::max(std::fabs(-1.0f + i * h), std::fabs(-1.0f + (i + 1) * h)); };
+  auto inner = [&](int i) { return -1.0f + i * h < 0.0f && -1.0f + (i + 1) * h > 0.0f ? 0.0f : std::min(std::fabs(-1.0f + i * h), std::fabs(-1.0f + (i + 1) * h)); };
+  // cells wholly outside the diamond |u| + |v| <= 1 never see a query: not visited
+  for (int c = 0; c < cells; ++c)
+    if (inner(c % side_) + inner(c / side_) > 1.0f && start_[2 * c] == start_[2 * c + 2])
+      near_[2 * c] = near_[2 * c + 1] = -2;
   for (size_t qi = 0; qi < queue.size(); ++qi) {
     const int node = queue[qi], layer = node & 1, c = node >> 1, cx = c % side_, cy = c / side_;
     const int nb[5] = {cx > 0 ? node - 2 : -1, cx + 1 < side_ ? node + 2 : -1, cy > 0 ? node - 2 * side_ : -1,
                        cy + 1 < side_ ? node + 2 * side_ : -1, edge(cx) + edge(cy) >= 1.0f ? (node ^ 1) : -1};
     (void)layer;
     for (int t : nb)
-      if (t >= 0 && near_[t] < 0) near_[t] = near_[node], queue.push_back(t);
+      if (t >= 0 && near_[t] == -1) near_[t] = near_[node], queue.push_back(t);
   }
   // |u| is largest at a column's outer edge; the gain grows with |u|
   gain_col_.resize(side_);
@@ -382,6 +413,7 @@ bool OctGridIndex::nearest1(const float* query, int& slot, int& id, float& sq, b
     // the lookup: the best of the query's own cell in its layer (or the
     // nearest cell with points, when it has none) and the hint, no more
     const int node = near_[own + (qz < 0 ? 1 : 0)];
+    if (node < 0) return false;  // (a cell outside the diamond: not for a unit query)
     scan_lanes(xs, ys, zs, ids, start_[node], start_[node + 1], vx, vy, vz, lanes);
     float d;
     int best;

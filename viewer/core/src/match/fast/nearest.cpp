@@ -445,8 +445,10 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
           index.knn(q, k, ids, sq);
         }
       }
+      if (out.on_rows) out.on_rows(b, e);
     });
     if (stop) return make_error("cancelled during nearest search");
+    out.rows_reported = static_cast<bool>(out.on_rows);
     if (stats)
       stats->index = name, stats->projected_dims = 0, stats->certified = exact ? 1 : 0, stats->explained_variance = 1;
     return {};

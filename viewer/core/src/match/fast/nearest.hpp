@@ -1,6 +1,7 @@
 #pragma once
 // Internal: the k nearest source rows of every destination row by the full
 // feature distance (patches included), through the fast indices.
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -13,6 +14,11 @@ struct NearestLists {
   int k = 1;
   std::vector<int> ids;   // rows x k, ascending by (distance, id); -1 past the source's size
   std::vector<float> sq;  // squared feature distances
+  // Set by the caller (1x1 searches over 3 values): called with each block of
+  // rows [b, e) as soon as it is filled, while it is still in cache.
+  // (only the direct searches do: `rows_reported` says whether it was called)
+  std::function<void(int, int)> on_rows;
+  bool rows_reported = false;
 };
 
 // `index_kind` "grid" / "kdtree" for 3-value 1x1 features; patches and
