@@ -174,6 +174,10 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
   const int band = u > 0 ? h + 1 : std::max(8, h / 16);
   // Windows halve from the source object's extent (larger ones only land off it).
   const int max_radius = std::max(src.bbox.width, src.bbox.height);
+  // After the first pass, from the nearest-by-centre start, windows wider than
+  // 16 px won under 0.4 % of their draws (bull <- orange, 21k px) for the
+  // cost of a random source read each: later passes search within 16 px.
+  const int far_radius = 16;
   for (int it = 0; it < o.iterations; ++it) {
     if (p.cancelled()) return make_error("cancelled during patchmatch");
     p.report(static_cast<double>(it) / o.iterations, "patchmatch");
@@ -228,7 +232,7 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
             offer(m.x - off.x, m.y - off.y);
           }
           uint64_t r = hash3(o.seed, static_cast<uint64_t>(it), static_cast<uint64_t>(d));
-          for (int radius = max_radius; radius >= 1; radius /= 2) {
+          for (int radius = it == 0 ? max_radius : std::min(max_radius, far_radius); radius >= 1; radius /= 2) {
             const cv::Point c = src.pixels[match[d]];
             r = mix64(r);
             const int span = 2 * radius + 1;
