@@ -138,28 +138,35 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
       // (x and y multiples of 4): a sixteenth of the source reads where most
       // chunks fail, and still hundreds of pixels per chunk.
       const bool sampled = s >= 16;
+      // the seed whose chunk pixel pt is in: the nearest of the 3x3 cells' seeds
+      auto owner_of = [&](cv::Point pt) {
+        const int ci = (pt.x - box.x) >> shift, cj = (pt.y - box.y) >> shift;
+        int best_cell = -1, best_d2 = std::numeric_limits<int>::max();
+        for (int j = std::max(0, cj - 1); j <= std::min(gy - 1, cj + 1); ++j)
+          for (int i = std::max(0, ci - 1); i <= std::min(gx - 1, ci + 1); ++i) {
+            const int cell = j * gx + i;
+            if (seed_match[cell] < 0) continue;
+            const cv::Point a = seed_at[cell];
+            const int d2 = (a.x - pt.x) * (a.x - pt.x) + (a.y - pt.y) * (a.y - pt.y);
+            if (d2 < best_d2) best_d2 = d2, best_cell = cell;
+          }
+        return best_cell;
+      };
       parallel_rows(na, o.threads, 512, [&](int b, int e) {
         // first each pixel's chunk and the source position it proposes
         // (prop: y * width + x, -1 off the frame, -2 not judged), then the
         // source reads, each a cache miss: prefetched a few pixels ahead
         for (int ai = b; ai < e; ++ai) {
           const int d = active[ai];
-          owner[ai] = -1;
           const cv::Point pt = dst.pixels[d];
-          const int ci = (pt.x - box.x) >> shift, cj = (pt.y - box.y) >> shift;
-          int best_cell = -1, best_d2 = std::numeric_limits<int>::max();
-          for (int j = std::max(0, cj - 1); j <= std::min(gy - 1, cj + 1); ++j)
-            for (int i = std::max(0, ci - 1); i <= std::min(gx - 1, ci + 1); ++i) {
-              const int cell = j * gx + i;
-              if (seed_match[cell] < 0) continue;
-              const cv::Point a = seed_at[cell];
-              const int d2 = (a.x - pt.x) * (a.x - pt.x) + (a.y - pt.y) * (a.y - pt.y);
-              if (d2 < best_d2) best_d2 = d2, best_cell = cell;
-            }
-          if (best_cell < 0) continue;
-          owner[ai] = best_cell;
           prop[ai] = -2;  // not judged (see `sampled`)
-          if (sampled && ((pt.x | pt.y) & 3) != 0) continue;
+          if (sampled && ((pt.x | pt.y) & 3) != 0) {
+            owner[ai] = -3;  // found only if a chunk nearby is taken (below)
+            continue;
+          }
+          const int best_cell = owner_of(pt);
+          owner[ai] = best_cell;
+          if (best_cell < 0) continue;
           const cv::Point m = src.pixels[seed_match[best_cell]];
           const cv::Point a = seed_at[best_cell];
           const int x = m.x + pt.x - a.x, y = m.y + pt.y - a.y;
@@ -183,14 +190,21 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
         }
       });
       const double thr = o.coherent_threshold * 1048576.0;
-      parallel_rows(na, o.threads, 1024, [&](int b, int e) {
+      std::vector<uint8_t> taken(seeds, 0);
+      bool any = false;
+      for (size_t c = 0; c < seeds; ++c) {
+        const uint32_t judged = cnt[c].load(std::memory_order_relaxed);
+        taken[c] = judged > 0 && static_cast<double>(sum[c].load(std::memory_order_relaxed)) / judged < thr &&
+                   worst[c].load(std::memory_order_relaxed) < cap * thr;
+        any = any || taken[c];
+      }
+      // (a level that takes no chunk, often the coarsest, ends here)
+      parallel_rows(any ? na : 0, o.threads, 1024, [&](int b, int e) {
         for (int ai = b; ai < e; ++ai) {
-          const int c0 = owner[ai];
+          int c0 = owner[ai];
+          if (c0 == -3) c0 = owner_of(dst.pixels[active[ai]]);
           if (c0 < 0 || prop[ai] == -1) continue;
-          const uint32_t judged = cnt[c0].load(std::memory_order_relaxed);
-          if (judged == 0 || !(static_cast<double>(sum[c0].load(std::memory_order_relaxed)) / judged < thr &&
-                               worst[c0].load(std::memory_order_relaxed) < cap * thr))
-            continue;
+          if (!taken[c0]) continue;
           int row = prop[ai];
           if (row == -2) {  // in an accepted chunk but not among the pixels judged
             const int d = active[ai];
