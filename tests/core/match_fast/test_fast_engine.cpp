@@ -252,7 +252,7 @@ TEST_F(FastEngine, IntensitiesOneByOneLinearStaysExactWithHighlights) {
 // Patches. Intensities go through the certified re-ranking, exact up to float
 // summation order: tolerance 1e-4 relative on every pixel's distance and at
 // least 99 % identical matches (the rest are equal-distance ties). Normal
-// patches take the fast approximate path (8 nearest patch-mean directions +
+// patches take the fast approximate path (12 nearest patch-mean directions +
 // 2 propagated candidates): at least 95 % identical matches and the mean
 // distance within 1 % of the exact one.
 TEST_F(FastEngine, PatchesMatchLinearWithinTolerance) {
