@@ -369,17 +369,24 @@ static inline void scan_lanes(const float* xs, const float* ys, const float* zs,
 
 // The lanes' best (distance, id) pair; false when no lane has one.
 static inline bool best_of(const Lanes& l, float& best_d, int& best_slot) {
-  alignas(32) float d[8];
-  alignas(32) int id[8], slot[8];
-  _mm256_store_ps(d, l.d);
-  _mm256_store_si256(reinterpret_cast<__m256i*>(id), l.id);
+  // the smallest distance in every lane
+  __m256 m = _mm256_min_ps(l.d, _mm256_permute2f128_ps(l.d, l.d, 1));
+  m = _mm256_min_ps(m, _mm256_shuffle_ps(m, m, _MM_SHUFFLE(1, 0, 3, 2)));
+  m = _mm256_min_ps(m, _mm256_shuffle_ps(m, m, _MM_SHUFFLE(2, 3, 0, 1)));
+  const float dmin = _mm256_cvtss_f32(m);
+  if (!(dmin < kInf)) return false;  // no lane has a point (those that do are finite)
+  // among the lanes at that distance, the lowest id
+  const __m256i at_min = _mm256_castps_si256(_mm256_cmp_ps(l.d, m, _CMP_EQ_OQ));
+  const __m256i ids = _mm256_blendv_epi8(_mm256_set1_epi32(std::numeric_limits<int>::max()), l.id, at_min);
+  __m256i t = _mm256_min_epi32(ids, _mm256_permute2x128_si256(ids, ids, 1));
+  t = _mm256_min_epi32(t, _mm256_shuffle_epi32(t, _MM_SHUFFLE(1, 0, 3, 2)));
+  t = _mm256_min_epi32(t, _mm256_shuffle_epi32(t, _MM_SHUFFLE(2, 3, 0, 1)));
+  const __m256i hit = _mm256_and_si256(at_min, _mm256_cmpeq_epi32(ids, t));
+  const int lane = __builtin_ctz(static_cast<unsigned>(_mm256_movemask_ps(_mm256_castsi256_ps(hit))));
+  alignas(32) int slot[8];
   _mm256_store_si256(reinterpret_cast<__m256i*>(slot), l.slot);
-  int j = -1;
-  for (int t = 0; t < 8; ++t)
-    if (slot[t] >= 0 && (j < 0 || d[t] < d[j] || (d[t] == d[j] && id[t] < id[j]))) j = t;
-  if (j < 0) return false;
-  best_d = d[j];
-  best_slot = slot[j];
+  best_d = dmin;
+  best_slot = slot[lane];
   return true;
 }
 
