@@ -355,7 +355,7 @@ int main(int argc, char** argv) {
           dp.insert(dp.end(), {n[0], n[1], n[2]});
         }
     std::printf("| nearest-normal index, one thread, CPU time | build (ms) | all queries, k=1 (ms) | ns / query | all queries, k=100 (ms) |\n|---|---|---|---|---|\n");
-    for (const char* kind : {"grid", "kdtree", "flann"}) {
+    for (const char* kind : {"grid", "lookup", "kdtree", "flann"}) {
       std::vector<double> tb, tq, tk;
       for (int i = 0; i < (std::strcmp(kind, "flann") == 0 || pr.large ? 1 : runs); ++i) {
         auto index = std::strcmp(kind, "flann") == 0 ? make_index("flann") : fast::make_index(kind);

@@ -74,6 +74,8 @@ void expect_same(NearestIndex& index, const std::vector<float>& pts, int dims, c
 TEST(FastIndex, KnownKinds) {
   EXPECT_NE(veneer::match::fast::make_index("grid"), nullptr);
   EXPECT_NE(veneer::match::fast::make_index("kdtree"), nullptr);
+  ASSERT_NE(veneer::match::fast::make_index("lookup"), nullptr);
+  EXPECT_EQ(veneer::match::fast::make_index("lookup")->name(), "lookup");
   EXPECT_EQ(veneer::match::fast::make_index("nonsense"), nullptr);
 }
 

@@ -49,8 +49,9 @@ Expected<Map> compute_map(const ObjectView& destination, const ObjectView& sourc
 Expected<Map> compute_map(const ObjectView& destination, const ObjectView& source, const MatchOptions& options,
                           const Progress& progress, Stats* stats);
 
-// "grid" (octahedral lookup, exact for any 3-D points, fastest on normals) or
-// "kdtree" (nanoflann, exact, any dimension); nullptr for other names.
+// "grid" (octahedral lookup, exact for any 3-D points, fastest on normals),
+// "lookup" (the same grid, k = 1 answered from the query's own cell: not
+// exact) or "kdtree" (nanoflann, exact, any dimension); nullptr for other names.
 std::unique_ptr<NearestIndex> make_index(const std::string& kind);
 
 // Repaint with the overlapping chunks blended (StyleBlit's optional blending,

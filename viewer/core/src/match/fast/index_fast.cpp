@@ -186,7 +186,7 @@ class KdTreeIndex final : public NearestIndex {
 // unvisited cells exceeds the k-th best: the result is exact.
 
 
-OctGridIndex::OctGridIndex(int cells_per_side) : fixed_side_(cells_per_side) {}
+OctGridIndex::OctGridIndex(int cells_per_side, bool lookup) : lookup_(lookup), fixed_side_(cells_per_side) {}
 OctGridIndex::~OctGridIndex() = default;
 
 // Largest box of cells visited directly (else ring by ring): 16-49 measured
@@ -475,6 +475,10 @@ bool OctGridIndex::nearest_slot(const float* query, int& slot, int& id, float& s
 }
 
 void OctGridIndex::knn(const float* query, int k, int* ids, float* sq_dists) const {
+  if (lookup_ && k == 1 && !fallback_ && n_ > 0) {
+    int slot = -1;
+    if (nearest1(query, slot, ids[0], sq_dists[0], false)) return;
+  }
   nearest_from(query, k, ids, sq_dists, -1);
 }
 
@@ -625,6 +629,7 @@ void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_d
 
 std::unique_ptr<NearestIndex> make_index(const std::string& kind) {
   if (kind == "grid") return std::make_unique<OctGridIndex>();
+  if (kind == "lookup") return std::make_unique<OctGridIndex>(0, true);
   if (kind == "kdtree") return std::make_unique<KdTreeIndex>();
   return nullptr;
 }

@@ -14,11 +14,12 @@ namespace veneer::match::fast {
 // from unit length, or dims != 3, are served by an internal kd-tree.
 class OctGridIndex final : public NearestIndex {
  public:
-  explicit OctGridIndex(int cells_per_side = 0);  // 0 = chosen from the point count
+  explicit OctGridIndex(int cells_per_side = 0, bool lookup = false);  // 0 = chosen from the point count
+  // lookup = true: knn with k = 1 is the lookup (nearest_slot, exact = false)
   ~OctGridIndex() override;
   void build(const float* points, int n, int dims) override;
   void knn(const float* query, int k, int* ids, float* sq_dists) const override;
-  std::string name() const override { return "grid"; }
+  std::string name() const override { return lookup_ ? "lookup" : "grid"; }
   // knn, seeded with `hint` (a source id likely to be near; k = 1 only).
   void nearest_from(const float* query, int k, int* ids, float* sq_dists, int hint) const;
   // k = 1 for a scan of near-unit queries: `slot` carries the previous
@@ -31,6 +32,7 @@ class OctGridIndex final : public NearestIndex {
 
  private:
   bool nearest1(const float* query, int& slot, int& id, float& sq, bool exact) const;
+  bool lookup_ = false;
   int fixed_side_ = 0, side_ = 0, n_ = 0, dims_ = 0;
   float eps_ = 0;
   const float* points_ = nullptr;
