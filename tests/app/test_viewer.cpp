@@ -307,6 +307,14 @@ TEST(Viewer, MatchingOptionChangesRecomputeTheMap) {
   EXPECT_GT(cv::countNonZero(diff.reshape(1) > 0.5), 0) << "a larger threshold makes other chunks";
   EXPECT_TRUE(child<QLabel>(w, "transferStatus")->text().contains("map"));
 
+  // a segmentation change prepares the objects again (not a map-only run) and matches
+  const int before = w.mapOnlyRuns();
+  const auto* shown = w.result();
+  child<QComboBox>(w, "segMethod")->setCurrentText("otsu");
+  ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.result() != shown; }, 60000));
+  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
+  EXPECT_EQ(w.mapOnlyRuns(), before);
+
   // switched off: a change does nothing until Compute
   const int runs = w.mapOnlyRuns();
   child<QCheckBox>(w, "liveUpdate")->setChecked(false);

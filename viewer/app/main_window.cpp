@@ -366,6 +366,10 @@ QWidget* MainWindow::buildTransferPanel() {
   for (QDoubleSpinBox* b : {threshold_, coherent_threshold_, uniformity_})
     connect(b, &QDoubleSpinBox::valueChanged, this, &MainWindow::matchOptionChanged);
   connect(fast_, &QCheckBox::toggled, this, &MainWindow::matchOptionChanged);
+  // segmentation and truth normals change the prepared objects: prepared again, then the map
+  connect(truth_normals_, &QCheckBox::toggled, this, &MainWindow::matchOptionChanged);
+  connect(seg_method_, &QComboBox::currentIndexChanged, this, &MainWindow::matchOptionChanged);
+  connect(seg_threshold_, &QDoubleSpinBox::valueChanged, this, &MainWindow::matchOptionChanged);
   auto* row = new QHBoxLayout;
   row->addWidget(compute_btn_);
   row->addWidget(cancel_btn_);
@@ -413,6 +417,7 @@ QWidget* MainWindow::buildLookTab() {
     seg_rect_ = r;
     rect_label_->setText(r.isEmpty() ? tr("no rectangle")
                                      : tr("rectangle %1,%2 %3x%4").arg(r.x()).arg(r.y()).arg(r.width()).arg(r.height()));
+    matchOptionChanged();  // a new object outline: prepared again and matched
   });
   return w;
 }
@@ -851,8 +856,9 @@ QString MainWindow::preparationKey() const {
       .arg(seg_rect_.height());
 }
 
-// A matching option changed: once a transfer has been shown, recompute (the
-// map alone, the objects are kept); while one runs, once more when it ends.
+// An option changed: once a transfer has been shown, recompute (the map alone
+// when only matching options changed, the objects kept); while one runs,
+// once more when it ends.
 void MainWindow::matchOptionChanged() {
   if (!live_update_ || !live_update_->isChecked() || !result_) return;
   if (computing_) {
