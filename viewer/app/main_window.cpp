@@ -690,6 +690,7 @@ bool MainWindow::loadLocalSet(const QString& folder, veneer::Role as) {
   loaded->folder = folder;
   loaded->set = std::move(*read);
   loaded->median = veneer::match::median_photo(loaded->set.images);
+  loaded->median_picture = picture_of(loaded->median);
   addLocalItem(folder, loaded->set);
   setLoaded(loaded, as);
   computeNormals(loaded);
@@ -783,9 +784,13 @@ void MainWindow::startTransfer() {
   if (cached) ++map_only_runs_;
   pending_prepared_.reset();
   pending_key_ = key;
+  pending_repainter_.reset();
+  pending_result_picture_ = cv::Mat();
+  pending_relit_ = pending_relit_source_ = cv::Mat();
+  const cv::Vec3d light = relight_pad_->direction();
   QPointer<MainWindow> self(this);
   transfer_watch_.setFuture(QtConcurrent::run([this, self, dst, src, options, seg, custom_segmentation, cached,
-                                               relighter] {
+                                               relighter, light] {
     veneer::Progress progress;
     progress.cancel = &cancel_;
     progress.on_progress = [self](double f, const std::string& stage) {
@@ -823,15 +828,23 @@ void MainWindow::startTransfer() {
       return;
     }
     pending_result_ = std::make_shared<veneer::match::TransferResult>(std::move(*result));
+    // what showing the result needs, made here rather than on the GUI thread
+    pending_result_picture_ = picture_of(pending_result_->repainted_median);
+    pending_repainter_.emplace(pending_result_->map, pending_result_->source_size, dst->median_picture);
     if (relighter) {  // same source as last time
       pending_relighter_ = relighter;
-      return;
-    }
-    auto fitted = veneer::match::Relighter::fit(src->set);
-    if (fitted) {
-      pending_relighter_ = std::make_shared<veneer::match::Relighter>(std::move(*fitted));
     } else {
-      relight_error_ = qs(fitted.message());
+      auto fitted = veneer::match::Relighter::fit(src->set);
+      if (fitted) {
+        pending_relighter_ = std::make_shared<veneer::match::Relighter>(std::move(*fitted));
+      } else {
+        relight_error_ = qs(fitted.message());
+      }
+    }
+    if (pending_relighter_) {
+      pending_relit_ = picture_of(pending_relighter_->render(pending_result_->map, light, dst->median * 0.25));
+      pending_relit_source_ = picture_of(pending_relighter_->render_source(light));
+      pending_relit_direction_ = light;
     }
   }));
 }
@@ -882,6 +895,7 @@ void MainWindow::onTransferDone() {
     if (pending_result_) {
       result_ = pending_result_;
       relighter_ = pending_relighter_;
+      result_picture_ = pending_result_picture_;
     }
     startTransfer();
     return;
@@ -905,11 +919,21 @@ void MainWindow::onTransferDone() {
   text += tr(" · map %1 ms").arg(result_->match_seconds * 1000, 0, 'f', 1);
   transfer_label_->setText(text);
   message(tr("transfer done (%1)").arg(method_->currentText()));
-  cv::Mat backdrop = dst_ ? picture_of(dst_->median) : cv::Mat();
-  repainter_ = veneer::match::LiveRepainter(result_->map, result_->source_size, backdrop);
-  look_what_->setCurrentIndex(0);
-  refreshLook();
-  refreshRelight();
+  result_picture_ = pending_result_picture_;
+  if (pending_repainter_) repainter_ = std::move(*pending_repainter_);
+  pending_repainter_.reset();
+  if (look_what_->currentIndex() != 0)
+    look_what_->setCurrentIndex(0);  // refreshes the views
+  else
+    refreshLook();
+  if (relighter_ && !pending_relit_.empty() && pending_relit_direction_ == relight_pad_->direction()) {
+    // the worker rendered it for this direction
+    relight_view_->setImage(to_qimage(pending_relit_));
+    relight_src_view_->setImage(to_qimage(pending_relit_source_));
+    updateRelightLabel(pending_relit_direction_);
+  } else {
+    refreshRelight();
+  }
 }
 
 // ---------------------------------------------------------------- views
@@ -922,7 +946,7 @@ void MainWindow::refreshLook() {
       case 1: return s->normals ? normals_picture(s->normals->normals) : cv::Mat();
       case 2: return s->normals ? picture_of(s->normals->albedo) : cv::Mat();
       case 3: return s->normals ? s->normals->mask : cv::Mat();
-      default: return picture_of(s->median);
+      default: return s->median_picture.empty() ? picture_of(s->median) : s->median_picture;
     }
   };
   dst_view_->setImage(to_qimage(pick(dst_)));
@@ -934,9 +958,9 @@ void MainWindow::refreshLook() {
     } else if (what == 5) {
       r = veneer::match::reuse_picture(result_->reuse, result_->source_median);
       src_view_->setImage(to_qimage(r));
-      r = picture_of(result_->repainted_median);
+      r = result_picture_.empty() ? picture_of(result_->repainted_median) : result_picture_;
     } else {
-      r = picture_of(result_->repainted_median);
+      r = result_picture_.empty() ? picture_of(result_->repainted_median) : result_picture_;
     }
     result_view_->setImage(to_qimage(r));
   } else {
@@ -981,6 +1005,10 @@ void MainWindow::refreshRelight() {
   cv::Mat backdrop = dst_->median * 0.25;  // the destination dimmed where nothing is mapped
   relight_view_->setImage(to_qimage(relighter_->render(result_->map, d, backdrop)));
   relight_src_view_->setImage(to_qimage(relighter_->render_source(d)));
+  updateRelightLabel(d);
+}
+
+void MainWindow::updateRelightLabel(const cv::Vec3d& d) {
   relight_label_->setText(tr("light (%1, %2, %3)\n%4 fit, RMS %5")
                               .arg(d[0], 0, 'f', 2).arg(d[1], 0, 'f', 2).arg(d[2], 0, 'f', 2)
                               .arg(relighter_->basis_name())

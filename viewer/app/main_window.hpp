@@ -41,6 +41,7 @@ struct LoadedSet {
   veneer::ImageSet set;
   std::optional<veneer::ps::PsResult> normals;  // filled in the background after loading
   cv::Mat median;                               // per-pixel median photo (linear BGR)
+  cv::Mat median_picture;                       // the same, tonemapped (8-bit), for the views
 };
 
 class MainWindow : public QMainWindow {
@@ -96,6 +97,7 @@ class MainWindow : public QMainWindow {
   void onLiveFrame(const veneer::rig::LiveFrame& frame);
   void onTransferDone();
   void matchOptionChanged();
+  void updateRelightLabel(const cv::Vec3d& direction);
   QString preparationKey() const;
   void refreshLook();
   void showOrigin(QPoint destination_pixel);
@@ -119,6 +121,13 @@ class MainWindow : public QMainWindow {
   std::shared_ptr<veneer::match::TransferResult> result_;
   std::shared_ptr<veneer::match::Relighter> relighter_;
   veneer::match::LiveRepainter repainter_;
+  // Made by the transfer's worker, so that showing a result costs the GUI
+  // thread almost nothing: the result's picture, the live repainter, the
+  // relit pictures for the light direction the run started with.
+  cv::Mat result_picture_, pending_result_picture_;
+  std::optional<veneer::match::LiveRepainter> pending_repainter_;
+  cv::Mat pending_relit_, pending_relit_source_;
+  cv::Vec3d pending_relit_direction_;
   std::atomic<bool> cancel_{false};
   bool computing_ = false;
   bool rerun_ = false;  // a matching option changed while computing: run again when done
