@@ -19,7 +19,6 @@
 #include <cstring>
 #include <ctime>
 #include <functional>
-#include <map>
 #include <random>
 #include <string>
 #include <vector>
@@ -31,6 +30,7 @@
 #include "veneer/match/features.hpp"
 #include "veneer/match/index.hpp"
 #include "veneer/match/matcher.hpp"
+#include "veneer/match/metrics.hpp"
 #include "veneer/sim/simulator.hpp"
 
 using namespace veneer::match;
@@ -158,47 +158,6 @@ std::string fmt(double v, int prec = 1) {
 }
 
 int count(const cv::Mat& m) { return cv::countNonZero(m); }
-
-double coherence(const Map& m, const cv::Mat& mask) {
-  long pairs = 0, good = 0;
-  for (int y = 0; y + 1 < mask.rows; ++y)
-    for (int x = 0; x + 1 < mask.cols; ++x) {
-      if (!mask.at<uchar>(y, x) || !m.valid(x, y)) continue;
-      for (const cv::Point o : {cv::Point(1, 0), cv::Point(0, 1)}) {
-        if (!mask.at<uchar>(y + o.y, x + o.x) || !m.valid(x + o.x, y + o.y)) continue;
-        ++pairs;
-        if (cv::norm(m.xy.at<cv::Vec2f>(y, x) - m.xy.at<cv::Vec2f>(y + o.y, x + o.x)) <= 1.5) ++good;
-      }
-    }
-  return pairs ? 100.0 * good / pairs : 0;
-}
-
-double normal_error_deg(const Map& m, const ObjectView& d, const ObjectView& s) {
-  double sum = 0;
-  long n = 0;
-  for (int y = 0; y < d.mask.rows; ++y)
-    for (int x = 0; x < d.mask.cols; ++x)
-      if (d.mask.at<uchar>(y, x) && m.valid(x, y)) {
-        const cv::Vec2f q = m.xy.at<cv::Vec2f>(y, x);
-        const cv::Vec3f a = d.normals.at<cv::Vec3f>(y, x);
-        const cv::Vec3f b = s.normals.at<cv::Vec3f>(static_cast<int>(q[1]), static_cast<int>(q[0]));
-        sum += std::acos(std::clamp(static_cast<double>(a.dot(b)), -1.0, 1.0)) * 180 / CV_PI;
-        ++n;
-      }
-  return n ? sum / n : 0;
-}
-
-int max_reuse(const Map& m, const cv::Mat& mask) {
-  std::map<std::pair<int, int>, int> uses;
-  int best = 0;
-  for (int y = 0; y < mask.rows; ++y)
-    for (int x = 0; x < mask.cols; ++x)
-      if (mask.at<uchar>(y, x) && m.valid(x, y)) {
-        const cv::Vec2f q = m.xy.at<cv::Vec2f>(y, x);
-        best = std::max(best, ++uses[{static_cast<int>(q[0]), static_cast<int>(q[1])}]);
-      }
-  return best;
-}
 
 }  // namespace
 
@@ -409,8 +368,9 @@ int main(int argc, char** argv) {
           if (!std::isalnum(static_cast<unsigned char>(ch))) ch = '_';
         write_pictures(pictures, file, *m, pr.dst, pr.src);
       }
-      std::printf("| %s | %s | %s | %d |\n", name.c_str(), fmt(normal_error_deg(*m, pr.dst, pr.src), 2).c_str(),
-                  fmt(coherence(*m, pr.dst.mask), 1).c_str(), max_reuse(*m, pr.dst.mask));
+      const Quality q = evaluate(*m, pr.dst.mask, pr.src.mask, pr.dst.normals, pr.src.normals);
+      std::printf("| %s | %s | %s | %d |\n", name.c_str(), fmt(q.normal_mean_deg.value_or(-1), 2).c_str(),
+                  fmt(100 * q.coherence, 1).c_str(), q.reuse_max);
     }
     std::printf("\n");
   }

@@ -2,12 +2,12 @@
 // fast = false), on small synthetic objects with fixed seeds.
 #include <algorithm>
 #include <cmath>
-#include <map>
 #include <random>
 
 #include <gtest/gtest.h>
 
 #include "veneer/match/fast.hpp"
+#include "veneer/match/metrics.hpp"
 #include "veneer/match/matcher.hpp"
 
 namespace {
@@ -112,47 +112,9 @@ Compare compare(const Map& a, const Map& exact_map, const cv::Mat& mask) {
   return c;
 }
 
-double coherence(const Map& m, const cv::Mat& mask) {
-  int pairs = 0, good = 0;
-  for (int y = 0; y < mask.rows; ++y)
-    for (int x = 0; x < mask.cols; ++x) {
-      if (!mask.at<uchar>(y, x) || !m.valid(x, y)) continue;
-      for (const cv::Point o : {cv::Point(1, 0), cv::Point(0, 1)}) {
-        const int nx = x + o.x, ny = y + o.y;
-        if (nx >= mask.cols || ny >= mask.rows || !mask.at<uchar>(ny, nx) || !m.valid(nx, ny)) continue;
-        ++pairs;
-        const cv::Vec2f a = m.xy.at<cv::Vec2f>(y, x), b = m.xy.at<cv::Vec2f>(ny, nx);
-        if (cv::norm(a - b) <= 1.5) ++good;
-      }
-    }
-  return pairs ? static_cast<double>(good) / pairs : 0;
-}
-
-int max_reuse(const Map& m, const cv::Mat& mask) {
-  std::map<std::pair<int, int>, int> uses;
-  int best = 0;
-  for (int y = 0; y < mask.rows; ++y)
-    for (int x = 0; x < mask.cols; ++x)
-      if (mask.at<uchar>(y, x) && m.valid(x, y)) {
-        const cv::Vec2f q = m.xy.at<cv::Vec2f>(y, x);
-        best = std::max(best, ++uses[{static_cast<int>(q[0]), static_cast<int>(q[1])}]);
-      }
-  return best;
-}
-
-double mean_normal_error_deg(const Map& m, const ObjectView& d, const ObjectView& s) {
-  double sum = 0;
-  int n = 0;
-  for (int y = 0; y < d.mask.rows; ++y)
-    for (int x = 0; x < d.mask.cols; ++x)
-      if (d.mask.at<uchar>(y, x) && m.valid(x, y)) {
-        const cv::Vec2f q = m.xy.at<cv::Vec2f>(y, x);
-        const cv::Vec3f a = d.normals.at<cv::Vec3f>(y, x);
-        const cv::Vec3f b = s.normals.at<cv::Vec3f>(static_cast<int>(q[1]), static_cast<int>(q[0]));
-        sum += std::acos(std::clamp(static_cast<double>(a.dot(b)), -1.0, 1.0)) * 180 / CV_PI;
-        ++n;
-      }
-  return n ? sum / n : 0;
+// Coherence, normal agreement and reuse as the product measures them.
+Quality quality(const Map& m, const ObjectView& d, const ObjectView& s) {
+  return evaluate(m, d.mask, s.mask, d.normals, s.normals);
 }
 
 bool same_map(const Map& a, const Map& b) {
@@ -374,10 +336,10 @@ TEST_F(FastEngine, CoherentIsDeterministicCoherentAndAccurate) {
   o.threads = 1;
   EXPECT_TRUE(same_map(a, fast_map(smooth_dst, smooth_src, o)));
   const Map nearest = exact(smooth_dst, smooth_src, opts(Method::linear, Feature::normals, 1, false));
-  const double coh = coherence(a, smooth_dst.mask), coh_nearest = coherence(nearest, smooth_dst.mask);
-  EXPECT_GE(coh, 0.85);
-  EXPECT_GT(coh, coh_nearest);
-  EXPECT_LE(mean_normal_error_deg(a, smooth_dst, smooth_src), mean_normal_error_deg(nearest, smooth_dst, smooth_src) + 3.0);
+  const Quality qa = quality(a, smooth_dst, smooth_src), qn = quality(nearest, smooth_dst, smooth_src);
+  EXPECT_GE(qa.coherence, 0.85);
+  EXPECT_GT(qa.coherence, qn.coherence);
+  EXPECT_LE(qa.normal_mean_deg.value_or(180), qn.normal_mean_deg.value_or(0) + 3.0);
   // a different seed gives a different (jittered) chunking
   o.seed = 2;
   EXPECT_FALSE(same_map(a, fast_map(smooth_dst, smooth_src, o)));
@@ -399,9 +361,9 @@ TEST_F(FastEngine, UniformityReducesReuse) {
   const ObjectView small = sphere({60, 60}, {30.f, 30.f}, 14.f, 0.12f, 0, 3);
   for (Method m : {Method::coherent, Method::patchmatch}) {
     auto o = opts(m, Feature::normals, m == Method::patchmatch ? 3 : 1, true);
-    const int plain = max_reuse(fast_map(dst, small, o), dst.mask);
+    const int plain = quality(fast_map(dst, small, o), dst, small).reuse_max;
     o.uniformity = 0.5;
-    const int uniform = max_reuse(fast_map(dst, small, o), dst.mask);
+    const int uniform = quality(fast_map(dst, small, o), dst, small).reuse_max;
     EXPECT_LT(uniform, plain) << method_name(m);
   }
 }
