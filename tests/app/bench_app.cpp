@@ -21,6 +21,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "main_window.hpp"
+#include "wait_for.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/match/live.hpp"
 #include "veneer/match/transfer.hpp"
@@ -44,16 +45,6 @@ double median_ms(F f, int runs) {
   return t[t.size() / 2];
 }
 
-template <class F>
-bool wait_for(F cond, int ms) {
-  QElapsedTimer t;
-  t.start();
-  while (!cond()) {
-    if (t.elapsed() > ms) return false;
-    QTest::qWait(10);
-  }
-  return true;
-}
 
 }  // namespace
 

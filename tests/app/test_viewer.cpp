@@ -22,6 +22,7 @@
 #include <gtest/gtest.h>
 
 #include "main_window.hpp"
+#include "wait_for.hpp"
 #include "veneer/sim/simulator.hpp"
 
 namespace fs = std::filesystem;
@@ -29,17 +30,6 @@ using veneer::app::MainWindow;
 
 namespace {
 
-// Waits (processing events) until `cond` holds or `ms` pass.
-template <class F>
-bool wait_for(F cond, int ms) {
-  QElapsedTimer t;
-  t.start();
-  while (!cond()) {
-    if (t.elapsed() > ms) return false;
-    QTest::qWait(20);
-  }
-  return true;
-}
 
 int free_port() {
   QTcpServer s;
