@@ -315,6 +315,14 @@ QWidget* MainWindow::buildTransferPanel() {
   coherent_threshold_->setDecimals(3);
   coherent_threshold_->setSingleStep(0.01);
   coherent_threshold_->setValue(veneer::match::MatchOptions{}.coherent_threshold);
+  coherent_smooth_ = new QDoubleSpinBox;
+  coherent_smooth_->setObjectName("coherentSmooth");
+  coherent_smooth_->setRange(0, 20);
+  coherent_smooth_->setDecimals(2);
+  coherent_smooth_->setSingleStep(0.25);
+  coherent_smooth_->setValue(veneer::match::MatchOptions{}.coherent_smooth);
+  coherent_smooth_->setToolTip(tr("coherent: how much a seam between two chunks costs, in coherent thresholds "
+                                  "(0 = chunks only; larger = fewer seams, less exact shading)"));
   uniformity_ = new QDoubleSpinBox;
   uniformity_->setObjectName("uniformity");
   uniformity_->setRange(0, 10);
@@ -342,6 +350,7 @@ QWidget* MainWindow::buildTransferPanel() {
   form->addRow(tr("Region threshold"), threshold_);
   form->addRow(tr("PatchMatch iterations"), iterations_);
   form->addRow(tr("Coherent threshold"), coherent_threshold_);
+  form->addRow(tr("Seam cost"), coherent_smooth_);
   form->addRow(tr("Uniformity"), uniformity_);
   form->addRow(fast_);
   form->addRow(truth_normals_);
@@ -363,7 +372,7 @@ QWidget* MainWindow::buildTransferPanel() {
     connect(c, &QComboBox::currentIndexChanged, this, &MainWindow::matchOptionChanged);
   for (QSpinBox* b : {candidates_, iterations_})
     connect(b, &QSpinBox::valueChanged, this, &MainWindow::matchOptionChanged);
-  for (QDoubleSpinBox* b : {threshold_, coherent_threshold_, uniformity_})
+  for (QDoubleSpinBox* b : {threshold_, coherent_threshold_, coherent_smooth_, uniformity_})
     connect(b, &QDoubleSpinBox::valueChanged, this, &MainWindow::matchOptionChanged);
   connect(fast_, &QCheckBox::toggled, this, &MainWindow::matchOptionChanged);
   // segmentation and truth normals change the prepared objects: prepared again, then the map
@@ -752,6 +761,7 @@ void MainWindow::startTransfer() {
   options.match.iterations = iterations_->value();
   options.match.coherent_threshold = coherent_threshold_->value();
   options.match.uniformity = uniformity_->value();
+  options.match.coherent_smooth = coherent_smooth_->value();
   options.match.fast = fast_->isChecked();
   options.truth_normals = truth_normals_->isChecked();
   if (auto ok = options.check(); !ok) {

@@ -49,6 +49,10 @@ Status MatchOptions::check() const {
     return make_error("iterations must be in 1..1000, got " + std::to_string(iterations));
   if (!std::isfinite(coherent_threshold) || coherent_threshold < 0)
     return make_error("coherent threshold must be a finite number >= 0, got " + std::to_string(coherent_threshold));
+  if (!std::isfinite(coherent_smooth) || coherent_smooth < 0)
+    return make_error("coherent smoothness must be a finite number >= 0, got " + std::to_string(coherent_smooth));
+  if (coherent_sweeps < 0 || coherent_sweeps > 100)
+    return make_error("coherent sweeps must be in 0..100, got " + std::to_string(coherent_sweeps));
   if (!std::isfinite(uniformity) || uniformity < 0)
     return make_error("uniformity must be a finite number >= 0, got " + std::to_string(uniformity));
   if (threads < 0) return make_error("threads must be >= 0 (0 = all cores), got " + std::to_string(threads));

@@ -102,7 +102,10 @@ std::vector<RowSpec> row_specs(const TableOptions& o) {
     }
     MatchOptions coherent;
     coherent.method = Method::coherent;
-    if (fast::supports(coherent)) fast.push_back({Method::coherent, Feature::normals, 1, 10, 0.05, true});
+    if (fast::supports(coherent)) {
+      fast.push_back({Method::coherent, Feature::normals, 1, 10, 0.05, true});
+      fast.push_back({Method::coherent, Feature::intensities, 1, 10, 0.05, true});
+    }
     specs.insert(specs.end(), fast.begin(), fast.end());
   }
   return specs;

@@ -324,7 +324,8 @@ Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOption
   j["options"] = {{"method", method_name(o.method)}, {"feature", feature_name(o.feature)}, {"patch", o.patch},
                   {"candidates", o.candidates}, {"threshold", o.threshold}, {"iterations", o.iterations},
                   {"coherent_threshold", o.coherent_threshold}, {"uniformity", o.uniformity},
-                  {"coherent_grow", o.coherent_grow}, {"fast", o.fast}, {"seed", o.seed},
+                  {"coherent_grow", o.coherent_grow},
+                  {"coherent_smooth", o.coherent_smooth}, {"fast", o.fast}, {"seed", o.seed},
                   {"truth_normals", options.truth_normals},
                   {"scale", options.scale}};
   if (destination.truth.present() && source.truth.present()) {

@@ -42,6 +42,7 @@ struct Stats {
   double certified = 1;          // share of destination pixels whose nearest is proven exact
   double candidates = 0;         // mean exact distances computed per destination pixel (projected search)
   double seconds = 0;            // wall time of compute_map
+  double refine_seconds = 0;     // of which `coherent`'s refinement (wall)
 };
 
 Expected<Map> compute_map(const ObjectView& destination, const ObjectView& source, const MatchOptions& options,

@@ -45,6 +45,8 @@ struct MatchOptions {
   double coherent_threshold = 0.10;    // `coherent` normal error allowed for a chunk, radians-ish (|dn|)
   double uniformity = 0.0;             // reuse penalty weight for `coherent`/`patchmatch` (0 = off)
   bool coherent_grow = true;           // `coherent`: chunks grow into the pixels no chunk took
+  double coherent_smooth = 2.0;        // `coherent`: a broken neighbour pair costs this x coherent_threshold (0 = off)
+  int coherent_sweeps = 4;             // `coherent`: at most this many refinement rounds
   bool fast = true;                    // use the fast engine where it applies (false = faithful thesis code)
   unsigned seed = 1;                   // random init/jitter seed (same seed, same map)
   int threads = 0;                     // 0 = all cores

@@ -18,7 +18,8 @@
 // Chunks of 16 px and more are judged on a 1-in-4 grid of their pixels.
 // Then the chunks grow into the pixels no level took (a forward and a
 // backward sweep continuing a neighbour's chunk while under the threshold);
-// what is left keeps its nearest match. Jitter comes from a hash of (seed,
+// what is left keeps its nearest match. Last, a refinement (see refine())
+// trades the seams between chunks against normal error. Jitter comes from a hash of (seed,
 // level, cell): the same options give the same map, and a small threshold
 // change only changes the chunks whose error sits near it.
 //
@@ -30,7 +31,9 @@
 // on their error alone (judging each pixel with the penalty, as before, broke
 // them up: 12.8 % coherence against 46 % now at u = 0.5, bench_match).
 #include <algorithm>
+#include <array>
 #include <bit>
+#include <chrono>
 #include <atomic>
 #include <cstdint>
 #include <cmath>
@@ -39,6 +42,136 @@
 #include "nearest.hpp"
 
 namespace veneer::match::fast {
+
+namespace {
+
+// Refinement (o.coherent_smooth = w > 0). The chunks leave a seam every few
+// pixels where the source's and the destination's curvatures differ, and the
+// pixels no chunk took keep their (speckled) nearest. Each pixel then takes,
+// among its current match, its nearest and every continuation of a
+// 4-neighbour's match (shifted by their offset, and by one pixel more each
+// way, so a chunk may stretch or shrink with the curvatures), the one that
+// minimises
+//     error + w * threshold * (4-neighbours it breaks with),
+// "broken" meaning matched more than 1.5 px apart, as match::evaluate counts
+// coherence. Iterated conditional modes on a checkerboard: the pixels of one
+// colour change together, in parallel, reading the other colour's matches
+// (fixed meanwhile, so the map does not depend on threads); then the other
+// colour; after the first round only pixels next to a change are visited.
+// Each pixel's cost only falls, so the rounds converge; o.coherent_sweeps
+// bounds them (4: later rounds changed under 1 % of the map, bench_coherent).
+// Against the chunks alone, at w = 2 (bull <- orange, truth normals,
+// 512x340): coherence 54.7 -> 74.4 %, normal error 2.91 -> 2.68 deg.
+// With uniformity the pixel's nearest is not offered (it ignores the reuse
+// penalty); continuations keep the spread the seeds chose.
+template <int C>  // the channel count, or 0: any
+Status refine(const Object& dst, const Object& src, const int* nearest, int k, const MatchOptions& o,
+              const Progress& p, std::vector<int>& chosen) {
+  const int n = dst.rows(), cc = C > 0 ? C : dst.channels;
+  const float lam = static_cast<float>(o.coherent_smooth * o.coherent_threshold);
+  const bool offer_nearest = o.uniformity <= 0;
+  const cv::Point n4[4] = {{-1, 0}, {1, 0}, {0, -1}, {0, 1}};
+  // The source densely over its bounding box (NaN off the object) and every
+  // match as a position in it: a proposal costs one read, not three.
+  const cv::Rect sb = src.bbox;
+  std::vector<float> dense(static_cast<size_t>(sb.area()) * cc, std::numeric_limits<float>::quiet_NaN());
+  for (int i = 0; i < src.rows(); ++i) {
+    const cv::Point q = src.pixels[i];
+    std::copy_n(src.flat.data() + static_cast<size_t>(i) * cc, cc,
+                dense.data() + (static_cast<size_t>(q.y - sb.y) * sb.width + (q.x - sb.x)) * cc);
+  }
+  auto at_pos = [&](int row) { return src.pixels[row] - sb.tl(); };
+  std::vector<cv::Point> pos(n), near(offer_nearest ? n : 0);
+  std::vector<std::array<int, 4>> nbr(n);  // 4-neighbour rows (-1 off the object)
+  parallel_rows(n, o.threads, 4096, [&](int b, int e) {
+    for (int d = b; d < e; ++d) {
+      const cv::Point pt = dst.pixels[d];
+      for (int j = 0; j < 4; ++j) nbr[d][j] = dst.row_at(pt.x + n4[j].x, pt.y + n4[j].y);
+      pos[d] = at_pos(chosen[d]);
+      if (offer_nearest) near[d] = at_pos(nearest[static_cast<size_t>(d) * k]);
+    }
+  });
+  std::vector<uint8_t> visit(n, 1), next(n, 0);
+  for (int round = 0; round < o.coherent_sweeps; ++round) {
+    if (p.cancelled()) return make_error("cancelled during coherent transfer");
+    p.report(0.9 + 0.1 * round / o.coherent_sweeps, "coherent refinement");
+    std::atomic<int> changed{0};
+    for (int colour = 0; colour < 2; ++colour) {
+      parallel_rows(n, o.threads, 2048, [&](int b, int e) {
+        int local = 0;
+        for (int d = b; d < e; ++d) {
+          const cv::Point pt = dst.pixels[d];
+          if (((pt.x + pt.y) & 1) != colour || !visit[d]) continue;
+          visit[d] = 0;
+          cv::Point nm[4];
+          int nh = 0;
+          for (int j = 0; j < 4; ++j)
+            if (nbr[d][j] >= 0) nm[nh++] = pos[nbr[d][j]];
+          const float* a = dst.flat.data() + static_cast<size_t>(d) * cc;
+          cv::Point best_q = pos[d];
+          float best = std::numeric_limits<float>::max();
+          // A proposal's cost: lam per neighbour it breaks with, plus its
+          // error; off the source object it is not taken. The neighbour term
+          // first: it often rules a proposal out before the source is read.
+          auto offer = [&](cv::Point q) {
+            if (static_cast<unsigned>(q.x) >= static_cast<unsigned>(sb.width) ||
+                static_cast<unsigned>(q.y) >= static_cast<unsigned>(sb.height))
+              return;
+            float pairs = 0;
+            for (int j = 0; j < nh; ++j) {
+              const int dx = nm[j].x - q.x, dy = nm[j].y - q.y;
+              pairs += dx * dx + dy * dy > 2 ? lam : 0.0f;  // integer positions: > 1.5 px
+            }
+            const float room = best - pairs;
+            if (!(room > 0)) return;
+            const float* v = dense.data() + (static_cast<size_t>(q.y) * sb.width + q.x) * cc;
+            if (std::isnan(v[0])) return;
+            float e2 = 0;
+            for (int i = 0; i < cc; ++i) e2 += (a[i] - v[i]) * (a[i] - v[i]);
+            if (e2 >= room * room) return;
+            const float t = std::sqrt(e2) + pairs;
+            if (t < best) best = t, best_q = q;
+          };
+          offer(best_q);  // the current match first: only a strictly lower cost replaces it
+          if (offer_nearest && round == 0) offer(near[d]);
+          cv::Point bases[4];
+          int nb = 0;
+          for (int j = 0; j < 4; ++j) {
+            const int q = nbr[d][j];
+            if (q < 0) continue;
+            const cv::Point base = pos[q] - n4[j];
+            bool seen = false;
+            for (int t = 0; t < nb; ++t) seen = seen || bases[t] == base;
+            if (seen) continue;  // the same chunk continued from two sides
+            bases[nb++] = base;
+            offer(base);
+            offer(base + cv::Point(1, 0));
+            offer(base + cv::Point(-1, 0));
+            offer(base + cv::Point(0, 1));
+            offer(base + cv::Point(0, -1));
+          }
+          if (best_q != pos[d]) {
+            pos[d] = best_q;
+            ++local;
+            for (int j = 0; j < 4; ++j)
+              if (nbr[d][j] >= 0) std::atomic_ref<uint8_t>(next[nbr[d][j]]).store(1, std::memory_order_relaxed);
+          }
+        }
+        changed.fetch_add(local, std::memory_order_relaxed);
+      });
+      // the other colour's pixels next to a change are visited next
+      for (int d = 0; d < n; ++d)
+        if (next[d]) visit[d] = 1, next[d] = 0;
+    }
+    if (changed.load() == 0) break;
+  }
+  parallel_rows(n, o.threads, 4096, [&](int b, int e) {
+    for (int d = b; d < e; ++d) chosen[d] = src.row_at(pos[d].x + sb.x, pos[d].y + sb.y);
+  });
+  return {};
+}
+
+}  // namespace
 
 Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOptions& o, const Progress& p,
                            Stats* stats) {
@@ -78,7 +211,7 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
 
   for (int level = 0; spacing >= 2; ++level, spacing /= 2) {
     if (p.cancelled()) return make_error("cancelled during coherent transfer");
-    p.report(0.5 + 0.5 * level / 8.0, "coherent chunks");
+    p.report(0.5 + 0.4 * std::min(level, 8) / 8.0, "coherent chunks");
     const int s = spacing, shift = std::countr_zero(static_cast<unsigned>(spacing));  // a power of two
     const int gx = box.width / s + 1, gy = box.height / s + 1;
     // Seeds: one jittered point per cell; its destination row and source match.
@@ -275,6 +408,13 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
       const cv::Point q = src.pixels[chosen[d]];
       ++uses[static_cast<size_t>(q.y) * src.size.width + q.x];
     }
+  }
+  if (o.coherent_smooth > 0) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const Status r = c == 3 ? refine<3>(dst, src, nn.ids.data(), k, o, p, chosen)
+                            : refine<0>(dst, src, nn.ids.data(), k, o, p, chosen);
+    if (!r) return r.error();
+    if (stats) stats->refine_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }
   Map map = new_map(dst.size);
   parallel_rows(n, o.threads, 4096, [&](int b, int e) {
