@@ -12,7 +12,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <cstdlib>
 #include <string>
 #include <vector>
 
@@ -122,7 +121,6 @@ int main(int argc, char** argv) {
         o.method = Method::coherent;
         o.coherent_smooth = w;
         run("coherent, refined", o, w == MatchOptions{}.coherent_smooth);
-        if (getenv("NOGROW")) { o.coherent_grow = false; run("coherent, refined, no grow", o, false); }
       }
     }
   return 0;
