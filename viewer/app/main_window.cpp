@@ -323,6 +323,11 @@ QWidget* MainWindow::buildTransferPanel() {
   coherent_smooth_->setValue(veneer::match::MatchOptions{}.coherent_smooth);
   coherent_smooth_->setToolTip(tr("coherent: how much a seam between two chunks costs, in coherent thresholds "
                                   "(0 = chunks only; larger = fewer seams, less exact shading)"));
+  blend_ = new QSpinBox;
+  blend_->setObjectName("blend");
+  blend_->setRange(0, 16);
+  blend_->setSuffix(tr(" px"));
+  blend_->setToolTip(tr("result pictures: blend the chunks meeting at a seam over this radius (0 = off)"));
   uniformity_ = new QDoubleSpinBox;
   uniformity_->setObjectName("uniformity");
   uniformity_->setRange(0, 10);
@@ -352,6 +357,7 @@ QWidget* MainWindow::buildTransferPanel() {
   form->addRow(tr("Coherent threshold"), coherent_threshold_);
   form->addRow(tr("Seam cost"), coherent_smooth_);
   form->addRow(tr("Uniformity"), uniformity_);
+  form->addRow(tr("Blend seams"), blend_);
   form->addRow(fast_);
   form->addRow(truth_normals_);
   live_update_ = new QCheckBox(tr("recompute as options change"));
@@ -370,7 +376,7 @@ QWidget* MainWindow::buildTransferPanel() {
   connect(cancel_btn_, &QPushButton::clicked, this, &MainWindow::cancelTransfer);
   for (QComboBox* c : {method_, feature_, patch_})
     connect(c, &QComboBox::currentIndexChanged, this, &MainWindow::matchOptionChanged);
-  for (QSpinBox* b : {candidates_, iterations_})
+  for (QSpinBox* b : {candidates_, iterations_, blend_})
     connect(b, &QSpinBox::valueChanged, this, &MainWindow::matchOptionChanged);
   for (QDoubleSpinBox* b : {threshold_, coherent_threshold_, coherent_smooth_, uniformity_})
     connect(b, &QDoubleSpinBox::valueChanged, this, &MainWindow::matchOptionChanged);
@@ -764,6 +770,7 @@ void MainWindow::startTransfer() {
   options.match.coherent_smooth = coherent_smooth_->value();
   options.match.fast = fast_->isChecked();
   options.truth_normals = truth_normals_->isChecked();
+  options.blend = blend_->value();
   if (auto ok = options.check(); !ok) {
     message(qs(ok.message()), true);
     return;

@@ -12,7 +12,7 @@ namespace {
 
 struct TransferArgs {
   std::string dst, src, out, method = "flann", feature = "normals";
-  int patch = 1, candidates = 10, iterations = 5, threads = 0;
+  int patch = 1, candidates = 10, iterations = 5, threads = 0, blend = 0;
   double threshold = 0.05, scale = 1.0, coherent_threshold = 0.10, uniformity = 0.0,
          coherent_smooth = match::MatchOptions{}.coherent_smooth;
   bool no_grow = false;
@@ -45,6 +45,7 @@ int run(const TransferArgs& a) {
   options.match.threads = a.threads;
   options.match.fast = !a.faithful;
   options.truth_normals = a.truth_normals;
+  options.blend = a.blend;
   options.scale = a.scale;
   if (auto s = options.check(); !s) return fail(s.message(), 2);
 
@@ -100,6 +101,9 @@ VENEER_COMMAND(transfer) {
   cmd->add_option("--uniformity", args->uniformity,
                   "coherent, patchmatch: penalty for reusing the same source pixel, >= 0 (default 0 = off)");
   cmd->add_flag("--no-grow", args->no_grow, "coherent: do not grow chunks into the pixels no chunk took");
+  cmd->add_option("--blend", args->blend,
+                  "repaint: blend the chunks meeting at a seam over this radius, 0..16 px (default 0 = off; "
+                  "2 softens seams and speckle, texture inside chunks stays sharp)");
   cmd->add_option("--seed", args->seed, "random seed (patchmatch, coherent)");
   cmd->add_option("--threads", args->threads, "threads, 0 = all cores");
   cmd->add_option("--scale", args->scale, "resize both sets first, (0, 1] (default 1)");

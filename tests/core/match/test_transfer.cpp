@@ -90,6 +90,42 @@ TEST(Transfer, PipelineWithPhotometricStereoAndScale) {
   EXPECT_LT(*q.normal_mean_deg, 15.0);
 }
 
+// Blending keeps a chunk's inside exactly as repaint() has it and softens
+// only where two chunks meet; radius 0 is repaint() itself.
+TEST(Transfer, RepaintBlendedKeepsChunksSharp) {
+  const cv::Size size(40, 30);
+  cv::Mat photo(size, CV_32FC3);
+  cv::randu(photo, cv::Scalar::all(0), cv::Scalar::all(1));
+  Map map;
+  map.xy = cv::Mat(size, CV_32FC2, cv::Scalar(-1, -1));
+  map.distance = cv::Mat(size, CV_32FC1, cv::Scalar(0));
+  for (int y = 5; y < 25; ++y)
+    for (int x = 5; x < 35; ++x)  // two chunks: (+2, +1) left of x = 20, (-3, 0) right
+      map.xy.at<cv::Vec2f>(y, x) = x < 20 ? cv::Vec2f(x + 2.f, y + 1.f) : cv::Vec2f(x - 3.f, y + 0.f);
+  const cv::Mat backdrop(size, CV_32FC3, cv::Scalar::all(0.5));
+  const cv::Mat plain = repaint(map, photo, backdrop);
+  EXPECT_EQ(cv::norm(repaint_blended(map, photo, {}, 0, backdrop), plain, cv::NORM_INF), 0.0);
+  const cv::Mat soft = repaint_blended(map, photo, {}, 2, backdrop);
+  auto same = [&](int x, int y) { return cv::norm(soft.at<cv::Vec3f>(y, x) - plain.at<cv::Vec3f>(y, x)) < 1e-5; };
+  EXPECT_TRUE(same(10, 15));  // inside the left chunk
+  EXPECT_TRUE(same(28, 15));  // inside the right chunk
+  EXPECT_TRUE(same(0, 0));    // unmapped: the backdrop
+  EXPECT_FALSE(same(19, 15));  // at the seam, the two chunks mixed
+  EXPECT_FALSE(same(20, 15));
+  // through transfer: the options reach the result, and a bad radius is refused
+  const ImageSet dst = simulated("cup-white", Role::destination);
+  const ImageSet src = simulated("cup-dots", Role::source);
+  auto o = options(Method::linear);
+  o.blend = 2;
+  auto r = transfer(dst, src, o);
+  ASSERT_TRUE(r.ok()) << r.message();
+  EXPECT_NE(r->metrics_json.find("\"blend\": 2"), std::string::npos);
+  o.blend = 17;
+  auto bad = transfer(dst, src, o);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.message().find("blend radius"), std::string::npos) << bad.message();
+}
+
 TEST(Transfer, BadInput) {
   const ImageSet dst = simulated("apple", Role::destination);
   ImageSet src = simulated("banana", Role::source);

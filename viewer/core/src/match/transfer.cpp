@@ -10,6 +10,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "veneer/io/image_io.hpp"
+#include "veneer/match/fast.hpp"
 #include "veneer/ps/photometric_stereo.hpp"
 #include "veneer/ps/segmentation.hpp"
 #include "veneer/util/log.hpp"
@@ -48,6 +49,7 @@ nlohmann::json quality_json(const Quality& q) {
 Status TransferOptions::check() const {
   if (auto s = match.check(); !s) return s;
   if (!(scale > 0 && scale <= 1)) return make_error("scale must be in (0, 1], got " + std::to_string(scale));
+  if (blend < 0 || blend > 16) return make_error("blend radius must be in 0..16 px, got " + std::to_string(blend));
   return {};
 }
 
@@ -140,6 +142,20 @@ cv::Mat repaint(const Map& map, const cv::Mat& photo, const cv::Mat& backdrop) {
       const int sx = static_cast<int>(std::lround(m[0])), sy = static_cast<int>(std::lround(m[1]));
       if (sx < photo.cols && sy < photo.rows) out.at<cv::Vec3f>(y, x) = photo.at<cv::Vec3f>(sy, sx);
     }
+  return out;
+}
+
+cv::Mat repaint_blended(const Map& map, const cv::Mat& photo, const cv::Mat& source_mask, int radius,
+                        const cv::Mat& backdrop) {
+  if (radius <= 0) return repaint(map, photo, backdrop);
+  cv::Mat channels[2];
+  cv::split(map.xy, channels);
+  const cv::Mat mapped = channels[0] >= 0;
+  const cv::Mat smask = source_mask.empty() ? cv::Mat(photo.size(), CV_8UC1, cv::Scalar(255)) : source_mask;
+  auto blended = fast::blend_repaint(map, mapped, photo, smask, std::min(radius, 16), 0);
+  if (!blended) return repaint(map, photo, backdrop);  // (sizes checked by the callers; never expected)
+  cv::Mat out = backdrop.empty() ? cv::Mat(map.xy.size(), CV_32FC3, cv::Scalar::all(0)) : backdrop.clone();
+  blended->copyTo(out, mapped);
   return out;
 }
 
@@ -309,9 +325,11 @@ Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOption
   t0 = Clock::now();
   progress.report(0.9, "repaint");
   for (size_t i = 0; i < src->view.images.size() && i < dst->view.images.size(); ++i)
-    result.repainted.push_back(repaint(result.map, src->view.images[i], dst->view.images[i]));
+    result.repainted.push_back(
+        repaint_blended(result.map, src->view.images[i], src->view.mask, options.blend, dst->view.images[i]));
   result.source_median = pair.source_median;
-  result.repainted_median = repaint(result.map, pair.source_median, pair.destination_median);
+  result.repainted_median =
+      repaint_blended(result.map, pair.source_median, src->view.mask, options.blend, pair.destination_median);
   result.reuse = reuse_counts(result.map, source.size);
   timings["repaint_s"] = since(t0);
 
@@ -327,13 +345,13 @@ Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOption
                   {"coherent_grow", o.coherent_grow},
                   {"coherent_smooth", o.coherent_smooth}, {"fast", o.fast}, {"seed", o.seed},
                   {"truth_normals", options.truth_normals},
-                  {"scale", options.scale}};
+                  {"scale", options.scale}, {"blend", options.blend}};
   if (destination.truth.present() && source.truth.present()) {
     t0 = Clock::now();
     Quality q = evaluate(result.map, destination.truth.mask, source.truth.mask, destination.truth.normals,
                          source.truth.normals);
     if (relight_measurable(source.scene)) {
-      auto relit = relight(result.map, destination, source, destination.truth.mask);
+      auto relit = relight(result.map, destination, source, destination.truth.mask, options.blend);
       if (relit) {
         q.psnr_db = relit->psnr_db;
         result.relit = std::move(*relit);

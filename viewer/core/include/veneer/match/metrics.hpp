@@ -58,8 +58,9 @@ struct Relit {
   cv::Mat reference;    // linear BGR: the destination's shape in the source's material under the extra lamp
   double psnr_db = 0;
 };
+// blend > 0: the source carried through the map with repaint_blended (transfer.hpp).
 Expected<Relit> relight(const Map& map, const ImageSet& destination, const ImageSet& source,
-                        const cv::Mat& destination_mask);
+                        const cv::Mat& destination_mask, int blend = 0);
 bool relight_measurable(const std::string& source_scene);
 
 // The quality table of the thesis pairs (issue 3): simulated sets at a reduced

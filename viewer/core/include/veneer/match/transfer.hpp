@@ -21,6 +21,8 @@ struct TransferOptions {
   bool truth_normals = false;  // use truth/normals.pfm and truth/mask.png (simulated sets) instead of
                                // photometric stereo and segmentation
   double scale = 1.0;          // resize both sets first (0 < scale <= 1; 0.5 = half size)
+  int blend = 0;               // repaint: blend the chunks meeting at a seam over this radius, px
+                               // (0..16; 0 = each pixel its own source pixel; see repaint_blended)
   Status check() const;
 };
 
@@ -87,6 +89,14 @@ cv::Mat median_photo(const std::vector<cv::Mat>& photos);  // per-pixel, per-cha
 // The destination `backdrop` with the source's `photo` pasted through `map`
 // (linear BGR CV_32FC3; backdrop may be empty = black).
 cv::Mat repaint(const Map& map, const cv::Mat& photo, const cv::Mat& backdrop = {});
+// The same with the chunks blended (StyleBlit's optional blending,
+// fast::blend_repaint): each mapped pixel averages its neighbours' matches
+// within `radius` px continued to it, Gaussian-weighted. Inside a chunk they
+// all agree, so texture stays sharp; seams and speckle are softened.
+// `source_mask` (CV_8UC1, empty = all) keeps continuations on the object.
+// radius 0 = repaint().
+cv::Mat repaint_blended(const Map& map, const cv::Mat& photo, const cv::Mat& source_mask, int radius,
+                        const cv::Mat& backdrop = {});
 // The thesis's picture of a map: R = x / width, G = y / height, B = 1 (8-bit BGR), black unmapped.
 cv::Mat map_picture(const Map& map, cv::Size source_size);
 // Reuse counts as a heat map over the grey source picture (8-bit BGR).
