@@ -133,8 +133,8 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
         o1->patch = 1;
         o1->dims = o1->channels;
         o1->slot.assign(o1->rows(), -1);
-        o1->rim.clear();
         o1->box.clear();
+        o1->patch_at.clear();
       }
       NearestLists nn;
       if (auto s = nearest_lists(d1, s1, 1, default_index(), o.threads, p, nn, nullptr); !s) return s.error();

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 
 #ifdef __AVX2__
 #include <immintrin.h>
@@ -116,18 +117,6 @@ Expected<Object> make_object(const ObjectView& view, Feature feature, int patch,
 
   o.slot.assign(n, -1);
   if (patch == 1) return o;
-  {
-    const size_t line = 16;  // floats per cache line
-    size_t lines = (static_cast<size_t>(o.bbox.width) * c + line - 1) / line;
-    if (lines % 2 == 0) ++lines;
-    o.box_stride = lines * line;
-    o.box.resize(o.box_stride * o.bbox.height);
-    parallel_rows(o.bbox.height, threads, 32, [&](int b, int e) {
-      for (int y = b; y < e; ++y)
-        std::copy_n(o.values.ptr<float>(o.bbox.y + y) + static_cast<size_t>(o.bbox.x) * c,
-                    static_cast<size_t>(o.bbox.width) * c, o.box.data() + y * o.box_stride);
-    });
-  }
   // Interior: the whole patch window lies on the object.
   cv::Mat on = view.mask != 0, interior;
   cv::erode(on, interior, cv::Mat::ones(patch, patch, CV_8U), cv::Point(-1, -1), 1, cv::BORDER_CONSTANT,
@@ -135,15 +124,40 @@ Expected<Object> make_object(const ObjectView& view, Feature feature, int patch,
   int rims = 0;
   for (int i = 0; i < n; ++i)
     if (!interior.at<uchar>(o.pixels[i].y, o.pixels[i].x)) o.slot[i] = rims++;
-  o.rim.resize(static_cast<size_t>(rims) * o.dims);
   const int r = patch / 2;
+  const size_t patch_w = static_cast<size_t>(patch) * c;
+  {
+    const size_t line = 16;  // floats per cache line
+    size_t lines = (std::max(static_cast<size_t>(o.bbox.width) * c, patch_w) + line - 1) / line;
+    if (lines % 2 == 0) ++lines;
+    o.box_stride = lines * line;
+  }
+  const size_t per_band = o.box_stride / patch_w;  // rim patches side by side in a band of P rows
+  const size_t bands = (static_cast<size_t>(rims) + per_band - 1) / per_band;
+  const size_t rim_base = o.box_stride * o.bbox.height;
+  o.box.assign(rim_base + bands * patch * o.box_stride, 0.0f);
+  if (o.box.size() > std::numeric_limits<uint32_t>::max())
+    return make_error("the object's patches exceed 16 GB");
+  parallel_rows(o.bbox.height, threads, 32, [&](int b, int e) {
+    for (int y = b; y < e; ++y)
+      std::copy_n(o.values.ptr<float>(o.bbox.y + y) + static_cast<size_t>(o.bbox.x) * c,
+                  static_cast<size_t>(o.bbox.width) * c, o.box.data() + y * o.box_stride);
+  });
+  o.patch_at.resize(n);
   auto on_object = [&](int x, int y) { return x >= 0 && y >= 0 && x < w && y < h && view.mask.at<uchar>(y, x) != 0; };
   parallel_rows(n, threads, 256, [&](int b, int e) {
     for (int i = b; i < e; ++i) {
-      if (o.slot[i] < 0) continue;
       const cv::Point p = o.pixels[i];
-      float* out = o.rim.data() + static_cast<size_t>(o.slot[i]) * o.dims;
+      if (o.slot[i] < 0) {
+        o.patch_at[i] = static_cast<uint32_t>(static_cast<size_t>(p.y - r - o.bbox.y) * o.box_stride +
+                                              static_cast<size_t>(p.x - r - o.bbox.x) * c);
+        continue;
+      }
+      const size_t k = static_cast<size_t>(o.slot[i]);
+      const size_t at = rim_base + (k / per_band) * patch * o.box_stride + (k % per_band) * patch_w;
+      o.patch_at[i] = static_cast<uint32_t>(at);
       for (int dy = -r; dy <= r; ++dy) {
+        float* out = o.box.data() + at + static_cast<size_t>(dy + r) * o.box_stride;
         for (int dx = -r; dx <= r; ++dx) {
           int x = p.x + dx, y = p.y + dy;
           if (!on_object(x, y)) {
@@ -152,7 +166,7 @@ Expected<Object> make_object(const ObjectView& view, Feature feature, int patch,
             if (!on_object(x, y)) x = p.x, y = p.y;
           }
           const float* v = o.values.ptr<float>(y) + static_cast<size_t>(x) * c;
-          for (int k = 0; k < c; ++k) *out++ = v[k];
+          for (int k2 = 0; k2 < c; ++k2) *out++ = v[k2];
         }
       }
     }

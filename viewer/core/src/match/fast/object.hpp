@@ -1,11 +1,13 @@
 #pragma once
-// Internal: one object in the fast engine's layout. Patches are not
-// materialised: a patch that lies wholly on the object is read straight from
-// the per-pixel value image (P rows of P*C contiguous floats, stride = image
-// row), and only patches touching the object's rim (whose mirrored pixels
-// follow features.hpp's rule) are stored, contiguously. Rows are the object's
-// pixels in scan order, as in FeatureSet, so ids and tie-breaks agree with
-// the faithful methods.
+// Internal: one object in the fast engine's layout. For patches (P > 1)
+// every row's patch is P runs of P*C floats in `box`, box_stride floats apart:
+// a patch that lies wholly on the object is read in place from the dense copy
+// of the values over the bounding box, and only patches touching the object's
+// rim (whose mirrored pixels follow features.hpp's rule) are stored, side by
+// side in bands of P rows appended below it. One offset per row (patch_at)
+// finds either. Rows are the object's pixels in scan order, as in FeatureSet,
+// so ids and tie-breaks agree with the faithful methods.
+#include <cstdint>
 #include <functional>
 #include <limits>
 #include <string>
@@ -29,13 +31,13 @@ struct Object {
   cv::Mat row_of;                 // CV_32S pixel -> row (-1 off the object)
   cv::Rect bbox;
   std::vector<float> flat;        // rows x channels, the centre values (contiguous)
-  std::vector<int> slot;          // row -> index into rim, -1 = interior (read from values)
-  std::vector<float> rim;         // stored patches of rim rows, dims floats each
+  std::vector<int> slot;          // row -> index of its stored rim patch, -1 = interior (read in place)
   // patch > 1: the values over bbox, copied densely (rows of box_stride floats,
   // an odd number of cache lines so that a patch's rows do not share cache
-  // sets as the full image's 12 KB rows do); interior patches read from here
+  // sets as the full image's 12 KB rows do), then the rim patches' bands
   std::vector<float> box;
   size_t box_stride = 0;
+  std::vector<uint32_t> patch_at;  // patch > 1: row -> offset of its patch's first float in box
 
   int rows() const { return static_cast<int>(pixels.size()); }
   int row_at(int x, int y) const {
@@ -44,20 +46,12 @@ struct Object {
   }
   // First patch row of `row` and the stride between patch rows (in floats).
   const float* patch_ptr(int row, size_t& stride) const {
-    const int s = slot[row];
     if (patch == 1) {  // the pixel's own values
       stride = static_cast<size_t>(channels);
       return flat.data() + static_cast<size_t>(row) * channels;
     }
-    if (s < 0) {
-      const cv::Point p = pixels[row];
-      const int r = patch / 2;
-      stride = box_stride;
-      return box.data() + static_cast<size_t>(p.y - r - bbox.y) * box_stride +
-             static_cast<size_t>(p.x - r - bbox.x) * channels;
-    }
-    stride = static_cast<size_t>(patch) * channels;
-    return rim.data() + static_cast<size_t>(s) * dims;
+    stride = box_stride;
+    return box.data() + patch_at[row];
   }
   // The patch of `row` as one contiguous vector (features.hpp's layout).
   void gather(int row, float* out) const {
