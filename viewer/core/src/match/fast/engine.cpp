@@ -153,23 +153,28 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
   }
   const std::vector<int> at = row_starts(dst);
   const int h = dst.size.height;
-  // The source's pixel -> row lookup, dense over its bounding box: random
-  // search reads it at random places, and the frame-wide row_of puts every
-  // image row 4 KB apart (a TLB entry each, the same cache sets).
+  // The source over its bounding box, dense: per pixel its patch's offset
+  // (kOff off the object) and its row. Random search reads them at random
+  // places, and the frame-wide row_of puts every image row 4 KB apart (a TLB
+  // entry each, the same cache sets). A candidate costs one read of the
+  // offsets, then its patch; the row is read only when a candidate wins (or
+  // for the use counts of uniformity). Matches are followed by position.
+  constexpr uint32_t kOff = std::numeric_limits<uint32_t>::max();
   const cv::Rect sb = src.bbox;
   std::vector<int> src_rows(static_cast<size_t>(sb.area()), -1);
+  std::vector<uint32_t> src_at(static_cast<size_t>(sb.area()), kOff);
+  const float* src_base = src.patch == 1 ? src.flat.data() : src.box.data();
+  const size_t src_stride = src.patch == 1 ? static_cast<size_t>(src.channels) : src.box_stride;
   for (int i = 0; i < ns; ++i) {
     const cv::Point q = src.pixels[i];
-    src_rows[static_cast<size_t>(q.y - sb.y) * sb.width + (q.x - sb.x)] = i;
+    const size_t cell = static_cast<size_t>(q.y - sb.y) * sb.width + (q.x - sb.x);
+    src_rows[cell] = i;
+    src_at[cell] = src.patch == 1 ? static_cast<uint32_t>(i * src.channels) : src.patch_at[i];
   }
-  auto src_row_at = [&](int x, int y) {
-    x -= sb.x;
-    y -= sb.y;
-    if (static_cast<unsigned>(x) >= static_cast<unsigned>(sb.width) ||
-        static_cast<unsigned>(y) >= static_cast<unsigned>(sb.height))
-      return -1;
-    return src_rows[static_cast<size_t>(y) * sb.width + x];
-  };
+  const PatchKernel kernel = patch_kernel(src.patch, src.channels);
+  const int patch_w = src.patch * src.channels;
+  std::vector<cv::Point> match_at(n);
+  for (int d = 0; d < n; ++d) match_at[d] = src.pixels[match[d]];
   // With uniformity the use counts must be live for every pixel: one band.
   const int band = u > 0 ? h + 1 : std::max(8, h / 16);
   // Windows halve from the source object's extent (larger ones only land off it).
@@ -209,18 +214,29 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
           const float* a = dst.patch_ptr(d, a_stride);  // read in place, not copied
           float best = total(sq[d], match[d]);
           auto offer = [&](int x, int y) {
-            const int s = src_row_at(x, y);
-            if (s < 0 || s == match[d]) return;  // off the source, or no change
-            const float pen = penalty(s);
+            const int bx = x - sb.x, by = y - sb.y;
+            if (static_cast<unsigned>(bx) >= static_cast<unsigned>(sb.width) ||
+                static_cast<unsigned>(by) >= static_cast<unsigned>(sb.height))
+              return;  // off the source's box
+            const size_t cell = static_cast<size_t>(by) * sb.width + bx;
+            const uint32_t off = src_at[cell];
+            if (off == kOff || (x == match_at[d].x && y == match_at[d].y)) return;  // off the source, or no change
+            int s = -1;
+            float pen = 0;
+            if (u > 0) {
+              s = src_rows[cell];
+              pen = penalty(s);
+            }
             const float room = best - pen;
             if (room <= 0) return;
             const float bound = room * room * area;
-            const float v = patch_sq_strided(a, a_stride, src, s, bound);
+            const float v = kernel(a, a_stride, src_base + off, src_stride, src.patch, patch_w, bound);
             if (v > bound) return;
             const float t = std::sqrt(v / area) + pen;
             if (t < best) {
+              if (s < 0) s = src_rows[cell];
               if (u > 0) --delta[match[d]], ++delta[s];
-              best = t, match[d] = s, sq[d] = v;
+              best = t, match[d] = s, match_at[d] = cv::Point(x, y), sq[d] = v;
             }
           };
           for (const cv::Point off : {cv::Point(-step, 0), cv::Point(0, -step)}) {
@@ -228,12 +244,12 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
             if (ny < y0 || ny >= y1) continue;  // another band's pixel: not this iteration
             const int nb = dst.row_at(pt.x + off.x, ny);
             if (nb < 0) continue;
-            const cv::Point m = src.pixels[match[nb]];
+            const cv::Point m = match_at[nb];
             offer(m.x - off.x, m.y - off.y);
           }
           uint64_t r = hash3(o.seed, static_cast<uint64_t>(it), static_cast<uint64_t>(d));
           for (int radius = it == 0 ? max_radius : std::min(max_radius, far_radius); radius >= 1; radius /= 2) {
-            const cv::Point c = src.pixels[match[d]];
+            const cv::Point c = match_at[d];
             r = mix64(r);
             const int span = 2 * radius + 1;
             // uniform in [0, span) by multiply-shift (no division)

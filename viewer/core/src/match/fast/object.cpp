@@ -248,30 +248,27 @@ inline float sq_fixed(const float* a, size_t a_stride, const float* b, size_t b_
   return sum();
 }
 #endif
-}  // namespace
 
-float patch_sq_strided(const float* a, size_t a_stride, const Object& src, int s, float bound) {
-  size_t stride;
-  const float* b = src.patch_ptr(s, stride);
-  const int w = src.patch * src.channels;
-  if (src.patch == 1) return patch_sq_ordered(a, src, s);  // one pixel: the faithful sum, bit for bit
-#ifdef __AVX2__
-  if (src.channels == 3) {  // normals: the patch sizes the methods offer, unrolled
-    switch (src.patch) {
-      case 3: return sq_fixed<3, 9>(a, a_stride, b, stride, bound);
-      case 5: return sq_fixed<5, 15>(a, a_stride, b, stride, bound);
-      case 7: return sq_fixed<7, 21>(a, a_stride, b, stride, bound);
-      default: break;
-    }
+// One pixel: the faithful sum, bit for bit (patch_sq_ordered's order).
+float sq_pixel(const float* a, size_t, const float* b, size_t, int, int w, float) {
+  float sum = 0;
+  for (int j = 0; j < w; ++j) {
+    const float t = a[j] - b[j];
+    sum += t * t;
   }
-  // 8 lanes per step, the row's tail through a masked load (lanes past the
-  // row are neither read nor counted); the bound is checked after rows 2 and 5.
+  return sum;
+}
+
+// Any patch: 8 lanes per step; the bound is checked after rows 2 and 5.
+float sq_any(const float* a, size_t a_stride, const float* b, size_t b_stride, int patch, int w, float bound) {
+#ifdef __AVX2__
+  // the row's tail through a masked load (lanes past the row are neither read nor counted)
   const int full = w & ~7, tail = w - full;
   const __m256i tail_mask = _mm256_cmpgt_epi32(_mm256_set1_epi32(tail), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
   __m256 acc = _mm256_setzero_ps();
-  for (int i = 0; i < src.patch; ++i) {
+  for (int i = 0; i < patch; ++i) {
     const float* ar = a + i * a_stride;
-    const float* br = b + i * stride;
+    const float* br = b + i * b_stride;
     for (int j = 0; j < full; j += 8) {
       const __m256 t = _mm256_sub_ps(_mm256_loadu_ps(ar + j), _mm256_loadu_ps(br + j));
       acc = _mm256_fmadd_ps(t, t, acc);
@@ -280,7 +277,7 @@ float patch_sq_strided(const float* a, size_t a_stride, const Object& src, int s
       const __m256 t = _mm256_sub_ps(_mm256_maskload_ps(ar + full, tail_mask), _mm256_maskload_ps(br + full, tail_mask));
       acc = _mm256_fmadd_ps(t, t, acc);
     }
-    if (i % 3 == 1 && i + 1 < src.patch) {
+    if (i % 3 == 1 && i + 1 < patch) {
       const float sum = hsum(acc);
       if (sum > bound) return sum;
     }
@@ -288,12 +285,54 @@ float patch_sq_strided(const float* a, size_t a_stride, const Object& src, int s
   return hsum(acc);
 #else
   float sum = 0;
-  for (int i = 0; i < src.patch; ++i) {
-    sum += ssd(a + i * a_stride, b + i * stride, w);
+  for (int i = 0; i < patch; ++i) {
+    sum += ssd(a + i * a_stride, b + i * b_stride, w);
     if (sum > bound) return sum;
   }
   return sum;
 #endif
+}
+
+#ifdef __AVX2__
+template <int P, int W>
+float sq_fixed_kernel(const float* a, size_t a_stride, const float* b, size_t b_stride, int, int, float bound) {
+  return sq_fixed<P, W>(a, a_stride, b, b_stride, bound);
+}
+#endif
+
+}  // namespace
+
+PatchKernel patch_kernel(int patch, int channels) {
+  if (patch == 1) return sq_pixel;
+#ifdef __AVX2__
+  if (channels == 3) {  // normals: the patch sizes the methods offer, unrolled
+    switch (patch) {
+      case 3: return sq_fixed_kernel<3, 9>;
+      case 5: return sq_fixed_kernel<5, 15>;
+      case 7: return sq_fixed_kernel<7, 21>;
+      default: break;
+    }
+  }
+#endif
+  return sq_any;
+}
+
+float patch_sq_strided(const float* a, size_t a_stride, const Object& src, int s, float bound) {
+  size_t stride;
+  const float* b = src.patch_ptr(s, stride);
+  const int w = src.patch * src.channels;
+  if (src.patch == 1) return sq_pixel(a, 0, b, 0, 1, w, bound);
+#ifdef __AVX2__
+  if (src.channels == 3) {  // inlined here: the common case
+    switch (src.patch) {
+      case 3: return sq_fixed<3, 9>(a, a_stride, b, stride, bound);
+      case 5: return sq_fixed<5, 15>(a, a_stride, b, stride, bound);
+      case 7: return sq_fixed<7, 21>(a, a_stride, b, stride, bound);
+      default: break;
+    }
+  }
+#endif
+  return sq_any(a, a_stride, b, stride, src.patch, w, bound);
 }
 
 float patch_sq_ordered(const float* a, const Object& src, int s) {

@@ -98,6 +98,13 @@ Expected<Object> make_object(const ObjectView& view, Feature feature, int patch,
 float patch_sq(const float* a, const Object& src, int s, float bound);
 // The same with `a`'s patch rows a_stride floats apart (a patch read in place).
 float patch_sq_strided(const float* a, size_t a_stride, const Object& src, int s, float bound);
+// The distance of patch a (rows a_stride floats apart) to patch b (rows
+// b_stride apart), `patch` rows of w = patch * channels floats, stopping
+// early like patch_sq: the kernel patch_sq_strided uses, for callers that
+// find patches themselves. One pixel (patch 1) sums in element order.
+using PatchKernel = float (*)(const float* a, size_t a_stride, const float* b, size_t b_stride, int patch, int w,
+                              float bound);
+PatchKernel patch_kernel(int patch, int channels);
 // The same sum in strict element order, bit-identical to features.hpp's
 // squared_distance() (for methods whose decisions chain, like region growing).
 float patch_sq_ordered(const float* a, const Object& src, int s);
