@@ -153,24 +153,31 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
   }
   const std::vector<int> at = row_starts(dst);
   const int h = dst.size.height;
-  // The source over its bounding box, dense: per pixel its patch's offset
-  // (kOff off the object) and its row. Random search reads them at random
-  // places, and the frame-wide row_of puts every image row 4 KB apart (a TLB
-  // entry each, the same cache sets). A candidate costs one read of the
-  // offsets, then its patch; the row is read only when a candidate wins (or
-  // for the use counts of uniformity). Matches are followed by position.
-  constexpr uint32_t kOff = std::numeric_limits<uint32_t>::max();
+  // The source over its bounding box, dense: per pixel whether it is off the
+  // object, interior (its patch read in place: the offset follows from the
+  // position) or on the rim (stored patch, through its row), one byte each so
+  // that the table stays in cache; and its row. Random search reads them at
+  // random places, and the frame-wide row_of puts every image row 4 KB apart
+  // (a TLB entry each, the same cache sets). An interior candidate's patch
+  // address does not wait for the table: its loads start while the table is
+  // read. The row is read only when a candidate wins, for rim patches, and
+  // for the use counts of uniformity. Matches are followed by position.
+  enum : uint8_t { kOff = 0, kInterior = 1, kRim = 2 };
   const cv::Rect sb = src.bbox;
   std::vector<int> src_rows(static_cast<size_t>(sb.area()), -1);
-  std::vector<uint32_t> src_at(static_cast<size_t>(sb.area()), kOff);
+  std::vector<uint8_t> src_kind(static_cast<size_t>(sb.area()), kOff);
   const float* src_base = src.patch == 1 ? src.flat.data() : src.box.data();
   const size_t src_stride = src.patch == 1 ? static_cast<size_t>(src.channels) : src.box_stride;
   for (int i = 0; i < ns; ++i) {
     const cv::Point q = src.pixels[i];
     const size_t cell = static_cast<size_t>(q.y - sb.y) * sb.width + (q.x - sb.x);
     src_rows[cell] = i;
-    src_at[cell] = src.patch == 1 ? static_cast<uint32_t>(i * src.channels) : src.patch_at[i];
+    src_kind[cell] = src.patch > 1 && src.slot[i] < 0 ? kInterior : kRim;
   }
+  auto rim_offset = [&](int row) {
+    return src.patch == 1 ? static_cast<size_t>(row) * src.channels : static_cast<size_t>(src.patch_at[row]);
+  };
+  const int half = src.patch / 2;
   const PatchKernel kernel = patch_kernel(src.patch, src.channels);
   const int patch_w = src.patch * src.channels;
   std::vector<cv::Point> match_at(n);
@@ -219,8 +226,8 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
                 static_cast<unsigned>(by) >= static_cast<unsigned>(sb.height))
               return;  // off the source's box
             const size_t cell = static_cast<size_t>(by) * sb.width + bx;
-            const uint32_t off = src_at[cell];
-            if (off == kOff || (x == match_at[d].x && y == match_at[d].y)) return;  // off the source, or no change
+            const uint8_t kind = src_kind[cell];
+            if (kind == kOff || (x == match_at[d].x && y == match_at[d].y)) return;  // off the source, or no change
             int s = -1;
             float pen = 0;
             if (u > 0) {
@@ -230,7 +237,14 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
             const float room = best - pen;
             if (room <= 0) return;
             const float bound = room * room * area;
-            const float v = kernel(a, a_stride, src_base + off, src_stride, src.patch, patch_w, bound);
+            float v;
+            if (kind == kInterior) {
+              const size_t off = static_cast<size_t>(by - half) * src_stride + static_cast<size_t>(bx - half) * src.channels;
+              v = kernel(a, a_stride, src_base + off, src_stride, src.patch, patch_w, bound);
+            } else {
+              if (s < 0) s = src_rows[cell];
+              v = kernel(a, a_stride, src_base + rim_offset(s), src_stride, src.patch, patch_w, bound);
+            }
             if (v > bound) return;
             const float t = std::sqrt(v / area) + pen;
             if (t < best) {
