@@ -121,8 +121,9 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
   std::vector<int> uses;
 
   // Init: the faithful method starts from random source object pixels; the
-  // fast one starts from each pixel's nearest by its centre value (exact, a
-  // few ms), which leaves the 5 iterations refining instead of searching.
+  // fast one starts from each pixel's nearest by its centre value (the grid's
+  // lookup, a few ms), which leaves the 5 iterations refining instead of
+  // searching.
   {
     std::vector<int> ids;
     if (dst.channels == 3) {
@@ -141,13 +142,13 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
       ids = std::move(nn.ids);
     }
     parallel_rows(n, o.threads, 256, [&](int b, int e) {
-      std::vector<float> buf(dst.dims);
       for (int d = b; d < e; ++d) {
         match[d] = ids[d] >= 0 ? ids[d]
                                : static_cast<int>(hash3(o.seed, 0xffffu, static_cast<uint64_t>(d)) %
                                                   static_cast<uint64_t>(ns));
-        dst.gather(d, buf.data());
-        sq[d] = patch_sq(buf.data(), src, match[d], kInf);
+        size_t a_stride;
+        const float* a = dst.patch_ptr(d, a_stride);  // read in place
+        sq[d] = patch_sq_strided(a, a_stride, src, match[d], kInf);
       }
     });
   }

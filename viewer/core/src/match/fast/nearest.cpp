@@ -405,8 +405,14 @@ Status nearest_centres(const Object& dst, const Object& src, int threads, const 
     if (progress.cancelled()) stop = true;
     if (stop) return;
     float sq;
-    for (int d = b; d < e; ++d)  // neighbouring pixels have neighbouring normals: start from the last match
-      grid.nearest_from(dst.flat.data() + static_cast<size_t>(d) * 3, 1, &ids[d], &sq, d > b ? ids[d - 1] : -1);
+    int slot = -1;  // neighbouring pixels have neighbouring normals: start from the last match's place
+    for (int d = b; d < e; ++d) {
+      const float* q = dst.flat.data() + static_cast<size_t>(d) * 3;
+      if (!grid.nearest_slot(q, slot, ids[d], sq, false)) {
+        grid.nearest_from(q, 1, &ids[d], &sq, d > b ? ids[d - 1] : -1);
+        slot = -1;
+      }
+    }
   });
   if (stop) return make_error("cancelled during nearest search");
   return {};
