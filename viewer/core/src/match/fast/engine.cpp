@@ -107,7 +107,7 @@ std::vector<int> row_starts(const Object& o) {
 // the source's size, off-object candidates cost +inf) but a better start (see
 // below), run on horizontal bands
 // in parallel. A band propagates only within itself; the band edges move by
-// half a band every iteration so no seam stays. Random numbers come from a
+// half a band every other iteration so no seam stays. Random numbers come from a
 // hash of (seed, iteration, pixel), so the map does not depend on threads.
 // uniformity u > 0 adds u * uses(s) / fair_share to the RMS distance, with
 // live use counts; that makes the scan sequential (one band).
@@ -153,7 +153,6 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
     });
   }
   const std::vector<int> at = row_starts(dst);
-  const int h = dst.size.height;
   // The source over its bounding box, dense: per pixel whether it is off the
   // object, interior (its patch read in place: the offset follows from the
   // position) or on the rim (stored patch, through its row), one byte each so
@@ -184,7 +183,22 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
   std::vector<cv::Point> match_at(n);
   for (int d = 0; d < n; ++d) match_at[d] = src.pixels[match[d]];
   // With uniformity the use counts must be live for every pixel: one band.
-  const int band = u > 0 ? h + 1 : std::max(8, h / 16);
+  // Otherwise 8 bands of whole image rows holding about equal numbers of
+  // object pixels (equal heights left one core idle for a while on a small
+  // object); odd iterations cut halfway between (9 bands, the outer two half).
+  const int h = dst.size.height;
+  const int band_count = u > 0 ? 1 : 8;
+  auto band_cuts = [&](bool half) {
+    std::vector<int> cuts{0};  // first image row of each band, then h
+    if (band_count > 1)
+      for (int k = 1; k <= band_count - (half ? 0 : 1); ++k) {
+        const long want = (2L * k - (half ? 1 : 0)) * n / (2L * band_count);
+        cuts.push_back(static_cast<int>(std::lower_bound(at.begin(), at.end(), want) - at.begin()));
+      }
+    cuts.push_back(h);
+    return cuts;
+  };
+  const std::vector<int> even_cuts = band_cuts(false), odd_cuts = band_cuts(true);
   // Windows halve from the source object's extent (larger ones only land off it).
   const int max_radius = std::max(src.bbox.width, src.bbox.height);
   // After the first pass, from the nearest-by-centre start, windows wider than
@@ -200,8 +214,8 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
     }
     const bool forward = it % 2 == 0;
     const int step = forward ? 1 : -1;
-    const int shift = (it % 2) * (band / 2);
-    const int bands = (h + shift + band - 1) / band;
+    const std::vector<int>& cuts = it % 2 ? odd_cuts : even_cuts;
+    const int bands = static_cast<int>(cuts.size()) - 1;
     parallel_rows(bands, o.threads, 1, [&](int bb, int be) {
       // this band's own changes to the use counts, applied live
       std::unordered_map<int, int> delta;
@@ -213,7 +227,7 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
       auto total = [&](float q, int s) { return std::sqrt(q / area) + penalty(s); };
       for (int bi = bb; bi < be; ++bi) {
         delta.clear();
-        const int y0 = std::clamp(bi * band - shift, 0, h), y1 = std::clamp((bi + 1) * band - shift, 0, h);
+        const int y0 = cuts[bi], y1 = cuts[bi + 1];
         const int r0 = at[y0], r1 = at[y1];
         for (int i = r0; i < r1; ++i) {
           const int d = forward ? i : r1 - 1 + r0 - i;
@@ -277,7 +291,9 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
     });
   }
   Map map = new_map(dst.size);
-  for (int d = 0; d < n; ++d) put(map, dst, src, d, match[d], sq[d]);
+  parallel_rows(n, o.threads, 4096, [&](int b, int e) {
+    for (int d = b; d < e; ++d) put(map, dst, src, d, match[d], sq[d]);
+  });
   return map;
 }
 
