@@ -234,7 +234,7 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
           const cv::Point pt = dst.pixels[d];
           size_t a_stride;
           const float* a = dst.patch_ptr(d, a_stride);  // read in place, not copied
-          float best = total(sq[d], match[d]);
+          float best = u > 0 ? total(sq[d], match[d]) : 0.0f;  // with uniformity: RMS distance + penalty
           auto offer = [&](int x, int y) {
             const int bx = x - sb.x, by = y - sb.y;
             if (static_cast<unsigned>(bx) >= static_cast<unsigned>(sb.width) ||
@@ -243,28 +243,27 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
             const size_t cell = static_cast<size_t>(by) * sb.width + bx;
             const uint8_t kind = src_kind[cell];
             if (kind == kOff || (x == match_at[d].x && y == match_at[d].y)) return;  // off the source, or no change
-            int s = -1;
-            float pen = 0;
-            if (u > 0) {
-              s = src_rows[cell];
-              pen = penalty(s);
+            if (u <= 0) {  // plain distances: compared squared, no roots
+              const float v = kind == kInterior
+                                  ? kernel(a, a_stride,
+                                           src_base + static_cast<size_t>(by - half) * src_stride +
+                                               static_cast<size_t>(bx - half) * src.channels,
+                                           src_stride, src.patch, patch_w, sq[d])
+                                  : kernel(a, a_stride, src_base + rim_offset(src_rows[cell]), src_stride, src.patch,
+                                           patch_w, sq[d]);
+              if (v < sq[d]) match[d] = src_rows[cell], match_at[d] = cv::Point(x, y), sq[d] = v;
+              return;
             }
+            int s = src_rows[cell];
+            const float pen = penalty(s);
             const float room = best - pen;
             if (room <= 0) return;
             const float bound = room * room * area;
-            float v;
-            if (kind == kInterior) {
-              const size_t off = static_cast<size_t>(by - half) * src_stride + static_cast<size_t>(bx - half) * src.channels;
-              v = kernel(a, a_stride, src_base + off, src_stride, src.patch, patch_w, bound);
-            } else {
-              if (s < 0) s = src_rows[cell];
-              v = kernel(a, a_stride, src_base + rim_offset(s), src_stride, src.patch, patch_w, bound);
-            }
+            const float v = kernel(a, a_stride, src_base + rim_offset(s), src_stride, src.patch, patch_w, bound);
             if (v > bound) return;
             const float t = std::sqrt(v / area) + pen;
             if (t < best) {
-              if (s < 0) s = src_rows[cell];
-              if (u > 0) --delta[match[d]], ++delta[s];
+              --delta[match[d]], ++delta[s];
               best = t, match[d] = s, match_at[d] = cv::Point(x, y), sq[d] = v;
             }
           };
