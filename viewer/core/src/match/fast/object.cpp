@@ -117,14 +117,18 @@ Expected<Object> make_object(const ObjectView& view, Feature feature, int patch,
 
   o.slot.assign(n, -1);
   if (patch == 1) return o;
-  // Interior: the whole patch window lies on the object.
-  cv::Mat on = view.mask != 0, interior;
+  // Interior: the whole patch window lies on the object. Eroded over the
+  // bounding box grown by the patch radius only (the mask is 0 around it;
+  // most of a frame, for a thesis-sized object).
+  const int r = patch / 2;
+  const cv::Rect roi = cv::Rect(o.bbox.x - r, o.bbox.y - r, o.bbox.width + 2 * r, o.bbox.height + 2 * r) &
+                       cv::Rect(0, 0, w, h);
+  cv::Mat on = view.mask(roi) != 0, interior;
   cv::erode(on, interior, cv::Mat::ones(patch, patch, CV_8U), cv::Point(-1, -1), 1, cv::BORDER_CONSTANT,
             cv::Scalar(0));
   int rims = 0;
   for (int i = 0; i < n; ++i)
-    if (!interior.at<uchar>(o.pixels[i].y, o.pixels[i].x)) o.slot[i] = rims++;
-  const int r = patch / 2;
+    if (!interior.at<uchar>(o.pixels[i].y - roi.y, o.pixels[i].x - roi.x)) o.slot[i] = rims++;
   const size_t patch_w = static_cast<size_t>(patch) * c;
   {
     const size_t line = 16;  // floats per cache line
