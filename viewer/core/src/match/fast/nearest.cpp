@@ -347,10 +347,13 @@ Status nearest_patch_normals(const Object& dst, const Object& src, int threads, 
   buckets.build(ys, ns);
   const int kc = std::min(ns, 12);
   const int block = 1024, blocks = (n + block - 1) / block;
+  const PatchKernel kernel = patch_kernel(src.patch, src.channels);
+  const int patch_w = src.patch * src.channels;
   const bool walk = !src.row_of.empty() && !dst.row_of.empty();
   std::atomic<bool> stop{false};
   parallel_rows(blocks, threads, 1, [&](int bb, int be) {
     std::vector<int> cid(kc);
+    std::vector<const float*> cptr(kc);
     DirectionBuckets::Scratch scratch;
     for (int blk = bb; blk < be; ++blk) {
       if (progress.cancelled()) stop = true;
@@ -376,7 +379,15 @@ Status nearest_patch_normals(const Object& dst, const Object& src, int threads, 
             offer(src.row_at(m.x - off.x, m.y - off.y));
           }
         }
-        for (int j = 0; j < kc; ++j) offer(cid[j]);
+        // the candidates' patch offsets read all at once (each read misses
+        // the cache; in a row they overlap), then their distances
+        for (int j = 0; j < kc; ++j) cptr[j] = src.box.data() + src.patch_at[cid[j]];
+        for (int j = 0; j < kc; ++j) {
+          const int s = cid[j];
+          if (s == best) continue;
+          const float v = kernel(a, a_stride, cptr[j], src.box_stride, src.patch, patch_w, best_sq);
+          if (v < best_sq || (v == best_sq && s < best)) best_sq = v, best = s;
+        }
         out.ids[d] = best;
         out.sq[d] = best_sq;
       }
