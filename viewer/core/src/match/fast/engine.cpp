@@ -168,12 +168,14 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
   std::vector<uint8_t> src_kind(static_cast<size_t>(sb.area()), kOff);
   const float* src_base = src.patch == 1 ? src.flat.data() : src.box.data();
   const size_t src_stride = src.patch == 1 ? static_cast<size_t>(src.channels) : src.box_stride;
-  for (int i = 0; i < ns; ++i) {
-    const cv::Point q = src.pixels[i];
-    const size_t cell = static_cast<size_t>(q.y - sb.y) * sb.width + (q.x - sb.x);
-    src_rows[cell] = i;
-    src_kind[cell] = src.patch > 1 && src.slot[i] < 0 ? kInterior : kRim;
-  }
+  parallel_rows(ns, o.threads, 8192, [&](int b, int e) {
+    for (int i = b; i < e; ++i) {
+      const cv::Point q = src.pixels[i];
+      const size_t cell = static_cast<size_t>(q.y - sb.y) * sb.width + (q.x - sb.x);
+      src_rows[cell] = i;
+      src_kind[cell] = src.patch > 1 && src.slot[i] < 0 ? kInterior : kRim;
+    }
+  });
   auto rim_offset = [&](int row) {
     return src.patch == 1 ? static_cast<size_t>(row) * src.channels : static_cast<size_t>(src.patch_at[row]);
   };
@@ -181,7 +183,9 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
   const PatchKernel kernel = patch_kernel(src.patch, src.channels);
   const int patch_w = src.patch * src.channels;
   std::vector<cv::Point> match_at(n);
-  for (int d = 0; d < n; ++d) match_at[d] = src.pixels[match[d]];
+  parallel_rows(n, o.threads, 8192, [&](int b, int e) {
+    for (int d = b; d < e; ++d) match_at[d] = src.pixels[match[d]];
+  });
   // With uniformity the use counts must be live for every pixel: one band.
   // Otherwise 8 bands of whole image rows holding about equal numbers of
   // object pixels (equal heights left one core idle for a while on a small

@@ -139,7 +139,8 @@ Expected<Object> make_object(const ObjectView& view, Feature feature, int patch,
   const size_t per_band = o.box_stride / patch_w;  // rim patches side by side in a band of P rows
   const size_t bands = (static_cast<size_t>(rims) + per_band - 1) / per_band;
   const size_t rim_base = o.box_stride * o.bbox.height;
-  o.box.assign(rim_base + bands * patch * o.box_stride, 0.0f);
+  // not zeroed: only the object's patches are ever read, and they are all written below
+  o.box.resize(rim_base + bands * patch * o.box_stride);
   if (o.box.size() > std::numeric_limits<uint32_t>::max())
     return make_error("the object's patches exceed 16 GB");
   parallel_rows(o.bbox.height, threads, 32, [&](int b, int e) {
@@ -148,7 +149,6 @@ Expected<Object> make_object(const ObjectView& view, Feature feature, int patch,
                   static_cast<size_t>(o.bbox.width) * c, o.box.data() + y * o.box_stride);
   });
   o.patch_at.resize(n);
-  auto on_object = [&](int x, int y) { return x >= 0 && y >= 0 && x < w && y < h && view.mask.at<uchar>(y, x) != 0; };
   parallel_rows(n, threads, 256, [&](int b, int e) {
     for (int i = b; i < e; ++i) {
       const cv::Point p = o.pixels[i];
@@ -162,14 +162,19 @@ Expected<Object> make_object(const ObjectView& view, Feature feature, int patch,
       o.patch_at[i] = static_cast<uint32_t>(at);
       for (int dy = -r; dy <= r; ++dy) {
         float* out = o.box.data() + at + static_cast<size_t>(dy + r) * o.box_stride;
+        // the mask rows of the pixel and of its mirror through the centre (null off the frame)
+        const int y = p.y + dy, ym = p.y - dy;
+        const uchar* m = y >= 0 && y < h ? view.mask.ptr<uchar>(y) : nullptr;
+        const uchar* mm = ym >= 0 && ym < h ? view.mask.ptr<uchar>(ym) : nullptr;
         for (int dx = -r; dx <= r; ++dx) {
-          int x = p.x + dx, y = p.y + dy;
-          if (!on_object(x, y)) {
-            x = p.x - dx;  // mirrored through the centre (features.hpp)
-            y = p.y - dy;
-            if (!on_object(x, y)) x = p.x, y = p.y;
-          }
-          const float* v = o.values.ptr<float>(y) + static_cast<size_t>(x) * c;
+          const int x = p.x + dx, xm = p.x - dx;
+          const float* v;
+          if (m && x >= 0 && x < w && m[x])
+            v = o.values.ptr<float>(y) + static_cast<size_t>(x) * c;
+          else if (mm && xm >= 0 && xm < w && mm[xm])  // mirrored through the centre (features.hpp)
+            v = o.values.ptr<float>(ym) + static_cast<size_t>(xm) * c;
+          else
+            v = o.values.ptr<float>(p.y) + static_cast<size_t>(p.x) * c;
           for (int k2 = 0; k2 < c; ++k2) *out++ = v[k2];
         }
       }

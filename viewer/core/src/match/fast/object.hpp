@@ -10,7 +10,9 @@
 #include <cstdint>
 #include <functional>
 #include <limits>
+#include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -20,6 +22,26 @@
 #include "veneer/util/progress.hpp"
 
 namespace veneer::match::fast {
+
+// std::allocator whose resize leaves floats as they come (not zeroed): for
+// buffers that are written before they are read (Object::box, a few MB).
+template <class T>
+struct UninitialisedAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = UninitialisedAllocator<U>;
+  };
+  UninitialisedAllocator() = default;
+  template <class U>
+  UninitialisedAllocator(const UninitialisedAllocator<U>&) noexcept {}
+  template <class U, class... Args>
+  void construct(U* p, Args&&... args) {
+    if constexpr (sizeof...(Args) == 0)
+      ::new (static_cast<void*>(p)) U;
+    else
+      ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+};
 
 struct Object {
   int channels = 0;  // values per pixel (3 for normals, lamps for intensities)
@@ -35,7 +57,7 @@ struct Object {
   // patch > 1: the values over bbox, copied densely (rows of box_stride floats,
   // an odd number of cache lines so that a patch's rows do not share cache
   // sets as the full image's 12 KB rows do), then the rim patches' bands
-  std::vector<float> box;
+  std::vector<float, UninitialisedAllocator<float>> box;
   size_t box_stride = 0;
   std::vector<uint32_t> patch_at;  // patch > 1: row -> offset of its patch's first float in box
 
