@@ -257,11 +257,25 @@ class DirectionBuckets {
       return;
     }
     // Rows farther than the k-th of any k rows (here the first k) cannot be
-    // among the k nearest: k rows are strictly nearer. The rest are ranked by
-    // (distance, id), counted without branches; those ranked below k are the
-    // answer (the rows dropped lie beyond every row kept, so ranks agree).
+    // among the k nearest: k rows are strictly nearer. That bound kept nearly
+    // all of the box's ~3k rows, so it is narrowed: of the 8 bounds
+    // thr * 1/8 .. thr * 8/8, the least that has at least k rows within it
+    // (counted for all 8 at once, without branches) keeps the k nearest too.
+    // The rest are ranked by (distance, id), counted without branches; those
+    // ranked below k are the answer (the rows dropped lie beyond every row
+    // kept, so ranks agree).
     float thr = 0;
     for (int j = 0; j < k; ++j) thr = std::max(thr, w.d[j]);
+    {
+      float t[8];
+      int within[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+      for (int b = 0; b < 8; ++b) t[b] = thr * (static_cast<float>(b + 1) * 0.125f);  // t[7] == thr
+      for (int j = 0; j < m; ++j)
+        for (int b = 0; b < 8; ++b) within[b] += w.d[j] <= t[b];
+      int b = 0;
+      while (within[b] < k) ++b;  // within[7] >= k: the first k rows are within thr
+      thr = t[b];
+    }
     w.kd.resize(m + 8);
     w.ki.resize(m + 8);
     float* kd = w.kd.data();
