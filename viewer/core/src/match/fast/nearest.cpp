@@ -97,13 +97,16 @@ void patch_moments(const Object& o, int threads, std::vector<float>& out, int& p
             for (int t = 0; t < len; ++t) v0[t] += row[t];
         }
         if (parts == 1) {
-          for (int q = i; q < j; ++q) {
-            float* m = out.data() + static_cast<size_t>(q) * per_row;
-            const float* a0 = v0.data() + (o.pixels[q].x - r - xa) * c;
-            for (int dx = 0; dx < p; ++dx)
-              for (int k = 0; k < c; ++k) m[k] += a0[dx * c + k];
-            for (int k = 0; k < c; ++k) m[k] *= inv_p;
+          // rows i..j-1 are consecutive pixels, their means one flat run of
+          // (j - i) c floats: each column's sums added over the whole run at
+          // once (the same order per value as one pixel at a time)
+          float* m = out.data() + static_cast<size_t>(i) * per_row;
+          const int run = (j - i) * c;
+          for (int dx = 0; dx < p; ++dx) {
+            const float* a0 = v0.data() + dx * c;
+            for (int t = 0; t < run; ++t) m[t] += a0[t];
           }
+          for (int t = 0; t < run; ++t) m[t] *= inv_p;
           i = j;
           continue;
         }
