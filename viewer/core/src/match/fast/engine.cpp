@@ -121,13 +121,13 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
   std::vector<int> uses;
 
   // Init: the faithful method starts from random source object pixels; the
-  // fast one starts from each pixel's nearest by its centre value (the grid's
-  // lookup, a few ms), which leaves the 5 iterations refining instead of
-  // searching.
+  // fast one starts from each pixel's nearest by its centre value (a few ms;
+  // for patches the grid's lookup), which leaves the 5 iterations refining
+  // instead of searching.
   {
     std::vector<int> ids;
     if (dst.channels == 3) {
-      if (auto s = nearest_centres(dst, src, o.threads, p, ids); !s) return s.error();
+      if (auto s = nearest_centres(dst, src, o.threads, p, ids, dst.patch == 1); !s) return s.error();
     } else {
       Object d1 = dst, s1 = src;
       for (Object* o1 : {&d1, &s1}) {

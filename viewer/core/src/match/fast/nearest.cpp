@@ -422,7 +422,7 @@ Status nearest_patch_normals(const Object& dst, const Object& src, int threads, 
 }
 
 Status nearest_centres(const Object& dst, const Object& src, int threads, const Progress& progress,
-                       std::vector<int>& ids) {
+                       std::vector<int>& ids, bool exact) {
   const int n = dst.rows();
   ids.assign(n, -1);
   if (dst.channels != 3) return make_error("nearest_centres: 3 values per pixel needed");
@@ -436,7 +436,7 @@ Status nearest_centres(const Object& dst, const Object& src, int threads, const 
     int slot = -1;  // neighbouring pixels have neighbouring normals: start from the last match's place
     for (int d = b; d < e; ++d) {
       const float* q = dst.flat.data() + static_cast<size_t>(d) * 3;
-      if (!grid.nearest_slot(q, slot, ids[d], sq, false)) {
+      if (!grid.nearest_slot(q, slot, ids[d], sq, exact)) {
         grid.nearest_from(q, 1, &ids[d], &sq, d > b ? ids[d - 1] : -1);
         slot = -1;
       }
