@@ -159,9 +159,10 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
   // that the table stays in cache; and its row. Random search reads them at
   // random places, and the frame-wide row_of puts every image row 4 KB apart
   // (a TLB entry each, the same cache sets). An interior candidate's patch
-  // address does not wait for the table: its loads start while the table is
-  // read. The row is read only when a candidate wins, for rim patches, and
-  // for the use counts of uniformity. Matches are followed by position.
+  // address follows from its position, not from a table read, so its loads
+  // start as soon as the branch on the table is predicted. The row is read
+  // only when a candidate wins, for rim patches, and for the use counts of
+  // uniformity. Matches are followed by position.
   enum : uint8_t { kOff = 0, kInterior = 1, kRim = 2 };
   const cv::Rect sb = src.bbox;
   std::vector<int> src_rows(static_cast<size_t>(sb.area()), -1);
@@ -192,11 +193,11 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
   // object); odd iterations cut halfway between (9 bands, the outer two half).
   const int h = dst.size.height;
   const int band_count = u > 0 ? 1 : 8;
-  auto band_cuts = [&](bool half) {
+  auto band_cuts = [&](bool halfway) {
     std::vector<int> cuts{0};  // first image row of each band, then h
     if (band_count > 1)
-      for (int k = 1; k <= band_count - (half ? 0 : 1); ++k) {
-        const long want = (2L * k - (half ? 1 : 0)) * n / (2L * band_count);
+      for (int k = 1; k <= band_count - (halfway ? 0 : 1); ++k) {
+        const long want = (2L * k - (halfway ? 1 : 0)) * n / (2L * band_count);
         cuts.push_back(static_cast<int>(std::lower_bound(at.begin(), at.end(), want) - at.begin()));
       }
     cuts.push_back(h);
