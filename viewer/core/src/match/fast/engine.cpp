@@ -107,7 +107,7 @@ std::vector<int> row_starts(const Object& o) {
 // the source's size, off-object candidates cost +inf) but a better start (see
 // below), run on horizontal bands
 // in parallel. A band propagates only within itself; the band edges move by
-// half a band every iteration so no seam stays. Random numbers come from a
+// half a band every other iteration so no seam stays. Random numbers come from a
 // hash of (seed, iteration, pixel), so the map does not depend on threads.
 // uniformity u > 0 adds u * uses(s) / fair_share to the RMS distance, with
 // live use counts; that makes the scan sequential (one band).
@@ -121,57 +121,89 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
   std::vector<int> uses;
 
   // Init: the faithful method starts from random source object pixels; the
-  // fast one starts from each pixel's nearest by its centre value (exact, a
-  // few ms), which leaves the 5 iterations refining instead of searching.
+  // fast one starts from each pixel's nearest by its centre value (a few ms;
+  // for patches the grid's lookup), which leaves the 5 iterations refining
+  // instead of searching.
   {
     std::vector<int> ids;
     if (dst.channels == 3) {
-      if (auto s = nearest_centres(dst, src, o.threads, p, ids); !s) return s.error();
+      if (auto s = nearest_centres(dst, src, o.threads, p, ids, dst.patch == 1); !s) return s.error();
     } else {
       Object d1 = dst, s1 = src;
       for (Object* o1 : {&d1, &s1}) {
         o1->patch = 1;
         o1->dims = o1->channels;
         o1->slot.assign(o1->rows(), -1);
-        o1->rim.clear();
         o1->box.clear();
+        o1->patch_at.clear();
       }
       NearestLists nn;
       if (auto s = nearest_lists(d1, s1, 1, default_index(), o.threads, p, nn, nullptr); !s) return s.error();
       ids = std::move(nn.ids);
     }
     parallel_rows(n, o.threads, 256, [&](int b, int e) {
-      std::vector<float> buf(dst.dims);
       for (int d = b; d < e; ++d) {
         match[d] = ids[d] >= 0 ? ids[d]
                                : static_cast<int>(hash3(o.seed, 0xffffu, static_cast<uint64_t>(d)) %
                                                   static_cast<uint64_t>(ns));
-        dst.gather(d, buf.data());
-        sq[d] = patch_sq(buf.data(), src, match[d], kInf);
+        size_t a_stride;
+        const float* a = dst.patch_ptr(d, a_stride);  // read in place
+        sq[d] = patch_sq_strided(a, a_stride, src, match[d], kInf);
       }
     });
   }
   const std::vector<int> at = row_starts(dst);
-  const int h = dst.size.height;
-  // The source's pixel -> row lookup, dense over its bounding box: random
-  // search reads it at random places, and the frame-wide row_of puts every
-  // image row 4 KB apart (a TLB entry each, the same cache sets).
+  // The source over its bounding box, dense: per pixel whether it is off the
+  // object, interior (its patch read in place: the offset follows from the
+  // position) or on the rim (stored patch, through its row), one byte each so
+  // that the table stays in cache; and its row. Random search reads them at
+  // random places, and the frame-wide row_of puts every image row 4 KB apart
+  // (a TLB entry each, the same cache sets). An interior candidate's patch
+  // address follows from its position, not from a table read, so its loads
+  // start as soon as the branch on the table is predicted. The row is read
+  // only when a candidate wins, for rim patches, and for the use counts of
+  // uniformity. Matches are followed by position.
+  enum : uint8_t { kOff = 0, kInterior = 1, kRim = 2 };
   const cv::Rect sb = src.bbox;
   std::vector<int> src_rows(static_cast<size_t>(sb.area()), -1);
-  for (int i = 0; i < ns; ++i) {
-    const cv::Point q = src.pixels[i];
-    src_rows[static_cast<size_t>(q.y - sb.y) * sb.width + (q.x - sb.x)] = i;
-  }
-  auto src_row_at = [&](int x, int y) {
-    x -= sb.x;
-    y -= sb.y;
-    if (static_cast<unsigned>(x) >= static_cast<unsigned>(sb.width) ||
-        static_cast<unsigned>(y) >= static_cast<unsigned>(sb.height))
-      return -1;
-    return src_rows[static_cast<size_t>(y) * sb.width + x];
+  std::vector<uint8_t> src_kind(static_cast<size_t>(sb.area()), kOff);
+  const float* src_base = src.patch == 1 ? src.flat.data() : src.box.data();
+  const size_t src_stride = src.patch == 1 ? static_cast<size_t>(src.channels) : src.box_stride;
+  parallel_rows(ns, o.threads, 8192, [&](int b, int e) {
+    for (int i = b; i < e; ++i) {
+      const cv::Point q = src.pixels[i];
+      const size_t cell = static_cast<size_t>(q.y - sb.y) * sb.width + (q.x - sb.x);
+      src_rows[cell] = i;
+      src_kind[cell] = src.patch > 1 && src.slot[i] < 0 ? kInterior : kRim;
+    }
+  });
+  auto rim_offset = [&](int row) {
+    return src.patch == 1 ? static_cast<size_t>(row) * src.channels : static_cast<size_t>(src.patch_at[row]);
   };
+  const int half = src.patch / 2;
+  const PatchKernel kernel = patch_kernel(src.patch, src.channels);
+  const int patch_w = src.patch * src.channels;
+  std::vector<cv::Point> match_at(n);
+  parallel_rows(n, o.threads, 8192, [&](int b, int e) {
+    for (int d = b; d < e; ++d) match_at[d] = src.pixels[match[d]];
+  });
   // With uniformity the use counts must be live for every pixel: one band.
-  const int band = u > 0 ? h + 1 : std::max(8, h / 16);
+  // Otherwise 8 bands of whole image rows holding about equal numbers of
+  // object pixels (equal heights left one core idle for a while on a small
+  // object); odd iterations cut halfway between (9 bands, the outer two half).
+  const int h = dst.size.height;
+  const int band_count = u > 0 ? 1 : 8;
+  auto band_cuts = [&](bool halfway) {
+    std::vector<int> cuts{0};  // first image row of each band, then h
+    if (band_count > 1)
+      for (int k = 1; k <= band_count - (halfway ? 0 : 1); ++k) {
+        const long want = (2L * k - (halfway ? 1 : 0)) * n / (2L * band_count);
+        cuts.push_back(static_cast<int>(std::lower_bound(at.begin(), at.end(), want) - at.begin()));
+      }
+    cuts.push_back(h);
+    return cuts;
+  };
+  const std::vector<int> even_cuts = band_cuts(false), odd_cuts = band_cuts(true);
   // Windows halve from the source object's extent (larger ones only land off it).
   const int max_radius = std::max(src.bbox.width, src.bbox.height);
   // After the first pass, from the nearest-by-centre start, windows wider than
@@ -187,8 +219,8 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
     }
     const bool forward = it % 2 == 0;
     const int step = forward ? 1 : -1;
-    const int shift = (it % 2) * (band / 2);
-    const int bands = (h + shift + band - 1) / band;
+    const std::vector<int>& cuts = it % 2 ? odd_cuts : even_cuts;
+    const int bands = static_cast<int>(cuts.size()) - 1;
     parallel_rows(bands, o.threads, 1, [&](int bb, int be) {
       // this band's own changes to the use counts, applied live
       std::unordered_map<int, int> delta;
@@ -200,27 +232,44 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
       auto total = [&](float q, int s) { return std::sqrt(q / area) + penalty(s); };
       for (int bi = bb; bi < be; ++bi) {
         delta.clear();
-        const int y0 = std::clamp(bi * band - shift, 0, h), y1 = std::clamp((bi + 1) * band - shift, 0, h);
+        const int y0 = cuts[bi], y1 = cuts[bi + 1];
         const int r0 = at[y0], r1 = at[y1];
         for (int i = r0; i < r1; ++i) {
           const int d = forward ? i : r1 - 1 + r0 - i;
           const cv::Point pt = dst.pixels[d];
           size_t a_stride;
           const float* a = dst.patch_ptr(d, a_stride);  // read in place, not copied
-          float best = total(sq[d], match[d]);
+          float best = u > 0 ? total(sq[d], match[d]) : 0.0f;  // with uniformity: RMS distance + penalty
           auto offer = [&](int x, int y) {
-            const int s = src_row_at(x, y);
-            if (s < 0 || s == match[d]) return;  // off the source, or no change
+            const int bx = x - sb.x, by = y - sb.y;
+            if (static_cast<unsigned>(bx) >= static_cast<unsigned>(sb.width) ||
+                static_cast<unsigned>(by) >= static_cast<unsigned>(sb.height))
+              return;  // off the source's box
+            const size_t cell = static_cast<size_t>(by) * sb.width + bx;
+            const uint8_t kind = src_kind[cell];
+            if (kind == kOff || (x == match_at[d].x && y == match_at[d].y)) return;  // off the source, or no change
+            if (u <= 0) {  // plain distances: compared squared, no roots
+              const float v = kind == kInterior
+                                  ? kernel(a, a_stride,
+                                           src_base + static_cast<size_t>(by - half) * src_stride +
+                                               static_cast<size_t>(bx - half) * src.channels,
+                                           src_stride, src.patch, patch_w, sq[d])
+                                  : kernel(a, a_stride, src_base + rim_offset(src_rows[cell]), src_stride, src.patch,
+                                           patch_w, sq[d]);
+              if (v < sq[d]) match[d] = src_rows[cell], match_at[d] = cv::Point(x, y), sq[d] = v;
+              return;
+            }
+            int s = src_rows[cell];
             const float pen = penalty(s);
             const float room = best - pen;
             if (room <= 0) return;
             const float bound = room * room * area;
-            const float v = patch_sq_strided(a, a_stride, src, s, bound);
+            const float v = kernel(a, a_stride, src_base + rim_offset(s), src_stride, src.patch, patch_w, bound);
             if (v > bound) return;
             const float t = std::sqrt(v / area) + pen;
             if (t < best) {
-              if (u > 0) --delta[match[d]], ++delta[s];
-              best = t, match[d] = s, sq[d] = v;
+              --delta[match[d]], ++delta[s];
+              best = t, match[d] = s, match_at[d] = cv::Point(x, y), sq[d] = v;
             }
           };
           for (const cv::Point off : {cv::Point(-step, 0), cv::Point(0, -step)}) {
@@ -228,12 +277,12 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
             if (ny < y0 || ny >= y1) continue;  // another band's pixel: not this iteration
             const int nb = dst.row_at(pt.x + off.x, ny);
             if (nb < 0) continue;
-            const cv::Point m = src.pixels[match[nb]];
+            const cv::Point m = match_at[nb];
             offer(m.x - off.x, m.y - off.y);
           }
           uint64_t r = hash3(o.seed, static_cast<uint64_t>(it), static_cast<uint64_t>(d));
           for (int radius = it == 0 ? max_radius : std::min(max_radius, far_radius); radius >= 1; radius /= 2) {
-            const cv::Point c = src.pixels[match[d]];
+            const cv::Point c = match_at[d];
             r = mix64(r);
             const int span = 2 * radius + 1;
             // uniform in [0, span) by multiply-shift (no division)
@@ -246,7 +295,9 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
     });
   }
   Map map = new_map(dst.size);
-  for (int d = 0; d < n; ++d) put(map, dst, src, d, match[d], sq[d]);
+  parallel_rows(n, o.threads, 4096, [&](int b, int e) {
+    for (int d = b; d < e; ++d) put(map, dst, src, d, match[d], sq[d]);
+  });
   return map;
 }
 

@@ -97,13 +97,16 @@ void patch_moments(const Object& o, int threads, std::vector<float>& out, int& p
             for (int t = 0; t < len; ++t) v0[t] += row[t];
         }
         if (parts == 1) {
-          for (int q = i; q < j; ++q) {
-            float* m = out.data() + static_cast<size_t>(q) * per_row;
-            const float* a0 = v0.data() + (o.pixels[q].x - r - xa) * c;
-            for (int dx = 0; dx < p; ++dx)
-              for (int k = 0; k < c; ++k) m[k] += a0[dx * c + k];
-            for (int k = 0; k < c; ++k) m[k] *= inv_p;
+          // rows i..j-1 are consecutive pixels, their means one flat run of
+          // (j - i) c floats: each column's sums added over the whole run at
+          // once (the same order per value as one pixel at a time)
+          float* m = out.data() + static_cast<size_t>(i) * per_row;
+          const int run = (j - i) * c;
+          for (int dx = 0; dx < p; ++dx) {
+            const float* a0 = v0.data() + dx * c;
+            for (int t = 0; t < run; ++t) m[t] += a0[t];
           }
+          for (int t = 0; t < run; ++t) m[t] *= inv_p;
           i = j;
           continue;
         }
@@ -257,11 +260,25 @@ class DirectionBuckets {
       return;
     }
     // Rows farther than the k-th of any k rows (here the first k) cannot be
-    // among the k nearest: k rows are strictly nearer. The rest are ranked by
-    // (distance, id), counted without branches; those ranked below k are the
-    // answer (the rows dropped lie beyond every row kept, so ranks agree).
+    // among the k nearest: k rows are strictly nearer. That bound kept nearly
+    // all of the box's ~3k rows, so it is narrowed: of the 8 bounds
+    // thr * 1/8 .. thr * 8/8, the least that has at least k rows within it
+    // (counted for all 8 at once, without branches) keeps the k nearest too.
+    // The rest are ranked by (distance, id), counted without branches; those
+    // ranked below k are the answer (the rows dropped lie beyond every row
+    // kept, so ranks agree).
     float thr = 0;
     for (int j = 0; j < k; ++j) thr = std::max(thr, w.d[j]);
+    {
+      float t[8];
+      int within[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+      for (int b = 0; b < 8; ++b) t[b] = thr * (static_cast<float>(b + 1) * 0.125f);  // t[7] == thr
+      for (int j = 0; j < m; ++j)
+        for (int b = 0; b < 8; ++b) within[b] += w.d[j] <= t[b];
+      int b = 0;
+      while (within[b] < k) ++b;  // within[7] >= k: the first k rows are within thr
+      thr = t[b];
+    }
     w.kd.resize(m + 8);
     w.ki.resize(m + 8);
     float* kd = w.kd.data();
@@ -347,10 +364,13 @@ Status nearest_patch_normals(const Object& dst, const Object& src, int threads, 
   buckets.build(ys, ns);
   const int kc = std::min(ns, 12);
   const int block = 1024, blocks = (n + block - 1) / block;
+  const PatchKernel kernel = patch_kernel(src.patch, src.channels);
+  const int patch_w = src.patch * src.channels;
   const bool walk = !src.row_of.empty() && !dst.row_of.empty();
   std::atomic<bool> stop{false};
   parallel_rows(blocks, threads, 1, [&](int bb, int be) {
     std::vector<int> cid(kc);
+    std::vector<const float*> cptr(kc);
     DirectionBuckets::Scratch scratch;
     for (int blk = bb; blk < be; ++blk) {
       if (progress.cancelled()) stop = true;
@@ -376,7 +396,15 @@ Status nearest_patch_normals(const Object& dst, const Object& src, int threads, 
             offer(src.row_at(m.x - off.x, m.y - off.y));
           }
         }
-        for (int j = 0; j < kc; ++j) offer(cid[j]);
+        // the candidates' patch offsets read all at once (each read misses
+        // the cache; in a row they overlap), then their distances
+        for (int j = 0; j < kc; ++j) cptr[j] = src.box.data() + src.patch_at[cid[j]];
+        for (int j = 0; j < kc; ++j) {
+          const int s = cid[j];
+          if (s == best) continue;
+          const float v = kernel(a, a_stride, cptr[j], src.box_stride, src.patch, patch_w, best_sq);
+          if (v < best_sq || (v == best_sq && s < best)) best_sq = v, best = s;
+        }
         out.ids[d] = best;
         out.sq[d] = best_sq;
       }
@@ -394,7 +422,7 @@ Status nearest_patch_normals(const Object& dst, const Object& src, int threads, 
 }
 
 Status nearest_centres(const Object& dst, const Object& src, int threads, const Progress& progress,
-                       std::vector<int>& ids) {
+                       std::vector<int>& ids, bool exact) {
   const int n = dst.rows();
   ids.assign(n, -1);
   if (dst.channels != 3) return make_error("nearest_centres: 3 values per pixel needed");
@@ -405,8 +433,14 @@ Status nearest_centres(const Object& dst, const Object& src, int threads, const 
     if (progress.cancelled()) stop = true;
     if (stop) return;
     float sq;
-    for (int d = b; d < e; ++d)  // neighbouring pixels have neighbouring normals: start from the last match
-      grid.nearest_from(dst.flat.data() + static_cast<size_t>(d) * 3, 1, &ids[d], &sq, d > b ? ids[d - 1] : -1);
+    int slot = -1;  // neighbouring pixels have neighbouring normals: start from the last match's place
+    for (int d = b; d < e; ++d) {
+      const float* q = dst.flat.data() + static_cast<size_t>(d) * 3;
+      if (!grid.nearest_slot(q, slot, ids[d], sq, exact)) {
+        grid.nearest_from(q, 1, &ids[d], &sq, d > b ? ids[d - 1] : -1);
+        slot = -1;
+      }
+    }
   });
   if (stop) return make_error("cancelled during nearest search");
   return {};

@@ -32,9 +32,13 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
 // distance of two rows' coefficients is a lower bound of their patch distance.
 void patch_moments(const Object& o, int threads, std::vector<float>& out, int& per_row, bool means_only = false);
 
-// The exact nearest source row of each destination row by the centre values
-// (3 per pixel), whatever the patch size: the octahedral grid.
+// The nearest source row of each destination row by the centre values (3
+// per pixel), whatever the patch size: the octahedral grid, exact, or with
+// exact = false its lookup (the query's own cell and the previous result;
+// rarely misses a nearer row across a cell edge, see default_index()), about
+// 3x faster. PatchMatch's start: for patches its iterations refine it anyway;
+// at 1x1 it is nearly the answer, so exact.
 Status nearest_centres(const Object& dst, const Object& src, int threads, const Progress& progress,
-                       std::vector<int>& ids);
+                       std::vector<int>& ids, bool exact);
 
 }  // namespace veneer::match::fast

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 
 #ifdef __AVX2__
 #include <immintrin.h>
@@ -116,43 +117,65 @@ Expected<Object> make_object(const ObjectView& view, Feature feature, int patch,
 
   o.slot.assign(n, -1);
   if (patch == 1) return o;
-  {
-    const size_t line = 16;  // floats per cache line
-    size_t lines = (static_cast<size_t>(o.bbox.width) * c + line - 1) / line;
-    if (lines % 2 == 0) ++lines;
-    o.box_stride = lines * line;
-    o.box.resize(o.box_stride * o.bbox.height);
-    parallel_rows(o.bbox.height, threads, 32, [&](int b, int e) {
-      for (int y = b; y < e; ++y)
-        std::copy_n(o.values.ptr<float>(o.bbox.y + y) + static_cast<size_t>(o.bbox.x) * c,
-                    static_cast<size_t>(o.bbox.width) * c, o.box.data() + y * o.box_stride);
-    });
-  }
-  // Interior: the whole patch window lies on the object.
-  cv::Mat on = view.mask != 0, interior;
+  // Interior: the whole patch window lies on the object. Eroded over the
+  // bounding box grown by the patch radius only (the mask is 0 around it;
+  // most of a frame, for a thesis-sized object).
+  const int r = patch / 2;
+  const cv::Rect roi = cv::Rect(o.bbox.x - r, o.bbox.y - r, o.bbox.width + 2 * r, o.bbox.height + 2 * r) &
+                       cv::Rect(0, 0, w, h);
+  cv::Mat on = view.mask(roi) != 0, interior;
   cv::erode(on, interior, cv::Mat::ones(patch, patch, CV_8U), cv::Point(-1, -1), 1, cv::BORDER_CONSTANT,
             cv::Scalar(0));
   int rims = 0;
   for (int i = 0; i < n; ++i)
-    if (!interior.at<uchar>(o.pixels[i].y, o.pixels[i].x)) o.slot[i] = rims++;
-  o.rim.resize(static_cast<size_t>(rims) * o.dims);
-  const int r = patch / 2;
-  auto on_object = [&](int x, int y) { return x >= 0 && y >= 0 && x < w && y < h && view.mask.at<uchar>(y, x) != 0; };
+    if (!interior.at<uchar>(o.pixels[i].y - roi.y, o.pixels[i].x - roi.x)) o.slot[i] = rims++;
+  const size_t patch_w = static_cast<size_t>(patch) * c;
+  {
+    const size_t line = 16;  // floats per cache line
+    size_t lines = (std::max(static_cast<size_t>(o.bbox.width) * c, patch_w) + line - 1) / line;
+    if (lines % 2 == 0) ++lines;
+    o.box_stride = lines * line;
+  }
+  const size_t per_band = o.box_stride / patch_w;  // rim patches side by side in a band of P rows
+  const size_t bands = (static_cast<size_t>(rims) + per_band - 1) / per_band;
+  const size_t rim_base = o.box_stride * o.bbox.height;
+  // not zeroed: only the object's patches are ever read, and they are all written below
+  o.box.resize(rim_base + bands * patch * o.box_stride);
+  if (o.box.size() > std::numeric_limits<uint32_t>::max())
+    return make_error("the object's patches exceed 16 GB");
+  parallel_rows(o.bbox.height, threads, 32, [&](int b, int e) {
+    for (int y = b; y < e; ++y)
+      std::copy_n(o.values.ptr<float>(o.bbox.y + y) + static_cast<size_t>(o.bbox.x) * c,
+                  static_cast<size_t>(o.bbox.width) * c, o.box.data() + y * o.box_stride);
+  });
+  o.patch_at.resize(n);
   parallel_rows(n, threads, 256, [&](int b, int e) {
     for (int i = b; i < e; ++i) {
-      if (o.slot[i] < 0) continue;
       const cv::Point p = o.pixels[i];
-      float* out = o.rim.data() + static_cast<size_t>(o.slot[i]) * o.dims;
+      if (o.slot[i] < 0) {
+        o.patch_at[i] = static_cast<uint32_t>(static_cast<size_t>(p.y - r - o.bbox.y) * o.box_stride +
+                                              static_cast<size_t>(p.x - r - o.bbox.x) * c);
+        continue;
+      }
+      const size_t k = static_cast<size_t>(o.slot[i]);
+      const size_t at = rim_base + (k / per_band) * patch * o.box_stride + (k % per_band) * patch_w;
+      o.patch_at[i] = static_cast<uint32_t>(at);
       for (int dy = -r; dy <= r; ++dy) {
+        float* out = o.box.data() + at + static_cast<size_t>(dy + r) * o.box_stride;
+        // the mask rows of the pixel and of its mirror through the centre (null off the frame)
+        const int y = p.y + dy, ym = p.y - dy;
+        const uchar* m = y >= 0 && y < h ? view.mask.ptr<uchar>(y) : nullptr;
+        const uchar* mm = ym >= 0 && ym < h ? view.mask.ptr<uchar>(ym) : nullptr;
         for (int dx = -r; dx <= r; ++dx) {
-          int x = p.x + dx, y = p.y + dy;
-          if (!on_object(x, y)) {
-            x = p.x - dx;  // mirrored through the centre (features.hpp)
-            y = p.y - dy;
-            if (!on_object(x, y)) x = p.x, y = p.y;
-          }
-          const float* v = o.values.ptr<float>(y) + static_cast<size_t>(x) * c;
-          for (int k = 0; k < c; ++k) *out++ = v[k];
+          const int x = p.x + dx, xm = p.x - dx;
+          const float* v;
+          if (m && x >= 0 && x < w && m[x])
+            v = o.values.ptr<float>(y) + static_cast<size_t>(x) * c;
+          else if (mm && xm >= 0 && xm < w && mm[xm])  // mirrored through the centre (features.hpp)
+            v = o.values.ptr<float>(ym) + static_cast<size_t>(xm) * c;
+          else
+            v = o.values.ptr<float>(p.y) + static_cast<size_t>(p.x) * c;
+          for (int k2 = 0; k2 < c; ++k2) *out++ = v[k2];
         }
       }
     }
@@ -186,26 +209,74 @@ float patch_sq(const float* a, const Object& src, int s, float bound) {
   return patch_sq_strided(a, static_cast<size_t>(src.patch) * src.channels, src, s, bound);
 }
 
-float patch_sq_strided(const float* a, size_t a_stride, const Object& src, int s, float bound) {
-  size_t stride;
-  const float* b = src.patch_ptr(s, stride);
-  const int w = src.patch * src.channels;
-  if (src.patch == 1) return patch_sq_ordered(a, src, s);  // one pixel: the faithful sum, bit for bit
+namespace {
 #ifdef __AVX2__
-  // 8 lanes per step, the row's tail through a masked load (lanes past the
-  // row are neither read nor counted); the bound is checked after rows 2 and 5
-  // (measured a little faster than after every row or every second one).
+inline float hsum(__m256 v) {
+  const __m128 q = _mm_add_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1));
+  const __m128 h = _mm_add_ps(q, _mm_movehl_ps(q, q));
+  return _mm_cvtss_f32(_mm_add_ss(h, _mm_shuffle_ps(h, h, 1)));
+}
+
+// A patch of P rows of W floats, fully unrolled: one accumulator per 8-float
+// column of the row (the row's tail through a masked load: lanes past the row
+// are neither read nor counted), so the FMAs of a row do not wait on each
+// other -- one shared accumulator made every distance a chain of P * ceil(W/8)
+// dependent FMAs. No early exit: without a branch on the partial sum the
+// core overlaps one candidate's loads with the next one's, and those
+// branches mispredicted often (PatchMatch 7x7 and normals 7x7, one thread:
+// 7-18 % faster than checking the bound after rows 2 and 5, which was the
+// best with one accumulator; after row 1, 2, 3 or 4 alone: all slower).
+template <int P, int W>
+inline float sq_fixed(const float* a, size_t a_stride, const float* b, size_t b_stride) {
+  constexpr int full = W / 8, tail = W % 8, cols = full + (tail ? 1 : 0);
+  static_assert(cols >= 1 && cols <= 4);
+  const __m256i tail_mask = _mm256_cmpgt_epi32(_mm256_set1_epi32(tail), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+  __m256 acc[cols];
+  for (int j = 0; j < cols; ++j) acc[j] = _mm256_setzero_ps();
+  auto sum = [&] {
+    __m256 t = acc[0];
+    for (int j = 1; j < cols; ++j) t = _mm256_add_ps(t, acc[j]);
+    return hsum(t);
+  };
+#pragma GCC unroll 8
+  for (int i = 0; i < P; ++i) {
+    const float* ar = a + i * a_stride;
+    const float* br = b + i * b_stride;
+#pragma GCC unroll 4
+    for (int j = 0; j < full; ++j) {
+      const __m256 t = _mm256_sub_ps(_mm256_loadu_ps(ar + 8 * j), _mm256_loadu_ps(br + 8 * j));
+      acc[j] = _mm256_fmadd_ps(t, t, acc[j]);
+    }
+    if constexpr (tail != 0) {
+      const __m256 t = _mm256_sub_ps(_mm256_maskload_ps(ar + 8 * full, tail_mask),
+                                     _mm256_maskload_ps(br + 8 * full, tail_mask));
+      acc[full] = _mm256_fmadd_ps(t, t, acc[full]);
+    }
+  }
+  return sum();
+}
+#endif
+
+// One pixel: the faithful sum, bit for bit (patch_sq_ordered's order).
+float sq_pixel(const float* a, size_t, const float* b, size_t, int, int w, float) {
+  float sum = 0;
+  for (int j = 0; j < w; ++j) {
+    const float t = a[j] - b[j];
+    sum += t * t;
+  }
+  return sum;
+}
+
+// Any patch: 8 lanes per step; the bound is checked after rows 2 and 5.
+float sq_any(const float* a, size_t a_stride, const float* b, size_t b_stride, int patch, int w, float bound) {
+#ifdef __AVX2__
+  // the row's tail through a masked load (lanes past the row are neither read nor counted)
   const int full = w & ~7, tail = w - full;
   const __m256i tail_mask = _mm256_cmpgt_epi32(_mm256_set1_epi32(tail), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
   __m256 acc = _mm256_setzero_ps();
-  auto total = [](__m256 v) {
-    const __m128 q = _mm_add_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1));
-    const __m128 h = _mm_add_ps(q, _mm_movehl_ps(q, q));
-    return _mm_cvtss_f32(_mm_add_ss(h, _mm_shuffle_ps(h, h, 1)));
-  };
-  for (int i = 0; i < src.patch; ++i) {
+  for (int i = 0; i < patch; ++i) {
     const float* ar = a + i * a_stride;
-    const float* br = b + i * stride;
+    const float* br = b + i * b_stride;
     for (int j = 0; j < full; j += 8) {
       const __m256 t = _mm256_sub_ps(_mm256_loadu_ps(ar + j), _mm256_loadu_ps(br + j));
       acc = _mm256_fmadd_ps(t, t, acc);
@@ -214,20 +285,62 @@ float patch_sq_strided(const float* a, size_t a_stride, const Object& src, int s
       const __m256 t = _mm256_sub_ps(_mm256_maskload_ps(ar + full, tail_mask), _mm256_maskload_ps(br + full, tail_mask));
       acc = _mm256_fmadd_ps(t, t, acc);
     }
-    if (i % 3 == 1 && i + 1 < src.patch) {
-      const float sum = total(acc);
+    if (i % 3 == 1 && i + 1 < patch) {
+      const float sum = hsum(acc);
       if (sum > bound) return sum;
     }
   }
-  return total(acc);
+  return hsum(acc);
 #else
   float sum = 0;
-  for (int i = 0; i < src.patch; ++i) {
-    sum += ssd(a + i * a_stride, b + i * stride, w);
+  for (int i = 0; i < patch; ++i) {
+    sum += ssd(a + i * a_stride, b + i * b_stride, w);
     if (sum > bound) return sum;
   }
   return sum;
 #endif
+}
+
+#ifdef __AVX2__
+template <int P, int W>
+float sq_fixed_kernel(const float* a, size_t a_stride, const float* b, size_t b_stride, int, int, float) {
+  return sq_fixed<P, W>(a, a_stride, b, b_stride);
+}
+#endif
+
+}  // namespace
+
+PatchKernel patch_kernel(int patch, int channels) {
+  if (patch == 1) return sq_pixel;
+#ifdef __AVX2__
+  if (channels == 3) {  // normals: the patch sizes the methods offer, unrolled
+    switch (patch) {
+      case 3: return sq_fixed_kernel<3, 9>;
+      case 5: return sq_fixed_kernel<5, 15>;
+      case 7: return sq_fixed_kernel<7, 21>;
+      default: break;
+    }
+  }
+#endif
+  return sq_any;
+}
+
+float patch_sq_strided(const float* a, size_t a_stride, const Object& src, int s, float bound) {
+  size_t stride;
+  const float* b = src.patch_ptr(s, stride);
+  const int w = src.patch * src.channels;
+  if (src.patch == 1) return sq_pixel(a, 0, b, 0, 1, w, bound);
+#ifdef __AVX2__
+  if (src.channels == 3) {  // inlined here: the common case
+    switch (src.patch) {
+      case 3: return sq_fixed<3, 9>(a, a_stride, b, stride);
+      case 5: return sq_fixed<5, 15>(a, a_stride, b, stride);
+      case 7: return sq_fixed<7, 21>(a, a_stride, b, stride);
+      default: break;
+    }
+  }
+#endif
+  return sq_any(a, a_stride, b, stride, src.patch, w, bound);
 }
 
 float patch_sq_ordered(const float* a, const Object& src, int s) {

@@ -1,14 +1,18 @@
 #pragma once
-// Internal: one object in the fast engine's layout. Patches are not
-// materialised: a patch that lies wholly on the object is read straight from
-// the per-pixel value image (P rows of P*C contiguous floats, stride = image
-// row), and only patches touching the object's rim (whose mirrored pixels
-// follow features.hpp's rule) are stored, contiguously. Rows are the object's
-// pixels in scan order, as in FeatureSet, so ids and tie-breaks agree with
-// the faithful methods.
+// Internal: one object in the fast engine's layout. For patches (P > 1)
+// every row's patch is P runs of P*C floats in `box`, box_stride floats apart:
+// a patch that lies wholly on the object is read in place from the dense copy
+// of the values over the bounding box, and only patches touching the object's
+// rim (whose mirrored pixels follow features.hpp's rule) are stored, side by
+// side in bands of P rows appended below it. One offset per row (patch_at)
+// finds either. Rows are the object's pixels in scan order, as in FeatureSet,
+// so ids and tie-breaks agree with the faithful methods.
+#include <cstdint>
 #include <functional>
 #include <limits>
+#include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -18,6 +22,26 @@
 #include "veneer/util/progress.hpp"
 
 namespace veneer::match::fast {
+
+// std::allocator whose resize leaves floats as they come (not zeroed): for
+// buffers that are written before they are read (Object::box, a few MB).
+template <class T>
+struct UninitialisedAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = UninitialisedAllocator<U>;
+  };
+  UninitialisedAllocator() = default;
+  template <class U>
+  UninitialisedAllocator(const UninitialisedAllocator<U>&) noexcept {}
+  template <class U, class... Args>
+  void construct(U* p, Args&&... args) {
+    if constexpr (sizeof...(Args) == 0)
+      ::new (static_cast<void*>(p)) U;
+    else
+      ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+};
 
 struct Object {
   int channels = 0;  // values per pixel (3 for normals, lamps for intensities)
@@ -29,13 +53,13 @@ struct Object {
   cv::Mat row_of;                 // CV_32S pixel -> row (-1 off the object)
   cv::Rect bbox;
   std::vector<float> flat;        // rows x channels, the centre values (contiguous)
-  std::vector<int> slot;          // row -> index into rim, -1 = interior (read from values)
-  std::vector<float> rim;         // stored patches of rim rows, dims floats each
+  std::vector<int> slot;          // row -> index of its stored rim patch, -1 = interior (read in place)
   // patch > 1: the values over bbox, copied densely (rows of box_stride floats,
   // an odd number of cache lines so that a patch's rows do not share cache
-  // sets as the full image's 12 KB rows do); interior patches read from here
-  std::vector<float> box;
+  // sets as the full image's 12 KB rows do), then the rim patches' bands
+  std::vector<float, UninitialisedAllocator<float>> box;
   size_t box_stride = 0;
+  std::vector<uint32_t> patch_at;  // patch > 1: row -> offset of its patch's first float in box
 
   int rows() const { return static_cast<int>(pixels.size()); }
   int row_at(int x, int y) const {
@@ -44,20 +68,12 @@ struct Object {
   }
   // First patch row of `row` and the stride between patch rows (in floats).
   const float* patch_ptr(int row, size_t& stride) const {
-    const int s = slot[row];
     if (patch == 1) {  // the pixel's own values
       stride = static_cast<size_t>(channels);
       return flat.data() + static_cast<size_t>(row) * channels;
     }
-    if (s < 0) {
-      const cv::Point p = pixels[row];
-      const int r = patch / 2;
-      stride = box_stride;
-      return box.data() + static_cast<size_t>(p.y - r - bbox.y) * box_stride +
-             static_cast<size_t>(p.x - r - bbox.x) * channels;
-    }
-    stride = static_cast<size_t>(patch) * channels;
-    return rim.data() + static_cast<size_t>(s) * dims;
+    stride = box_stride;
+    return box.data() + patch_at[row];
   }
   // The patch of `row` as one contiguous vector (features.hpp's layout).
   void gather(int row, float* out) const {
@@ -100,10 +116,18 @@ void parallel_rows(int n, int threads, int grain, const std::function<void(int, 
 Expected<Object> make_object(const ObjectView& view, Feature feature, int patch, bool need_row_of, int threads);
 
 // Squared distance of a contiguous patch `a` (dims floats) to `src` row `s`;
-// stops early and returns something > `bound` once the sum exceeds it.
+// may stop early and return something > `bound` once the sum exceeds it (the
+// unrolled kernels of 3-value patches never do: measured faster, object.cpp).
 float patch_sq(const float* a, const Object& src, int s, float bound);
 // The same with `a`'s patch rows a_stride floats apart (a patch read in place).
 float patch_sq_strided(const float* a, size_t a_stride, const Object& src, int s, float bound);
+// The distance of patch a (rows a_stride floats apart) to patch b (rows
+// b_stride apart), `patch` rows of w = patch * channels floats, stopping
+// early like patch_sq: the kernel patch_sq_strided uses, for callers that
+// find patches themselves. One pixel (patch 1) sums in element order.
+using PatchKernel = float (*)(const float* a, size_t a_stride, const float* b, size_t b_stride, int patch, int w,
+                              float bound);
+PatchKernel patch_kernel(int patch, int channels);
 // The same sum in strict element order, bit-identical to features.hpp's
 // squared_distance() (for methods whose decisions chain, like region growing).
 float patch_sq_ordered(const float* a, const Object& src, int s);
