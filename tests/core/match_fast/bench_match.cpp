@@ -245,6 +245,11 @@ int main(int argc, char** argv) {
       {"regiongrow 3x3", opt(Method::regiongrow, Feature::normals, 3), 3, Feature::normals, 1, 16, 20, 150},
       {"candidates K=100", opt(Method::candidates, Feature::normals, 1), 1, Feature::normals, 100, 19, 20, 100},
       {"coherent", opt(Method::coherent, Feature::normals, 1), 1, Feature::normals, 1, 0, 10, 40},
+      {"coherent, chunks only", [&] {
+         auto o = opt(Method::coherent, Feature::normals, 1);
+         o.coherent_smooth = 0;  // without the seam refinement
+         return o;
+       }(), 1, Feature::normals, 1, 0, 10, 40},
   };
 
   std::printf("## bench_match — correspondence, fast engine vs the faithful FLANN peer\n\n");
@@ -350,6 +355,11 @@ int main(int argc, char** argv) {
                 return o;
               }()},
              {"coherent (threshold 0.10, the default)", opt(Method::coherent, Feature::normals, 1)},
+             {"coherent, chunks only (no seam refinement)", [&] {
+                auto o = opt(Method::coherent, Feature::normals, 1);
+                o.coherent_smooth = 0;
+                return o;
+              }()},
              {"coherent, threshold 0.20", [&] {
                 auto o = opt(Method::coherent, Feature::normals, 1);
                 o.coherent_threshold = 0.20;
