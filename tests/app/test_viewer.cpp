@@ -110,6 +110,14 @@ std::unique_ptr<MainWindow> open_pair(const QTemporaryDir& dir) {
   return w;
 }
 
+// Compute pressed and waited for: success when a result is shown.
+::testing::AssertionResult compute_and_wait(MainWindow& w) {
+  QTest::mouseClick(child<QPushButton>(w, "compute"), Qt::LeftButton);
+  if (!wait_for([&] { return !w.computing(); }, 60000)) return ::testing::AssertionFailure() << "still computing";
+  if (!w.result()) return ::testing::AssertionFailure() << "no result: " << w.lastMessage().toStdString();
+  return ::testing::AssertionSuccess();
+}
+
 }  // namespace
 
 TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
@@ -214,9 +222,7 @@ TEST(Viewer, CancelledComputationLeavesUiUsable) {
   child<QComboBox>(w, "method")->setCurrentText("coherent");
   child<QComboBox>(w, "patch")->setCurrentText("1");
   child<QCheckBox>(w, "fast")->setChecked(true);
-  QTest::mouseClick(child<QPushButton>(w, "compute"), Qt::LeftButton);
-  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
-  ASSERT_NE(w.result(), nullptr) << w.lastMessage().toStdString();
+  ASSERT_TRUE(compute_and_wait(w));
   ASSERT_TRUE(w.result()->quality.has_value());
   EXPECT_GT(w.result()->quality->coverage, 0.9);
 }
@@ -278,9 +284,7 @@ TEST(Viewer, MatchingOptionChangesRecomputeTheMap) {
   MainWindow& w = *window;
   child<QComboBox>(w, "method")->setCurrentText("coherent");
   EXPECT_FALSE(w.computing());  // nothing shown yet: no recomputation
-  QTest::mouseClick(child<QPushButton>(w, "compute"), Qt::LeftButton);
-  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
-  ASSERT_NE(w.result(), nullptr) << w.lastMessage().toStdString();
+  ASSERT_TRUE(compute_and_wait(w));
   const cv::Mat first = w.result()->map.xy.clone();
   EXPECT_EQ(w.mapOnlyRuns(), 0);
 
