@@ -135,18 +135,6 @@ struct Tree {
   }
 };
 
-// Same arithmetic, in the same order, as squared_distance() of features.hpp
-// (source value minus query value, summed from 0).
-inline float sq3(float ax, float ay, float az, float bx, float by, float bz) {
-  float s = 0;
-  float t = ax - bx;
-  s += t * t;
-  t = ay - by;
-  s += t * t;
-  t = az - bz;
-  s += t * t;
-  return s;
-}
 
 inline uint64_t key_of(float d, uint32_t id) {
   uint32_t bits;

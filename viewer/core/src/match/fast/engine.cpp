@@ -94,13 +94,6 @@ Expected<Map> run_candidates(const Object& dst, const Object& src, const MatchOp
   return map;
 }
 
-// Rows of `o` per image row: rows with pixel y in [y0, y1) are [at[y0], at[y1]).
-std::vector<int> row_starts(const Object& o) {
-  std::vector<int> at(o.size.height + 1, 0);
-  for (const cv::Point& p : o.pixels) ++at[p.y + 1];
-  for (int y = 0; y < o.size.height; ++y) at[y + 1] += at[y];
-  return at;
-}
 
 // PatchMatch with matcher.cpp's semantics (propagation from the neighbours already visited with the scan
 // direction alternating per iteration, random search in windows halving from

@@ -70,22 +70,6 @@ struct Best {
   }
 };
 
-// Same arithmetic, in the same order, as squared_distance() of features.hpp,
-// so that exact indices report bit-identical distances to the brute force.
-inline float sq3(float ax, float ay, float az, float bx, float by, float bz) {
-  const float tx = ax - bx, ty = ay - by, tz = az - bz;
-#ifdef __FMA__
-  // what the compiler makes of that loop with fused multiply-adds (-mfma),
-  // spelled out so the vector scan can match it bit for bit
-  return std::fma(tz, tz, std::fma(ty, ty, tx * tx));
-#else
-  float s = 0;
-  s += tx * tx;
-  s += ty * ty;
-  s += tz * tz;
-  return s;
-#endif
-}
 
 // ---------------------------------------------------------------------------
 // kd-tree (nanoflann): exact, any dimension.

@@ -72,9 +72,7 @@ void patch_moments(const Object& o, int threads, std::vector<float>& out, int& p
   };
   // object rows per image row (rows are in scan order)
   const int h = o.size.height;
-  std::vector<int> at(h + 1, 0);
-  for (const cv::Point& pt : o.pixels) ++at[pt.y + 1];
-  for (int y = 0; y < h; ++y) at[y + 1] += at[y];
+  const std::vector<int> at = row_starts(o);
   parallel_rows(h, threads, 4, [&](int yb, int ye) {
     std::vector<float> v0, v2;  // per column of a run: sum over dy, and of dy * value
     for (int y = yb; y < ye; ++y) {
@@ -310,10 +308,6 @@ class DirectionBuckets {
   std::vector<float> x_, y_, z_;
   std::vector<int> id_;
 
-  static float sq3(float ax, float ay, float az, float bx, float by, float bz) {
-    const float tx = ax - bx, ty = ay - by, tz = az - bz;
-    return tx * tx + ty * ty + tz * tz;
-  }
   static void uv(const float* m, float& u, float& v) {
     const float s = std::fabs(m[0]) + std::fabs(m[1]) + std::fabs(m[2]);
     u = s > 0 ? m[0] / s : 0.0f;

@@ -388,4 +388,11 @@ void patch_sq_ordered_pairs(const Object& a, const int* ra, const Object& b, con
   for (int k = 0; k < count; ++k) out[k] = s[k];
 }
 
+std::vector<int> row_starts(const Object& o) {
+  std::vector<int> at(o.size.height + 1, 0);
+  for (const cv::Point& p : o.pixels) ++at[p.y + 1];
+  for (int y = 0; y < o.size.height; ++y) at[y + 1] += at[y];
+  return at;
+}
+
 }  // namespace veneer::match::fast

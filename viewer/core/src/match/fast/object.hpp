@@ -7,6 +7,7 @@
 // side in bands of P rows appended below it. One offset per row (patch_at)
 // finds either. Rows are the object's pixels in scan order, as in FeatureSet,
 // so ids and tie-breaks agree with the faithful methods.
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <limits>
@@ -84,6 +85,27 @@ struct Object {
       for (int j = 0; j < w; ++j) *out++ = p[i * stride + j];
   }
 };
+
+// Squared distance of two 3-value points with the same arithmetic, in the
+// same order, as squared_distance() of features.hpp, so that exact searches
+// report bit-identical distances to the brute force.
+inline float sq3(float ax, float ay, float az, float bx, float by, float bz) {
+  const float tx = ax - bx, ty = ay - by, tz = az - bz;
+#ifdef __FMA__
+  // what the compiler makes of that loop with fused multiply-adds (-mfma),
+  // spelled out so the vector scans can match it bit for bit
+  return std::fma(tz, tz, std::fma(ty, ty, tx * tx));
+#else
+  float s = 0;
+  s += tx * tx;
+  s += ty * ty;
+  s += tz * tz;
+  return s;
+#endif
+}
+
+// Rows of `o` per image row: rows with pixel y in [y0, y1) are [at[y0], at[y1]).
+std::vector<int> row_starts(const Object& o);
 
 // Keeps the k best (distance, id) pairs in caller storage, ascending, ties to
 // the lower id (the brute force's order).
