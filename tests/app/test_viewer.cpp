@@ -266,13 +266,6 @@ TEST(Viewer, BadInputGivesClearMessages) {
   EXPECT_TRUE(w.lastMessage().contains("load a destination"));
 }
 
-int main(int argc, char** argv) {
-  if (qEnvironmentVariableIsEmpty("QT_QPA_PLATFORM")) qputenv("QT_QPA_PLATFORM", "offscreen");
-  QApplication app(argc, argv);
-  QApplication::setOrganizationName("veneer-tests");
-  ::testing::InitGoogleTest(&argc, argv);
-  return RUN_ALL_TESTS();
-}
 
 // After a first Compute, changing a matching option recomputes the map alone
 // (normals and masks kept), as a slider is dragged: several changes while one
@@ -315,4 +308,12 @@ TEST(Viewer, MatchingOptionChangesRecomputeTheMap) {
   thr->setValue(0.05);
   EXPECT_FALSE(w.computing());
   EXPECT_EQ(w.mapOnlyRuns(), runs);
+}
+
+int main(int argc, char** argv) {
+  if (qEnvironmentVariableIsEmpty("QT_QPA_PLATFORM")) qputenv("QT_QPA_PLATFORM", "offscreen");
+  QApplication app(argc, argv);
+  QApplication::setOrganizationName("veneer-tests");
+  ::testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();
 }
