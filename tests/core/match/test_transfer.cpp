@@ -104,14 +104,22 @@ TEST(Transfer, RepaintBlendedKeepsChunksSharp) {
       map.xy.at<cv::Vec2f>(y, x) = x < 20 ? cv::Vec2f(x + 2.f, y + 1.f) : cv::Vec2f(x - 3.f, y + 0.f);
   const cv::Mat backdrop(size, CV_32FC3, cv::Scalar::all(0.5));
   const cv::Mat plain = repaint(map, photo, backdrop);
-  EXPECT_EQ(cv::norm(repaint_blended(map, photo, {}, 0, backdrop), plain, cv::NORM_INF), 0.0);
-  const cv::Mat soft = repaint_blended(map, photo, {}, 2, backdrop);
+  auto same_as_plain = repaint_blended(map, photo, {}, 0, backdrop);
+  ASSERT_TRUE(same_as_plain.ok());
+  EXPECT_EQ(cv::norm(*same_as_plain, plain, cv::NORM_INF), 0.0);
+  auto blended = repaint_blended(map, photo, {}, 2, backdrop);
+  ASSERT_TRUE(blended.ok()) << blended.message();
+  const cv::Mat soft = *blended;
   auto same = [&](int x, int y) { return cv::norm(soft.at<cv::Vec3f>(y, x) - plain.at<cv::Vec3f>(y, x)) < 1e-5; };
   EXPECT_TRUE(same(10, 15));  // inside the left chunk
   EXPECT_TRUE(same(28, 15));  // inside the right chunk
   EXPECT_TRUE(same(0, 0));    // unmapped: the backdrop
   EXPECT_FALSE(same(19, 15));  // at the seam, the two chunks mixed
   EXPECT_FALSE(same(20, 15));
+  // a mask that does not fit the photo is an error, not a silent plain repaint
+  auto misfit = repaint_blended(map, photo, cv::Mat(5, 5, CV_8UC1, cv::Scalar(255)), 2, backdrop);
+  ASSERT_FALSE(misfit.ok());
+  EXPECT_NE(misfit.message().find("mask"), std::string::npos) << misfit.message();
   // through transfer: the options reach the result, and a bad radius is refused
   const ImageSet dst = simulated("cup-white", Role::destination);
   const ImageSet src = simulated("cup-dots", Role::source);

@@ -46,7 +46,9 @@ Expected<Relit> relight(const Map& map, const ImageSet& destination, const Image
   if (!reference_scene) return reference_scene.error();
   Relit out;
   out.reference = sim::render(**reference_scene, lamp, dst_options);
-  out.transferred = repaint_blended(map, lit_source, source.truth.mask, blend);
+  auto transferred = repaint_blended(map, lit_source, source.truth.mask, blend);
+  if (!transferred) return transferred.error();
+  out.transferred = std::move(*transferred);
   out.psnr_db = psnr(out.transferred, out.reference, destination_mask);
   return out;
 }

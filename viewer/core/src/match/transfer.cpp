@@ -145,15 +145,15 @@ cv::Mat repaint(const Map& map, const cv::Mat& photo, const cv::Mat& backdrop) {
   return out;
 }
 
-cv::Mat repaint_blended(const Map& map, const cv::Mat& photo, const cv::Mat& source_mask, int radius,
-                        const cv::Mat& backdrop) {
-  if (radius <= 0) return repaint(map, photo, backdrop);
+Expected<cv::Mat> repaint_blended(const Map& map, const cv::Mat& photo, const cv::Mat& source_mask, int radius,
+                                  const cv::Mat& backdrop) {
+  if (radius == 0) return repaint(map, photo, backdrop);
   cv::Mat channels[2];
   cv::split(map.xy, channels);
   const cv::Mat mapped = channels[0] >= 0;
   const cv::Mat smask = source_mask.empty() ? cv::Mat(photo.size(), CV_8UC1, cv::Scalar(255)) : source_mask;
-  auto blended = fast::blend_repaint(map, mapped, photo, smask, std::min(radius, 16), 0);
-  if (!blended) return repaint(map, photo, backdrop);  // (sizes checked by the callers; never expected)
+  auto blended = fast::blend_repaint(map, mapped, photo, smask, radius, 0);
+  if (!blended) return blended.error();
   cv::Mat out = backdrop.empty() ? cv::Mat(map.xy.size(), CV_32FC3, cv::Scalar::all(0)) : backdrop.clone();
   blended->copyTo(out, mapped);
   return out;
@@ -282,27 +282,16 @@ Expected<PreparedPair> prepare_pair(const ImageSet& destination_in, const ImageS
   return pair;
 }
 
-Expected<TransferResult> transfer(const ImageSet& destination_in, const ImageSet& source_in,
-                                  const TransferOptions& options, const Progress& progress) {
-  const auto t_all = Clock::now();
-  auto pair = prepare_pair(destination_in, source_in, options, sub_progress(progress, 0.0, 0.3));
-  if (!pair) return pair.error();
-  auto result = transfer(*pair, options, sub_progress(progress, 0.3, 1.0));
-  if (!result) return result;
-  // the total includes the preparation
-  auto j = nlohmann::json::parse(result->metrics_json);
-  j["timings"]["total_s"] = since(t_all);
-  result->metrics_json = j.dump(2);
-  return result;
-}
+namespace {
 
-Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOptions& options, const Progress& progress) {
+// transfer() of a prepared pair; timings' total_s counts from t_all.
+Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferOptions& options,
+                                       const Progress& progress, Clock::time_point t_all) {
   if (auto s = options.check(); !s) return s.error();
   if (options.scale != pair.scale || options.truth_normals != pair.truth_normals)
     return make_error("the prepared pair was made with scale " + std::to_string(pair.scale) + " and truth normals " +
                       (pair.truth_normals ? "on" : "off") + ", the options ask for scale " +
                       std::to_string(options.scale) + " and truth normals " + (options.truth_normals ? "on" : "off"));
-  const auto t_all = Clock::now();
   const ImageSet& destination = pair.destination;
   const ImageSet& source = pair.source;
   const PreparedObject* dst = &pair.dst;
@@ -324,12 +313,17 @@ Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOption
   result.source_size = source.size;
   t0 = Clock::now();
   progress.report(0.9, "repaint");
-  for (size_t i = 0; i < src->view.images.size() && i < dst->view.images.size(); ++i)
-    result.repainted.push_back(
-        repaint_blended(result.map, src->view.images[i], src->view.mask, options.blend, dst->view.images[i]));
+  for (size_t i = 0; i < src->view.images.size() && i < dst->view.images.size(); ++i) {
+    auto painted =
+        repaint_blended(result.map, src->view.images[i], src->view.mask, options.blend, dst->view.images[i]);
+    if (!painted) return make_error("repaint: " + painted.message());
+    result.repainted.push_back(std::move(*painted));
+  }
   result.source_median = pair.source_median;
-  result.repainted_median =
+  auto median =
       repaint_blended(result.map, pair.source_median, src->view.mask, options.blend, pair.destination_median);
+  if (!median) return make_error("repaint: " + median.message());
+  result.repainted_median = std::move(*median);
   result.reuse = reuse_counts(result.map, source.size);
   timings["repaint_s"] = since(t0);
 
@@ -368,6 +362,20 @@ Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOption
   result.metrics_json = j.dump(2);
   progress.report(1.0, "done");
   return result;
+}
+
+}  // namespace
+
+Expected<TransferResult> transfer(const ImageSet& destination_in, const ImageSet& source_in,
+                                  const TransferOptions& options, const Progress& progress) {
+  const auto t_all = Clock::now();  // the total includes the preparation
+  auto pair = prepare_pair(destination_in, source_in, options, sub_progress(progress, 0.0, 0.3));
+  if (!pair) return pair.error();
+  return transfer_from(*pair, options, sub_progress(progress, 0.3, 1.0), t_all);
+}
+
+Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOptions& options, const Progress& progress) {
+  return transfer_from(pair, options, progress, Clock::now());
 }
 
 double map_scale(const Map& map, const ImageSet& destination) {

@@ -94,9 +94,10 @@ cv::Mat repaint(const Map& map, const cv::Mat& photo, const cv::Mat& backdrop = 
 // within `radius` px continued to it, Gaussian-weighted. Inside a chunk they
 // all agree, so texture stays sharp; seams and speckle are softened.
 // `source_mask` (CV_8UC1, empty = all) keeps continuations on the object.
-// radius 0 = repaint().
-cv::Mat repaint_blended(const Map& map, const cv::Mat& photo, const cv::Mat& source_mask, int radius,
-                        const cv::Mat& backdrop = {});
+// radius 0 = repaint(). Fails, naming it, on a radius outside 0..16 or a
+// mask that does not fit the photo.
+Expected<cv::Mat> repaint_blended(const Map& map, const cv::Mat& photo, const cv::Mat& source_mask, int radius,
+                                  const cv::Mat& backdrop = {});
 // The thesis's picture of a map: R = x / width, G = y / height, B = 1 (8-bit BGR), black unmapped.
 cv::Mat map_picture(const Map& map, cv::Size source_size);
 // Reuse counts as a heat map over the grey source picture (8-bit BGR).
