@@ -716,11 +716,10 @@ bool MainWindow::loadLocalSet(const QString& folder, veneer::Role as) {
 void MainWindow::setLoaded(std::shared_ptr<LoadedSet> loaded, veneer::Role as) {
   if (as == veneer::Role::source) {
     src_ = loaded;
-    ++sets_loaded_;
   } else {
     dst_ = loaded;
-    ++sets_loaded_;
   }
+  ++sets_loaded_;
   result_.reset();
   relighter_.reset();
   repainter_ = {};
