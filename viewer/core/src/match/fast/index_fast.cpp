@@ -298,10 +298,9 @@ void OctGridIndex::build(const float* points, int n, int dims) {
     if (inner(c % side_) + inner(c / side_) > 1.0f && start_[2 * c] == start_[2 * c + 2])
       near_[2 * c] = near_[2 * c + 1] = -2;
   for (size_t qi = 0; qi < queue.size(); ++qi) {
-    const int node = queue[qi], layer = node & 1, c = node >> 1, cx = c % side_, cy = c / side_;
+    const int node = queue[qi], c = node >> 1, cx = c % side_, cy = c / side_;
     const int nb[5] = {cx > 0 ? node - 2 : -1, cx + 1 < side_ ? node + 2 : -1, cy > 0 ? node - 2 * side_ : -1,
                        cy + 1 < side_ ? node + 2 * side_ : -1, edge(cx) + edge(cy) >= 1.0f ? (node ^ 1) : -1};
-    (void)layer;
     for (int t : nb)
       if (t >= 0 && near_[t] == -1) near_[t] = near_[node], queue.push_back(t);
   }
