@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include "veneer/match/fast.hpp"
+#include "veneer/match/features.hpp"
 #include "veneer/match/metrics.hpp"
 #include "veneer/match/matcher.hpp"
 
@@ -376,6 +377,62 @@ TEST_F(FastEngine, CoherentRefinementJoinsChunks) {
   auto bad = fast::compute_map(dst, src, o);
   ASSERT_FALSE(bad.ok());
   EXPECT_NE(bad.message().find("coherent smoothness"), std::string::npos) << bad.message();
+}
+
+// Run to convergence, the refinement leaves every pixel at a local minimum of
+// error + w * threshold * (4-neighbours matched more than 1.5 px apart): no
+// continuation of a neighbour's match, nor one pixel beside it, is cheaper.
+// Checked here independently of the engine, for normals (the vector path)
+// and intensities (seven channels, the scalar path).
+TEST_F(FastEngine, CoherentRefinementEndsAtALocalMinimum) {
+  for (Feature f : {Feature::normals, Feature::intensities}) {
+    auto o = opts(Method::coherent, f, 1, true);
+    o.coherent_threshold = f == Feature::normals ? 0.10 : 0.02;
+    o.coherent_sweeps = 100;
+    const Map m = fast_map(dst, src, o);
+    const cv::Mat a = *pixel_values(dst, f), b = *pixel_values(src, f);
+    const int c = a.channels();
+    const float lam = static_cast<float>(o.coherent_smooth * o.coherent_threshold);
+    auto match = [&](int x, int y) {
+      const cv::Vec2f v = m.xy.at<cv::Vec2f>(y, x);
+      return cv::Point(static_cast<int>(v[0]), static_cast<int>(v[1]));
+    };
+    const cv::Point n4[4] = {{-1, 0}, {1, 0}, {0, -1}, {0, 1}};
+    int checked = 0, better = 0;
+    for (int y = 0; y < dst.mask.rows; ++y)
+      for (int x = 0; x < dst.mask.cols; ++x) {
+        if (!dst.mask.at<uchar>(y, x)) continue;
+        auto cost = [&](cv::Point q) {
+          double e = 0;
+          for (int i = 0; i < c; ++i) {
+            const double t = a.ptr<float>(y)[x * c + i] - b.ptr<float>(q.y)[q.x * c + i];
+            e += t * t;
+          }
+          double pairs = 0;
+          for (const cv::Point& d : n4) {
+            const int nx = x + d.x, ny = y + d.y;
+            if (nx < 0 || ny < 0 || nx >= dst.mask.cols || ny >= dst.mask.rows || !dst.mask.at<uchar>(ny, nx)) continue;
+            const cv::Point r = match(nx, ny);
+            pairs += (r.x - q.x) * (r.x - q.x) + (r.y - q.y) * (r.y - q.y) > 2 ? lam : 0;
+          }
+          return std::sqrt(e) + pairs;
+        };
+        const double now = cost(match(x, y));
+        for (const cv::Point& d : n4) {
+          const int nx = x + d.x, ny = y + d.y;
+          if (nx < 0 || ny < 0 || nx >= dst.mask.cols || ny >= dst.mask.rows || !dst.mask.at<uchar>(ny, nx)) continue;
+          const cv::Point base = match(nx, ny) - d;
+          for (const cv::Point& s : {cv::Point(0, 0), cv::Point(1, 0), cv::Point(-1, 0), cv::Point(0, 1), cv::Point(0, -1)}) {
+            const cv::Point q = base + s;
+            if (q.x < 0 || q.y < 0 || q.x >= src.mask.cols || q.y >= src.mask.rows || !src.mask.at<uchar>(q)) continue;
+            ++checked;
+            if (cost(q) < now - 1e-4) ++better;
+          }
+        }
+      }
+    EXPECT_GT(checked, 10000) << feature_name(f);
+    EXPECT_EQ(better, 0) << feature_name(f) << ": " << better << " of " << checked << " proposals are cheaper";
+  }
 }
 
 TEST_F(FastEngine, CoherentChangesLocallyWithTheThreshold) {
