@@ -215,7 +215,9 @@ Status refine(const Object& dst, const Object& src, const DenseSource& dense, co
       if (offer_nearest) near[d] = at_pos(nearest[static_cast<size_t>(d) * k]);
     }
   });
-  std::vector<uint8_t> visit(n, 1), next(n, 0);
+  // to visit: all at first; then the pixels next to a change, all of the
+  // other colour, so marking them does not touch the pixels being visited
+  std::vector<uint8_t> visit(n, 1);
   for (int round = 0; round < o.coherent_sweeps; ++round) {
     if (p.cancelled()) return make_error("cancelled during coherent transfer");
     p.report(0.9 + 0.1 * round / o.coherent_sweeps, "coherent refinement");
@@ -285,14 +287,11 @@ Status refine(const Object& dst, const Object& src, const DenseSource& dense, co
             pos[d] = best_q;
             ++local;
             for (int j = 0; j < 4; ++j)
-              if (nbr[d][j] >= 0) std::atomic_ref<uint8_t>(next[nbr[d][j]]).store(1, std::memory_order_relaxed);
+              if (nbr[d][j] >= 0) std::atomic_ref<uint8_t>(visit[nbr[d][j]]).store(1, std::memory_order_relaxed);
           }
         }
         changed.fetch_add(local, std::memory_order_relaxed);
       });
-      // the other colour's pixels next to a change are visited next
-      for (int d = 0; d < n; ++d)
-        if (next[d]) visit[d] = 1, next[d] = 0;
     }
     if (changed.load() == 0) break;
   }
