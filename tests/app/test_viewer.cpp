@@ -294,6 +294,19 @@ TEST(Viewer, MatchingOptionChangesRecomputeTheMap) {
   EXPECT_GT(cv::countNonZero(diff.reshape(1) > 0.5), 0) << "a larger threshold makes other chunks";
   EXPECT_TRUE(child<QLabel>(w, "transferStatus")->text().contains("map"));
 
+  // the blend radius changes the pictures, not the map: repainted from the map shown
+  const int map_runs = w.mapOnlyRuns();
+  const auto* unblended = w.result();
+  const cv::Mat kept = unblended->map.xy.clone(), plain = unblended->repainted_median.clone();
+  child<QSpinBox>(w, "blend")->setValue(2);
+  ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.result() != unblended; }, 60000));
+  EXPECT_EQ(w.repaintOnlyRuns(), 1);
+  EXPECT_EQ(w.mapOnlyRuns(), map_runs);
+  EXPECT_TRUE(w.result()->map_given);
+  EXPECT_EQ(cv::norm(w.result()->map.xy, kept, cv::NORM_INF), 0.0);
+  EXPECT_GT(cv::norm(w.result()->repainted_median, plain, cv::NORM_INF), 0.0);
+  EXPECT_TRUE(child<QLabel>(w, "transferStatus")->text().contains("map kept"));
+
   // a segmentation change prepares the objects again (not a map-only run) and matches
   const int before = w.mapOnlyRuns();
   const auto* shown = w.result();

@@ -797,7 +797,14 @@ void MainWindow::startTransfer() {
   const QString key = preparationKey();
   auto cached = key == prepared_key_ ? prepared_ : nullptr;
   auto relighter = cached ? relighter_ : nullptr;
-  if (cached) ++map_only_runs_;
+  // the same matching options as the map shown (only the blend changed, or
+  // Compute again): repainted from that map, not matched again
+  std::shared_ptr<const veneer::match::TransferResult> previous =
+      cached && result_ && result_->match_options == options.match ? result_ : nullptr;
+  if (previous)
+    ++repaint_only_runs_;
+  else if (cached)
+    ++map_only_runs_;
   pending_prepared_.reset();
   pending_key_ = key;
   pending_repainter_.reset();
@@ -806,7 +813,7 @@ void MainWindow::startTransfer() {
   const cv::Vec3d light = relight_pad_->direction();
   QPointer<MainWindow> self(this);
   transfer_watch_.setFuture(QtConcurrent::run([this, self, dst, src, options, seg, custom_segmentation, cached,
-                                               relighter, light] {
+                                               previous, relighter, light] {
     veneer::Progress progress;
     progress.cancel = &cancel_;
     progress.on_progress = [self](double f, const std::string& stage) {
@@ -838,7 +845,8 @@ void MainWindow::startTransfer() {
       pair = std::make_shared<const veneer::match::PreparedPair>(std::move(*prepared));
       pending_prepared_ = pair;
     }
-    auto result = veneer::match::transfer(*pair, options, progress);
+    auto result = previous ? veneer::match::transfer(*pair, options, previous->map, progress)
+                           : veneer::match::transfer(*pair, options, progress);
     if (!result) {
       transfer_error_ = qs(result.message());
       return;
@@ -932,7 +940,10 @@ void MainWindow::onTransferDone() {
     text += tr(" · coverage %1% · coherence %2%").arg(q.coverage * 100, 0, 'f', 1).arg(q.coherence * 100, 0, 'f', 1);
     if (q.normal_mean_deg) text += tr(" · normals %1°").arg(*q.normal_mean_deg, 0, 'f', 2);
   }
-  text += tr(" · map %1 ms").arg(result_->match_seconds * 1000, 0, 'f', 1);
+  if (result_->map_given)
+    text += tr(" · map kept");
+  else
+    text += tr(" · map %1 ms").arg(result_->match_seconds * 1000, 0, 'f', 1);
   transfer_label_->setText(text);
   message(tr("transfer done (%1)").arg(method_->currentText()));
   result_picture_ = pending_result_picture_;

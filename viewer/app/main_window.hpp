@@ -73,6 +73,7 @@ class MainWindow : public QMainWindow {
   // Transfers that reused the prepared objects (normals, masks) and
   // recomputed only the map: what a change of a matching option triggers.
   int mapOnlyRuns() const { return map_only_runs_; }
+  int repaintOnlyRuns() const { return repaint_only_runs_; }
   double liveFps() const { return live_fps_; }
   QString workdir() const { return workdir_; }
   // Grabs every view as <dir>/<tab>.png; returns the files written.
@@ -132,6 +133,7 @@ class MainWindow : public QMainWindow {
   bool computing_ = false;
   bool rerun_ = false;  // a matching option changed while computing: run again when done
   int map_only_runs_ = 0;
+  int repaint_only_runs_ = 0;  // runs that kept the map shown (only the blend changed)
   int sets_loaded_ = 0;  // counts every set loaded as destination or source
   // The objects prepared for the last transfer and what they were made from
   // (preparationKey); reused while only matching options change.

@@ -1,5 +1,6 @@
 // Transfer end to end on small simulated sets (the simulator's truth is the oracle).
 #include <gtest/gtest.h>
+#include <opencv2/imgproc.hpp>
 
 #include <filesystem>
 #include <fstream>
@@ -132,6 +133,37 @@ TEST(Transfer, RepaintBlendedKeepsChunksSharp) {
   auto bad = transfer(dst, src, o);
   ASSERT_FALSE(bad.ok());
   EXPECT_NE(bad.message().find("blend radius"), std::string::npos) << bad.message();
+}
+
+// A prepared pair repainted from a map computed earlier (the viewer's blend
+// slider): the same pictures as a full transfer with those options, the map
+// untouched, no matching time; a map of another size is refused.
+TEST(Transfer, FromAGivenMapRepaintsWithoutMatching) {
+  const ImageSet dst = simulated("cup-white", Role::destination);
+  const ImageSet src = simulated("cup-dots", Role::source);
+  auto o = options(Method::coherent);
+  auto pair = prepare_pair(dst, src, o);
+  ASSERT_TRUE(pair.ok()) << pair.message();
+  auto first = transfer(*pair, o);
+  ASSERT_TRUE(first.ok()) << first.message();
+  EXPECT_FALSE(first->map_given);
+  EXPECT_TRUE(first->match_options == o.match);
+  o.blend = 2;
+  auto full = transfer(*pair, o);
+  auto kept = transfer(*pair, o, first->map);
+  ASSERT_TRUE(full.ok() && kept.ok()) << kept.message();
+  EXPECT_TRUE(kept->map_given);
+  EXPECT_EQ(kept->match_seconds, 0.0);
+  EXPECT_EQ(cv::norm(kept->map.xy, first->map.xy, cv::NORM_INF), 0.0);
+  EXPECT_EQ(cv::norm(kept->repainted_median, full->repainted_median, cv::NORM_INF), 0.0);
+  EXPECT_GT(cv::norm(kept->repainted_median, first->repainted_median, cv::NORM_INF), 0.0) << "the blend shows";
+  EXPECT_NE(kept->metrics_json.find("\"map_given\": true"), std::string::npos);
+  Map small;
+  cv::resize(first->map.xy, small.xy, {}, 0.5, 0.5, cv::INTER_NEAREST);
+  cv::resize(first->map.distance, small.distance, {}, 0.5, 0.5, cv::INTER_NEAREST);
+  auto bad = transfer(*pair, o, small);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.message().find("map given"), std::string::npos) << bad.message();
 }
 
 TEST(Transfer, BadInput) {

@@ -284,8 +284,9 @@ Expected<PreparedPair> prepare_pair(const ImageSet& destination_in, const ImageS
 
 namespace {
 
-// transfer() of a prepared pair; timings' total_s counts from t_all.
-Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferOptions& options,
+// transfer() of a prepared pair, from `given` when not null (else the map is
+// computed); timings' total_s counts from t_all.
+Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferOptions& options, const Map* given,
                                        const Progress& progress, Clock::time_point t_all) {
   if (auto s = options.check(); !s) return s.error();
   if (options.scale != pair.scale || options.truth_normals != pair.truth_normals)
@@ -303,13 +304,25 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
   timings["normals_source_s"] = src->normals_seconds;
 
   auto t0 = Clock::now();
-  auto map = compute_map(dst->view, src->view, options.match, sub_progress(progress, 0.0, 0.85));
-  if (!map) return map.error();
-  timings["match_s"] = since(t0);
-
   TransferResult result;
+  if (given) {
+    const cv::Size want = dst->view.mask.size();
+    if (given->xy.size() != want || given->xy.type() != CV_32FC2)
+      return make_error("the map given is " + std::to_string(given->xy.cols) + "x" + std::to_string(given->xy.rows) +
+                        ", the prepared destination " + std::to_string(want.width) + "x" +
+                        std::to_string(want.height));
+    result.map = *given;
+    result.map_given = true;
+    timings["match_s"] = 0.0;
+    timings["map_given"] = true;
+  } else {
+    auto map = compute_map(dst->view, src->view, options.match, sub_progress(progress, 0.0, 0.85));
+    if (!map) return map.error();
+    timings["match_s"] = since(t0);
+    result.map = std::move(*map);
+  }
   result.match_seconds = timings["match_s"].get<double>();
-  result.map = std::move(*map);
+  result.match_options = options.match;
   result.source_size = source.size;
   t0 = Clock::now();
   progress.report(0.9, "repaint");
@@ -371,11 +384,16 @@ Expected<TransferResult> transfer(const ImageSet& destination_in, const ImageSet
   const auto t_all = Clock::now();  // the total includes the preparation
   auto pair = prepare_pair(destination_in, source_in, options, sub_progress(progress, 0.0, 0.3));
   if (!pair) return pair.error();
-  return transfer_from(*pair, options, sub_progress(progress, 0.3, 1.0), t_all);
+  return transfer_from(*pair, options, nullptr, sub_progress(progress, 0.3, 1.0), t_all);
 }
 
 Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOptions& options, const Progress& progress) {
-  return transfer_from(pair, options, progress, Clock::now());
+  return transfer_from(pair, options, nullptr, progress, Clock::now());
+}
+
+Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOptions& options, const Map& map,
+                                  const Progress& progress) {
+  return transfer_from(pair, options, &map, progress, Clock::now());
 }
 
 double map_scale(const Map& map, const ImageSet& destination) {

@@ -51,6 +51,7 @@ struct MatchOptions {
   unsigned seed = 1;                   // random init/jitter seed (same seed, same map)
   int threads = 0;                     // 0 = all cores
   Status check() const;
+  bool operator==(const MatchOptions&) const = default;  // the same options make the same map
 };
 
 Expected<Map> compute_map(const ObjectView& destination, const ObjectView& source,

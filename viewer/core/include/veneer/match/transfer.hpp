@@ -49,7 +49,9 @@ struct TransferResult {
   std::optional<Quality> quality;  // when both sets carry truth
   std::optional<Relit> relit;      // the relighting measure's pictures, when measured
   std::string metrics_json;        // timings, options, sizes, quality
-  double match_seconds = 0;        // the map's computation alone (wall)
+  double match_seconds = 0;        // the map's computation alone (wall; 0 when the map was given)
+  MatchOptions match_options;      // what the map was computed with
+  bool map_given = false;          // made from a map computed earlier (transfer(pair, options, map))
 };
 
 Expected<TransferResult> transfer(const ImageSet& destination, const ImageSet& source,
@@ -70,6 +72,12 @@ struct PreparedPair {
 Expected<PreparedPair> prepare_pair(const ImageSet& destination, const ImageSet& source,
                                     const TransferOptions& options, const Progress& progress = {});
 Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOptions& options,
+                                  const Progress& progress = {});
+// The rest (repaint, reuse, quality, metrics) from a map already computed
+// for this pair with options.match: what an option that does not change the
+// map (the blend radius) needs, in milliseconds. A map of another size than
+// the pair's destination is an error.
+Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOptions& options, const Map& map,
                                   const Progress& progress = {});
 // Writes map.pfm, map.png, result_light_NN.png, result_median.png, reuse.png,
 // metrics.json (and relight_transferred.png / relight_reference.png when the
