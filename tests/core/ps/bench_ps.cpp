@@ -117,6 +117,7 @@ int main() {
   distant.robust = false;
   distant_robust.light_model = ps::LightModel::distant;
   near_robust.light_model = ps::LightModel::near;
+  distant_robust.outlier_fraction = near_robust.outlier_fraction = 0;  // without the outlier pass (a column of its own)
 
   struct Row {
     std::string what;

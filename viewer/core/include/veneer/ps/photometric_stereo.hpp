@@ -35,12 +35,13 @@ struct PsOptions {
   float shadow_fraction = 0.10f;   // robust: a sample below this fraction of the pixel's brightest is shadowed [0, 1)
   float saturation = 0.98f;        // robust: a sample with any channel >= this (1.0 = full scale) is saturated (0, 1]
   float min_signal = 1e-3f;        // pixels whose brightest grey sample is below this are unreliable (>= 0)
-  float outlier_fraction = 0.0f;   // robust: after a first fit, the sample farthest from it (a specular
+  float outlier_fraction = 0.10f;  // robust: after a first fit, the sample farthest from it (a specular
                                    // highlight, a cast shadow) is dropped and the pixel solved again when it
                                    // is off by more than this fraction of the pixel's brightest sample (of
                                    // 0.2 for darker pixels, whose deviations are mostly noise) and
-                                   // 4+ samples remain [0, 1); 0 = off (the default: it costs
-                                   // up to 2x; `veneer normals` uses 0.1, which helps glossy scenes)
+                                   // 4+ samples remain [0, 1); 0 = off. On by default (it costs up to 2x):
+                                   // on the quality table's 8 simulated pairs it lowers the mean normal
+                                   // error of the transfer's exact nearest from 3.71 to 3.20 degrees
   bool subtract_ambient = true;    // subtract set.ambient when present
   int near_iterations = 2;         // near: depth refinements after the z = 0 pass (0..5)
   int threads = 0;                 // 0 = all cores (TBB)
