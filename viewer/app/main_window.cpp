@@ -315,6 +315,8 @@ QWidget* MainWindow::buildTransferPanel() {
   coherent_threshold_->setDecimals(3);
   coherent_threshold_->setSingleStep(0.01);
   coherent_threshold_->setValue(veneer::match::MatchOptions{}.coherent_threshold);
+  coherent_threshold_->setToolTip(tr("coherent: the normal error a chunk may make (0.1 = about 6°; on intensities "
+                                     "converted by the destination's own normals)"));
   coherent_smooth_ = new QDoubleSpinBox;
   coherent_smooth_->setObjectName("coherentSmooth");
   coherent_smooth_->setRange(0, 20);

@@ -94,7 +94,8 @@ VENEER_COMMAND(transfer) {
   cmd->add_option("--iterations", args->iterations, "patchmatch iterations (default 5)");
   cmd->add_option("--coherent-threshold", args->coherent_threshold,
                   "coherent: normal error |dn| a chunk may make, >= 0 (default 0.10, about 6 degrees; larger = "
-                  "larger chunks, more texture kept whole, less exact shading)");
+                  "larger chunks, more texture kept whole, less exact shading; with --feature intensities "
+                  "converted by the destination's change of intensities per change of normal)");
   cmd->add_option("--coherent-smooth", args->coherent_smooth,
                   "coherent: cost of a seam between two chunks, in coherent thresholds, >= 0 (default 2; 0 = "
                   "chunks only; larger = fewer seams, less exact shading)");

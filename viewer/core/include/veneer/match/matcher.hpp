@@ -42,7 +42,8 @@ struct MatchOptions {
   int candidates = 10;                 // K for `candidates` (1..100)
   double threshold = 0.05;             // `regiongrow` smoothness threshold (>= 0; 0 = direct matching)
   int iterations = 5;                  // `patchmatch` iterations
-  double coherent_threshold = 0.10;    // `coherent` normal error allowed for a chunk, radians-ish (|dn|)
+  double coherent_threshold = 0.10;    // `coherent` normal error allowed for a chunk, radians-ish (|dn|); on
+                                       // intensities converted when the destination has normals (fast engine)
   double uniformity = 0.0;             // reuse penalty weight for `coherent`/`patchmatch` (0 = off)
   bool coherent_grow = true;           // `coherent`: chunks grow into the pixels no chunk took
   double coherent_smooth = 2.0;        // `coherent`: a broken neighbour pair costs this x coherent_threshold (0 = off)

@@ -457,6 +457,42 @@ bool supports(const MatchOptions& options) {
 // about twice as fast again for +0.07 degrees of mean normal error.
 const char* default_index() { return "lookup"; }
 
+namespace {
+
+// `coherent`'s threshold is a normal error (|dn|, about radians). Intensity
+// features (each lamp's share of the pixel's light) change by another amount
+// for the same turn of the surface, set by the lamps' layout. When the
+// destination has normals, the threshold is converted by how much its
+// features change per unit of normal change between neighbouring pixels
+// (summed over right and lower neighbours); else it stays as given. Albedo
+// divides out of the features, so texture does not move the ratio.
+double feature_per_normal(const ObjectView& v, const Object& o) {
+  if (v.normals.empty() || v.normals.size() != o.values.size()) return 1.0;
+  const int c = o.channels;
+  std::vector<float> ratios;
+  for (int y = 0; y + 1 < v.mask.rows; ++y)
+    for (int x = 0; x + 1 < v.mask.cols; ++x) {
+      if (!v.mask.at<uchar>(y, x)) continue;
+      const cv::Vec3f n = v.normals.at<cv::Vec3f>(y, x);
+      const float* f = o.values.ptr<float>(y) + static_cast<size_t>(x) * c;
+      for (const cv::Point d : {cv::Point(1, 0), cv::Point(0, 1)}) {
+        if (!v.mask.at<uchar>(y + d.y, x + d.x)) continue;
+        const double a = cv::norm(v.normals.at<cv::Vec3f>(y + d.y, x + d.x) - n);
+        if (a < 0.02) continue;  // mostly noise
+        const float* g = o.values.ptr<float>(y + d.y) + static_cast<size_t>(x + d.x) * c;
+        double b = 0;
+        for (int i = 0; i < c; ++i) b += (f[i] - g[i]) * (f[i] - g[i]);
+        ratios.push_back(static_cast<float>(std::sqrt(b) / a));
+      }
+    }
+  if (ratios.size() < 16) return 1.0;
+  auto mid = ratios.begin() + ratios.size() / 2;
+  std::nth_element(ratios.begin(), mid, ratios.end());
+  return *mid > 0 ? *mid : 1.0;
+}
+
+}  // namespace
+
 Expected<Map> compute_map(const ObjectView& destination, const ObjectView& source, const MatchOptions& options,
                           const Progress& progress) {
   return compute_map(destination, source, options, progress, nullptr);
@@ -499,7 +535,12 @@ Expected<Map> compute_map(const ObjectView& destination, const ObjectView& sourc
     case Method::candidates: map = run_candidates(*dst, *src, options, progress, st); break;
     case Method::patchmatch: map = run_patchmatch(*dst, *src, options, progress); break;
     case Method::regiongrow: map = run_regiongrow(*dst, *src, options, progress, st); break;
-    case Method::coherent: map = run_coherent(*dst, *src, options, progress, st); break;
+    case Method::coherent: {
+      MatchOptions o = options;
+      if (o.feature == Feature::intensities) o.coherent_threshold *= feature_per_normal(destination, *dst);
+      map = run_coherent(*dst, *src, o, progress, st);
+      break;
+    }
     case Method::baseline: break;
   }
   st->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
