@@ -186,7 +186,14 @@ TEST(Faults, ClientVanishingDuringADownloadHarmsNobody) {
     std::thread closer;
     veneer::Progress progress;
     progress.on_progress = [&](double f, const std::string&) {
-      if (f > 0.1 && !closed.exchange(true)) closer = std::thread([raw] { raw->close(); });
+      if (f > 0.1 && !closed.exchange(true)) {
+        closer = std::thread([raw] { raw->close(); });
+        // this chunk is held until the close has begun: on a loaded machine
+        // the rest of the set could otherwise arrive before the closer runs
+        const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+        while (raw->connected() && std::chrono::steady_clock::now() < until)
+          std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      }
     };
     fs::path out = rig.dir / "half";
     auto s = raw->pull(id, out, true, false, progress);
