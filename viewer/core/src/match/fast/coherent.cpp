@@ -112,7 +112,7 @@ cv::Point cheapest3(const float* a, const float* dense, cv::Size box, const cv::
   const __m256i w = _mm256_set1_epi32(box.width), h = _mm256_set1_epi32(box.height), two = _mm256_set1_epi32(2);
   const __m256i minus1 = _mm256_set1_epi32(-1);
   const __m256 vlam = _mm256_set1_ps(lam), inf = _mm256_set1_ps(std::numeric_limits<float>::infinity());
-  __m256 cost[3];
+  __m256 cost[3] = {};  // the first `vectors` are set (at least one: the current match)
   for (int v = 0; v < vectors; ++v) {
     const __m256i x = _mm256_load_si256(reinterpret_cast<const __m256i*>(px + 8 * v));
     const __m256i y = _mm256_load_si256(reinterpret_cast<const __m256i*>(py + 8 * v));
