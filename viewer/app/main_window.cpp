@@ -325,6 +325,14 @@ QWidget* MainWindow::buildTransferPanel() {
   coherent_smooth_->setValue(veneer::match::MatchOptions{}.coherent_smooth);
   coherent_smooth_->setToolTip(tr("coherent: how much a seam between two chunks costs, in coherent thresholds "
                                   "(0 = chunks only; larger = fewer seams, less exact shading)"));
+  coherent_guide_ = new QDoubleSpinBox;
+  coherent_guide_->setObjectName("coherentGuide");
+  coherent_guide_->setRange(0, 32);
+  coherent_guide_->setDecimals(1);
+  coherent_guide_->setSingleStep(1);
+  coherent_guide_->setSuffix(tr(" px"));
+  coherent_guide_->setToolTip(tr("coherent on normals: match the source's normals smoothed over this radius, so its "
+                                 "small relief (dimples, grain) is copied whole (0 = off)"));
   blend_ = new QSpinBox;
   blend_->setObjectName("blend");
   blend_->setRange(0, 16);
@@ -358,6 +366,7 @@ QWidget* MainWindow::buildTransferPanel() {
   form->addRow(tr("PatchMatch iterations"), iterations_);
   form->addRow(tr("Coherent threshold"), coherent_threshold_);
   form->addRow(tr("Seam cost"), coherent_smooth_);
+  form->addRow(tr("Source relief"), coherent_guide_);
   form->addRow(tr("Uniformity"), uniformity_);
   form->addRow(tr("Blend seams"), blend_);
   form->addRow(fast_);
@@ -380,7 +389,7 @@ QWidget* MainWindow::buildTransferPanel() {
     connect(c, &QComboBox::currentIndexChanged, this, &MainWindow::matchOptionChanged);
   for (QSpinBox* b : {candidates_, iterations_, blend_})
     connect(b, &QSpinBox::valueChanged, this, &MainWindow::matchOptionChanged);
-  for (QDoubleSpinBox* b : {threshold_, coherent_threshold_, coherent_smooth_, uniformity_})
+  for (QDoubleSpinBox* b : {threshold_, coherent_threshold_, coherent_smooth_, coherent_guide_, uniformity_})
     connect(b, &QDoubleSpinBox::valueChanged, this, &MainWindow::matchOptionChanged);
   connect(fast_, &QCheckBox::toggled, this, &MainWindow::matchOptionChanged);
   // segmentation and truth normals change the prepared objects: prepared again, then the map
@@ -769,6 +778,7 @@ void MainWindow::startTransfer() {
   options.match.coherent_threshold = coherent_threshold_->value();
   options.match.uniformity = uniformity_->value();
   options.match.coherent_smooth = coherent_smooth_->value();
+  options.match.coherent_guide = coherent_guide_->value();
   options.match.fast = fast_->isChecked();
   options.truth_normals = truth_normals_->isChecked();
   options.blend = blend_->value();

@@ -14,7 +14,7 @@ struct TransferArgs {
   std::string dst, src, out, method = "flann", feature = "normals";
   int patch = 1, candidates = 10, iterations = 5, threads = 0, blend = 0;
   double threshold = 0.05, scale = 1.0, coherent_threshold = 0.10, uniformity = 0.0,
-         coherent_smooth = match::MatchOptions{}.coherent_smooth;
+         coherent_smooth = match::MatchOptions{}.coherent_smooth, coherent_guide = 0.0;
   bool no_grow = false;
   unsigned seed = 1;
   bool faithful = false, truth_normals = false;
@@ -40,6 +40,7 @@ int run(const TransferArgs& a) {
   options.match.coherent_threshold = a.coherent_threshold;
   options.match.uniformity = a.uniformity;
   options.match.coherent_smooth = a.coherent_smooth;
+  options.match.coherent_guide = a.coherent_guide;
   options.match.coherent_grow = !a.no_grow;
   options.match.seed = a.seed;
   options.match.threads = a.threads;
@@ -99,6 +100,10 @@ VENEER_COMMAND(transfer) {
   cmd->add_option("--coherent-smooth", args->coherent_smooth,
                   "coherent: cost of a seam between two chunks, in coherent thresholds, >= 0 (default 2; 0 = "
                   "chunks only; larger = fewer seams, less exact shading)");
+  cmd->add_option("--coherent-guide", args->coherent_guide,
+                  "coherent on normals: match against the source's normals smoothed over this many px, 0..32 "
+                  "(default 0 = off; 3-6 copies a bumpy source's relief -- dimples, grain -- whole, in larger "
+                  "chunks, at the cost of agreement with its fine normals)");
   cmd->add_option("--uniformity", args->uniformity,
                   "coherent, patchmatch: penalty for reusing the same source pixel, >= 0 (default 0 = off)");
   cmd->add_flag("--no-grow", args->no_grow, "coherent: do not grow chunks into the pixels no chunk took");

@@ -51,6 +51,8 @@ Status MatchOptions::check() const {
     return make_error("coherent threshold must be a finite number >= 0, got " + std::to_string(coherent_threshold));
   if (!std::isfinite(coherent_smooth) || coherent_smooth < 0)
     return make_error("coherent smoothness must be a finite number >= 0, got " + std::to_string(coherent_smooth));
+  if (!std::isfinite(coherent_guide) || coherent_guide < 0 || coherent_guide > 32)
+    return make_error("coherent guide must be a smoothing radius in 0..32 px, got " + std::to_string(coherent_guide));
   if (coherent_sweeps < 0 || coherent_sweeps > 100)
     return make_error("coherent sweeps must be in 0..100, got " + std::to_string(coherent_sweeps));
   if (!std::isfinite(uniformity) || uniformity < 0)

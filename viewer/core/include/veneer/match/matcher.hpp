@@ -48,6 +48,9 @@ struct MatchOptions {
   bool coherent_grow = true;           // `coherent`: chunks grow into the pixels no chunk took
   double coherent_smooth = 2.0;        // `coherent`: a broken neighbour pair costs this x coherent_threshold (0 = off)
   int coherent_sweeps = 4;             // `coherent`: at most this many refinement rounds
+  double coherent_guide = 0.0;         // `coherent` on normals: match against the source's normals smoothed
+                                       // over this many px (Gaussian sigma, 0..32; 0 = off), so its small
+                                       // relief (dimples, grain) is copied whole as texture
   bool fast = true;                    // use the fast engine where it applies (false = faithful thesis code)
   unsigned seed = 1;                   // random init/jitter seed (same seed, same map)
   int threads = 0;                     // 0 = all cores

@@ -9,6 +9,7 @@
 #include <mutex>
 #include <unordered_map>
 
+#include <opencv2/imgproc.hpp>
 #include <tbb/parallel_invoke.h>
 
 #include "candidates.hpp"
@@ -459,6 +460,29 @@ const char* default_index() { return "lookup"; }
 
 namespace {
 
+// The view with its normals smoothed over sigma px (Gaussian, masked: only
+// object pixels count), renormalised; the rest shared.
+ObjectView smoothed_normals(const ObjectView& v, double sigma) {
+  ObjectView out = v;
+  out.normals = cv::Mat(v.normals.size(), CV_32FC3, cv::Scalar::all(0));  // new data: v's stays untouched
+  // over the object's box and 3 sigma around it (beyond, all zero anyway)
+  const int m = static_cast<int>(std::ceil(3 * sigma)) + 1;
+  const cv::Rect box = (cv::boundingRect(v.mask) + cv::Size(2 * m, 2 * m) - cv::Point(m, m)) &
+                       cv::Rect(cv::Point(0, 0), v.mask.size());
+  cv::Mat masked = cv::Mat::zeros(box.size(), CV_32FC3), sum;  // (a sum's direction needs no weights)
+  v.normals(box).copyTo(masked, v.mask(box));
+  cv::GaussianBlur(masked, sum, {0, 0}, sigma, sigma, cv::BORDER_CONSTANT);
+  for (int y = 0; y < box.height; ++y)
+    for (int x = 0; x < box.width; ++x) {
+      if (!v.mask.at<uchar>(box.y + y, box.x + x)) continue;
+      const cv::Vec3f n = sum.at<cv::Vec3f>(y, x);
+      const float len = static_cast<float>(cv::norm(n));
+      out.normals.at<cv::Vec3f>(box.y + y, box.x + x) =
+          len > 1e-6f ? n / len : v.normals.at<cv::Vec3f>(box.y + y, box.x + x);
+    }
+  return out;
+}
+
 // `coherent`'s threshold is a normal error (|dn|, about radians). Intensity
 // features (each lamp's share of the pixel's light) change by another amount
 // for the same turn of the surface, set by the lamps' layout. When the
@@ -515,7 +539,13 @@ Expected<Map> compute_map(const ObjectView& destination, const ObjectView& sourc
   // both objects at once (each is parallel inside too; their serial parts overlap)
   Expected<Object> dst = make_error("unreachable"), src = make_error("unreachable");
   auto make_dst = [&] { dst = make_object(destination, options.feature, patch, grid_needed, options.threads); };
-  auto make_src = [&] { src = make_object(source, options.feature, patch, grid_needed, options.threads); };
+  // `coherent` with a guide: the source's normals smoothed (see MatchOptions::coherent_guide)
+  const bool guided = options.method == Method::coherent && options.feature == Feature::normals &&
+                      options.coherent_guide > 0;
+  auto make_src = [&] {
+    src = make_object(guided ? smoothed_normals(source, options.coherent_guide) : source, options.feature, patch,
+                      grid_needed, options.threads);
+  };
   if (options.threads == 1) {
     make_dst();
     make_src();
