@@ -45,6 +45,19 @@ QPushButton* button(const QString& text, const QString& name, QWidget* parent) {
   return b;
 }
 
+// A number box of the transfer panel: range, decimals, step and start value.
+QDoubleSpinBox* number_box(const QString& name, double lo, double hi, int decimals, double step, double value,
+                           const QString& tip = {}) {
+  auto* b = new QDoubleSpinBox;
+  b->setObjectName(name);
+  b->setRange(lo, hi);
+  b->setDecimals(decimals);
+  b->setSingleStep(step);
+  b->setValue(value);
+  if (!tip.isEmpty()) b->setToolTip(tip);
+  return b;
+}
+
 cv::Mat picture_of(const cv::Mat& linear) { return linear.empty() ? cv::Mat() : tonemap_picture(linear); }
 
 }  // namespace
@@ -299,49 +312,28 @@ QWidget* MainWindow::buildTransferPanel() {
   candidates_->setObjectName("candidates");
   candidates_->setRange(1, 100);
   candidates_->setValue(10);
-  threshold_ = new QDoubleSpinBox;
-  threshold_->setObjectName("threshold");
-  threshold_->setRange(0, 2);
-  threshold_->setDecimals(3);
-  threshold_->setSingleStep(0.01);
-  threshold_->setValue(0.05);
+  threshold_ = number_box("threshold", 0, 2, 3, 0.01, 0.05);
   iterations_ = new QSpinBox;
   iterations_->setObjectName("iterations");
   iterations_->setRange(1, 50);
   iterations_->setValue(5);
-  coherent_threshold_ = new QDoubleSpinBox;
-  coherent_threshold_->setObjectName("coherentThreshold");
-  coherent_threshold_->setRange(0, 2);
-  coherent_threshold_->setDecimals(3);
-  coherent_threshold_->setSingleStep(0.01);
-  coherent_threshold_->setValue(veneer::match::MatchOptions{}.coherent_threshold);
-  coherent_threshold_->setToolTip(tr("coherent: the normal error a chunk may make (0.1 = about 6°; on intensities "
-                                     "converted by the destination's own normals)"));
-  coherent_smooth_ = new QDoubleSpinBox;
-  coherent_smooth_->setObjectName("coherentSmooth");
-  coherent_smooth_->setRange(0, 20);
-  coherent_smooth_->setDecimals(2);
-  coherent_smooth_->setSingleStep(0.25);
-  coherent_smooth_->setValue(veneer::match::MatchOptions{}.coherent_smooth);
-  coherent_smooth_->setToolTip(tr("coherent: how much a seam between two chunks costs, in coherent thresholds "
-                                  "(0 = chunks only; larger = fewer seams, less exact shading)"));
-  coherent_guide_ = new QDoubleSpinBox;
-  coherent_guide_->setObjectName("coherentGuide");
-  coherent_guide_->setRange(0, 32);
-  coherent_guide_->setDecimals(1);
-  coherent_guide_->setSingleStep(1);
+  const veneer::match::MatchOptions defaults;
+  coherent_threshold_ = number_box("coherentThreshold", 0, 2, 3, 0.01, defaults.coherent_threshold,
+                                   tr("coherent: the normal error a chunk may make (0.1 = about 6°; on intensities "
+                                      "converted by the destination's own normals)"));
+  coherent_smooth_ = number_box("coherentSmooth", 0, 20, 2, 0.25, defaults.coherent_smooth,
+                                tr("coherent: how much a seam between two chunks costs, in coherent thresholds "
+                                   "(0 = chunks only; larger = fewer seams, less exact shading)"));
+  coherent_guide_ = number_box("coherentGuide", 0, 32, 1, 1, defaults.coherent_guide,
+                               tr("coherent on normals: match the source's normals smoothed over this radius, so "
+                                  "its small relief (dimples, grain) is copied whole (0 = off)"));
   coherent_guide_->setSuffix(tr(" px"));
-  coherent_guide_->setToolTip(tr("coherent on normals: match the source's normals smoothed over this radius, so its "
-                                 "small relief (dimples, grain) is copied whole (0 = off)"));
   blend_ = new QSpinBox;
   blend_->setObjectName("blend");
   blend_->setRange(0, 16);
   blend_->setSuffix(tr(" px"));
   blend_->setToolTip(tr("result pictures: blend the chunks meeting at a seam over this radius (0 = off)"));
-  uniformity_ = new QDoubleSpinBox;
-  uniformity_->setObjectName("uniformity");
-  uniformity_->setRange(0, 10);
-  uniformity_->setSingleStep(0.1);
+  uniformity_ = number_box("uniformity", 0, 10, 2, 0.1, defaults.uniformity);
   fast_ = new QCheckBox(tr("fast engine"));
   fast_->setObjectName("fast");
   fast_->setChecked(true);
@@ -350,12 +342,7 @@ QWidget* MainWindow::buildTransferPanel() {
   seg_method_ = new QComboBox;
   seg_method_->setObjectName("segMethod");
   seg_method_->addItems({"automatic", "otsu", "threshold"});
-  seg_threshold_ = new QDoubleSpinBox;
-  seg_threshold_->setObjectName("segThreshold");
-  seg_threshold_->setRange(0, 0.99);
-  seg_threshold_->setDecimals(3);
-  seg_threshold_->setSingleStep(0.005);
-  seg_threshold_->setValue(0.02);
+  seg_threshold_ = number_box("segThreshold", 0, 0.99, 3, 0.005, 0.02);
   rect_label_ = new QLabel(tr("no rectangle (shift+drag on the destination)"));
   rect_label_->setWordWrap(true);
   form->addRow(tr("Method"), method_);
