@@ -160,6 +160,16 @@ cv::Point cheapest3(const float* a, const float* dense, cv::Size box, const cv::
 }
 #endif
 
+// Squared distance between two feature vectors of c values.
+inline float sq_diff(const float* a, const float* b, int c) {
+  float v = 0;
+  for (int i = 0; i < c; ++i) {
+    const float t = a[i] - b[i];
+    v += t * t;
+  }
+  return v;
+}
+
 // The source's values densely over its bounding box, `stride` floats a
 // pixel (4 for three channels, for cheapest3's loads); off the object every
 // value is far away (1e4), so that a proposal there errs more than any on it.
@@ -257,9 +267,7 @@ Status refine(const Object& dst, const Object& src, const DenseSource& dense, co
             }
             const float room = best - pairs;
             if (!(room > 0)) return;
-            const float* v = dense.at(q.x, q.y, sb);
-            float e2 = 0;
-            for (int i = 0; i < cc; ++i) e2 += (a[i] - v[i]) * (a[i] - v[i]);
+            const float e2 = sq_diff(a, dense.at(q.x, q.y, sb), cc);
             if (e2 >= room * room) return;
             const float t = std::sqrt(e2) + pairs;
             if (t < best) best = t, best_q = q;
@@ -316,27 +324,14 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
   const int n = dst.rows(), c = dst.channels;
   const float thr2 = static_cast<float>(o.coherent_threshold * o.coherent_threshold);
   auto pixel_sq = [&](int d, int s) {
-    const float* a = dst.flat.data() + static_cast<size_t>(d) * c;
-    const float* b = src.flat.data() + static_cast<size_t>(s) * c;
-    float v = 0;
-    for (int i = 0; i < c; ++i) {
-      const float t = a[i] - b[i];
-      v += t * t;
-    }
-    return v;
+    return sq_diff(dst.flat.data() + static_cast<size_t>(d) * c, src.flat.data() + static_cast<size_t>(s) * c, c);
   };
 
   const DenseSource dense = dense_source(src, o.threads);
   const cv::Rect sb = src.bbox;
   auto dense_sq = [&](int d, int offset) {  // pixel_sq against the dense source at an offset
-    const float* a = dst.flat.data() + static_cast<size_t>(d) * c;
-    const float* b = dense.v.data() + static_cast<size_t>(offset) * dense.stride;
-    float v = 0;
-    for (int i = 0; i < c; ++i) {
-      const float t = a[i] - b[i];
-      v += t * t;
-    }
-    return v;
+    return sq_diff(dst.flat.data() + static_cast<size_t>(d) * c,
+                   dense.v.data() + static_cast<size_t>(offset) * dense.stride, c);
   };
   std::vector<int> chosen(n, -1);
   // the rows still unassigned, and per one of them its chunk (seed cell),

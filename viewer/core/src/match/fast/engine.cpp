@@ -487,9 +487,10 @@ ObjectView smoothed_normals(const ObjectView& v, double sigma) {
 // features (each lamp's share of the pixel's light) change by another amount
 // for the same turn of the surface, set by the lamps' layout. When the
 // destination has normals, the threshold is converted by how much its
-// features change per unit of normal change between neighbouring pixels
-// (summed over right and lower neighbours); else it stays as given. Albedo
-// divides out of the features, so texture does not move the ratio.
+// features change per unit of normal change between neighbouring pixels (the
+// median ratio over right and lower neighbours whose normals differ by 0.02
+// or more; smaller differences are mostly noise); else it stays as given.
+// Albedo divides out of the features, so texture does not move the ratio.
 double feature_per_normal(const ObjectView& v, const Object& o) {
   if (v.normals.empty() || v.normals.size() != o.values.size()) return 1.0;
   const int c = o.channels;
