@@ -307,7 +307,7 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
   TransferResult result;
   if (given) {
     const cv::Size want = dst->view.mask.size();
-    if (given->xy.size() != want || given->xy.type() != CV_32FC2)
+    if (given->xy.size() != want || given->xy.type() != CV_32FC2 || given->distance.size() != want)
       return make_error("the map given is " + std::to_string(given->xy.cols) + "x" + std::to_string(given->xy.rows) +
                         ", the prepared destination " + std::to_string(want.width) + "x" +
                         std::to_string(want.height));
