@@ -400,6 +400,9 @@ TEST_F(FastEngine, CoherentRefinementEndsAtALocalMinimum) {
       return cv::Point(static_cast<int>(v[0]), static_cast<int>(v[1]));
     };
     const cv::Point n4[4] = {{-1, 0}, {1, 0}, {0, -1}, {0, 1}};
+    auto on_dst = [&](int x, int y) {
+      return x >= 0 && y >= 0 && x < dst.mask.cols && y < dst.mask.rows && dst.mask.at<uchar>(y, x);
+    };
     int checked = 0, better = 0;
     for (int y = 0; y < dst.mask.rows; ++y)
       for (int x = 0; x < dst.mask.cols; ++x) {
@@ -413,7 +416,7 @@ TEST_F(FastEngine, CoherentRefinementEndsAtALocalMinimum) {
           double pairs = 0;
           for (const cv::Point& d : n4) {
             const int nx = x + d.x, ny = y + d.y;
-            if (nx < 0 || ny < 0 || nx >= dst.mask.cols || ny >= dst.mask.rows || !dst.mask.at<uchar>(ny, nx)) continue;
+            if (!on_dst(nx, ny)) continue;
             const cv::Point r = match(nx, ny);
             pairs += (r.x - q.x) * (r.x - q.x) + (r.y - q.y) * (r.y - q.y) > 2 ? lam : 0;
           }
@@ -422,7 +425,7 @@ TEST_F(FastEngine, CoherentRefinementEndsAtALocalMinimum) {
         const double now = cost(match(x, y));
         for (const cv::Point& d : n4) {
           const int nx = x + d.x, ny = y + d.y;
-          if (nx < 0 || ny < 0 || nx >= dst.mask.cols || ny >= dst.mask.rows || !dst.mask.at<uchar>(ny, nx)) continue;
+          if (!on_dst(nx, ny)) continue;
           const cv::Point base = match(nx, ny) - d;
           for (const cv::Point& s : {cv::Point(0, 0), cv::Point(1, 0), cv::Point(-1, 0), cv::Point(0, 1), cv::Point(0, -1)}) {
             const cv::Point q = base + s;
