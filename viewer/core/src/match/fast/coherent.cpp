@@ -112,7 +112,10 @@ cv::Point cheapest3(const float* a, const float* dense, cv::Size box, const cv::
   const __m256i w = _mm256_set1_epi32(box.width), h = _mm256_set1_epi32(box.height), two = _mm256_set1_epi32(2);
   const __m256i minus1 = _mm256_set1_epi32(-1);
   const __m256 vlam = _mm256_set1_ps(lam), inf = _mm256_set1_ps(std::numeric_limits<float>::infinity());
-  __m256 cost[3] = {};  // the first `vectors` are set (at least one: the current match)
+  // costs kept in memory for the final scan, and their running minimum (an
+  // array of vectors zero-filled first costs a `rep stos` per pixel)
+  alignas(32) float cost[24];
+  __m256 m = inf;
   for (int v = 0; v < vectors; ++v) {
     const __m256i x = _mm256_load_si256(reinterpret_cast<const __m256i*>(px + 8 * v));
     const __m256i y = _mm256_load_si256(reinterpret_cast<const __m256i*>(py + 8 * v));
@@ -142,15 +145,15 @@ cv::Point cheapest3(const float* a, const float* dense, cv::Size box, const cv::
       breaks = _mm256_add_epi32(breaks, _mm256_cmpgt_epi32(d2i, two));
     }
     const __m256 pairs = _mm256_mul_ps(vlam, _mm256_cvtepi32_ps(_mm256_sub_epi32(_mm256_setzero_si256(), breaks)));
-    cost[v] = _mm256_blendv_ps(inf, _mm256_add_ps(err, pairs), _mm256_castsi256_ps(inside));
+    const __m256 c = _mm256_blendv_ps(inf, _mm256_add_ps(err, pairs), _mm256_castsi256_ps(inside));
+    _mm256_store_ps(cost + 8 * v, c);
+    m = _mm256_min_ps(m, c);
   }
-  __m256 m = cost[0];
-  for (int v = 1; v < vectors; ++v) m = _mm256_min_ps(m, cost[v]);
   m = _mm256_min_ps(m, _mm256_permute2f128_ps(m, m, 1));
   m = _mm256_min_ps(m, _mm256_shuffle_ps(m, m, _MM_SHUFFLE(1, 0, 3, 2)));
   m = _mm256_min_ps(m, _mm256_shuffle_ps(m, m, _MM_SHUFFLE(2, 3, 0, 1)));
   for (int v = 0; v < vectors; ++v) {
-    const int hit = _mm256_movemask_ps(_mm256_cmp_ps(cost[v], m, _CMP_EQ_OQ));
+    const int hit = _mm256_movemask_ps(_mm256_cmp_ps(_mm256_load_ps(cost + 8 * v), m, _CMP_EQ_OQ));
     if (hit) {
       const int i = 8 * v + std::countr_zero(static_cast<unsigned>(hit));
       return {px[i], py[i]};
@@ -240,6 +243,18 @@ Status refine(const Object& dst, const Object& src, const DenseSource& dense, co
           if (((pt.x + pt.y) & 1) != colour || !visit[d]) continue;
           visit[d] = 0;
           cv::Point best_q = pos[d];
+          // Settled: all four neighbours continue this match exactly (a
+          // chunk's inside) and it errs less than lam. Every other position
+          // lies over 1.5 px from one neighbour's match, so costs at least
+          // lam: nothing can be cheaper, and the pixel is skipped unread.
+          {
+            bool settled = true;
+            for (int j = 0; j < 4 && settled; ++j)
+              settled = nbr[d][j] >= 0 && pos[nbr[d][j]] == best_q + n4[j];
+            if (settled && sq_diff(dst.flat.data() + static_cast<size_t>(d) * cc,
+                                   dense.at(best_q.x, best_q.y, sb), cc) < lam * lam)
+              continue;
+          }
 #ifdef __AVX2__
           if constexpr (C == 3) {
             best_q = cheapest3(dst.flat.data() + static_cast<size_t>(d) * 3, dense.v.data(), sb.size(), pos.data(),
