@@ -8,6 +8,7 @@
 // under the thesis's 7-lamp ring.
 //
 // Usage: bench_match [--quick] [--pictures DIR] [--only STEP [--runs N]]
+//   --only: time one row (for profiling) and print its map's quality
 //   --quick: 1 run per row, small object only; --pictures: PNGs of the maps
 //   (thesis colouring) beside the destination repainted with the source's photo.
 #include <algorithm>
@@ -271,6 +272,7 @@ int main(int argc, char** argv) {
       std::vector<double> t;
       bool ok = true;
       std::vector<double> cpu;
+      Quality q;  // of the last run's map, printed with --only
       const int reps = pr.large && only.empty() ? std::min(runs, 3) : runs;
       for (int i = 0; i <= reps; ++i) {  // run 0 warms caches and the thread pool
         const auto t0 = Clock::now();
@@ -284,6 +286,7 @@ int main(int argc, char** argv) {
           break;
         }
         if (i > 0) t.push_back(e);
+        if (!only.empty() && i == reps) q = evaluate(*m, pr.dst.mask, pr.src.mask, pr.dst.normals, pr.src.normals);
       }
       if (!ok) continue;
       const double fast_ms = median(t), fast_cpu = median(cpu);
@@ -299,6 +302,9 @@ int main(int argc, char** argv) {
                   : !st.projected_dims ? "exact"
                   : st.certified > 0 ? (fmt(100 * st.certified, 1) + " %").c_str()
                                      : "approximate");
+      if (!only.empty())  // a speed change shows here whether it moved the map
+        std::printf("\nmap: mean normal error %s deg, coherence %s %%\n", fmt(q.normal_mean_deg.value_or(-1), 3).c_str(),
+                    fmt(100 * q.coherence, 2).c_str());
       std::fflush(stdout);
     }
     std::printf("\n");
