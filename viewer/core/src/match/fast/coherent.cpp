@@ -422,21 +422,36 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
       // (x and y multiples of 4): a sixteenth of the source reads where most
       // chunks fail, and still hundreds of pixels per chunk.
       const bool sampled = s >= 16;
-      // the seed whose chunk pixel pt is in: the nearest of the 3x3 cells' seeds
+      // The seeds on a grid padded by one cell all round; a seed off the
+      // object, and the padding, sit far away (cell -1), so that finding a
+      // pixel's nearest seed needs neither bounds checks nor branches.
+      const int pgx = gx + 2;
+      struct PaddedSeed {
+        int x, y, cell;
+      };
+      std::vector<PaddedSeed> padded(static_cast<size_t>(pgx) * (gy + 2), PaddedSeed{-(1 << 14), -(1 << 14), -1});
+      for (int j = 0; j < gy; ++j)
+        for (int i = 0; i < gx; ++i) {
+          const int cell = j * gx + i;
+          if (seed_match[cell] >= 0) padded[(j + 1) * pgx + i + 1] = {seed_at[cell].x, seed_at[cell].y, cell};
+        }
+      // the seed whose chunk pixel pt is in: the nearest of the 3x3 cells'
+      // seeds (the first in row order among equals), -1 if none is on the object
       auto owner_of = [&](cv::Point pt) {
         const int ci = (pt.x - box.x) >> shift, cj = (pt.y - box.y) >> shift;
         int best_cell = -1, best_d2 = std::numeric_limits<int>::max();
-        for (int j = std::max(0, cj - 1); j <= std::min(gy - 1, cj + 1); ++j)
-          for (int i = std::max(0, ci - 1); i <= std::min(gx - 1, ci + 1); ++i) {
-            const int cell = j * gx + i;
-            if (seed_match[cell] < 0) continue;
-            const cv::Point a = seed_at[cell];
-            const int d2 = (a.x - pt.x) * (a.x - pt.x) + (a.y - pt.y) * (a.y - pt.y);
-            if (d2 < best_d2) best_d2 = d2, best_cell = cell;
+        for (int j = 0; j < 3; ++j) {
+          const PaddedSeed* row = &padded[static_cast<size_t>(cj + j) * pgx + ci];
+          for (int i = 0; i < 3; ++i) {
+            const int dx = row[i].x - pt.x, dy = row[i].y - pt.y, d2 = dx * dx + dy * dy;
+            const bool nearer = d2 < best_d2;
+            best_d2 = nearer ? d2 : best_d2;
+            best_cell = nearer ? row[i].cell : best_cell;
           }
+        }
         return best_cell;
       };
-      parallel_rows(na, o.threads, 512, [&](int b, int e) {
+      parallel_rows(na, o.threads, 16384, [&](int b, int e) {
         // first each pixel's chunk and the source position it proposes
         // (prop: its offset in the dense source, -1 outside the source's
         // box, -2 not judged), then the source reads, each a cache miss:
