@@ -173,22 +173,36 @@ inline float sq_diff(const float* a, const float* b, int c) {
   return v;
 }
 
-// The source's values densely over its bounding box, `stride` floats a
-// pixel (4 for three channels, for cheapest3's loads); off the object every
-// value is far away (1e4), so that a proposal there errs more than any on it.
-// Reading it costs one cache miss where the row image and the rows cost two.
+// The source's values densely over its bounding box, channels + 1 floats a
+// pixel (4 for normals, for cheapest3's loads): the values, then 0 on the
+// object; off the object every float is far away (1e4), so that a proposal
+// there errs more than any on it. Reading it costs one cache miss where the
+// row image and the rows cost two. `coherent` keeps its matches as
+// positions in the box packed in an int (x + y * 2^16; -1 none), and needs
+// the source's rows only for the nearest.
 struct DenseSource {
   std::vector<float> v;
-  int stride = 0;
-  const float* at(int x, int y, const cv::Rect& box) const {  // x, y relative to box
+  int stride = 0, channels = 0;
+  cv::Rect box;  // of the source, in the image
+  const float* at(int x, int y) const {  // x, y relative to box
     return v.data() + (static_cast<size_t>(y) * box.width + x) * stride;
   }
+  const float* at(cv::Point q) const { return at(q.x, q.y); }
+  bool inside(cv::Point q) const {
+    return static_cast<unsigned>(q.x) < static_cast<unsigned>(box.width) &&
+           static_cast<unsigned>(q.y) < static_cast<unsigned>(box.height);
+  }
+  bool on(cv::Point q) const { return at(q)[channels] == 0.0f; }  // on the object (q inside)
+  static int pack(cv::Point q) { return q.x | (q.y << 16); }
+  static cv::Point unpack(int packed) { return {packed & 0xffff, packed >> 16}; }
 };
 
 DenseSource dense_source(const Object& src, int threads) {
   DenseSource d;
   const int cc = src.channels;
-  d.stride = cc == 3 ? 4 : cc;
+  d.channels = cc;
+  d.stride = cc + 1;
+  d.box = src.bbox;
   const cv::Rect sb = src.bbox;
   d.v.resize(static_cast<size_t>(sb.area()) * d.stride);
   parallel_rows(sb.height, threads, 16, [&](int b, int e) {
@@ -210,21 +224,21 @@ DenseSource dense_source(const Object& src, int threads) {
 
 template <int C>  // the channel count, or 0: any
 Status refine(const Object& dst, const Object& src, const DenseSource& dense, const int* nearest, int k,
-              const MatchOptions& o, const Progress& p, std::vector<int>& chosen) {
+              const MatchOptions& o, const Progress& p, std::vector<int>& chosen) {  // chosen: packed positions
   const int n = dst.rows(), cc = C > 0 ? C : dst.channels;
   const float lam = static_cast<float>(o.coherent_smooth * o.coherent_threshold);
   const bool offer_nearest = o.uniformity <= 0;
   const cv::Point n4[4] = {{-1, 0}, {1, 0}, {0, -1}, {0, 1}};
   // every match as a position in the dense source: a proposal costs one read
   const cv::Rect sb = src.bbox;
-  auto at_pos = [&](int row) { return src.pixels[row] - sb.tl(); };
+  auto at_pos = [&](int row) { return src.pixels[row] - sb.tl(); };  // a source row's
   std::vector<cv::Point> pos(n), near(offer_nearest ? n : 0);
   std::vector<std::array<int, 4>> nbr(n);  // 4-neighbour rows (-1 off the object)
   parallel_rows(n, o.threads, 4096, [&](int b, int e) {
     for (int d = b; d < e; ++d) {
       const cv::Point pt = dst.pixels[d];
       for (int j = 0; j < 4; ++j) nbr[d][j] = dst.row_at(pt.x + n4[j].x, pt.y + n4[j].y);
-      pos[d] = at_pos(chosen[d]);
+      pos[d] = DenseSource::unpack(chosen[d]);
       if (offer_nearest) near[d] = at_pos(nearest[static_cast<size_t>(d) * k]);
     }
   });
@@ -252,7 +266,7 @@ Status refine(const Object& dst, const Object& src, const DenseSource& dense, co
             for (int j = 0; j < 4 && settled; ++j)
               settled = nbr[d][j] >= 0 && pos[nbr[d][j]] == best_q + n4[j];
             if (settled && sq_diff(dst.flat.data() + static_cast<size_t>(d) * cc,
-                                   dense.at(best_q.x, best_q.y, sb), cc) < lam * lam)
+                                   dense.at(best_q.x, best_q.y), cc) < lam * lam)
               continue;
           }
 #ifdef __AVX2__
@@ -282,7 +296,7 @@ Status refine(const Object& dst, const Object& src, const DenseSource& dense, co
             }
             const float room = best - pairs;
             if (!(room > 0)) return;
-            const float e2 = sq_diff(a, dense.at(q.x, q.y, sb), cc);
+            const float e2 = sq_diff(a, dense.at(q.x, q.y), cc);
             if (e2 >= room * room) return;
             const float t = std::sqrt(e2) + pairs;
             if (t < best) best = t, best_q = q;
@@ -319,7 +333,7 @@ Status refine(const Object& dst, const Object& src, const DenseSource& dense, co
     if (changed.load() == 0) break;
   }
   parallel_rows(n, o.threads, 4096, [&](int b, int e) {
-    for (int d = b; d < e; ++d) chosen[d] = src.row_at(pos[d].x + sb.x, pos[d].y + sb.y);
+    for (int d = b; d < e; ++d) chosen[d] = DenseSource::pack(pos[d]);
   });
   return {};
 }
@@ -338,16 +352,20 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
   if (auto s = nearest_lists(dst, src, k, default_index(), o.threads, p, nn, stats); !s) return s.error();
   const int n = dst.rows(), c = dst.channels;
   const float thr2 = static_cast<float>(o.coherent_threshold * o.coherent_threshold);
-  auto pixel_sq = [&](int d, int s) {
-    return sq_diff(dst.flat.data() + static_cast<size_t>(d) * c, src.flat.data() + static_cast<size_t>(s) * c, c);
-  };
-
-  const DenseSource dense = dense_source(src, o.threads);
   const cv::Rect sb = src.bbox;
-  auto dense_sq = [&](int d, int offset) {  // pixel_sq against the dense source at an offset
+  if (sb.width > 32767 || sb.height > 32767)
+    return make_error("coherent: the source object spans more than 32767 px (" + std::to_string(sb.width) + "x" +
+                      std::to_string(sb.height) + ")");
+  const DenseSource dense = dense_source(src, o.threads);
+  auto dense_sq = [&](int d, int offset) {  // squared feature distance to the dense source at an offset
     return sq_diff(dst.flat.data() + static_cast<size_t>(d) * c,
                    dense.v.data() + static_cast<size_t>(offset) * dense.stride, c);
   };
+  auto packed_sq = [&](int d, int packed) {  // the same at a packed position
+    return sq_diff(dst.flat.data() + static_cast<size_t>(d) * c, dense.at(DenseSource::unpack(packed)), c);
+  };
+  auto packed_row = [&](int row) { return DenseSource::pack(src.pixels[row] - sb.tl()); };  // a source row's
+  // the match of every destination row, as a packed position (-1: none yet)
   std::vector<int> chosen(n, -1);
   // the rows still unassigned, and per one of them its chunk (seed cell),
   // proposal and error at the current level
@@ -518,8 +536,8 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
           if (c0 < 0 || prop[ai] == -1) continue;
           if (!taken[c0]) continue;
           const cv::Point pt = dst.pixels[active[ai]], m = src.pixels[seed_match[c0]], a = seed_at[c0];
-          const int row = src.row_at(m.x + pt.x - a.x, m.y + pt.y - a.y);
-          if (row >= 0) chosen[active[ai]] = row;
+          const cv::Point q = m + pt - a - sb.tl();
+          if (dense.inside(q) && dense.on(q)) chosen[active[ai]] = DenseSource::pack(q);
         }
       });
       // the pixels still unassigned, in row order
@@ -532,7 +550,7 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
       std::fill(uses.begin(), uses.end(), 0);
       for (int d = 0; d < n; ++d)
         if (chosen[d] >= 0) {
-          const cv::Point q = src.pixels[chosen[d]];
+          const cv::Point q = DenseSource::unpack(chosen[d]) + sb.tl();
           ++uses[static_cast<size_t>(q.y) * src.size.width + q.x];
         }
     }
@@ -549,15 +567,14 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
         const int d = active[sweep == 0 ? i : na - 1 - i];
         if (chosen[d] >= 0 && sweep == 0) continue;
         const cv::Point pt = dst.pixels[d];
-        float best = chosen[d] >= 0 ? pixel_sq(d, chosen[d]) : t2;
+        float best = chosen[d] >= 0 ? packed_sq(d, chosen[d]) : t2;
         for (const cv::Point off : {cv::Point(-step, 0), cv::Point(0, -step)}) {
           const int nb = dst.row_at(pt.x + off.x, pt.y + off.y);
           if (nb < 0 || chosen[nb] < 0) continue;
-          const cv::Point m = src.pixels[chosen[nb]];
-          const int row = src.row_at(m.x - off.x, m.y - off.y);
-          if (row < 0) continue;
-          const float v = pixel_sq(d, row);
-          if (v < best) best = v, chosen[d] = row;
+          const cv::Point q = DenseSource::unpack(chosen[nb]) - off;
+          if (!dense.inside(q) || !dense.on(q)) continue;
+          const float v = sq_diff(dst.flat.data() + static_cast<size_t>(d) * c, dense.at(q), c);
+          if (v < best) best = v, chosen[d] = DenseSource::pack(q);
         }
       }
     }
@@ -567,20 +584,22 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
   for (int d = 0; d < n; ++d) {
     if (chosen[d] >= 0) continue;
     if (u <= 0) {
-      chosen[d] = nn.ids[static_cast<size_t>(d) * k];
+      chosen[d] = packed_row(nn.ids[static_cast<size_t>(d) * k]);
       continue;
     }
     float best = std::numeric_limits<float>::infinity();
+    int pick = -1;
     for (int m = 0; m < k; ++m) {
       const int id = nn.ids[static_cast<size_t>(d) * k + m];
       if (id < 0) break;
       const cv::Point q = src.pixels[id];
       const float cost = std::sqrt(nn.sq[static_cast<size_t>(d) * k + m] / area) +
                          u * static_cast<float>(uses[static_cast<size_t>(q.y) * src.size.width + q.x]) / fair;
-      if (cost < best) best = cost, chosen[d] = id;
+      if (cost < best) best = cost, pick = id;
     }
-    if (chosen[d] >= 0) {
-      const cv::Point q = src.pixels[chosen[d]];
+    if (pick >= 0) {
+      chosen[d] = packed_row(pick);
+      const cv::Point q = src.pixels[pick];
       ++uses[static_cast<size_t>(q.y) * src.size.width + q.x];
     }
   }
@@ -594,11 +613,10 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
   Map map = new_map(dst.size);
   parallel_rows(n, o.threads, 4096, [&](int b, int e) {
     for (int d = b; d < e; ++d) {
-      const int s = chosen[d];
-      if (s < 0) continue;
-      const cv::Point pt = dst.pixels[d], q = src.pixels[s];
+      if (chosen[d] < 0) continue;
+      const cv::Point pt = dst.pixels[d], q = DenseSource::unpack(chosen[d]) + sb.tl();
       map.xy.at<cv::Vec2f>(pt.y, pt.x) = cv::Vec2f(static_cast<float>(q.x), static_cast<float>(q.y));
-      map.distance.at<float>(pt.y, pt.x) = std::sqrt(pixel_sq(d, s));  // the feature distance
+      map.distance.at<float>(pt.y, pt.x) = std::sqrt(packed_sq(d, chosen[d]));  // the feature distance
     }
   });
   return map;
