@@ -529,22 +529,37 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
         any = any || taken[c];
       }
       // (a level that takes no chunk, often the coarsest, ends here)
-      parallel_rows(any ? na : 0, o.threads, 1024, [&](int b, int e) {
-        for (int ai = b; ai < e; ++ai) {
-          int c0 = owner[ai];
-          if (c0 == -3) c0 = owner_of(dst.pixels[active[ai]]);
-          if (c0 < 0 || prop[ai] == -1) continue;
-          if (!taken[c0]) continue;
-          const cv::Point pt = dst.pixels[active[ai]], m = src.pixels[seed_match[c0]], a = seed_at[c0];
-          const cv::Point q = m + pt - a - sb.tl();
-          if (dense.inside(q) && dense.on(q)) chosen[active[ai]] = DenseSource::pack(q);
-        }
-      });
-      // the pixels still unassigned, in row order
-      size_t kept = 0;
-      for (int ai = 0; ai < na; ++ai)
-        if (chosen[active[ai]] < 0) active[kept++] = active[ai];
-      active.resize(kept);
+      if (any) {
+        // per cell: whether a taken chunk's seed is among its 3x3 cells, i.e.
+        // whether a pixel there can be in one (the pixels not judged look for
+        // their seed only then)
+        std::vector<uint8_t> near_taken(static_cast<size_t>(gx) * gy, 0);
+        for (int j = 0; j < gy; ++j)
+          for (int i = 0; i < gx; ++i)
+            if (taken[static_cast<size_t>(j) * gx + i])
+              for (int y = std::max(0, j - 1); y <= std::min(gy - 1, j + 1); ++y)
+                for (int x = std::max(0, i - 1); x <= std::min(gx - 1, i + 1); ++x) near_taken[y * gx + x] = 1;
+        parallel_rows(na, o.threads, 1024, [&](int b, int e) {
+          for (int ai = b; ai < e; ++ai) {
+            int c0 = owner[ai];
+            if (c0 == -3) {
+              const cv::Point pt = dst.pixels[active[ai]];
+              if (!near_taken[((pt.y - box.y) >> shift) * gx + ((pt.x - box.x) >> shift)]) continue;
+              c0 = owner_of(pt);
+            }
+            if (c0 < 0 || prop[ai] == -1) continue;
+            if (!taken[c0]) continue;
+            const cv::Point pt = dst.pixels[active[ai]], m = src.pixels[seed_match[c0]], a = seed_at[c0];
+            const cv::Point q = m + pt - a - sb.tl();
+            if (dense.inside(q) && dense.on(q)) chosen[active[ai]] = DenseSource::pack(q);
+          }
+        });
+        // the pixels still unassigned, in row order
+        size_t kept = 0;
+        for (int ai = 0; ai < na; ++ai)
+          if (chosen[active[ai]] < 0) active[kept++] = active[ai];
+        active.resize(kept);
+      }
     }
     if (u > 0) {
       std::fill(uses.begin(), uses.end(), 0);
