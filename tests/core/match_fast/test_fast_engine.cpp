@@ -517,6 +517,23 @@ TEST_F(FastEngine, BadInputIsAnError) {
   EXPECT_FALSE(fast::compute_map(dst, fewer, o).ok());
 }
 
+// coherent keeps a source position's x in 16 bits: a source spread over more
+// than 65536 px is refused by name, not wrapped into wrong matches.
+TEST_F(FastEngine, CoherentRefusesASourceWiderThanItsPositions) {
+  const cv::Size size(70000, 2);
+  ObjectView wide;
+  wide.normals = cv::Mat(size, CV_32FC3, cv::Scalar(0, 0, 1));
+  wide.mask = cv::Mat::zeros(size, CV_8UC1);
+  wide.mask.at<uchar>(0, 0) = wide.mask.at<uchar>(1, 69999) = 255;
+  auto o = opts(Method::coherent, Feature::normals, 1, true);
+  auto m = fast::compute_map(dst, wide, o);
+  ASSERT_FALSE(m.ok());
+  EXPECT_NE(m.message().find("70000x2"), std::string::npos) << m.message();
+  wide.mask.at<uchar>(1, 69999) = 0;  // two source pixels side by side instead
+  wide.mask.at<uchar>(1, 1) = 255;
+  EXPECT_TRUE(fast::compute_map(dst, wide, o).ok());
+}
+
 }  // namespace
 
 namespace {

@@ -356,9 +356,9 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
   const int n = dst.rows(), c = dst.channels;
   const float thr2 = static_cast<float>(o.coherent_threshold * o.coherent_threshold);
   const cv::Rect sb = src.bbox;
-  if (sb.width > 32767 || sb.height > 32767)
-    return make_error("coherent: the source object spans more than 32767 px (" + std::to_string(sb.width) + "x" +
-                      std::to_string(sb.height) + ")");
+  if (sb.width > 65536 || sb.height > 32768)  // DenseSource::pack: x in 16 bits, y in 15
+    return make_error("coherent: the source object spans " + std::to_string(sb.width) + "x" +
+                      std::to_string(sb.height) + " px; at most 65536x32768 can be matched");
   const DenseSource dense = dense_source(src, o.threads);
   auto dense_sq = [&](int d, int offset) {  // squared feature distance to the dense source at an offset
     return sq_diff(dst.flat.data() + static_cast<size_t>(d) * c,
