@@ -3,7 +3,7 @@
 // cup-dots -> cup-white), matched on the simulator's truth normals and
 // measured with match::evaluate against the same truth, at 512x340 (the
 // quality table's size), 1024x680 (the frames) and 1024x680 with the
-// objects 1.7x larger (the bull 130k px; bench_match's large one has 178k). Rows:
+// objects 1.7x larger (the bull 130k px; bench_match's large one has 150k). Rows:
 // the per-pixel nearest (fast flann), the chunks alone (coherent_smooth = 0)
 // over thresholds, and the chunks refined over thresholds t and seam costs w
 // (default t = 0.10, w = 2), and once with a 4 px guide (coherent_guide: the
