@@ -451,7 +451,8 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
       struct PaddedSeed {
         int x, y, cell;
       };
-      std::vector<PaddedSeed> padded(static_cast<size_t>(pgx) * (gy + 2), PaddedSeed{-(1 << 14), -(1 << 14), -1});
+      constexpr int far = -(1 << 29);  // squared distances in 64 bits: no overflow for any image
+      std::vector<PaddedSeed> padded(static_cast<size_t>(pgx) * (gy + 2), PaddedSeed{far, far, -1});
       for (int j = 0; j < gy; ++j)
         for (int i = 0; i < gx; ++i) {
           const int cell = j * gx + i;
@@ -461,11 +462,12 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
       // seeds (the first in row order among equals), -1 if none is on the object
       auto owner_of = [&](cv::Point pt) {
         const int ci = (pt.x - box.x) >> shift, cj = (pt.y - box.y) >> shift;
-        int best_cell = -1, best_d2 = std::numeric_limits<int>::max();
+        int best_cell = -1;
+        int64_t best_d2 = std::numeric_limits<int64_t>::max();
         for (int j = 0; j < 3; ++j) {
           const PaddedSeed* row = &padded[static_cast<size_t>(cj + j) * pgx + ci];
           for (int i = 0; i < 3; ++i) {
-            const int dx = row[i].x - pt.x, dy = row[i].y - pt.y, d2 = dx * dx + dy * dy;
+            const int64_t dx = row[i].x - pt.x, dy = row[i].y - pt.y, d2 = dx * dx + dy * dy;
             const bool nearer = d2 < best_d2;
             best_d2 = nearer ? d2 : best_d2;
             best_cell = nearer ? row[i].cell : best_cell;
