@@ -246,19 +246,16 @@ Status refine(const Object& dst, const Object& src, const DenseSource& dense, co
   // to visit: all at first; then the pixels next to a change, all of the
   // other colour, so marking them does not touch the pixels being visited
   std::vector<uint8_t> visit(n, 1);
-  std::vector<int> of_colour[2];  // the rows of each colour, in order
-  for (int d = 0; d < n; ++d) of_colour[(dst.pixels[d].x + dst.pixels[d].y) & 1].push_back(d);
   for (int round = 0; round < o.coherent_sweeps; ++round) {
     if (p.cancelled()) return make_error("cancelled during coherent transfer");
     p.report(0.9 + 0.1 * round / o.coherent_sweeps, "coherent refinement");
     std::atomic<int> changed{0};
     for (int colour = 0; colour < 2; ++colour) {
-      const std::vector<int>& rows = of_colour[colour];
-      parallel_rows(static_cast<int>(rows.size()), o.threads, 1024, [&](int b, int e) {
+      parallel_rows(n, o.threads, 2048, [&](int b, int e) {
         int local = 0;
-        for (int i = b; i < e; ++i) {
-          const int d = rows[i];
-          if (!visit[d]) continue;
+        for (int d = b; d < e; ++d) {
+          const cv::Point pt = dst.pixels[d];
+          if (((pt.x + pt.y) & 1) != colour || !visit[d]) continue;
           visit[d] = 0;
           cv::Point best_q = pos[d];
           // Settled: all four neighbours continue this match exactly (a
