@@ -164,16 +164,6 @@ cv::Point cheapest3(const float* a, const float* dense, cv::Size box, const cv::
 }
 #endif
 
-// Squared distance between two feature vectors of c values.
-inline float sq_diff(const float* a, const float* b, int c) {
-  float v = 0;
-  for (int i = 0; i < c; ++i) {
-    const float t = a[i] - b[i];
-    v += t * t;
-  }
-  return v;
-}
-
 // The source's values densely over its bounding box, channels + 1 floats a
 // pixel (4 for normals, for cheapest3's loads): the values, then 0 on the
 // object; off the object every float is far away (1e4), so that a proposal
@@ -266,7 +256,7 @@ Status refine(const Object& dst, const Object& src, const DenseSource& dense, co
             bool settled = true;
             for (int j = 0; j < 4 && settled; ++j)
               settled = nbr[d][j] >= 0 && pos[nbr[d][j]] == best_q + n4[j];
-            if (settled && sq_diff(dst.flat.data() + static_cast<size_t>(d) * cc,
+            if (settled && squared_distance(dst.flat.data() + static_cast<size_t>(d) * cc,
                                    dense.at(best_q.x, best_q.y), cc) < lam * lam)
               continue;
           }
@@ -297,7 +287,7 @@ Status refine(const Object& dst, const Object& src, const DenseSource& dense, co
             }
             const float room = best - pairs;
             if (!(room > 0)) return;
-            const float e2 = sq_diff(a, dense.at(q.x, q.y), cc);
+            const float e2 = squared_distance(a, dense.at(q.x, q.y), cc);
             if (e2 >= room * room) return;
             const float t = std::sqrt(e2) + pairs;
             if (t < best) best = t, best_q = q;
@@ -359,11 +349,11 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
                       std::to_string(sb.height) + " px; at most 65536x32768 can be matched");
   const DenseSource dense = dense_source(src, o.threads);
   auto dense_sq = [&](int d, int offset) {  // squared feature distance to the dense source at an offset
-    return sq_diff(dst.flat.data() + static_cast<size_t>(d) * c,
+    return squared_distance(dst.flat.data() + static_cast<size_t>(d) * c,
                    dense.v.data() + static_cast<size_t>(offset) * dense.stride, c);
   };
   auto packed_sq = [&](int d, int packed) {  // the same at a packed position
-    return sq_diff(dst.flat.data() + static_cast<size_t>(d) * c, dense.at(DenseSource::unpack(packed)), c);
+    return squared_distance(dst.flat.data() + static_cast<size_t>(d) * c, dense.at(DenseSource::unpack(packed)), c);
   };
   auto packed_row = [&](int row) { return DenseSource::pack(src.pixels[row] - sb.tl()); };  // a source row's
   // the match of every destination row, as a packed position (-1: none yet)
@@ -591,7 +581,7 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
           if (nb < 0 || chosen[nb] < 0) continue;
           const cv::Point q = DenseSource::unpack(chosen[nb]) - off;
           if (!dense.inside(q) || !dense.on(q)) continue;
-          const float v = sq_diff(dst.flat.data() + static_cast<size_t>(d) * c, dense.at(q), c);
+          const float v = squared_distance(dst.flat.data() + static_cast<size_t>(d) * c, dense.at(q), c);
           if (v < best) best = v, chosen[d] = DenseSource::pack(q);
         }
       }
