@@ -1,6 +1,7 @@
 // Blending of overlapping chunks for repaint (fast.hpp, blend_repaint).
 #include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include "object.hpp"
 #include "veneer/match/fast.hpp"
@@ -19,6 +20,12 @@ Expected<cv::Mat> blend_repaint(const Map& map, const cv::Mat& destination_mask,
   const int w = destination_mask.cols, h = destination_mask.rows;
   cv::Mat out(destination_mask.size(), CV_32FC3, cv::Scalar::all(0));
   const float sigma2 = 2.0f * std::max(1.0f, radius * 0.5f) * std::max(1.0f, radius * 0.5f);
+  // the Gaussian weight of every offset in the window, once per call (not per pixel)
+  const int side = 2 * radius + 1;
+  std::vector<float> weight_of(static_cast<size_t>(side) * side);
+  for (int dy = -radius; dy <= radius; ++dy)
+    for (int dx = -radius; dx <= radius; ++dx)
+      weight_of[(dy + radius) * side + dx + radius] = std::exp(-static_cast<float>(dx * dx + dy * dy) / sigma2);
   parallel_rows(h, threads, 4, [&](int y0, int y1) {
     for (int y = y0; y < y1; ++y) {
       for (int x = 0; x < w; ++x) {
@@ -35,7 +42,7 @@ Expected<cv::Mat> blend_repaint(const Map& map, const cv::Mat& destination_mask,
             const int qx = static_cast<int>(m[0]) - dx, qy = static_cast<int>(m[1]) - dy;
             if (qx < 0 || qy < 0 || qx >= source_mask.cols || qy >= source_mask.rows || !source_mask.at<uchar>(qy, qx))
               continue;
-            const float wgt = std::exp(-static_cast<float>(dx * dx + dy * dy) / sigma2);
+            const float wgt = weight_of[(dy + radius) * side + dx + radius];
             sum += wgt * source_photo.at<cv::Vec3f>(qy, qx);
             weight += wgt;
           }
