@@ -157,8 +157,9 @@ class MainWindow : public QMainWindow {
   QLabel *status_label_ = nullptr, *capture_label_ = nullptr, *transfer_label_ = nullptr,
          *message_label_ = nullptr, *live_label_ = nullptr, *rect_label_ = nullptr, *relight_label_ = nullptr;
   QProgressBar *shot_bar_ = nullptr, *transfer_bar_ = nullptr, *pull_bar_ = nullptr;
-  QDoubleSpinBox *shutter_ = nullptr, *aperture_ = nullptr, *threshold_ = nullptr, *coherent_threshold_ = nullptr, *coherent_smooth_ = nullptr,
-                 *coherent_guide_ = nullptr, *uniformity_ = nullptr, *seg_threshold_ = nullptr, *fps_ = nullptr;
+  QDoubleSpinBox *shutter_ = nullptr, *aperture_ = nullptr, *threshold_ = nullptr, *coherent_threshold_ = nullptr,
+                 *coherent_smooth_ = nullptr, *coherent_guide_ = nullptr, *uniformity_ = nullptr,
+                 *seg_threshold_ = nullptr, *fps_ = nullptr;
   QSpinBox *iso_ = nullptr, *candidates_ = nullptr, *iterations_ = nullptr, *blend_ = nullptr;
   QComboBox *method_ = nullptr, *feature_ = nullptr, *patch_ = nullptr, *seg_method_ = nullptr, *look_what_ = nullptr,
             *recent_ = nullptr;

@@ -106,23 +106,21 @@ bool sim_object(const std::string& scene, int target, ObjectView& v, int& got) {
   // The scale that gives the target pixel count (within 2 %): the area does
   // not grow exactly with the square of the scale (perspective, the frame's
   // edge), so the first guess is corrected a few times.
-  for (int pass = 0; pass < 6; ++pass) {
+  for (int pass = 0;; ++pass) {
     auto sc = sim::make_scene(scene, ro);
     if (!sc) return false;
     veneer::Truth t = sim::render_truth(**sc, ro);
     got = cv::countNonZero(t.mask);
     if (got == 0) return false;
-    if (std::abs(got - target) > target / 50 && pass < 5) {
-      ro.scale *= std::sqrt(static_cast<double>(target) / got);
-      continue;
+    if (std::abs(got - target) <= target / 50 || pass == 5) {  // close enough, or the last try
+      v.normals = t.normals;
+      v.mask = t.mask;
+      v.images.clear();
+      for (const sim::Lamp& lamp : sim::thesis_rig()) v.images.push_back(sim::render(**sc, {lamp}, ro));
+      return true;
     }
-    v.normals = t.normals;
-    v.mask = t.mask;
-    v.images.clear();
-    for (const sim::Lamp& lamp : sim::thesis_rig()) v.images.push_back(sim::render(**sc, {lamp}, ro));
-    return true;
+    ro.scale *= std::sqrt(static_cast<double>(target) / got);
   }
-  return true;
 }
 
 double median(std::vector<double> v) {
