@@ -26,7 +26,7 @@ struct NormalsArgs {
   bool robust = false, plain = false, near_light = false, distant = false, otsu = false;
   double threshold = -1;
   bool supplied_mask = false, no_clean = false;
-  float shadow = 0.10f, saturation = 0.98f, outliers = 0.10f;
+  float shadow = 0.10f, saturation = 0.98f, outliers = 0.0f, chroma = 0.25f;  // as ps::PsOptions
   int iterations = 2, threads = 0;
 };
 
@@ -75,6 +75,7 @@ int run_normals(const NormalsArgs& a) {
   po.shadow_fraction = a.shadow;
   po.saturation = a.saturation;
   po.outlier_fraction = a.outliers;
+  po.diffuse_chroma = a.chroma;
   po.near_iterations = a.iterations;
   po.threads = a.threads;
   if (auto st = po.check(); !st) return fail(2, st.message());
@@ -184,7 +185,12 @@ VENEER_COMMAND(normals) {
       ->capture_default_str();
   cmd->add_option("--outliers", args->outliers,
                   "robust: drop the sample farthest from a first fit when off by more than this fraction of the "
-                  "pixel's brightest sample (highlights, cast shadows); 0 = off")
+                  "pixel's brightest sample (cast shadows, highlights on grey surfaces); 0 = off")
+      ->capture_default_str();
+  cmd->add_option("--diffuse-chroma", args->chroma,
+                  "robust: solve pixels at least this coloured (|sum of colour - grey| / sum of grey over the lamps) "
+                  "on their colour's off-grey part, which a glossy highlight (the lamps' colour) does not reach; "
+                  "0 = off")
       ->capture_default_str();
   cmd->add_option("--iterations", args->iterations, "near-light depth refinements (0..5)")->capture_default_str();
   cmd->add_option("--threads", args->threads, "worker threads (0 = all cores)")->capture_default_str();

@@ -23,6 +23,9 @@ struct SynthOptions {
   double ambient = 0.0;            // uniform ambient added to every photo (and the ambient frame)
   unsigned seed = 1;
   double lamp_intensity = 1.0;
+  cv::Vec3f lamp_tint{1.f, 1.f, 1.f};  // every lamp's colour, RGB (multiplies lamp_intensity)
+  double specular = 0.0;           // Blinn-Phong highlight in the lamp's colour: specular * (n . h)^shininess
+  double shininess = 40.0;
 };
 
 // The thesis rig: 8 sockets on a 0.47 m circle around the camera at (0,0,1), bottom one empty.
@@ -53,7 +56,7 @@ inline ImageSet synth_sphere(const SynthOptions& o) {
     l.lamp_id = "synth-" + std::to_string(i);
     l.direction = pos[i] / cv::norm(pos[i]);
     if (!o.distant) l.position_m = pos[i];
-    l.intensity = cv::Vec3f(float(o.lamp_intensity), float(o.lamp_intensity), float(o.lamp_intensity));
+    l.intensity = o.lamp_tint * float(o.lamp_intensity);
     set.lights.push_back(l);
     set.images.emplace_back(o.size, CV_32FC3, cv::Scalar::all(o.ambient));
   }
@@ -78,16 +81,22 @@ inline ImageSet synth_sphere(const SynthOptions& o) {
       set.truth.albedo.at<cv::Vec3f>(v, u) = o.albedo_bgr;
       set.truth.depth.at<float>(v, u) = static_cast<float>(1.0 - p[2]);
       for (int i = 0; i < n; ++i) {
-        double shade;
-        if (o.distant) {
-          shade = std::max(0.0, nrm.dot(set.lights[i].direction));
-        } else {
+        double shade, gloss = 0, falloff = 1;
+        cv::Vec3d l = set.lights[i].direction;
+        if (!o.distant) {
           const cv::Vec3d L = pos[i] - p;
           const double d2 = L.dot(L);
-          shade = std::max(0.0, nrm.dot(L / std::sqrt(d2))) * pos[i].dot(pos[i]) / d2;
+          l = L / std::sqrt(d2);
+          falloff = pos[i].dot(pos[i]) / d2;
+        }
+        shade = std::max(0.0, nrm.dot(l)) * falloff;
+        if (o.specular > 0 && nrm.dot(l) > 0) {
+          const cv::Vec3d h = (l - d) / cv::norm(l - d);  // half-way between the lamp and the camera (-d)
+          gloss = o.specular * std::pow(std::max(0.0, nrm.dot(h)), o.shininess) * falloff;
         }
         cv::Vec3f& px = set.images[i].at<cv::Vec3f>(v, u);
-        for (int ch = 0; ch < 3; ++ch) px[ch] += static_cast<float>(o.albedo_bgr[ch] * o.lamp_intensity * shade);
+        for (int ch = 0; ch < 3; ++ch)
+          px[ch] += static_cast<float>((o.albedo_bgr[ch] * shade + gloss) * o.lamp_intensity * o.lamp_tint[2 - ch]);
       }
     }
   }

@@ -154,6 +154,44 @@ TEST(PhotometricStereo, OutlierSampleIsDropped) {
   EXPECT_GT(eo, 4 * ew) << "with " << ew << " without " << eo;
 }
 
+TEST(PhotometricStereo, GlossyColouredSurfaceIsSolvedOffItsHighlights) {
+  // A red glazed sphere under tinted lamps: every lamp's highlight (in the
+  // lamp's colour) lands near the middle. Solved on the colour's off-grey
+  // part, the highlights are gone; on grey they bend the normals.
+  SynthOptions o;
+  o.distant = true;
+  o.albedo_bgr = {0.05f, 0.07f, 0.70f};
+  o.lamp_tint = {1.0f, 0.85f, 0.7f};
+  o.specular = 0.6;
+  o.shininess = 60;
+  o.noise = 0.002;
+  ImageSet set = synth_sphere(o);
+  PsOptions with, without;
+  with.light_model = without.light_model = LightModel::distant;
+  without.diffuse_chroma = 0.f;
+  const AngularError ew = solve_error(set, with), eo = solve_error(set, without);
+  EXPECT_LT(ew.mean_deg, 0.5);
+  EXPECT_LT(ew.p95_deg, 1.0);
+  EXPECT_GT(eo.mean_deg, 3 * ew.mean_deg) << "with " << ew.mean_deg << " without " << eo.mean_deg;
+  EXPECT_GT(eo.p95_deg, 3 * ew.p95_deg) << "with " << ew.p95_deg << " without " << eo.p95_deg;
+}
+
+TEST(PhotometricStereo, GreySurfaceKeepsItsGreySolve) {
+  // A grey glossy sphere has no off-grey part to solve on: the option leaves
+  // it exactly as it was.
+  SynthOptions o;
+  o.distant = true;
+  o.albedo_bgr = {0.6f, 0.6f, 0.6f};
+  o.specular = 0.4;
+  ImageSet set = synth_sphere(o);
+  PsOptions with, without;
+  with.light_model = without.light_model = LightModel::distant;
+  without.diffuse_chroma = 0.f;
+  auto rw = photometric_stereo(set, set.truth.mask, with), ro = photometric_stereo(set, set.truth.mask, without);
+  ASSERT_TRUE(rw.ok() && ro.ok());
+  EXPECT_EQ(cv::norm(rw->normals, ro->normals, cv::NORM_INF), 0.0);
+}
+
 TEST(PhotometricStereo, UnreliablePixelsAreMarked) {
   // Three lamps only: every attached shadow leaves < 3 samples.
   SynthOptions o;
@@ -300,6 +338,11 @@ TEST(PhotometricStereoBadInput, BadOptions) {
   opt = {};
   opt.saturation = 0.f;
   EXPECT_FALSE(opt.check().ok());
+  opt = {};
+  opt.diffuse_chroma = -0.1f;
+  r = photometric_stereo(set, {}, opt);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.message().find("diffuse_chroma"), std::string::npos) << r.message();
 }
 
 TEST(AngularError, KnownAngles) {

@@ -52,6 +52,8 @@ Status PsOptions::check() const {
   if (!(min_signal >= 0.f)) return make_error("min_signal must be >= 0, got " + std::to_string(min_signal));
   if (!(outlier_fraction >= 0.f && outlier_fraction < 1.f))
     return make_error("outlier_fraction must be in [0, 1), got " + std::to_string(outlier_fraction));
+  if (!(diffuse_chroma >= 0.f && diffuse_chroma <= 2.f))
+    return make_error("diffuse_chroma must be in [0, 2], got " + std::to_string(diffuse_chroma));
   if (near_iterations < 0 || near_iterations > 5)
     return make_error("near_iterations must be in 0..5, got " + std::to_string(near_iterations));
   if (threads < 0) return make_error("threads must be >= 0, got " + std::to_string(threads));
@@ -69,6 +71,7 @@ struct Setup {
   bool near = false;
   bool robust = true;
   float shadow_fraction = 0.1f, saturation = 0.98f, min_signal = 1e-3f, outlier_fraction = 0.0f;
+  float diffuse_chroma = 0.0f;   // see PsOptions::diffuse_chroma
   std::vector<float> dir;        // n*3 distant directions
   std::vector<float> pos;        // n*3 lamp positions (near)
   std::vector<float> pos_norm2;  // n: |position|^2 (intensity reference distance)
@@ -208,6 +211,63 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
       amb ? load_light<1, true>(a) : load_light<1, false>(a);
     } else {
       amb ? load_light<0, true>(a) : load_light<0, false>(a);
+    }
+  }
+  // 1b. Coloured pixels are solved on their colour's part off the lamps'
+  // white: c - grey(c) per sample (the colours are divided by the lamp's,
+  // so the lamps are white here), measured along the pixel's colour. A dielectric's highlight is the lamp's
+  // colour, so it adds only to grey and this part is its diffuse shading
+  // times a constant: Lambertian, highlight-free (the SUV space of Mallick et
+  // al., CVPR 2005). Grey pixels (white, stone) have no such part: they keep
+  // the grey samples.
+  if (s.diffuse_chroma > 0.f) {
+    float* __restrict sy = b.den.data();  // per pixel: the sum of grey over the samples,
+    float* __restrict c0 = b.nx.data();   // the summed off-grey colour, then its direction
+    float* __restrict c1 = b.ny.data();   // (these buffers are written again before
+    float* __restrict c2 = b.nz.data();   // their own use below)
+    float* __restrict use = b.ok.data();
+    std::fill(sy, sy + count, 0.f);
+    std::fill(c0, c0 + count, 0.f);
+    std::fill(c1, c1 + count, 0.f);
+    std::fill(c2, c2 + count, 0.f);
+    for (int i = 0; i < n; ++i) {
+      const float* __restrict cb = b.C.data() + (size_t(i) * 3 + 0) * cap;
+      const float* __restrict cg = b.C.data() + (size_t(i) * 3 + 1) * cap;
+      const float* __restrict cr = b.C.data() + (size_t(i) * 3 + 2) * cap;
+      const float* __restrict yy = b.Y.data() + size_t(i) * cap;
+#pragma GCC ivdep
+      for (int k = 0; k < count; ++k) {
+        c0[k] += cb[k] - yy[k];
+        c1[k] += cg[k] - yy[k];
+        c2[k] += cr[k] - yy[k];
+        sy[k] += std::max(yy[k], 0.f);
+      }
+    }
+    const float dc = s.diffuse_chroma;
+#pragma GCC ivdep
+    for (int k = 0; k < count; ++k) {
+      const float len = std::sqrt(c0[k] * c0[k] + c1[k] * c1[k] + c2[k] * c2[k]);
+      const bool coloured = (len >= dc * sy[k]) & (sy[k] > 0.f);
+      use[k] = coloured ? 1.f : 0.f;
+      const float il = (coloured ? 1.f : 0.f) / (coloured ? len : 1.f);
+      c0[k] *= il;
+      c1[k] *= il;
+      c2[k] *= il;
+      M[k] = coloured ? 0.f : M[k];
+    }
+    // Each sample's off-grey part measured along the pixel's own colour
+    // direction: linear in the shading, so dark samples carry no bias.
+    for (int i = 0; i < n; ++i) {
+      const float* __restrict cb = b.C.data() + (size_t(i) * 3 + 0) * cap;
+      const float* __restrict cg = b.C.data() + (size_t(i) * 3 + 1) * cap;
+      const float* __restrict cr = b.C.data() + (size_t(i) * 3 + 2) * cap;
+      float* __restrict yy = b.Y.data() + size_t(i) * cap;
+#pragma GCC ivdep
+      for (int k = 0; k < count; ++k) {
+        const float g = yy[k], u = (cb[k] - g) * c0[k] + (cg[k] - g) * c1[k] + (cr[k] - g) * c2[k];
+        yy[k] = use[k] != 0.f ? u : g;
+        M[k] = use[k] != 0.f ? std::max(M[k], u) : M[k];
+      }
     }
   }
   // 2. weights: robust drops shadowed and saturated samples; < 3 kept falls back to all.
@@ -669,6 +729,7 @@ Status photometric_stereo_into(const ImageSet& set, const cv::Mat& mask_in, cons
   s.saturation = options.saturation;
   s.min_signal = options.min_signal;
   s.outlier_fraction = options.outlier_fraction;
+  s.diffuse_chroma = options.robust ? options.diffuse_chroma : 0.f;
   s.dir.resize(size_t(n) * 3);
   s.inv_e.resize(size_t(n) * 3);
   bool have_positions = true;
