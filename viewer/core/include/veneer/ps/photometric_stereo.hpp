@@ -11,6 +11,9 @@
 //  - robust: per pixel, shadowed (dark relative to the pixel's brightest
 //    sample) and saturated samples are dropped; at least 3 must remain or the
 //    pixel is unreliable. Pseudo-inverses are cached per "lamps kept" pattern.
+//    Coloured pixels are solved on their colour's part off the lamps' colour
+//    (PsOptions::diffuse_chroma), where a glossy dielectric's highlight --
+//    the lamp's colour -- does not reach.
 #include <string>
 
 #include <opencv2/core.hpp>
