@@ -308,16 +308,16 @@ QWidget* MainWindow::buildTransferPanel() {
   patch_ = new QComboBox;
   patch_->setObjectName("patch");
   patch_->addItems({"1", "3", "5", "7"});
+  const veneer::match::MatchOptions defaults;  // every matching box starts at the library's default
   candidates_ = new QSpinBox;
   candidates_->setObjectName("candidates");
   candidates_->setRange(1, 100);
-  candidates_->setValue(10);
-  threshold_ = number_box("threshold", 0, 2, 3, 0.01, 0.05);
+  candidates_->setValue(defaults.candidates);
+  threshold_ = number_box("threshold", 0, 2, 3, 0.01, defaults.threshold);
   iterations_ = new QSpinBox;
   iterations_->setObjectName("iterations");
   iterations_->setRange(1, 50);
-  iterations_->setValue(5);
-  const veneer::match::MatchOptions defaults;
+  iterations_->setValue(defaults.iterations);
   coherent_threshold_ = number_box("coherentThreshold", 0, 2, 3, 0.01, defaults.coherent_threshold,
                                    tr("coherent: the normal error a chunk may make (0.1 = about 6°; on intensities "
                                       "converted by the destination's own normals)"));
@@ -342,7 +342,7 @@ QWidget* MainWindow::buildTransferPanel() {
   seg_method_ = new QComboBox;
   seg_method_->setObjectName("segMethod");
   seg_method_->addItems({"automatic", "otsu", "threshold"});
-  seg_threshold_ = number_box("segThreshold", 0, 0.99, 3, 0.005, 0.02);
+  seg_threshold_ = number_box("segThreshold", 0, 0.99, 3, 0.005, veneer::ps::SegmentOptions{}.threshold);
   rect_label_ = new QLabel(tr("no rectangle (shift+drag on the destination)"));
   rect_label_->setWordWrap(true);
   form->addRow(tr("Method"), method_);

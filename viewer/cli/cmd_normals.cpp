@@ -26,8 +26,10 @@ struct NormalsArgs {
   bool robust = false, plain = false, near_light = false, distant = false, otsu = false;
   double threshold = -1;
   bool supplied_mask = false, no_clean = false;
-  float shadow = 0.10f, saturation = 0.98f, outliers = 0.0f, chroma = 0.25f;  // as ps::PsOptions
-  int iterations = 2, threads = 0;
+  // the solver's defaults are the library's (PsOptions)
+  float shadow = veneer::ps::PsOptions{}.shadow_fraction, saturation = veneer::ps::PsOptions{}.saturation,
+        outliers = veneer::ps::PsOptions{}.outlier_fraction, chroma = veneer::ps::PsOptions{}.diffuse_chroma;
+  int iterations = veneer::ps::PsOptions{}.near_iterations, threads = 0;
 };
 
 int fail(int code, const std::string& message) {

@@ -12,11 +12,15 @@ namespace {
 
 struct TransferArgs {
   std::string dst, src, out, method = "flann", feature = "normals";
-  int patch = 1, candidates = 10, iterations = 5, threads = 0, blend = 0;
-  double threshold = 0.05, scale = 1.0, coherent_threshold = 0.10, uniformity = 0.0,
-         coherent_smooth = match::MatchOptions{}.coherent_smooth, coherent_guide = 0.0;
+  // the matching defaults are the library's (MatchOptions)
+  int patch = 1, candidates = match::MatchOptions{}.candidates, iterations = match::MatchOptions{}.iterations,
+      threads = 0, blend = 0;
+  double threshold = match::MatchOptions{}.threshold, scale = 1.0,
+         coherent_threshold = match::MatchOptions{}.coherent_threshold,
+         uniformity = match::MatchOptions{}.uniformity, coherent_smooth = match::MatchOptions{}.coherent_smooth,
+         coherent_guide = match::MatchOptions{}.coherent_guide;
   bool no_grow = false;
-  unsigned seed = 1;
+  unsigned seed = match::MatchOptions{}.seed;
   bool faithful = false, truth_normals = false;
 };
 
