@@ -352,9 +352,10 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
     return squared_distance(dst.flat.data() + static_cast<size_t>(d) * c,
                    dense.v.data() + static_cast<size_t>(offset) * dense.stride, c);
   };
-  auto packed_sq = [&](int d, int packed) {  // the same at a packed position
-    return squared_distance(dst.flat.data() + static_cast<size_t>(d) * c, dense.at(DenseSource::unpack(packed)), c);
+  auto point_sq = [&](int d, cv::Point q) {  // the same at a position in the box
+    return squared_distance(dst.flat.data() + static_cast<size_t>(d) * c, dense.at(q), c);
   };
+  auto packed_sq = [&](int d, int packed) { return point_sq(d, DenseSource::unpack(packed)); };
   auto packed_row = [&](int row) { return DenseSource::pack(src.pixels[row] - sb.tl()); };  // a source row's
   // the match of every destination row, as a packed position (-1: none yet)
   std::vector<int> chosen(n, -1);
@@ -581,7 +582,7 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
           if (nb < 0 || chosen[nb] < 0) continue;
           const cv::Point q = DenseSource::unpack(chosen[nb]) - off;
           if (!dense.inside(q) || !dense.on(q)) continue;
-          const float v = squared_distance(dst.flat.data() + static_cast<size_t>(d) * c, dense.at(q), c);
+          const float v = point_sq(d, q);
           if (v < best) best = v, chosen[d] = DenseSource::pack(q);
         }
       }
