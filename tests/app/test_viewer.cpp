@@ -294,17 +294,23 @@ TEST(Viewer, MatchingOptionChangesRecomputeTheMap) {
   EXPECT_GT(cv::countNonZero(diff.reshape(1) > 0.5), 0) << "a larger threshold makes other chunks";
   EXPECT_TRUE(child<QLabel>(w, "transferStatus")->text().contains("map"));
 
-  // the blend radius changes the pictures, not the map: repainted from the map shown
+  // the blend radius and its guide change the pictures, not the map: repainted from the map shown
   const int map_runs = w.mapOnlyRuns();
-  const auto* unblended = w.result();
-  const cv::Mat kept = unblended->map.xy.clone(), plain = unblended->repainted_median.clone();
-  child<QSpinBox>(w, "blend")->setValue(2);
-  ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.result() != unblended; }, 60000));
-  EXPECT_EQ(w.repaintOnlyRuns(), 1);
+  const auto* guided = w.result();
+  const cv::Mat kept = guided->map.xy.clone(), guided_picture = guided->repainted_median.clone();
+  EXPECT_EQ(child<QSpinBox>(w, "blend")->value(), veneer::match::TransferOptions{}.blend);
+  child<QDoubleSpinBox>(w, "blendGuide")->setValue(0);
+  ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.result() != guided; }, 60000));
+  const auto* plain_blend = w.result();
+  const cv::Mat plain_picture = plain_blend->repainted_median.clone();
+  EXPECT_GT(cv::norm(plain_picture, guided_picture, cv::NORM_INF), 0.0);
+  child<QSpinBox>(w, "blend")->setValue(0);
+  ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.result() != plain_blend; }, 60000));
+  EXPECT_EQ(w.repaintOnlyRuns(), 2);
   EXPECT_EQ(w.mapOnlyRuns(), map_runs);
   EXPECT_TRUE(w.result()->map_given);
   EXPECT_EQ(cv::norm(w.result()->map.xy, kept, cv::NORM_INF), 0.0);
-  EXPECT_GT(cv::norm(w.result()->repainted_median, plain, cv::NORM_INF), 0.0);
+  EXPECT_GT(cv::norm(w.result()->repainted_median, plain_picture, cv::NORM_INF), 0.0);
   EXPECT_TRUE(child<QLabel>(w, "transferStatus")->text().contains("map kept"));
 
   // a segmentation change prepares the objects again (not a map-only run) and matches

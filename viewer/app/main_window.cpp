@@ -332,7 +332,13 @@ QWidget* MainWindow::buildTransferPanel() {
   blend_->setObjectName("blend");
   blend_->setRange(0, 16);
   blend_->setSuffix(tr(" px"));
-  blend_->setToolTip(tr("result pictures: blend the chunks meeting at a seam over this radius (0 = off)"));
+  blend_->setValue(veneer::match::TransferOptions{}.blend);
+  blend_->setToolTip(tr("result pictures: blend the chunks meeting at a seam over this radius (0 = off: each "
+                        "pixel its own source pixel)"));
+  blend_guide_ = number_box("blendGuide", 0, 2, 2, 0.05, veneer::match::TransferOptions{}.blend_guide,
+                            tr("result pictures, maps matched on normals: blend only chunks whose normals fit "
+                               "(fall-off |dn|, 0.1 = about 6°), so outlines such as a leg in front of the body "
+                               "stay sharp (0 = plain blend)"));
   uniformity_ = number_box("uniformity", 0, 10, 2, 0.1, defaults.uniformity);
   fast_ = new QCheckBox(tr("fast engine"));
   fast_->setObjectName("fast");
@@ -356,6 +362,7 @@ QWidget* MainWindow::buildTransferPanel() {
   form->addRow(tr("Source relief"), coherent_guide_);
   form->addRow(tr("Uniformity"), uniformity_);
   form->addRow(tr("Blend seams"), blend_);
+  form->addRow(tr("Blend guide"), blend_guide_);
   form->addRow(fast_);
   form->addRow(truth_normals_);
   live_update_ = new QCheckBox(tr("recompute as options change"));
@@ -376,7 +383,7 @@ QWidget* MainWindow::buildTransferPanel() {
     connect(c, &QComboBox::currentIndexChanged, this, &MainWindow::matchOptionChanged);
   for (QSpinBox* b : {candidates_, iterations_, blend_})
     connect(b, &QSpinBox::valueChanged, this, &MainWindow::matchOptionChanged);
-  for (QDoubleSpinBox* b : {threshold_, coherent_threshold_, coherent_smooth_, coherent_guide_, uniformity_})
+  for (QDoubleSpinBox* b : {threshold_, coherent_threshold_, coherent_smooth_, coherent_guide_, uniformity_, blend_guide_})
     connect(b, &QDoubleSpinBox::valueChanged, this, &MainWindow::matchOptionChanged);
   connect(fast_, &QCheckBox::toggled, this, &MainWindow::matchOptionChanged);
   // segmentation and truth normals change the prepared objects: prepared again, then the map
@@ -769,6 +776,7 @@ void MainWindow::startTransfer() {
   options.match.fast = fast_->isChecked();
   options.truth_normals = truth_normals_->isChecked();
   options.blend = blend_->value();
+  options.blend_guide = blend_guide_->value();
   if (auto ok = options.check(); !ok) {
     message(qs(ok.message()), true);
     return;

@@ -159,6 +159,7 @@ class MainWindow : public QMainWindow {
   QProgressBar *shot_bar_ = nullptr, *transfer_bar_ = nullptr, *pull_bar_ = nullptr;
   QDoubleSpinBox *shutter_ = nullptr, *aperture_ = nullptr, *threshold_ = nullptr, *coherent_threshold_ = nullptr,
                  *coherent_smooth_ = nullptr, *coherent_guide_ = nullptr, *uniformity_ = nullptr,
+                 *blend_guide_ = nullptr,
                  *seg_threshold_ = nullptr, *fps_ = nullptr;
   QSpinBox *iso_ = nullptr, *candidates_ = nullptr, *iterations_ = nullptr, *blend_ = nullptr;
   QComboBox *method_ = nullptr, *feature_ = nullptr, *patch_ = nullptr, *seg_method_ = nullptr, *look_what_ = nullptr,

@@ -14,11 +14,11 @@ struct TransferArgs {
   std::string dst, src, out, method = "flann", feature = "normals";
   // the matching defaults are the library's (MatchOptions)
   int patch = 1, candidates = match::MatchOptions{}.candidates, iterations = match::MatchOptions{}.iterations,
-      threads = 0, blend = 0;
+      threads = 0, blend = match::TransferOptions{}.blend;
   double threshold = match::MatchOptions{}.threshold, scale = 1.0,
          coherent_threshold = match::MatchOptions{}.coherent_threshold,
          uniformity = match::MatchOptions{}.uniformity, coherent_smooth = match::MatchOptions{}.coherent_smooth,
-         coherent_guide = match::MatchOptions{}.coherent_guide;
+         coherent_guide = match::MatchOptions{}.coherent_guide, blend_guide = match::TransferOptions{}.blend_guide;
   bool no_grow = false;
   unsigned seed = match::MatchOptions{}.seed;
   bool faithful = false, truth_normals = false;
@@ -51,6 +51,7 @@ int run(const TransferArgs& a) {
   options.match.fast = !a.faithful;
   options.truth_normals = a.truth_normals;
   options.blend = a.blend;
+  options.blend_guide = a.blend_guide;
   options.scale = a.scale;
   if (auto s = options.check(); !s) return fail(s.message(), 2);
 
@@ -112,8 +113,13 @@ VENEER_COMMAND(transfer) {
                   "coherent, patchmatch: penalty for reusing the same source pixel, >= 0 (default 0 = off)");
   cmd->add_flag("--no-grow", args->no_grow, "coherent: do not grow chunks into the pixels no chunk took");
   cmd->add_option("--blend", args->blend,
-                  "repaint: blend the chunks meeting at a seam over this radius, 0..16 px (default 0 = off; "
-                  "2 softens seams and speckle, texture inside chunks stays sharp)");
+                  "repaint: blend the chunks meeting at a seam over this radius, 0..16 px (default 2: softens "
+                  "seams and speckle, texture inside chunks stays sharp; 0 = each pixel its own source pixel, "
+                  "as the thesis)");
+  cmd->add_option("--blend-guide", args->blend_guide,
+                  "repaint: blend only what fits -- each chunk's proposal weighed by how well its source normal "
+                  "fits the destination's, fall-off |dn|, 0..2 (default 0.1, about 6 degrees; keeps outlines "
+                  "such as a leg in front of the body sharp; 0 = plain Gaussian blend)");
   cmd->add_option("--seed", args->seed, "random seed (patchmatch, coherent)");
   cmd->add_option("--threads", args->threads, "threads, 0 = all cores");
   cmd->add_option("--scale", args->scale, "resize both sets first, (0, 1] (default 1)");

@@ -129,6 +129,21 @@ TEST(Transfer, RepaintBlendedKeepsChunksSharp) {
   auto r = transfer(dst, src, o);
   ASSERT_TRUE(r.ok()) << r.message();
   EXPECT_NE(r->metrics_json.find("\"blend\": 2"), std::string::npos);
+  // matched on normals, the blend is guided by them (the default), and that
+  // changes the pictures: the guided and the plain blend differ
+  EXPECT_NE(r->metrics_json.find("\"blend_guide\": 0.1"), std::string::npos) << r->metrics_json;
+  auto plain_blend = o;
+  plain_blend.blend_guide = 0;
+  auto rp = transfer(dst, src, plain_blend);
+  ASSERT_TRUE(rp.ok()) << rp.message();
+  EXPECT_NE(rp->metrics_json.find("\"blend_guide\": 0.0"), std::string::npos);
+  EXPECT_EQ(cv::norm(r->map.xy, rp->map.xy, cv::NORM_INF), 0.0);
+  EXPECT_GT(cv::norm(r->repainted_median, rp->repainted_median, cv::NORM_INF), 0.0);
+  auto bad_guide = o;
+  bad_guide.blend_guide = 3;
+  auto refused = transfer(dst, src, bad_guide);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.message().find("blend_guide"), std::string::npos) << refused.message();
   o.blend = 17;
   auto bad = transfer(dst, src, o);
   ASSERT_FALSE(bad.ok());
@@ -142,6 +157,7 @@ TEST(Transfer, FromAGivenMapRepaintsWithoutMatching) {
   const ImageSet dst = simulated("cup-white", Role::destination);
   const ImageSet src = simulated("cup-dots", Role::source);
   auto o = options(Method::coherent);
+  o.blend = 0;  // first without blending
   auto pair = prepare_pair(dst, src, o);
   ASSERT_TRUE(pair.ok()) << pair.message();
   auto first = transfer(*pair, o);

@@ -1,6 +1,7 @@
 // The fast engine's maps against the exact methods (compute_map with
 // fast = false), on small synthetic objects with fixed seeds.
 #include <algorithm>
+#include <limits>
 #include <cmath>
 #include <random>
 
@@ -538,21 +539,31 @@ TEST_F(FastEngine, CoherentRefusesASourceWiderThanItsPositions) {
 
 namespace {
 
+// A map of `size` sending each pixel (x, y) to to(x, y).
+template <class F>
+Map map_of(cv::Size size, F to) {
+  Map map;
+  map.xy.create(size, CV_32FC2);
+  map.distance = cv::Mat::zeros(size, CV_32FC1);
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x) {
+      const cv::Point q = to(x, y);
+      map.xy.at<cv::Vec2f>(y, x) = cv::Vec2f(static_cast<float>(q.x), static_cast<float>(q.y));
+    }
+  return map;
+}
+
 TEST(FastBlend, KeepsChunksSharpAndFadesSeams) {
   const cv::Size size(40, 30);
   cv::Mat dmask(size, CV_8UC1, cv::Scalar(255)), smask(size, CV_8UC1, cv::Scalar(255));
   cv::Mat photo(size, CV_32FC3);
   cv::randu(photo, cv::Scalar::all(0), cv::Scalar::all(1));
   // Two chunks: the left half copies the source shifted by (+2, +1), the right half by (-3, 0).
-  Map map;
-  map.xy.create(size, CV_32FC2);
-  map.distance = cv::Mat::zeros(size, CV_32FC1);
-  for (int y = 0; y < size.height; ++y)
-    for (int x = 0; x < size.width; ++x) {
-      const bool left = x < 20;
-      int qx = std::clamp(x + (left ? 2 : -3), 0, size.width - 1), qy = std::clamp(y + (left ? 1 : 0), 0, size.height - 1);
-      map.xy.at<cv::Vec2f>(y, x) = cv::Vec2f(static_cast<float>(qx), static_cast<float>(qy));
-    }
+  const Map map = map_of(size, [&](int x, int y) {
+    const bool left = x < 20;
+    return cv::Point(std::clamp(x + (left ? 2 : -3), 0, size.width - 1),
+                     std::clamp(y + (left ? 1 : 0), 0, size.height - 1));
+  });
   auto plain = fast::blend_repaint(map, dmask, photo, smask, 0);
   auto blended = fast::blend_repaint(map, dmask, photo, smask, 2);
   ASSERT_TRUE(plain.ok() && blended.ok());
@@ -569,6 +580,70 @@ TEST(FastBlend, KeepsChunksSharpAndFadesSeams) {
   for (int y = 5; y < 25; ++y) diff += cv::norm(blended->at<cv::Vec3f>(y, 20) - plain->at<cv::Vec3f>(y, 20));
   EXPECT_GT(diff, 0.1);
   EXPECT_FALSE(fast::blend_repaint(map, dmask, photo, smask, -1).ok());
+}
+
+// Guided by normals, a chunk continued across the destination's own edge
+// (where its normals jump) drops out, so the edge stays sharp; a seam between
+// chunks on a smooth stretch still blends; a pixel without a normal is
+// blended as unguided.
+TEST(FastBlend, GuideKeepsEdgesSharpAndStillBlendsSeams) {
+  const cv::Size size(40, 30), ssize(60, 30);
+  cv::Mat dmask(size, CV_8UC1, cv::Scalar(255)), smask(ssize, CV_8UC1, cv::Scalar(255));
+  cv::Mat photo(ssize, CV_32FC3);
+  cv::randu(photo, cv::Scalar::all(0), cv::Scalar::all(1));
+  // Destination: facing the camera left of x = 20, turned 45 degrees right of
+  // it; the source the same, with its edge at x = 30.
+  const cv::Vec3f front(0, 0, 1), turned(0.7071f, 0, 0.7071f);
+  cv::Mat dn(size, CV_32FC3), sn(ssize, CV_32FC3);
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x) dn.at<cv::Vec3f>(y, x) = x < 20 ? front : turned;
+  for (int y = 0; y < ssize.height; ++y)
+    for (int x = 0; x < ssize.width; ++x) sn.at<cv::Vec3f>(y, x) = x < 30 ? front : turned;
+  // Two rigid chunks, each onto its own kind of source: left x -> x + 5
+  // (front), right x -> x + 15 (turned). Continued across x = 20, each lands
+  // on the other kind. Below row 15 the left chunk is shifted down a row: a
+  // seam where all normals are alike.
+  const Map map = map_of(size, [&](int x, int y) {
+    const bool left = x < 20;
+    return cv::Point(x + (left ? 5 : 15), left && y >= 15 ? std::min(y + 1, size.height - 1) : y);
+  });
+  const fast::BlendGuide guide{dn, sn, 0.1};
+  auto plain = fast::blend_repaint(map, dmask, photo, smask, 0);
+  auto unguided = fast::blend_repaint(map, dmask, photo, smask, 2);
+  auto guided = fast::blend_repaint(map, dmask, photo, smask, 2, 0, &guide);
+  ASSERT_TRUE(plain.ok() && unguided.ok() && guided.ok()) << guided.message();
+  auto moved = [&](const cv::Mat& m, int x, int y) {
+    return cv::norm(m.at<cv::Vec3f>(y, x) - plain->at<cv::Vec3f>(y, x));
+  };
+  // at the destination's edge (x = 19, 20) the unguided blend mixes the two
+  // sides, the guided one keeps each pixel its own side's colour
+  double unguided_edge = 0, guided_edge = 0;
+  for (int y = 3; y < 12; ++y)
+    for (int x : {19, 20}) unguided_edge += moved(*unguided, x, y), guided_edge += moved(*guided, x, y);
+  EXPECT_GT(unguided_edge, 0.5);
+  EXPECT_LT(guided_edge, 1e-3 * unguided_edge);
+  // the seam at row 15 inside the left half (all normals alike) still blends
+  double seam = 0;
+  for (int x = 5; x < 15; ++x) seam += moved(*guided, x, 15);
+  EXPECT_GT(seam, 0.1);
+  // a destination pixel without a normal is blended as without a guide
+  cv::Mat holes = dn.clone();
+  holes.at<cv::Vec3f>(8, 20) = cv::Vec3f(0, 0, 0);
+  holes.at<cv::Vec3f>(9, 20) = cv::Vec3f(std::numeric_limits<float>::quiet_NaN(), 0, 1);
+  const fast::BlendGuide holed{holes, sn, 0.1};
+  auto with_holes = fast::blend_repaint(map, dmask, photo, smask, 2, 0, &holed);
+  ASSERT_TRUE(with_holes.ok());
+  for (int y : {8, 9})
+    EXPECT_LT(cv::norm(with_holes->at<cv::Vec3f>(y, 20) - unguided->at<cv::Vec3f>(y, 20)), 1e-5);
+  // a guide that does not fit is refused, naming what is wrong
+  const fast::BlendGuide small{dn(cv::Rect(0, 0, 10, 10)).clone(), sn, 0.1};
+  auto misfit = fast::blend_repaint(map, dmask, photo, smask, 2, 0, &small);
+  ASSERT_FALSE(misfit.ok());
+  EXPECT_NE(misfit.message().find("destination normals"), std::string::npos) << misfit.message();
+  const fast::BlendGuide flat{dn, sn, 0.0};
+  auto zero = fast::blend_repaint(map, dmask, photo, smask, 2, 0, &flat);
+  ASSERT_FALSE(zero.ok());
+  EXPECT_NE(zero.message().find("sigma"), std::string::npos) << zero.message();
 }
 
 }  // namespace

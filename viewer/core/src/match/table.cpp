@@ -31,7 +31,7 @@ Expected<double> relight_psnr(const Map& map, const ImageSet& destination, const
 }
 
 Expected<Relit> relight(const Map& map, const ImageSet& destination, const ImageSet& source,
-                        const cv::Mat& destination_mask, int blend) {
+                        const cv::Mat& destination_mask, int blend, const fast::BlendGuide* guide) {
   if (!relight_measurable(source.scene))
     return make_error("relighting is measured with a source of uniform material (sphere-red-gloss, sphere-gray), not '" +
                       source.scene + "'");
@@ -46,7 +46,7 @@ Expected<Relit> relight(const Map& map, const ImageSet& destination, const Image
   if (!reference_scene) return reference_scene.error();
   Relit out;
   out.reference = sim::render(**reference_scene, lamp, dst_options);
-  auto transferred = repaint_blended(map, lit_source, source.truth.mask, blend);
+  auto transferred = repaint_blended(map, lit_source, source.truth.mask, blend, {}, guide);
   if (!transferred) return transferred.error();
   out.transferred = std::move(*transferred);
   out.psnr_db = psnr(out.transferred, out.reference, destination_mask);

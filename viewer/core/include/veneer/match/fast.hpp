@@ -22,6 +22,7 @@
 
 #include <opencv2/core.hpp>
 #include <string>
+#include <vector>
 
 #include "veneer/match/index.hpp"
 #include "veneer/match/matcher.hpp"
@@ -62,8 +63,42 @@ std::unique_ptr<NearestIndex> make_index(const std::string& kind);
 // is the same pixel, so texture stays sharp; across a seam the chunks fade
 // into each other. radius 0 = plain lookup. Returns CV_32FC3, zero where the
 // destination is not mapped.
+// With a guide, a proposal also weighs exp(-|n_d - n_s|^2 / (2 sigma^2)): the
+// destination pixel's normal against the proposed source pixel's. A chunk
+// continued across the destination's own edges (a leg in front of the body,
+// an ear against the head) proposes normals that do not fit there and drops
+// out, so outlines stay sharp while seams and speckle soften. A destination
+// pixel without a normal (zero or not finite) is blended unguided; a proposal
+// without one is left out; when nothing is left the pixel keeps its own match.
+struct BlendGuide {
+  cv::Mat destination;  // CV_32FC3 normals, the map's size
+  cv::Mat source;       // CV_32FC3 normals, the source photo's size
+  double sigma = 0.1;   // |dn| of the fall-off (0.1 ~ 6 degrees), > 0
+};
 Expected<cv::Mat> blend_repaint(const Map& map, const cv::Mat& destination_mask, const cv::Mat& source_photo,
-                                const cv::Mat& source_mask, int radius = 2, int threads = 0);
+                                const cv::Mat& source_mask, int radius = 2, int threads = 0,
+                                const BlendGuide* guide = nullptr);
+// The same in two steps, for several photos through one map: the weights
+// depend on the map, the masks and the guide only, so they are worked out
+// once (blend_plan) and each photo is then a weighted sum per pixel
+// (apply_blend; the photo must have the source mask's size).
+struct BlendPlan {
+  struct Pixel {
+    int destination;  // y * width + x
+    int terms;        // how many terms it sums
+  };
+  struct Term {
+    int source;    // y * source width + x
+    float weight;  // the pixel's weights sum to 1
+  };
+  cv::Size destination_size, source_size;
+  std::vector<Pixel> pixels;  // the mapped pixels, row order
+  std::vector<int> first;     // per pixel its first term (one more entry: the end)
+  std::vector<Term> terms;
+};
+Expected<BlendPlan> blend_plan(const Map& map, const cv::Mat& destination_mask, const cv::Mat& source_mask,
+                               int radius, int threads = 0, const BlendGuide* guide = nullptr);
+Expected<cv::Mat> apply_blend(const BlendPlan& plan, const cv::Mat& source_photo, int threads = 0);
 
 // The index kind compute_map uses for nearest normals (the faster one as measured).
 const char* default_index();

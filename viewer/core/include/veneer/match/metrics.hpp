@@ -8,6 +8,7 @@
 #include <opencv2/core.hpp>
 
 #include "veneer/io/imageset.hpp"
+#include "veneer/match/fast.hpp"
 #include "veneer/match/matcher.hpp"
 #include "veneer/sim/simulator.hpp"
 #include "veneer/util/expected.hpp"
@@ -58,9 +59,10 @@ struct Relit {
   cv::Mat reference;    // linear BGR: the destination's shape in the source's material under the extra lamp
   double psnr_db = 0;
 };
-// blend > 0: the source carried through the map with repaint_blended (transfer.hpp).
+// blend > 0: the source carried through the map with repaint_blended (transfer.hpp),
+// weighed by `guide` when given (fast::BlendGuide; normals of the map's size and the source's).
 Expected<Relit> relight(const Map& map, const ImageSet& destination, const ImageSet& source,
-                        const cv::Mat& destination_mask, int blend = 0);
+                        const cv::Mat& destination_mask, int blend = 0, const fast::BlendGuide* guide = nullptr);
 bool relight_measurable(const std::string& source_scene);
 
 // The quality table of the thesis pairs (issue 3): simulated sets at a reduced

@@ -9,6 +9,7 @@
 #include <opencv2/core.hpp>
 
 #include "veneer/io/imageset.hpp"
+#include "veneer/match/fast.hpp"
 #include "veneer/match/matcher.hpp"
 #include "veneer/match/metrics.hpp"
 #include "veneer/util/expected.hpp"
@@ -21,8 +22,11 @@ struct TransferOptions {
   bool truth_normals = false;  // use truth/normals.pfm and truth/mask.png (simulated sets) instead of
                                // photometric stereo and segmentation
   double scale = 1.0;          // resize both sets first (0 < scale <= 1; 0.5 = half size)
-  int blend = 0;               // repaint: blend the chunks meeting at a seam over this radius, px
+  int blend = 2;               // repaint: blend the chunks meeting at a seam over this radius, px
                                // (0..16; 0 = each pixel its own source pixel; see repaint_blended)
+  double blend_guide = 0.1;    // blend: weigh each proposal by its normal's fit, fall-off |dn| (0 = off,
+                               // plain Gaussian; [0, 2]; see fast::BlendGuide); maps matched on
+                               // normals only (an intensities map is blended plain)
   Status check() const;
 };
 
@@ -102,10 +106,12 @@ cv::Mat repaint(const Map& map, const cv::Mat& photo, const cv::Mat& backdrop = 
 // within `radius` px continued to it, Gaussian-weighted. Inside a chunk they
 // all agree, so texture stays sharp; seams and speckle are softened.
 // `source_mask` (CV_8UC1, empty = all) keeps continuations on the object.
+// `guide` (optional): proposals weighed by how well their source normal fits
+// the destination's, so outlines stay sharp (fast::BlendGuide).
 // radius 0 = repaint(). Fails, naming it, on a radius outside 0..16 or a
-// mask that does not fit the photo.
+// mask or guide that does not fit the photo.
 Expected<cv::Mat> repaint_blended(const Map& map, const cv::Mat& photo, const cv::Mat& source_mask, int radius,
-                                  const cv::Mat& backdrop = {});
+                                  const cv::Mat& backdrop = {}, const fast::BlendGuide* guide = nullptr);
 // The thesis's picture of a map: R = x / width, G = y / height, B = 1 (8-bit BGR), black unmapped.
 cv::Mat map_picture(const Map& map, cv::Size source_size);
 // Reuse counts as a heat map over the grey source picture (8-bit BGR).
