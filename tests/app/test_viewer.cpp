@@ -20,6 +20,7 @@
 #include <QTreeWidget>
 
 #include <gtest/gtest.h>
+#include <opencv2/imgproc.hpp>
 
 #include "main_window.hpp"
 #include "wait_for.hpp"
@@ -180,19 +181,30 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
       << w.lastMessage().toStdString();
   const cv::Mat frame = w.lastLiveFrame().clone(), shown = w.lastRepaintedFrame().clone();
   ASSERT_EQ(shown.size(), map.xy.size());
-  const double fx = double(frame.cols) / w.result()->source_size.width;
-  const double fy = double(frame.rows) / w.result()->source_size.height;
+  // The pictures are blended by default, and so are the live frames: each
+  // mapped pixel the weighted sum of the frame (at the source's size) over
+  // the blend's terms, to 8-bit rounding.
+  const auto plan = w.result()->blend;
+  ASSERT_NE(plan, nullptr) << "blended by default";
+  cv::Mat at_source;
+  cv::resize(frame, at_source, w.result()->source_size, 0, 0, cv::INTER_AREA);
   int checked = 0, wrong = 0;
-  for (int y = 0; y < map.xy.rows; ++y)
-    for (int x = 0; x < map.xy.cols; ++x) {
-      const cv::Vec2f m = map.xy.at<cv::Vec2f>(y, x);
-      if (m[0] < 0) continue;
-      const int sx = std::clamp(int(std::lround((m[0] + 0.5) * fx - 0.5)), 0, frame.cols - 1);
-      const int sy = std::clamp(int(std::lround((m[1] + 0.5) * fy - 0.5)), 0, frame.rows - 1);
-      ++checked;
-      if (shown.at<cv::Vec3b>(y, x) != frame.at<cv::Vec3b>(sy, sx)) ++wrong;
+  for (size_t i = 0; i < plan->pixels.size(); ++i) {
+    cv::Vec3f want(0, 0, 0);
+    for (int t = plan->first[i]; t < plan->first[i + 1]; ++t) {
+      const cv::Vec3b p = at_source.ptr<cv::Vec3b>(0)[plan->terms[t].source];
+      want += plan->terms[t].weight * cv::Vec3f(p[0], p[1], p[2]);
     }
+    const cv::Vec3b got = shown.ptr<cv::Vec3b>(0)[plan->pixels[i].destination];
+    ++checked;
+    for (int c = 0; c < 3; ++c)
+      if (std::abs(got[c] - want[c]) > 0.51f) {
+        ++wrong;
+        break;
+      }
+  }
   EXPECT_GT(checked, 200);
+  EXPECT_EQ(checked, mapped);
   EXPECT_EQ(wrong, 0) << "of " << checked;
   child<QPushButton>(w, "liveToggle")->setChecked(false);
 

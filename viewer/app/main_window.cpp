@@ -861,7 +861,8 @@ void MainWindow::startTransfer() {
     pending_result_ = std::make_shared<veneer::match::TransferResult>(std::move(*result));
     // what showing the result needs, made here rather than on the GUI thread
     pending_result_picture_ = picture_of(pending_result_->repainted_median);
-    pending_repainter_.emplace(pending_result_->map, pending_result_->source_size, dst->median_picture);
+    pending_repainter_.emplace(pending_result_->map, pending_result_->source_size, dst->median_picture,
+                               pending_result_->blend);
     if (relighter) {  // same source as last time
       pending_relighter_ = relighter;
     } else {

@@ -1,4 +1,5 @@
 // core/repaint: the live repaint's gather tables and the per-pixel relighting fit.
+#include <memory>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -58,6 +59,48 @@ TEST(LiveRepaint, ScalesCoordinatesToTheFrameSize) {
   match::LiveRepainter live(map, src);
   const cv::Mat a = live.apply(small), b = live.apply(big);
   EXPECT_EQ(cv::norm(a, b, cv::NORM_INF), 0.0);
+}
+
+// With the transfer's blend plan, a frame is blended as the stills were: the
+// same as the plan applied to the frame by hand (to 8-bit rounding), the
+// backdrop where unmapped, and not the nearest gather (the random map's
+// neighbours all disagree, so the blend mixes them).
+TEST(LiveRepaint, BlendsFramesAsTheStillsWere) {
+  const cv::Size dst(64, 40), src(50, 30);
+  const match::Map map = random_map(dst, src, 11);
+  cv::Mat channels[2];
+  cv::split(map.xy, channels);
+  const cv::Mat mapped = channels[0] >= 0;
+  auto plan = match::fast::blend_plan(map, mapped, cv::Mat(src, CV_8UC1, cv::Scalar(255)), 2);
+  ASSERT_TRUE(plan.ok()) << plan.message();
+  const auto shared = std::make_shared<const match::fast::BlendPlan>(std::move(*plan));
+  cv::Mat frame(src, CV_8UC3);
+  cv::randu(frame, 0, 255);
+  const cv::Mat backdrop(dst, CV_8UC3, cv::Scalar(1, 2, 3));
+  match::LiveRepainter nearest(map, src, backdrop), blended(map, src, backdrop, shared);
+  const cv::Mat a = nearest.apply(frame), b = blended.apply(frame);
+  cv::Mat f;
+  frame.convertTo(f, CV_32FC3, 1.0 / 255.0);
+  auto by_hand = match::fast::apply_blend(*shared, f);
+  ASSERT_TRUE(by_hand.ok());
+  int differ = 0;
+  for (int y = 0; y < dst.height; ++y)
+    for (int x = 0; x < dst.width; ++x) {
+      const cv::Vec3b got = b.at<cv::Vec3b>(y, x);
+      if (!mapped.at<uchar>(y, x)) {
+        ASSERT_EQ(got, backdrop.at<cv::Vec3b>(y, x));
+        continue;
+      }
+      const cv::Vec3f want = by_hand->at<cv::Vec3f>(y, x) * 255.0f;
+      for (int c = 0; c < 3; ++c) ASSERT_NEAR(got[c], want[c], 0.51) << x << "," << y;
+      differ += got != a.at<cv::Vec3b>(y, x);
+    }
+  EXPECT_GT(differ, cv::countNonZero(mapped) / 2);
+  // a plan for another map size is not used: the nearest gather then
+  match::LiveRepainter misfit(map, cv::Size(20, 20), backdrop, shared);
+  cv::Mat small(20, 20, CV_8UC3);
+  cv::randu(small, 0, 255);
+  EXPECT_EQ(misfit.apply(small).size(), dst);
 }
 
 TEST(Relight, FitsTheThesisRingAndPredictsAnUnseenLamp) {

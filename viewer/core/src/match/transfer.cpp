@@ -338,7 +338,7 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
                       !guide.destination.empty() && !guide.source.empty();
   const fast::BlendGuide* g = guided ? &guide : nullptr;
   // every photo through the same map: the blend's weights worked out once
-  std::optional<fast::BlendPlan> plan;
+  std::shared_ptr<const fast::BlendPlan> plan;
   cv::Mat mapped;
   if (options.blend > 0) {
     cv::Mat channels[2];
@@ -346,8 +346,9 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
     mapped = channels[0] >= 0;
     auto made = fast::blend_plan(result.map, mapped, src->view.mask, options.blend, 0, g);
     if (!made) return make_error("repaint: " + made.message());
-    plan = std::move(*made);
+    plan = std::make_shared<const fast::BlendPlan>(std::move(*made));
   }
+  result.blend = plan;
   auto paint = [&](const cv::Mat& photo, const cv::Mat& backdrop) -> Expected<cv::Mat> {
     if (!plan) return repaint(result.map, photo, backdrop);
     auto blended = fast::apply_blend(*plan, photo);

@@ -5,6 +5,9 @@
 // nearest neighbour) and stays within a couple of milliseconds at 1024x680.
 #include <opencv2/core.hpp>
 
+#include <memory>
+
+#include "veneer/match/fast.hpp"
 #include "veneer/match/matcher.hpp"
 
 namespace veneer::match {
@@ -15,7 +18,10 @@ class LiveRepainter {
   // `map` was computed against a source of `source_size` pixels. `backdrop`
   // (8-bit BGR, any size; resized to the map's) shows where the destination
   // is not mapped — usually the destination's own picture; empty = black.
-  LiveRepainter(const Map& map, cv::Size source_size, const cv::Mat& backdrop = {});
+  // `blend` (optional, TransferResult::blend): frames are blended as the
+  // transfer's pictures were (each frame brought to the source's size first).
+  LiveRepainter(const Map& map, cv::Size source_size, const cv::Mat& backdrop = {},
+                std::shared_ptr<const fast::BlendPlan> blend = nullptr);
 
   bool ready() const { return !map_xy_.empty(); }
   cv::Size destination_size() const { return map_xy_.size(); }
@@ -34,6 +40,7 @@ class LiveRepainter {
   cv::Mat mask_;          // CV_8UC1 255 where mapped
   cv::Size prepared_for_;
   cv::Mat table_x_, table_y_;  // CV_32FC1 gather tables for the current frame size
+  std::shared_ptr<const fast::BlendPlan> blend_;
 };
 
 }  // namespace veneer::match

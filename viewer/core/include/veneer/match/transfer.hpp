@@ -3,6 +3,7 @@
 // the destination repainted with the source's photos out (DESIGN.md: map.pfm,
 // map.png), plus the reuse heat map and metrics.json.
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -56,6 +57,8 @@ struct TransferResult {
   double match_seconds = 0;        // the map's computation alone (wall; 0 when the map was given)
   MatchOptions match_options;      // what the map was computed with
   bool map_given = false;          // made from a map computed earlier (transfer(pair, options, map))
+  std::shared_ptr<const fast::BlendPlan> blend;  // the pictures' blend weights (blend > 0), for
+                                                 // repainting more photos the same way (live video)
 };
 
 Expected<TransferResult> transfer(const ImageSet& destination, const ImageSet& source,
