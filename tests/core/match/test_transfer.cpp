@@ -132,6 +132,8 @@ TEST(Transfer, RepaintBlendedKeepsChunksSharp) {
   // matched on normals, the blend is guided by them (the default), and that
   // changes the pictures: the guided and the plain blend differ
   EXPECT_NE(r->metrics_json.find("\"blend_guide\": 0.1"), std::string::npos) << r->metrics_json;
+  // every matching option is recorded, the refinement's round limit too
+  EXPECT_NE(r->metrics_json.find("\"coherent_sweeps\": " + std::to_string(o.match.coherent_sweeps)), std::string::npos);
   auto plain_blend = o;
   plain_blend.blend_guide = 0;
   auto rp = transfer(dst, src, plain_blend);

@@ -379,7 +379,8 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
                   {"candidates", o.candidates}, {"threshold", o.threshold}, {"iterations", o.iterations},
                   {"coherent_threshold", o.coherent_threshold}, {"uniformity", o.uniformity},
                   {"coherent_grow", o.coherent_grow},
-                  {"coherent_smooth", o.coherent_smooth}, {"coherent_guide", o.coherent_guide},
+                  {"coherent_smooth", o.coherent_smooth}, {"coherent_sweeps", o.coherent_sweeps},
+                  {"coherent_guide", o.coherent_guide},
                   {"fast", o.fast}, {"seed", o.seed},
                   {"truth_normals", options.truth_normals},
                   {"scale", options.scale}, {"blend", options.blend}, {"blend_guide", guided ? options.blend_guide : 0.0}};
