@@ -195,7 +195,7 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
       const cv::Vec3b p = at_source.ptr<cv::Vec3b>(0)[plan->terms[t].source];
       want += plan->terms[t].weight * cv::Vec3f(p[0], p[1], p[2]);
     }
-    const cv::Vec3b got = shown.ptr<cv::Vec3b>(0)[plan->pixels[i].destination];
+    const cv::Vec3b got = shown.ptr<cv::Vec3b>(0)[plan->pixels[i]];
     ++checked;
     for (int c = 0; c < 3; ++c)
       if (std::abs(got[c] - want[c]) > 0.51f) {

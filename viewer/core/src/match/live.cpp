@@ -1,8 +1,5 @@
 #include "veneer/match/live.hpp"
 
-#include <algorithm>
-
-#include <opencv2/core/utility.hpp>
 #include <opencv2/imgproc.hpp>
 
 namespace veneer::match {
@@ -42,30 +39,6 @@ void LiveRepainter::prepare(cv::Size frame_size) {
   prepared_for_ = frame_size;
 }
 
-namespace {
-
-// The blend's weighted sums straight from the frame into `out`, mapped pixels only.
-template <class Pixel>
-void blend_into(const fast::BlendPlan& plan, const cv::Mat& frame, cv::Mat& out) {
-  const Pixel* src = frame.ptr<Pixel>(0);
-  Pixel* dst = out.ptr<Pixel>(0);
-  const int n = static_cast<int>(plan.pixels.size());
-  cv::parallel_for_(cv::Range(0, n), [&](const cv::Range& r) {
-    for (int i = r.start; i < r.end; ++i) {
-      cv::Vec3f sum(0, 0, 0);
-      for (int t = plan.first[i]; t < plan.first[i + 1]; ++t) {
-        const Pixel& p = src[plan.terms[t].source];
-        const float w = plan.terms[t].weight;
-        sum += cv::Vec3f(w * p[0], w * p[1], w * p[2]);
-      }
-      Pixel& o = dst[plan.pixels[i].destination];
-      for (int c = 0; c < 3; ++c) o[c] = cv::saturate_cast<typename Pixel::value_type>(sum[c]);
-    }
-  }, std::max(1, n / 4096));
-}
-
-}  // namespace
-
 cv::Mat LiveRepainter::apply(const cv::Mat& frame) {
   if (!ready() || frame.empty()) return {};
   if (frame.size() != prepared_for_) prepare(frame.size());
@@ -84,11 +57,7 @@ cv::Mat LiveRepainter::apply(const cv::Mat& frame) {
     // mapped pixels are touched (the frame is not converted as a whole)
     cv::Mat at_source = frame;
     if (at_source.size() != source_size_) cv::resize(frame, at_source, source_size_, 0, 0, cv::INTER_AREA);
-    if (frame.type() == CV_8UC3)
-      blend_into<cv::Vec3b>(*blend_, at_source, background);
-    else
-      blend_into<cv::Vec3f>(*blend_, at_source, background);
-    return background;
+    if (fast::apply_blend(*blend_, at_source, background)) return background;
   }
   // Unmapped pixels point far outside the frame, so BORDER_TRANSPARENT keeps
   // the backdrop there; mapped ones gather their source pixel.

@@ -148,18 +148,24 @@ cv::Mat repaint(const Map& map, const cv::Mat& photo, const cv::Mat& backdrop) {
   return out;
 }
 
+namespace {
+
+// `backdrop` (empty = black) with the plan's pixels blended from `photo`.
+Expected<cv::Mat> repaint_planned(const fast::BlendPlan& plan, const cv::Mat& photo, const cv::Mat& backdrop) {
+  cv::Mat out = backdrop.empty() ? cv::Mat(plan.destination_size, CV_32FC3, cv::Scalar::all(0)) : backdrop.clone();
+  if (auto s = fast::apply_blend(plan, photo, out); !s) return s.error();
+  return out;
+}
+
+}  // namespace
+
 Expected<cv::Mat> repaint_blended(const Map& map, const cv::Mat& photo, const cv::Mat& source_mask, int radius,
                                   const cv::Mat& backdrop, const fast::BlendGuide* guide) {
   if (radius == 0) return repaint(map, photo, backdrop);
-  cv::Mat channels[2];
-  cv::split(map.xy, channels);
-  const cv::Mat mapped = channels[0] >= 0;
   const cv::Mat smask = source_mask.empty() ? cv::Mat(photo.size(), CV_8UC1, cv::Scalar(255)) : source_mask;
-  auto blended = fast::blend_repaint(map, mapped, photo, smask, radius, 0, guide);
-  if (!blended) return blended.error();
-  cv::Mat out = backdrop.empty() ? cv::Mat(map.xy.size(), CV_32FC3, cv::Scalar::all(0)) : backdrop.clone();
-  blended->copyTo(out, mapped);
-  return out;
+  auto plan = fast::blend_plan(map, {}, smask, radius, 0, guide);  // every mapped pixel
+  if (!plan) return plan.error();
+  return repaint_planned(*plan, photo, backdrop);
 }
 
 cv::Mat map_picture(const Map& map, cv::Size source_size) {
@@ -339,23 +345,15 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
   const fast::BlendGuide* g = guided ? &guide : nullptr;
   // every photo through the same map: the blend's weights worked out once
   std::shared_ptr<const fast::BlendPlan> plan;
-  cv::Mat mapped;
   if (options.blend > 0) {
-    cv::Mat channels[2];
-    cv::split(result.map.xy, channels);
-    mapped = channels[0] >= 0;
-    auto made = fast::blend_plan(result.map, mapped, src->view.mask, options.blend, 0, g);
+    auto made = fast::blend_plan(result.map, {}, src->view.mask, options.blend, 0, g);
     if (!made) return make_error("repaint: " + made.message());
     plan = std::make_shared<const fast::BlendPlan>(std::move(*made));
   }
   result.blend = plan;
   auto paint = [&](const cv::Mat& photo, const cv::Mat& backdrop) -> Expected<cv::Mat> {
     if (!plan) return repaint(result.map, photo, backdrop);
-    auto blended = fast::apply_blend(*plan, photo);
-    if (!blended) return blended.error();
-    cv::Mat out = backdrop.clone();
-    blended->copyTo(out, mapped);
-    return out;
+    return repaint_planned(*plan, photo, backdrop);
   };
   for (size_t i = 0; i < src->view.images.size() && i < dst->view.images.size(); ++i) {
     auto painted = paint(src->view.images[i], dst->view.images[i]);

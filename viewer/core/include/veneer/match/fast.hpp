@@ -80,25 +80,24 @@ Expected<cv::Mat> blend_repaint(const Map& map, const cv::Mat& destination_mask,
                                 const BlendGuide* guide = nullptr);
 // The same in two steps, for several photos through one map: the weights
 // depend on the map, the masks and the guide only, so they are worked out
-// once (blend_plan) and each photo is then a weighted sum per pixel
-// (apply_blend; the photo must have the source mask's size).
+// once (blend_plan; an empty destination_mask = every mapped pixel) and each
+// photo is then a weighted sum per pixel (apply_blend).
 struct BlendPlan {
-  struct Pixel {
-    int destination;  // y * width + x
-    int terms;        // how many terms it sums
-  };
   struct Term {
     int source;    // y * source width + x
-    float weight;  // the pixel's weights sum to 1
+    float weight;  // the pixel's weights sum to 1 (no terms: black)
   };
   cv::Size destination_size, source_size;
-  std::vector<Pixel> pixels;  // the mapped pixels, row order
-  std::vector<int> first;     // per pixel its first term (one more entry: the end)
+  std::vector<int> pixels;  // the mapped pixels (y * width + x), row order
+  std::vector<int> first;   // per pixel its first term (one more entry: the end)
   std::vector<Term> terms;
 };
 Expected<BlendPlan> blend_plan(const Map& map, const cv::Mat& destination_mask, const cv::Mat& source_mask,
                                int radius, int threads = 0, const BlendGuide* guide = nullptr);
-Expected<cv::Mat> apply_blend(const BlendPlan& plan, const cv::Mat& source_photo, int threads = 0);
+// Writes the plan's pixels of `out` (the plan's destination size, the photo's
+// type) from `source_photo` (CV_8UC3 or CV_32FC3, the plan's source size);
+// the other pixels of `out` are left as they are.
+Status apply_blend(const BlendPlan& plan, const cv::Mat& source_photo, cv::Mat& out, int threads = 0);
 
 // The index kind compute_map uses for nearest normals (the faster one as measured).
 const char* default_index();
