@@ -53,7 +53,8 @@ struct PsOptions {
                                    // lamps' colour, divided out here) does not reach, so its normals no
                                    // longer lean towards the lamps; greyer pixels are solved on their grey
                                    // [0, 2]; 0 = off. Quality table, 512x340: the exact nearest's normal
-                                   // error 3.20 -> 2.13 degrees (bench_ps: red glossy sphere 3.85 -> 0.85)
+                                   // error 3.20 -> 2.08 degrees, with the outlier pass
+                                   // then off (bench_ps: red glossy sphere 3.85 -> 0.85)
   bool subtract_ambient = true;    // subtract set.ambient when present
   int near_iterations = 2;         // near: depth refinements after the z = 0 pass (0..5)
   int threads = 0;                 // 0 = all cores (TBB)
