@@ -186,6 +186,8 @@ struct DenseSource {
   bool on(cv::Point q) const { return at(q)[channels] == 0.0f; }  // on the object (q inside)
   static int pack(cv::Point q) { return q.x | (q.y << 16); }
   static cv::Point unpack(int packed) { return {packed & 0xffff, packed >> 16}; }
+  cv::Point local(cv::Point in_image) const { return in_image - box.tl(); }  // an image position in the box
+  cv::Point in_image(int packed) const { return unpack(packed) + box.tl(); }
 };
 
 DenseSource dense_source(const Object& src, int threads) {
@@ -222,7 +224,6 @@ Status refine(const Object& dst, const Object& src, const DenseSource& dense, co
   const cv::Point n4[4] = {{-1, 0}, {1, 0}, {0, -1}, {0, 1}};
   // every match as a position in the dense source: a proposal costs one read
   const cv::Rect sb = src.bbox;
-  auto at_pos = [&](int row) { return src.pixels[row] - sb.tl(); };  // a source row's
   std::vector<cv::Point> pos(n), near(offer_nearest ? n : 0);
   std::vector<std::array<int, 4>> nbr(n);  // 4-neighbour rows (-1 off the object)
   parallel_rows(n, o.threads, 4096, [&](int b, int e) {
@@ -230,7 +231,7 @@ Status refine(const Object& dst, const Object& src, const DenseSource& dense, co
       const cv::Point pt = dst.pixels[d];
       for (int j = 0; j < 4; ++j) nbr[d][j] = dst.row_at(pt.x + n4[j].x, pt.y + n4[j].y);
       pos[d] = DenseSource::unpack(chosen[d]);
-      if (offer_nearest) near[d] = at_pos(nearest[static_cast<size_t>(d) * k]);
+      if (offer_nearest) near[d] = dense.local(src.pixels[nearest[static_cast<size_t>(d) * k]]);
     }
   });
   // to visit: all at first; then the pixels next to a change, all of the
@@ -362,7 +363,7 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
     return squared_distance(dst.flat.data() + static_cast<size_t>(d) * c, dense.at(q), c);
   };
   auto packed_sq = [&](int d, int packed) { return point_sq(d, DenseSource::unpack(packed)); };
-  auto packed_row = [&](int row) { return DenseSource::pack(src.pixels[row] - sb.tl()); };  // a source row's
+  auto packed_row = [&](int row) { return DenseSource::pack(dense.local(src.pixels[row])); };  // a source row's
   // the match of every destination row, as a packed position (-1: none yet)
   std::vector<int> chosen(n, -1);
   // the rows still unassigned, and per one of them its chunk (seed cell),
@@ -550,7 +551,7 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
             if (c0 < 0 || prop[ai] == -1) continue;
             if (!taken[c0]) continue;
             const cv::Point pt = dst.pixels[active[ai]], m = src.pixels[seed_match[c0]], a = seed_at[c0];
-            const cv::Point q = m + pt - a - sb.tl();
+            const cv::Point q = dense.local(m + pt - a);
             if (dense.inside(q) && dense.on(q)) chosen[active[ai]] = DenseSource::pack(q);
           }
         });
@@ -565,7 +566,7 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
       std::fill(uses.begin(), uses.end(), 0);
       for (int d = 0; d < n; ++d)
         if (chosen[d] >= 0) {
-          const cv::Point q = DenseSource::unpack(chosen[d]) + sb.tl();
+          const cv::Point q = dense.in_image(chosen[d]);
           ++uses[static_cast<size_t>(q.y) * src.size.width + q.x];
         }
     }
@@ -629,7 +630,7 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
   parallel_rows(n, o.threads, 4096, [&](int b, int e) {
     for (int d = b; d < e; ++d) {
       if (chosen[d] < 0) continue;
-      const cv::Point pt = dst.pixels[d], q = DenseSource::unpack(chosen[d]) + sb.tl();
+      const cv::Point pt = dst.pixels[d], q = dense.in_image(chosen[d]);
       map.xy.at<cv::Vec2f>(pt.y, pt.x) = cv::Vec2f(static_cast<float>(q.x), static_cast<float>(q.y));
       map.distance.at<float>(pt.y, pt.x) = std::sqrt(packed_sq(d, chosen[d]));  // the feature distance
     }
