@@ -309,6 +309,7 @@ QWidget* MainWindow::buildTransferPanel() {
   patch_->setObjectName("patch");
   patch_->addItems({"1", "3", "5", "7"});
   const veneer::match::MatchOptions defaults;  // every matching box starts at the library's default
+  const veneer::match::TransferOptions transfer_defaults;
   candidates_ = new QSpinBox;
   candidates_->setObjectName("candidates");
   candidates_->setRange(1, 100);
@@ -332,10 +333,10 @@ QWidget* MainWindow::buildTransferPanel() {
   blend_->setObjectName("blend");
   blend_->setRange(0, 16);
   blend_->setSuffix(tr(" px"));
-  blend_->setValue(veneer::match::TransferOptions{}.blend);
+  blend_->setValue(transfer_defaults.blend);
   blend_->setToolTip(tr("result pictures: blend the chunks meeting at a seam over this radius (0 = off: each "
                         "pixel its own source pixel)"));
-  blend_guide_ = number_box("blendGuide", 0, 2, 2, 0.05, veneer::match::TransferOptions{}.blend_guide,
+  blend_guide_ = number_box("blendGuide", 0, 2, 2, 0.05, transfer_defaults.blend_guide,
                             tr("result pictures, maps matched on normals: blend only chunks whose normals fit "
                                "(fall-off |dn|, 0.1 = about 6°), so outlines such as a leg in front of the body "
                                "stay sharp (0 = plain blend)"));
