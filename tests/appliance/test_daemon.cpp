@@ -4,12 +4,16 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+
+#include <opencv2/imgcodecs.hpp>
 #include <mutex>
 #include <sstream>
 
 #include "rig_test_util.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
+#include "veneer/match/live.hpp"
+#include "veneer/match/transfer.hpp"
 #include "veneer/rig/client.hpp"
 #include "veneer/ps/photometric_stereo.hpp"
 #include "veneer/sim/simulator.hpp"
@@ -147,6 +151,65 @@ TEST(Daemon, TwoPressesStoreTwoSetsThatPullWithTheRenderedPixelsAndTrueNormals) 
   ASSERT_GT(err.size(), 500u);
   std::nth_element(err.begin(), err.begin() + err.size() / 2, err.end());
   EXPECT_LT(err[err.size() / 2], 3.0) << "median angular error of the recovered normals";
+  fs::remove_all(dir);
+}
+
+// `veneer rig live --map`: the frames repainted as the transfer's stills were
+// (its metrics.json's options; blended, guided by the sets' normals), or
+// unblended when asked; a guide without the destination is refused.
+TEST(Daemon, LiveFramesThroughAMapAreBlendedAsTheStills) {
+  fs::path dir = rigtest::temp_dir("live-map");
+  fs::path store = dir / "store";
+  auto d = DaemonProcess::start(store, kSmall);
+  ASSERT_TRUE(d && d->port() != 0) << (d ? d->log() : "no process");
+  const std::string rig = rigtest::veneer_cli() + rig_args(*d, store);
+  for (int i = 0; i < 2; ++i) ASSERT_EQ(run(rig + " press --wait").code, 0) << d->log();
+  auto list = run(rig + " list");
+  std::vector<std::string> ids;
+  std::istringstream lines(list.out);
+  for (std::string line; std::getline(lines, line);)
+    if (!line.empty()) ids.push_back(line.substr(0, line.find(' ')));
+  ASSERT_EQ(ids.size(), 2u) << list.out;
+  const fs::path dst = dir / "dst", src = dir / "src", tr = dir / "transfer";
+  ASSERT_EQ(run(rig + " pull " + ids[0] + " --out " + dst.string()).code, 0);
+  ASSERT_EQ(run(rig + " pull " + ids[1] + " --out " + src.string()).code, 0);
+  auto t = run(rigtest::veneer_cli() + " transfer --dst " + dst.string() + " --src " + src.string() +
+               " --method coherent --blend 3 --out " + tr.string());
+  ASSERT_EQ(t.code, 0) << t.out;
+
+  const std::string live = rig + " live --frames 2 --fps 5 --map " + tr.string() + " --src " + src.string();
+  auto blended = run(live + " --dst " + dst.string() + " --out " + (dir / "blended").string());
+  ASSERT_EQ(blended.code, 0) << blended.out;
+  EXPECT_NE(blended.out.find("3 px, guided"), std::string::npos) << blended.out;
+  auto plain = run(live + " --dst " + dst.string() + " --blend 0 --out " + (dir / "plain").string());
+  ASSERT_EQ(plain.code, 0) << plain.out;
+  auto refused = run(live + " --blend-guide 0.1 --out " + (dir / "refused").string());
+  EXPECT_EQ(refused.code, 2) << refused.out;
+  EXPECT_NE(refused.out.find("--blend-guide needs --dst"), std::string::npos) << refused.out;
+
+  // the same frame repainted here through the core: with the stills' plan, and without
+  auto dset = veneer::read_set(dst), sset = veneer::read_set(src);
+  ASSERT_TRUE(dset && sset);
+  auto options = veneer::match::read_transfer_options(tr / "metrics.json");
+  ASSERT_TRUE(options) << options.message();
+  EXPECT_EQ(options->blend, 3);
+  auto pair = veneer::match::prepare_pair(*dset, *sset, *options);
+  ASSERT_TRUE(pair) << pair.message();
+  auto map = veneer::match::read_map(tr / "map.pfm");
+  ASSERT_TRUE(map) << map.message();
+  auto plan = veneer::match::blend_plan_for(*pair, *options, *map);
+  ASSERT_TRUE(plan && *plan) << (plan ? "no plan" : plan.message());
+  const cv::Mat backdrop = veneer::tonemap_picture(veneer::match::median_photo(dset->images));
+  for (const char* which : {"blended", "plain"}) {
+    const cv::Mat frame = cv::imread((dir / which / "frame_0000.jpg").string(), cv::IMREAD_COLOR);
+    const cv::Mat got = cv::imread((dir / which / "repainted_0000.png").string(), cv::IMREAD_COLOR);
+    ASSERT_FALSE(frame.empty() || got.empty()) << which;
+    veneer::match::LiveRepainter with(*map, pair->source.size, backdrop, *plan), without(*map, pair->source.size, backdrop);
+    const cv::Mat want_blended = with.apply(frame), want_plain = without.apply(frame);
+    const bool is_blended = std::string(which) == "blended";
+    EXPECT_EQ(cv::norm(got, is_blended ? want_blended : want_plain, cv::NORM_INF), 0.0) << which;
+    EXPECT_GT(cv::norm(got, is_blended ? want_plain : want_blended, cv::NORM_INF), 0.0) << which;
+  }
   fs::remove_all(dir);
 }
 

@@ -162,8 +162,20 @@ VENEER_COMMAND(rig) {
   auto live_dst = std::make_shared<std::string>();
   auto live_sweep = std::make_shared<bool>(false);
   live->add_option("--map", *live_map, "also write repainted_NNNN.png: each frame carried through this map (a transfer folder or map.pfm)");
-  live->add_option("--src", *live_src, "with --map: the source set the map was computed against (for its size)");
-  live->add_option("--dst", *live_dst, "with --map: the destination set (its picture shows where nothing is mapped)");
+  auto live_blend = std::make_shared<int>(0);
+  auto live_guide = std::make_shared<double>(0);
+  live->add_option("--src", *live_src, "with --map: the source set the map was computed against (its size and mask)");
+  live->add_option("--dst", *live_dst,
+                   "with --map: the destination set (its picture shows where nothing is mapped; its normals guide the "
+                   "blend)");
+  auto* blend_opt = live->add_option("--blend", *live_blend,
+                                     "with --map: blend the chunks' seams over this radius, 0..16 px (default: as the "
+                                     "transfer folder's metrics.json says, else 2)")
+                        ->check(CLI::Range(0, 16));
+  auto* guide_opt = live->add_option("--blend-guide", *live_guide,
+                                     "with --map: the blend's normal fall-off |dn|, 0..2 (0 = plain; default: as "
+                                     "metrics.json says, else 0.1; needs --dst)")
+                        ->check(CLI::Range(0.0, 2.0));
   live->add_flag("--sweep", *live_sweep, "simulated rig: move the hand-held lamp round the source while recording");
 
   auto* events = rig_cmd->add_subcommand("events", "print the rig's events, one a line");
@@ -264,15 +276,55 @@ VENEER_COMMAND(rig) {
         if (std::filesystem::is_directory(mp)) mp /= "map.pfm";
         auto map = match::read_map(mp);
         if (!map) return fail("live", map.message());
+        // The frames are repainted as the transfer's pictures were: its
+        // options (scale, feature, blend) from the folder's metrics.json.
+        match::TransferOptions options;
+        const std::filesystem::path metrics = mp.parent_path() / "metrics.json";
+        if (std::filesystem::exists(metrics)) {
+          auto read = match::read_transfer_options(metrics);
+          if (!read) return fail("live", read.message());
+          options = *read;
+        }
+        if (blend_opt->count()) options.blend = *live_blend;
+        if (guide_opt->count()) options.blend_guide = *live_guide;
+        if (live_dst->empty() && options.blend > 0 && options.blend_guide > 0) {
+          if (guide_opt->count()) return fail("live", "--blend-guide needs --dst (the destination's normals)", 2);
+          options.blend_guide = 0;  // no destination normals: the plain blend
+        }
         auto src = read_set(*live_src);
         if (!src) return fail("live", src.message());
+        std::optional<ImageSet> dst;
         cv::Mat backdrop;
         if (!live_dst->empty()) {
-          auto dst = read_set(*live_dst);
-          if (!dst) return fail("live", dst.message());
-          backdrop = tonemap_picture(match::median_photo(dst->images));
+          auto d = read_set(*live_dst);
+          if (!d) return fail("live", d.message());
+          backdrop = tonemap_picture(match::median_photo(d->images));
+          dst = std::move(*d);
         }
-        repainter.emplace(*map, src->size, backdrop);
+        // the source as the map saw it (scaled like the transfer's)
+        match::PreparedPair pair;
+        pair.source = *src;
+        match::scale_set(pair.source, options.scale);
+        std::shared_ptr<const match::fast::BlendPlan> plan;
+        if (options.blend > 0) {
+          std::cout << "preparing the blend (" << options.blend << " px, "
+                    << (options.blend_guide > 0 ? "guided by the normals" : "plain") << ") ..." << std::endl;
+          if (dst) {
+            auto prepared = match::prepare_pair(*dst, *src, options);
+            if (!prepared) return fail("live", prepared.message());
+            pair = std::move(*prepared);
+          } else {
+            auto object = match::prepare_object(pair.source, options.truth_normals);
+            if (!object) return fail("live", "source: " + object.message());
+            pair.src = std::move(*object);
+            pair.dst.view.mask = cv::Mat(map->xy.size(), CV_8UC1, cv::Scalar(255));  // the map's own size
+            pair.scale = options.scale, pair.truth_normals = options.truth_normals;
+          }
+          auto made = match::blend_plan_for(pair, options, *map);
+          if (!made) return fail("live", made.message());
+          plan = *made;
+        }
+        repainter.emplace(*map, pair.source.size, backdrop, plan);
       }
       std::error_code ec;
       std::filesystem::create_directories(*live_out, ec);

@@ -184,6 +184,97 @@ TEST(Transfer, FromAGivenMapRepaintsWithoutMatching) {
   EXPECT_NE(bad.message().find("map given"), std::string::npos) << bad.message();
 }
 
+// What the live view needs to repaint frames as the stills were: the options
+// back from metrics.json, and the same blend plan from them.
+TEST(Transfer, OptionsComeBackFromMetricsAndGiveTheStillsBlend) {
+  const ImageSet dst = simulated("bull", Role::destination);
+  const ImageSet src = simulated("orange", Role::source);
+  auto o = options(Method::coherent);
+  o.match.fast = true;
+  o.match.coherent_threshold = 0.15, o.match.seed = 7, o.match.coherent_sweeps = 3;
+  o.scale = 0.75, o.blend = 3, o.blend_guide = 0.2;
+  auto r = transfer(dst, src, o);
+  ASSERT_TRUE(r.ok()) << r.message();
+  ASSERT_TRUE(r->blend);
+  const auto dir = std::filesystem::temp_directory_path() / ("veneer-options-test-" + std::to_string(::getpid()));
+  ASSERT_TRUE(write_transfer(*r, dir).ok());
+  auto back = read_transfer_options(dir / "metrics.json");
+  ASSERT_TRUE(back.ok()) << back.message();
+  EXPECT_TRUE(back->match == o.match);
+  EXPECT_EQ(back->scale, o.scale);
+  EXPECT_EQ(back->truth_normals, o.truth_normals);
+  EXPECT_EQ(back->blend, o.blend);
+  EXPECT_EQ(back->blend_guide, o.blend_guide);
+
+  // the plan from the options read back and the map read back: the stills' own
+  auto map = read_map(dir / "map.pfm");
+  ASSERT_TRUE(map.ok()) << map.message();
+  auto pair = prepare_pair(dst, src, *back);
+  ASSERT_TRUE(pair.ok()) << pair.message();
+  auto plan = blend_plan_for(*pair, *back, *map);
+  ASSERT_TRUE(plan.ok()) << plan.message();
+  ASSERT_TRUE(*plan);
+  const fast::BlendPlan &a = **plan, &b = *r->blend;
+  EXPECT_EQ(a.pixels, b.pixels);
+  EXPECT_EQ(a.first, b.first);
+  ASSERT_EQ(a.terms.size(), b.terms.size());
+  for (size_t i = 0; i < a.terms.size(); ++i) {
+    ASSERT_EQ(a.terms[i].source, b.terms[i].source) << i;
+    ASSERT_EQ(a.terms[i].weight, b.terms[i].weight) << i;
+  }
+  // plain when asked, and none at radius 0
+  TransferOptions plain = *back;
+  plain.blend_guide = 0;
+  auto p = blend_plan_for(*pair, plain, *map);
+  ASSERT_TRUE(p.ok() && *p);
+  bool differs = (*p)->terms.size() != a.terms.size();
+  for (size_t i = 0; !differs && i < a.terms.size(); ++i) differs = (*p)->terms[i].weight != a.terms[i].weight;
+  EXPECT_TRUE(differs) << "the guide changes the weights";
+  plain.blend = 0;
+  auto none = blend_plan_for(*pair, plain, *map);
+  ASSERT_TRUE(none.ok());
+  EXPECT_FALSE(*none);
+  // a map of another size is named
+  Map small;
+  cv::resize(map->xy, small.xy, {}, 0.5, 0.5, cv::INTER_NEAREST);
+  auto wrong = blend_plan_for(*pair, *back, small);
+  ASSERT_FALSE(wrong.ok());
+  EXPECT_NE(wrong.message().find("the map is"), std::string::npos) << wrong.message();
+
+  // bad files: each error names the file and what is wrong; nothing else is touched
+  auto write = [&](const std::string& text) {
+    std::ofstream(dir / "bad.json") << text;
+    return read_transfer_options(dir / "bad.json");
+  };
+  auto not_json = write("{ \"options\": ");
+  ASSERT_FALSE(not_json.ok());
+  EXPECT_NE(not_json.message().find("bad.json: not a JSON object"), std::string::npos) << not_json.message();
+  auto wrong_type = write(R"({"options": {"blend": "two"}})");
+  ASSERT_FALSE(wrong_type.ok());
+  EXPECT_NE(wrong_type.message().find("options.blend"), std::string::npos) << wrong_type.message();
+  auto negative_seed = write(R"({"options": {"seed": -1}})");
+  ASSERT_FALSE(negative_seed.ok());
+  EXPECT_NE(negative_seed.message().find("options.seed"), std::string::npos) << negative_seed.message();
+  auto huge = write(R"({"options": {"patch": 4294967297}})");
+  ASSERT_FALSE(huge.ok());
+  EXPECT_NE(huge.message().find("options.patch"), std::string::npos) << huge.message();
+  auto range = write(R"({"options": {"blend": 40}})");
+  ASSERT_FALSE(range.ok());
+  EXPECT_NE(range.message().find("blend"), std::string::npos) << range.message();
+  auto method = write(R"({"options": {"method": "magic"}})");
+  ASSERT_FALSE(method.ok());
+  EXPECT_NE(method.message().find("options.method"), std::string::npos) << method.message();
+  auto missing = read_transfer_options(dir / "none.json");
+  ASSERT_FALSE(missing.ok());
+  EXPECT_NE(missing.message().find("none.json"), std::string::npos) << missing.message();
+  // no options recorded: the defaults
+  auto bare = write(R"({"quality": {}})");
+  ASSERT_TRUE(bare.ok()) << bare.message();
+  EXPECT_TRUE(bare->match == TransferOptions{}.match);
+  EXPECT_EQ(bare->blend, TransferOptions{}.blend);
+  std::filesystem::remove_all(dir);
+}
+
 TEST(Transfer, BadInput) {
   const ImageSet dst = simulated("apple", Role::destination);
   ImageSet src = simulated("banana", Role::source);

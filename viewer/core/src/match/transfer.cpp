@@ -6,6 +6,8 @@
 #include <cmath>
 #include <cstdio>
 #include <optional>
+#include <limits>
+#include <type_traits>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
@@ -293,6 +295,37 @@ Expected<PreparedPair> prepare_pair(const ImageSet& destination_in, const ImageS
 
 namespace {
 
+// The blend weighs each proposal by its fit to the normals, when the map was
+// matched on them. (A map matched on intensities is not guided by normals:
+// on bull <- sphere-red-gloss that re-matched it by normals, 17.4 dB of
+// relighting PSNR against 18.3 blended plain and 17.9 not blended.) Empty
+// normals when the blend is plain.
+fast::BlendGuide blend_guide_of(const PreparedPair& pair, const TransferOptions& options) {
+  const bool guided = options.blend > 0 && options.blend_guide > 0 && options.match.feature == Feature::normals &&
+                      !pair.dst.view.normals.empty() && !pair.src.view.normals.empty();
+  if (!guided) return {{}, {}, options.blend_guide};
+  return {pair.dst.view.normals, pair.src.view.normals, options.blend_guide};
+}
+
+}  // namespace
+
+Expected<std::shared_ptr<const fast::BlendPlan>> blend_plan_for(const PreparedPair& pair,
+                                                                const TransferOptions& options, const Map& map) {
+  if (auto s = options.check(); !s) return s.error();
+  if (options.blend == 0) return std::shared_ptr<const fast::BlendPlan>();
+  const cv::Size want = pair.dst.view.mask.size();
+  if (map.xy.size() != want || map.xy.type() != CV_32FC2)
+    return make_error("the map is " + std::to_string(map.xy.cols) + "x" + std::to_string(map.xy.rows) +
+                      ", the prepared destination " + std::to_string(want.width) + "x" + std::to_string(want.height));
+  const fast::BlendGuide guide = blend_guide_of(pair, options);
+  auto made = fast::blend_plan(map, {}, pair.src.view.mask, options.blend, 0,
+                               guide.destination.empty() ? nullptr : &guide);
+  if (!made) return made.error();
+  return std::shared_ptr<const fast::BlendPlan>(std::make_shared<const fast::BlendPlan>(std::move(*made)));
+}
+
+namespace {
+
 // transfer() of a prepared pair, from `given` when not null (else the map is
 // computed); timings' total_s counts from t_all.
 Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferOptions& options, const Map* given,
@@ -335,21 +368,13 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
   result.source_size = source.size;
   t0 = Clock::now();
   progress.report(0.9, "repaint");
-  // The blend weighs each proposal by its fit to the normals, when the map was
-  // matched on them. (A map matched on intensities is not guided by normals:
-  // on bull <- sphere-red-gloss that re-matched it by normals, 17.4 dB of
-  // relighting PSNR against 18.3 blended plain and 17.9 not blended.)
-  const fast::BlendGuide guide{dst->view.normals, src->view.normals, options.blend_guide};
-  const bool guided = options.blend > 0 && options.blend_guide > 0 && options.match.feature == Feature::normals &&
-                      !guide.destination.empty() && !guide.source.empty();
+  const fast::BlendGuide guide = blend_guide_of(pair, options);
+  const bool guided = !guide.destination.empty();
   const fast::BlendGuide* g = guided ? &guide : nullptr;
   // every photo through the same map: the blend's weights worked out once
-  std::shared_ptr<const fast::BlendPlan> plan;
-  if (options.blend > 0) {
-    auto made = fast::blend_plan(result.map, {}, src->view.mask, options.blend, 0, g);
-    if (!made) return make_error("repaint: " + made.message());
-    plan = std::make_shared<const fast::BlendPlan>(std::move(*made));
-  }
+  auto planned = blend_plan_for(pair, options, result.map);
+  if (!planned) return make_error("repaint: " + planned.message());
+  const std::shared_ptr<const fast::BlendPlan> plan = *planned;
   result.blend = plan;
   auto paint = [&](const cv::Mat& photo, const cv::Mat& backdrop) -> Expected<cv::Mat> {
     if (!plan) return repaint(result.map, photo, backdrop);
@@ -423,6 +448,58 @@ Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOption
 Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOptions& options, const Map& map,
                                   const Progress& progress) {
   return transfer_from(pair, options, &map, progress, Clock::now());
+}
+
+Expected<TransferOptions> read_transfer_options(const std::filesystem::path& file) {
+  auto bytes = read_file_bytes(file);
+  if (!bytes) return bytes.error();
+  const std::string name = file.string();
+  const nlohmann::json j = nlohmann::json::parse(*bytes, nullptr, false);
+  if (j.is_discarded() || !j.is_object()) return make_error(name + ": not a JSON object");
+  TransferOptions t;
+  if (!j.contains("options")) return t;
+  const nlohmann::json& o = j["options"];
+  if (!o.is_object()) return make_error(name + ": \"options\" is not an object");
+  std::string bad;  // the first key of the wrong type
+  auto get = [&](const char* key, auto& into) {
+    if (!o.contains(key) || !bad.empty()) return;
+    using T = std::decay_t<decltype(into)>;
+    const nlohmann::json& v = o[key];
+    const bool fits = std::is_same_v<T, bool>          ? v.is_boolean()
+                      : std::is_same_v<T, std::string> ? v.is_string()
+                      : std::is_unsigned_v<T>          ? v.is_number_unsigned()
+                      : std::is_integral_v<T>          ? v.is_number_integer()
+                                                       : v.is_number();
+    bool in_range = fits;
+    if constexpr (std::is_integral_v<T> && !std::is_same_v<T, bool>) {
+      if (fits && v.is_number_unsigned())
+        in_range = v.get<uint64_t>() <= static_cast<uint64_t>(std::numeric_limits<T>::max());
+      else if (fits)
+        in_range = v.get<int64_t>() >= static_cast<int64_t>(std::numeric_limits<T>::min()) &&
+                   v.get<int64_t>() <= static_cast<int64_t>(std::numeric_limits<T>::max());
+    }
+    if (!in_range) {
+      bad = key;
+      return;
+    }
+    into = v.get<T>();
+  };
+  std::string method = method_name(t.match.method), feature = feature_name(t.match.feature);
+  MatchOptions& m = t.match;
+  get("method", method), get("feature", feature), get("patch", m.patch), get("candidates", m.candidates);
+  get("threshold", m.threshold), get("iterations", m.iterations), get("coherent_threshold", m.coherent_threshold);
+  get("uniformity", m.uniformity), get("coherent_grow", m.coherent_grow), get("coherent_smooth", m.coherent_smooth);
+  get("coherent_sweeps", m.coherent_sweeps), get("coherent_guide", m.coherent_guide), get("fast", m.fast);
+  get("seed", m.seed), get("truth_normals", t.truth_normals), get("scale", t.scale), get("blend", t.blend);
+  get("blend_guide", t.blend_guide);
+  if (!bad.empty()) return make_error(name + ": options." + bad + " has the wrong type or is out of range");
+  auto me = parse_method(method);
+  if (!me) return make_error(name + ": options.method: " + me.message());
+  auto fe = parse_feature(feature);
+  if (!fe) return make_error(name + ": options.feature: " + fe.message());
+  m.method = *me, m.feature = *fe;
+  if (auto s = t.check(); !s) return make_error(name + ": options: " + s.message());
+  return t;
 }
 
 double map_scale(const Map& map, const ImageSet& destination) {

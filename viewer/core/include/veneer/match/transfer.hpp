@@ -86,6 +86,18 @@ Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOption
 // the pair's destination is an error.
 Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOptions& options, const Map& map,
                                   const Progress& progress = {});
+// The blend weights of the pictures transfer() paints through `map` with
+// `options` (null when options.blend is 0): guided by the pair's normals when
+// the map was matched on them and blend_guide > 0, else plain. The live view
+// repaints every frame with the same plan, so frames look like the stills.
+// Fails for a map of another size than the pair's destination.
+Expected<std::shared_ptr<const fast::BlendPlan>> blend_plan_for(const PreparedPair& pair,
+                                                                const TransferOptions& options, const Map& map);
+// The options a transfer folder's metrics.json records (write_transfer), for
+// redoing its pictures the same way -- TransferOptions' defaults for any it
+// leaves out. Fails, naming the file and the key, when the file cannot be
+// read, is not JSON, or a value has the wrong type or is out of range.
+Expected<TransferOptions> read_transfer_options(const std::filesystem::path& metrics_json);
 // Writes map.pfm, map.png, result_light_NN.png, result_median.png, reuse.png,
 // metrics.json (and relight_transferred.png / relight_reference.png when the
 // relighting was measured) into `folder` (created when missing).
