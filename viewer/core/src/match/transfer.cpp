@@ -295,6 +295,18 @@ Expected<PreparedPair> prepare_pair(const ImageSet& destination_in, const ImageS
 
 namespace {
 
+// metrics.json's "options" (blend_guide as the pictures were blended: 0 plain)
+nlohmann::json options_json(const TransferOptions& options, double blend_guide) {
+  const auto& o = options.match;
+  return {{"method", method_name(o.method)}, {"feature", feature_name(o.feature)}, {"patch", o.patch},
+          {"candidates", o.candidates}, {"threshold", o.threshold}, {"iterations", o.iterations},
+          {"coherent_threshold", o.coherent_threshold}, {"uniformity", o.uniformity},
+          {"coherent_grow", o.coherent_grow}, {"coherent_smooth", o.coherent_smooth},
+          {"coherent_sweeps", o.coherent_sweeps}, {"coherent_guide", o.coherent_guide}, {"fast", o.fast},
+          {"seed", o.seed}, {"truth_normals", options.truth_normals}, {"scale", options.scale},
+          {"blend", options.blend}, {"blend_guide", blend_guide}};
+}
+
 // The blend weighs each proposal by its fit to the normals, when the map was
 // matched on them. (A map matched on intensities is not guided by normals:
 // on bull <- sphere-red-gloss that re-matched it by normals, 17.4 dB of
@@ -397,16 +409,7 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
                       {"object_pixels", cv::countNonZero(dst->view.mask)}};
   j["source"] = {{"id", source.id}, {"scene", source.scene}, {"size", {source.size.width, source.size.height}},
                  {"object_pixels", cv::countNonZero(src->view.mask)}};
-  const auto& o = options.match;
-  j["options"] = {{"method", method_name(o.method)}, {"feature", feature_name(o.feature)}, {"patch", o.patch},
-                  {"candidates", o.candidates}, {"threshold", o.threshold}, {"iterations", o.iterations},
-                  {"coherent_threshold", o.coherent_threshold}, {"uniformity", o.uniformity},
-                  {"coherent_grow", o.coherent_grow},
-                  {"coherent_smooth", o.coherent_smooth}, {"coherent_sweeps", o.coherent_sweeps},
-                  {"coherent_guide", o.coherent_guide},
-                  {"fast", o.fast}, {"seed", o.seed},
-                  {"truth_normals", options.truth_normals},
-                  {"scale", options.scale}, {"blend", options.blend}, {"blend_guide", guided ? options.blend_guide : 0.0}};
+  j["options"] = options_json(options, guided ? options.blend_guide : 0.0);
   if (destination.truth.present() && source.truth.present()) {
     t0 = Clock::now();
     Quality q = evaluate(result.map, destination.truth.mask, source.truth.mask, destination.truth.normals,
@@ -450,11 +453,18 @@ Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOption
   return transfer_from(pair, options, &map, progress, Clock::now());
 }
 
+std::string transfer_options_json(const TransferOptions& options) {
+  return nlohmann::json{{"options", options_json(options, options.blend_guide)}}.dump(2);
+}
+
 Expected<TransferOptions> read_transfer_options(const std::filesystem::path& file) {
   auto bytes = read_file_bytes(file);
   if (!bytes) return bytes.error();
-  const std::string name = file.string();
-  const nlohmann::json j = nlohmann::json::parse(*bytes, nullptr, false);
+  return parse_transfer_options(*bytes, file.string());
+}
+
+Expected<TransferOptions> parse_transfer_options(std::string_view text, const std::string& name) {
+  const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
   if (j.is_discarded() || !j.is_object()) return make_error(name + ": not a JSON object");
   TransferOptions t;
   if (!j.contains("options")) return t;

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -98,6 +99,10 @@ Expected<std::shared_ptr<const fast::BlendPlan>> blend_plan_for(const PreparedPa
 // leaves out. Fails, naming the file and the key, when the file cannot be
 // read, is not JSON, or a value has the wrong type or is out of range.
 Expected<TransferOptions> read_transfer_options(const std::filesystem::path& metrics_json);
+// The same from the file's text (`name` for the errors), and the options as
+// such a file's text ({"options": {...}}; parse_transfer_options reads it back equal).
+Expected<TransferOptions> parse_transfer_options(std::string_view text, const std::string& name);
+std::string transfer_options_json(const TransferOptions& options);
 // Writes map.pfm, map.png, result_light_NN.png, result_median.png, reuse.png,
 // metrics.json (and relight_transferred.png / relight_reference.png when the
 // relighting was measured) into `folder` (created when missing).
