@@ -25,6 +25,16 @@
 #include "depth.hpp"
 #include "veneer/util/log.hpp"
 
+// "No dependence between the iterations": GCC vectorises the per-pixel lane
+// loops below without a runtime alias check. (Clang -- the fuzz build -- has
+// no such hint that it does not turn into an error when a sanitizer keeps it
+// from vectorising; it relies on the __restrict pointers.)
+#if defined(__clang__)
+#define VENEER_IVDEP
+#else
+#define VENEER_IVDEP _Pragma("GCC ivdep")
+#endif
+
 
 namespace veneer::ps {
 
@@ -168,7 +178,7 @@ inline void load_light(const LoadArgs& a) {
   float* __restrict M = a.M;
   const int st3 = kStep > 0 ? kStep * 3 : a.step * 3;
   const float e0 = a.e0, e1 = a.e1, e2 = a.e2, satv = a.satv;
-#pragma GCC ivdep
+VENEER_IVDEP
   for (int k = 0; k < a.count; ++k) {
     const float v0 = src[k * st3], v1 = src[k * st3 + 1], v2 = src[k * st3 + 2];
     st[k] = float((v0 >= satv) | (v1 >= satv) | (v2 >= satv));
@@ -235,7 +245,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
       const float* __restrict cg = b.C.data() + (size_t(i) * 3 + 1) * cap;
       const float* __restrict cr = b.C.data() + (size_t(i) * 3 + 2) * cap;
       const float* __restrict yy = b.Y.data() + size_t(i) * cap;
-#pragma GCC ivdep
+VENEER_IVDEP
       for (int k = 0; k < count; ++k) {
         c0[k] += cb[k] - yy[k];
         c1[k] += cg[k] - yy[k];
@@ -244,7 +254,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
       }
     }
     const float dc = s.diffuse_chroma;
-#pragma GCC ivdep
+VENEER_IVDEP
     for (int k = 0; k < count; ++k) {
       const float len = std::sqrt(c0[k] * c0[k] + c1[k] * c1[k] + c2[k] * c2[k]);
       const bool coloured = (len >= dc * sy[k]) & (sy[k] > 0.f);
@@ -262,7 +272,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
       const float* __restrict cg = b.C.data() + (size_t(i) * 3 + 1) * cap;
       const float* __restrict cr = b.C.data() + (size_t(i) * 3 + 2) * cap;
       float* __restrict yy = b.Y.data() + size_t(i) * cap;
-#pragma GCC ivdep
+VENEER_IVDEP
       for (int k = 0; k < count; ++k) {
         const float g = yy[k], u = (cb[k] - g) * c0[k] + (cg[k] - g) * c1[k] + (cr[k] - g) * c2[k];
         yy[k] = use[k] != 0.f ? u : g;
@@ -280,27 +290,27 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
       const float* __restrict st = b.sat.data() + size_t(i) * cap;
       float* __restrict w = b.W.data() + size_t(i) * cap;
       const float sf = s.shadow_fraction;
-#pragma GCC ivdep
+VENEER_IVDEP
       for (int k = 0; k < count; ++k) w[k] = float((yy[k] >= sf * M[k]) & (st[k] == 0.f) & (yy[k] > 0.f));
     }
     std::fill(K, K + count, 0.f);
     for (int i = 0; i < n; ++i) {
       const float* __restrict w = b.W.data() + size_t(i) * cap;
-#pragma GCC ivdep
+VENEER_IVDEP
       for (int k = 0; k < count; ++k) K[k] += w[k];
     }
-#pragma GCC ivdep
+VENEER_IVDEP
     for (int k = 0; k < count; ++k) okv[k] = K[k] >= 3.f ? 1.f : 0.f;
     if (s.use_cache) {
       std::fill(pat, pat + count, 0u);
       for (int i = 0; i < n; ++i) {
         const float* __restrict w = b.W.data() + size_t(i) * cap;
-#pragma GCC ivdep
+VENEER_IVDEP
         for (int k = 0; k < count; ++k) pat[k] |= uint32_t(w[k] != 0.f) << i;
       }
     }
     // Fallback to every sample where fewer than 3 are kept.
-#pragma GCC ivdep
+VENEER_IVDEP
     for (int k = 0; k < count; ++k) {
       if (okv[k] == 0.f) {
         for (int i = 0; i < n; ++i) b.W[size_t(i) * cap + k] = 1.f;
@@ -337,7 +347,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
           for (int i = 0; i < n; ++i) {
             const float* __restrict yy = b.Y.data() + size_t(i) * cap;
             const float p0 = P[i], p1 = P[n + i], p2 = P[2 * n + i];
-#pragma GCC ivdep
+VENEER_IVDEP
             for (int k = 0; k < count; ++k) {
               gx[k] += p0 * yy[k];
               gy[k] += p1 * yy[k];
@@ -347,7 +357,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
         }
         if (s.robust) {
           const float* dropped = b.acc.data();  // best_i of the outlier step: -1 = kept all
-#pragma GCC ivdep
+VENEER_IVDEP
           for (int k = 0; k < count; ++k) {
             const uint32_t p = pat[k];
             if (p == s.full) continue;
@@ -385,7 +395,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
           const float* __restrict yy = b.Y.data() + size_t(i) * cap;
           const float* __restrict w = b.W.data() + size_t(i) * cap;
           const float lx = s.dir[i * 3], ly = s.dir[i * 3 + 1], lz = s.dir[i * 3 + 2];
-#pragma GCC ivdep
+VENEER_IVDEP
           for (int k = 0; k < count; ++k) {
             const float wk = w[k], wy = wk * yy[k];
             a00[k] += wk * lx * lx;
@@ -407,9 +417,9 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
       float* __restrict pz = b.pz.data();
       const float invf = 1.f / s.f;
       const float v = (float(y) - s.cy) * invf;
-#pragma GCC ivdep
+VENEER_IVDEP
       for (int k = 0; k < count; ++k) pz[k] = z ? z[k] : 0.f;
-#pragma GCC ivdep
+VENEER_IVDEP
       for (int k = 0; k < count; ++k) {
         const float zz = pz[k];
         const float t = 1.f - zz;
@@ -434,7 +444,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
         float* __restrict vy = b.V.data() + (size_t(i) * 3 + 1) * cap;
         float* __restrict vz = b.V.data() + (size_t(i) * 3 + 2) * cap;
         const float lx = s.pos[i * 3], ly = s.pos[i * 3 + 1], lz = s.pos[i * 3 + 2], r2 = s.pos_norm2[i];
-#pragma GCC ivdep
+VENEER_IVDEP
         for (int k = 0; k < count; ++k) {
           const float dx = lx - px[k], dy = ly - py[k], dz = lz - pz[k];
           const float d2 = dx * dx + dy * dy + dz * dz;
@@ -468,7 +478,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
       const float* __restrict B0 = A + 6 * cap;
       const float* __restrict B1 = A + 7 * cap;
       const float* __restrict B2 = A + 8 * cap;
-#pragma GCC ivdep
+VENEER_IVDEP
       for (int k = 0; k < count; ++k) {
         const float a00 = A[k], a01 = A1[k], a02 = A2[k], a11 = A3[k], a12 = A4[k], a22 = A5[k];
         const float b0 = B0[k], b1 = B1[k], b2 = B2[k];
@@ -485,7 +495,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
       }
     }
     // 4. normal and grey albedo.
-#pragma GCC ivdep
+VENEER_IVDEP
     for (int k = 0; k < count; ++k) {
       const float len = std::sqrt(gx[k] * gx[k] + gy[k] * gy[k] + gz[k] * gz[k]);
       const bool sig = (len > 0.f) & (M[k] > ms);
@@ -512,7 +522,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
       const float* __restrict vz = b.V.data() + (size_t(i) * 3 + 2) * cap;
       const float lx = s.dir[i * 3], ly = s.dir[i * 3 + 1], lz = s.dir[i * 3 + 2];
       const bool near = s.near;
-#pragma GCC ivdep
+VENEER_IVDEP
       for (int k = 0; k < count; ++k) {
         const float sh = near ? nx[k] * vx[k] + ny[k] * vy[k] + nz[k] * vz[k] : nx[k] * lx + ny[k] * ly + nz[k] * lz;
         const float r = std::abs(yy[k] - ga[k] * sh) * w[k];
@@ -533,7 +543,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
     if (drops == 0) break;
     for (int i = 0; i < n; ++i) {
       float* __restrict w = b.W.data() + size_t(i) * cap;
-#pragma GCC ivdep
+VENEER_IVDEP
       for (int k = 0; k < count; ++k) w[k] = best_i[k] == float(i) ? 0.f : w[k];
     }
     if (s.use_cache) {
@@ -562,7 +572,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
       const float* __restrict vx = b.V.data() + (size_t(i) * 3 + 0) * cap;
       const float* __restrict vy = b.V.data() + (size_t(i) * 3 + 1) * cap;
       const float* __restrict vz = b.V.data() + (size_t(i) * 3 + 2) * cap;
-#pragma GCC ivdep
+VENEER_IVDEP
       for (int k = 0; k < count; ++k) {
         const float sh = nx[k] * vx[k] + ny[k] * vy[k] + nz[k] * vz[k];
         const float ws = w[k] * sh;
@@ -575,7 +585,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
       }
     } else {
       const float lx = s.dir[i * 3], ly = s.dir[i * 3 + 1], lz = s.dir[i * 3 + 2];
-#pragma GCC ivdep
+VENEER_IVDEP
       for (int k = 0; k < count; ++k) {
         const float sh = nx[k] * lx + ny[k] * ly + nz[k] * lz;
         const float ws = w[k] * sh;
@@ -593,7 +603,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
   const uint8_t* __restrict mk = mask;
   float* __restrict inside = b.px.data();  // reuse: 1 where the pixel is in the mask
   for (int k = 0; k < count; ++k) inside[k] = mk[size_t(k) * step] != 0 ? 1.f : 0.f;
-#pragma GCC ivdep
+VENEER_IVDEP
   for (int k = 0; k < count; ++k) {
     on[k * 3] = nx[k] * inside[k];
     on[k * 3 + 1] = ny[k] * inside[k];
@@ -601,7 +611,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
   }
   if (out.albedo) {
     float* __restrict al = out.albedo;
-#pragma GCC ivdep
+VENEER_IVDEP
     for (int k = 0; k < count; ++k) {
       const bool use = (inside[k] != 0.f) & (ga[k] > 0.f) & (den[k] > 0.f);
       const float id = (use ? 1.f : 0.f) / (use ? den[k] : 1.f);
@@ -612,7 +622,7 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
   }
   if (out.residual) {
     float* __restrict ro = out.residual;
-#pragma GCC ivdep
+VENEER_IVDEP
     for (int k = 0; k < count; ++k) {
       const bool use = (inside[k] != 0.f) & (ga[k] > 0.f);
       ro[k] = use ? std::sqrt(res[k] / std::max(K[k], 1.f)) / (use ? M[k] : 1.f) : 0.f;

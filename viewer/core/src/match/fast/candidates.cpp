@@ -136,18 +136,6 @@ struct Tree {
 };
 
 
-inline uint64_t key_of(float d, uint32_t id) {
-  uint32_t bits;
-  std::memcpy(&bits, &d, sizeof bits);
-  return (static_cast<uint64_t>(bits) << 32) | id;
-}
-inline float dist_of(uint64_t key) {
-  const uint32_t bits = static_cast<uint32_t>(key >> 32);
-  float d;
-  std::memcpy(&d, &bits, sizeof d);
-  return d;
-}
-
 #if defined(__AVX2__)
 // Lane permutations that move the lanes set in an 8-bit mask to the front.
 struct PackTable {
