@@ -210,6 +210,31 @@ TEST(Daemon, LiveFramesThroughAMapAreBlendedAsTheStills) {
     EXPECT_EQ(cv::norm(got, is_blended ? want_blended : want_plain, cv::NORM_INF), 0.0) << which;
     EXPECT_GT(cv::norm(got, is_blended ? want_plain : want_blended, cv::NORM_INF), 0.0) << which;
   }
+
+  // A bare map.pfm of a half-scale transfer (no metrics.json beside it): its
+  // scale comes from its width against the destination's, its blend is the default.
+  const fs::path half = dir / "half", bare = dir / "bare";
+  auto th = run(rigtest::veneer_cli() + " transfer --dst " + dst.string() + " --src " + src.string() +
+                " --method coherent --scale 0.5 --out " + half.string());
+  ASSERT_EQ(th.code, 0) << th.out;
+  fs::create_directories(bare);
+  fs::copy_file(half / "map.pfm", bare / "map.pfm");
+  auto scaled = run(rig + " live --frames 1 --fps 5 --map " + (bare / "map.pfm").string() + " --src " + src.string() +
+                    " --dst " + dst.string() + " --out " + (dir / "scaled").string());
+  ASSERT_EQ(scaled.code, 0) << scaled.out;
+  veneer::match::TransferOptions defaults;
+  defaults.scale = 0.5;
+  auto half_pair = veneer::match::prepare_pair(*dset, *sset, defaults);
+  auto half_map = veneer::match::read_map(bare / "map.pfm");
+  ASSERT_TRUE(half_pair && half_map);
+  auto half_plan = veneer::match::blend_plan_for(*half_pair, defaults, *half_map);
+  ASSERT_TRUE(half_plan && *half_plan) << (half_plan ? "no plan" : half_plan.message());
+  const cv::Mat frame = cv::imread((dir / "scaled" / "frame_0000.jpg").string(), cv::IMREAD_COLOR);
+  const cv::Mat got = cv::imread((dir / "scaled" / "repainted_0000.png").string(), cv::IMREAD_COLOR);
+  ASSERT_FALSE(frame.empty() || got.empty());
+  EXPECT_EQ(got.size(), half_map->xy.size());
+  veneer::match::LiveRepainter at_half(*half_map, half_pair->source.size, backdrop, *half_plan);
+  EXPECT_EQ(cv::norm(got, at_half.apply(frame), cv::NORM_INF), 0.0);
   fs::remove_all(dir);
 }
 

@@ -299,6 +299,8 @@ VENEER_COMMAND(rig) {
           auto d = read_set(*live_dst);
           if (!d) return fail("live", d.message());
           backdrop = tonemap_picture(match::median_photo(d->images));
+          // a bare map.pfm: its scale from its width against the destination's
+          if (!std::filesystem::exists(metrics)) options.scale = match::map_scale(*map, *d);
           dst = std::move(*d);
         }
         // the source as the map saw it (scaled like the transfer's)
