@@ -8,6 +8,7 @@
 #include <optional>
 #include <limits>
 #include <type_traits>
+#include <utility>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
@@ -295,16 +296,25 @@ Expected<PreparedPair> prepare_pair(const ImageSet& destination_in, const ImageS
 
 namespace {
 
+// metrics.json's "options" besides method and feature, one list for the
+// writer and the reader: f(key, member) for each.
+template <class Options, class F>
+void for_each_option(Options& t, F&& f) {
+  auto& m = t.match;
+  f("patch", m.patch), f("candidates", m.candidates), f("threshold", m.threshold), f("iterations", m.iterations);
+  f("coherent_threshold", m.coherent_threshold), f("uniformity", m.uniformity), f("coherent_grow", m.coherent_grow);
+  f("coherent_smooth", m.coherent_smooth), f("coherent_sweeps", m.coherent_sweeps);
+  f("coherent_guide", m.coherent_guide), f("fast", m.fast), f("seed", m.seed), f("truth_normals", t.truth_normals);
+  f("scale", t.scale), f("blend", t.blend), f("blend_guide", t.blend_guide);
+}
+
 // metrics.json's "options" (blend_guide as the pictures were blended: 0 plain)
 nlohmann::json options_json(const TransferOptions& options, double blend_guide) {
-  const auto& o = options.match;
-  return {{"method", method_name(o.method)}, {"feature", feature_name(o.feature)}, {"patch", o.patch},
-          {"candidates", o.candidates}, {"threshold", o.threshold}, {"iterations", o.iterations},
-          {"coherent_threshold", o.coherent_threshold}, {"uniformity", o.uniformity},
-          {"coherent_grow", o.coherent_grow}, {"coherent_smooth", o.coherent_smooth},
-          {"coherent_sweeps", o.coherent_sweeps}, {"coherent_guide", o.coherent_guide}, {"fast", o.fast},
-          {"seed", o.seed}, {"truth_normals", options.truth_normals}, {"scale", options.scale},
-          {"blend", options.blend}, {"blend_guide", blend_guide}};
+  nlohmann::json j = {{"method", method_name(options.match.method)}, {"feature", feature_name(options.match.feature)}};
+  TransferOptions written = options;
+  written.blend_guide = blend_guide;
+  for_each_option(std::as_const(written), [&](const char* key, const auto& value) { j[key] = value; });
+  return j;
 }
 
 // The blend weighs each proposal by its fit to the normals, when the map was
@@ -471,7 +481,7 @@ Expected<TransferOptions> parse_transfer_options(std::string_view text, const st
   const nlohmann::json& o = j["options"];
   if (!o.is_object()) return make_error(name + ": \"options\" is not an object");
   std::string bad;  // the first key of the wrong type
-  auto get = [&](const char* key, auto& into) {
+  auto get = [&](const char* key, auto& into) {  // into: a member of t
     if (!o.contains(key) || !bad.empty()) return;
     using T = std::decay_t<decltype(into)>;
     const nlohmann::json& v = o[key];
@@ -495,19 +505,14 @@ Expected<TransferOptions> parse_transfer_options(std::string_view text, const st
     into = v.get<T>();
   };
   std::string method = method_name(t.match.method), feature = feature_name(t.match.feature);
-  MatchOptions& m = t.match;
-  get("method", method), get("feature", feature), get("patch", m.patch), get("candidates", m.candidates);
-  get("threshold", m.threshold), get("iterations", m.iterations), get("coherent_threshold", m.coherent_threshold);
-  get("uniformity", m.uniformity), get("coherent_grow", m.coherent_grow), get("coherent_smooth", m.coherent_smooth);
-  get("coherent_sweeps", m.coherent_sweeps), get("coherent_guide", m.coherent_guide), get("fast", m.fast);
-  get("seed", m.seed), get("truth_normals", t.truth_normals), get("scale", t.scale), get("blend", t.blend);
-  get("blend_guide", t.blend_guide);
+  get("method", method), get("feature", feature);
+  for_each_option(t, get);
   if (!bad.empty()) return make_error(name + ": options." + bad + " has the wrong type or is out of range");
   auto me = parse_method(method);
   if (!me) return make_error(name + ": options.method: " + me.message());
   auto fe = parse_feature(feature);
   if (!fe) return make_error(name + ": options.feature: " + fe.message());
-  m.method = *me, m.feature = *fe;
+  t.match.method = *me, t.match.feature = *fe;
   if (auto s = t.check(); !s) return make_error(name + ": options: " + s.message());
   return t;
 }
