@@ -211,6 +211,22 @@ TEST(Daemon, LiveFramesThroughAMapAreBlendedAsTheStills) {
     EXPECT_GT(cv::norm(got, is_blended ? want_plain : want_blended, cv::NORM_INF), 0.0) << which;
   }
 
+  // Without --dst: no normals to guide, so the plain blend over the source's
+  // mask, on black
+  auto no_dst = run(live + " --out " + (dir / "no-dst").string());
+  ASSERT_EQ(no_dst.code, 0) << no_dst.out;
+  EXPECT_NE(no_dst.out.find("3 px, plain"), std::string::npos) << no_dst.out;
+  {
+    auto plain_plan = veneer::match::fast::blend_plan(*map, {}, pair->src.view.mask, 3);
+    ASSERT_TRUE(plain_plan) << plain_plan.message();
+    const cv::Mat frame = cv::imread((dir / "no-dst" / "frame_0000.jpg").string(), cv::IMREAD_COLOR);
+    const cv::Mat got = cv::imread((dir / "no-dst" / "repainted_0000.png").string(), cv::IMREAD_COLOR);
+    ASSERT_FALSE(frame.empty() || got.empty());
+    veneer::match::LiveRepainter on_black(*map, pair->source.size, {},
+                                          std::make_shared<const veneer::match::fast::BlendPlan>(*plain_plan));
+    EXPECT_EQ(cv::norm(got, on_black.apply(frame), cv::NORM_INF), 0.0);
+  }
+
   // A bare map.pfm of a half-scale transfer (no metrics.json beside it): its
   // scale comes from its width against the destination's, its blend is the default.
   const fs::path half = dir / "half", bare = dir / "bare";

@@ -303,30 +303,29 @@ VENEER_COMMAND(rig) {
           if (!std::filesystem::exists(metrics)) options.scale = match::map_scale(*map, *d);
           dst = std::move(*d);
         }
-        // the source as the map saw it (scaled like the transfer's)
-        match::PreparedPair pair;
-        pair.source = *src;
-        match::scale_set(pair.source, options.scale);
         std::shared_ptr<const match::fast::BlendPlan> plan;
         if (options.blend > 0) {
           std::cout << "preparing the blend (" << options.blend << " px, "
                     << (options.blend_guide > 0 ? "guided by the normals" : "plain") << ") ..." << std::endl;
+          Expected<std::shared_ptr<const match::fast::BlendPlan>> made = std::shared_ptr<const match::fast::BlendPlan>();
           if (dst) {
-            auto prepared = match::prepare_pair(*dst, *src, options);
-            if (!prepared) return fail("live", prepared.message());
-            pair = std::move(*prepared);
-          } else {
-            auto object = match::prepare_object(pair.source, options.truth_normals);
+            auto pair = match::prepare_pair(*dst, *src, options);
+            if (!pair) return fail("live", pair.message());
+            made = match::blend_plan_for(*pair, options, *map);
+          } else {  // no destination normals: the plain blend, over the source's mask as the map saw it
+            ImageSet source = *src;
+            match::scale_set(source, options.scale);
+            auto object = match::prepare_object(source, options.truth_normals);
             if (!object) return fail("live", "source: " + object.message());
-            pair.src = std::move(*object);
-            pair.dst.view.mask = cv::Mat(map->xy.size(), CV_8UC1, cv::Scalar(255));  // the map's own size
-            pair.scale = options.scale, pair.truth_normals = options.truth_normals;
+            auto plain = match::fast::blend_plan(*map, {}, object->view.mask, options.blend);
+            if (plain) made = std::make_shared<const match::fast::BlendPlan>(std::move(*plain));
+            else made = plain.error();
           }
-          auto made = match::blend_plan_for(pair, options, *map);
           if (!made) return fail("live", made.message());
           plan = *made;
         }
-        repainter.emplace(*map, pair.source.size, backdrop, plan);
+        // the source's size as the map saw it (scaled like the transfer's)
+        repainter.emplace(*map, match::scaled_size(src->size, options.scale), backdrop, plan);
       }
       std::error_code ec;
       std::filesystem::create_directories(*live_out, ec);

@@ -59,10 +59,15 @@ Status TransferOptions::check() const {
   return {};
 }
 
+cv::Size scaled_size(cv::Size size, double scale) {
+  if (scale == 1.0) return size;
+  return {std::max(1, static_cast<int>(std::lround(size.width * scale))),
+          std::max(1, static_cast<int>(std::lround(size.height * scale)))};
+}
+
 void scale_set(ImageSet& set, double scale) {
   if (scale == 1.0) return;
-  const cv::Size size(std::max(1, static_cast<int>(std::lround(set.size.width * scale))),
-                      std::max(1, static_cast<int>(std::lround(set.size.height * scale))));
+  const cv::Size size = scaled_size(set.size, scale);
   auto area = [&](cv::Mat& m) {
     if (!m.empty()) cv::resize(m, m, size, 0, 0, cv::INTER_AREA);
   };

@@ -42,6 +42,8 @@ struct PreparedObject {
 // Resizes a set in place (photos by area, masks and truth nearest, normals
 // renormalized, camera intrinsics scaled).
 void scale_set(ImageSet& set, double scale);
+// The size scale_set gives a set of `size`.
+cv::Size scaled_size(cv::Size size, double scale);
 
 Expected<PreparedObject> prepare_object(const ImageSet& set, bool truth_normals, const Progress& progress = {});
 
