@@ -342,12 +342,10 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
   const double cap = 2.0;  // no pixel of an accepted chunk errs more than cap x threshold
   NearestLists nn;
   // Normals: the lookup (rarely misses a nearer row across a cell edge, see
-  // default_index()). Longer features (intensities): the exact nearest --
-  // the projected search's approximate one, the default elsewhere, cost
-  // coherent 0.09 dB of relighting PSNR on bull <- sphere-red-gloss (17.85
-  // against 17.94) for 10 % of its time (bench_quality).
-  const char* index = dst.channels == 3 ? default_index() : "grid";
-  if (auto s = nearest_lists(dst, src, k, index, o.threads, p, nn, stats); !s) return s.error();
+  // default_index()). Intensities: the exact nearest whatever the index
+  // (nearest.cpp; an approximate one cost coherent 0.09 dB of relighting
+  // PSNR on bull <- sphere-red-gloss, 17.85 against 17.94, bench_quality).
+  if (auto s = nearest_lists(dst, src, k, default_index(), o.threads, p, nn, stats); !s) return s.error();
   const int n = dst.rows(), c = dst.channels;
   const float thr2 = static_cast<float>(o.coherent_threshold * o.coherent_threshold);
   const cv::Rect sb = src.bbox;
