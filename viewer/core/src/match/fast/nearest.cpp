@@ -13,7 +13,10 @@
 // distance, and the k-th exact distance is proven final once it is below the
 // bound of the first candidate not taken. Otherwise the list grows once (x4),
 // after which the best found is kept (counted as not certified: approximate,
-// see Stats::certified).
+// see Stats::certified) -- except for `linear`, which then compares the
+// pixel's patch with every source patch (exact; bull <- sphere-red-gloss 3x3
+// at 512x340: 121 ms against the faithful scan's 820 ms and the approximate
+// 30 ms, relighting PSNR 17.32 dB as the faithful scan against 16.86).
 // Intensities at 1x1 are always exact: a pixel the projection does not
 // certify is looked up by the kd-tree at full dimension; below 90 % of the
 // variance kept by the 3 principal directions every pixel goes there. (Keeping
@@ -527,11 +530,15 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
   // One growth step (x4); past it the best found is kept (not certified).
   const int first = std::min(ns, std::max(12, 2 * k + 8));
   const int cap = std::min(ns, (k > 1 ? 4 : 2) * first);
+  // `linear` (any index but the lookup) asks for the exact nearest whatever it costs
+  const bool exhaustive = index_kind != "lookup";
   std::atomic<int> certified{0};
   std::atomic<long> exact_distances{0};
   // 1x1: a pixel the projection cannot certify asks the exact kd-tree at
   // full dimension (see the top of this file for what that costs). Patches
-  // keep the grown candidate list's best (approximate, counted in Stats).
+  // keep the grown candidate list's best (approximate, counted in Stats) --
+  // for `linear` every source patch is then compared (exact; each distance
+  // stops once over the best found).
   std::unique_ptr<NearestIndex> full;
   if (dst.patch == 1) {
     full = make_kdtree();
@@ -542,6 +549,7 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
     std::vector<float> buf(static_cast<size_t>(dst.dims));
     std::vector<int> cid;
     std::vector<float> clb;
+    std::vector<uint8_t> seen(exhaustive && !full ? static_cast<size_t>(ns) : 0, 0);
     int local_certified = 0;
     long local_exact = 0;
     for (int d = b; d < e; ++d) {
@@ -567,6 +575,20 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
         if (!proven && full) {
           full->knn(dst.flat.data() + static_cast<size_t>(d) * c, k, ids, sq);
           ++local_certified;  // exact all the same
+          break;
+        }
+        if (!proven && exhaustive && want >= cap) {  // the rest of the source, bounded by the best found
+          if (cancelled()) return;
+          for (int j = 0; j < want && cid[j] >= 0; ++j) seen[cid[j]] = 1;
+          for (int id = 0; id < ns; ++id) {
+            if (seen[id]) continue;
+            const float bound = top.worst();
+            const float v = patch_sq(buf.data(), src, id, bound);
+            if (v <= bound) top.add(v, id);
+          }
+          for (int j = 0; j < want && cid[j] >= 0; ++j) seen[cid[j]] = 0;
+          ++local_certified;
+          local_exact += ns - want;
           break;
         }
         if (proven || want >= cap) break;
