@@ -297,7 +297,7 @@ Expected<Map> run_patchmatch(const Object& dst, const Object& src, const MatchOp
 
 // Region growing with matcher.cpp's semantics (thesis sec. 4.2.2; the match
 // constraint is relative: no more than T worse than the pixel's direct match): the direct
-// matches come from the fast nearest search (parallel, exact when certified);
+// matches come from the fast nearest search (parallel, exact: see nearest.cpp);
 // the growth is the same sequential breadth-first pass, with distances read
 // through the fast layout.
 Expected<Map> run_regiongrow(const Object& dst, const Object& src, const MatchOptions& o, const Progress& p,
