@@ -126,6 +126,39 @@ TEST(FastIndex, NonNormalPointsAndHigherDimensions) {
   }
 }
 
+// knn_within: given a radius the caller knows holds the k nearest (here the
+// brute force's k-th distance, as the fast search passes its candidates'
+// best, with the same margin), the kd-tree answers exactly the brute force,
+// ties included; a radius far too small leaves it nothing to find.
+TEST(FastIndex, KdTreeWithinARadiusEqualsBruteForce) {
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<float> u(0, 1);
+  const int dims = 21, n = 3000;
+  std::vector<float> pts(static_cast<size_t>(n) * dims);
+  for (auto& v : pts) v = u(rng);
+  for (int i = 0; i < 50; ++i)  // repeated rows: equal distances
+    std::copy_n(pts.begin() + static_cast<long>(rng() % n) * dims, dims, pts.begin() + static_cast<long>(i) * dims);
+  auto tree = veneer::match::fast::make_kdtree();
+  tree->build(pts.data(), n, dims);
+  std::vector<int> ids, bids;
+  std::vector<float> d, bd;
+  for (int k : {1, 10}) {
+    ids.assign(k, -1), d.assign(k, 0);
+    for (int i = 0; i < 200; ++i) {
+      std::vector<float> q(dims);
+      for (auto& v : q) v = u(rng);
+      if (i % 4 == 0) q.assign(pts.begin() + static_cast<long>(i) * dims, pts.begin() + static_cast<long>(i + 1) * dims);
+      brute_knn(pts, dims, q.data(), k, bids, bd);
+      tree->knn_within(q.data(), k, bd[k - 1] * (1.0f + 1e-4f) + 1e-12f, ids.data(), d.data());
+      ASSERT_EQ(ids, bids) << "k=" << k << " query " << i;
+      ASSERT_EQ(d, bd) << "k=" << k << " query " << i;
+    }
+    std::vector<float> q(dims, 0.5f);
+    tree->knn_within(q.data(), k, 1e-9f, ids.data(), d.data());
+    EXPECT_EQ(ids[0], -1) << "nothing lies within a radius of 3e-5";
+  }
+}
+
 }  // namespace
 
 // nearest_from with a hint (the previous pixel's match, as the engine seeds

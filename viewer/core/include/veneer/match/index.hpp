@@ -17,6 +17,13 @@ class NearestIndex {
   // k nearest by squared Euclidean distance, sorted ascending; writes k ids
   // (-1 when fewer exist) and distances.
   virtual void knn(const float* query, int k, int* ids, float* sq_dists) const = 0;
+  // The same, for a caller that knows k points within sqrt(radius_sq) of the
+  // query (say, from a cheaper search): an index may prune with it from the
+  // start. The result is knn()'s.
+  virtual void knn_within(const float* query, int k, float radius_sq, int* ids, float* sq_dists) const {
+    (void)radius_sq;
+    knn(query, k, ids, sq_dists);
+  }
   virtual std::string name() const = 0;
 };
 

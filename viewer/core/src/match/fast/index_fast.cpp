@@ -120,6 +120,17 @@ class KdTreeIndex final : public NearestIndex {
     tree_ = std::make_unique<Tree>(dims, cloud_, nanoflann::KDTreeSingleIndexAdaptorParams(12));
   }
   void knn(const float* query, int k, int* ids, float* sq_dists) const override {
+    search(query, k, std::numeric_limits<float>::max(), ids, sq_dists);
+  }
+  // The tree prunes with the radius from the first node: every point within
+  // it is a candidate, and the k nearest are among them.
+  void knn_within(const float* query, int k, float radius_sq, int* ids, float* sq_dists) const override {
+    search(query, k, radius_sq, ids, sq_dists);
+  }
+  std::string name() const override { return "kdtree"; }
+
+ private:
+  void search(const float* query, int k, float radius_sq, int* ids, float* sq_dists) const {
     Best best(k, ids, sq_dists);
     if (!tree_ || k <= 0) return;
     // nanoflann breaks ties by visiting order; ask for a few more and re-sort
@@ -139,14 +150,14 @@ class KdTreeIndex final : public NearestIndex {
     }
     nanoflann::KNNResultSet<float, uint32_t> rs(static_cast<size_t>(want));
     rs.init(pi, pd);
+    // the set's worst distance is its last slot's until it fills: the radius
+    // (points at or past it are never taken, as past a full set's worst)
+    pd[want - 1] = radius_sq;
     tree_->findNeighbors(rs, query, nanoflann::SearchParams(32, 0.0f, false));
     const int got = static_cast<int>(rs.size());
     for (int j = 0; j < got; ++j) best.add(pd[j], static_cast<int>(pi[j]));
     best.finish();
   }
-  std::string name() const override { return "kdtree"; }
-
- private:
   Cloud cloud_;
   std::unique_ptr<Tree> tree_;
 };

@@ -24,7 +24,11 @@
 // variance kept by the 3 principal directions every pixel goes there. (Keeping
 // the grown list's best instead, as `flann` did between 90 and 99.9 %, cost
 // 0.5 dB of relighting PSNR on bull <- sphere-red-gloss -- 17.51 against 18.03
-// -- for 20 % less time, bench_quality.)
+// -- and 0.4 deg of normal agreement on bull <- orange, for 20 % less time in
+// bench_quality and 35-40 % less in bench_match's intensities row, where about
+// half the pixels need the full tree.) The full tree is asked within the
+// candidates' best distance, which prunes from its first node (675 against
+// 840 ms at 150k px).
 #include "nearest.hpp"
 
 #include <algorithm>
@@ -576,7 +580,10 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
         if (proven) ++local_certified;
         local_exact += want;
         if (!proven && full) {
-          full->knn(dst.flat.data() + static_cast<size_t>(d) * c, k, ids, sq);
+          // the candidates' k-th distance bounds the search (with a margin
+          // for the tree's other summation order)
+          const float radius = top.worst() * (1.0f + 1e-4f) + 1e-12f;
+          full->knn_within(dst.flat.data() + static_cast<size_t>(d) * c, k, radius, ids, sq);
           ++local_certified;  // exact all the same
           break;
         }
