@@ -511,14 +511,13 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
   patch_moments(src, threads, ms, per_row);
   const int c = dst.channels, parts = per_row / c;
   double explained = 1;
-  if (dst.patch == 1 && c > 3) {
-    const cv::Mat w = principal3(md, ms, c, per_row, explained);
-    if (explained < 0.9) {  // the projection keeps too little: full dimension
-      auto index = make_kdtree();
-      auto s = direct(*index, "kdtree");
-      if (stats) stats->explained_variance = explained;
-      return s;
-    }
+  cv::Mat w;  // the 3 principal channel directions (features other than normals)
+  if (c != 3) w = principal3(md, ms, c, per_row, explained);
+  if (dst.patch == 1 && c > 3 && explained < 0.9) {  // the projection keeps too little: full dimension
+    auto index = make_kdtree();
+    auto s = direct(*index, "kdtree");
+    if (stats) stats->explained_variance = explained;
+    return s;
   }
   // y: per spatial function, the 3 principal channel directions (identity for normals)
   std::vector<float> yd, ys;
@@ -526,7 +525,6 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
     yd = std::move(md);
     ys = std::move(ms);
   } else {
-    const cv::Mat w = principal3(md, ms, c, per_row, explained);
     project(md, c, parts, w, yd);
     project(ms, c, parts, w, ys);
   }
