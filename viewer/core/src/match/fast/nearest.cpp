@@ -554,7 +554,7 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
     std::vector<float> buf(static_cast<size_t>(dst.dims));
     std::vector<int> cid;
     std::vector<float> clb;
-    std::vector<uint8_t> seen(exhaustive && !full ? static_cast<size_t>(ns) : 0, 0);
+    std::vector<uint8_t> seen;  // the exhaustive path's marks, sized when first needed
     int local_certified = 0;
     long local_exact = 0;
     for (int d = b; d < e; ++d) {
@@ -587,6 +587,7 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
         }
         if (!proven && exhaustive && want >= cap) {  // the rest of the source, bounded by the best found
           if (cancelled()) return;
+          if (seen.empty()) seen.assign(static_cast<size_t>(ns), 0);
           for (int j = 0; j < want && cid[j] >= 0; ++j) seen[cid[j]] = 1;
           for (int id = 0; id < ns; ++id) {
             if (seen[id]) continue;
