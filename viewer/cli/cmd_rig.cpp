@@ -315,9 +315,9 @@ VENEER_COMMAND(rig) {
           } else {  // no destination normals: the plain blend, over the source's mask as the map saw it
             ImageSet source = *src;
             match::scale_set(source, options.scale);
-            auto object = match::prepare_object(source, options.truth_normals);
-            if (!object) return fail("live", "source: " + object.message());
-            auto plain = match::fast::blend_plan(*map, {}, object->view.mask, options.blend);
+            auto mask = match::object_mask(source, options.truth_normals);
+            if (!mask) return fail("live", "source: " + mask.message());
+            auto plain = match::fast::blend_plan(*map, {}, *mask, options.blend);
             if (plain) made = std::make_shared<const match::fast::BlendPlan>(std::move(*plain));
             else made = plain.error();
           }

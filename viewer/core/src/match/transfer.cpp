@@ -88,29 +88,39 @@ void scale_set(ImageSet& set, double scale) {
   set.size = size;
 }
 
+namespace {
+std::string who_of(const ImageSet& set) { return set.id.empty() ? set.origin.string() : set.id; }
+}  // namespace
+
+Expected<cv::Mat> object_mask(const ImageSet& set, bool truth_normals) {
+  if (truth_normals) {
+    if (!set.truth.present())
+      return make_error("set " + who_of(set) + " has no truth/normals.pfm (needed by truth normals)");
+    if (!set.truth.mask.empty()) return set.truth.mask.clone();
+    cv::Mat m;
+    cv::transform(set.truth.normals, m, cv::Matx13f(1, 1, 1));
+    return cv::Mat(m != 0);
+  }
+  auto seg = ps::segment(set);
+  if (!seg) return make_error("set " + who_of(set) + ": segmentation: " + seg.message());
+  return seg->mask;
+}
+
 Expected<PreparedObject> prepare_object(const ImageSet& set, bool truth_normals, const Progress& progress) {
   PreparedObject out;
-  const std::string who = set.id.empty() ? set.origin.string() : set.id;
+  auto t0 = Clock::now();
+  auto mask = object_mask(set, truth_normals);
+  if (!mask) return mask.error();
+  out.view.mask = std::move(*mask);
   if (truth_normals) {
-    if (!set.truth.present()) return make_error("set " + who + " has no truth/normals.pfm (needed by truth normals)");
     out.view.normals = set.truth.normals.clone();
-    out.view.mask = set.truth.mask.empty() ? cv::Mat() : set.truth.mask.clone();
-    if (out.view.mask.empty()) {
-      cv::Mat m;
-      cv::transform(set.truth.normals, m, cv::Matx13f(1, 1, 1));
-      out.view.mask = m != 0;
-    }
   } else {
-    auto t0 = Clock::now();
-    auto seg = ps::segment(set);
-    if (!seg) return make_error("set " + who + ": segmentation: " + seg.message());
     out.segment_seconds = since(t0);
     t0 = Clock::now();
-    auto solved = ps::photometric_stereo(set, seg->mask, {}, progress);
-    if (!solved) return make_error("set " + who + ": photometric stereo: " + solved.message());
+    auto solved = ps::photometric_stereo(set, out.view.mask, {}, progress);
+    if (!solved) return make_error("set " + who_of(set) + ": photometric stereo: " + solved.message());
     out.normals_seconds = since(t0);
     out.view.normals = solved->normals;
-    out.view.mask = seg->mask;
   }
   for (const auto& im : set.images) {
     cv::Mat photo = im.clone();

@@ -46,6 +46,9 @@ void scale_set(ImageSet& set, double scale);
 cv::Size scaled_size(cv::Size size, double scale);
 
 Expected<PreparedObject> prepare_object(const ImageSet& set, bool truth_normals, const Progress& progress = {});
+// Only the object's mask, as prepare_object finds it (the truth's with truth
+// normals, else the segmentation's), without solving for normals.
+Expected<cv::Mat> object_mask(const ImageSet& set, bool truth_normals);
 
 struct TransferResult {
   Map map;
