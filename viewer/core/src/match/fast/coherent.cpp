@@ -368,6 +368,12 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
   // proposal and error at the current level
   std::vector<int> active(n), owner(n), prop(n);
   for (int d = 0; d < n; ++d) active[d] = d;
+  // The places in `active` of its pixels on a level's judging grid (see
+  // `sampled`), kept while `active` stays the same: the coarse levels often
+  // take nothing (bull <- orange at 150k px: none of 256 ... 32), and then
+  // iterate over a sixteenth of the pixels instead of all.
+  std::vector<int> on_grid;
+  int on_grid_mask = 0;  // of the grid on_grid holds; 0: none
   const cv::Rect box = dst.bbox;
   int spacing = 2;
   while (spacing * 2 <= std::max(box.width, box.height) / 2 && spacing < 256) spacing *= 2;
@@ -436,7 +442,19 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
       // Chunks of 16 px and more are judged on the pixels of a 1-in-4 grid
       // (x and y multiples of 4): a sixteenth of the source reads where most
       // chunks fail, and still hundreds of pixels per chunk.
-      const bool sampled = s >= 16;
+      const int grid_mask = s >= 16 ? 3 : 0;  // judged where (x | y) & grid_mask == 0
+      const bool sampled = grid_mask != 0;
+      if (sampled && on_grid_mask != grid_mask) {
+        on_grid.clear();
+        for (int ai = 0; ai < static_cast<int>(active.size()); ++ai) {
+          const cv::Point pt = dst.pixels[active[ai]];
+          if (((pt.x | pt.y) & grid_mask) == 0) on_grid.push_back(ai);
+        }
+        on_grid_mask = grid_mask;
+      }
+      // the places in `active` judged at this level: on the grid, or all
+      const int nj = sampled ? static_cast<int>(on_grid.size()) : na;
+      auto judged = [&](int i) { return sampled ? on_grid[i] : i; };
       // The seeds on a grid padded by one cell all round; a seed off the
       // object, and the padding, sit far away (cell -1), so that finding a
       // pixel's nearest seed needs neither bounds checks nor branches.
@@ -468,27 +486,23 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
         }
         return best_cell;
       };
-      parallel_rows(na, o.threads, 16384, [&](int b, int e) {
-        // first each pixel's chunk and the source position it proposes
-        // (prop: its offset in the dense source, -1 outside the source's
-        // box, -2 not judged), then the source reads, each a cache miss:
-        // prefetched a few pixels ahead. The chunk sums are added when the
-        // chunk changes along the row (runs of a few pixels at the finest).
-        for (int ai = b; ai < e; ++ai) {
-          const int d = active[ai];
-          const cv::Point pt = dst.pixels[d];
-          prop[ai] = -2;  // not judged (see `sampled`)
-          if (sampled && ((pt.x | pt.y) & 3) != 0) {
-            owner[ai] = -3;  // found only if a chunk nearby is taken (below)
-            continue;
-          }
+      parallel_rows(nj, o.threads, sampled ? 4096 : 16384, [&](int b, int e) {
+        // first each judged pixel's chunk and the source position it
+        // proposes (prop: its offset in the dense source, -1 outside the
+        // source's box, -2 none; both by judged place i), then the source
+        // reads, each a cache miss: prefetched a few pixels ahead. The chunk
+        // sums are added when the chunk changes along the row (runs of a few
+        // pixels at the finest).
+        for (int i = b; i < e; ++i) {
+          const cv::Point pt = dst.pixels[active[judged(i)]];
+          prop[i] = -2;
           const int best_cell = owner_of(pt);
-          owner[ai] = best_cell;
+          owner[i] = best_cell;
           if (best_cell < 0) continue;
           const cv::Point m = src.pixels[seed_match[best_cell]];
           const cv::Point a = seed_at[best_cell];
           const int x = m.x + pt.x - a.x - sb.x, y = m.y + pt.y - a.y - sb.y;
-          prop[ai] = x < 0 || y < 0 || x >= sb.width || y >= sb.height ? -1 : y * sb.width + x;
+          prop[i] = x < 0 || y < 0 || x >= sb.width || y >= sb.height ? -1 : y * sb.width + x;
         }
         constexpr int ahead = 8;
         int run = -1;
@@ -502,13 +516,13 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
           while (run_worst > w && !worst[run].compare_exchange_weak(w, run_worst, std::memory_order_relaxed)) {
           }
         };
-        for (int ai = b; ai < e; ++ai) {
-          if (ai + ahead < e && prop[ai + ahead] >= 0)
-            __builtin_prefetch(dense.v.data() + static_cast<size_t>(prop[ai + ahead]) * dense.stride);
-          const int c0 = owner[ai];
-          if (c0 < 0 || prop[ai] == -2) continue;
+        for (int i = b; i < e; ++i) {
+          if (i + ahead < e && prop[i + ahead] >= 0)
+            __builtin_prefetch(dense.v.data() + static_cast<size_t>(prop[i + ahead]) * dense.stride);
+          const int c0 = owner[i];
+          if (c0 < 0) continue;
           // off the source's box 1; off the object min(1, far) = 1 as well
-          const float err = prop[ai] < 0 ? 1.0f : std::min(1.0f, std::sqrt(dense_sq(active[ai], prop[ai])));
+          const float err = prop[i] < 0 ? 1.0f : std::min(1.0f, std::sqrt(dense_sq(active[judged(i)], prop[i])));
           const uint32_t q = static_cast<uint32_t>(err * 1048576.0f);
           if (c0 != run) {
             flush();
@@ -520,35 +534,43 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
       });
       const double thr = o.coherent_threshold * 1048576.0;
       std::vector<uint8_t> taken(seeds, 0);
-      bool any = false;
-      for (size_t c = 0; c < seeds; ++c) {
-        const uint32_t judged = cnt[c].load(std::memory_order_relaxed);
-        taken[c] = judged > 0 && static_cast<double>(sum[c].load(std::memory_order_relaxed)) / judged < thr &&
-                   worst[c].load(std::memory_order_relaxed) < cap * thr;
-        any = any || taken[c];
-      }
+      std::atomic<bool> any{false};
+      parallel_rows(static_cast<int>(seeds), o.threads, 8192, [&](int b, int e) {
+        bool some = false;
+        for (int c = b; c < e; ++c) {
+          const uint32_t judged = cnt[c].load(std::memory_order_relaxed);
+          taken[c] = judged > 0 && static_cast<double>(sum[c].load(std::memory_order_relaxed)) / judged < thr &&
+                     worst[c].load(std::memory_order_relaxed) < cap * thr;
+          some = some || taken[c];
+        }
+        if (some) any.store(true, std::memory_order_relaxed);
+      });
       // (a level that takes no chunk, often the coarsest, ends here)
-      if (any) {
-        // per cell: whether a taken chunk's seed is among its 3x3 cells, i.e.
-        // whether a pixel there can be in one (the pixels not judged look for
-        // their seed only then)
-        std::vector<uint8_t> near_taken(static_cast<size_t>(gx) * gy, 0);
-        for (int j = 0; j < gy; ++j)
-          for (int i = 0; i < gx; ++i)
-            if (taken[static_cast<size_t>(j) * gx + i])
-              for (int y = std::max(0, j - 1); y <= std::min(gy - 1, j + 1); ++y)
-                for (int x = std::max(0, i - 1); x <= std::min(gx - 1, i + 1); ++x) near_taken[y * gx + x] = 1;
+      if (any.load()) {
+        // Judged on the grid: per cell, whether a taken chunk's seed is among
+        // its 3x3 cells, i.e. whether a pixel there can be in one; the
+        // pixels there look for their seed again (owner[] is by judged place).
+        std::vector<uint8_t> near_taken;
+        if (sampled) {
+          near_taken.assign(static_cast<size_t>(gx) * gy, 0);
+          for (int j = 0; j < gy; ++j)
+            for (int i = 0; i < gx; ++i)
+              if (taken[static_cast<size_t>(j) * gx + i])
+                for (int y = std::max(0, j - 1); y <= std::min(gy - 1, j + 1); ++y)
+                  for (int x = std::max(0, i - 1); x <= std::min(gx - 1, i + 1); ++x) near_taken[y * gx + x] = 1;
+        }
         parallel_rows(na, o.threads, 1024, [&](int b, int e) {
           for (int ai = b; ai < e; ++ai) {
-            int c0 = owner[ai];
-            if (c0 == -3) {
-              const cv::Point pt = dst.pixels[active[ai]];
+            const cv::Point pt = dst.pixels[active[ai]];
+            int c0;
+            if (sampled) {
               if (!near_taken[((pt.y - box.y) >> shift) * gx + ((pt.x - box.x) >> shift)]) continue;
               c0 = owner_of(pt);
+            } else {
+              c0 = owner[ai];
             }
-            if (c0 < 0 || prop[ai] == -1) continue;
-            if (!taken[c0]) continue;
-            const cv::Point pt = dst.pixels[active[ai]], m = src.pixels[seed_match[c0]], a = seed_at[c0];
+            if (c0 < 0 || !taken[c0]) continue;
+            const cv::Point m = src.pixels[seed_match[c0]], a = seed_at[c0];
             const cv::Point q = dense.local(m + pt - a);
             if (dense.inside(q) && dense.on(q)) chosen[active[ai]] = DenseSource::pack(q);
           }
@@ -558,6 +580,7 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
         for (int ai = 0; ai < na; ++ai)
           if (chosen[active[ai]] < 0) active[kept++] = active[ai];
         active.resize(kept);
+        on_grid_mask = 0;
       }
     }
     if (u > 0) {
