@@ -441,8 +441,11 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
       const int na = static_cast<int>(active.size());
       // Chunks of 16 px and more are judged on the pixels of a 1-in-4 grid
       // (x and y multiples of 4): a sixteenth of the source reads where most
-      // chunks fail, and still hundreds of pixels per chunk.
-      const int grid_mask = s >= 16 ? 3 : 0;  // judged where (x | y) & grid_mask == 0
+      // chunks fail, and still hundreds of pixels per chunk. Chunks of 8 px
+      // on a 1-in-2 grid (x and y even; ~16 pixels a chunk): at 150k px
+      // 0.3-1 ms less, coherence 0.2-0.7 points more and normal error
+      // 0.03-0.07 deg more than judging every pixel (orange, stone -> bull).
+      const int grid_mask = s >= 16 ? 3 : s == 8 ? 1 : 0;  // judged where (x | y) & grid_mask == 0
       const bool sampled = grid_mask != 0;
       if (sampled && on_grid_mask != grid_mask) {
         on_grid.clear();
