@@ -258,3 +258,73 @@ TEST(FastIndex, GridScanBySlotExactAndLookup) {
   EXPECT_LT(excess / nq, 0.5);      // degrees, mean
   EXPECT_LT(worst, 15.0);           // within a couple of cells of this grid (34 x 34 over the square)
 }
+
+// A source of few orientations (the faces of a box): thousands of equal
+// normals crowd a few cells, and the k = 1 search keeps one of each (the
+// lowest id, which wins their ties). Every answer stays the brute force's:
+// exact scans carrying their place, hinted searches, the lookup where the
+// query's own cell holds its nearest, and the k > 1 lists (all points).
+TEST(FastIndex, CrowdedEqualPointsKeepTheNearestAndItsTies) {
+  std::mt19937 rng(31);
+  auto src = unit_normals(1500, rng, true, 40);
+  const float faces[5][3] = {{0, 0, 1}, {0.6f, 0, 0.8f}, {-0.6f, 0, 0.8f}, {0, 0.28f, 0.96f}, {0, -0.8f, 0.6f}};
+  for (const auto& f : faces)
+    for (int i = 0; i < 2500; ++i) src.insert(src.end(), {f[0], f[1], f[2]});
+  // shuffled, so that equal points have scattered ids
+  const int n = static_cast<int>(src.size()) / 3;
+  std::vector<int> perm(n);
+  for (int i = 0; i < n; ++i) perm[i] = i;
+  std::shuffle(perm.begin(), perm.end(), rng);
+  std::vector<float> pts(src.size());
+  for (int i = 0; i < n; ++i) std::copy_n(&src[static_cast<size_t>(perm[i]) * 3], 3, &pts[static_cast<size_t>(i) * 3]);
+  std::vector<float> queries;
+  std::normal_distribution<float> g(0, 1);
+  for (const auto& f : faces) {
+    queries.insert(queries.end(), {f[0], f[1], f[2]});  // exactly a face
+    for (int i = 0; i < 40; ++i) {  // a face, slightly off
+      float x = f[0] + 1e-3f * g(rng), y = f[1] + 1e-3f * g(rng), z = f[2] + 1e-3f * g(rng);
+      const float l = std::sqrt(x * x + y * y + z * z);
+      queries.insert(queries.end(), {x / l, y / l, z / l});
+    }
+  }
+  float x = 0.1f, y = -0.1f, z = 0.98f;  // and a walk between them
+  for (int i = 0; i < 1500; ++i) {
+    x += 0.03f * g(rng), y += 0.03f * g(rng), z = std::fabs(z + 0.03f * g(rng));
+    const float l = std::sqrt(x * x + y * y + z * z);
+    x /= l, y /= l, z /= l;
+    queries.insert(queries.end(), {x, y, z});
+  }
+  veneer::match::fast::OctGridIndex grid;
+  grid.build(pts.data(), n, 3);
+  std::vector<int> bids;
+  std::vector<float> bd;
+  int slot = -1, hint = -1, served = 0;
+  const int nq = static_cast<int>(queries.size()) / 3;
+  for (int i = 0; i < nq; ++i) {
+    const float* q = &queries[static_cast<size_t>(i) * 3];
+    brute_knn(pts, 3, q, 1, bids, bd);
+    int id;
+    float d;
+    if (grid.nearest_slot(q, slot, id, d, true)) {
+      ++served;
+      ASSERT_EQ(id, bids[0]) << "exact scan, query " << i;
+      ASSERT_EQ(d, bd[0]) << "exact scan, query " << i;
+    } else {
+      slot = -1;
+    }
+    grid.nearest_from(q, 1, &id, &d, hint);
+    ASSERT_EQ(id, bids[0]) << "hinted, query " << i;
+    ASSERT_EQ(d, bd[0]) << "hinted, query " << i;
+    hint = id;
+    if (i % 41 == 0 && i < 5 * 41) {  // exactly a face: its own cell holds it
+      int lslot = -1;
+      ASSERT_TRUE(grid.nearest_slot(q, lslot, id, d, false));
+      EXPECT_EQ(id, bids[0]) << "lookup, face " << i / 41;
+      EXPECT_EQ(d, 0.0f);
+    }
+  }
+  EXPECT_GT(served, nq * 9 / 10);
+  // the lists of k > 1 keep every equal point, in id order
+  std::vector<float> some(queries.begin(), queries.begin() + 3 * 300);
+  expect_same(grid, pts, 3, some, 12);
+}

@@ -5,8 +5,10 @@
 #include "object.hpp"  // parallel_rows
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
+#include <tuple>
 #include <utility>
 #include <vector>
 
@@ -203,6 +205,7 @@ void OctGridIndex::build(const float* points, int n, int dims) {
   zs_.clear();
   ids_.clear();
   start_.clear();
+  unique_ = Runs{};
   if (n_ == 0) return;
   // Per point: its distance from unit length and its cell (in parallel).
   std::vector<int> cell(static_cast<size_t>(n_));
@@ -322,6 +325,69 @@ void OctGridIndex::build(const float* points, int n, int dims) {
     gain_col_[i] = std::sqrt((1.0f + a) * (1.0f + a) + 2.0f * a * a) * 1.0001f;
   }
   gain_row_ = gain_col_;
+  build_unique();
+}
+
+// Equal points in one run cost a k = 1 scan without changing its answer: of
+// equals the lowest id wins every tie, and ids ascend within a run, so the
+// first of each is all that scan needs. Only crowded runs are searched for
+// equals (a light one scans in a few vectors anyway), by sorting their slots.
+void OctGridIndex::build_unique() {
+  constexpr int kCrowded = 32;
+  const int nodes = static_cast<int>(start_.size()) - 1;
+  std::vector<int> crowded;
+  for (int node = 0; node < nodes; ++node)
+    if (start_[node + 1] - start_[node] > kCrowded) crowded.push_back(node);
+  if (crowded.empty()) return;
+  // per slot: the slot of its first equal (itself when it is the first)
+  std::vector<int> first(static_cast<size_t>(n_));
+  for (int i = 0; i < n_; ++i) first[i] = i;
+  std::atomic<int> dropped{0};
+  parallel_rows(static_cast<int>(crowded.size()), 0, 1, [&](int cb, int ce) {
+    std::vector<int> order;
+    int local = 0;
+    for (int c = cb; c < ce; ++c) {
+      const int b = start_[crowded[c]], e = start_[crowded[c] + 1];
+      order.resize(static_cast<size_t>(e - b));
+      for (int i = b; i < e; ++i) order[i - b] = i;
+      std::sort(order.begin(), order.end(), [&](int x, int y) {
+        return std::tie(xs_[x], ys_[x], zs_[x], x) < std::tie(xs_[y], ys_[y], zs_[y], y);
+      });
+      for (size_t t = 1; t < order.size(); ++t) {
+        const int a = order[t - 1], i = order[t];
+        if (xs_[a] == xs_[i] && ys_[a] == ys_[i] && zs_[a] == zs_[i]) first[i] = first[a], ++local;
+      }
+    }
+    dropped.fetch_add(local, std::memory_order_relaxed);
+  });
+  if (dropped.load() == 0) return;
+  Runs& u = unique_;
+  u.n = n_ - dropped.load();
+  u.start.assign(static_cast<size_t>(nodes) + 1, 0);
+  for (int node = 0; node < nodes; ++node) {
+    int kept = 0;
+    for (int i = start_[node]; i < start_[node + 1]; ++i) kept += first[i] == i;
+    u.start[node + 1] = u.start[node] + kept;
+  }
+  // 8 far points of padding, as the full arrays
+  u.xs.assign(static_cast<size_t>(u.n) + 8, 1e18f);
+  u.ys.assign(static_cast<size_t>(u.n) + 8, 1e18f);
+  u.zs.assign(static_cast<size_t>(u.n) + 8, 1e18f);
+  u.ids.assign(static_cast<size_t>(u.n) + 8, std::numeric_limits<int>::max());
+  std::vector<int> place(static_cast<size_t>(n_));  // slot -> its place in u (the first equal's)
+  for (int node = 0; node < nodes; ++node) {
+    int at = u.start[node];
+    for (int i = start_[node]; i < start_[node + 1]; ++i) {
+      if (first[i] != i) {
+        place[i] = place[first[i]];  // the first equal comes earlier in the run
+        continue;
+      }
+      u.xs[at] = xs_[i], u.ys[at] = ys_[i], u.zs[at] = zs_[i], u.ids[at] = ids_[i];
+      place[i] = at++;
+    }
+  }
+  u.slot_of.resize(static_cast<size_t>(n_));
+  for (int id = 0; id < n_; ++id) u.slot_of[id] = place[slot_of_[id]];
 }
 
 // Largest box of cells the k = 1 path reads as rows of runs (else the cell
@@ -404,27 +470,31 @@ bool OctGridIndex::nearest1(const float* query, int& slot, int& id, float& sq, b
   const int cj = std::clamp(static_cast<int>((v + 1.0f) * scale), 0, side_ - 1);
   const __m256 vx = _mm256_set1_ps(qx), vy = _mm256_set1_ps(qy), vz = _mm256_set1_ps(qz);
   Lanes lanes{_mm256_set1_ps(kInf), _mm256_set1_epi32(std::numeric_limits<int>::max()), _mm256_set1_epi32(-1)};
-  const float* xs = xs_.data();
-  const float* ys = ys_.data();
-  const float* zs = zs_.data();
-  const int* ids = ids_.data();
-  if (slot >= 0 && slot < n_) scan_lanes(xs, ys, zs, ids, slot, slot + 1, vx, vy, vz, lanes);  // a bound from the start
+  // the arrays without repeated equals, when some run had them
+  const bool dedup = unique_.n > 0;
+  const float* xs = dedup ? unique_.xs.data() : xs_.data();
+  const float* ys = dedup ? unique_.ys.data() : ys_.data();
+  const float* zs = dedup ? unique_.zs.data() : zs_.data();
+  const int* ids = dedup ? unique_.ids.data() : ids_.data();
+  const int* start = dedup ? unique_.start.data() : start_.data();
+  const int count = dedup ? unique_.n : n_;
+  if (slot >= 0 && slot < count) scan_lanes(xs, ys, zs, ids, slot, slot + 1, vx, vy, vz, lanes);  // a bound from the start
   const int own = 2 * (cj * side_ + ci);
   if (!exact) {
     // the lookup: the best of the query's own cell in its layer (or the
     // nearest cell with points, when it has none) and the hint, no more
     const int node = near_[own + (qz < 0 ? 1 : 0)];
     if (node < 0) return false;  // (a cell outside the diamond: not for a unit query)
-    scan_lanes(xs, ys, zs, ids, start_[node], start_[node + 1], vx, vy, vz, lanes);
+    scan_lanes(xs, ys, zs, ids, start[node], start[node + 1], vx, vy, vz, lanes);
     float d;
     int best;
     if (!best_of(lanes, d, best)) return false;
     slot = best;
-    id = ids_[best];
+    id = ids[best];
     sq = d;
     return true;
   }
-  scan_lanes(xs, ys, zs, ids, start_[own], start_[own + 2], vx, vy, vz, lanes);
+  scan_lanes(xs, ys, zs, ids, start[own], start[own + 2], vx, vy, vz, lanes);
   // the smallest distance over the lanes
   __m128 m = _mm_min_ps(_mm256_castps256_ps128(lanes.d), _mm256_extractf128_ps(lanes.d, 1));
   m = _mm_min_ps(m, _mm_movehl_ps(m, m));
@@ -448,17 +518,17 @@ bool OctGridIndex::nearest1(const float* query, int& slot, int& id, float& sq, b
   for (int cy = y0; cy <= y1; ++cy) {
     const int row = 2 * cy * side_;
     if (cy == cj) {  // around the cell already read
-      if (x0 < ci) scan_lanes(xs, ys, zs, ids, start_[row + 2 * x0], start_[row + 2 * ci], vx, vy, vz, lanes);
-      if (ci < x1) scan_lanes(xs, ys, zs, ids, start_[row + 2 * ci + 2], start_[row + 2 * x1 + 2], vx, vy, vz, lanes);
+      if (x0 < ci) scan_lanes(xs, ys, zs, ids, start[row + 2 * x0], start[row + 2 * ci], vx, vy, vz, lanes);
+      if (ci < x1) scan_lanes(xs, ys, zs, ids, start[row + 2 * ci + 2], start[row + 2 * x1 + 2], vx, vy, vz, lanes);
       continue;
     }
-    scan_lanes(xs, ys, zs, ids, start_[row + 2 * x0], start_[row + 2 * x1 + 2], vx, vy, vz, lanes);
+    scan_lanes(xs, ys, zs, ids, start[row + 2 * x0], start[row + 2 * x1 + 2], vx, vy, vz, lanes);
   }
   float d = best_d;
   int best = 0;
   best_of(lanes, d, best);
   slot = best;
-  id = ids_[best];
+  id = ids[best];
   sq = d;
   return true;
 }
@@ -482,7 +552,7 @@ void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_d
     return;
   }
   if (k == 1 && n_ > 0 && !fallback_) {
-    int slot = hint >= 0 && hint < n_ ? slot_of_[hint] : -1;
+    int slot = hint < 0 || hint >= n_ ? -1 : unique_.n > 0 ? unique_.slot_of[hint] : slot_of_[hint];
     if (nearest1(query, slot, ids[0], sq_dists[0], true)) return;
   }
   Best best(k, ids, sq_dists);

@@ -42,6 +42,16 @@ class OctGridIndex final : public NearestIndex {
   std::vector<int> near_;  // uv cell -> the nearest uv cell with points (itself when it has some)
   std::vector<float> gain_col_, gain_row_;  // per column / row of cells: the bound's stretch (index_fast.cpp)  // id -> its place in the sorted arrays
   std::vector<int> start_;  // side^2 uv cells x 2 layers (adjacent), CSR offsets
+  // The k = 1 search's copy of the sorted arrays when some crowded run holds
+  // equal points (a face of a box: thousands of identical normals), each kept
+  // once with its lowest id (which wins their ties); empty when none does.
+  struct Runs {
+    int n = 0;
+    std::vector<float> xs, ys, zs;
+    std::vector<int> ids, start, slot_of;  // slot_of: id -> the place of its kept equal
+  };
+  Runs unique_;
+  void build_unique();
   std::unique_ptr<NearestIndex> fallback_;
 };
 
