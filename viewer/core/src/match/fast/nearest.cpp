@@ -425,6 +425,18 @@ Status nearest_patch_normals(const Object& dst, const Object& src, int threads, 
   return {};
 }
 
+// The rows in fixed runs of 256, both cores taking runs: a scan that carries
+// the previous match from row to row starts afresh at the same rows whatever
+// the threads do. (The lookup's answer depends on that start: the best of
+// the query's own cell and the previous match. Over the ranges the scheduler
+// splits, a map of blocks -> bull came out different on 1 and on 2 threads.)
+static void for_each_run(int n, int threads, const std::function<void(int, int)>& run) {
+  constexpr int kRun = 256;
+  parallel_rows((n + kRun - 1) / kRun, threads, 1, [&](int rb, int re) {
+    for (int r = rb; r < re; ++r) run(r * kRun, std::min(n, (r + 1) * kRun));
+  });
+}
+
 Status nearest_centres(const Object& dst, const Object& src, int threads, const Progress& progress,
                        std::vector<int>& ids, bool exact) {
   const int n = dst.rows();
@@ -433,7 +445,7 @@ Status nearest_centres(const Object& dst, const Object& src, int threads, const 
   OctGridIndex grid;
   grid.build(src.flat.data(), src.rows(), 3);
   std::atomic<bool> stop{false};
-  parallel_rows(n, threads, 256, [&](int b, int e) {
+  for_each_run(n, threads, [&](int b, int e) {
     if (progress.cancelled()) stop = true;
     if (stop) return;
     float sq;
@@ -466,7 +478,7 @@ Status nearest_lists(const Object& dst, const Object& src, int k, const std::str
   auto direct = [&](NearestIndex& index, const char* name, bool exact = true) -> Status {
     index.build(src.flat.data(), ns, src.channels);
     const auto* grid = dynamic_cast<const OctGridIndex*>(&index);
-    parallel_rows(n, threads, 256, [&](int b, int e) {
+    for_each_run(n, threads, [&](int b, int e) {
       if (cancelled()) return;
       int slot = -1;
       for (int d = b; d < e; ++d) {
