@@ -73,6 +73,7 @@ int run_map(const EvalArgs& a) {
   std::printf("reuse, max per source px   %d\n", q->reuse_max);
   std::printf("source object used         %.2f %%\n", 100 * q->source_used);
   if (q->psnr_db) std::printf("relighting PSNR            %.2f dB\n", *q->psnr_db);
+  if (q->psnr_lit_db) std::printf("  outside cast shadows     %.2f dB\n", *q->psnr_lit_db);
   return 0;
 }
 

@@ -76,6 +76,7 @@ int run(const TransferArgs& a) {
     std::printf(", coherence %.1f %%, reuse max %d, source used %.1f %%", 100 * g.coherence, g.reuse_max,
                 100 * g.source_used);
     if (g.psnr_db) std::printf(", relight PSNR %.2f dB", *g.psnr_db);
+    if (g.psnr_lit_db) std::printf(" (%.2f dB outside cast shadows)", *g.psnr_lit_db);
     std::printf("\n");
   }
   return 0;

@@ -162,6 +162,24 @@ TEST(Simulator, CastAndAttachedShadows) {
   EXPECT_LT(truth.normals.at<cv::Vec3f>(ty, ax)[0], -0.9f);
   EXPECT_EQ(right.at<cv::Vec3f>(ty, ax)[1], 0.0f);
   EXPECT_GT(left.at<cv::Vec3f>(ty, ax)[1], 0.2f);
+  // without cast shadows the table point is lit by the right lamp as the left
+  // one lights it (mirror images), the sphere's limb stays in its attached shadow,
+  // and nothing the lamp reached before changes
+  o.cast_shadows = false;
+  const cv::Mat unblocked = render(*scene, {rig[2]}, o);
+  EXPECT_GT(unblocked.at<cv::Vec3f>(ty, tx)[1], 0.5f * lit);
+  EXPECT_EQ(unblocked.at<cv::Vec3f>(ty, ax)[1], 0.0f);
+  int changed = 0, darker = 0, lit_changed = 0;
+  for (int y = 0; y < right.rows; ++y)
+    for (int x = 0; x < right.cols; ++x) {
+      const float a = right.at<cv::Vec3f>(y, x)[1], b = unblocked.at<cv::Vec3f>(y, x)[1];
+      changed += a != b;
+      darker += b < a;
+      lit_changed += a > 0 && a != b;
+    }
+  EXPECT_GT(changed, 50) << "the sphere's shadow on the table";
+  EXPECT_EQ(darker, 0);
+  EXPECT_EQ(lit_changed, 0);
 }
 
 TEST(Simulator, ConcaveSceneCastsShadowsOnItself) {

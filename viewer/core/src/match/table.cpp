@@ -23,13 +23,6 @@ sim::RenderOptions render_options_for(const ImageSet& set) {
 
 }  // namespace
 
-Expected<double> relight_psnr(const Map& map, const ImageSet& destination, const ImageSet& source,
-                              const cv::Mat& destination_mask) {
-  auto r = relight(map, destination, source, destination_mask);
-  if (!r) return r.error();
-  return r->psnr_db;
-}
-
 Expected<Relit> relight(const Map& map, const ImageSet& destination, const ImageSet& source,
                         const cv::Mat& destination_mask, int blend, const fast::BlendGuide* guide) {
   if (!relight_measurable(source.scene))
@@ -46,10 +39,21 @@ Expected<Relit> relight(const Map& map, const ImageSet& destination, const Image
   if (!reference_scene) return reference_scene.error();
   Relit out;
   out.reference = sim::render(**reference_scene, lamp, dst_options);
+  auto unshadowed_options = dst_options;
+  unshadowed_options.cast_shadows = false;
+  const cv::Mat unshadowed = sim::render(**reference_scene, lamp, unshadowed_options);
+  if (out.reference.empty() || unshadowed.empty()) return make_error("rendering the relighting reference failed");
+  cv::Mat differs;
+  cv::compare(cv::abs(out.reference - unshadowed), cv::Scalar::all(1e-6), differs, cv::CMP_GT);
+  cv::Mat shadowed;
+  cv::transform(differs, shadowed, cv::Matx13f(1, 1, 1));
+  out.lit = destination_mask.clone();
+  out.lit.setTo(0, shadowed);
   auto transferred = repaint_blended(map, lit_source, source.truth.mask, blend, {}, guide);
   if (!transferred) return transferred.error();
   out.transferred = std::move(*transferred);
   out.psnr_db = psnr(out.transferred, out.reference, destination_mask);
+  out.psnr_lit_db = psnr(out.transferred, out.reference, out.lit);
   return out;
 }
 
@@ -178,9 +182,13 @@ Expected<std::vector<TableRow>> quality_table(const TableOptions& options, const
       }
       row.quality = evaluate(*map, dset.truth.mask, sset.truth.mask, dset.truth.normals, sset.truth.normals);
       if (relight_measurable(sname)) {
-        auto p = relight_psnr(*map, dset, sset, dset.truth.mask);
-        if (p) row.quality.psnr_db = *p;
-        else row.error = p.message();
+        auto relit = relight(*map, dset, sset, dset.truth.mask);
+        if (relit) {
+          row.quality.psnr_db = relit->psnr_db;
+          row.quality.psnr_lit_db = relit->psnr_lit_db;
+        } else {
+          row.error = relit.message();
+        }
       }
       rows.push_back(row);
     }
@@ -194,13 +202,13 @@ std::string format_table(const std::vector<TableRow>& rows, const TableOptions& 
   char buf[1024];
   std::snprintf(buf, sizeof buf,
                 "Quality of the correspondence methods on simulated pairs, rendered at %dx%d (reduced from 1024x680 so "
-                "the faithful methods finish) with sensor noise %.3f, normals from %s; quality measured against the simulator's truth (masks, normals). blocks <- blocks compares two captures (the source moved and smaller). Coherence counts neighbours matched within 1.5 px, so one source pixel stamped over a region also counts as coherent: read it with reuse.\n\n",
+                "the faithful methods finish) with sensor noise %.3f, normals from %s; quality measured against the simulator's truth (masks, normals). blocks <- blocks compares two captures (the source moved and smaller). Coherence counts neighbours matched within 1.5 px, so one source pixel stamped over a region also counts as coherent: read it with reuse. PSNR: relighting under a lamp off the capture ring, where the source is of uniform material; PSNR lit leaves out the lamp's cast shadows on the destination, which no map can carry.\n\n",
                 options.size.width, options.size.height, options.noise,
                 options.truth_normals ? "the truth" : "photometric stereo");
   out << buf;
   out << "| destination <- source | px dst/src | method | engine | feature | patch | coverage | normal mean / p95 "
-         "[deg] | coherence | reuse max | source used | PSNR [dB] | time [s] |\n";
-  out << "|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+         "[deg] | coherence | reuse max | source used | PSNR [dB] | PSNR lit [dB] | time [s] |\n";
+  out << "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
   for (const auto& r : rows) {
     std::string method = r.method;
     if (r.candidates) method += " K=" + std::to_string(r.candidates);
@@ -209,14 +217,14 @@ std::string format_table(const std::vector<TableRow>& rows, const TableOptions& 
       method += buf;
     }
     if (!r.error.empty() && r.quality.destination_pixels == 0) {
-      std::snprintf(buf, sizeof buf, "| %s <- %s | %d/%d | %s | %s | %s | %dx%d | failed: %s |||||||\n",
+      std::snprintf(buf, sizeof buf, "| %s <- %s | %d/%d | %s | %s | %s | %dx%d | failed: %s ||||||||\n",
                     r.destination.c_str(), r.source.c_str(), r.destination_pixels, r.source_pixels, method.c_str(),
                     r.engine.c_str(), r.feature.c_str(), r.patch, r.patch, r.error.c_str());
       out << buf;
       continue;
     }
     const auto& q = r.quality;
-    std::string normals = "-", psnr_text = "-";
+    std::string normals = "-", psnr_text = "-", lit_text = "-";
     if (q.normal_mean_deg) {
       std::snprintf(buf, sizeof buf, "%.2f / %.2f", *q.normal_mean_deg, *q.normal_p95_deg);
       normals = buf;
@@ -225,10 +233,14 @@ std::string format_table(const std::vector<TableRow>& rows, const TableOptions& 
       std::snprintf(buf, sizeof buf, "%.2f", *q.psnr_db);
       psnr_text = buf;
     }
-    std::snprintf(buf, sizeof buf, "| %s <- %s | %d/%d | %s | %s | %s | %dx%d | %.1f %% | %s | %.1f %% | %d | %.1f %% | %s | %.3f |\n",
+    if (q.psnr_lit_db) {
+      std::snprintf(buf, sizeof buf, "%.2f", *q.psnr_lit_db);
+      lit_text = buf;
+    }
+    std::snprintf(buf, sizeof buf, "| %s <- %s | %d/%d | %s | %s | %s | %dx%d | %.1f %% | %s | %.1f %% | %d | %.1f %% | %s | %s | %.3f |\n",
                   r.destination.c_str(), r.source.c_str(), r.destination_pixels, r.source_pixels, method.c_str(),
                   r.engine.c_str(), r.feature.c_str(), r.patch, r.patch, 100 * q.coverage, normals.c_str(),
-                  100 * q.coherence, q.reuse_max, 100 * q.source_used, psnr_text.c_str(), r.seconds);
+                  100 * q.coherence, q.reuse_max, 100 * q.source_used, psnr_text.c_str(), lit_text.c_str(), r.seconds);
     out << buf;
   }
   return out.str();

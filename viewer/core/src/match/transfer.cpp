@@ -45,6 +45,7 @@ nlohmann::json quality_json(const Quality& q) {
   j["reuse_max"] = q.reuse_max;
   j["source_used"] = q.source_used;
   if (q.psnr_db) j["relight_psnr_db"] = *q.psnr_db;
+  if (q.psnr_lit_db) j["relight_psnr_lit_db"] = *q.psnr_lit_db;
   return j;
 }
 
@@ -443,6 +444,7 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
       auto relit = relight(result.map, destination, source, destination.truth.mask, options.blend, g);
       if (relit) {
         q.psnr_db = relit->psnr_db;
+        q.psnr_lit_db = relit->psnr_lit_db;
         result.relit = std::move(*relit);
       } else {
         j["relight_error"] = relit.message();
@@ -552,9 +554,10 @@ Expected<Quality> evaluate_sets(const Map& map, const ImageSet& destination_in, 
     Quality q = evaluate(map, destination.truth.mask, source.truth.mask, destination.truth.normals,
                          source.truth.normals);
     if (relight_measurable(source.scene)) {
-      auto p = relight_psnr(map, destination, source, destination.truth.mask);
-      if (!p) return make_error("relighting: " + p.message());
-      q.psnr_db = *p;
+      auto relit = relight(map, destination, source, destination.truth.mask);
+      if (!relit) return make_error("relighting: " + relit.message());
+      q.psnr_db = relit->psnr_db;
+      q.psnr_lit_db = relit->psnr_lit_db;
     }
     return q;
   }

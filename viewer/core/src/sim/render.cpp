@@ -240,7 +240,8 @@ cv::Mat shade(const Scene& scene, const GBuffer& gb, const std::vector<ShotLamp>
           V3 l = L / r;
           double ndl = dot(n, l);
           if (ndl <= 0 || dot(ng, l) <= 0) continue;  // attached shadow
-          if (scene.shape.occluded(shadow_origin, l, 1e-9, (r - kShadowEps) * inv_scale)) continue;  // cast shadow
+          if (o.cast_shadows && scene.shape.occluded(shadow_origin, l, 1e-9, (r - kShadowEps) * inv_scale))
+            continue;  // cast shadow
           V3 E = lamp.radiant / r2;
           double spec = 0;
           if (g.ks > 0) {

@@ -46,6 +46,8 @@ struct RenderOptions {
   double scale = 1.0;           // scales the object about its base (the point where it rests on
                                 // the table behind it); 2.5 fills a 1024x680 frame (~150 000 px)
   int threads = 0;              // 0 = all cores
+  bool cast_shadows = true;     // false: a lamp lights every point facing it, blocked or not (the
+                                // relighting measure's way to find the cast shadows, match/metrics.hpp)
   Status check() const;
 };
 
