@@ -1,5 +1,6 @@
 // The fast engine's indices against an exact brute force.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -264,6 +265,26 @@ TEST(FastIndex, GridScanBySlotExactAndLookup) {
 // lowest id, which wins their ties). Every answer stays the brute force's:
 // exact scans carrying their place, hinted searches, the lookup where the
 // query's own cell holds its nearest, and the k > 1 lists (all points).
+// The k = 1 searches that must equal the brute force (`want`, `want_d`): the
+// exact scan carrying its place from query to query (counted in `served`
+// when it answers) and the search hinted with the previous answer.
+void expect_exact_k1(const veneer::match::fast::OctGridIndex& grid, const float* q, int want, float want_d,
+                     int& slot, int& hint, int& served, int i) {
+  int id;
+  float d;
+  if (grid.nearest_slot(q, slot, id, d, true)) {
+    ++served;
+    ASSERT_EQ(id, want) << "exact scan, query " << i;
+    ASSERT_EQ(d, want_d) << "exact scan, query " << i;
+  } else {
+    slot = -1;
+  }
+  grid.nearest_from(q, 1, &id, &d, hint);
+  ASSERT_EQ(id, want) << "hinted, query " << i;
+  ASSERT_EQ(d, want_d) << "hinted, query " << i;
+  hint = id;
+}
+
 TEST(FastIndex, CrowdedEqualPointsKeepTheNearestAndItsTies) {
   std::mt19937 rng(31);
   auto src = unit_normals(1500, rng, true, 40);
@@ -303,19 +324,9 @@ TEST(FastIndex, CrowdedEqualPointsKeepTheNearestAndItsTies) {
   for (int i = 0; i < nq; ++i) {
     const float* q = &queries[static_cast<size_t>(i) * 3];
     brute_knn(pts, 3, q, 1, bids, bd);
+    ASSERT_NO_FATAL_FAILURE(expect_exact_k1(grid, q, bids[0], bd[0], slot, hint, served, i));
     int id;
     float d;
-    if (grid.nearest_slot(q, slot, id, d, true)) {
-      ++served;
-      ASSERT_EQ(id, bids[0]) << "exact scan, query " << i;
-      ASSERT_EQ(d, bd[0]) << "exact scan, query " << i;
-    } else {
-      slot = -1;
-    }
-    grid.nearest_from(q, 1, &id, &d, hint);
-    ASSERT_EQ(id, bids[0]) << "hinted, query " << i;
-    ASSERT_EQ(d, bd[0]) << "hinted, query " << i;
-    hint = id;
     if (i % 41 == 0 && i < 5 * 41) {  // exactly a face: its own cell holds it
       int lslot = -1;
       ASSERT_TRUE(grid.nearest_slot(q, lslot, id, d, false));
@@ -327,4 +338,80 @@ TEST(FastIndex, CrowdedEqualPointsKeepTheNearestAndItsTies) {
   // the lists of k > 1 keep every equal point, in id order
   std::vector<float> some(queries.begin(), queries.begin() + 3 * 300);
   expect_same(grid, pts, 3, some, 12);
+}
+
+TEST(FastIndex, DenseClustersAreReadBySubCellsWithTheSameAnswers) {
+  // the faces of a box seen with noise: thousands of distinct normals in a
+  // few cells (crowded runs, read by sub-cells within reach of the best)
+  std::mt19937 rng(47);
+  auto pts = unit_normals(1500, rng, true, 0);
+  std::normal_distribution<float> g(0, 1);
+  const float faces[4][3] = {{0, 0, 1}, {0.6f, 0, 0.8f}, {0, 0.28f, 0.96f}, {0, -0.8f, 0.6f}};
+  auto near_face = [&](const float* f, float sd) {
+    float x = f[0] + sd * g(rng), y = f[1] + sd * g(rng), z = f[2] + sd * g(rng);
+    const float l = std::sqrt(x * x + y * y + z * z);
+    return std::array<float, 3>{x / l, y / l, z / l};
+  };
+  for (const auto& f : faces)
+    for (int i = 0; i < 3000; ++i) {
+      const auto p = near_face(f, 0.004f);
+      pts.insert(pts.end(), p.begin(), p.end());
+    }
+  const int n = static_cast<int>(pts.size()) / 3;
+  std::vector<float> queries;
+  for (const auto& f : faces)
+    for (int i = 0; i < 150; ++i) {  // inside the clusters
+      const auto q = near_face(f, 0.004f);
+      queries.insert(queries.end(), q.begin(), q.end());
+    }
+  for (int i = 0; i < 400; ++i) {  // and anywhere (mostly far from them)
+    float x = g(rng), y = g(rng), z = std::fabs(g(rng));
+    const float l = std::sqrt(x * x + y * y + z * z);
+    queries.insert(queries.end(), {x / l, y / l, z / l});
+  }
+  constexpr int kSide = 48;  // fixed, so that the test knows the cells
+  veneer::match::fast::OctGridIndex grid(kSide);
+  grid.build(pts.data(), n, 3);
+  // (cell, layer) as the index computes it, for points and for queries
+  auto node_of = [](const float* p, bool query) {
+    const float s = std::fabs(p[0]) + std::fabs(p[1]) + std::fabs(p[2]);
+    const float inv = 1.0f / s;
+    const float u = query ? p[0] * inv : p[0] / s, v = query ? p[1] * inv : p[1] / s;
+    const float scale = 0.5f * kSide;
+    const int cx = std::clamp(static_cast<int>((u + 1.0f) * scale), 0, kSide - 1);
+    const int cy = std::clamp(static_cast<int>((v + 1.0f) * scale), 0, kSide - 1);
+    return 2 * (cy * kSide + cx) + (p[2] < 0 ? 1 : 0);
+  };
+  std::vector<int> node(n), count(2 * kSide * kSide, 0);
+  for (int i = 0; i < n; ++i) ++count[node[i] = node_of(&pts[static_cast<size_t>(i) * 3], false)];
+  std::vector<int> bids;
+  std::vector<float> bd;
+  int slot = -1, hint = -1, served = 0, crowded_lookups = 0;
+  const int nq = static_cast<int>(queries.size()) / 3;
+  for (int i = 0; i < nq; ++i) {
+    const float* q = &queries[static_cast<size_t>(i) * 3];
+    brute_knn(pts, 3, q, 1, bids, bd);
+    ASSERT_NO_FATAL_FAILURE(expect_exact_k1(grid, q, bids[0], bd[0], slot, hint, served, i));
+    int id;
+    float d;
+    // the lookup in a crowded cell of the query's own: the best of all that
+    // cell's points (no hint here), however they are read
+    const int own = node_of(q, true);
+    if (count[own] > 32) {
+      float best = std::numeric_limits<float>::infinity();
+      int best_id = -1;
+      for (int p = 0; p < n; ++p) {
+        if (node[p] != own) continue;
+        float s = 0;
+        for (int j = 0; j < 3; ++j) s += (pts[static_cast<size_t>(p) * 3 + j] - q[j]) * (pts[static_cast<size_t>(p) * 3 + j] - q[j]);
+        if (s < best) best = s, best_id = p;
+      }
+      int lslot = -1;
+      ASSERT_TRUE(grid.nearest_slot(q, lslot, id, d, false));
+      EXPECT_EQ(id, best_id) << "lookup, query " << i;
+      ++crowded_lookups;
+    }
+  }
+  EXPECT_GT(served, nq / 2);
+  EXPECT_GT(crowded_lookups, 400) << "the clusters' queries fall in crowded cells";
 }

@@ -206,6 +206,8 @@ void OctGridIndex::build(const float* points, int n, int dims) {
   ids_.clear();
   start_.clear();
   unique_ = Runs{};
+  k1_ = View{};
+  sub_ = SubGrids{};
   if (n_ == 0) return;
   // Per point: its distance from unit length and its cell (in parallel).
   std::vector<int> cell(static_cast<size_t>(n_));
@@ -326,6 +328,12 @@ void OctGridIndex::build(const float* points, int n, int dims) {
   }
   gain_row_ = gain_col_;
   build_unique();
+  if (unique_.n > 0)
+    k1_ = View{unique_.xs.data(), unique_.ys.data(), unique_.zs.data(), unique_.ids.data(),
+               unique_.start.data(), unique_.slot_of.data(), unique_.n};
+  else
+    k1_ = View{xs_.data(), ys_.data(), zs_.data(), ids_.data(), start_.data(), slot_of_.data(), n_};
+  build_subgrids();
 }
 
 // Equal points in one run cost a k = 1 scan without changing its answer: of
@@ -390,6 +398,92 @@ void OctGridIndex::build_unique() {
   for (int id = 0; id < n_; ++id) u.slot_of[id] = place[slot_of_[id]];
 }
 
+// A crowded run of the k = 1 arrays (over 32 points: thousands where the
+// source's normals cluster, as on the faces of a box seen with noise) is
+// reordered by an S x S grid over its cell (S ~ sqrt(points / 4), 2..64), row
+// by row, keeping where each sub-cell starts; within a sub-cell the order
+// stays (ids ascending). The k = 1 search then reads the query's own sub-cell
+// first and, of the rest of the run, only the sub-cells within reach of its
+// best so far: the same answer, from a few dozen points instead of thousands.
+void OctGridIndex::build_subgrids() {
+  constexpr int kSubCrowded = 64;
+  const int nodes = 2 * side_ * side_;
+  std::vector<int> crowded;
+  for (int node = 0; node < nodes; ++node)
+    if (k1_.start[node + 1] - k1_.start[node] > kSubCrowded) crowded.push_back(node);
+  if (crowded.empty()) return;
+  sub_.at.assign(static_cast<size_t>(nodes), -1);
+  sub_.side.assign(static_cast<size_t>(nodes), 0);
+  sub_.row_has.assign(static_cast<size_t>(side_), 0);
+  int total = 0;
+  for (int node : crowded) {
+    const int len = k1_.start[node + 1] - k1_.start[node];
+    const int S = std::clamp(static_cast<int>(std::sqrt(len / 4.0)), 2, 64);
+    sub_.at[node] = total;
+    sub_.side[node] = S;
+    sub_.row_has[(node >> 1) / side_] = 1;
+    total += S * S + 1;
+  }
+  sub_.start.assign(static_cast<size_t>(total), 0);
+  sub_.near.assign(static_cast<size_t>(total), 0);
+  // old place -> new place: every id's place is remapped when ids share
+  // places (the deduplicated arrays), else only the moved points' are set
+  const bool shared = k1_.n < n_;
+  std::vector<int> moved(shared ? static_cast<size_t>(k1_.n) : 0);
+  for (size_t i = 0; i < moved.size(); ++i) moved[i] = static_cast<int>(i);
+  const float scale = 0.5f * static_cast<float>(side_);
+  parallel_rows(static_cast<int>(crowded.size()), 0, 1, [&](int cb, int ce) {
+    std::vector<int> sub_of, fill;
+    std::vector<float> tx, ty, tz;
+    std::vector<int> tid;
+    for (int c = cb; c < ce; ++c) {
+      const int node = crowded[c], b = k1_.start[node], e = k1_.start[node + 1], len = e - b;
+      const int S = sub_.side[node], cx = (node >> 1) % side_, cy = (node >> 1) / side_;
+      int* ss = sub_.start.data() + sub_.at[node];
+      sub_of.resize(static_cast<size_t>(len));
+      for (int i = b; i < e; ++i) {
+        float u, v;
+        oct_uv(k1_.xs[i], k1_.ys[i], k1_.zs[i], u, v);
+        const int sx = std::clamp(static_cast<int>(((u + 1.0f) * scale - cx) * S), 0, S - 1);
+        const int sy = std::clamp(static_cast<int>(((v + 1.0f) * scale - cy) * S), 0, S - 1);
+        sub_of[i - b] = sy * S + sx;
+        ++ss[sy * S + sx + 1];
+      }
+      ss[0] = b;
+      for (int k = 0; k < S * S; ++k) ss[k + 1] += ss[k];
+      fill.assign(ss, ss + S * S);
+      tx.resize(len), ty.resize(len), tz.resize(len), tid.resize(len);
+      for (int i = b; i < e; ++i) {
+        const int at = fill[sub_of[i - b]]++;
+        tx[at - b] = k1_.xs[i], ty[at - b] = k1_.ys[i], tz[at - b] = k1_.zs[i], tid[at - b] = k1_.ids[i];
+        if (shared) moved[i] = at;
+      }
+      std::copy(tx.begin(), tx.end(), k1_.xs + b);
+      std::copy(ty.begin(), ty.end(), k1_.ys + b);
+      std::copy(tz.begin(), tz.end(), k1_.zs + b);
+      std::copy(tid.begin(), tid.end(), k1_.ids + b);
+      if (!shared)
+        for (int i = b; i < e; ++i) k1_.slot_of[k1_.ids[i]] = i;
+      // each empty sub-cell sends its queries to the nearest one with points
+      // (in sub-cells, breadth first), as near_ does for cells
+      int* near = sub_.near.data() + sub_.at[node];
+      fill.clear();
+      for (int k = 0; k < S * S; ++k) {
+        near[k] = ss[k] < ss[k + 1] ? k : -1;
+        if (near[k] == k) fill.push_back(k);
+      }
+      for (size_t qi = 0; qi < fill.size(); ++qi) {
+        const int k = fill[qi], x = k % S, y = k / S;
+        const int nb[4] = {x > 0 ? k - 1 : -1, x + 1 < S ? k + 1 : -1, y > 0 ? k - S : -1, y + 1 < S ? k + S : -1};
+        for (int t : nb)
+          if (t >= 0 && near[t] < 0) near[t] = near[k], fill.push_back(t);
+      }
+    }
+  });
+  if (shared)
+    for (int id = 0; id < n_; ++id) k1_.slot_of[id] = moved[k1_.slot_of[id]];
+}
+
 // Largest box of cells the k = 1 path reads as rows of runs (else the cell
 // by cell search of nearest_from).
 constexpr int kRunCells = 49;
@@ -450,6 +544,14 @@ static inline bool best_of(const Lanes& l, float& best_d, int& best_slot) {
   return true;
 }
 
+// The smallest distance over the lanes (infinity when none has a point).
+static inline float lanes_min(const Lanes& l) {
+  __m128 m = _mm_min_ps(_mm256_castps256_ps128(l.d), _mm256_extractf128_ps(l.d, 1));
+  m = _mm_min_ps(m, _mm_movehl_ps(m, m));
+  m = _mm_min_ss(m, _mm_shuffle_ps(m, m, 1));
+  return _mm_cvtss_f32(m);
+}
+
 // k = 1 for a query of near-unit length (the engine's normals): the hint (a
 // point likely near, e.g. the previous pixel's match) and the query's own
 // cell first; then every cell within
@@ -470,22 +572,63 @@ bool OctGridIndex::nearest1(const float* query, int& slot, int& id, float& sq, b
   const int cj = std::clamp(static_cast<int>((v + 1.0f) * scale), 0, side_ - 1);
   const __m256 vx = _mm256_set1_ps(qx), vy = _mm256_set1_ps(qy), vz = _mm256_set1_ps(qz);
   Lanes lanes{_mm256_set1_ps(kInf), _mm256_set1_epi32(std::numeric_limits<int>::max()), _mm256_set1_epi32(-1)};
-  // the arrays without repeated equals, when some run had them
-  const bool dedup = unique_.n > 0;
-  const float* xs = dedup ? unique_.xs.data() : xs_.data();
-  const float* ys = dedup ? unique_.ys.data() : ys_.data();
-  const float* zs = dedup ? unique_.zs.data() : zs_.data();
-  const int* ids = dedup ? unique_.ids.data() : ids_.data();
-  const int* start = dedup ? unique_.start.data() : start_.data();
-  const int count = dedup ? unique_.n : n_;
-  if (slot >= 0 && slot < count) scan_lanes(xs, ys, zs, ids, slot, slot + 1, vx, vy, vz, lanes);  // a bound from the start
+  const float* xs = k1_.xs;
+  const float* ys = k1_.ys;
+  const float* zs = k1_.zs;
+  const int* ids = k1_.ids;
+  const int* start = k1_.start;
+  auto scan = [&](int b, int e) { scan_lanes(xs, ys, zs, ids, b, e, vx, vy, vz, lanes); };
+  if (slot >= 0 && slot < k1_.n) scan(slot, slot + 1);  // a bound from the start
   const int own = 2 * (cj * side_ + ci);
-  if (!exact) {
-    // the lookup: the best of the query's own cell in its layer (or the
-    // nearest cell with points, when it has none) and the hint, no more
-    const int node = near_[own + (qz < 0 ? 1 : 0)];
-    if (node < 0) return false;  // (a cell outside the diamond: not for a unit query)
-    scan_lanes(xs, ys, zs, ids, start[node], start[node + 1], vx, vy, vz, lanes);
+  // A point that could still beat distance d is within r = sqrt(d) of q,
+  // hence its unit direction within r + eps + | |q| - 1 | of q's (the chord c
+  // of the bound above); its u and v lie within these reaches of q's. The
+  // gains are their largest over the query's cell column / row (tables).
+  auto reach_of = [&](float d, float& reach_u, float& reach_v) {
+    const float c = (std::sqrt(d) + eps_ + dq) * 1.0001f + 1e-6f;
+    const float s_q = s / (1.0f + dq);  // <= s / |q|
+    const float shrink = 1.0001f / std::max(1.0f, s_q - 1.7320509f * c);
+    reach_u = c * gain_col_[ci] * shrink + 1e-5f;
+    reach_v = c * gain_row_[cj] * shrink + 1e-5f;
+  };
+  auto crowded = [&](int node) { return !sub_.at.empty() && sub_.at[node] >= 0; };
+  // A crowded node of cell (cx, cy): the query's sub-cell (the nearest one,
+  // when the query is outside the cell), or the nearest with points ...
+  auto own_sub = [&](int node, int cx, int cy, int& sx, int& sy) {
+    const int S = sub_.side[node];
+    sx = std::clamp(static_cast<int>(((u + 1.0f) * scale - cx) * S), 0, S - 1);
+    sy = std::clamp(static_cast<int>(((v + 1.0f) * scale - cy) * S), 0, S - 1);
+  };
+  auto scan_own_sub = [&](int node, int cx, int cy) {
+    int sx, sy;
+    own_sub(node, cx, cy, sx, sy);
+    const int at = sub_.at[node];
+    const int k = sub_.near[at + sy * sub_.side[node] + sx];
+    scan(sub_.start[at + k], sub_.start[at + k + 1]);
+  };
+  // ... and its sub-cells within the reaches of q, the query's own left out
+  // when `skip_own` (read already); a row of sub-cells is one run
+  auto scan_near_subs = [&](int node, int cx, int cy, float reach_u, float reach_v, bool skip_own) {
+    const int S = sub_.side[node];
+    const int* ss = sub_.start.data() + sub_.at[node];
+    const float fx = ((u + 1.0f) * scale - cx) * S, fy = ((v + 1.0f) * scale - cy) * S;
+    const float rx = reach_u * scale * S, ry = reach_v * scale * S;
+    // (truncation instead of floor: a negative value clamps to 0 either way)
+    const int x0 = std::clamp(static_cast<int>(fx - rx), 0, S - 1), x1 = std::clamp(static_cast<int>(fx + rx), 0, S - 1);
+    const int y0 = std::clamp(static_cast<int>(fy - ry), 0, S - 1), y1 = std::clamp(static_cast<int>(fy + ry), 0, S - 1);
+    int ox = -1, oy = -1;
+    if (skip_own) own_sub(node, cx, cy, ox, oy);
+    for (int y = y0; y <= y1; ++y) {
+      const int* row = ss + y * S;
+      if (y == oy && x0 <= ox && ox <= x1) {
+        scan(row[x0], row[ox]);
+        scan(row[ox + 1], row[x1 + 1]);
+      } else {
+        scan(row[x0], row[x1 + 1]);
+      }
+    }
+  };
+  auto finish = [&] {
     float d;
     int best;
     if (!best_of(lanes, d, best)) return false;
@@ -493,23 +636,38 @@ bool OctGridIndex::nearest1(const float* query, int& slot, int& id, float& sq, b
     id = ids[best];
     sq = d;
     return true;
+  };
+  if (!exact) {
+    // the lookup: the best of the query's own cell in its layer (or the
+    // nearest cell with points, when it has none) and the hint, no more
+    const int node = near_[own + (qz < 0 ? 1 : 0)];
+    if (node < 0) return false;  // (a cell outside the diamond: not for a unit query)
+    if (!crowded(node)) {
+      scan(start[node], start[node + 1]);
+      return finish();
+    }
+    // A crowded cell. The query's own: the best of all its points, read by
+    // sub-cells within reach (the same answer as reading them all). Another
+    // (the query's cell has no points): the sub-cell nearest the query. A
+    // query far from a dense cluster has nearly the whole cluster within
+    // reach (the bound is in uv, inflated by the map's stretch), and its best
+    // is an approximation anyway, as every lookup across a cell edge.
+    scan_own_sub(node, (node >> 1) % side_, (node >> 1) / side_);
+    if (node >> 1 == own >> 1) {
+      float reach_u, reach_v;
+      reach_of(lanes_min(lanes), reach_u, reach_v);
+      scan_near_subs(node, ci, cj, reach_u, reach_v, true);
+    }
+    return finish();
   }
-  scan_lanes(xs, ys, zs, ids, start[own], start[own + 2], vx, vy, vz, lanes);
-  // the smallest distance over the lanes
-  __m128 m = _mm_min_ps(_mm256_castps256_ps128(lanes.d), _mm256_extractf128_ps(lanes.d, 1));
-  m = _mm_min_ps(m, _mm_movehl_ps(m, m));
-  m = _mm_min_ss(m, _mm_shuffle_ps(m, m, 1));
-  const float best_d = _mm_cvtss_f32(m);
+  for (int node = own; node < own + 2; ++node) {
+    if (crowded(node)) scan_own_sub(node, ci, cj);
+    else scan(start[node], start[node + 1]);
+  }
+  const float best_d = lanes_min(lanes);
   if (!(best_d < kInf)) return false;
-  // A point that could still win is within r of q, hence its unit direction
-  // within r + eps + | |q| - 1 | of q's (the chord c of the bound above); the
-  // gains are their largest over the query's cell column / row (tables).
-  const float c = (std::sqrt(best_d) + eps_ + dq) * 1.0001f + 1e-6f;
-  const float s_q = s / (1.0f + dq);  // <= s / |q|
-  const float shrink = 1.0001f / std::max(1.0f, s_q - 1.7320509f * c);
-  const float reach_u = c * gain_col_[ci] * shrink + 1e-5f;
-  const float reach_v = c * gain_row_[cj] * shrink + 1e-5f;
-  // (truncation instead of floor: a negative value clamps to 0 either way)
+  float reach_u, reach_v;
+  reach_of(best_d, reach_u, reach_v);
   const int x0 = std::clamp(static_cast<int>((u - reach_u + 1.0f) * scale), 0, side_ - 1);
   const int x1 = std::clamp(static_cast<int>((u + reach_u + 1.0f) * scale), 0, side_ - 1);
   const int y0 = std::clamp(static_cast<int>((v - reach_v + 1.0f) * scale), 0, side_ - 1);
@@ -517,20 +675,30 @@ bool OctGridIndex::nearest1(const float* query, int& slot, int& id, float& sq, b
   if ((x1 - x0 + 1) * (y1 - y0 + 1) > kRunCells) return false;
   for (int cy = y0; cy <= y1; ++cy) {
     const int row = 2 * cy * side_;
-    if (cy == cj) {  // around the cell already read
-      if (x0 < ci) scan_lanes(xs, ys, zs, ids, start[row + 2 * x0], start[row + 2 * ci], vx, vy, vz, lanes);
-      if (ci < x1) scan_lanes(xs, ys, zs, ids, start[row + 2 * ci + 2], start[row + 2 * x1 + 2], vx, vy, vz, lanes);
+    if (sub_.row_has.empty() || !sub_.row_has[cy]) {
+      if (cy == cj) {  // around the cell already read
+        if (x0 < ci) scan(start[row + 2 * x0], start[row + 2 * ci]);
+        if (ci < x1) scan(start[row + 2 * ci + 2], start[row + 2 * x1 + 2]);
+        continue;
+      }
+      scan(start[row + 2 * x0], start[row + 2 * x1 + 2]);
       continue;
     }
-    scan_lanes(xs, ys, zs, ids, start[row + 2 * x0], start[row + 2 * x1 + 2], vx, vy, vz, lanes);
+    // node by node: runs of light nodes read together, crowded ones by sub-cell
+    int b = -1, e = -1;
+    for (int node = row + 2 * x0; node < row + 2 * x1 + 2; ++node) {
+      const bool mine = node >> 1 == own >> 1;
+      if (!crowded(node) && !mine) {
+        if (b < 0) b = start[node];
+        e = start[node + 1];
+        continue;
+      }
+      if (b >= 0) scan(b, e), b = -1;
+      if (crowded(node)) scan_near_subs(node, (node >> 1) % side_, cy, reach_u, reach_v, mine);
+    }
+    if (b >= 0) scan(b, e);
   }
-  float d = best_d;
-  int best = 0;
-  best_of(lanes, d, best);
-  slot = best;
-  id = ids[best];
-  sq = d;
-  return true;
+  return finish();
 }
 
 bool OctGridIndex::nearest_slot(const float* query, int& slot, int& id, float& sq, bool exact) const {
@@ -552,7 +720,7 @@ void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_d
     return;
   }
   if (k == 1 && n_ > 0 && !fallback_) {
-    int slot = hint < 0 || hint >= n_ ? -1 : unique_.n > 0 ? unique_.slot_of[hint] : slot_of_[hint];
+    int slot = hint < 0 || hint >= n_ ? -1 : k1_.slot_of[hint];
     if (nearest1(query, slot, ids[0], sq_dists[0], true)) return;
   }
   Best best(k, ids, sq_dists);

@@ -52,6 +52,29 @@ class OctGridIndex final : public NearestIndex {
   };
   Runs unique_;
   void build_unique();
+  // What the k = 1 search reads: the deduplicated arrays when there are
+  // some, else the full ones (set at the end of build()).
+  struct View {
+    float *xs = nullptr, *ys = nullptr, *zs = nullptr;
+    int* ids = nullptr;
+    const int* start = nullptr;
+    int* slot_of = nullptr;
+    int n = 0;
+  };
+  View k1_;
+  // Crowded runs of the k = 1 arrays (a dense cluster of normals: a face of
+  // a box seen with noise) sorted by a finer S x S grid inside their cell,
+  // row by row, so that a search reads only the sub-cells within reach of its
+  // best so far (index_fast.cpp).
+  struct SubGrids {
+    std::vector<int> at;        // node -> its S x S + 1 sub-cell starts in `start`; -1: not crowded
+    std::vector<int> side;      // node -> S
+    std::vector<int> start;     // places in the k = 1 arrays
+    std::vector<int> near;      // (same offsets as start) sub-cell -> the nearest one with points
+    std::vector<char> row_has;  // cell row -> holds a crowded node
+  };
+  SubGrids sub_;
+  void build_subgrids();
   std::unique_ptr<NearestIndex> fallback_;
 };
 
