@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <map>
 #include <memory>
+#include <optional>
 #include <sstream>
 
 #include "veneer/match/fast.hpp"
@@ -23,8 +24,7 @@ sim::RenderOptions render_options_for(const ImageSet& set) {
 
 }  // namespace
 
-Expected<Relit> relight(const Map& map, const ImageSet& destination, const ImageSet& source,
-                        const cv::Mat& destination_mask, int blend, const fast::BlendGuide* guide) {
+Expected<RelightScenes> relight_scenes(const ImageSet& destination, const ImageSet& source) {
   if (!relight_measurable(source.scene))
     return make_error("relighting is measured with a source of uniform material (sphere-red-gloss, sphere-gray), not '" +
                       source.scene + "'");
@@ -33,28 +33,42 @@ Expected<Relit> relight(const Map& map, const ImageSet& destination, const Image
   const auto src_options = render_options_for(source);
   auto src_scene = sim::make_scene(source.scene, src_options);
   if (!src_scene) return src_scene.error();
-  const cv::Mat lit_source = sim::render(**src_scene, lamp, src_options);
+  RelightScenes out;
+  out.lit_source = sim::render(**src_scene, lamp, src_options);
   const auto dst_options = render_options_for(destination);
   auto reference_scene = sim::make_scene_with_material(destination.scene, source.scene, dst_options);
   if (!reference_scene) return reference_scene.error();
-  Relit out;
   out.reference = sim::render(**reference_scene, lamp, dst_options);
   auto unshadowed_options = dst_options;
   unshadowed_options.cast_shadows = false;
   const cv::Mat unshadowed = sim::render(**reference_scene, lamp, unshadowed_options);
-  if (out.reference.empty() || unshadowed.empty()) return make_error("rendering the relighting reference failed");
+  if (out.lit_source.empty() || out.reference.empty() || unshadowed.empty())
+    return make_error("rendering the relighting reference failed");
   cv::Mat differs;
   cv::compare(cv::abs(out.reference - unshadowed), cv::Scalar::all(1e-6), differs, cv::CMP_GT);
-  cv::Mat shadowed;
-  cv::transform(differs, shadowed, cv::Matx13f(1, 1, 1));
+  cv::transform(differs, out.shadowed, cv::Matx13f(1, 1, 1));
+  return out;
+}
+
+Expected<Relit> relight(const Map& map, const RelightScenes& scenes, const cv::Mat& source_mask,
+                        const cv::Mat& destination_mask, int blend, const fast::BlendGuide* guide) {
+  Relit out;
+  out.reference = scenes.reference;
   out.lit = destination_mask.clone();
-  out.lit.setTo(0, shadowed);
-  auto transferred = repaint_blended(map, lit_source, source.truth.mask, blend, {}, guide);
+  out.lit.setTo(0, scenes.shadowed);
+  auto transferred = repaint_blended(map, scenes.lit_source, source_mask, blend, {}, guide);
   if (!transferred) return transferred.error();
   out.transferred = std::move(*transferred);
   out.psnr_db = psnr(out.transferred, out.reference, destination_mask);
   out.psnr_lit_db = psnr(out.transferred, out.reference, out.lit);
   return out;
+}
+
+Expected<Relit> relight(const Map& map, const ImageSet& destination, const ImageSet& source,
+                        const cv::Mat& destination_mask, int blend, const fast::BlendGuide* guide) {
+  auto scenes = relight_scenes(destination, source);
+  if (!scenes) return scenes.error();
+  return relight(map, *scenes, source.truth.mask, destination_mask, blend, guide);
 }
 
 std::vector<std::pair<std::string, std::string>> thesis_pairs() {
@@ -150,6 +164,7 @@ Expected<std::vector<TableRow>> quality_table(const TableOptions& options, const
     if (!s) return s.error();
     const ImageSet& dset = sets[dname];
     const ImageSet& sset = sets[sname + (second ? "#2" : "")];
+    std::optional<Expected<RelightScenes>> relit_scenes;
     for (const RowSpec& spec : specs) {
       if (progress.cancelled()) return make_error("quality table cancelled");
       progress.report(done++ / total, dname + " <- " + sname + " " + method_name(spec.method));
@@ -182,7 +197,10 @@ Expected<std::vector<TableRow>> quality_table(const TableOptions& options, const
       }
       row.quality = evaluate(*map, dset.truth.mask, sset.truth.mask, dset.truth.normals, sset.truth.normals);
       if (relight_measurable(sname)) {
-        auto relit = relight(*map, dset, sset, dset.truth.mask);
+        // rendered once per pair: the lamp's scenes do not depend on the map
+        if (!relit_scenes) relit_scenes = relight_scenes(dset, sset);
+        auto relit = *relit_scenes ? relight(*map, **relit_scenes, sset.truth.mask, dset.truth.mask)
+                                   : Expected<Relit>(relit_scenes->error());
         if (relit) {
           row.quality.psnr_db = relit->psnr_db;
           row.quality.psnr_lit_db = relit->psnr_lit_db;

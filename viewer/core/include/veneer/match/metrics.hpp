@@ -73,6 +73,16 @@ struct Relit {
 // weighed by `guide` when given (fast::BlendGuide; normals of the map's size and the source's).
 Expected<Relit> relight(const Map& map, const ImageSet& destination, const ImageSet& source,
                         const cv::Mat& destination_mask, int blend = 0, const fast::BlendGuide* guide = nullptr);
+// What the measure renders for a pair whatever the map (relight() renders it
+// on every call; the quality table once per pair and then uses the overload).
+struct RelightScenes {
+  cv::Mat lit_source;  // linear BGR: the source under the extra lamp
+  cv::Mat reference;   // as Relit::reference
+  cv::Mat shadowed;    // CV_8UC1: 255 where the lamp's cast shadows fall on the destination
+};
+Expected<RelightScenes> relight_scenes(const ImageSet& destination, const ImageSet& source);
+Expected<Relit> relight(const Map& map, const RelightScenes& scenes, const cv::Mat& source_mask,
+                        const cv::Mat& destination_mask, int blend = 0, const fast::BlendGuide* guide = nullptr);
 bool relight_measurable(const std::string& source_scene);
 
 // The quality table of the thesis pairs (issue 3): simulated sets at a reduced
