@@ -260,31 +260,43 @@ TEST(FastIndex, GridScanBySlotExactAndLookup) {
   EXPECT_LT(worst, 15.0);           // within a couple of cells of this grid (34 x 34 over the square)
 }
 
+// Every query through the k = 1 searches that must equal the brute force:
+// the exact scan carrying its place from query to query and the search
+// hinted with the previous answer; then `more(i, q, nearest_id)`. Returns how
+// many queries the exact scan answered itself. Stops at the first failure.
+template <class More>
+int expect_exact_k1(const veneer::match::fast::OctGridIndex& grid, const std::vector<float>& pts,
+                    const std::vector<float>& queries, More more) {
+  std::vector<int> bids;
+  std::vector<float> bd;
+  int slot = -1, hint = -1, served = 0;
+  const int nq = static_cast<int>(queries.size()) / 3;
+  for (int i = 0; i < nq && !::testing::Test::HasFailure(); ++i) {
+    const float* q = &queries[static_cast<size_t>(i) * 3];
+    brute_knn(pts, 3, q, 1, bids, bd);
+    int id;
+    float d;
+    if (grid.nearest_slot(q, slot, id, d, true)) {
+      ++served;
+      EXPECT_EQ(id, bids[0]) << "exact scan, query " << i;
+      EXPECT_EQ(d, bd[0]) << "exact scan, query " << i;
+    } else {
+      slot = -1;
+    }
+    grid.nearest_from(q, 1, &id, &d, hint);
+    EXPECT_EQ(id, bids[0]) << "hinted, query " << i;
+    EXPECT_EQ(d, bd[0]) << "hinted, query " << i;
+    hint = id;
+    more(i, q, bids[0]);
+  }
+  return served;
+}
+
 // A source of few orientations (the faces of a box): thousands of equal
 // normals crowd a few cells, and the k = 1 search keeps one of each (the
 // lowest id, which wins their ties). Every answer stays the brute force's:
 // exact scans carrying their place, hinted searches, the lookup where the
 // query's own cell holds its nearest, and the k > 1 lists (all points).
-// The k = 1 searches that must equal the brute force (`want`, `want_d`): the
-// exact scan carrying its place from query to query (counted in `served`
-// when it answers) and the search hinted with the previous answer.
-void expect_exact_k1(const veneer::match::fast::OctGridIndex& grid, const float* q, int want, float want_d,
-                     int& slot, int& hint, int& served, int i) {
-  int id;
-  float d;
-  if (grid.nearest_slot(q, slot, id, d, true)) {
-    ++served;
-    ASSERT_EQ(id, want) << "exact scan, query " << i;
-    ASSERT_EQ(d, want_d) << "exact scan, query " << i;
-  } else {
-    slot = -1;
-  }
-  grid.nearest_from(q, 1, &id, &d, hint);
-  ASSERT_EQ(id, want) << "hinted, query " << i;
-  ASSERT_EQ(d, want_d) << "hinted, query " << i;
-  hint = id;
-}
-
 TEST(FastIndex, CrowdedEqualPointsKeepTheNearestAndItsTies) {
   std::mt19937 rng(31);
   auto src = unit_normals(1500, rng, true, 40);
@@ -317,23 +329,16 @@ TEST(FastIndex, CrowdedEqualPointsKeepTheNearestAndItsTies) {
   }
   veneer::match::fast::OctGridIndex grid;
   grid.build(pts.data(), n, 3);
-  std::vector<int> bids;
-  std::vector<float> bd;
-  int slot = -1, hint = -1, served = 0;
   const int nq = static_cast<int>(queries.size()) / 3;
-  for (int i = 0; i < nq; ++i) {
-    const float* q = &queries[static_cast<size_t>(i) * 3];
-    brute_knn(pts, 3, q, 1, bids, bd);
-    ASSERT_NO_FATAL_FAILURE(expect_exact_k1(grid, q, bids[0], bd[0], slot, hint, served, i));
-    int id;
-    float d;
+  const int served = expect_exact_k1(grid, pts, queries, [&](int i, const float* q, int nearest) {
     if (i % 41 == 0 && i < 5 * 41) {  // exactly a face: its own cell holds it
-      int lslot = -1;
+      int lslot = -1, id;
+      float d;
       ASSERT_TRUE(grid.nearest_slot(q, lslot, id, d, false));
-      EXPECT_EQ(id, bids[0]) << "lookup, face " << i / 41;
+      EXPECT_EQ(id, nearest) << "lookup, face " << i / 41;
       EXPECT_EQ(d, 0.0f);
     }
-  }
+  });
   EXPECT_GT(served, nq * 9 / 10);
   // the lists of k > 1 keep every equal point, in id order
   std::vector<float> some(queries.begin(), queries.begin() + 3 * 300);
@@ -384,34 +389,27 @@ TEST(FastIndex, DenseClustersAreReadBySubCellsWithTheSameAnswers) {
   };
   std::vector<int> node(n), count(2 * kSide * kSide, 0);
   for (int i = 0; i < n; ++i) ++count[node[i] = node_of(&pts[static_cast<size_t>(i) * 3], false)];
-  std::vector<int> bids;
-  std::vector<float> bd;
-  int slot = -1, hint = -1, served = 0, crowded_lookups = 0;
+  int crowded_lookups = 0;
   const int nq = static_cast<int>(queries.size()) / 3;
-  for (int i = 0; i < nq; ++i) {
-    const float* q = &queries[static_cast<size_t>(i) * 3];
-    brute_knn(pts, 3, q, 1, bids, bd);
-    ASSERT_NO_FATAL_FAILURE(expect_exact_k1(grid, q, bids[0], bd[0], slot, hint, served, i));
-    int id;
-    float d;
+  const int served = expect_exact_k1(grid, pts, queries, [&](int i, const float* q, int) {
     // the lookup in a crowded cell of the query's own: the best of all that
     // cell's points (no hint here), however they are read
     const int own = node_of(q, true);
-    if (count[own] > 256) {  // (crowded: read by sub-cells)
-      float best = std::numeric_limits<float>::infinity();
-      int best_id = -1;
-      for (int p = 0; p < n; ++p) {
-        if (node[p] != own) continue;
-        float s = 0;
-        for (int j = 0; j < 3; ++j) s += (pts[static_cast<size_t>(p) * 3 + j] - q[j]) * (pts[static_cast<size_t>(p) * 3 + j] - q[j]);
-        if (s < best) best = s, best_id = p;
-      }
-      int lslot = -1;
-      ASSERT_TRUE(grid.nearest_slot(q, lslot, id, d, false));
-      EXPECT_EQ(id, best_id) << "lookup, query " << i;
-      ++crowded_lookups;
+    if (count[own] <= 256) return;  // (crowded: read by sub-cells)
+    float best = std::numeric_limits<float>::infinity();
+    int best_id = -1;
+    for (int p = 0; p < n; ++p) {
+      if (node[p] != own) continue;
+      float s = 0;
+      for (int j = 0; j < 3; ++j) s += (pts[static_cast<size_t>(p) * 3 + j] - q[j]) * (pts[static_cast<size_t>(p) * 3 + j] - q[j]);
+      if (s < best) best = s, best_id = p;
     }
-  }
+    int lslot = -1, id;
+    float d;
+    ASSERT_TRUE(grid.nearest_slot(q, lslot, id, d, false));
+    EXPECT_EQ(id, best_id) << "lookup, query " << i;
+    ++crowded_lookups;
+  });
   EXPECT_GT(served, nq / 2);
   EXPECT_GT(crowded_lookups, 400) << "the clusters' queries fall in crowded cells";
 }
