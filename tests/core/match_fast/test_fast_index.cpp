@@ -51,6 +51,12 @@ std::vector<float> unit_normals(int n, std::mt19937& rng, bool hemisphere, int d
   return p;
 }
 
+// (x, y, z) made unit length, appended to v
+void push_unit(std::vector<float>& v, float x, float y, float z) {
+  const float l = std::sqrt(x * x + y * y + z * z);
+  v.insert(v.end(), {x / l, y / l, z / l});
+}
+
 void expect_same(NearestIndex& index, const std::vector<float>& pts, int dims, const std::vector<float>& queries,
                  int k) {
   index.build(pts.data(), static_cast<int>(pts.size()) / dims, dims);
@@ -412,4 +418,78 @@ TEST(FastIndex, DenseClustersAreReadBySubCellsWithTheSameAnswers) {
   });
   EXPECT_GT(served, nq / 2);
   EXPECT_GT(crowded_lookups, 400) << "the clusters' queries fall in crowded cells";
+}
+
+// Every search of the grid over `pts` equals the brute force on `queries`:
+// the k = 1 scans and hinted searches, and plain lists of 1, 5 and 16.
+void expect_all_exact(veneer::match::fast::OctGridIndex& grid, const std::vector<float>& pts,
+                      const std::vector<float>& queries) {
+  for (int k : {1, 5, 16}) expect_same(grid, pts, 3, queries, k);  // (builds the grid)
+  expect_exact_k1(grid, pts, queries, [](int, const float*, int) {});
+}
+
+// Tight clusters of normals (a flat region seen with little noise: points
+// 1e-5 to 1e-4 apart), on a fine grid so that many clusters straddle a cell
+// edge. The k-th best distance is then below ~6e-8, where the bound's
+// cos θ once rounded to 1 and cut the reach to nothing: the lists missed
+// points just across the edge.
+TEST(FastIndex, KnnListsStayExactAmongTightClustersOfNormals) {
+  std::mt19937 rng(53);
+  auto centres = unit_normals(400, rng, true, 0);
+  std::normal_distribution<float> g(0, 1);
+  std::vector<float> pts, queries;
+  for (size_t c = 0; c < centres.size(); c += 3) {
+    for (int i = 0; i < 24; ++i) {
+      push_unit(pts, centres[c] + 5e-5f * g(rng), centres[c + 1] + 5e-5f * g(rng), centres[c + 2] + 5e-5f * g(rng));
+    }
+    queries.insert(queries.end(), pts.end() - 3, pts.end());  // exactly a point
+    queries.insert(queries.end(), {centres[c], centres[c + 1], centres[c + 2]});
+  }
+  veneer::match::fast::OctGridIndex grid(512);
+  expect_same(grid, pts, 3, queries, 5);
+  expect_same(grid, pts, 3, queries, 16);
+}
+
+// A source of a few dense clusters and nothing else (the faces of a box,
+// with noise and without), and queries anywhere: most are far from every
+// point, where rings of cells would cross the empty sphere and reach whole
+// clusters. The searches read the clusters' 3-D boxes instead (nearest
+// first, crowded cells by their tiles and sub-cells); every answer stays the
+// brute force's, for k = 1 (scan, hinted, plain) and for lists with equals.
+TEST(FastIndex, QueriesFarFromAFewDenseClustersAreExact) {
+  std::mt19937 rng(59);
+  std::normal_distribution<float> g(0, 1);
+  std::vector<float> pts;
+  const float faces[4][3] = {{0, 0, 1}, {0.6f, 0, 0.8f}, {0, 0.28f, 0.96f}, {0, -0.8f, 0.6f}};
+  for (const auto& f : faces) {
+    for (int i = 0; i < 2500; ++i) push_unit(pts, f[0] + 0.004f * g(rng), f[1] + 0.004f * g(rng), f[2] + 0.004f * g(rng));
+    for (int i = 0; i < 300; ++i) pts.insert(pts.end(), {f[0], f[1], f[2]});  // and exactly the face
+  }
+  const int n = static_cast<int>(pts.size()) / 3;
+  std::vector<float> queries;
+  for (int i = 0; i < 700; ++i) push_unit(queries, g(rng), g(rng), g(rng));  // anywhere on the sphere
+  for (int i = 0; i < 100; ++i) {  // and exactly source points
+    const size_t p = static_cast<size_t>(rng() % n) * 3;
+    queries.insert(queries.end(), pts.begin() + p, pts.begin() + p + 3);
+  }
+  veneer::match::fast::OctGridIndex grid;
+  expect_all_exact(grid, pts, queries);
+}
+
+// Many small clusters in one cap of the sphere (more nodes with points than
+// a few boxes), queries on the far side: the rings grow until they have
+// crossed as many cells as there are such nodes, then the boxes outside the
+// rings take over. Same answers as the brute force.
+TEST(FastIndex, RingsGiveWayToBoxesWithTheSameAnswers) {
+  std::mt19937 rng(61);
+  std::normal_distribution<float> g(0, 1);
+  std::vector<float> pts;
+  for (int c = 0; c < 600; ++c) {
+    const float cx = 0.35f * g(rng), cy = 0.35f * g(rng);
+    for (int i = 0; i < 12; ++i) push_unit(pts, cx + 0.002f * g(rng), cy + 0.002f * g(rng), 1.0f);
+  }
+  std::vector<float> queries;
+  for (int i = 0; i < 600; ++i) push_unit(queries, g(rng), g(rng), -0.5f * std::fabs(g(rng)));
+  veneer::match::fast::OctGridIndex grid(96);
+  expect_all_exact(grid, pts, queries);
 }

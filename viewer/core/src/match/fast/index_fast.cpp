@@ -186,6 +186,10 @@ class KdTreeIndex final : public NearestIndex {
 OctGridIndex::OctGridIndex(int cells_per_side, bool lookup) : lookup_(lookup), fixed_side_(cells_per_side) {}
 OctGridIndex::~OctGridIndex() = default;
 
+// Most nodes with points for which a wide search reads their 3-D boxes at
+// once instead of rings of cells (nearest_from).
+constexpr long kFewBoxes = 256;
+
 // Largest box of cells visited directly (else ring by ring): 16-49 measured
 // alike on bull <- orange, 0 (rings only) 25-30 % slower.
 constexpr int kBoxCells = 25;
@@ -208,6 +212,9 @@ void OctGridIndex::build(const float* points, int n, int dims) {
   unique_ = Runs{};
   k1_ = View{};
   sub_ = SubGrids{};
+  eq_next_.clear();
+  node_box_ = sub_box_ = tile_box_ = Boxes{};
+  box_node_.clear();
   if (n_ == 0) return;
   // Per point: its distance from unit length and its cell (in parallel).
   std::vector<int> cell(static_cast<size_t>(n_));
@@ -334,6 +341,7 @@ void OctGridIndex::build(const float* points, int n, int dims) {
   else
     k1_ = View{xs_.data(), ys_.data(), zs_.data(), ids_.data(), start_.data(), slot_of_.data(), n_};
   build_subgrids();
+  build_boxes();
 }
 
 // Equal points in one run cost a k = 1 scan without changing its answer: of
@@ -396,6 +404,68 @@ void OctGridIndex::build_unique() {
   }
   u.slot_of.resize(static_cast<size_t>(n_));
   for (int id = 0; id < n_; ++id) u.slot_of[id] = place[slot_of_[id]];
+  // each group of equals chained by ascending id (slots ascend with ids in a run)
+  eq_next_.assign(static_cast<size_t>(n_), -1);
+  std::vector<int> last(static_cast<size_t>(n_));  // first equal's slot -> the group's last slot so far
+  for (int i = 0; i < n_; ++i) {
+    last[i] = i;
+    if (first[i] == i) continue;
+    eq_next_[ids_[last[first[i]]]] = ids_[i];
+    last[first[i]] = i;
+  }
+}
+
+void OctGridIndex::Boxes::reset(size_t n) {
+  for (int a = 0; a < 3; ++a) lo[a].assign(n + 8, kInf), hi[a].assign(n + 8, -kInf);
+}
+
+void OctGridIndex::Boxes::set(size_t at, const View& v, int b, int e) {
+  float lx = kInf, ly = kInf, lz = kInf, hx = -kInf, hy = -kInf, hz = -kInf;
+  for (int i = b; i < e; ++i) {
+    lx = std::min(lx, v.xs[i]), ly = std::min(ly, v.ys[i]), lz = std::min(lz, v.zs[i]);
+    hx = std::max(hx, v.xs[i]), hy = std::max(hy, v.ys[i]), hz = std::max(hz, v.zs[i]);
+  }
+  lo[0][at] = lx, lo[1][at] = ly, lo[2][at] = lz, hi[0][at] = hx, hi[1][at] = hy, hi[2][at] = hz;
+}
+
+// The 3-D boxes of the nodes with points and of the sub-cells, from the
+// k = 1 arrays (the same points as the full ones, equals aside).
+void OctGridIndex::build_boxes() {
+  const int nodes = 2 * side_ * side_;
+  for (int node = 0; node < nodes; ++node)
+    if (k1_.start[node] < k1_.start[node + 1]) box_node_.push_back(node);
+  const int m = static_cast<int>(box_node_.size());
+  node_box_.reset(static_cast<size_t>(m));
+  parallel_rows(m, 0, 1024, [&](int jb, int je) {
+    for (int j = jb; j < je; ++j) node_box_.set(static_cast<size_t>(j), k1_, k1_.start[box_node_[j]], k1_.start[box_node_[j] + 1]);
+  });
+  if (sub_.at.empty()) return;
+  sub_box_.reset(sub_.start.size());
+  // and of every tile of 8 x 8 sub-cells (the last row and column of tiles
+  // cut at S), row by row
+  sub_.tile_at.assign(static_cast<size_t>(nodes), -1);
+  int tiles = 0;
+  for (int node = 0; node < nodes; ++node)
+    if (sub_.at[node] >= 0) {
+      const int t = (sub_.side[node] + 7) / 8;
+      sub_.tile_at[node] = tiles;
+      tiles += t * t;
+    }
+  tile_box_.reset(static_cast<size_t>(tiles));
+  parallel_rows(nodes, 0, 4096, [&](int nb, int ne) {
+    for (int node = nb; node < ne; ++node) {
+      if (sub_.at[node] < 0) continue;
+      const int at = sub_.at[node], S = sub_.side[node], T = (S + 7) / 8;
+      for (int k = 0; k < S * S; ++k) sub_box_.set(static_cast<size_t>(at + k), k1_, sub_.start[at + k], sub_.start[at + k + 1]);
+      for (int k = 0; k < S * S; ++k) {
+        const size_t tile = static_cast<size_t>(sub_.tile_at[node] + (k / S / 8) * T + (k % S) / 8);
+        for (int a = 0; a < 3; ++a) {
+          tile_box_.lo[a][tile] = std::min(tile_box_.lo[a][tile], sub_box_.lo[a][at + k]);
+          tile_box_.hi[a][tile] = std::max(tile_box_.hi[a][tile], sub_box_.hi[a][at + k]);
+        }
+      }
+    }
+  });
 }
 
 // A crowded run of the k = 1 arrays (over 256 points: thousands where the
@@ -500,7 +570,7 @@ struct Lanes {
   __m256i id, slot;
 };
 
-static inline void scan_lanes(const float* xs, const float* ys, const float* zs, const int* ids, int b, int e,
+__attribute__((always_inline)) static inline void scan_lanes(const float* xs, const float* ys, const float* zs, const int* ids, int b, int e,
                               __m256 vx, __m256 vy, __m256 vz, Lanes& l) {
   const __m256i step = _mm256_set1_epi32(8);
   __m256i slot = _mm256_add_epi32(_mm256_set1_epi32(b), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
@@ -554,6 +624,37 @@ static inline float lanes_min(const Lanes& l) {
   return _mm_cvtss_f32(m);
 }
 
+// Boxes [b, b + n) against q, 8 at a time: per box, a lower bound of the
+// squared distance from q to any point in it (+inf for an empty box), through
+// `take(j, bound)` for each box j (counted from b) whose bound is at most
+// *limit, which the caller may lower as it goes. Per axis the gap between q
+// and the box, summed as sq3 sums a point's differences: every term is at
+// most the point's (rounding keeps the order), so the bound never exceeds the
+// distance sq3 computes for any point in the box.
+template <class Take>
+static inline void boxes_within(const float* const lo[3], const float* const hi[3], int b, int n, float qx, float qy,
+                                float qz, const float* limit, Take&& take) {
+  const __m256 zero = _mm256_setzero_ps();
+  const __m256 q[3] = {_mm256_set1_ps(qx), _mm256_set1_ps(qy), _mm256_set1_ps(qz)};
+  for (int j = 0; j < n; j += 8) {
+    __m256 t[3];
+    for (int a = 0; a < 3; ++a)
+      t[a] = _mm256_max_ps(_mm256_max_ps(_mm256_sub_ps(_mm256_loadu_ps(lo[a] + b + j), q[a]),
+                                         _mm256_sub_ps(q[a], _mm256_loadu_ps(hi[a] + b + j))),
+                           zero);
+    const __m256 d = _mm256_fmadd_ps(t[2], t[2], _mm256_fmadd_ps(t[1], t[1], _mm256_mul_ps(t[0], t[0])));
+    unsigned mask = static_cast<unsigned>(_mm256_movemask_ps(_mm256_cmp_ps(d, _mm256_set1_ps(*limit), _CMP_LE_OQ)));
+    if (n - j < 8) mask &= (1u << (n - j)) - 1u;
+    if (!mask) continue;
+    alignas(32) float bound[8];
+    _mm256_store_ps(bound, d);
+    for (; mask; mask &= mask - 1) {
+      const int lane = __builtin_ctz(mask);
+      if (bound[lane] <= *limit) take(j + lane, bound[lane]);
+    }
+  }
+}
+
 // k = 1 for a query of near-unit length (the engine's normals): the hint (a
 // point likely near, e.g. the previous pixel's match) and the query's own
 // cell first; then every cell within
@@ -579,21 +680,22 @@ bool OctGridIndex::nearest1(const float* query, int& slot, int& id, float& sq, b
   const float* zs = k1_.zs;
   const int* ids = k1_.ids;
   const int* start = k1_.start;
-  auto scan = [&](int b, int e) { scan_lanes(xs, ys, zs, ids, b, e, vx, vy, vz, lanes); };
+  // (forced inline: with the file grown, GCC stopped inlining it, +10 % on k = 1)
+  auto scan = [&](int b, int e) __attribute__((always_inline)) { scan_lanes(xs, ys, zs, ids, b, e, vx, vy, vz, lanes); };
   if (slot >= 0 && slot < k1_.n) scan(slot, slot + 1);  // a bound from the start
   const int own = 2 * (cj * side_ + ci);
   // A point that could still beat distance d is within r = sqrt(d) of q,
   // hence its unit direction within r + eps + | |q| - 1 | of q's (the chord c
   // of the bound above); its u and v lie within these reaches of q's. The
   // gains are their largest over the query's cell column / row (tables).
-  auto reach_of = [&](float d, float& reach_u, float& reach_v) {
+  auto reach_of = [&](float d, float& reach_u, float& reach_v) __attribute__((always_inline)) {
     const float c = (std::sqrt(d) + eps_ + dq) * 1.0001f + 1e-6f;
     const float s_q = s / (1.0f + dq);  // <= s / |q|
     const float shrink = 1.0001f / std::max(1.0f, s_q - 1.7320509f * c);
     reach_u = c * gain_col_[ci] * shrink + 1e-5f;
     reach_v = c * gain_row_[cj] * shrink + 1e-5f;
   };
-  auto crowded = [&](int node) { return !sub_.at.empty() && sub_.at[node] >= 0; };
+  auto crowded = [&](int node) __attribute__((always_inline)) { return !sub_.at.empty() && sub_.at[node] >= 0; };
   // A crowded node of cell (cx, cy): the query's sub-cell (the nearest one,
   // when the query is outside the cell), or the nearest with points ...
   auto own_sub = [&](int node, int cx, int cy, int& sx, int& sy) {
@@ -607,10 +709,14 @@ bool OctGridIndex::nearest1(const float* query, int& slot, int& id, float& sq, b
     const int at = sub_.at[node];
     const int k = sub_.near[at + sy * sub_.side[node] + sx];
     scan(sub_.start[at + k], sub_.start[at + k + 1]);
+    return k;
   };
-  // ... and its sub-cells within the reaches of q, the query's own left out
-  // when `skip_own` (read already); a row of sub-cells is one run
-  auto scan_near_subs = [&](int node, int cx, int cy, float reach_u, float reach_v, bool skip_own) {
+  // ... and its sub-cells within the reaches of q, sub-cell `skip` left out
+  // (read already; -1: none); a row of sub-cells is one run. (The sub-cell
+  // read is passed, not computed again: the compiler may fuse the two
+  // computations' arithmetic differently, and a query on a sub-cell edge
+  // then skipped the other one, missing its points.)
+  auto scan_near_subs = [&](int node, int cx, int cy, float reach_u, float reach_v, int skip) {
     const int S = sub_.side[node];
     const int* ss = sub_.start.data() + sub_.at[node];
     const float fx = ((u + 1.0f) * scale - cx) * S, fy = ((v + 1.0f) * scale - cy) * S;
@@ -618,8 +724,7 @@ bool OctGridIndex::nearest1(const float* query, int& slot, int& id, float& sq, b
     // (truncation instead of floor: a negative value clamps to 0 either way)
     const int x0 = std::clamp(static_cast<int>(fx - rx), 0, S - 1), x1 = std::clamp(static_cast<int>(fx + rx), 0, S - 1);
     const int y0 = std::clamp(static_cast<int>(fy - ry), 0, S - 1), y1 = std::clamp(static_cast<int>(fy + ry), 0, S - 1);
-    int ox = -1, oy = -1;
-    if (skip_own) own_sub(node, cx, cy, ox, oy);
+    const int ox = skip < 0 ? -1 : skip % S, oy = skip < 0 ? -1 : skip / S;
     for (int y = y0; y <= y1; ++y) {
       const int* row = ss + y * S;
       if (y == oy && x0 <= ox && ox <= x1) {
@@ -630,7 +735,7 @@ bool OctGridIndex::nearest1(const float* query, int& slot, int& id, float& sq, b
       }
     }
   };
-  auto finish = [&] {
+  auto finish = [&]() __attribute__((always_inline)) {
     float d;
     int best;
     if (!best_of(lanes, d, best)) return false;
@@ -654,16 +759,17 @@ bool OctGridIndex::nearest1(const float* query, int& slot, int& id, float& sq, b
     // query far from a dense cluster has nearly the whole cluster within
     // reach (the bound is in uv, inflated by the map's stretch), and its best
     // is an approximation anyway, as every lookup across a cell edge.
-    scan_own_sub(node, (node >> 1) % side_, (node >> 1) / side_);
+    const int read = scan_own_sub(node, (node >> 1) % side_, (node >> 1) / side_);
     if (node >> 1 == own >> 1) {
       float reach_u, reach_v;
       reach_of(lanes_min(lanes), reach_u, reach_v);
-      scan_near_subs(node, ci, cj, reach_u, reach_v, true);
+      scan_near_subs(node, ci, cj, reach_u, reach_v, read);
     }
     return finish();
   }
+  int read[2] = {-1, -1};  // the sub-cell read in each layer of the own cell
   for (int node = own; node < own + 2; ++node) {
-    if (crowded(node)) scan_own_sub(node, ci, cj);
+    if (crowded(node)) read[node - own] = scan_own_sub(node, ci, cj);
     else scan(start[node], start[node + 1]);
   }
   const float best_d = lanes_min(lanes);
@@ -696,7 +802,7 @@ bool OctGridIndex::nearest1(const float* query, int& slot, int& id, float& sq, b
         continue;
       }
       if (b >= 0) scan(b, e), b = -1;
-      if (crowded(node)) scan_near_subs(node, (node >> 1) % side_, cy, reach_u, reach_v, mine);
+      if (crowded(node)) scan_near_subs(node, (node >> 1) % side_, cy, reach_u, reach_v, mine ? read[node - own] : -1);
     }
     if (b >= 0) scan(b, e);
   }
@@ -765,18 +871,72 @@ void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_d
       return;
     }
     // the angle θ between the directions of q and of any point that could
-    // still win: cos θ >= c (points within eps of unit length)
-    const float r = std::sqrt(w) + eps_;
-    const float c = (qn * qn + 1.0f - r * r) / (2.0f * qn);
-    if (c <= -1.0f) {
+    // still win (points within eps of unit length): |q|^2 + 1 - 2 |q| cos θ
+    // <= r^2, so the chord between the unit directions, 2 sin(θ / 2) =
+    // sqrt(2 (1 - cos θ)), is at most sqrt((r^2 - (|q| - 1)^2) / |q|). (Not
+    // through cos θ: 1 - cos θ cancels to 0 in floats for r below ~2e-4,
+    // which once cut the reach of a source with tight clusters of normals.)
+    const float r = std::sqrt(w) + eps_, off = qn - 1.0f;
+    const float chord2 = (r - std::fabs(off)) * (r + std::fabs(off)) / qn;
+    if (!(chord2 < 4.0f)) {
       reach_u = reach_v = kInf;
       return;
     }
-    // chord between the unit directions: 2 sin(θ / 2) = 2 sqrt((1 - cos θ) / 2)
-    const float chord = (2.0f * std::sqrt(std::clamp(0.5f * (1.0f - c), 0.0f, 1.0f))) * 1.0001f + 1e-6f;
+    const float chord = std::sqrt(std::max(chord2, 0.0f)) * 1.0001f + 1e-6f;
     const float denom = std::max(1.0f, s_q - 1.7320509f * chord);
     reach_u = chord * gain_u / denom * 1.0001f + 1e-5f;
     reach_v = chord * gain_v / denom * 1.0001f + 1e-5f;
+  };
+  // The k = 1 arrays are read (equals kept once): a point that enters a
+  // longer list brings its equals after it, lowest ids first, while they fit.
+  const View& V = k1_;
+  const bool equals = !one && !eq_next_.empty();
+  auto worst = [&] { return one ? best_d : best.worst(); };
+  auto scan_run = [&](int b, int e) {
+    if (b >= e) return;
+    if (one) {
+      const float before = best_d;
+      for (int i = b; i < e; ++i) {
+        const float d = sq3(V.xs[i], V.ys[i], V.zs[i], qx, qy, qz);
+        if (d < best_d || (d == best_d && V.ids[i] < best_id)) best_d = d, best_id = V.ids[i];
+      }
+      if (best_d < before) update_reach();
+      return;
+    }
+    bool improved = false;
+    for (int i = b; i < e; ++i) {
+      const float d = sq3(V.xs[i], V.ys[i], V.zs[i], qx, qy, qz);
+      if (!(d < best.worst() || (d == best.worst() && V.ids[i] < best.worst_id()))) continue;
+      best.add(d, V.ids[i]);
+      improved = true;
+      if (equals)
+        for (int id = eq_next_[V.ids[i]]; id >= 0 && (d < best.worst() || (d == best.worst() && id < best.worst_id()));
+             id = eq_next_[id])
+          best.add(d, id);
+    }
+    if (improved) update_reach();
+  };
+  auto crowded = [&](int node) { return !sub_.at.empty() && sub_.at[node] >= 0; };
+  // A crowded node of cell (cx, cy): its rows of sub-cells within reach, from
+  // the query's row outwards, each row's sub-cells within reach as one run.
+  auto scan_subs = [&](int node, int cx, int cy) __attribute__((noinline)) {
+    const int S = sub_.side[node];
+    const int* ss = sub_.start.data() + sub_.at[node];
+    const float fx = ((u + 1.0f) * scale - cx) * S, fy = ((v + 1.0f) * scale - cy) * S;
+    const int own_y = static_cast<int>(std::clamp(fy, 0.0f, S - 1.0f));
+    auto row = [&](int y) {
+      const float gap = std::max({0.0f, y - fy, fy - (y + 1)});  // in sub-cells
+      const float ry = reach_v * scale * S, rx = reach_u * scale * S;
+      if (gap > ry) return false;
+      const int x0 = static_cast<int>(std::clamp(fx - rx, 0.0f, S - 1.0f));
+      const int x1 = static_cast<int>(std::clamp(fx + rx, 0.0f, S - 1.0f));
+      scan_run(ss[y * S + x0], ss[y * S + x1 + 1]);
+      return true;
+    };
+    for (int y = own_y; y >= 0 && row(y); --y) {
+    }
+    for (int y = own_y + 1; y < S && row(y); ++y) {
+    }
   };
   auto scan_cell = [&](int cx, int cy) {
     // uv distance from the query to this cell's rectangle
@@ -785,26 +945,73 @@ void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_d
     const float dy = std::max({0.0f, y0 - v, v - (y0 + h)});
     if (dx > reach_u || dy > reach_v) return;
     const int c = 2 * (cy * side_ + cx);
-    const int b = start_[c], e = start_[c + 2];
-    if (b == e) return;
-    if (one) {
-      const float before = best_d;
-      for (int i = b; i < e; ++i) {
-        const float d = sq3(xs_[i], ys_[i], zs_[i], qx, qy, qz);
-        if (d < best_d || (d == best_d && ids_[i] < best_id)) best_d = d, best_id = ids_[i];
-      }
-      if (best_d < before) update_reach();
+    if (sub_.at.empty() || sub_.at[c] + sub_.at[c + 1] == -2) {  // neither layer crowded: one run
+      scan_run(V.start[c], V.start[c + 2]);
       return;
     }
-    bool improved = false;
-    for (int i = b; i < e; ++i) {
-      const float d = sq3(xs_[i], ys_[i], zs_[i], qx, qy, qz);
-      if (d < best.worst() || (d == best.worst() && ids_[i] < best.worst_id())) {
-        best.add(d, ids_[i]);
-        improved = true;
+    for (int node = c; node < c + 2; ++node) {
+      if (crowded(node) && !getenv("NOSUBS")) scan_subs(node, cx, cy);
+      else scan_run(V.start[node], V.start[node + 1]);
+    }
+  };
+  // Far from every point (a query between a few dense clusters: a box's
+  // faces), the rings cross many empty cells and reach whole clusters. Then
+  // the nodes with points outside the square of rings < r are read by their
+  // 3-D boxes, nearest first, while a box can still hold a winner; a crowded
+  // one by its sub-cells' boxes, the one nearest the query in uv first.
+  auto far = [&](int r) __attribute__((noinline)) {
+    thread_local std::vector<std::pair<float, int>> order, tiles;
+    order.clear();
+    const float* lo[3] = {node_box_.lo[0].data(), node_box_.lo[1].data(), node_box_.lo[2].data()};
+    const float* hi[3] = {node_box_.hi[0].data(), node_box_.hi[1].data(), node_box_.hi[2].data()};
+    const float limit = worst();
+    boxes_within(lo, hi, 0, static_cast<int>(box_node_.size()), qx, qy, qz, &limit, [&](int j, float bound) {
+      const int node = box_node_[j], cx = (node >> 1) % side_, cy = (node >> 1) / side_;
+      if (std::abs(cx - ci) >= r || std::abs(cy - cj) >= r) order.emplace_back(bound, node);
+    });
+    // nearest first, popped from a heap: the search usually ends after a few
+    auto later = [](const std::pair<float, int>& a, const std::pair<float, int>& b) { return b < a; };
+    std::make_heap(order.begin(), order.end(), later);
+    const float* slo[3] = {sub_box_.lo[0].data(), sub_box_.lo[1].data(), sub_box_.lo[2].data()};
+    const float* shi[3] = {sub_box_.hi[0].data(), sub_box_.hi[1].data(), sub_box_.hi[2].data()};
+    const float* tlo[3] = {tile_box_.lo[0].data(), tile_box_.lo[1].data(), tile_box_.lo[2].data()};
+    const float* thi[3] = {tile_box_.hi[0].data(), tile_box_.hi[1].data(), tile_box_.hi[2].data()};
+    for (auto end = order.end(); end != order.begin(); --end) {
+      std::pop_heap(order.begin(), end, later);
+      const auto [bound, node] = end[-1];
+      float now = worst();
+      if (bound > now) break;
+      if (!crowded(node)) {
+        scan_run(V.start[node], V.start[node + 1]);
+        continue;
+      }
+      const int S = sub_.side[node], at = sub_.at[node];
+      const int cx = (node >> 1) % side_, cy = (node >> 1) / side_;
+      const int sx = std::clamp(static_cast<int>(((u + 1.0f) * scale - cx) * S), 0, S - 1);
+      const int sy = std::clamp(static_cast<int>(((v + 1.0f) * scale - cy) * S), 0, S - 1);
+      const int first = sub_.near[at + sy * S + sx];
+      const int* ss = sub_.start.data() + at;
+      scan_run(ss[first], ss[first + 1]);
+      now = worst();
+      // the tiles that can hold a winner, nearest first, then their
+      // sub-cells that still can, 8 per row
+      const int T = (S + 7) / 8;
+      tiles.clear();
+      boxes_within(tlo, thi, sub_.tile_at[node], T * T, qx, qy, qz, &now,
+                   [&](int t, float b) { tiles.emplace_back(b, t); });
+      std::sort(tiles.begin(), tiles.end());
+      for (const auto& [tb, t] : tiles) {
+        if (tb > now) break;
+        const int x0 = (t % T) * 8, y0 = (t / T) * 8;
+        for (int y = y0; y < std::min(S, y0 + 8); ++y)
+          boxes_within(slo, shi, at + y * S + x0, std::min(8, S - x0), qx, qy, qz, &now, [&](int x, float) {
+            const int k = y * S + x0 + x;
+            if (k == first) return;
+            scan_run(ss[k], ss[k + 1]);
+            now = worst();
+          });
       }
     }
-    if (improved) update_reach();
   };
   if (hint >= 0 && hint < n_ && k == 1) {
     // A point known to be near (the previous pixel's match) bounds the search
@@ -816,10 +1023,11 @@ void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_d
   }
   // With a bound from the hint, the query's own cell and then every cell that
   // meets the box of reach around the query (computed once: the reach only
-  // shrinks) is all there is to visit; no rings needed.
-  // With a bound from the hint, the query's own cell and then every cell that
-  // meets the box of reach around the query (computed once: the reach only
   // shrinks) is all there is to visit, when that box is small; else rings.
+  auto done = [&] {
+    if (one && best_d < kInf) ids[0] = best_id, sq_dists[0] = best_d;
+    best.finish();
+  };
   if (reach_u < kInf) {
     scan_cell(ci, cj);
     const int x0 = std::clamp(static_cast<int>(std::floor((u - reach_u + 1.0f) * scale)), 0, side_ - 1);
@@ -830,10 +1038,18 @@ void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_d
       for (int cy = y0; cy <= y1; ++cy)
         for (int cx = x0; cx <= x1; ++cx)
           if (cx != ci || cy != cj) scan_cell(cx, cy);
-      if (one && best_d < kInf) ids[0] = best_id, sq_dists[0] = best_d;
-      best.finish();
+      done();
       return;
     }
+  }
+  // A source of a few dense clusters (under kFewBoxes nodes with points) is
+  // read by their boxes at once; else the rings give way to the boxes once
+  // they have crossed as many cells as there are nodes with points.
+  const long far_cells = static_cast<long>(box_node_.size());
+  if (far_cells <= kFewBoxes) {
+    far(0);
+    done();
+    return;
   }
   for (int r = 0;; ++r) {
     if (r > 0) {
@@ -846,6 +1062,10 @@ void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_d
       if (lo_y > 0 && v - (-1.0f + lo_y * h) <= reach_v) open = true;
       if (hi_y < side_ - 1 && (-1.0f + (hi_y + 1) * h) - v <= reach_v) open = true;
       if (!open) break;
+      if (static_cast<long>(2 * r - 1) * (2 * r - 1) >= far_cells) {
+        far(r);
+        break;
+      }
     }
     const int x0 = ci - r, x1 = ci + r, y0 = cj - r, y1 = cj + r;
     for (int cy = std::max(0, y0); cy <= std::min(side_ - 1, y1); ++cy) {
@@ -857,8 +1077,7 @@ void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_d
       }
     }
   }
-  if (one && best_d < kInf) ids[0] = best_id, sq_dists[0] = best_d;
-  best.finish();
+  done();
 }
 
 std::unique_ptr<NearestIndex> make_index(const std::string& kind) {

@@ -38,9 +38,9 @@ class OctGridIndex final : public NearestIndex {
   const float* points_ = nullptr;
   std::vector<float> xs_, ys_, zs_;  // points sorted by cell (SoA)
   std::vector<int> ids_;
-  std::vector<int> slot_of_;
+  std::vector<int> slot_of_;  // id -> its place in the sorted arrays
   std::vector<int> near_;  // uv cell -> the nearest uv cell with points (itself when it has some)
-  std::vector<float> gain_col_, gain_row_;  // per column / row of cells: the bound's stretch (index_fast.cpp)  // id -> its place in the sorted arrays
+  std::vector<float> gain_col_, gain_row_;  // per column / row of cells: the bound's stretch (index_fast.cpp)
   std::vector<int> start_;  // side^2 uv cells x 2 layers (adjacent), CSR offsets
   // The k = 1 search's copy of the sorted arrays when some crowded run holds
   // equal points (a face of a box: thousands of identical normals), each kept
@@ -72,9 +72,28 @@ class OctGridIndex final : public NearestIndex {
     std::vector<int> start;     // places in the k = 1 arrays
     std::vector<int> near;      // (same offsets as start) sub-cell -> the nearest one with points
     std::vector<char> row_has;  // cell row -> holds a crowded node
+    std::vector<int> tile_at;   // node -> its tiles of 8 x 8 sub-cells in tile_box_ (row by row)
   };
   SubGrids sub_;
   void build_subgrids();
+  // Equal points a crowded run kept once (unique_): id -> the next higher id
+  // of the same point, -1 at the end; empty when none were merged. A list of
+  // k > 1 takes a kept point's equals after it, lowest ids first.
+  std::vector<int> eq_next_;
+  // 3-D bounding boxes, SoA (an empty box spans +inf..-inf), with 8 empty
+  // ones of padding: of every node with points (box_node_ names them), and of
+  // every sub-cell (the offsets of sub_.start) and of every tile of 8 x 8
+  // sub-cells (sub_.tile_at). A search whose rings grow
+  // past the number of such nodes (a query far from a few dense clusters)
+  // reads the boxes nearest first instead of the empty cells between them.
+  struct Boxes {
+    std::vector<float> lo[3], hi[3];
+    void reset(size_t n);
+    void set(size_t at, const View& v, int b, int e);  // box `at`: of points [b, e) of v
+  };
+  Boxes node_box_, sub_box_, tile_box_;
+  std::vector<int> box_node_;
+  void build_boxes();
   std::unique_ptr<NearestIndex> fallback_;
 };
 
