@@ -34,15 +34,15 @@ struct Best {
     for (int j = 0; j < k; ++j) ids[j] = -1, d[j] = kInf;
     if (heap) h.reserve(k);
   }
-  float worst() const {
+  __attribute__((always_inline)) float worst() const {
     if (heap) return static_cast<int>(h.size()) < k ? kInf : h.front().first;
     return filled < k ? kInf : d[k - 1];
   }
-  int worst_id() const {
+  __attribute__((always_inline)) int worst_id() const {
     if (heap) return static_cast<int>(h.size()) < k ? std::numeric_limits<int>::max() : h.front().second;
     return filled < k ? std::numeric_limits<int>::max() : ids[k - 1];
   }
-  void add(float dist, int id) {
+  __attribute__((always_inline)) void add(float dist, int id) {
     if (heap) {
       const std::pair<float, int> e(dist, id);
       if (static_cast<int>(h.size()) < k) {
@@ -594,7 +594,7 @@ __attribute__((always_inline)) static inline void scan_lanes(const float* xs, co
 }
 
 // The lanes' best (distance, id) pair; false when no lane has one.
-static inline bool best_of(const Lanes& l, float& best_d, int& best_slot) {
+__attribute__((always_inline)) static inline bool best_of(const Lanes& l, float& best_d, int& best_slot) {
   // the smallest distance in every lane
   __m256 m = _mm256_min_ps(l.d, _mm256_permute2f128_ps(l.d, l.d, 1));
   m = _mm256_min_ps(m, _mm256_shuffle_ps(m, m, _MM_SHUFFLE(1, 0, 3, 2)));
@@ -617,7 +617,7 @@ static inline bool best_of(const Lanes& l, float& best_d, int& best_slot) {
 }
 
 // The smallest distance over the lanes (infinity when none has a point).
-static inline float lanes_min(const Lanes& l) {
+__attribute__((always_inline)) static inline float lanes_min(const Lanes& l) {
   __m128 m = _mm_min_ps(_mm256_castps256_ps128(l.d), _mm256_extractf128_ps(l.d, 1));
   m = _mm_min_ps(m, _mm_movehl_ps(m, m));
   m = _mm_min_ss(m, _mm_shuffle_ps(m, m, 1));
