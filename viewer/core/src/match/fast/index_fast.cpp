@@ -950,7 +950,7 @@ void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_d
       return;
     }
     for (int node = c; node < c + 2; ++node) {
-      if (crowded(node) && !getenv("NOSUBS")) scan_subs(node, cx, cy);
+      if (crowded(node)) scan_subs(node, cx, cy);
       else scan_run(V.start[node], V.start[node + 1]);
     }
   };
