@@ -83,9 +83,10 @@ class OctGridIndex final : public NearestIndex {
   // 3-D bounding boxes, SoA (an empty box spans +inf..-inf), with 8 empty
   // ones of padding: of every node with points (box_node_ names them), and of
   // every sub-cell (the offsets of sub_.start) and of every tile of 8 x 8
-  // sub-cells (sub_.tile_at). A search whose rings grow
-  // past the number of such nodes (a query far from a few dense clusters)
-  // reads the boxes nearest first instead of the empty cells between them.
+  // sub-cells (sub_.tile_at). A wide search (a query far from a few dense
+  // clusters) reads the boxes nearest first instead of the empty cells
+  // between them: at once when there are few such nodes, else once its rings
+  // have crossed as many cells as there are nodes with points.
   struct Boxes {
     std::vector<float> lo[3], hi[3];
     void reset(size_t n);
