@@ -958,7 +958,8 @@ void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_d
   // faces), the rings cross many empty cells and reach whole clusters. Then
   // the nodes with points outside the square of rings < r are read by their
   // 3-D boxes, nearest first, while a box can still hold a winner; a crowded
-  // one by its sub-cells' boxes, the one nearest the query in uv first.
+  // one from the sub-cell nearest the query in uv, then by the boxes of its
+  // 8 x 8 tiles (nearest first) and of their sub-cells.
   auto far = [&](int r) __attribute__((noinline)) {
     thread_local std::vector<std::pair<float, int>> order, tiles;
     order.clear();
