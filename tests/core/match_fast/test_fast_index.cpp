@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <random>
+#include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -474,6 +475,27 @@ TEST(FastIndex, QueriesFarFromAFewDenseClustersAreExact) {
   }
   veneer::match::fast::OctGridIndex grid;
   expect_all_exact(grid, pts, queries);
+  // The boxes are made by the first search that needs them: two threads
+  // asking at once from a fresh build get the brute force's lists too.
+  const int nq = static_cast<int>(queries.size()) / 3;
+  std::vector<int> want(static_cast<size_t>(nq) * 5), bids;
+  std::vector<float> bd;
+  for (int i = 0; i < nq; ++i) {
+    brute_knn(pts, 3, &queries[static_cast<size_t>(i) * 3], 5, bids, bd);
+    std::copy(bids.begin(), bids.end(), want.begin() + static_cast<std::ptrdiff_t>(i) * 5);
+  }
+  grid.build(pts.data(), n, 3);
+  std::vector<int> got[2];
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 2; ++t)
+    threads.emplace_back([&, t] {
+      got[t].resize(want.size());
+      float d[5];
+      for (int i = 0; i < nq; ++i) grid.knn(&queries[static_cast<size_t>(i) * 3], 5, &got[t][static_cast<size_t>(i) * 5], d);
+    });
+  for (auto& th : threads) th.join();
+  EXPECT_EQ(got[0], want);
+  EXPECT_EQ(got[1], want);
 }
 
 // Many small clusters in one cap of the sphere (more nodes with points than

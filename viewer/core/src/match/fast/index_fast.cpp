@@ -213,8 +213,9 @@ void OctGridIndex::build(const float* points, int n, int dims) {
   k1_ = View{};
   sub_ = SubGrids{};
   eq_next_.clear();
-  node_box_ = sub_box_ = tile_box_ = Boxes{};
-  box_node_.clear();
+  boxes_ = BoxSet{};
+  boxes_made_ = false;
+  occupied_ = 0;
   if (n_ == 0) return;
   // Per point: its distance from unit length and its cell (in parallel).
   std::vector<int> cell(static_cast<size_t>(n_));
@@ -313,6 +314,7 @@ void OctGridIndex::build(const float* points, int n, int dims) {
   queue.reserve(static_cast<size_t>(2 * cells));
   for (int c = 0; c < 2 * cells; ++c)
     if (start_[c] < start_[c + 1]) near_[c] = c, queue.push_back(c);
+  occupied_ = static_cast<int>(queue.size());
   const float h = 2.0f / static_cast<float>(side_);
   auto edge = [&](int i) { return std::max(std::fabs(-1.0f + i * h), std::fabs(-1.0f + (i + 1) * h)); };
   auto inner = [&](int i) { return -1.0f + i * h < 0.0f && -1.0f + (i + 1) * h > 0.0f ? 0.0f : std::min(std::fabs(-1.0f + i * h), std::fabs(-1.0f + (i + 1) * h)); };
@@ -341,7 +343,6 @@ void OctGridIndex::build(const float* points, int n, int dims) {
   else
     k1_ = View{xs_.data(), ys_.data(), zs_.data(), ids_.data(), start_.data(), slot_of_.data(), n_};
   build_subgrids();
-  build_boxes();
 }
 
 // Equal points in one run cost a k = 1 scan without changing its answer: of
@@ -428,44 +429,47 @@ void OctGridIndex::Boxes::set(size_t at, const View& v, int b, int e) {
   lo[0][at] = lx, lo[1][at] = ly, lo[2][at] = lz, hi[0][at] = hx, hi[1][at] = hy, hi[2][at] = hz;
 }
 
-// The 3-D boxes of the nodes with points and of the sub-cells, from the
-// k = 1 arrays (the same points as the full ones, equals aside).
-void OctGridIndex::build_boxes() {
+// The 3-D boxes of the nodes with points, of the sub-cells and of their
+// tiles, from the k = 1 arrays (the same points as the full ones, equals
+// aside), on the thread that first needs them: a search can run inside a
+// parallel loop, and a nested one under the lock could wait on itself.
+const OctGridIndex::BoxSet& OctGridIndex::boxes() const {
+  if (boxes_made_.load(std::memory_order_acquire)) return boxes_;
+  std::lock_guard<std::mutex> lock(boxes_mutex_);
+  if (boxes_made_.load(std::memory_order_relaxed)) return boxes_;
+  BoxSet& bs = boxes_;
   const int nodes = 2 * side_ * side_;
   for (int node = 0; node < nodes; ++node)
-    if (k1_.start[node] < k1_.start[node + 1]) box_node_.push_back(node);
-  const int m = static_cast<int>(box_node_.size());
-  node_box_.reset(static_cast<size_t>(m));
-  parallel_rows(m, 0, 1024, [&](int jb, int je) {
-    for (int j = jb; j < je; ++j) node_box_.set(static_cast<size_t>(j), k1_, k1_.start[box_node_[j]], k1_.start[box_node_[j] + 1]);
-  });
-  if (sub_.at.empty()) return;
-  sub_box_.reset(sub_.start.size());
-  // and of every tile of 8 x 8 sub-cells (the last row and column of tiles
-  // cut at S), row by row
-  sub_.tile_at.assign(static_cast<size_t>(nodes), -1);
-  int tiles = 0;
-  for (int node = 0; node < nodes; ++node)
-    if (sub_.at[node] >= 0) {
-      const int t = (sub_.side[node] + 7) / 8;
-      sub_.tile_at[node] = tiles;
-      tiles += t * t;
-    }
-  tile_box_.reset(static_cast<size_t>(tiles));
-  parallel_rows(nodes, 0, 4096, [&](int nb, int ne) {
-    for (int node = nb; node < ne; ++node) {
+    if (k1_.start[node] < k1_.start[node + 1]) bs.node_of.push_back(node);
+  bs.node.reset(bs.node_of.size());
+  for (size_t j = 0; j < bs.node_of.size(); ++j) bs.node.set(j, k1_, k1_.start[bs.node_of[j]], k1_.start[bs.node_of[j] + 1]);
+  if (!sub_.at.empty()) {
+    bs.sub.reset(sub_.start.size());
+    // tiles: the last row and column of each node's tiles cut at S
+    bs.tile_at.assign(static_cast<size_t>(nodes), -1);
+    int tiles = 0;
+    for (int node = 0; node < nodes; ++node)
+      if (sub_.at[node] >= 0) {
+        const int t = (sub_.side[node] + 7) / 8;
+        bs.tile_at[node] = tiles;
+        tiles += t * t;
+      }
+    bs.tile.reset(static_cast<size_t>(tiles));
+    for (int node = 0; node < nodes; ++node) {
       if (sub_.at[node] < 0) continue;
       const int at = sub_.at[node], S = sub_.side[node], T = (S + 7) / 8;
-      for (int k = 0; k < S * S; ++k) sub_box_.set(static_cast<size_t>(at + k), k1_, sub_.start[at + k], sub_.start[at + k + 1]);
       for (int k = 0; k < S * S; ++k) {
-        const size_t tile = static_cast<size_t>(sub_.tile_at[node] + (k / S / 8) * T + (k % S) / 8);
+        bs.sub.set(static_cast<size_t>(at + k), k1_, sub_.start[at + k], sub_.start[at + k + 1]);
+        const size_t tile = static_cast<size_t>(bs.tile_at[node] + (k / S / 8) * T + (k % S) / 8);
         for (int a = 0; a < 3; ++a) {
-          tile_box_.lo[a][tile] = std::min(tile_box_.lo[a][tile], sub_box_.lo[a][at + k]);
-          tile_box_.hi[a][tile] = std::max(tile_box_.hi[a][tile], sub_box_.hi[a][at + k]);
+          bs.tile.lo[a][tile] = std::min(bs.tile.lo[a][tile], bs.sub.lo[a][at + k]);
+          bs.tile.hi[a][tile] = std::max(bs.tile.hi[a][tile], bs.sub.hi[a][at + k]);
         }
       }
     }
-  });
+  }
+  boxes_made_.store(true, std::memory_order_release);
+  return boxes_;
 }
 
 // A crowded run of the k = 1 arrays (over 256 points: thousands where the
@@ -963,20 +967,22 @@ void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_d
   auto far = [&](int r) __attribute__((noinline)) {
     thread_local std::vector<std::pair<float, int>> order, tiles;
     order.clear();
-    const float* lo[3] = {node_box_.lo[0].data(), node_box_.lo[1].data(), node_box_.lo[2].data()};
-    const float* hi[3] = {node_box_.hi[0].data(), node_box_.hi[1].data(), node_box_.hi[2].data()};
+    const BoxSet& bs = boxes();
+    auto lo_hi = [](const Boxes& b, const float* lo[3], const float* hi[3]) {
+      for (int a = 0; a < 3; ++a) lo[a] = b.lo[a].data(), hi[a] = b.hi[a].data();
+    };
+    const float *lo[3], *hi[3], *slo[3], *shi[3], *tlo[3], *thi[3];
+    lo_hi(bs.node, lo, hi);
+    lo_hi(bs.sub, slo, shi);
+    lo_hi(bs.tile, tlo, thi);
     const float limit = worst();
-    boxes_within(lo, hi, 0, static_cast<int>(box_node_.size()), qx, qy, qz, &limit, [&](int j, float bound) {
-      const int node = box_node_[j], cx = (node >> 1) % side_, cy = (node >> 1) / side_;
+    boxes_within(lo, hi, 0, static_cast<int>(bs.node_of.size()), qx, qy, qz, &limit, [&](int j, float bound) {
+      const int node = bs.node_of[j], cx = (node >> 1) % side_, cy = (node >> 1) / side_;
       if (std::abs(cx - ci) >= r || std::abs(cy - cj) >= r) order.emplace_back(bound, node);
     });
     // nearest first, popped from a heap: the search usually ends after a few
     auto later = [](const std::pair<float, int>& a, const std::pair<float, int>& b) { return b < a; };
     std::make_heap(order.begin(), order.end(), later);
-    const float* slo[3] = {sub_box_.lo[0].data(), sub_box_.lo[1].data(), sub_box_.lo[2].data()};
-    const float* shi[3] = {sub_box_.hi[0].data(), sub_box_.hi[1].data(), sub_box_.hi[2].data()};
-    const float* tlo[3] = {tile_box_.lo[0].data(), tile_box_.lo[1].data(), tile_box_.lo[2].data()};
-    const float* thi[3] = {tile_box_.hi[0].data(), tile_box_.hi[1].data(), tile_box_.hi[2].data()};
     for (auto end = order.end(); end != order.begin(); --end) {
       std::pop_heap(order.begin(), end, later);
       const auto [bound, node] = end[-1];
@@ -998,7 +1004,7 @@ void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_d
       // sub-cells that still can, 8 per row
       const int T = (S + 7) / 8;
       tiles.clear();
-      boxes_within(tlo, thi, sub_.tile_at[node], T * T, qx, qy, qz, &now,
+      boxes_within(tlo, thi, bs.tile_at[node], T * T, qx, qy, qz, &now,
                    [&](int t, float b) { tiles.emplace_back(b, t); });
       std::sort(tiles.begin(), tiles.end());
       for (const auto& [tb, t] : tiles) {
@@ -1046,7 +1052,7 @@ void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_d
   // A source of a few dense clusters (under kFewBoxes nodes with points) is
   // read by their boxes at once; else the rings give way to the boxes once
   // they have crossed as many cells as there are nodes with points.
-  const long far_cells = static_cast<long>(box_node_.size());
+  const long far_cells = occupied_;
   if (far_cells <= kFewBoxes) {
     far(0);
     done();

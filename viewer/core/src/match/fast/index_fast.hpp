@@ -1,6 +1,8 @@
 #pragma once
 // Internal: the fast engine's indices (see fast.hpp).
+#include <atomic>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -72,7 +74,6 @@ class OctGridIndex final : public NearestIndex {
     std::vector<int> start;     // places in the k = 1 arrays
     std::vector<int> near;      // (same offsets as start) sub-cell -> the nearest one with points
     std::vector<char> row_has;  // cell row -> holds a crowded node
-    std::vector<int> tile_at;   // node -> its tiles of 8 x 8 sub-cells in tile_box_ (row by row)
   };
   SubGrids sub_;
   void build_subgrids();
@@ -81,20 +82,28 @@ class OctGridIndex final : public NearestIndex {
   // k > 1 takes a kept point's equals after it, lowest ids first.
   std::vector<int> eq_next_;
   // 3-D bounding boxes, SoA (an empty box spans +inf..-inf), with 8 empty
-  // ones of padding: of every node with points (box_node_ names them), and of
-  // every sub-cell (the offsets of sub_.start) and of every tile of 8 x 8
-  // sub-cells (sub_.tile_at). A wide search (a query far from a few dense
-  // clusters) reads the boxes nearest first instead of the empty cells
-  // between them: at once when there are few such nodes, else once its rings
-  // have crossed as many cells as there are nodes with points.
+  // ones of padding: of every node with points, of every sub-cell (the
+  // offsets of sub_.start) and of every tile of 8 x 8 sub-cells. A wide
+  // search (a query far from a few dense clusters) reads the boxes nearest
+  // first instead of the empty cells between them: at once when few nodes
+  // have points, else once its rings have crossed as many cells as there are
+  // such nodes. Made at the first search that needs them (most sources never
+  // do), once per build.
   struct Boxes {
     std::vector<float> lo[3], hi[3];
     void reset(size_t n);
     void set(size_t at, const View& v, int b, int e);  // box `at`: of points [b, e) of v
   };
-  Boxes node_box_, sub_box_, tile_box_;
-  std::vector<int> box_node_;
-  void build_boxes();
+  struct BoxSet {
+    Boxes node, sub, tile;
+    std::vector<int> node_of;  // node box -> its node
+    std::vector<int> tile_at;  // node -> its first tile box (row by row); -1: not crowded
+  };
+  int occupied_ = 0;  // nodes with points
+  mutable BoxSet boxes_;
+  mutable std::atomic<bool> boxes_made_{false};
+  mutable std::mutex boxes_mutex_;
+  const BoxSet& boxes() const;
   std::unique_ptr<NearestIndex> fallback_;
 };
 
