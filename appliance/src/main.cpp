@@ -13,6 +13,7 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include "veneer/util/cpu_check.hpp"
 #include "veneer/util/log.hpp"
 #include "veneerd/daemon.hpp"
 #include "veneerd/hw/hue_setup.hpp"

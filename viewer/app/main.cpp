@@ -3,6 +3,7 @@
 #include <QCommandLineParser>
 
 #include "main_window.hpp"
+#include "veneer/util/cpu_check.hpp"
 
 int main(int argc, char** argv) {
   QApplication app(argc, argv);

@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include "command.hpp"
+#include "veneer/util/cpu_check.hpp"
 #include "veneer/util/log.hpp"
 
 namespace veneer::cli {

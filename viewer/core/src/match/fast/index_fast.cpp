@@ -12,8 +12,16 @@
 #include <utility>
 #include <vector>
 
-#include <immintrin.h>
 #include <nanoflann.hpp>
+
+// The scans below run 8 points (or boxes) at a time with AVX2 and FMA, and
+// one at a time elsewhere (an ARM board, a build for older x86-64, a debug
+// build without -mavx2; VENEER_PORTABLE forces it, for the tests). Both give
+// the same answers: the distances are sq3's, the ties go to the lower id.
+#if defined(__AVX2__) && defined(__FMA__) && !defined(VENEER_PORTABLE)
+#define VENEER_INDEX_AVX2 1
+#include <immintrin.h>
+#endif
 
 namespace veneer::match::fast {
 
@@ -132,32 +140,28 @@ class KdTreeIndex final : public NearestIndex {
   std::string name() const override { return "kdtree"; }
 
  private:
+  // The result set nanoflann fills: the k best by (distance, id), ties to the
+  // lower id as the brute force, whatever order the tree visits them in.
+  // nanoflann offers a point only when it is strictly nearer than
+  // worstDist(), and reads a subtree while its bound is at most that, so
+  // worstDist() is one float past the k-th best: a point tying with it is
+  // still offered (asking for a few more and re-sorting missed the lowest id
+  // among many equal distances). Points at or past the radius never are.
+  struct TieSet {
+    Best& best;
+    float radius_sq;
+    float worstDist() const { return std::min(radius_sq, std::nextafter(best.worst(), kInf)); }
+    bool addPoint(float dist, uint32_t id) {
+      best.add(dist, static_cast<int>(id));
+      return true;
+    }
+    bool full() const { return best.worst() < kInf; }
+  };
   void search(const float* query, int k, float radius_sq, int* ids, float* sq_dists) const {
     Best best(k, ids, sq_dists);
     if (!tree_ || k <= 0) return;
-    // nanoflann breaks ties by visiting order; ask for a few more and re-sort
-    // by (distance, id) so ties go to the lower id like the brute force.
-    const int want = static_cast<int>(std::min<size_t>(cloud_.n, static_cast<size_t>(k) + 4));
-    uint32_t idx[512];
-    float dist[512];
-    std::vector<uint32_t> idx_big;
-    std::vector<float> dist_big;
-    uint32_t* pi = idx;
-    float* pd = dist;
-    if (want > 512) {
-      idx_big.resize(want);
-      dist_big.resize(want);
-      pi = idx_big.data();
-      pd = dist_big.data();
-    }
-    nanoflann::KNNResultSet<float, uint32_t> rs(static_cast<size_t>(want));
-    rs.init(pi, pd);
-    // the set's worst distance is its last slot's until it fills: the radius
-    // (points at or past it are never taken, as past a full set's worst)
-    pd[want - 1] = radius_sq;
-    tree_->findNeighbors(rs, query, nanoflann::SearchParams(32, 0.0f, false));
-    const int got = static_cast<int>(rs.size());
-    for (int j = 0; j < got; ++j) best.add(pd[j], static_cast<int>(pi[j]));
+    TieSet set{best, radius_sq};
+    tree_->findNeighbors(set, query, nanoflann::SearchParams(32, 0.0f, false));
     best.finish();
   }
   Cloud cloud_;
@@ -569,13 +573,20 @@ constexpr int kRunCells = 49;
 // reduces the lanes at the end (best_of). The arrays are padded past n with
 // far points, so the last group reads valid memory and never wins. Distances
 // are the same fused sums as sq3's, bit for bit.
+#ifdef VENEER_INDEX_AVX2
+struct Query {  // the query in every lane
+  __m256 x, y, z;
+  Query(float qx, float qy, float qz) : x(_mm256_set1_ps(qx)), y(_mm256_set1_ps(qy)), z(_mm256_set1_ps(qz)) {}
+};
+
 struct Lanes {
-  __m256 d;
-  __m256i id, slot;
+  __m256 d = _mm256_set1_ps(kInf);
+  __m256i id = _mm256_set1_epi32(std::numeric_limits<int>::max()), slot = _mm256_set1_epi32(-1);
 };
 
 __attribute__((always_inline)) static inline void scan_lanes(const float* xs, const float* ys, const float* zs, const int* ids, int b, int e,
-                              __m256 vx, __m256 vy, __m256 vz, Lanes& l) {
+                              const Query& q, Lanes& l) {
+  const __m256 vx = q.x, vy = q.y, vz = q.z;
   const __m256i step = _mm256_set1_epi32(8);
   __m256i slot = _mm256_add_epi32(_mm256_set1_epi32(b), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
   const __m256i end = _mm256_set1_epi32(e);
@@ -628,6 +639,35 @@ __attribute__((always_inline)) static inline float lanes_min(const Lanes& l) {
   return _mm_cvtss_f32(m);
 }
 
+#else
+struct Query {
+  float x, y, z;
+  Query(float qx, float qy, float qz) : x(qx), y(qy), z(qz) {}
+};
+
+struct Lanes {  // one lane
+  float d = kInf;
+  int id = std::numeric_limits<int>::max(), slot = -1;
+};
+
+__attribute__((always_inline)) static inline void scan_lanes(const float* xs, const float* ys, const float* zs, const int* ids, int b, int e,
+                              const Query& q, Lanes& l) {
+  for (int i = b; i < e; ++i) {
+    const float d = sq3(xs[i], ys[i], zs[i], q.x, q.y, q.z);
+    if (d < l.d || (d == l.d && ids[i] < l.id)) l.d = d, l.id = ids[i], l.slot = i;
+  }
+}
+
+__attribute__((always_inline)) static inline bool best_of(const Lanes& l, float& best_d, int& best_slot) {
+  if (!(l.d < kInf)) return false;
+  best_d = l.d;
+  best_slot = l.slot;
+  return true;
+}
+
+__attribute__((always_inline)) static inline float lanes_min(const Lanes& l) { return l.d; }
+#endif
+
 // Boxes [b, b + n) against q, 8 at a time: per box, a lower bound of the
 // squared distance from q to any point in it (+inf for an empty box), through
 // `take(j, bound)` for each box j (counted from b) whose bound is at most
@@ -635,6 +675,7 @@ __attribute__((always_inline)) static inline float lanes_min(const Lanes& l) {
 // and the box, summed as sq3 sums a point's differences: every term is at
 // most the point's (rounding keeps the order), so the bound never exceeds the
 // distance sq3 computes for any point in the box.
+#ifdef VENEER_INDEX_AVX2
 template <class Take>
 static inline void boxes_within(const float* const lo[3], const float* const hi[3], int b, int n, float qx, float qy,
                                 float qz, const float* limit, Take&& take) {
@@ -658,6 +699,19 @@ static inline void boxes_within(const float* const lo[3], const float* const hi[
     }
   }
 }
+#else
+template <class Take>
+static inline void boxes_within(const float* const lo[3], const float* const hi[3], int b, int n, float qx, float qy,
+                                float qz, const float* limit, Take&& take) {
+  const float q[3] = {qx, qy, qz};
+  for (int j = 0; j < n; ++j) {
+    float t[3];
+    for (int a = 0; a < 3; ++a) t[a] = std::max(std::max(lo[a][b + j] - q[a], q[a] - hi[a][b + j]), 0.0f);
+    const float bound = sq3(t[0], t[1], t[2], 0.0f, 0.0f, 0.0f);  // (t - 0 is t exactly)
+    if (bound <= *limit) take(j, bound);
+  }
+}
+#endif
 
 // k = 1 for a query of near-unit length (the engine's normals): the hint (a
 // point likely near, e.g. the previous pixel's match) and the query's own
@@ -677,15 +731,15 @@ bool OctGridIndex::nearest1(const float* query, int& slot, int& id, float& sq, b
   const float scale = 0.5f * static_cast<float>(side_);
   const int ci = std::clamp(static_cast<int>((u + 1.0f) * scale), 0, side_ - 1);
   const int cj = std::clamp(static_cast<int>((v + 1.0f) * scale), 0, side_ - 1);
-  const __m256 vx = _mm256_set1_ps(qx), vy = _mm256_set1_ps(qy), vz = _mm256_set1_ps(qz);
-  Lanes lanes{_mm256_set1_ps(kInf), _mm256_set1_epi32(std::numeric_limits<int>::max()), _mm256_set1_epi32(-1)};
+  const Query vq(qx, qy, qz);
+  Lanes lanes;
   const float* xs = k1_.xs;
   const float* ys = k1_.ys;
   const float* zs = k1_.zs;
   const int* ids = k1_.ids;
   const int* start = k1_.start;
   // (forced inline: with the file grown, GCC stopped inlining it, +10 % on k = 1)
-  auto scan = [&](int b, int e) __attribute__((always_inline)) { scan_lanes(xs, ys, zs, ids, b, e, vx, vy, vz, lanes); };
+  auto scan = [&](int b, int e) __attribute__((always_inline)) { scan_lanes(xs, ys, zs, ids, b, e, vq, lanes); };
   if (slot >= 0 && slot < k1_.n) scan(slot, slot + 1);  // a bound from the start
   const int own = 2 * (cj * side_ + ci);
   // A point that could still beat distance d is within r = sqrt(d) of q,
