@@ -15,10 +15,10 @@
 #include <nanoflann.hpp>
 
 // The scans below run 8 points (or boxes) at a time with AVX2 and FMA, and
-// one at a time elsewhere (an ARM board, a build for older x86-64, a debug
-// build without -mavx2; VENEER_PORTABLE forces it, for the tests). Both give
+// one at a time elsewhere (an ARM board; -DVENEER_AVX2=OFF, for any x86-64;
+// test_core_match_fast_portable builds it on every run). Both give
 // the same answers: the distances are sq3's, the ties go to the lower id.
-#if defined(__AVX2__) && defined(__FMA__) && !defined(VENEER_PORTABLE)
+#if defined(__AVX2__) && defined(__FMA__)
 #define VENEER_INDEX_AVX2 1
 #include <immintrin.h>
 #endif
