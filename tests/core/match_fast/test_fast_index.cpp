@@ -10,6 +10,7 @@
 #include <gtest/gtest.h>
 
 #include "index_fast.hpp"
+#include "nearest.hpp"
 #include "veneer/match/fast.hpp"
 
 namespace {
@@ -533,4 +534,57 @@ TEST(FastIndex, RingsGiveWayToBoxesWithTheSameAnswers) {
   for (int i = 0; i < 600; ++i) push_unit(queries, g(rng), g(rng), -0.5f * std::fabs(g(rng)));
   veneer::match::fast::OctGridIndex grid(96);
   expect_all_exact(grid, pts, queries);
+}
+
+// nearest_rows answers the rows asked, and only those: exact mode equals the
+// brute force on every row of a scattered subset (coherent asks its seeds and
+// the pixels no chunk took); rows not asked are left as they were; the
+// answers are the same on one thread and on several.
+TEST(FastIndex, NearestOfChosenRowsOnly) {
+  std::mt19937 rng(41);
+  const auto src = unit_normals(5000, rng, true, 300);
+  veneer::match::fast::Object dst;
+  dst.channels = 3;
+  dst.flat = unit_normals(3000, rng, true, 0);
+  veneer::match::fast::OctGridIndex grid;
+  grid.build(src.data(), static_cast<int>(src.size()) / 3, 3);
+  std::vector<int> rows;
+  for (int d = 0; d < 3000; ++d)
+    if (rng() % 3 == 0) rows.push_back(d);
+  const veneer::Progress quiet;
+  for (const bool exact : {true, false}) {
+    std::vector<int> one(3000, -7), many(3000, -7);
+    std::vector<float> sq(3000, -1.0f);
+    ASSERT_TRUE(veneer::match::fast::nearest_rows(grid, dst, rows.data(), static_cast<int>(rows.size()), 1, quiet,
+                                                  one.data(), sq.data(), exact));
+    ASSERT_TRUE(veneer::match::fast::nearest_rows(grid, dst, rows.data(), static_cast<int>(rows.size()), 0, quiet,
+                                                  many.data(), nullptr, exact));
+    EXPECT_EQ(one, many) << "exact " << exact;
+    std::vector<int> bids;
+    std::vector<float> bd;
+    size_t next = 0, asked = 0, same = 0;
+    for (int d = 0; d < 3000; ++d) {
+      const bool wanted = next < rows.size() && rows[next] == d;
+      if (!wanted) {
+        EXPECT_EQ(one[d], -7) << "row " << d << " was not asked";
+        EXPECT_EQ(sq[d], -1.0f) << "row " << d << " was not asked";
+        continue;
+      }
+      ++next, ++asked;
+      brute_knn(src, 3, &dst.flat[static_cast<size_t>(d) * 3], 1, bids, bd);
+      if (exact) {
+        EXPECT_EQ(one[d], bids[0]) << "row " << d;
+        EXPECT_EQ(sq[d], bd[0]) << "row " << d;
+      } else {
+        EXPECT_GE(sq[d], bd[0]) << "row " << d;  // the lookup is never nearer than the nearest
+      }
+      same += one[d] == bids[0];
+    }
+    EXPECT_EQ(asked, rows.size());
+    if (exact) {
+      EXPECT_EQ(same, asked);
+    } else {
+      EXPECT_GT(same, asked * 7 / 10);  // as on a walk (GridScanBySlotExactAndLookup)
+    }
+  }
 }

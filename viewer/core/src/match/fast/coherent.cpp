@@ -1,10 +1,10 @@
 // Method `coherent`: normal-guided transfer in coherent chunks, after
 // StyleBlit (Sýkora et al., Eurographics 2019).
 //
-// Every destination pixel first gets its nearest source pixel by the chosen
-// feature (the fast search, see the call; for normals the patch size is not used).
-// Then, for jittered seed grids of spacing 2^L ... 4, 2 (coarse to fine), the
-// pixels not yet assigned are split into chunks -- those sharing a nearest
+// The seeds below, and the pixels no chunk takes, start from their nearest
+// source pixel by the chosen feature (the fast search, see the call; for
+// normals the patch size is not used). For jittered seed grids of spacing
+// 2^L ... 4, 2 (coarse to fine), the pixels not yet assigned are split into chunks -- those sharing a nearest
 // seed s (among the 3x3 cells around their own) -- and each pixel p of a
 // chunk proposes the source pixel m(s) + (p - s): the seed's match shifted by
 // p's offset from the seed, i.e. the whole chunk of source copied rigidly. A
@@ -44,6 +44,7 @@
 #endif
 
 #include "engine.hpp"
+#include "index_fast.hpp"
 #include "nearest.hpp"
 
 namespace veneer::match::fast {
@@ -53,9 +54,8 @@ namespace {
 // Refinement (o.coherent_smooth = w > 0). The chunks leave a seam every few
 // pixels where the source's and the destination's curvatures differ, and the
 // pixels no chunk took keep their (speckled) nearest. Each pixel then takes,
-// among its current match, its nearest and every continuation of a
-// 4-neighbour's match (shifted by their offset, and by one pixel more each
-// way, so a chunk may stretch or shrink with the curvatures), the one that
+// among its current match and every continuation of a 4-neighbour's match
+// (shifted by their offset, and by one pixel more each way, so a chunk may stretch or shrink with the curvatures), the one that
 // minimises
 //     error + w * threshold * (4-neighbours it breaks with),
 // "broken" meaning matched more than 1.5 px apart, as match::evaluate counts
@@ -67,30 +67,28 @@ namespace {
 // bounds them (4: the fourth still changes ~5 % of a 178k px map, but 8 or 16
 // rounds gave the same coherence and error to 0.2 points, bench_coherent;
 // 3 rounds save 2 of 40 ms at 150k px for 0.2-0.4 points less coherence).
-// The pixel's nearest is offered in the first round only (later offers of
-// it changed nothing measurable).
 // Against the chunks alone, at w = 2 (bull <- orange, truth normals,
 // 512x340): coherence 54.7 -> 74.4 %, normal error 2.91 -> 2.68 deg.
-// With uniformity the pixel's nearest is not offered (it ignores the reuse
-// penalty); continuations keep the spread the seeds chose.
+// The pixel's own nearest is not offered: offered in the first round it
+// changed coherence and mean error by at most 0.1 point and 0.02 deg
+// (bench_coherent, all pairs and frames), and without it the nearest is only
+// needed at the seeds and the pixels no chunk took (see run_coherent).
 #ifdef __AVX2__
 // The cheapest of a pixel's proposals (refine(), three channels: normals),
-// costed 8 at once, with no branch on the costs: its current match, its
-// nearest (when not the current), then per 4-neighbour (left, right, up,
-// down) whose continuation no earlier one gave, its match continued to the
-// pixel and moved one pixel +x, -x, +y, -y; the current match fills the last
-// vector. Cost = |a - source| + lam * (present
+// costed 8 at once, with no branch on the costs: its current match, then per
+// 4-neighbour (left, right, up, down) whose continuation no earlier one gave,
+// its match continued to the pixel and moved one pixel +x, -x, +y, -y; the
+// current match fills the last vector. Cost = |a - source| + lam * (present
 // neighbours matched more than 1.5 px from the proposal); outside the source
 // box +inf. Ties go to the lowest slot, so the order is the scalar path's
 // and the current match stays unless a proposal is strictly cheaper.
 // `dense`: the source over its box, 4 floats a pixel, off the object far away.
 cv::Point cheapest3(const float* a, const float* dense, cv::Size box, const cv::Point* pos,
-                    const std::array<int, 4>& nbr, cv::Point current, cv::Point nearest, float lam) {
+                    const std::array<int, 4>& nbr, cv::Point current, float lam) {
   alignas(32) int px[24], py[24];
   int count = 0;
   auto push = [&](int x, int y) { px[count] = x, py[count] = y, ++count; };
   push(current.x, current.y);
-  if (nearest != current) push(nearest.x, nearest.y);
   static constexpr int n4x[4] = {-1, 1, 0, 0}, n4y[4] = {0, 0, -1, 1};
   int nmx[4], nmy[4], bx[4], by[4], nb = 0;
   for (int j = 0; j < 4; ++j) {
@@ -216,22 +214,20 @@ DenseSource dense_source(const Object& src, int threads) {
 }
 
 template <int C>  // the channel count, or 0: any
-Status refine(const Object& dst, const Object& src, const DenseSource& dense, const int* nearest, int k,
-              const MatchOptions& o, const Progress& p, std::vector<int>& chosen) {  // chosen: packed positions
+Status refine(const Object& dst, const Object& src, const DenseSource& dense, const MatchOptions& o, const Progress& p,
+              std::vector<int>& chosen) {  // chosen: packed positions
   const int n = dst.rows(), cc = C > 0 ? C : dst.channels;
   const float lam = static_cast<float>(o.coherent_smooth * o.coherent_threshold);
-  const bool offer_nearest = o.uniformity <= 0;
   const cv::Point n4[4] = {{-1, 0}, {1, 0}, {0, -1}, {0, 1}};
   // every match as a position in the dense source: a proposal costs one read
   const cv::Rect sb = src.bbox;
-  std::vector<cv::Point> pos(n), near(offer_nearest ? n : 0);
+  std::vector<cv::Point> pos(n);
   std::vector<std::array<int, 4>> nbr(n);  // 4-neighbour rows (-1 off the object)
   parallel_rows(n, o.threads, 4096, [&](int b, int e) {
     for (int d = b; d < e; ++d) {
       const cv::Point pt = dst.pixels[d];
       for (int j = 0; j < 4; ++j) nbr[d][j] = dst.row_at(pt.x + n4[j].x, pt.y + n4[j].y);
       pos[d] = DenseSource::unpack(chosen[d]);
-      if (offer_nearest) near[d] = dense.local(src.pixels[nearest[static_cast<size_t>(d) * k]]);
     }
   });
   // to visit: all at first; then the pixels next to a change, all of the
@@ -264,7 +260,7 @@ Status refine(const Object& dst, const Object& src, const DenseSource& dense, co
 #ifdef __AVX2__
           if constexpr (C == 3) {
             best_q = cheapest3(dst.flat.data() + static_cast<size_t>(d) * 3, dense.v.data(), sb.size(), pos.data(),
-                               nbr[d], best_q, offer_nearest && round == 0 ? near[d] : best_q, lam);
+                               nbr[d], best_q, lam);
           } else
 #endif
           {
@@ -294,7 +290,6 @@ Status refine(const Object& dst, const Object& src, const DenseSource& dense, co
             if (t < best) best = t, best_q = q;
           };
           offer(best_q);  // the current match first: only a strictly lower cost replaces it
-          if (offer_nearest && round == 0) offer(near[d]);
           cv::Point bases[4];
           int nb = 0;
           for (int j = 0; j < 4; ++j) {
@@ -340,13 +335,39 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
   // 2 points of coherence at equal normal error for 3-6x the time (bench_coherent).
   const int k = u > 0 ? std::min(16, src.rows()) : 1;
   const double cap = 2.0;  // no pixel of an accepted chunk errs more than cap x threshold
-  NearestLists nn;
+  const int n = dst.rows(), c = dst.channels;
   // Normals: the lookup (rarely misses a nearer row across a cell edge, see
   // default_index()). Intensities: the exact nearest whatever the index
   // (nearest.cpp; an approximate one cost coherent 0.09 dB of relighting
   // PSNR on bull <- sphere-red-gloss, 17.85 against 17.94, bench_quality).
-  if (auto s = nearest_lists(dst, src, k, default_index(), o.threads, p, nn, stats); !s) return s.error();
-  const int n = dst.rows(), c = dst.channels;
+  // Without uniformity only the seeds and the pixels no chunk took need
+  // their nearest (`near`, by destination row; -1 not asked yet). Normals
+  // then ask the lookup for those rows only, when they come to need it:
+  // 37 % of the rows at 150k px (bull <- orange), 1.6 ms less of ~40 (the
+  // seeds' queries, being sparse, cost twice as much each, bench_match).
+  const bool on_demand = u <= 0 && c == 3 && dst.patch == 1;
+  NearestLists nn;
+  OctGridIndex grid;
+  std::vector<int> near;
+  if (on_demand) {
+    grid.build(src.flat.data(), src.rows(), 3);
+    near.assign(n, -1);
+    if (stats)
+      stats->index = "lookup", stats->projected_dims = 0, stats->certified = 0, stats->explained_variance = 1;
+  } else {
+    if (auto s = nearest_lists(dst, src, k, default_index(), o.threads, p, nn, stats); !s) return s.error();
+    if (u <= 0) near = std::move(nn.ids);  // k = 1
+  }
+  // asks for the rows in `rows` whose nearest is not known yet
+  std::vector<int> asked;
+  auto ask = [&](const std::vector<int>& rows) -> Status {
+    if (!on_demand) return {};
+    asked.clear();
+    for (const int d : rows)
+      if (near[d] < 0) asked.push_back(d);
+    return nearest_rows(grid, dst, asked.data(), static_cast<int>(asked.size()), o.threads, p, near.data(), nullptr,
+                        false);
+  };
   const float thr2 = static_cast<float>(o.coherent_threshold * o.coherent_threshold);
   const cv::Rect sb = src.bbox;
   if (sb.width > 65536 || sb.height > 32768)  // DenseSource::pack: x in 16 bits, y in 15
@@ -389,7 +410,7 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
     const int gx = box.width / s + 1, gy = box.height / s + 1;
     // Seeds: one jittered point per cell; its destination row and source match.
     std::vector<cv::Point> seed_at(static_cast<size_t>(gx) * gy);
-    std::vector<int> seed_match(seed_at.size(), -1);
+    std::vector<int> seed_match(seed_at.size(), -1), seed_row(u <= 0 ? seed_at.size() : 0, -1);
     // seed rows [jb, je); in parallel unless the reuse counts chain them
     auto make_seeds = [&](int jb, int je) {
     for (int j = jb; j < je; ++j)
@@ -402,7 +423,7 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
         const int row = dst.row_at(at.x, at.y);
         if (row < 0) continue;
         if (u <= 0) {
-          seed_match[cell] = nn.ids[static_cast<size_t>(row) * k];
+          seed_row[cell] = row;  // its match once its nearest is known
           continue;
         }
         float best = std::numeric_limits<float>::infinity();
@@ -421,10 +442,18 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
             ++uses[static_cast<size_t>(y) * src.size.width + x];
       }
     };
-    if (u <= 0)
+    if (u <= 0) {
       parallel_rows(gy, o.threads, 4, make_seeds);
-    else
+      std::vector<int> rows;
+      rows.reserve(seed_row.size());
+      for (const int r : seed_row)
+        if (r >= 0) rows.push_back(r);
+      if (auto st = ask(rows); !st) return st.error();
+      for (size_t cell = 0; cell < seed_row.size(); ++cell)
+        if (seed_row[cell] >= 0) seed_match[cell] = near[seed_row[cell]];
+    } else {
       make_seeds(0, gy);
+    }
     {
       // Chunks: the unassigned pixels sharing a nearest seed. Each seed's
       // source position is the one of its nearest normals (kc of them) that
@@ -621,10 +650,16 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
   }
   // Pixels no chunk took keep their nearest; with uniformity, the nearest of
   // their 16 by distance + reuse penalty (live counts, scan order).
+  if (u <= 0) {
+    std::vector<int> rows;
+    for (int d = 0; d < n; ++d)
+      if (chosen[d] < 0) rows.push_back(d);
+    if (auto st = ask(rows); !st) return st.error();
+  }
   for (int d = 0; d < n; ++d) {
     if (chosen[d] >= 0) continue;
     if (u <= 0) {
-      chosen[d] = packed_row(nn.ids[static_cast<size_t>(d) * k]);
+      chosen[d] = packed_row(near[d]);
       continue;
     }
     float best = std::numeric_limits<float>::infinity();
@@ -645,8 +680,7 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
   }
   if (o.coherent_smooth > 0) {
     const auto t0 = std::chrono::steady_clock::now();
-    const Status r = c == 3 ? refine<3>(dst, src, dense, nn.ids.data(), k, o, p, chosen)
-                            : refine<0>(dst, src, dense, nn.ids.data(), k, o, p, chosen);
+    const Status r = c == 3 ? refine<3>(dst, src, dense, o, p, chosen) : refine<0>(dst, src, dense, o, p, chosen);
     if (!r) return r.error();
     if (stats) stats->refine_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }

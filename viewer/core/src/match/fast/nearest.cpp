@@ -437,29 +437,36 @@ static void for_each_run(int n, int threads, const std::function<void(int, int)>
   });
 }
 
-Status nearest_centres(const Object& dst, const Object& src, int threads, const Progress& progress,
-                       std::vector<int>& ids, bool exact) {
-  const int n = dst.rows();
-  ids.assign(n, -1);
-  if (dst.channels != 3) return make_error("nearest_centres: 3 values per pixel needed");
-  OctGridIndex grid;
-  grid.build(src.flat.data(), src.rows(), 3);
+Status nearest_rows(const OctGridIndex& grid, const Object& dst, const int* rows, int count, int threads,
+                    const Progress& progress, int* ids, float* sq, bool exact) {
+  if (dst.channels != 3) return make_error("nearest_rows: 3 values per pixel needed");
   std::atomic<bool> stop{false};
-  for_each_run(n, threads, [&](int b, int e) {
+  for_each_run(count, threads, [&](int b, int e) {
     if (progress.cancelled()) stop = true;
     if (stop) return;
-    float sq;
+    float ignored;
     int slot = -1;  // neighbouring pixels have neighbouring normals: start from the last match's place
-    for (int d = b; d < e; ++d) {
+    for (int i = b; i < e; ++i) {
+      const int d = rows ? rows[i] : i;
       const float* q = dst.flat.data() + static_cast<size_t>(d) * 3;
-      if (!grid.nearest_slot(q, slot, ids[d], sq, exact)) {
-        grid.nearest_from(q, 1, &ids[d], &sq, d > b ? ids[d - 1] : -1);
+      float& out = sq ? sq[d] : ignored;
+      if (!grid.nearest_slot(q, slot, ids[d], out, exact)) {
+        grid.nearest_from(q, 1, &ids[d], &out, i > b ? ids[rows ? rows[i - 1] : i - 1] : -1);
         slot = -1;
       }
     }
   });
   if (stop) return make_error("cancelled during nearest search");
   return {};
+}
+
+Status nearest_centres(const Object& dst, const Object& src, int threads, const Progress& progress,
+                       std::vector<int>& ids, bool exact) {
+  ids.assign(dst.rows(), -1);
+  if (dst.channels != 3) return make_error("nearest_centres: 3 values per pixel needed");
+  OctGridIndex grid;
+  grid.build(src.flat.data(), src.rows(), 3);
+  return nearest_rows(grid, dst, nullptr, dst.rows(), threads, progress, ids.data(), nullptr, exact);
 }
 
 Status nearest_lists(const Object& dst, const Object& src, int k, const std::string& index_kind, int threads,

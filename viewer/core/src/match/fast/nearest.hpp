@@ -10,6 +10,8 @@
 
 namespace veneer::match::fast {
 
+class OctGridIndex;
+
 struct NearestLists {
   int k = 1;
   std::vector<int> ids;   // rows x k, ascending by (distance, id); -1 past the source's size
@@ -40,5 +42,12 @@ void patch_moments(const Object& o, int threads, std::vector<float>& out, int& p
 // at 1x1 it is nearly the answer, so exact.
 Status nearest_centres(const Object& dst, const Object& src, int threads, const Progress& progress,
                        std::vector<int>& ids, bool exact);
+
+// The same over a grid already built from the source, for the destination
+// rows `rows` (`count` of them; nullptr: rows 0 .. count - 1): ids[r] and, if
+// sq is given, sq[r] for each row r asked, the rest untouched. Rows are
+// taken in fixed runs of the list, so the answers do not depend on threads.
+Status nearest_rows(const OctGridIndex& grid, const Object& dst, const int* rows, int count, int threads,
+                    const Progress& progress, int* ids, float* sq, bool exact);
 
 }  // namespace veneer::match::fast
