@@ -358,14 +358,10 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
     if (auto s = nearest_lists(dst, src, k, default_index(), o.threads, p, nn, stats); !s) return s.error();
     if (u <= 0) near = std::move(nn.ids);  // k = 1
   }
-  // asks for the rows in `rows` whose nearest is not known yet
-  std::vector<int> asked;
+  // the nearest of `rows` (rows whose nearest is not known yet)
   auto ask = [&](const std::vector<int>& rows) -> Status {
     if (!on_demand) return {};
-    asked.clear();
-    for (const int d : rows)
-      if (near[d] < 0) asked.push_back(d);
-    return nearest_rows(grid, dst, asked.data(), static_cast<int>(asked.size()), o.threads, p, near.data(), nullptr,
+    return nearest_rows(grid, dst, rows.data(), static_cast<int>(rows.size()), o.threads, p, near.data(), nullptr,
                         false);
   };
   const float thr2 = static_cast<float>(o.coherent_threshold * o.coherent_threshold);
@@ -447,7 +443,7 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
       std::vector<int> rows;
       rows.reserve(seed_row.size());
       for (const int r : seed_row)
-        if (r >= 0) rows.push_back(r);
+        if (r >= 0 && near[r] < 0) rows.push_back(r);
       if (auto st = ask(rows); !st) return st.error();
       for (size_t cell = 0; cell < seed_row.size(); ++cell)
         if (seed_row[cell] >= 0) seed_match[cell] = near[seed_row[cell]];
@@ -653,7 +649,7 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
   if (u <= 0) {
     std::vector<int> rows;
     for (int d = 0; d < n; ++d)
-      if (chosen[d] < 0) rows.push_back(d);
+      if (chosen[d] < 0 && near[d] < 0) rows.push_back(d);
     if (auto st = ask(rows); !st) return st.error();
   }
   for (int d = 0; d < n; ++d) {
