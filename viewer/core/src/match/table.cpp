@@ -133,25 +133,29 @@ std::vector<RowSpec> row_specs(const TableOptions& o) {
 
 }  // namespace
 
+Expected<TableObject> table_object(const std::string& scene, bool second, const TableOptions& options) {
+  sim::RenderOptions ro;
+  ro.size = options.size;
+  ro.threads = options.threads;
+  ro.noise_sigma = options.noise;
+  if (second) second_capture(ro);
+  auto set = sim::simulate_set(scene, ro, second ? Role::source : Role::destination);
+  if (!set) return make_error("simulating " + scene + ": " + set.message());
+  auto prepared = prepare_object(*set, options.truth_normals);
+  if (!prepared) return make_error(scene + ": " + prepared.message());
+  return TableObject{std::move(*set), std::move(prepared->view)};
+}
+
 Expected<std::vector<TableRow>> quality_table(const TableOptions& options, const Progress& progress) {
   const auto pairs = options.pairs.empty() ? thesis_pairs() : options.pairs;
   const auto specs = row_specs(options);
-  std::map<std::string, ImageSet> sets;
-  std::map<std::string, PreparedObject> objects;
-  auto object = [&](const std::string& scene, bool second) -> Expected<const PreparedObject*> {
+  std::map<std::string, TableObject> objects;
+  auto object = [&](const std::string& scene, bool second) -> Expected<const TableObject*> {
     const std::string key = scene + (second ? "#2" : "");
     if (auto it = objects.find(key); it != objects.end()) return &it->second;
-    sim::RenderOptions ro;
-    ro.size = options.size;
-    ro.threads = options.threads;
-    ro.noise_sigma = options.noise;
-    if (second) second_capture(ro);
-    auto set = sim::simulate_set(scene, ro, second ? Role::source : Role::destination);
-    if (!set) return make_error("simulating " + scene + ": " + set.message());
-    auto prepared = prepare_object(*set, options.truth_normals);
-    if (!prepared) return make_error(scene + ": " + prepared.message());
-    sets[key] = std::move(*set);
-    return &(objects[key] = std::move(*prepared));
+    auto made = table_object(scene, second, options);
+    if (!made) return made.error();
+    return &(objects[key] = std::move(*made));
   };
   std::vector<TableRow> rows;
   const double total = static_cast<double>(pairs.size() * specs.size());
@@ -162,8 +166,8 @@ Expected<std::vector<TableRow>> quality_table(const TableOptions& options, const
     if (!d) return d.error();
     auto s = object(sname, second);
     if (!s) return s.error();
-    const ImageSet& dset = sets[dname];
-    const ImageSet& sset = sets[sname + (second ? "#2" : "")];
+    const ImageSet& dset = (*d)->set;
+    const ImageSet& sset = (*s)->set;
     std::optional<Expected<RelightScenes>> relit_scenes;
     for (const RowSpec& spec : specs) {
       if (progress.cancelled()) return make_error("quality table cancelled");

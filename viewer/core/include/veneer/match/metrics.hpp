@@ -105,6 +105,15 @@ struct TableRow {
   double seconds = 0;  // compute_map wall time
   std::string error;   // non-empty when the run failed
 };
+// One object of the quality table, simulated and prepared as the table does
+// it for `options` (size, noise, threads, normals from the truth or from
+// photometric stereo); second = the moved, smaller second capture a pair of
+// an object with itself takes as its source (second_capture()).
+struct TableObject {
+  ImageSet set;
+  ObjectView view;
+};
+Expected<TableObject> table_object(const std::string& scene, bool second, const TableOptions& options);
 std::vector<std::pair<std::string, std::string>> thesis_pairs();
 // A pair of one object with itself (blocks -> blocks) compares two captures:
 // the source's is moved in the frame and made smaller, like a second shot.
