@@ -224,7 +224,7 @@ std::string format_table(const std::vector<TableRow>& rows, const TableOptions& 
   char buf[1024];
   std::snprintf(buf, sizeof buf,
                 "Quality of the correspondence methods on simulated pairs, rendered at %dx%d (reduced from 1024x680 so "
-                "the faithful methods finish) with sensor noise %.3f, normals from %s; quality measured against the simulator's truth (masks, normals). blocks <- blocks compares two captures (the source moved and smaller). Coherence counts neighbours matched within 1.5 px, so one source pixel stamped over a region also counts as coherent: read it with reuse. PSNR: relighting under a lamp off the capture ring, where the source is of uniform material; PSNR lit leaves out the lamp's cast shadows on the destination, which no map can carry.\n\n",
+                "the faithful methods finish) with sensor noise %.3f, normals from %s; quality measured against the simulator's truth (masks, normals). blocks <- blocks compares two captures (the source moved and smaller). Coherence counts neighbours matched within 1.5 px, so one source pixel stamped over a region also counts as coherent: read it with reuse. PSNR: relighting under a lamp off the capture ring, where the source is of uniform material; PSNR lit leaves out the lamp's cast shadows on the destination, which no map can carry. Faithful flann rows on patches or intensities differ a little from run to run: FLANN shuffles its trees' points from std::random_device.\n\n",
                 options.size.width, options.size.height, options.noise,
                 options.truth_normals ? "the truth" : "photometric stereo");
   out << buf;
