@@ -135,10 +135,6 @@ TEST(FastIndex, NonNormalPointsAndHigherDimensions) {
   }
 }
 
-// knn_within: given a radius the caller knows holds the k nearest (here the
-// brute force's k-th distance, as the fast search passes its candidates'
-// best, with the same margin), the kd-tree answers exactly the brute force,
-// ties included; a radius far too small leaves it nothing to find.
 // Hundreds of points at the same distance from the query: the lists hold the
 // lowest ids among them, as the brute force, whatever order the tree visits
 // them in (the kd-tree asked nanoflann for k + 4 and re-sorted, which missed
@@ -158,6 +154,10 @@ TEST(FastIndex, ManyEqualDistancesGoToTheLowestIds) {
   }
 }
 
+// knn_within: given a radius the caller knows holds the k nearest (here the
+// brute force's k-th distance, as the fast search passes its candidates'
+// best, with the same margin), the kd-tree answers exactly the brute force,
+// ties included; a radius far too small leaves it nothing to find.
 TEST(FastIndex, KdTreeWithinARadiusEqualsBruteForce) {
   std::mt19937 rng(9);
   std::uniform_real_distribution<float> u(0, 1);
