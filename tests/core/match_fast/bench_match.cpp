@@ -208,10 +208,41 @@ void write_pictures(const std::string& dir, const std::string& name, const Map& 
   cv::imwrite(dir + "/" + name + ".png", both);
 }
 
+// Build, all k = 1 queries and all lists of `list` of each index kind over
+// the source normals sp for the destination normals dp, one thread, CPU
+// time: the median of `runs` (FLANN's peer: one run), as a table row each.
+void index_table(const char* what, const std::vector<float>& sp, const std::vector<float>& dp, int list, int runs) {
+  std::printf("| %s, one thread, CPU time | build (ms) | all queries, k=1 (ms) | ns / query | all queries, k=%d (ms) "
+              "|\n|---|---|---|---|---|\n",
+              what, list);
+  for (const char* kind : {"grid", "lookup", "kdtree", "flann"}) {
+    std::vector<double> tb, tq, tk;
+    for (int i = 0; i < (std::strcmp(kind, "flann") == 0 ? 1 : runs); ++i) {
+      auto index = std::strcmp(kind, "flann") == 0 ? make_index("flann") : fast::make_index(kind);
+      double t0 = thread_cpu_ms();
+      index->build(sp.data(), static_cast<int>(sp.size() / 3), 3);
+      tb.push_back(thread_cpu_ms() - t0);
+      int id;
+      float d;
+      t0 = thread_cpu_ms();
+      for (size_t q = 0; q < dp.size(); q += 3) index->knn(&dp[q], 1, &id, &d);
+      tq.push_back(thread_cpu_ms() - t0);
+      std::vector<int> ids(list);
+      std::vector<float> ds(list);
+      t0 = thread_cpu_ms();
+      for (size_t q = 0; q < dp.size(); q += 3) index->knn(&dp[q], list, ids.data(), ds.data());
+      tk.push_back(thread_cpu_ms() - t0);
+    }
+    std::printf("| %s | %s | %s | %s | %s |\n", kind, fmt(median(tb), 2).c_str(), fmt(median(tq), 2).c_str(),
+                fmt(1e6 * median(tq) / (dp.size() / 3), 0).c_str(), fmt(median(tk), 1).c_str());
+  }
+  std::printf("\n");
+}
+
 // The indices on a source of few orientations: the simulator's blocks (the
 // faces of boxes), their normals with photometric-stereo-like noise, against
-// the bull's normals (most far from every cluster). One thread, CPU time,
-// one run each; lists of 16 are the longest the grid serves.
+// the bull's normals (most far from every cluster). One run each; lists of
+// 16 are the longest the grid serves.
 void box_source_table(const std::vector<float>& dp) {
   ObjectView blocks;
   int got = 0;
@@ -226,26 +257,7 @@ void box_source_table(const std::vector<float>& dp) {
     for (int c = 0; c < 3; ++c) n[c] /= l;
   }
   std::printf("Source of few orientations: bull (%zu px) <- blocks (%d px), normals + noise sd 0.005.\n\n", dp.size() / 3, got);
-  std::printf("| nearest-normal index, box-like source, one thread, CPU time | build (ms) | all queries, k=1 (ms) | ns / query | all queries, k=16 (ms) |\n|---|---|---|---|---|\n");
-  for (const char* kind : {"grid", "lookup", "kdtree", "flann"}) {
-    auto index = std::strcmp(kind, "flann") == 0 ? make_index("flann") : fast::make_index(kind);
-    double t0 = thread_cpu_ms();
-    index->build(sp.data(), static_cast<int>(sp.size() / 3), 3);
-    const double tb = thread_cpu_ms() - t0;
-    int id;
-    float d;
-    t0 = thread_cpu_ms();
-    for (size_t q = 0; q < dp.size(); q += 3) index->knn(&dp[q], 1, &id, &d);
-    const double tq = thread_cpu_ms() - t0;
-    std::vector<int> ids(16);
-    std::vector<float> ds(16);
-    t0 = thread_cpu_ms();
-    for (size_t q = 0; q < dp.size(); q += 3) index->knn(&dp[q], 16, ids.data(), ds.data());
-    const double tk = thread_cpu_ms() - t0;
-    std::printf("| %s | %s | %s | %s | %s |\n", kind, fmt(tb, 2).c_str(), fmt(tq, 2).c_str(), fmt(1e6 * tq / (dp.size() / 3), 0).c_str(),
-                fmt(tk, 1).c_str());
-  }
-  std::printf("\n");
+  index_table("nearest-normal index, box-like source", sp, dp, 16, 1);
 }
 
 int main(int argc, char** argv) {
@@ -368,29 +380,7 @@ int main(int argc, char** argv) {
 
     // The nearest-normal index alone: build + all queries (1x1 normals).
     const std::vector<float> sp = normals_of(pr.src), dp = normals_of(pr.dst);
-    std::printf("| nearest-normal index, one thread, CPU time | build (ms) | all queries, k=1 (ms) | ns / query | all queries, k=100 (ms) |\n|---|---|---|---|---|\n");
-    for (const char* kind : {"grid", "lookup", "kdtree", "flann"}) {
-      std::vector<double> tb, tq, tk;
-      for (int i = 0; i < (std::strcmp(kind, "flann") == 0 || pr.large ? 1 : runs); ++i) {
-        auto index = std::strcmp(kind, "flann") == 0 ? make_index("flann") : fast::make_index(kind);
-        double t0 = thread_cpu_ms();
-        index->build(sp.data(), static_cast<int>(sp.size() / 3), 3);
-        tb.push_back(thread_cpu_ms() - t0);
-        int id;
-        float d;
-        t0 = thread_cpu_ms();
-        for (size_t q = 0; q < dp.size(); q += 3) index->knn(&dp[q], 1, &id, &d);
-        tq.push_back(thread_cpu_ms() - t0);
-        std::vector<int> ids(100);
-        std::vector<float> ds(100);
-        t0 = thread_cpu_ms();
-        for (size_t q = 0; q < dp.size(); q += 3) index->knn(&dp[q], 100, ids.data(), ds.data());
-        tk.push_back(thread_cpu_ms() - t0);
-      }
-      std::printf("| %s | %s | %s | %s | %s |\n", kind, fmt(median(tb), 2).c_str(), fmt(median(tq), 2).c_str(),
-                  fmt(1e6 * median(tq) / (dp.size() / 3), 0).c_str(), fmt(median(tk), 1).c_str());
-    }
-    std::printf("\n");
+    index_table("nearest-normal index", sp, dp, 100, pr.large ? 1 : runs);
     if (pr.large) box_source_table(dp);
 
     // What the maps look like (synthetic shapes carry their true normals).
