@@ -753,19 +753,10 @@ bool OctGridIndex::nearest1(const float* query, int& slot, int& id, float& sq, b
     reach_u = c * gain_col_[ci] * shrink + 1e-5f;
     reach_v = c * gain_row_[cj] * shrink + 1e-5f;
   };
-  auto crowded = [&](int node) __attribute__((always_inline)) { return !sub_.at.empty() && sub_.at[node] >= 0; };
   // A crowded node of cell (cx, cy): the query's sub-cell (the nearest one,
   // when the query is outside the cell), or the nearest with points ...
-  auto own_sub = [&](int node, int cx, int cy, int& sx, int& sy) {
-    const int S = sub_.side[node];
-    sx = std::clamp(static_cast<int>(((u + 1.0f) * scale - cx) * S), 0, S - 1);
-    sy = std::clamp(static_cast<int>(((v + 1.0f) * scale - cy) * S), 0, S - 1);
-  };
   auto scan_own_sub = [&](int node, int cx, int cy) {
-    int sx, sy;
-    own_sub(node, cx, cy, sx, sy);
-    const int at = sub_.at[node];
-    const int k = sub_.near[at + sy * sub_.side[node] + sx];
+    const int at = sub_.at[node], k = nearest_sub(node, cx, cy, u, v);
     scan(sub_.start[at + k], sub_.start[at + k + 1]);
     return k;
   };
@@ -974,7 +965,6 @@ void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_d
     }
     if (improved) update_reach();
   };
-  auto crowded = [&](int node) { return !sub_.at.empty() && sub_.at[node] >= 0; };
   // A crowded node of cell (cx, cy): its rows of sub-cells within reach, from
   // the query's row outwards, each row's sub-cells within reach as one run.
   auto scan_subs = [&](int node, int cx, int cy) __attribute__((noinline)) {
@@ -1047,10 +1037,7 @@ void OctGridIndex::nearest_from(const float* query, int k, int* ids, float* sq_d
         continue;
       }
       const int S = sub_.side[node], at = sub_.at[node];
-      const int cx = (node >> 1) % side_, cy = (node >> 1) / side_;
-      const int sx = std::clamp(static_cast<int>(((u + 1.0f) * scale - cx) * S), 0, S - 1);
-      const int sy = std::clamp(static_cast<int>(((v + 1.0f) * scale - cy) * S), 0, S - 1);
-      const int first = sub_.near[at + sy * S + sx];
+      const int first = nearest_sub(node, (node >> 1) % side_, (node >> 1) / side_, u, v);
       const int* ss = sub_.start.data() + at;
       scan_run(ss[first], ss[first + 1]);
       now = worst();

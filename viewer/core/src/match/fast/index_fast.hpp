@@ -1,5 +1,6 @@
 #pragma once
 // Internal: the fast engine's indices (see fast.hpp).
+#include <algorithm>
 #include <atomic>
 #include <memory>
 #include <mutex>
@@ -77,6 +78,18 @@ class OctGridIndex final : public NearestIndex {
   };
   SubGrids sub_;
   void build_subgrids();
+  // A node with its own sub-grid.
+  __attribute__((always_inline)) bool crowded(int node) const { return !sub_.at.empty() && sub_.at[node] >= 0; }
+  // Crowded node `node` of cell (cx, cy): the sub-cell with points nearest
+  // the one holding the uv point (u, v) (the nearest sub-cell when (u, v) is
+  // outside the cell), as its place among the node's sub-cells.
+  __attribute__((always_inline)) int nearest_sub(int node, int cx, int cy, float u, float v) const {
+    const int S = sub_.side[node];
+    const float scale = 0.5f * static_cast<float>(side_);
+    const int sx = std::clamp(static_cast<int>(((u + 1.0f) * scale - cx) * S), 0, S - 1);
+    const int sy = std::clamp(static_cast<int>(((v + 1.0f) * scale - cy) * S), 0, S - 1);
+    return sub_.near[sub_.at[node] + sy * S + sx];
+  }
   // Equal points a crowded run kept once (unique_): id -> the next higher id
   // of the same point, -1 at the end; empty when none were merged. A list of
   // k > 1 takes a kept point's equals after it, lowest ids first.
