@@ -4,10 +4,11 @@
 // The seeds below, and the pixels no chunk takes, start from their nearest
 // source pixel by the chosen feature (the fast search, see the call; for
 // normals the patch size is not used). For jittered seed grids of spacing
-// 2^L ... 4, 2 (coarse to fine), the pixels not yet assigned are split into chunks -- those sharing a nearest
-// seed s (among the 3x3 cells around their own) -- and each pixel p of a
-// chunk proposes the source pixel m(s) + (p - s): the seed's match shifted by
-// p's offset from the seed, i.e. the whole chunk of source copied rigidly. A
+// 2^L ... 4, 2 (coarse to fine), the pixels not yet assigned are split into
+// chunks -- those sharing a nearest seed s (among the 3x3 cells around their
+// own) -- and each pixel p of a chunk proposes the source pixel m(s) +
+// (p - s): the seed's match shifted by p's offset from the seed, i.e. the
+// whole chunk of source copied rigidly. A
 // chunk is taken whole when the mean error of its proposals (RMS, the map's
 // scale; |dn| for normals; off the source object = 1) is under
 // options.coherent_threshold and none of them errs more than twice that.
@@ -55,8 +56,8 @@ namespace {
 // pixels where the source's and the destination's curvatures differ, and the
 // pixels no chunk took keep their (speckled) nearest. Each pixel then takes,
 // among its current match and every continuation of a 4-neighbour's match
-// (shifted by their offset, and by one pixel more each way, so a chunk may stretch or shrink with the curvatures), the one that
-// minimises
+// (shifted by their offset, and by one pixel more each way, so a chunk may
+// stretch or shrink with the curvatures), the one that minimises
 //     error + w * threshold * (4-neighbours it breaks with),
 // "broken" meaning matched more than 1.5 px apart, as match::evaluate counts
 // coherence. Iterated conditional modes on a checkerboard: the pixels of one
