@@ -138,6 +138,14 @@ veneer::Expected<Config> parse_config(const json& doc, const std::string& origin
   if (auto s = r.device(doc, "trigger", c.trigger); !s) return s.error();
   if (auto s = r.device(doc, "led", c.led); !s) return s.error();
 
+  // The simulated camera renders what the Hue bridge reports: it reads the
+  // same bridge as the lamps, so its section need not repeat where that is.
+  if (c.camera.backend == "simulated" && c.lamps.section.is_object()) {
+    for (const char* key : {"bridge", "key", "lamps", "timeout_ms"}) {
+      if (!c.camera.section.contains(key) && c.lamps.section.contains(key)) c.camera.section[key] = c.lamps.section[key];
+    }
+  }
+
   const json& lamps = c.lamps.section;
   if (lamps.contains("lamps")) {
     const json& ids = lamps.at("lamps");

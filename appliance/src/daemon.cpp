@@ -169,6 +169,7 @@ veneer::Expected<std::unique_ptr<Daemon>> Daemon::create(const DaemonOptions& o)
   ro.exposure = c.exposure;
   ro.ambient_warning = c.ambient_warning;
   ro.settle_ms = c.settle_ms;
+  ro.owner_state_file = c.store / "lamps-owner.json";
   if (d->sim_) {
     ro.simulated = true;
     SimulatedRig* sim = d->sim_.get();

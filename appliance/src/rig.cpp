@@ -1,6 +1,11 @@
 #include "veneerd/rig.hpp"
 
 #include <chrono>
+#include <cstdio>
+#include <fstream>
+
+#include <fcntl.h>
+#include <unistd.h>
 
 #include "veneer/util/log.hpp"
 #include "veneerd/sequencer.hpp"
@@ -34,9 +39,7 @@ void jpeg_size(const std::vector<unsigned char>& j, int& w, int& h) {
 }  // namespace
 
 Rig::Rig(RigDevices devices, Store& store, RigOptions options)
-    : dev_(std::move(devices)), store_(store), options_(std::move(options)) {
-  lamps_on_.assign(dev_.lamps ? dev_.lamps->count() : 0, false);
-}
+    : dev_(std::move(devices)), store_(store), options_(std::move(options)) {}
 
 Rig::~Rig() { stop(); }
 
@@ -86,13 +89,32 @@ void Rig::start() {
         camera_connected_ = dev_.camera->connected();
       }
     }
-    // The rig starts dark: a crash may have left a lamp on.
+    // The lamps are left as their owner has them; only what an interrupted
+    // run took (a crash, a power loss) goes back.
     if (dev_.lamps) {
-      if (auto s = dev_.lamps->all_off(); !s) VLOG_WARN("Lamps", "switching all lamps off at start failed: {}", s.message());
+      std::error_code ec;
+      if (!options_.owner_state_file.empty() && std::filesystem::exists(options_.owner_state_file, ec)) {
+        owner_saved_ = true;
+        give_back_owner("at start, after an interrupted run");
+      }
+      refresh_lamps();
     }
-    if (dev_.led) dev_.led->show(LedState::idle);
-    log->info("rig '{}' ready: {} lamps, camera {}", options_.name, dev_.lamps ? dev_.lamps->count() : 0,
-              camera_model_.empty() ? "(none)" : camera_model_);
+    std::string problem, camera;
+    bool connected = false;
+    {
+      std::lock_guard lock(mutex_);
+      problem = lamps_problem_;
+      camera = camera_model_;
+      connected = camera_connected_;
+    }
+    if (!connected) problem += std::string(problem.empty() ? "" : "; ") + "camera: not connected";
+    if (dev_.led) dev_.led->show(problem.empty() ? LedState::idle : LedState::error);
+    if (problem.empty()) {
+      log->info("rig '{}' ready: {} lamps, camera {}", options_.name, dev_.lamps ? dev_.lamps->count() : 0,
+                camera.empty() ? "(none)" : camera);
+    } else {
+      log->error("rig '{}' NOT ready: {}", options_.name, problem);
+    }
   });
 }
 
@@ -103,9 +125,9 @@ void Rig::stop() {
   live_cv_.notify_all();
   if (worker_.joinable()) worker_.join();
   if (live_.joinable()) live_.join();
-  if (dev_.lamps) {
-    if (auto s = dev_.lamps->all_off(); !s) VLOG_WARN("Lamps", "switching all lamps off at exit failed: {}", s.message());
-  }
+  // Lamps a client switched (or a capture could not give back) go back to
+  // their owner; the others are left as they are.
+  if (dev_.lamps && owner_saved_) give_back_owner("at exit");
   if (dev_.trigger) dev_.trigger->on_press = nullptr;
   if (dev_.camera) dev_.camera->on_connection_change = nullptr;
 }
@@ -118,6 +140,10 @@ void Rig::worker_loop() {
       if (pending_restore_.needed) {
         // The bridge was down when a capture ended: try again every second.
         jobs_cv_.wait_for(lock, std::chrono::seconds(1), [&] { return stopping_ || !jobs_.empty(); });
+      } else if (options_.lamp_poll_s > 0 && dev_.lamps) {
+        // Idle: read the bridge now and then, so the status shows the lamps as they are.
+        jobs_cv_.wait_for(lock, std::chrono::duration<double>(options_.lamp_poll_s),
+                          [&] { return stopping_ || !jobs_.empty(); });
       } else {
         jobs_cv_.wait(lock, [&] { return stopping_ || !jobs_.empty(); });
       }
@@ -129,8 +155,10 @@ void Rig::worker_loop() {
     }
     if (job) {
       job();
-    } else {
+    } else if (pending_restore_.needed) {
       retry_restore();
+    } else {
+      refresh_lamps();
     }
   }
 }
@@ -142,7 +170,117 @@ void Rig::retry_restore() {
     return;
   }
   pending_restore_.needed = false;
+  if (owner_by_capture_) drop_owner();
   VLOG_INFO("Lamps", "the bridge answers again: lamps restored to their state before the capture");
+  refresh_lamps();
+}
+
+void Rig::note_lamps(const veneer::Expected<std::vector<LampState>>& reading) {
+  std::lock_guard lock(mutex_);
+  if (reading) {
+    lamps_now_ = *reading;
+    lamps_read_at_ = std::chrono::steady_clock::now();
+    lamps_problem_.clear();
+  } else {
+    lamps_problem_ = "lamps: " + reading.message();
+  }
+}
+
+void Rig::refresh_lamps() {
+  if (!dev_.lamps) return;
+  auto reading = dev_.lamps->read();
+  std::string before;
+  {
+    std::lock_guard lock(mutex_);
+    before = lamps_problem_;
+  }
+  note_lamps(reading);
+  if (!reading && before != "lamps: " + reading.message()) VLOG_ERROR("Lamps", "{}", reading.message());
+  if (reading && !before.empty()) VLOG_INFO("Lamps", "the lamps answer again");
+}
+
+veneer::Status Rig::save_owner(const std::vector<LampState>& states) {
+  if (options_.owner_state_file.empty()) {
+    owner_saved_ = true;  // kept in memory only
+    return {};
+  }
+  nlohmann::json doc;
+  doc["format"] = "veneer-lamp-owner/1";
+  doc["saved"] = utc_now_iso();
+  doc["lamps"] = nlohmann::json::array();
+  for (std::size_t i = 0; i < states.size(); ++i) {
+    nlohmann::json l = to_json(states[i]);
+    l["id"] = i < options_.lamp_ids.size() ? options_.lamp_ids[i] : std::to_string(i + 1);
+    doc["lamps"].push_back(l);
+  }
+  const auto& file = options_.owner_state_file;
+  std::string tmp = file.string() + ".tmp";
+  std::string text = doc.dump(1) + "\n";
+  int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) return make_error("cannot write " + tmp);
+  bool ok = ::write(fd, text.data(), text.size()) == static_cast<ssize_t>(text.size()) && ::fsync(fd) == 0;
+  ::close(fd);
+  if (!ok || std::rename(tmp.c_str(), file.c_str()) != 0) {
+    ::unlink(tmp.c_str());
+    return make_error("cannot write " + file.string() + " (disk full?)");
+  }
+  owner_saved_ = true;
+  return {};
+}
+
+veneer::Expected<std::vector<LampState>> Rig::load_owner() {
+  const auto& file = options_.owner_state_file;
+  std::ifstream in(file);
+  if (!in) return make_error("cannot read " + file.string());
+  nlohmann::json doc = nlohmann::json::parse(in, nullptr, false);
+  if (doc.is_discarded() || !doc.is_object() || !doc.contains("lamps") || !doc["lamps"].is_array())
+    return make_error(file.string() + " is not a saved lamp state");
+  const int count = dev_.lamps->count();
+  if (static_cast<int>(doc["lamps"].size()) != count)
+    return make_error(file.string() + " holds " + std::to_string(doc["lamps"].size()) + " lamps, the rig has " +
+                      std::to_string(count));
+  std::vector<LampState> out;
+  for (const auto& l : doc["lamps"]) {
+    auto s = lamp_state_from_json(l);
+    if (!s) return make_error(file.string() + ": " + s.message());
+    out.push_back(*s);
+  }
+  return out;
+}
+
+void Rig::drop_owner() {
+  owner_saved_ = false;
+  owner_by_capture_ = false;
+  if (options_.owner_state_file.empty()) return;
+  std::error_code ec;
+  std::filesystem::remove(options_.owner_state_file, ec);
+}
+
+void Rig::give_back_owner(const char* when) {
+  if (!owner_saved_ || !dev_.lamps) return;
+  if (options_.owner_state_file.empty()) {
+    if (pending_restore_.needed) (void)dev_.lamps->restore(pending_restore_.states);
+    drop_owner();
+    return;
+  }
+  auto states = load_owner();
+  if (!states) {
+    VLOG_ERROR("Lamps", "{}: {}; the owner's lamp states are lost, the file is kept for inspection", when,
+               states.message());
+    std::error_code ec;
+    std::filesystem::rename(options_.owner_state_file, options_.owner_state_file.string() + ".bad", ec);
+    owner_saved_ = false;
+    return;
+  }
+  if (auto s = dev_.lamps->restore(*states); !s) {
+    VLOG_ERROR("Lamps", "{}: giving the lamps back to their owner failed: {}; kept in {} for the next start", when,
+               s.message(), options_.owner_state_file.string());
+    return;
+  }
+  VLOG_INFO("Lamps", "{}: the lamps are back as their owner had them (from {})", when,
+            options_.owner_state_file.string());
+  pending_restore_.needed = false;
+  drop_owner();
 }
 
 veneer::Expected<std::string> Rig::capture(const CaptureRequest& request) {
@@ -229,6 +367,12 @@ void Rig::run_capture_job(const std::string& id, CaptureRequest req) {
 
   CaptureHooks hooks;
   hooks.cancel = &cancel_;
+  hooks.save_owner_state = [this](const std::vector<LampState>& states) -> veneer::Status {
+    if (owner_saved_) return {};  // a client's lamp change holds older owner states
+    if (auto s = save_owner(states); !s) return s;
+    owner_by_capture_ = true;
+    return {};
+  };
   hooks.on_shot = [&](int k, int total, double eta) {
     RigEvent e;
     e.kind = RigEvent::Kind::shot_taken;
@@ -259,6 +403,8 @@ void Rig::run_capture_job(const std::string& id, CaptureRequest req) {
     std::lock_guard cam(camera_mutex_);
     result = run_capture(*dev_.lamps, *dev_.camera, plan, hooks, &pending_restore_);
   }
+  if (owner_by_capture_ && !pending_restore_.needed) drop_owner();
+  refresh_lamps();
   veneer::Status stored;
   if (result) {
     veneer::ImageSet& set = result->set;
@@ -318,13 +464,21 @@ void Rig::set_lamps(std::vector<bool> on, int brightness, std::function<void(ven
       return;
     }
     on.resize(count, false);
+    if (!owner_saved_) {
+      // The owner's states go back at exit: saved before the first change.
+      auto owner = dev_.lamps->read();
+      veneer::Status saved = owner ? save_owner(*owner) : veneer::Status(owner.error());
+      if (!saved) {
+        note_lamps(owner);
+        if (done) done(make_error("lamps: cannot save their owner's state before changing them: " + saved.message()));
+        return;
+      }
+    }
+    owner_by_capture_ = false;  // the client's lamps stay until exit
     veneer::Status s = dev_.lamps->set(on, brightness);
+    refresh_lamps();
     if (s) {
       pending_restore_.needed = false;  // the controller's own setting wins
-      {
-        std::lock_guard lock(mutex_);
-        lamps_on_ = on;
-      }
       RigEvent e;
       e.kind = RigEvent::Kind::lamp_state;
       e.lamps_on = on;
@@ -409,7 +563,13 @@ RigState Rig::state() const {
   std::lock_guard lock(mutex_);
   s.camera_connected = camera_connected_;
   s.camera_model = camera_model_;
-  s.lamps_on = lamps_on_;
+  s.lamps = lamps_now_;
+  for (const auto& l : lamps_now_) s.lamps_on.push_back(l.on && l.reachable);
+  s.lamp_ids = options_.lamp_ids;
+  if (lamps_read_at_ != std::chrono::steady_clock::time_point{})
+    s.lamps_age_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - lamps_read_at_).count();
+  s.lamps_problem = lamps_problem_;
+  s.holds_lamps = owner_saved_;
   s.capturing = capturing_;
   s.next_role = next_role_;
   return s;

@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cmath>
 #include <ctime>
+#include <optional>
 #include <sstream>
 
 #include "veneer/util/log.hpp"
@@ -55,19 +56,19 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
                       std::to_string(plan.lamp_positions.size()) + " lamp positions are configured");
   }
   auto cancelled = [&] { return hooks.cancel != nullptr && hooks.cancel->load(); };
-  auto lamp_name = [&](int i) {
-    std::string s = "lamp " + std::to_string(i + 1);
-    if (static_cast<size_t>(i) < plan.lamp_ids.size()) s += " (id " + plan.lamp_ids[i] + ")";
-    return s;
-  };
   const int shots = count + 1;
 
   if (auto s = camera.open(); !s) return make_error("camera: " + s.message());
+  // The owner's lamps as the bridge reports them now: what goes back afterwards.
   auto saved = lamps.read();
   if (!saved) return make_error("lamps: cannot read their state before the capture: " + saved.message());
   // Lamps already unreachable now would only fail later, after the ambient frame.
   for (int i = 0; i < count && i < static_cast<int>(saved->size()); ++i) {
-    if (!(*saved)[i].reachable) return make_error(lamp_name(i) + " is unreachable; capture not started");
+    if (!(*saved)[i].reachable) return make_error(lamps.label(i) + " is unreachable; capture not started");
+  }
+  if (hooks.save_owner_state) {
+    if (auto s = hooks.save_owner_state(*saved); !s)
+      return make_error("lamps: cannot save their owner's state before touching them: " + s.message());
   }
 
   CaptureResult result;
@@ -77,6 +78,20 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
   set.object = plan.object;
   set.scene = plan.scene;
   set.created = utc_now_iso();
+
+  // Step k's lamps: the ambient frame (k = 0) all off, then ring lamp k - 1
+  // alone, rig white at full brightness. A lamp that is off keeps its owner's
+  // colour and level, so it comes back as it was when the owner next switches it on.
+  auto want_for = [&](int k) {
+    std::vector<LampState> want(count);
+    for (int i = 0; i < count; ++i) {
+      want[i] = (*saved)[i];
+      want[i].on = false;
+      want[i].reachable = true;
+    }
+    if (k > 0) want[k - 1] = rig_white(254);
+    return want;
+  };
 
   auto sequence = [&]() -> veneer::Status {
     if (auto desc = camera.describe(); desc) set.camera.model = desc->model;
@@ -91,22 +106,44 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
       double per = steps_done > 0 ? step_total / steps_done : plan.expected_shot_s;
       return per * (shots - done);
     };
+    std::optional<std::vector<LampState>> reading = *saved;  // the bridge as last read
     for (int k = 0; k < shots; ++k) {
       if (cancelled()) return make_error("cancelled");
       const auto step_start = Clock::now();
-      std::vector<bool> on(count, false);
-      if (k > 0) on[k - 1] = true;
-      if (auto s = lamps.set(on, 254); !s) {
-        return make_error((k == 0 ? std::string("lamps: switching all off") : lamp_name(k - 1) + ": switching on") +
-                          " failed: " + s.message());
+      const std::vector<LampState> want = want_for(k);
+      const std::string step_name = k == 0 ? std::string("ambient frame (all lamps off)")
+                                           : "shot " + std::to_string(k + 1) + " (" + lamps.label(k - 1) + " alone)";
+      cv::Mat photo;
+      for (int take = 1;; ++take) {
+        // Proven before the exposure: commanded from the bridge's own reading, read back.
+        auto proven = lamps.ensure(want, reading, plan.lamp_attempts);
+        reading.reset();
+        if (!proven) return make_error("lamps, " + step_name + ": " + proven.message());
+        if (cancelled()) return make_error("cancelled");
+        auto still = camera.capture();
+        if (!still) {
+          return make_error("camera, shot " + std::to_string(k + 1) + " of " + std::to_string(shots) + ": " +
+                            still.message());
+        }
+        // ... and after it: a lamp switched by another client meanwhile spoils the frame.
+        auto after = lamps.read();
+        if (!after) return make_error("lamps, " + step_name + ": cannot read them after the exposure: " + after.message());
+        std::vector<int> spoiled = lamps.differing(*after, want);
+        if (spoiled.empty()) {
+          photo = to_float_bgr(still->linear);
+          reading = std::move(*after);
+          break;
+        }
+        std::string who;
+        for (int i : spoiled) who += (who.empty() ? "" : ", ") + lamps.label(i) + " " + describe((*after)[i]);
+        if (take >= plan.shot_attempts) {
+          return make_error("lamps, " + step_name + ": another client changed the lamps during the exposure " +
+                            std::to_string(take) + " times (" + who + "); the set is not stored");
+        }
+        ++result.retakes;
+        log->warn("{}: {}: the lamps changed during the exposure ({}): taking it again", plan.set_id, step_name, who);
+        reading = std::move(*after);
       }
-      if (cancelled()) return make_error("cancelled");
-      auto still = camera.capture();
-      if (!still) {
-        return make_error("camera, shot " + std::to_string(k + 1) + " of " + std::to_string(shots) + ": " +
-                          still.message());
-      }
-      cv::Mat photo = to_float_bgr(still->linear);
       if (photo.empty()) return make_error("camera, shot " + std::to_string(k + 1) + ": empty image");
       if (set.size.area() == 0) set.size = photo.size();
       if (photo.size() != set.size) {
@@ -128,15 +165,16 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
 
   veneer::Status outcome = sequence();
 
-  // Whatever happened, give the owner's lamps back.
+  // Whatever happened, give the owner's lamps back exactly (proven by reading back).
   if (auto s = lamps.restore(*saved); !s) {
-    log->error("restoring the lamps after {} failed: {}; switching all off", plan.set_id, s.message());
-    if (auto off = lamps.all_off(); !off) log->error("switching the lamps off failed too: {}", off.message());
+    log->error("restoring the lamps after {} failed: {}; will retry", plan.set_id, s.message());
     if (pending) {
       pending->states = *saved;
       pending->needed = true;
     }
     if (outcome) outcome = make_error("lamps: restoring their state after the capture failed: " + s.message());
+  } else {
+    result.restored = true;
   }
   if (!outcome) return outcome.error();
 

@@ -291,6 +291,24 @@ class Session : public std::enable_shared_from_this<Session> {
     s.set_camera_model(st.camera_model);
     s.set_lamp_count(static_cast<uint32_t>(st.lamp_count));
     for (bool on : st.lamps_on) s.add_lamps_on(on);
+    for (std::size_t i = 0; i < st.lamps.size(); ++i) {
+      const LampState& l = st.lamps[i];
+      auto* r = s.add_lamps();
+      r->set_id(i < st.lamp_ids.size() ? st.lamp_ids[i] : std::to_string(i + 1));
+      r->set_on(l.on);
+      r->set_brightness(static_cast<uint32_t>(l.brightness));
+      r->set_colour_mode(colour_mode_name(l.mode));
+      r->set_x(l.x);
+      r->set_y(l.y);
+      r->set_ct(static_cast<uint32_t>(l.ct));
+      r->set_hue(static_cast<uint32_t>(l.hue));
+      r->set_sat(static_cast<uint32_t>(l.sat));
+      r->set_reachable(l.reachable);
+    }
+    s.set_lamps_age_s(st.lamps_age_s);
+    s.set_lamps_problem(st.lamps_problem);
+    s.set_holds_lamps(st.holds_lamps);
+    s.set_ready(st.camera_connected && st.lamps_problem.empty() && st.lamps_age_s >= 0);
     s.set_capturing(st.capturing);
     auto holder = srv_.controller.lock();
     s.set_you_control(holder.get() == this);

@@ -1,5 +1,6 @@
 #pragma once
 // In-memory lamps and camera for sequencer/store tests (no HTTP, no rendering).
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -13,27 +14,30 @@ class FakeLamps : public veneerd::Lamps {
   explicit FakeLamps(int n) : states_(n) {}
   std::string name() const override { return "fake"; }
   int count() const override { return static_cast<int>(states_.size()); }
-  veneer::Expected<std::vector<veneerd::LampState>> read() override { return states_; }
-  veneer::Status set(const std::vector<bool>& on, int brightness) override {
+  int confirm_ms() const override { return 0; }  // takes commands at once
+  veneer::Expected<std::vector<veneerd::LampState>> read() override {
+    ++reads;
+    if (down) return veneer::make_error("bridge down (fake)");
+    return states_;
+  }
+  // Takes the wanted state at once; counts calls (a call per step or restore).
+  veneer::Status command(const std::vector<veneerd::LampState>& now,
+                         const std::vector<veneerd::LampState>& want) override {
     ++sets;
     if (fail_on_set > 0 && sets == fail_on_set) return veneer::make_error("bridge timeout (fake)");
     if (down) return veneer::make_error("bridge down (fake)");
-    for (size_t i = 0; i < on.size(); ++i) {
-      states_[i].on = on[i];
-      states_[i].brightness = brightness;
-      states_[i].x = 0.3227;
-      states_[i].y = 0.329;
+    for (size_t i = 0; i < want.size(); ++i) {
+      if (veneerd::same_light(now[i], want[i]) && now[i].on) continue;
+      bool reachable = states_[i].reachable;
+      states_[i] = want[i];
+      states_[i].reachable = reachable;
     }
+    if (after_command) after_command(sets);
     return {};
   }
-  veneer::Status restore(const std::vector<veneerd::LampState>& s) override {
-    ++restores;
-    if (down) return veneer::make_error("bridge down (fake)");
-    states_ = s;
-    return {};
-  }
+  std::function<void(int)> after_command;  // another client's change, after the n-th command()
   std::vector<veneerd::LampState> states_;
-  int sets = 0, restores = 0, fail_on_set = 0;
+  int sets = 0, reads = 0, fail_on_set = 0;
   bool down = false;
 };
 
@@ -49,6 +53,7 @@ class FakeCamera : public veneerd::Camera {
   veneer::Expected<veneerd::Still> capture() override {
     ++shots;
     if (fail_on_shot == shots) return veneer::make_error("shutter jammed (fake)");
+    if (during_exposure) during_exposure(shots);
     float v = ambient;
     for (int i = 0; i < lamps_.count(); ++i) {
       if (lamps_.states_[i].on) v += 0.1f * (i + 1);
@@ -60,6 +65,7 @@ class FakeCamera : public veneerd::Camera {
   veneer::Expected<std::vector<unsigned char>> preview() override { return std::vector<unsigned char>{0xff, 0xd8}; }
   FakeLamps& lamps_;
   cv::Size size_;
+  std::function<void(int shot)> during_exposure;  // another client's change while the shutter is open
   int shots = 0, fail_on_shot = 0;
   float ambient = 0;
 };

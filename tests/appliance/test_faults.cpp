@@ -69,7 +69,8 @@ struct InProcessRig {
   bool store_is_clean() {
     for (const auto& entry : fs::directory_iterator(dir / "store")) {
       std::string name = entry.path().filename().string();
-      if (name != "token" && name != ".lock" && !daemon->store().find(name)) return false;
+      // lamps-owner.json: the owner's lamp states, kept while they are not back.
+      if (name != "token" && name != ".lock" && name != "lamps-owner.json" && !daemon->store().find(name)) return false;
     }
     return true;
   }
@@ -89,9 +90,6 @@ struct InProcessRig {
 TEST(Faults, BridgeErrorsMidSetFailTheCaptureAndLampsComeBackWhenTheBridgeDoes) {
   InProcessRig rig("bridge-errors");
   ASSERT_TRUE(rig.client);
-  // The rig switches every lamp off when it starts; wait for that first.
-  ASSERT_TRUE(rig.lamps_become(std::vector<bool>(7, false)));
-  std::this_thread::sleep_for(std::chrono::milliseconds(500));
   // The owner had lamp 2 on (another app set it).
   veneerd::LampState owner;
   owner.on = true;
@@ -107,9 +105,15 @@ TEST(Faults, BridgeErrorsMidSetFailTheCaptureAndLampsComeBackWhenTheBridgeDoes) 
   EXPECT_NE(outcome->reason.find("lamp"), std::string::npos) << outcome->reason;
   EXPECT_TRUE(rig.daemon->store().list().empty()) << "no partial set";
   EXPECT_TRUE(rig.store_is_clean());
+  // The owner's states wait on disk, so not even a crash now would lose them.
+  const fs::path owner_file = rig.dir / "store" / "lamps-owner.json";
+  EXPECT_TRUE(fs::exists(owner_file));
   // The bridge comes back: the rig gives the owner's lamps back by itself.
   rig.bridge().fail_next(0, 503);
   EXPECT_TRUE(rig.lamps_become(owners_pattern)) << "lamps restored when the bridge is back";
+  EXPECT_EQ(rig.bridge().lamp("2")->brightness, 120);
+  for (int i = 0; i < 100 && fs::exists(owner_file); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  EXPECT_FALSE(fs::exists(owner_file)) << "dropped once the lamps are back";
   // And the rig captures again.
   auto again = rig.capture(0, nullptr);
   ASSERT_TRUE(again) << again.message();

@@ -191,14 +191,38 @@ VENEER_COMMAND(rig) {
     if (status->parsed()) {
       auto s = client.status();
       if (!s) return fail("status", s.message());
-      std::cout << "rig:        " << s->name << (s->simulated ? " (simulated)" : "") << "\n"
+      std::cout << "rig:        " << s->name << (s->simulated ? " (simulated)" : "")
+                << (s->ready ? ", ready" : ", NOT READY") << "\n"
                 << "camera:     " << (s->camera_connected ? s->camera_model : "not connected") << "\n"
                 << "lamps:      " << s->lamp_count << " (on: ";
       bool any = false;
       for (size_t i = 0; i < s->lamps_on.size(); ++i) {
         if (s->lamps_on[i]) std::cout << (any ? "," : "") << i + 1, any = true;
       }
-      std::cout << (any ? "" : "none") << ")\n"
+      std::cout << (any ? "" : "none");
+      if (s->lamps_age_s >= 0) {
+        char age[32];
+        std::snprintf(age, sizeof age, "%.1f", s->lamps_age_s);
+        std::cout << ", as the bridge reported " << age << " s ago";
+      }
+      std::cout << ")" << (s->holds_lamps ? ", held by the rig until it exits" : "") << "\n";
+      if (!s->lamps_problem.empty()) std::cout << "  problem:  " << s->lamps_problem << "\n";
+      for (size_t i = 0; i < s->lamps.size(); ++i) {
+        const auto& l = s->lamps[i];
+        std::cout << "  " << i + 1 << " (Hue " << l.id << "): ";
+        if (!l.reachable) std::cout << "unreachable, ";
+        if (!l.on) {
+          std::cout << "off\n";
+          continue;
+        }
+        std::cout << "on, bri " << l.brightness << ", ";
+        char colour[64];
+        if (l.colour_mode == "ct") std::snprintf(colour, sizeof colour, "ct %d mired", l.ct);
+        else if (l.colour_mode == "hs") std::snprintf(colour, sizeof colour, "hue %d sat %d", l.hue, l.sat);
+        else std::snprintf(colour, sizeof colour, "xy %.4f %.4f", l.x, l.y);
+        std::cout << colour << "\n";
+      }
+      std::cout
                 << "capturing:  " << (s->capturing ? "yes" : "no") << "\n"
                 << "next press: " << role_name(s->next_role) << "\n"
                 << "sets:       " << s->sets_stored << " stored, " << human_bytes(s->free_bytes) << " free\n"

@@ -3,9 +3,21 @@
 // the API server and the capture button. Device work runs on one worker
 // thread (the devices are serial anyway); live view on its own thread.
 // Events and live frames go out through callbacks that must not block.
+//
+// The lamps belong to their owner (the Hue app, scenes, sensors). veneerd
+// leaves them alone at start and at exit, except to give back what it took:
+// before it first changes a lamp (a capture, or a client's lamp request) it
+// writes the owner's states to `owner_state_file`; a capture restores the
+// states it found when it ends (done, failed or cancelled); at exit the
+// owner's states from that file go back, and the file is removed once the
+// bridge confirms them; a file found at start (a crash or power loss while
+// the rig had the lamps) is restored then. While idle the rig reads the
+// bridge every few seconds, so the status shows the lamps as they are.
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <deque>
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -77,6 +89,8 @@ struct RigOptions {
   Exposure exposure;
   double ambient_warning = 0.05;
   int settle_ms = 150;
+  std::filesystem::path owner_state_file;  // the owner's lamp states while veneerd holds the lamps; empty = not kept
+  double lamp_poll_s = 2.0;                // reading of the bridge while idle [s]; 0 = only around captures
   bool simulated = false;
   SimulatedHooks sim;
 };
@@ -93,7 +107,12 @@ struct RigState {
   bool camera_connected = false;
   std::string camera_model;
   int lamp_count = 0;
-  std::vector<bool> lamps_on;
+  std::vector<bool> lamps_on;          // as the bridge reported them (lamps_age_s ago)
+  std::vector<LampState> lamps;        // the same reading, whole
+  std::vector<std::string> lamp_ids;
+  double lamps_age_s = -1;             // age of that reading [s]; -1 = never read
+  std::string lamps_problem;           // why the lamps can't be used now (key refused, bridge down...); empty = fine
+  bool holds_lamps = false;            // veneerd changed lamps that go back to their owner at exit
   bool capturing = false;
   veneer::Role next_role = veneer::Role::destination;
 };
@@ -136,6 +155,14 @@ class Rig {
   void post(std::function<void()> job);
   void worker_loop();
   void retry_restore();
+  // Reads the bridge into lamps_now_ / lamps_problem_ (worker thread).
+  void refresh_lamps();
+  void note_lamps(const veneer::Expected<std::vector<LampState>>& reading);
+  // The owner's states on disk before the first change (worker thread).
+  veneer::Status save_owner(const std::vector<LampState>& states);
+  void drop_owner();
+  veneer::Expected<std::vector<LampState>> load_owner();
+  void give_back_owner(const char* when);
   void live_loop();
   void run_capture_job(const std::string& id, CaptureRequest request);
 
@@ -147,7 +174,11 @@ class Rig {
   bool capturing_ = false;
   std::string capture_id_;
   veneer::Role next_role_ = veneer::Role::destination;
-  std::vector<bool> lamps_on_;
+  std::vector<LampState> lamps_now_;
+  std::chrono::steady_clock::time_point lamps_read_at_{};
+  std::string lamps_problem_;
+  std::atomic<bool> owner_saved_{false};  // owner_state_file holds the owner's states
+  bool owner_by_capture_ = false;   // ... written by the capture now running or pending restore
   std::string camera_model_;
   bool camera_connected_ = false;
   double mean_step_s_ = 0;

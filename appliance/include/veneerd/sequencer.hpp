@@ -1,9 +1,15 @@
 #pragma once
-// The capture sequence: save the lamps' state, all lamps off -> ambient frame,
-// then for each ring position only that lamp on (full white, same exposure)
-// -> one shot, and finally restore the lamps — also when a step fails or the
-// capture is cancelled. A lamp or camera fault fails the whole capture: a set
-// is never short.
+// The capture sequence: read the owner's lamp states (and have them saved),
+// all lamps off -> ambient frame, then for each ring position only that lamp
+// on (full white, same exposure) -> one shot, and finally restore the owner's
+// states — also when a step fails or the capture is cancelled.
+//
+// The lamps are shared with their owner's apps, so each step's lamp state is
+// proven, not assumed: commanded from a reading of the bridge and read back
+// before the exposure (Lamps::ensure), and read again after it; a frame
+// during which another client changed a lamp is taken again, and a set whose
+// lamps will not hold still fails. A lamp or camera fault fails the whole
+// capture: a set is never short and never silently wrong.
 #include <atomic>
 #include <functional>
 #include <string>
@@ -28,12 +34,17 @@ struct CapturePlan {
   std::vector<cv::Vec3d> lamp_positions;  // per ring position, rig frame [m]
   double ambient_warning = 0.05;          // ambient mean (of full scale) that warns
   double expected_shot_s = 1.0;           // first guess of one step's duration, for the ETA
+  int lamp_attempts = 3;                  // commands + read-backs per step before the lamps count as taken over
+  int shot_attempts = 3;                  // exposures per step while another client keeps changing a lamp
 };
 
 struct CaptureHooks {
   // k of n shots done (the ambient frame is shot 1), estimated seconds left.
   std::function<void(int k, int n, double eta_s)> on_shot;
   const std::atomic<bool>* cancel = nullptr;
+  // Called with the owner's lamp states before any lamp is touched, to keep
+  // them where a crash cannot lose them; an error stops the capture.
+  std::function<veneer::Status(const std::vector<LampState>&)> save_owner_state;
 };
 
 struct CaptureResult;
@@ -49,6 +60,8 @@ struct CaptureResult {
   veneer::ImageSet set;      // lights, images, ambient, camera info, warnings; no truth
   double seconds = 0;        // wall time of the whole sequence
   double mean_step_s = 0;    // mean time of one lamp step (switch + settle + shot)
+  int retakes = 0;           // frames taken again because another client changed a lamp
+  bool restored = false;     // the owner's lamp states are back (proven)
 };
 
 // Runs the sequence. Errors name the step ("lamp 3 (Hue id 5): ...",

@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <atomic>
 #include <cerrno>
 #include <condition_variable>
@@ -47,16 +48,57 @@ struct LampSlot {
   LampState target() const { return pending.empty() ? applied : pending.back().state; }
 };
 
+// The chromaticity a lamp shows in ct mode: the Planckian locus (Kim et al.'s
+// cubic fit), as a bridge reports xy for every mode.
+void xy_of_ct(int mired, double& x, double& y) {
+  double t = 1e6 / std::clamp(mired, 153, 500);
+  double t2 = t * t, t3 = t2 * t;
+  x = t <= 4000 ? -0.2661239e9 / t3 - 0.2343589e6 / t2 + 0.8776956e3 / t + 0.179910
+                : -3.0258469e9 / t3 + 2.1070379e6 / t2 + 0.2226347e3 / t + 0.240390;
+  double x2 = x * x, x3 = x2 * x;
+  y = t <= 2222 ? -1.1063814 * x3 - 1.34811020 * x2 + 2.18555832 * x - 0.20219683
+      : t <= 4000 ? -0.9549476 * x3 - 1.37418593 * x2 + 2.09137015 * x - 0.16748867
+                  : 3.0817580 * x3 - 5.87338670 * x2 + 3.75112997 * x - 0.37001483;
+}
+
+// The chromaticity of hue/sat mode: the HSV colour in linear sRGB primaries.
+void xy_of_hs(int hue, int sat, double& x, double& y) {
+  double h = std::clamp(hue, 0, 65535) / 65536.0 * 6.0, s = std::clamp(sat, 0, 254) / 254.0;
+  int sector = static_cast<int>(h);
+  double f = h - sector, p = 1 - s, q = 1 - s * f, t = 1 - s * (1 - f);
+  double r = 1, g = 1, b = 1;
+  switch (sector % 6) {
+    case 0: r = 1, g = t, b = p; break;
+    case 1: r = q, g = 1, b = p; break;
+    case 2: r = p, g = 1, b = t; break;
+    case 3: r = p, g = q, b = 1; break;
+    case 4: r = t, g = p, b = 1; break;
+    default: r = 1, g = p, b = q; break;
+  }
+  double X = 0.4124 * r + 0.3576 * g + 0.1805 * b, Y = 0.2126 * r + 0.7152 * g + 0.0722 * b,
+         Z = 0.0193 * r + 0.1192 * g + 0.9505 * b;
+  double sum = std::max(X + Y + Z, 1e-9);
+  x = X / sum;
+  y = Y / sum;
+}
+
+// A state given whole (another app, a test): xy follows its colour mode.
+LampState with_reported_xy(LampState s) {
+  if (s.mode == ColourMode::ct) xy_of_ct(s.ct, s.x, s.y);
+  if (s.mode == ColourMode::hs) xy_of_hs(s.hue, s.sat, s.x, s.y);
+  return s;
+}
+
 json state_json(const LampState& s) {
   return json{{"on", s.on},
               {"bri", s.brightness},
-              {"hue", 8418},
-              {"sat", 140},
+              {"hue", s.hue},
+              {"sat", s.sat},
               {"effect", "none"},
-              {"xy", {s.x, s.y}},
-              {"ct", 366},
+              {"xy", {std::round(s.x * 1e4) / 1e4, std::round(s.y * 1e4) / 1e4}},
+              {"ct", s.ct},
               {"alert", "none"},
-              {"colormode", "xy"},
+              {"colormode", colour_mode_name(s.mode)},
               {"mode", "homeautomation"},
               {"reachable", s.reachable}};
 }
@@ -135,6 +177,12 @@ struct HueBridgeEmulator::Impl {
   int fail_count = 0, fail_status = 503;
   int hue_error_count = 0, hue_error_type = 901;
   int drop_count = 0;
+  struct Interference {
+    int after = 0;  // light commands still to come before it
+    std::string id;
+    LampState state;
+  };
+  std::vector<Interference> interferences;
   HueEmulatorCounters counters;
   std::atomic<int> in_flight{0};
   uint64_t user_serial = 0;
@@ -259,12 +307,27 @@ struct HueBridgeEmulator::Impl {
         if (!(x >= 0 && x <= 1 && y >= 0 && y <= 1)) { invalid(); continue; }
         state.x = x;
         state.y = y;
+        state.mode = ColourMode::xy;
         out.push_back(json{{"success", {{address, json::array({x, y})}}}});
       } else if (key == "transitiontime") {
         if (!v.is_number_integer() || v.get<int64_t>() < 0 || v.get<int64_t>() > 65535) { invalid(); continue; }
         out.push_back(json{{"success", {{address, v}}}});
-      } else if (key == "hue" || key == "sat" || key == "ct" || key == "bri_inc") {
+      } else if (key == "ct") {
+        if (!v.is_number_integer() || v.get<int64_t>() < 153 || v.get<int64_t>() > 500) { invalid(); continue; }
+        state.ct = static_cast<int>(v.get<int64_t>());
+        state.mode = ColourMode::ct;
+        xy_of_ct(state.ct, state.x, state.y);
+        out.push_back(json{{"success", {{address, state.ct}}}});
+      } else if (key == "hue" || key == "sat") {
+        const int64_t hi = key == "hue" ? 65535 : 254;
+        if (!v.is_number_integer() || v.get<int64_t>() < 0 || v.get<int64_t>() > hi) { invalid(); continue; }
+        (key == "hue" ? state.hue : state.sat) = static_cast<int>(v.get<int64_t>());
+        state.mode = ColourMode::hs;
+        xy_of_hs(state.hue, state.sat, state.x, state.y);
+        out.push_back(json{{"success", {{address, v}}}});
+      } else if (key == "bri_inc") {
         if (!v.is_number_integer()) { invalid(); continue; }
+        state.brightness = static_cast<int>(std::clamp<int64_t>(state.brightness + v.get<int64_t>(), 1, 254));
         out.push_back(json{{"success", {{address, v}}}});
       } else if (key == "alert" || key == "effect") {
         if (!v.is_string()) { invalid(); continue; }
@@ -360,6 +423,19 @@ struct HueBridgeEmulator::Impl {
         LampState target = lamp->target();
         json answer = apply_body(body, prefix, target, true);
         lamp->pending.push_back({now + apply_delay, target});
+        // Another client's change, scheduled to land right after this command.
+        for (auto it = interferences.begin(); it != interferences.end();) {
+          if (--it->after > 0) {
+            ++it;
+            continue;
+          }
+          if (LampSlot* other = find_lamp(it->id)) {
+            LampState st = it->state;
+            st.reachable = other->target().reachable;
+            other->pending.push_back({now + apply_delay, st});
+          }
+          it = interferences.erase(it);
+        }
         return json_response(answer);
       }
       return not_available();
@@ -656,8 +732,13 @@ void HueBridgeEmulator::set_lamp(const std::string& id, const LampState& state) 
   std::lock_guard lock(impl_->mutex);
   if (LampSlot* l = impl_->find_lamp(id)) {
     l->pending.clear();
-    l->applied = state;
+    l->applied = with_reported_xy(state);
   }
+}
+
+void HueBridgeEmulator::interfere_after(int light_commands, const std::string& id, const LampState& state) {
+  std::lock_guard lock(impl_->mutex);
+  impl_->interferences.push_back({std::max(1, light_commands), id, with_reported_xy(state)});
 }
 
 void HueBridgeEmulator::set_reachable(const std::string& id, bool reachable) {

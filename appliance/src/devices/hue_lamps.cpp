@@ -22,7 +22,6 @@ using detail::HttpResult;
 namespace {
 
 constexpr const char* kLog = "Lamps";
-constexpr double kRigX = 0.3227, kRigY = 0.329;  // rig white (LampState defaults)
 
 // At most `count` events in any `window` (the bridge counts per second).
 class SlidingWindow {
@@ -46,10 +45,6 @@ class SlidingWindow {
   Clock::duration window_{};
   std::deque<Clock::time_point> times_;
 };
-
-bool same_colour(const LampState& a, double x, double y) {
-  return std::abs(a.x - x) < 1e-4 && std::abs(a.y - y) < 1e-4;
-}
 
 std::string ms(Clock::duration d) {
   return std::to_string(std::chrono::duration_cast<std::chrono::milliseconds>(d).count()) + " ms";
@@ -75,6 +70,7 @@ veneer::Status HueLampsOptions::check() const {
   if (!group.empty() && group.find_first_of(" /?#") != std::string::npos)
     return veneer::make_error("hue lamps: 'group' = '" + group + "' is not a group id");
   if (settle_ms < 0 || settle_ms > 10000) return veneer::make_error("hue lamps: 'settle_ms' must be 0..10000, got " + std::to_string(settle_ms));
+  if (confirm_ms < 0 || confirm_ms > 60000) return veneer::make_error("hue lamps: 'confirm_ms' must be 0..60000, got " + std::to_string(confirm_ms));
   if (timeout_ms < 50 || timeout_ms > 60000) return veneer::make_error("hue lamps: 'timeout_ms' must be 50..60000, got " + std::to_string(timeout_ms));
   if (!(light_rate > 0 && light_rate <= 50)) return veneer::make_error("hue lamps: 'light_rate' must be in (0, 50]");
   if (!(group_rate > 0 && group_rate <= 10)) return veneer::make_error("hue lamps: 'group_rate' must be in (0, 10]");
@@ -106,13 +102,10 @@ veneer::Expected<HueLampsOptions> HueLampsOptions::from_json(const json& s) {
   };
   for (auto st : {get_string("bridge", o.bridge), get_string("key", o.key), get_string("group", o.group),
                   get_int("settle_ms", o.settle_ms), get_int("timeout_ms", o.timeout_ms),
+                  get_int("confirm_ms", o.confirm_ms),
                   get_double("light_rate", o.light_rate), get_double("group_rate", o.group_rate),
                   get_int("max_in_flight", o.max_in_flight)})
     if (!st) return st.error();
-  if (s.contains("verify_reachable")) {
-    if (!s["verify_reachable"].is_boolean()) return veneer::make_error("hue lamps: 'verify_reachable' must be true or false");
-    o.verify_reachable = s["verify_reachable"].get<bool>();
-  }
   if (s.contains("lamps")) {
     if (!s["lamps"].is_array()) return veneer::make_error("hue lamps: 'lamps' must be an array of light ids");
     for (const auto& v : s["lamps"]) {
@@ -128,9 +121,8 @@ veneer::Expected<HueLampsOptions> HueLampsOptions::from_json(const json& s) {
 json HueLampsOptions::to_json() const {
   json j{{"bridge", bridge},         {"key", key},
          {"lamps", lamps},           {"settle_ms", settle_ms},
-         {"timeout_ms", timeout_ms}, {"light_rate", light_rate},
-         {"group_rate", group_rate}, {"max_in_flight", max_in_flight},
-         {"verify_reachable", verify_reachable}};
+         {"timeout_ms", timeout_ms}, {"confirm_ms", confirm_ms}, {"light_rate", light_rate},
+         {"group_rate", group_rate}, {"max_in_flight", max_in_flight}};
   if (!group.empty()) j["group"] = group;
   return j;
 }
@@ -167,16 +159,21 @@ struct HueLamps::Impl {
   HttpClient client;
   SlidingWindow light_window;
   SlidingWindow group_window;
-  std::vector<std::optional<LampState>> known;  // what we last commanded (acked)
   HueLampsStats stats;
 
   explicit Impl(const HueLampsOptions& o)
-      : options(o), light_window(o.light_rate), group_window(o.group_rate), known(o.lamps.size()) {
+      : options(o), light_window(o.light_rate), group_window(o.group_rate) {
     base = "http://" + o.bridge + "/api/" + o.key;
   }
 
   std::string lamp_label(int i) const {
-    return "lamp '" + options.lamps[i] + "' (ring position " + std::to_string(i + 1) + ")";
+    return "lamp " + std::to_string(i + 1) + " (Hue id " + options.lamps[i] + ")";
+  }
+
+  std::string key_refused() const {
+    return "the Hue bridge " + options.bridge + " refused the key '" + options.key +
+           "' (error 1, unauthorized user): pair the rig again with `veneerd hue pair --address " + options.bridge +
+           "` (press the bridge's link button) and put the key it prints into the config's lamps.key";
   }
 
   struct Command {
@@ -200,9 +197,7 @@ struct HueLamps::Impl {
   veneer::Status explain_results(const Command& c, const std::vector<HueResult>& results) {
     for (const auto& r : results) {
       if (r.success) continue;
-      if (r.error_type == 1)
-        return veneer::make_error("Hue bridge " + options.bridge + " refused key '" + options.key +
-                                  "' (error 1, unauthorized user): pair the rig with the bridge again");
+      if (r.error_type == 1) return veneer::make_error(key_refused());
       if (r.error_type == 3)
         return veneer::make_error(who(c) + ": the bridge " + options.bridge + " has no such resource (error 3, " +
                                   r.description + ")");
@@ -227,8 +222,17 @@ struct HueLamps::Impl {
       auto now = Clock::now();
       Clock::time_point wake = now + std::chrono::milliseconds(50);
       // Start what the limits allow, in order.
+      // A lamp's commands go one at a time, in order: two in flight could
+      // overtake each other (its colour landing after its "off").
+      std::vector<int> lamp_busy;
+      for (Command* a : active) lamp_busy.push_back(a->lamp);
       for (auto it = queue.begin(); it != queue.end() && client.active() < options.max_in_flight;) {
         Command* c = *it;
+        if (c->lamp >= 0 && std::find(lamp_busy.begin(), lamp_busy.end(), c->lamp) != lamp_busy.end()) {
+          ++it;
+          continue;
+        }
+        lamp_busy.push_back(c->lamp);
         if (c->attempts == 0) c->deadline = now + timeout;
         if (now >= c->deadline) {
           failure = veneer::make_error(who(*c) + ": the Hue bridge " + options.bridge + " did not acknowledge PUT " +
@@ -313,12 +317,7 @@ struct HueLamps::Impl {
       }
     }
     if (!failure.ok()) {
-      client.cancel_all();
-      // Whatever was in flight may or may not have happened.
-      for (auto& c : commands)
-        if (!c.done && c.lamp >= 0) known[c.lamp].reset();
-      if (std::any_of(commands.begin(), commands.end(), [](const Command& c) { return c.group && !c.done; }))
-        for (auto& k : known) k.reset();
+      client.cancel_all();  // whatever was in flight may or may not have happened: the next reading tells
       VLOG_WARN(kLog, "{}", failure.message());
     }
     return failure;
@@ -342,9 +341,7 @@ struct HueLamps::Impl {
           auto parsed = parse_hue_results(r.body);
           if (parsed) {
             for (const auto& e : *parsed) {
-              if (e.error_type == 1)
-                return veneer::make_error("Hue bridge " + options.bridge + " refused key '" + options.key +
-                                          "' (error 1, unauthorized user): pair the rig with the bridge again");
+              if (e.error_type == 1) return veneer::make_error(key_refused());
               if (!e.success)
                 return veneer::make_error("Hue bridge " + options.bridge + ": error " + std::to_string(e.error_type) +
                                           " for GET " + path + ": " + e.description);
@@ -373,113 +370,116 @@ struct HueLamps::Impl {
       int idx = static_cast<int>(i);
       auto it = lights->find(options.lamps[i]);
       if (it == lights->end() || !it->is_object())
-        return veneer::make_error(lamp_label(idx) + " is not known to the Hue bridge " + options.bridge);
-      const json& st = (*it)["state"];
-      if (!st.is_object()) return veneer::make_error(lamp_label(idx) + ": the bridge reports no state");
+        return veneer::make_error(lamp_label(idx) + " is not known to the Hue bridge " + options.bridge +
+                                  ": list its lamps with `veneerd hue lamps --address " + options.bridge +
+                                  " --key KEY` and correct the config's lamps.lamps");
+      auto st_it = it->find("state");
+      if (st_it == it->end() || !st_it->is_object())
+        return veneer::make_error(lamp_label(idx) + ": the bridge reports no state");
+      const json& st = *st_it;
       LampState s;
-      if (st.contains("on") && st["on"].is_boolean()) s.on = st["on"].get<bool>();
-      if (st.contains("bri") && st["bri"].is_number_integer()) s.brightness = std::clamp(st["bri"].get<int>(), 1, 254);
-      if (st.contains("xy") && st["xy"].is_array() && st["xy"].size() == 2 && st["xy"][0].is_number() &&
-          st["xy"][1].is_number()) {
-        s.x = st["xy"][0].get<double>();
-        s.y = st["xy"][1].get<double>();
+      auto integer = [&](const char* key, int lo, int hi, int& out_value) {
+        auto f = st.find(key);
+        if (f == st.end() || !f->is_number()) return false;
+        out_value = static_cast<int>(std::clamp<double>(std::round(f->get<double>()), lo, hi));
+        return true;
+      };
+      if (auto f = st.find("on"); f != st.end() && f->is_boolean()) s.on = f->get<bool>();
+      integer("bri", 1, 254, s.brightness);
+      s.has_xy = false;
+      if (auto f = st.find("xy"); f != st.end() && f->is_array() && f->size() == 2 && (*f)[0].is_number() &&
+                                  (*f)[1].is_number()) {
+        s.x = (*f)[0].get<double>();
+        s.y = (*f)[1].get<double>();
+        s.has_xy = true;
       }
-      if (st.contains("reachable") && st["reachable"].is_boolean()) s.reachable = st["reachable"].get<bool>();
+      s.has_ct = integer("ct", 153, 500, s.ct);
+      bool has_hs = integer("hue", 0, 65535, s.hue) && integer("sat", 0, 254, s.sat);
+      std::string mode;
+      if (auto f = st.find("colormode"); f != st.end() && f->is_string()) mode = f->get<std::string>();
+      if (mode == "ct" && s.has_ct) s.mode = ColourMode::ct;
+      else if (mode == "hs" && has_hs) s.mode = ColourMode::hs;
+      else if (s.has_xy) s.mode = ColourMode::xy;
+      else if (s.has_ct) s.mode = ColourMode::ct;
+      if (auto f = st.find("reachable"); f != st.end() && f->is_boolean()) s.reachable = f->get<bool>();
       out.push_back(s);
     }
     return out;
   }
 
-  std::string lamp_name(const json& lights, int i) const {
-    auto it = lights.find(options.lamps[i]);
-    if (it != lights.end() && it->is_object() && it->contains("name") && (*it)["name"].is_string())
-      return " '" + (*it)["name"].get<std::string>() + "'";
-    return "";
-  }
-
-  // Waits out the settle time after the last ack; checks reachability meanwhile.
-  veneer::Status settle(Clock::time_point acked, bool check_reachable) {
-    veneer::Status status;
-    if (options.verify_reachable && check_reachable) {
-      auto lights = get("/lights");
-      if (!lights) {
-        status = lights.error();
-      } else if (lights->is_object()) {
-        for (std::size_t i = 0; i < options.lamps.size(); ++i) {
-          auto it = lights->find(options.lamps[i]);
-          if (it == lights->end()) {
-            status = veneer::make_error(lamp_label(static_cast<int>(i)) + " is not known to the Hue bridge " + options.bridge);
-            break;
-          }
-          const json& st = (*it)["state"];
-          if (st.is_object() && st.contains("reachable") && st["reachable"].is_boolean() && !st["reachable"].get<bool>()) {
-            status = veneer::make_error(lamp_label(static_cast<int>(i)) + lamp_name(*lights, static_cast<int>(i)) +
-                                        " is unreachable (no power, or out of the bridge's range): the shot would "
-                                        "be taken without it");
-            known[i].reset();
-            break;
-          }
-        }
-      }
+  // The colour part of a body, in the wanted mode (ct on a lamp without xy).
+  static void put_colour(json& body, const LampState& want, const LampState& lamp) {
+    if (!lamp.has_xy && !lamp.has_ct) return;
+    ColourMode mode = want.mode;
+    if (!lamp.has_xy && mode != ColourMode::ct) mode = ColourMode::ct;
+    switch (mode) {
+      case ColourMode::xy: body["xy"] = {want.x, want.y}; break;
+      case ColourMode::ct: body["ct"] = std::clamp(want.ct, 153, 500); break;
+      case ColourMode::hs:
+        body["hue"] = std::clamp(want.hue, 0, 65535);
+        body["sat"] = std::clamp(want.sat, 0, 254);
+        break;
     }
-    std::this_thread::sleep_until(acked + std::chrono::milliseconds(options.settle_ms));
-    if (!status) VLOG_WARN(kLog, "{}", status.message());
-    return status;
   }
 
-  Command light_command(int i, const LampState& s) {
+  Command light_command(int i, json body) {
     Command c;
     c.path = "/lights/" + options.lamps[i] + "/state";
     c.lamp = i;
-    if (s.on)
-      c.body = json{{"on", true}, {"bri", std::clamp(s.brightness, 1, 254)}, {"xy", {s.x, s.y}}, {"transitiontime", 0}};
-    else
-      c.body = json{{"on", false}, {"transitiontime", 0}};
+    c.body = std::move(body);
     return c;
   }
 
-  veneer::Status apply(const std::vector<LampState>& want, bool check_reachable) {
+  veneer::Status command(const std::vector<LampState>& now, const std::vector<LampState>& want) {
+    if (want.size() != options.lamps.size() || now.size() != options.lamps.size())
+      return veneer::make_error("hue lamps: " + std::to_string(want.size()) + " states for " +
+                                std::to_string(options.lamps.size()) + " lamps");
     std::vector<Command> commands;
-    std::vector<LampState> after = want;
-    for (std::size_t i = 0; i < want.size(); ++i) {
-      const auto& k = known[i];
-      bool needed = !k || k->on != want[i].on ||
-                    (want[i].on && (k->brightness != want[i].brightness || !same_colour(*k, want[i].x, want[i].y)));
-      if (needed) commands.push_back(light_command(static_cast<int>(i), want[i]));
+    std::vector<int> plain_off;  // lamps that only need switching off
+    for (std::size_t k = 0; k < want.size(); ++k) {
+      int i = static_cast<int>(k);
+      const LampState& w = want[k];
+      const LampState& n = now[k];
+      if (w.on) {
+        if (n.on && same_colour(n, w)) continue;
+        json body{{"on", true}, {"bri", std::clamp(w.brightness, 1, 254)}};
+        put_colour(body, w, n);
+        body["transitiontime"] = 0;
+        commands.push_back(light_command(i, std::move(body)));
+      } else if (n.on) {
+        if (!same_colour(n, w)) {
+          // While it is still on: the look its owner expects when it next comes on.
+          json body{{"bri", std::clamp(w.brightness, 1, 254)}};
+          put_colour(body, w, n);
+          body["transitiontime"] = 0;
+          commands.push_back(light_command(i, std::move(body)));
+          commands.push_back(light_command(i, json{{"on", false}, {"transitiontime", 0}}));
+        } else {
+          plain_off.push_back(i);
+        }
+      }
     }
-    if (commands.empty()) return {};
-    auto status = run(std::move(commands));
-    if (!status) return status;
-    auto acked = Clock::now();
-    for (std::size_t i = 0; i < want.size(); ++i) known[i] = after[i];
-    return settle(acked, check_reachable);
-  }
-
-  // Every ring lamp off: one group command when a group is configured and the
-  // group window allows it now, else one light command per lamp not known off.
-  veneer::Status all_off() {
-    int need = 0;
-    for (const auto& k : known) need += (!k || k->on) ? 1 : 0;
-    if (need == 0) return {};
-    auto now = Clock::now();
-    if (!options.group.empty() && need >= 2 && group_window.next_allowed(now) <= now) {
+    const bool all_off = std::none_of(want.begin(), want.end(), [](const LampState& w) { return w.on; });
+    auto now_t = Clock::now();
+    if (all_off && !options.group.empty() && plain_off.size() >= 2 && commands.empty() &&
+        group_window.next_allowed(now_t) <= now_t) {
       Command c;
       c.path = "/groups/" + options.group + "/action";
       c.group = true;
       c.body = json{{"on", false}, {"transitiontime", 0}};
-      std::vector<Command> commands;
-      commands.push_back(std::move(c));
-      auto status = run(std::move(commands));
-      if (status) {
-        auto acked = Clock::now();
-        for (auto& k : known) k = LampState{.on = false};
-        return settle(acked, true);
+      std::vector<Command> group;
+      group.push_back(std::move(c));
+      if (auto st = run(std::move(group)); st) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(options.settle_ms));
+        return {};
       }
-      VLOG_WARN(kLog, "group '{}' off failed ({}); switching lamps off one by one", options.group, status.message());
+      VLOG_WARN(kLog, "group '{}' off failed; switching lamps off one by one", options.group);
     }
-    std::vector<LampState> want(options.lamps.size());
-    for (auto& w : want) w.on = false;
-    return apply(want, true);
+    for (int i : plain_off) commands.push_back(light_command(i, json{{"on", false}, {"transitiontime", 0}}));
+    if (commands.empty()) return {};
+    if (auto st = run(std::move(commands)); !st) return st;
+    std::this_thread::sleep_for(std::chrono::milliseconds(options.settle_ms));
+    return {};
   }
 };
 
@@ -493,48 +493,36 @@ veneer::Expected<std::unique_ptr<HueLamps>> HueLamps::create(const HueLampsOptio
 
 int HueLamps::count() const { return static_cast<int>(impl_->options.lamps.size()); }
 const HueLampsOptions& HueLamps::options() const { return impl_->options; }
+std::string HueLamps::label(int i) const {
+  if (i < 0 || i >= count()) return Lamps::label(i);
+  return impl_->lamp_label(i);
+}
 
 veneer::Expected<std::vector<LampState>> HueLamps::read() {
   std::lock_guard lock(impl_->mutex);
   return impl_->read_all();
 }
 
-veneer::Status HueLamps::set(const std::vector<bool>& on, int brightness) {
+veneer::Status HueLamps::command(const std::vector<LampState>& now, const std::vector<LampState>& want) {
   std::lock_guard lock(impl_->mutex);
-  if (static_cast<int>(on.size()) != count())
-    return veneer::make_error("hue lamps: set() got " + std::to_string(on.size()) + " values for " +
-                              std::to_string(count()) + " lamps");
-  if (std::none_of(on.begin(), on.end(), [](bool b) { return b; })) return impl_->all_off();
-  std::vector<LampState> want(on.size());
-  for (std::size_t i = 0; i < on.size(); ++i) {
-    want[i].on = on[i];
-    want[i].brightness = std::clamp(brightness, 1, 254);
-    want[i].x = kRigX;
-    want[i].y = kRigY;
-  }
-  return impl_->apply(want, true);
+  return impl_->command(now, want);
 }
 
-veneer::Status HueLamps::all_off() {
+veneer::Expected<std::string> HueLamps::check_bridge() {
   std::lock_guard lock(impl_->mutex);
-  return impl_->all_off();
-}
-
-veneer::Status HueLamps::restore(const std::vector<LampState>& states) {
-  std::lock_guard lock(impl_->mutex);
-  if (static_cast<int>(states.size()) != count())
-    return veneer::make_error("hue lamps: restore() got " + std::to_string(states.size()) + " states for " +
-                              std::to_string(count()) + " lamps");
-  std::vector<LampState> want = states;
-  for (auto& w : want) w.brightness = std::clamp(w.brightness, 1, 254);
-  // The owner's states go out whatever we believe the lamps show.
-  for (auto& k : impl_->known) k.reset();
-  return impl_->apply(want, false);
-}
-
-void HueLamps::invalidate() {
-  std::lock_guard lock(impl_->mutex);
-  for (auto& k : impl_->known) k.reset();
+  auto config = impl_->get("/config");
+  if (!config) return config.error();
+  // A bridge answers /config without a valid key too, with only a few fields:
+  // the whitelist (or the lights) tell a known user.
+  auto lights = impl_->get("/lights");
+  if (!lights) return lights.error();
+  std::string name = config->is_object() && config->contains("name") && (*config)["name"].is_string()
+                         ? (*config)["name"].get<std::string>()
+                         : "Hue bridge";
+  std::string api = config->is_object() && config->contains("apiversion") && (*config)["apiversion"].is_string()
+                        ? (*config)["apiversion"].get<std::string>()
+                        : "?";
+  return name + " at " + impl_->options.bridge + " (API " + api + ")";
 }
 
 HueLampsStats HueLamps::stats() const {

@@ -261,7 +261,6 @@ veneer::Expected<std::unique_ptr<SimulatedCamera>> SimulatedCamera::create(const
   impl->options = options;
   HueLampsOptions reader = options.bridge;
   reader.settle_ms = 0;
-  reader.verify_reachable = false;
   auto lamps = HueLamps::create(reader);
   if (!lamps) return lamps.error();
   impl->bridge = std::move(*lamps);

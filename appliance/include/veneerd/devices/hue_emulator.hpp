@@ -6,7 +6,9 @@
 //
 //   GET  /api/<key>/lights            all lamps
 //   GET  /api/<key>/lights/<id>       one lamp
-//   PUT  /api/<key>/lights/<id>/state {"on","bri","xy","transitiontime",...}
+//   PUT  /api/<key>/lights/<id>/state {"on","bri","xy"|"ct"|"hue"+"sat","bri_inc","transitiontime",...}
+// Lamps keep a colour mode (colormode xy, ct or hs, set by the last colour
+// parameter) and report xy for every mode, as a bridge does.
 //   GET  /api/<key>/groups            groups ("0" = every lamp)
 //   GET  /api/<key>/groups/<g>
 //   PUT  /api/<key>/groups/<g>/action
@@ -82,6 +84,10 @@ class HueBridgeEmulator {
   std::optional<LampState> lamp(const std::string& id) const;
   std::vector<bool> on_pattern() const;                          // lamps "1".."N" on?
   void set_lamp(const std::string& id, const LampState& state);  // as another app would
+  // Another app's change to lamp `id`, landing just after the `light_commands`-th
+  // light command accepted from now on (to switch or colour a lamp mid-set at a
+  // known step). Colour modes: state.mode with its values, as a client would set.
+  void interfere_after(int light_commands, const std::string& id, const LampState& state);
   void set_reachable(const std::string& id, bool reachable);
   void press_link_button();                                      // next pairing succeeds (30 s)
 

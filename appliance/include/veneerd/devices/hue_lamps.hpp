@@ -4,23 +4,28 @@
 // What the bridge is like, and what this class does about it:
 //  - ~10 light commands/s and 1 group command/s, 429/503 beyond that or with
 //    more than ~3 requests in flight: commands are paced by sliding windows
-//    below those limits, at most 3 are in flight, and 429/503 are retried with
-//    back-off;
-//  - it rejects bri/xy sent to a lamp that is off unless "on" is in the same
-//    body: every "on" command carries on, bri, xy and transitiontime 0 (the rig
-//    colour goes out on every switch, since lamps remember other apps' colours);
-//  - it acknowledges before the lamp has changed: set() waits settle_ms after
-//    the last ack;
-//  - only lamps whose state changes are commanded (lamp i -> lamp i+1 costs two
-//    light commands); "all off" uses the group when one is configured;
-//  - an unreachable lamp is an error naming the lamp (and its ring position).
+//    below those limits, at most 3 are in flight (never two for one lamp, so
+//    they take effect in the order sent), and 429/503 are retried with back-off;
+//  - its lamps are shared: the Hue app, scenes and sensors switch them at any
+//    time, so what to send is decided from a reading of the bridge
+//    (Lamps::ensure reads, commands the difference and reads back), never from
+//    a record of what this class sent earlier;
+//  - it rejects bri and colour sent to a lamp that is off unless "on" is in
+//    the same body: every "on" command carries on, bri, the colour in the
+//    wanted mode (xy, ct or hue/sat) and transitiontime 0; a lamp to be
+//    switched off that should keep another colour gets that colour first,
+//    while it is still on;
+//  - it acknowledges before the lamp has changed: command() waits settle_ms
+//    after the last ack;
+//  - "all off" uses the group when one is configured and two or more lamps
+//    need it.
 //
 // Config section (JSON):
 //   {"bridge": "127.0.0.1:8080", "key": "<whitelisted user>",
 //    "lamps": ["1","2",...]   Hue light ids in ring-position order,
-//    "group": "0"             optional, for "all off",
-//    "settle_ms": 150, "timeout_ms": 2000,
-//    "light_rate": 8, "group_rate": 0.9, "max_in_flight": 3, "verify_reachable": true}
+//    "group": "1"             optional, a group holding exactly the ring lamps, for "all off",
+//    "settle_ms": 150, "timeout_ms": 2000, "confirm_ms": 1000,
+//    "light_rate": 8, "group_rate": 0.9, "max_in_flight": 3}
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -41,10 +46,10 @@ struct HueLampsOptions {
   std::string group;                // group id for "all off"; empty = none
   int settle_ms = 150;              // wait after the last ack [ms]
   int timeout_ms = 2000;            // per command, retries included [ms]
+  int confirm_ms = 1000;            // a commanded change may take this long to show in the bridge's readings [ms]
   double light_rate = 8.0;          // light commands per second we allow ourselves (bridge: ~10)
   double group_rate = 0.9;          // group commands per second (bridge: 1)
   int max_in_flight = 3;            // concurrent requests (bridge: ~3)
-  bool verify_reachable = true;     // GET /lights during the settle wait; unreachable -> error
   veneer::Status check() const;
   static veneer::Expected<HueLampsOptions> from_json(const nlohmann::json& section);
   nlohmann::json to_json() const;
@@ -76,13 +81,13 @@ class HueLamps : public Lamps {
 
   std::string name() const override { return "hue"; }
   int count() const override;
+  std::string label(int i) const override;
+  int confirm_ms() const override { return options().confirm_ms; }
   veneer::Expected<std::vector<LampState>> read() override;
-  veneer::Status set(const std::vector<bool>& on, int brightness = 254) override;
-  veneer::Status restore(const std::vector<LampState>& states) override;
-  veneer::Status all_off() override;
-
-  // Forget what we believe the lamps show, so the next set() commands every lamp.
-  void invalidate();
+  veneer::Status command(const std::vector<LampState>& now, const std::vector<LampState>& want) override;
+  // The bridge's answer to GET /config with this key: its name and API
+  // version, or why not (unreachable, key refused with the fix).
+  veneer::Expected<std::string> check_bridge();
   HueLampsStats stats() const;
   const HueLampsOptions& options() const;
 

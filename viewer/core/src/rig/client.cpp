@@ -122,6 +122,24 @@ RigStatus convert(const pb::RigStatus& s) {
   r.camera_model = s.camera_model();
   r.lamp_count = static_cast<int>(s.lamp_count());
   r.lamps_on.assign(s.lamps_on().begin(), s.lamps_on().end());
+  for (const auto& l : s.lamps()) {
+    LampReading x;
+    x.id = l.id();
+    x.on = l.on();
+    x.brightness = static_cast<int>(l.brightness());
+    x.colour_mode = l.colour_mode();
+    x.x = l.x();
+    x.y = l.y();
+    x.ct = static_cast<int>(l.ct());
+    x.hue = static_cast<int>(l.hue());
+    x.sat = static_cast<int>(l.sat());
+    x.reachable = l.reachable();
+    r.lamps.push_back(std::move(x));
+  }
+  r.lamps_age_s = s.lamps_age_s();
+  r.lamps_problem = s.lamps_problem();
+  r.holds_lamps = s.holds_lamps();
+  r.ready = s.ready();
   r.capturing = s.capturing();
   r.you_control = s.you_control();
   r.controller_taken = s.controller_taken();

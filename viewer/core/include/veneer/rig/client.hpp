@@ -40,13 +40,29 @@ struct Endpoint {
 // Reads an access token file (the rig keeps it in <store>/token).
 Expected<std::string> read_token_file(const std::filesystem::path& file);
 
+// One lamp as the rig's Hue bridge reported it.
+struct LampReading {
+  std::string id;
+  bool on = false;
+  int brightness = 0;
+  std::string colour_mode;  // "xy", "ct", "hs"
+  double x = 0, y = 0;
+  int ct = 0, hue = 0, sat = 0;
+  bool reachable = true;
+};
+
 struct RigStatus {
   std::string name;
   bool simulated = false;
   bool camera_connected = false;
   std::string camera_model;
   int lamp_count = 0;
-  std::vector<bool> lamps_on;
+  std::vector<bool> lamps_on;        // as the bridge reported them, lamps_age_s ago
+  std::vector<LampReading> lamps;
+  double lamps_age_s = -1;
+  std::string lamps_problem;         // empty = the lamps are usable
+  bool holds_lamps = false;          // the rig holds lamps that go back to their owner at exit
+  bool ready = false;                // a capture can start
   bool capturing = false;
   bool you_control = false;
   bool controller_taken = false;
