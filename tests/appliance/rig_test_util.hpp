@@ -38,12 +38,17 @@ inline fs::path temp_dir(const std::string& name) {
 // The real daemon in its own process.
 class DaemonProcess {
  public:
-  // Starts build/bin/veneerd --simulate --listen 127.0.0.1:0 --store STORE [extra...].
+  // Starts build/bin/veneerd --simulate --listen 127.0.0.1:0 --store STORE [extra...]
+  // (without --simulate when extra has a --config).
   static std::unique_ptr<DaemonProcess> start(const fs::path& store, std::vector<std::string> extra = {}) {
     int out[2];
     if (::pipe(out) != 0) return nullptr;
-    std::vector<std::string> args = {VENEER_BIN_DIR "/veneerd", "--simulate", "--listen", "127.0.0.1:0", "--store",
-                                     store.string()};
+    std::vector<std::string> args = {VENEER_BIN_DIR "/veneerd"};
+    bool configured = false;
+    for (const auto& e : extra) configured = configured || e == "--config";
+    if (!configured) args.push_back("--simulate");
+    for (const char* a : {"--listen", "127.0.0.1:0", "--store"}) args.push_back(a);
+    args.push_back(store.string());
     args.insert(args.end(), extra.begin(), extra.end());
     fs::path log = store.parent_path() / (store.filename().string() + ".log");
     pid_t pid = ::fork();
