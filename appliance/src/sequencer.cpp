@@ -82,10 +82,13 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
   // Step k's lamps: the ambient frame (k = 0) all off, then ring lamp k - 1
   // alone, rig white at full brightness. A lamp that is off keeps its owner's
   // colour and level, so it comes back as it was when the owner next switches it on.
-  auto want_for = [&](int k) {
+  // A lamp the owner had on gets its colour back with the restore's "on", so
+  // it may go off in whatever colour it shows (`reading`): no extra command.
+  auto want_for = [&](int k, const std::optional<std::vector<LampState>>& reading) {
     std::vector<LampState> want(count);
     for (int i = 0; i < count; ++i) {
-      want[i] = (*saved)[i];
+      const bool shown = (*saved)[i].on && reading && static_cast<int>(reading->size()) == count;
+      want[i] = shown ? (*reading)[i] : (*saved)[i];
       want[i].on = false;
       want[i].reachable = true;
     }
@@ -110,7 +113,7 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
     for (int k = 0; k < shots; ++k) {
       if (cancelled()) return make_error("cancelled");
       const auto step_start = Clock::now();
-      const std::vector<LampState> want = want_for(k);
+      const std::vector<LampState> want = want_for(k, reading);
       const std::string step_name = k == 0 ? std::string("ambient frame (all lamps off)")
                                            : "shot " + std::to_string(k + 1) + " (" + lamps.label(k - 1) + " alone)";
       cv::Mat photo;

@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 
 #include "veneer/util/log.hpp"
+#include "veneerd/devices/hue_lamps.hpp"
 
 namespace veneerd::hw {
 
@@ -91,7 +92,9 @@ veneer::Status answer_ok(const HttpAnswer& a, const std::string& address, const 
     return veneer::make_error("Hue bridge " + address + ": " + what + ": HTTP " + std::to_string(a.status));
   HueError e = parse_hue_error(a.body);
   if (e.type == 1)
-    return veneer::make_error("Hue bridge " + address + ": the key is not paired with this bridge (run `veneerd hue pair`)");
+    return veneer::make_error("Hue bridge " + address +
+                              ": the key is not paired with this bridge: press its link button, run `veneerd hue pair "
+                              "--address " + address + "` and put the key it prints into the config's lamps.key");
   if (e.type != 0)
     return veneer::make_error("Hue bridge " + address + ": " + what + ": " + e.description + " (Hue error " +
                               std::to_string(e.type) + ")");
@@ -285,28 +288,77 @@ veneer::Expected<std::vector<BridgeLamp>> list_bridge_lamps(const std::string& a
 veneer::Status flash_lamps_in_turn(const std::string& address, const std::string& key,
                                    const std::vector<std::string>& ids, long gap_ms,
                                    const std::function<void(const std::string&, int)>& announce) {
-  for (size_t i = 0; i < ids.size(); ++i) {
+  if (ids.empty()) return {};
+  // The owner's states first: every lamp goes back as it was after its flash,
+  // also when a later flash fails.
+  HueLampsOptions o;
+  o.bridge = address;
+  o.key = key;
+  o.lamps = ids;
+  o.settle_ms = 0;
+  o.timeout_ms = 3000;
+  auto lamps = HueLamps::create(o);
+  if (!lamps) return lamps.error();
+  auto owner = (*lamps)->read();
+  if (!owner) return owner.error();
+  veneer::Status status;
+  for (size_t i = 0; i < ids.size() && status.ok(); ++i) {
     if (announce) announce(ids[i], int(i));
     // "on" in the same body: a lamp that is off would not show the alert.
     HttpAnswer a = http("PUT", url_of(address, "/api/" + key + "/lights/" + ids[i] + "/state"),
                         json{{"on", true}, {"alert", "select"}}.dump(), 3000);
-    if (auto s = answer_ok(a, address, "flashing lamp " + ids[i]); !s) return s;
-    if (i + 1 < ids.size()) std::this_thread::sleep_for(std::chrono::milliseconds(gap_ms));
+    status = answer_ok(a, address, "flashing lamp " + ids[i]);
+    if (status && i + 1 < ids.size()) std::this_thread::sleep_for(std::chrono::milliseconds(gap_ms));
+    // One breathe cycle takes about a second; then the lamp goes back.
+    if (status && i + 1 == ids.size()) std::this_thread::sleep_for(std::chrono::milliseconds(std::min(gap_ms, 1000L)));
+    auto now = (*lamps)->read();
+    if (!now) return now.error();
+    std::vector<LampState> want = *now;
+    want[i] = (*owner)[i];
+    if (auto r = (*lamps)->ensure(want, *now); !r) return veneer::make_error("giving lamp " + ids[i] + " back: " + r.message());
   }
-  return {};
+  return status;
 }
 
 // ------------------------------------------------------------------ CLI
 
+namespace {
+
+const char* kHueUsage =
+    "usage: veneerd hue discover [--address A]... [--cloud] [--no-mdns]\n"
+    "       veneerd hue pair --address A [--timeout S]\n"
+    "       veneerd hue lamps --address A --key K\n"
+    "       veneerd hue flash --address A --key K [--lamps 1,2,3] [--gap-ms 2500]\n";
+
+const char* kHueHelp =
+    "veneerd hue: set up the Philips Hue bridge that drives the rig's lamps.\n"
+    "\n"
+    "  discover  find bridges on the LAN (mDNS, then --address candidates, then with\n"
+    "            --cloud the vendor's discovery service); prints address, name, id, API version\n"
+    "  pair      press the link button on the bridge, then run this within --timeout\n"
+    "            seconds (default 60); prints the key for the config's lamps.key\n"
+    "  lamps     list the bridge's lamps: id, name, type, on/off/unreachable\n"
+    "  flash     flash each lamp (or those in --lamps) in turn, --gap-ms apart, so you\n"
+    "            can tell which socket of the ring holds which id; every lamp goes back\n"
+    "            to its state after its flash\n"
+    "\n"
+    "Then write the ids into the config in ring order (position 1 = top, clockwise):\n"
+    "  \"lamps\": {\"backend\": \"hue\", \"bridge\": \"A\", \"key\": \"K\", \"lamps\": [\"3\", \"4\", ...]}\n"
+    "\n";
+
+}  // namespace
+
 int hue_command(const std::vector<std::string>& args, std::ostream& out, std::ostream& err) {
   auto usage = [&](const std::string& why) {
-    err << "veneerd hue: " << why << "\n"
-        << "usage: veneerd hue discover [--address A]... [--cloud] [--no-mdns]\n"
-        << "       veneerd hue pair --address A [--timeout S]\n"
-        << "       veneerd hue lamps --address A --key K\n"
-        << "       veneerd hue flash --address A --key K [--lamps 1,2,3] [--gap-ms 2500]\n";
+    err << "veneerd hue: " << why << "\n" << kHueUsage << "(veneerd hue --help explains each)\n";
     return 2;
   };
+  for (const auto& a : args) {
+    if (a == "--help" || a == "-h" || a == "help") {
+      out << kHueHelp << kHueUsage;
+      return 0;
+    }
+  }
   size_t i = (!args.empty() && args[0] == "hue") ? 1 : 0;
   if (i >= args.size()) return usage("missing subcommand");
   std::string cmd = args[i++];

@@ -11,6 +11,9 @@
 namespace veneerd::hw {
 namespace {
 
+using veneerd::ColourMode;
+using veneerd::LampState;
+
 struct Bridge {
   HueBridgeEmulator emu;
   Bridge() : emu(options()) {
@@ -71,18 +74,31 @@ TEST(HueSetup, WrongKeyIsExplained) {
   EXPECT_NE(lamps.message().find("not paired"), std::string::npos) << lamps.message();
 }
 
-TEST(HueSetup, FlashEachLampInTurn) {
+TEST(HueSetup, FlashEachLampInTurnAndGiveItBack) {
   Bridge b;
+  // The owner's lamps: 1 on in ct mode, 2 off remembering red, 3 off.
+  b.emu.set_lamp("1", LampState{.on = true, .brightness = 90, .mode = ColourMode::ct, .ct = 400});
+  b.emu.set_lamp("2", LampState{.on = false, .brightness = 50, .x = 0.6, .y = 0.3});
   b.emu.press_link_button();
   auto p = pair_once(b.address());
   ASSERT_EQ(p.outcome, PairAttempt::Outcome::paired);
   std::vector<std::string> order;
-  auto s = flash_lamps_in_turn(b.address(), p.key, {"3", "1", "2"}, 0,
-                               [&](const std::string& id, int pos) { order.push_back(id + "@" + std::to_string(pos)); });
+  std::vector<bool> lit_when_announced;
+  auto s = flash_lamps_in_turn(b.address(), p.key, {"3", "1", "2"}, 0, [&](const std::string& id, int pos) {
+    order.push_back(id + "@" + std::to_string(pos));
+    // The lamp flashed before this one is back to its owner's state already.
+    if (pos == 1) lit_when_announced.push_back(b.emu.lamp("3")->on);
+  });
   ASSERT_TRUE(s.ok()) << s.message();
   EXPECT_EQ(order, (std::vector<std::string>{"3@0", "1@1", "2@2"}));
-  EXPECT_EQ(b.emu.counters().light_commands, 3u);
-  EXPECT_TRUE(b.emu.lamp("3")->on);  // switched on so the alert shows
+  EXPECT_EQ(lit_when_announced, std::vector<bool>{false});
+  EXPECT_FALSE(b.emu.lamp("3")->on) << "flash left lamp 3 on";
+  EXPECT_FALSE(b.emu.lamp("2")->on);
+  EXPECT_NEAR(b.emu.lamp("2")->x, 0.6, 1e-4);
+  EXPECT_EQ(b.emu.lamp("2")->brightness, 50);
+  EXPECT_TRUE(b.emu.lamp("1")->on);
+  EXPECT_EQ(b.emu.lamp("1")->mode, ColourMode::ct);
+  EXPECT_EQ(b.emu.lamp("1")->ct, 400);
   EXPECT_FALSE(b.emu.lamp("4")->on);
 }
 
@@ -133,6 +149,13 @@ TEST(HueSetup, CommandLine) {
   Bridge b;
   std::ostringstream out, err;
   EXPECT_EQ(hue_command({"hue"}, out, err), 2);
+  // --help anywhere: the whole help on stdout, exit 0.
+  for (std::vector<std::string> args : {std::vector<std::string>{"hue", "--help"}, {"hue", "pair", "--help"}, {"hue", "-h"}}) {
+    out.str("");
+    EXPECT_EQ(hue_command(args, out, err), 0);
+    EXPECT_NE(out.str().find("link button"), std::string::npos) << out.str();
+    EXPECT_NE(out.str().find("veneerd hue flash --address"), std::string::npos) << out.str();
+  }
   EXPECT_EQ(hue_command({"hue", "lamps", "--address", b.address()}, out, err), 2);  // no key
   EXPECT_NE(err.str().find("needs --key"), std::string::npos) << err.str();
   b.emu.press_link_button();
