@@ -49,12 +49,14 @@ bool same_colour(const LampState& a, const LampState& b) {
   if (!(a.has_xy || a.has_ct) || !(b.has_xy || b.has_ct)) return true;
   const bool xy_both = a.has_xy && b.has_xy;
   auto ct_of = [](const LampState& s) { return s.mode == ColourMode::ct || !s.has_xy ? s.ct : xy_to_mired(s.x, s.y); };
-  if (!xy_both) return std::abs(ct_of(a) - ct_of(b)) <= 2;
+  // Bridges round what they report (and some convert xy through RGB), so
+  // colours match within what an eye would not tell apart.
+  if (!xy_both) return std::abs(ct_of(a) - ct_of(b)) <= 5;
   if (a.mode != b.mode) return false;
   switch (a.mode) {
-    case ColourMode::xy: return std::abs(a.x - b.x) <= 0.002 && std::abs(a.y - b.y) <= 0.002;
-    case ColourMode::ct: return std::abs(a.ct - b.ct) <= 2;
-    case ColourMode::hs: return std::abs(a.hue - b.hue) <= 200 && std::abs(a.sat - b.sat) <= 2;
+    case ColourMode::xy: return std::abs(a.x - b.x) <= 0.01 && std::abs(a.y - b.y) <= 0.01;
+    case ColourMode::ct: return std::abs(a.ct - b.ct) <= 5;
+    case ColourMode::hs: return std::abs(a.hue - b.hue) <= 500 && std::abs(a.sat - b.sat) <= 5;
   }
   return false;
 }

@@ -92,6 +92,42 @@ TEST_F(Emulator, ListsLampsLikeABridge) {
   EXPECT_EQ(config["apiversion"], "1.56.0");
 }
 
+TEST_F(Emulator, ColourModesFollowTheLastColourParameter) {
+  bridge->set_apply_delay(std::chrono::milliseconds(0));
+  auto state = [&] { return json::parse(get("/lights/2").body)["state"]; };
+  ASSERT_EQ(put("/lights/2/state", R"({"on":true,"ct":400,"bri":100})").status, 200);
+  auto s = state();
+  EXPECT_EQ(s["colormode"], "ct");
+  EXPECT_EQ(s["ct"], 400);
+  // xy is reported in every mode: 400 mired (2500 K) is a warm white.
+  EXPECT_NEAR(s["xy"][0].get<double>(), 0.477, 0.01);
+  EXPECT_NEAR(s["xy"][1].get<double>(), 0.414, 0.01);
+  ASSERT_EQ(put("/lights/2/state", R"({"hue":0,"sat":254})").status, 200);
+  s = state();
+  EXPECT_EQ(s["colormode"], "hs");
+  EXPECT_EQ(s["sat"], 254);
+  EXPECT_GT(s["xy"][0].get<double>(), 0.6);  // saturated red
+  EXPECT_EQ(s["ct"], 400);                    // kept, not shown
+  ASSERT_EQ(put("/lights/2/state", R"({"xy":[0.2,0.3]})").status, 200);
+  s = state();
+  EXPECT_EQ(s["colormode"], "xy");
+  EXPECT_NEAR(s["xy"][0].get<double>(), 0.2, 1e-9);
+  // Out-of-range colour values are refused with the bridge's error 7.
+  auto bad = json::parse(put("/lights/2/state", R"({"ct":90})").body);
+  EXPECT_EQ(bad[0]["error"]["type"], 7);
+  EXPECT_EQ(state()["colormode"], "xy");
+}
+
+TEST_F(Emulator, AnotherClientsChangeLandsAfterTheNthCommand) {
+  bridge->set_apply_delay(std::chrono::milliseconds(0));
+  bridge->interfere_after(2, "5", veneerd::LampState{.on = true, .brightness = 77});
+  ASSERT_EQ(put("/lights/1/state", R"({"on":true})").status, 200);
+  EXPECT_FALSE(bridge->lamp("5")->on);
+  ASSERT_EQ(put("/lights/1/state", R"({"on":false})").status, 200);
+  EXPECT_TRUE(bridge->lamp("5")->on);
+  EXPECT_EQ(bridge->lamp("5")->brightness, 77);
+}
+
 TEST_F(Emulator, ErrorBodies) {
   auto unauth = json::parse(raw(easy, "GET", "http://" + bridge->address() + "/api/wrong-key/lights").body);
   ASSERT_TRUE(unauth.is_array());

@@ -37,7 +37,8 @@ struct LampState {
 
 // The rig's own light: full white, xy mode (ct 167 mired on a lamp without xy).
 LampState rig_white(int brightness = 254);
-// Same brightness and colour in the lamp's mode (xy within 0.002, ct within 2 mired).
+// Same brightness and colour in the lamp's mode (xy within 0.01, ct within 5
+// mired, hue within 500 and sat within 5: what bridges' rounding leaves).
 bool same_colour(const LampState& a, const LampState& b);
 // What a photo would see: both off, or both on with the same brightness and colour.
 bool same_light(const LampState& a, const LampState& b);
