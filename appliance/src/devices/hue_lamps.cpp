@@ -355,7 +355,9 @@ struct HueLamps::Impl {
       if (Clock::now() + backoff >= deadline)
         return veneer::make_error("the Hue bridge " + options.bridge + " did not answer GET " + path + " within " +
                                   std::to_string(options.timeout_ms) + " ms (" +
-                                  (r.transport_ok ? "HTTP " + std::to_string(r.status) : r.error) + ")");
+                                  (r.transport_ok ? "HTTP " + std::to_string(r.status) : r.error) + ")" +
+                                  (r.transport_ok ? "" : ": is it powered and on the network at that address? "
+                                                         "`veneerd hue discover` finds it"));
       ++stats.retries;
       std::this_thread::sleep_for(backoff);
     }

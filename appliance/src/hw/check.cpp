@@ -176,7 +176,7 @@ int check_hardware(std::ostream& out, const json& doc) {
             for (const auto& lamp : *l)
               if (lamp.id == wanted[i]) hit = &lamp;
             std::string pos = "ring position " + std::to_string(i + 1) + ": lamp " + wanted[i];
-            if (!hit) bad(pos + " is not on the bridge");
+            if (!hit) bad(pos + " is not on the bridge (the lamps above are; correct lamps.lamps, `veneerd hue flash` shows which is where)");
             else if (!hit->reachable) bad(pos + " is unreachable (switched off at the wall?)");
             else ok(pos + " \"" + hit->name + "\"");
           }
