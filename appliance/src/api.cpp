@@ -137,12 +137,12 @@ veneer::Expected<Request> decode(const pb::ClientMessage& m) {
     case pb::ClientMessage::kSetLamps: {
       const auto& l = m.set_lamps();
       if (l.on_size() > kMaxLampsInRequest) return make_error("set_lamps.on: " + std::to_string(l.on_size()) + " lamps is too many");
-      if (l.brightness() > 254) {
+      if (l.brightness() > kMaxBrightness) {
         return make_error("set_lamps.brightness: " + std::to_string(l.brightness()) + " is outside 1..254");
       }
       SetLampsReq req;
       req.on.assign(l.on().begin(), l.on().end());
-      req.brightness = l.brightness() == 0 ? 254 : static_cast<int>(l.brightness());
+      req.brightness = static_cast<int>(l.brightness() == 0 ? kMaxBrightness : l.brightness());
       r.body = req;
       return r;
     }

@@ -30,6 +30,10 @@ std::string AuthThrottle::peer_key(const std::string& address) {
 
 std::optional<AuthThrottle::Clock::time_point> AuthThrottle::admit(const std::string& peer, Clock::time_point now) {
   auto it = peers_.find(peer);
+  if (it != peers_.end() && it->second.waiting == 0 && secs(now - it->second.last_failure) > opt_.forget_s) {
+    peers_.erase(it);  // forgiven
+    it = peers_.end();
+  }
   if (it == peers_.end() || it->second.failures < opt_.free_failures) return now;
   Peer& p = it->second;
   const int over = p.failures - opt_.free_failures + 1;  // the turn after this one

@@ -63,6 +63,7 @@ constexpr double kMaxShutterS = 60;           // capture.exposure.shutter_s
 constexpr double kMaxAperture = 64;           // capture.exposure.aperture (f-number)
 constexpr uint32_t kMaxIso = 409600;          // capture.exposure.iso
 constexpr int kMaxLampsInRequest = 64;        // set_lamps.on
+constexpr uint32_t kMaxBrightness = 254;      // set_lamps.brightness (0 = this)
 constexpr double kMaxHandLampDistanceM = 5;   // move_hand_lamp.position, per coordinate
 constexpr double kMinHandLampDistanceM = 0.05;
 
