@@ -161,7 +161,7 @@ class Session : public std::enable_shared_from_this<Session> {
     turn_timer_.cancel();
     sock_.shutdown(tcp::socket::shutdown_both, ec);
     sock_.close(ec);
-    const bool held_much = queued_ > (64u << 10) || fetch_ || live_fps_ > 0;
+    const bool held_much = queued_ > (64u << 10) || fetch_ || live_fps_ > 0 || sent_bytes_ > (4u << 20);
     queue_.clear();
     queued_ = 0;
     fetch_.reset();
@@ -250,6 +250,7 @@ class Session : public std::enable_shared_from_this<Session> {
         return;
       }
       self->queued_ -= bytes->size();
+      self->sent_bytes_ += bytes->size();
       self->queue_.pop_front();
       if (self->closing_ && self->queue_.empty()) {
         self->close();
@@ -580,6 +581,7 @@ class Session : public std::enable_shared_from_this<Session> {
   veneer::wire::FrameBuffer in_;
   std::deque<std::shared_ptr<const std::string>> queue_;
   size_t queued_ = 0;
+  uint64_t sent_bytes_ = 0;  // a busy connection's end is a moment to release memory
   bool writing_ = false;
   bool closing_ = false;
   bool closed_ = false;

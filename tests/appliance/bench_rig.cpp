@@ -9,7 +9,8 @@
 //     and over live view at 60 fps: it must come back down, not grow in steps.
 //     VENEER_BENCH_LIVE_S sets the live-view time (default 30 s; 600 for the
 //     issue's 10 minutes), VENEER_BENCH_FETCHES the number of fetches (100),
-//     VENEER_BENCH_ROUNDS how often both are repeated (2). `bench_rig --memory`
+//     VENEER_BENCH_ROUNDS how often both are repeated (2),
+//     VENEER_BENCH_PREVIEW_SIZE the live-view size (default the still size). `bench_rig --memory`
 //     runs this section alone.
 #include <algorithm>
 #include <atomic>
@@ -70,7 +71,9 @@ static int bench_daemon_memory(const fs::path& dir) {
   const int parallel = 4;
   const uint32_t chunk = 4u << 20;  // the largest the rig allows
   fs::path store = dir / "mem-store";
-  auto d = rigtest::DaemonProcess::start(store, {"--size", "1024x680", "--log", "warn"});
+  std::vector<std::string> args = {"--size", "1024x680", "--log", "warn"};
+  if (const char* preview = std::getenv("VENEER_BENCH_PREVIEW_SIZE")) args.insert(args.end(), {"--preview-size", preview});
+  auto d = rigtest::DaemonProcess::start(store, args);
   if (!d || d->port() == 0) {
     std::fprintf(stderr, "bench_rig: veneerd did not start: %s\n", d ? d->log().c_str() : "");
     return 1;
