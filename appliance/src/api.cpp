@@ -2,6 +2,8 @@
 
 #include <cmath>
 
+#include <google/protobuf/io/coded_stream.h>
+
 #include "veneer/v1/rig.pb.h"
 
 namespace veneerd::api {
@@ -46,6 +48,14 @@ veneer::Status check_set_id(const std::string& field, const std::string& id) {
 
 }  // namespace
 
+std::string trim_token(const std::string& token) {
+  const char* space = " \t\r\n\v\f";
+  size_t first = token.find_first_not_of(space);
+  if (first == std::string::npos) return {};
+  size_t last = token.find_last_not_of(space);
+  return token.substr(first, last - first + 1);
+}
+
 bool needs_control(const Body& body) {
   return std::holds_alternative<CaptureReq>(body) || std::holds_alternative<CancelReq>(body) ||
          std::holds_alternative<SetLampsReq>(body) || std::holds_alternative<PressReq>(body) ||
@@ -65,9 +75,16 @@ veneer::Expected<Request> decode(const pb::ClientMessage& m) {
   switch (m.body_case()) {
     case pb::ClientMessage::kHello: {
       const auto& h = m.hello();
-      if (h.token().size() > 256) return make_error("hello.token: longer than 256 bytes");
-      if (h.client_name().size() > 128 || !printable(h.client_name())) {
-        return make_error("hello.client_name: must be up to 128 printable characters");
+      if (h.token().size() > kMaxTokenBytes) {
+        return make_error("hello.token: " + std::to_string(h.token().size()) + " bytes is longer than the limit of " +
+                          std::to_string(kMaxTokenBytes));
+      }
+      if (h.client_name().size() > kMaxClientNameChars) {
+        return make_error("hello.client_name: " + std::to_string(h.client_name().size()) +
+                          " characters is longer than the limit of " + std::to_string(kMaxClientNameChars));
+      }
+      if (!printable(h.client_name())) {
+        return make_error("hello.client_name: must be printable (no control characters)");
       }
       r.body = Hello{h.protocol_version(), h.token(), h.client_name()};
       return r;
@@ -82,7 +99,7 @@ veneer::Expected<Request> decode(const pb::ClientMessage& m) {
       const auto& f = m.fetch_images();
       if (auto s = check_set_id("fetch_images.set_id", f.set_id()); !s) return s.error();
       size_t chunk = f.chunk_size() == 0 ? kDefaultChunkBytes : f.chunk_size();
-      if (chunk < 1024 || chunk > kMaxChunkBytes) {
+      if (chunk < kMinChunkBytes || chunk > kMaxChunkBytes) {
         return make_error("fetch_images.chunk_size: " + std::to_string(f.chunk_size()) + " is outside 1 KiB..4 MiB");
       }
       r.body = FetchImagesReq{f.set_id(), f.include_truth(), chunk};
@@ -98,18 +115,18 @@ veneer::Expected<Request> decode(const pb::ClientMessage& m) {
       auto role = decode_role(c.role());
       if (!role) return role.error();
       req.capture.role = *role;
-      if (c.object().size() > 64 || !printable(c.object())) {
+      if (c.object().size() > kMaxObjectChars || !printable(c.object())) {
         return make_error("capture.object: must be up to 64 printable characters");
       }
       req.capture.object = c.object();
       const auto& e = c.exposure();
-      if (!std::isfinite(e.shutter_s()) || e.shutter_s() < 0 || e.shutter_s() > 60) {
+      if (!std::isfinite(e.shutter_s()) || e.shutter_s() < 0 || e.shutter_s() > kMaxShutterS) {
         return make_error("capture.exposure.shutter_s: " + std::to_string(e.shutter_s()) + " is outside 0..60 s");
       }
-      if (!std::isfinite(e.aperture()) || e.aperture() < 0 || e.aperture() > 64) {
+      if (!std::isfinite(e.aperture()) || e.aperture() < 0 || e.aperture() > kMaxAperture) {
         return make_error("capture.exposure.aperture: " + std::to_string(e.aperture()) + " is outside 0..64");
       }
-      if (e.iso() > 409600) return make_error("capture.exposure.iso: " + std::to_string(e.iso()) + " is too high");
+      if (e.iso() > kMaxIso) return make_error("capture.exposure.iso: " + std::to_string(e.iso()) + " is too high");
       req.capture.exposure.shutter_s = e.shutter_s();
       req.capture.exposure.aperture = e.aperture();
       req.capture.exposure.iso = static_cast<int>(e.iso());
@@ -119,20 +136,20 @@ veneer::Expected<Request> decode(const pb::ClientMessage& m) {
     case pb::ClientMessage::kCancelCapture: r.body = CancelReq{}; return r;
     case pb::ClientMessage::kSetLamps: {
       const auto& l = m.set_lamps();
-      if (l.on_size() > 64) return make_error("set_lamps.on: " + std::to_string(l.on_size()) + " lamps is too many");
-      if (l.brightness() > 254) {
+      if (l.on_size() > kMaxLampsInRequest) return make_error("set_lamps.on: " + std::to_string(l.on_size()) + " lamps is too many");
+      if (l.brightness() > kMaxBrightness) {
         return make_error("set_lamps.brightness: " + std::to_string(l.brightness()) + " is outside 1..254");
       }
       SetLampsReq req;
       req.on.assign(l.on().begin(), l.on().end());
-      req.brightness = l.brightness() == 0 ? 254 : static_cast<int>(l.brightness());
+      req.brightness = static_cast<int>(l.brightness() == 0 ? kMaxBrightness : l.brightness());
       r.body = req;
       return r;
     }
     case pb::ClientMessage::kStartLiveView: {
       double fps = m.start_live_view().fps();
-      if (fps == 0) fps = 10;
-      if (!std::isfinite(fps) || fps < 0.1 || fps > kMaxLiveFps) {
+      if (fps == 0) fps = kDefaultLiveFps;
+      if (!std::isfinite(fps) || fps < kMinLiveFps || fps > kMaxLiveFps) {
         return make_error("start_live_view.fps: " + std::to_string(fps) + " is outside 0.1..60");
       }
       r.body = StartLiveReq{fps};
@@ -144,11 +161,11 @@ veneer::Expected<Request> decode(const pb::ClientMessage& m) {
       const auto& p = m.move_hand_lamp().position();
       cv::Vec3d v(p.x(), p.y(), p.z());
       for (int i = 0; i < 3; ++i) {
-        if (!std::isfinite(v[i]) || std::abs(v[i]) > 5) {
+        if (!std::isfinite(v[i]) || std::abs(v[i]) > kMaxHandLampDistanceM) {
           return make_error("move_hand_lamp.position: each coordinate must be within 5 m of the object");
         }
       }
-      if (cv::norm(v) < 0.05) return make_error("move_hand_lamp.position: closer than 5 cm to the object");
+      if (cv::norm(v) < kMinHandLampDistanceM) return make_error("move_hand_lamp.position: closer than 5 cm to the object");
       r.body = MoveHandLampReq{v};
       return r;
     }
@@ -156,6 +173,46 @@ veneer::Expected<Request> decode(const pb::ClientMessage& m) {
       break;
   }
   return make_error("unknown or empty request (id " + std::to_string(m.id()) + ")");
+}
+
+bool encode_chunk(const ChunkHeader& h, size_t data_size, const std::function<bool(char*, size_t)>& read,
+                  std::string& out) {
+  using google::protobuf::io::CodedOutputStream;
+  // Everything but the data through protobuf; the data field (length-delimited)
+  // is appended by hand after it (field order does not matter to a parser).
+  pb::ImageChunk head;
+  head.set_request_id(h.request_id);
+  head.set_set_id(h.set_id);
+  head.set_file(h.file);
+  head.set_offset(h.offset);
+  head.set_file_size(h.file_size);
+  head.set_last(h.last);
+  head.set_end_of_set(h.end_of_set);
+  constexpr uint32_t kLengthDelimited = 2;
+  const uint32_t data_tag = (pb::ImageChunk::kDataFieldNumber << 3) | kLengthDelimited;
+  const uint32_t chunk_tag = (pb::RigMessage::kChunkFieldNumber << 3) | kLengthDelimited;
+  const size_t head_len = head.ByteSizeLong();
+  const size_t data_len = data_size == 0 ? 0
+                                         : CodedOutputStream::VarintSize32(data_tag) +
+                                               CodedOutputStream::VarintSize64(data_size) + data_size;
+  const size_t chunk_len = head_len + data_len;
+  const size_t message_len =
+      CodedOutputStream::VarintSize32(chunk_tag) + CodedOutputStream::VarintSize64(chunk_len) + chunk_len;
+  out.resize(CodedOutputStream::VarintSize64(message_len) + message_len);
+  auto* p = reinterpret_cast<uint8_t*>(out.data());
+  p = CodedOutputStream::WriteVarint64ToArray(message_len, p);
+  p = CodedOutputStream::WriteVarint32ToArray(chunk_tag, p);
+  p = CodedOutputStream::WriteVarint64ToArray(chunk_len, p);
+  p = head.SerializeWithCachedSizesToArray(p);
+  if (data_size > 0) {
+    p = CodedOutputStream::WriteVarint32ToArray(data_tag, p);
+    p = CodedOutputStream::WriteVarint64ToArray(data_size, p);
+    if (!read(reinterpret_cast<char*>(p), data_size)) {
+      out.clear();
+      return false;
+    }
+  }
+  return true;
 }
 
 void encode_set(const StoredSet& s, pb::SetInfo& info) {

@@ -24,7 +24,10 @@ veneer::Expected<std::string> read_token(const fs::path& file) {
   if (!in) return make_error(file.string() + ": cannot read the access token");
   std::string token;
   std::getline(in, token);
-  while (!token.empty() && (token.back() == '\r' || token.back() == ' ' || token.back() == '\t')) token.pop_back();
+  // Whitespace around the token is not part of it (as the server trims what a client sends).
+  const char* space = " \t\r\n\v\f";
+  const size_t first = token.find_first_not_of(space);
+  token = first == std::string::npos ? std::string() : token.substr(first, token.find_last_not_of(space) - first + 1);
   if (token.empty()) return make_error(file.string() + ": the token file is empty");
   return token;
 }

@@ -5,10 +5,14 @@
 #include <deque>
 #include <fstream>
 #include <mutex>
+#include <optional>
 #include <set>
 #include <thread>
 
 #include <asio.hpp>
+#if defined(__GLIBC__)
+#include <malloc.h>
+#endif
 
 #include "veneer/proto/framing.hpp"
 #include "veneer/util/log.hpp"
@@ -47,6 +51,11 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   std::set<std::shared_ptr<Session>> sessions;
   std::weak_ptr<Session> controller;
   uint64_t event_seq = 0;
+  AuthThrottle throttle{opt.auth};
+  asio::steady_timer auth_log_timer{io};
+  bool auth_log_armed = false;
+  asio::steady_timer release_timer{io};
+  bool release_pending = false;
 
   mutable std::mutex stats_mutex;
   ServerStats stats;
@@ -56,6 +65,9 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   void on_event(const RigEvent& e);
   void on_live(std::shared_ptr<const LiveFrameData> frame);
   void update_live_rate();
+  void wrong_token(const std::string& peer, const std::string& key, const std::string& client_name);
+  void check_auth_log();
+  void release_memory_soon();
   void count(uint64_t ServerStats::*field) {
     std::lock_guard lock(stats_mutex);
     ++(stats.*field);
@@ -66,10 +78,12 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
 class Session : public std::enable_shared_from_this<Session> {
  public:
   Session(Server::Impl& server, tcp::socket socket)
-      : srv_(server), sock_(std::move(socket)), hello_timer_(server.io), close_timer_(server.io) {
+      : srv_(server), sock_(std::move(socket)), hello_timer_(server.io), close_timer_(server.io),
+        turn_timer_(server.io) {
     std::error_code ec;
     auto ep = sock_.remote_endpoint(ec);
     peer_ = ec ? "?" : ep.address().to_string() + ":" + std::to_string(ep.port());
+    peer_key_ = ec ? "?" : AuthThrottle::peer_key(ep.address().to_string());
     sock_.set_option(tcp::no_delay(true), ec);
   }
 
@@ -95,7 +109,12 @@ class Session : public std::enable_shared_from_this<Session> {
   bool send(const pb::RigMessage& m, bool droppable = false) {
     if (closed_) return false;
     if (droppable && queued_ > srv_.opt.live_queue_bytes) return false;
-    auto bytes = std::make_shared<std::string>(veneer::wire::encode_delimited(m));
+    return send_encoded(std::make_shared<const std::string>(veneer::wire::encode_delimited(m)), droppable);
+  }
+  // The same with the message already encoded (shared by every client it goes to).
+  bool send_encoded(std::shared_ptr<const std::string> bytes, bool droppable = false) {
+    if (closed_) return false;
+    if (droppable && queued_ > srv_.opt.live_queue_bytes) return false;
     if (bytes->empty()) return false;
     if (queued_ + bytes->size() > srv_.opt.max_queue_bytes) {
       VLOG_WARN("Server", "{}: client too slow ({} bytes waiting), disconnecting", peer_, queued_);
@@ -109,6 +128,7 @@ class Session : public std::enable_shared_from_this<Session> {
   }
 
   void respond(uint64_t id, const veneer::Status& status) {
+    settle_control(id, status.ok());
     pb::RigMessage m;
     auto* r = m.mutable_response();
     r->set_id(id);
@@ -117,18 +137,14 @@ class Session : public std::enable_shared_from_this<Session> {
     send(m);
   }
 
-  void offer_live(const std::shared_ptr<const LiveFrameData>& f) {
-    if (!authed_ || live_fps_ <= 0) return;
+  bool wants_live() const { return authed_ && live_fps_ > 0 && !closed_; }
+
+  // `encoded` is the frame's RigMessage, encoded once for every client.
+  void offer_live(const std::shared_ptr<const std::string>& encoded) {
+    if (!wants_live()) return;
     auto now = Clock::now();
     if (now - last_frame_ < std::chrono::duration<double>(0.9 / live_fps_)) return;
-    pb::RigMessage m;
-    auto* lf = m.mutable_frame();
-    lf->set_jpeg(f->jpeg.data(), f->jpeg.size());
-    lf->set_seq(f->seq);
-    lf->set_ts(f->ts);
-    lf->set_width(static_cast<uint32_t>(f->width));
-    lf->set_height(static_cast<uint32_t>(f->height));
-    if (send(m, true)) {
+    if (send_encoded(encoded, true)) {
       last_frame_ = now;
       srv_.count(&ServerStats::live_frames_sent);
     } else {
@@ -142,11 +158,14 @@ class Session : public std::enable_shared_from_this<Session> {
     std::error_code ec;
     hello_timer_.cancel();
     close_timer_.cancel();
+    turn_timer_.cancel();
     sock_.shutdown(tcp::socket::shutdown_both, ec);
     sock_.close(ec);
+    const bool held_much = queued_ > (64u << 10) || fetch_ || live_fps_ > 0 || sent_bytes_ > (4u << 20);
     queue_.clear();
     queued_ = 0;
     fetch_.reset();
+    if (held_much) srv_.release_memory_soon();
     auto self = shared_from_this();
     srv_.sessions.erase(self);
     if (srv_.controller.lock() == self) {
@@ -157,14 +176,25 @@ class Session : public std::enable_shared_from_this<Session> {
       live_fps_ = 0;
       srv_.update_live_rate();
     }
-    VLOG_INFO("Server", "{}: connection closed", peer_);
+    // Connections that never said hello come and go without a line each (a
+    // stream of wrong tokens is summed up by the throttle instead).
+    if (authed_) {
+      VLOG_INFO("Server", "{}: connection closed", peer_);
+    } else {
+      VLOG_DEBUG("Server", "{}: connection closed", peer_);
+    }
   }
 
  private:
-  // Sends what is queued, then closes (after a protocol error or refused hello).
-  void close_after_flush(uint64_t id, const std::string& error) {
+  // Sends what is queued, then closes (after a protocol error or refused
+  // hello). `quiet`: logged at debug level only (wrong tokens are summed up).
+  void close_after_flush(uint64_t id, const std::string& error, bool quiet = false) {
     srv_.count(&ServerStats::protocol_errors);
-    VLOG_WARN("Server", "{}: {}; closing", peer_, error);
+    if (quiet) {
+      VLOG_DEBUG("Server", "{}: {}; closing", peer_, error);
+    } else {
+      VLOG_WARN("Server", "{}: {}; closing", peer_, error);
+    }
     respond(id, veneer::make_error(error));
     closing_ = true;
     fetch_.reset();
@@ -185,19 +215,26 @@ class Session : public std::enable_shared_from_this<Session> {
         return;
       }
       self->in_.feed(self->rbuf_.data(), n);
-      for (;;) {
-        if (self->closing_ || self->closed_) return;
-        pb::ClientMessage msg;
-        auto r = self->in_.next(msg);
-        if (r == veneer::wire::ReadResult::need_more) break;
-        if (r == veneer::wire::ReadResult::error) {
-          self->close_after_flush(0, "bad message stream: " + self->in_.error());
-          return;
-        }
-        self->handle(msg);
-      }
-      if (!self->closing_ && !self->closed_) self->read();
+      self->serve_buffered();
     });
+  }
+
+  // Serves the whole messages received, in order, then reads on; while a
+  // hello waits for its turn (wrong tokens from this address before), what
+  // follows it waits too.
+  void serve_buffered() {
+    for (;;) {
+      if (closing_ || closed_ || hello_waiting_) return;
+      pb::ClientMessage msg;
+      auto r = in_.next(msg);
+      if (r == veneer::wire::ReadResult::need_more) break;
+      if (r == veneer::wire::ReadResult::error) {
+        close_after_flush(0, "bad message stream: " + in_.error());
+        return;
+      }
+      handle(msg);
+    }
+    if (!closing_ && !closed_ && !hello_waiting_) read();
   }
 
   void write() {
@@ -213,6 +250,7 @@ class Session : public std::enable_shared_from_this<Session> {
         return;
       }
       self->queued_ -= bytes->size();
+      self->sent_bytes_ += bytes->size();
       self->queue_.pop_front();
       if (self->closing_ && self->queue_.empty()) {
         self->close();
@@ -228,6 +266,10 @@ class Session : public std::enable_shared_from_this<Session> {
   void handle(const pb::ClientMessage& msg) {
     auto req = api::decode(msg);
     if (!authed_) {
+      if (!req && msg.has_hello()) {  // a hello, but a bad one: say what was wrong with it
+        close_after_flush(msg.id(), "hello refused: " + req.message());
+        return;
+      }
       if (!req || !std::holds_alternative<api::Hello>(req->body)) {
         close_after_flush(msg.id(), "the first request must be a hello with the protocol version and token");
         return;
@@ -248,15 +290,29 @@ class Session : public std::enable_shared_from_this<Session> {
         return;
       }
       if (!holder) {
+        // Taken by this request; given back if the request is refused.
         srv_.controller = shared_from_this();
+        taking_control_ = id;
         VLOG_INFO("Server", "{}: now controls the rig", peer_);
+      } else {
+        taking_control_.reset();  // a controller using its control keeps it
       }
     }
     std::visit([&](auto& body) { on(id, body); }, req->body);
   }
 
+  // The request `id` is answered. If it took control and was refused, control
+  // goes back to being free, as if the request had not been made.
+  void settle_control(uint64_t id, bool ok) {
+    if (!taking_control_ || *taking_control_ != id) return;
+    taking_control_.reset();
+    if (ok || srv_.controller.lock().get() != this) return;
+    srv_.controller.reset();
+    VLOG_INFO("Server", "{}: request refused, control is free again", peer_);
+  }
+
   void on(uint64_t id, api::Hello& h) {
-    if (authed_) {
+    if (authed_ || hello_waiting_) {
       respond(id, veneer::make_error("hello: already said"));
       return;
     }
@@ -266,12 +322,41 @@ class Session : public std::enable_shared_from_this<Session> {
                                 std::to_string(veneer::wire::kProtocolVersion) + ")");
       return;
     }
-    if (!same_token(h.token, srv_.opt.token)) {
-      close_after_flush(id, h.token.empty() ? "hello: no access token given" : "hello: wrong access token");
+    hello_timer_.cancel();
+    const auto now = Clock::now();
+    auto turn = srv_.throttle.admit(peer_key_, now);
+    if (!turn) {
+      close_after_flush(id, "hello: too many hellos from " + peer_key_ +
+                                " are waiting after wrong access tokens; try again later", true);
       return;
     }
+    if (*turn <= now) {
+      check_hello(id, h);
+      return;
+    }
+    // Wrong tokens came from this address before: the answer waits for its turn.
+    hello_waiting_ = true;
+    turn_timer_.expires_at(*turn);
+    turn_timer_.async_wait([self = shared_from_this(), id, h](std::error_code ec) {
+      self->srv_.throttle.left_queue(self->peer_key_);
+      if (ec || self->closed_) return;
+      self->hello_waiting_ = false;
+      self->check_hello(id, h);
+      self->serve_buffered();
+    });
+  }
+
+  void check_hello(uint64_t id, const api::Hello& h) {
+    // Surrounding whitespace is not part of the token: the token file ends
+    // with a newline, and a client may send the file's bytes as they are.
+    const std::string token = api::trim_token(h.token);
+    if (!same_token(token, srv_.opt.token)) {
+      srv_.wrong_token(peer_, peer_key_, h.client_name);
+      close_after_flush(id, token.empty() ? "hello: no access token given" : "hello: wrong access token", true);
+      return;
+    }
+    srv_.throttle.succeeded(peer_key_);
     authed_ = true;
-    hello_timer_.cancel();
     client_name_ = h.client_name;
     VLOG_INFO("Server", "{}: hello from '{}'", peer_, client_name_);
     pb::RigMessage m;
@@ -399,36 +484,37 @@ class Session : public std::enable_shared_from_this<Session> {
     while (fetch_ && !closed_ && !closing_ && queued_ < srv_.opt.fetch_queue_bytes) {
       Fetch& f = *fetch_;
       FetchFile& file = f.files[f.index];
-      pb::RigMessage m;
-      auto* c = m.mutable_chunk();
-      c->set_request_id(f.request_id);
-      c->set_set_id(f.set_id);
-      c->set_file(file.rel);
-      c->set_offset(f.offset);
-      c->set_file_size(file.size);
-      size_t want = static_cast<size_t>(std::min<uint64_t>(f.chunk, file.size - f.offset));
-      std::string* data = c->mutable_data();
-      data->resize(want);
-      if (want > 0) file.in->read(data->data(), static_cast<std::streamsize>(want));
-      if (want > 0 && static_cast<size_t>(file.in->gcount()) != want) {
+      api::ChunkHeader h;
+      h.request_id = f.request_id;
+      h.set_id = f.set_id;
+      h.file = file.rel;
+      h.offset = f.offset;
+      h.file_size = file.size;
+      const size_t want = static_cast<size_t>(std::min<uint64_t>(f.chunk, file.size - f.offset));
+      h.last = f.offset + want >= file.size;
+      h.end_of_set = h.last && f.index + 1 == f.files.size();
+      auto bytes = std::make_shared<std::string>();
+      std::ifstream& in = *file.in;
+      bool read_ok = api::encode_chunk(h, want, [&in](char* dst, size_t n) {
+        in.read(dst, static_cast<std::streamsize>(n));
+        return static_cast<size_t>(in.gcount()) == n;
+      }, *bytes);
+      if (!read_ok) {
         VLOG_ERROR("Server", "{}: reading {}/{} failed mid-download", peer_, f.set_id, file.rel);
         close();
         return;
       }
       f.offset += want;
-      bool last = f.offset >= file.size;
-      c->set_last(last);
-      bool end = last && f.index + 1 == f.files.size();
-      c->set_end_of_set(end);
-      if (last) {
+      if (h.last) {
         ++f.index;
         f.offset = 0;
       }
-      if (end) {
+      if (h.end_of_set) {
         VLOG_INFO("Server", "{}: download of {} sent", peer_, f.set_id);
         fetch_.reset();
+        srv_.release_memory_soon();
       }
-      send(m);
+      send_encoded(std::move(bytes));
     }
   }
 
@@ -440,6 +526,7 @@ class Session : public std::enable_shared_from_this<Session> {
       respond(id, set_id.error());
       return;
     }
+    settle_control(id, true);
     pb::RigMessage m;
     auto* r = m.mutable_response();
     r->set_id(id);
@@ -502,12 +589,17 @@ class Session : public std::enable_shared_from_this<Session> {
   tcp::socket sock_;
   asio::steady_timer hello_timer_;
   asio::steady_timer close_timer_;
+  asio::steady_timer turn_timer_;  // a hello waiting for its turn (AuthThrottle)
   std::string peer_;
+  std::string peer_key_;  // the address as the throttle counts it
+  bool hello_waiting_ = false;
+  std::optional<uint64_t> taking_control_;  // the request that took control, until it is answered
   std::string client_name_;
   std::array<char, 64 * 1024> rbuf_{};
   veneer::wire::FrameBuffer in_;
   std::deque<std::shared_ptr<const std::string>> queue_;
   size_t queued_ = 0;
+  uint64_t sent_bytes_ = 0;  // a busy connection's end is a moment to release memory
   bool writing_ = false;
   bool closing_ = false;
   bool closed_ = false;
@@ -533,7 +625,7 @@ void Server::Impl::accept() {
     auto session = std::make_shared<Session>(*self, std::move(socket));
     self->sessions.insert(session);
     self->count(&ServerStats::connections);
-    VLOG_INFO("Server", "{}: connected", session->peer());
+    VLOG_DEBUG("Server", "{}: connected", session->peer());  // "hello from" says who, once authenticated
     session->start();
     self->accept();
   });
@@ -542,21 +634,90 @@ void Server::Impl::accept() {
 void Server::Impl::on_event(const RigEvent& e) {
   pb::RigMessage m;
   api::encode_event(e, ++event_seq, m);
+  auto bytes = std::make_shared<const std::string>(veneer::wire::encode_delimited(m));
   auto copy = sessions;  // a send may close (and erase) a session
   for (const auto& s : copy) {
-    if (s->authed()) s->send(m);
+    if (s->authed()) s->send_encoded(bytes);
   }
 }
 
 void Server::Impl::on_live(std::shared_ptr<const LiveFrameData> frame) {
   auto copy = sessions;
-  for (const auto& s : copy) s->offer_live(frame);
+  std::shared_ptr<const std::string> bytes;  // encoded once, only if someone watches
+  for (const auto& s : copy) {
+    if (!s->wants_live()) continue;
+    if (!bytes) {
+      pb::RigMessage m;
+      auto* lf = m.mutable_frame();
+      lf->set_jpeg(frame->jpeg.data(), frame->jpeg.size());
+      lf->set_seq(frame->seq);
+      lf->set_ts(frame->ts);
+      lf->set_width(static_cast<uint32_t>(frame->width));
+      lf->set_height(static_cast<uint32_t>(frame->height));
+      bytes = std::make_shared<const std::string>(veneer::wire::encode_delimited(m));
+    }
+    s->offer_live(bytes);
+  }
 }
 
 void Server::Impl::update_live_rate() {
   double fps = 0;
   for (const auto& s : sessions) fps = std::max(fps, s->live_fps());
   rig.set_live_fps(fps);
+  if (fps == 0) release_memory_soon();
+}
+
+void Server::Impl::wrong_token(const std::string& peer, const std::string& key, const std::string& client_name) {
+  count(&ServerStats::wrong_tokens);
+  if (throttle.failed(key, Clock::now())) {
+    const auto& a = throttle.options();
+    VLOG_WARN("Server",
+              "{}: wrong access token (client '{}'); more are summed up in one line; an address gets {} answers at "
+              "once, then one per {} s doubling to one per {} s",
+              peer, client_name, a.free_failures, a.first_delay_s, a.max_delay_s);
+  }
+  check_auth_log();
+}
+
+// Logs the summary of a burst of wrong tokens when it is due, and comes back
+// while the burst is open.
+void Server::Impl::check_auth_log() {
+  if (auth_log_armed) return;
+  std::optional<Clock::time_point> next;
+  if (auto line = throttle.summary(Clock::now(), &next)) VLOG_WARN("Server", "{}", *line);
+  if (!next) return;
+  auth_log_armed = true;
+  auth_log_timer.expires_at(*next);
+  auth_log_timer.async_wait([weak = weak_from_this()](std::error_code ec) {
+    auto self = weak.lock();
+    if (!self || ec) return;
+    self->auth_log_armed = false;
+    self->check_auth_log();
+  });
+}
+
+// Memory freed after a large transfer stays with the process: glibc keeps
+// freed chunks of its arenas (one per thread that allocates: this one, the
+// camera's, OpenCV's workers) for reuse, so the daemon's RSS would climb in
+// steps with each new mix of downloads and live view and never come down.
+// Once things go quiet, hand the free pages back.
+void Server::Impl::release_memory_soon() {
+#if defined(__GLIBC__)
+  if (release_pending) return;
+  release_pending = true;
+  release_timer.expires_after(std::chrono::duration_cast<Clock::duration>(
+      std::chrono::duration<double>(opt.release_memory_delay_s)));
+  release_timer.async_wait([weak = weak_from_this()](std::error_code ec) {
+    auto self = weak.lock();
+    if (!self || ec) return;
+    self->release_pending = false;
+    auto t0 = Clock::now();
+    ::malloc_trim(0);
+    self->count(&ServerStats::memory_releases);
+    VLOG_DEBUG("Server", "freed memory handed back to the system in {:.1f} ms",
+               std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+  });
+#endif
 }
 
 Server::Server(Rig& rig, ServerOptions options) : impl_(std::make_shared<Impl>(rig, std::move(options))) {
@@ -615,6 +776,8 @@ void Server::stop() {
     impl->acceptor.close(ec);
     auto copy = impl->sessions;
     for (const auto& s : copy) s->close();
+    impl->auth_log_timer.cancel();
+    impl->release_timer.cancel();
     impl->io.stop();
   });
   impl_->thread.join();

@@ -7,7 +7,6 @@
 #include <ctime>
 
 #include <fcntl.h>
-#include <signal.h>
 #include <sys/file.h>
 #include <sys/statvfs.h>
 #include <unistd.h>
@@ -45,12 +44,6 @@ bool leftover_temp(const std::string& name, long& pid) {
   return true;
 }
 
-bool process_alive(long pid) {
-  if (pid <= 0) return false;
-  if (pid == ::getpid()) return true;
-  return ::kill(static_cast<pid_t>(pid), 0) == 0 || errno == EPERM;
-}
-
 uint64_t folder_bytes(const fs::path& folder) {
   uint64_t total = 0;
   std::error_code ec;
@@ -78,18 +71,29 @@ veneer::Expected<std::unique_ptr<Store>> Store::open(const fs::path& root) {
   std::unique_ptr<Store> store(new Store(root, fd));
 
   auto log = veneer::log::get("Store");
+  // Every temporary here is stale: the store's lock is ours, so the daemon
+  // that wrote it has exited. (The writer's pid in the name says nothing: it
+  // may by now belong to another process, or to the writer's unreaped
+  // zombie, which is how a leftover used to survive one more restart.) The
+  // names are gathered first and removed after: removing entries while
+  // reading the folder may make readdir skip others.
   std::vector<std::string> ids;
+  std::vector<fs::path> stale;
   for (const auto& entry : fs::directory_iterator(root, ec)) {
     std::string name = entry.path().filename().string();
     long pid = -1;
     if (leftover_temp(name, pid)) {
-      if (process_alive(pid) && pid != ::getpid()) continue;
-      log->warn("removing leftover temporary {} (an interrupted write)", entry.path().string());
-      fs::remove_all(entry.path(), ec);
+      stale.push_back(entry.path());
       continue;
     }
     if (!entry.is_directory() || !valid_set_id(name)) continue;
     ids.push_back(name);
+  }
+  for (const auto& path : stale) {
+    log->warn("removing leftover temporary {} (an interrupted write)", path.string());
+    std::error_code rm;
+    fs::remove_all(path, rm);
+    if (rm) log->warn("cannot remove {}: {}", path.string(), rm.message());
   }
   for (const auto& id : ids) {
     auto set = store->scan_one(id);

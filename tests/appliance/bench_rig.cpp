@@ -3,13 +3,24 @@
 //  1. a full 8-shot set at 1024x680: time per shot beyond exposure + settle
 //     (and beyond the simulator's own render time), requests refused for rate;
 //  2. live view of 1024x680 frames while another client downloads sets,
-//     against live view alone.
+//     against live view alone;
+//  3. the real veneerd binary's resident memory (its own process) over 100
+//     fetches of a 1024x680 set with the largest chunk size, several at once,
+//     and over live view at 60 fps: it must come back down, not grow in steps.
+//     VENEER_BENCH_LIVE_S sets the live-view time (default 30 s; 600 for the
+//     issue's 10 minutes), VENEER_BENCH_FETCHES the number of fetches (100),
+//     VENEER_BENCH_ROUNDS how often both are repeated (2),
+//     VENEER_BENCH_PREVIEW_SIZE the live-view size (default the still size). `bench_rig --memory`
+//     runs this section alone.
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <mutex>
 #include <thread>
+#include <vector>
 
 #include "rig_test_util.hpp"
 #include "veneer/rig/client.hpp"
@@ -24,9 +35,185 @@ using Kind = veneer::rig::Event::Kind;
 
 static double secs(Clock::duration d) { return std::chrono::duration<double>(d).count(); }
 
-int main() {
+static double env_number(const char* name, double fallback) {
+  const char* v = std::getenv(name);
+  if (!v || !*v) return fallback;
+  char* end = nullptr;
+  double x = std::strtod(v, &end);
+  return end && *end == 0 && x > 0 ? x : fallback;
+}
+
+// One FetchImages over a raw connection with `chunk` bytes per chunk; the bytes
+// received, or 0 on failure.
+static uint64_t raw_fetch(rigtest::RawConnection& c, uint64_t id, const std::string& set_id, uint32_t chunk) {
+  veneer::v1::ClientMessage m;
+  m.set_id(id);
+  m.mutable_fetch_images()->set_set_id(set_id);
+  m.mutable_fetch_images()->set_include_truth(true);
+  m.mutable_fetch_images()->set_chunk_size(chunk);
+  if (!c.send(m)) return 0;
+  uint64_t bytes = 0;
+  for (;;) {
+    auto msg = c.next(30);
+    if (!msg) return 0;
+    if (msg->has_response() && msg->response().id() == id && !msg->response().ok()) return 0;
+    if (!msg->has_chunk() || msg->chunk().request_id() != id) continue;
+    bytes += msg->chunk().data().size();
+    if (msg->chunk().end_of_set()) return bytes;
+  }
+}
+
+// Section 3: the daemon's resident memory, in its own process.
+static int bench_daemon_memory(const fs::path& dir) {
+  const double live_s = env_number("VENEER_BENCH_LIVE_S", 30);
+  const int fetches = static_cast<int>(env_number("VENEER_BENCH_FETCHES", 100));
+  const int rounds = static_cast<int>(env_number("VENEER_BENCH_ROUNDS", 2));
+  const int parallel = 4;
+  const uint32_t chunk = 4u << 20;  // the largest the rig allows
+  fs::path store = dir / "mem-store";
+  std::vector<std::string> args = {"--size", "1024x680", "--log", "warn"};
+  if (const char* preview = std::getenv("VENEER_BENCH_PREVIEW_SIZE")) args.insert(args.end(), {"--preview-size", preview});
+  auto d = rigtest::DaemonProcess::start(store, args);
+  if (!d || d->port() == 0) {
+    std::fprintf(stderr, "bench_rig: veneerd did not start: %s\n", d ? d->log().c_str() : "");
+    return 1;
+  }
+  auto token = veneer::rig::read_token_file(store / "token");
+  if (!token) return 1;
+  auto client = veneer::rig::Client::connect({"127.0.0.1", d->port()}, *token);
+  if (!client) {
+    std::fprintf(stderr, "bench_rig: %s\n", client.message().c_str());
+    return 1;
+  }
+  auto& c = **client;
+  auto id = c.capture();
+  if (!id) return 1;
+  auto done = c.wait_event([&](const veneer::rig::Event& e) {
+    return e.set_id == *id && (e.kind == Kind::set_stored || e.kind == Kind::capture_failed);
+  }, 120);
+  if (!done || done->kind != Kind::set_stored) {
+    std::fprintf(stderr, "bench_rig: capture failed\n");
+    return 1;
+  }
+  auto settle = [] { std::this_thread::sleep_for(std::chrono::seconds(2)); };
+  settle();
+  struct Row {
+    std::string moment;
+    double rss;
+    double anon = -1;  // of which anonymous (heap, stacks): what a leak would grow
+  };
+  std::vector<Row> rows;
+  rows.push_back({"after one capture, idle", d->rss_mib(), d->rss_mib("RssAnon")});
+
+  // The project's own client: pulls one at a time with the default chunk size.
+  for (int i = 0; i < 15; ++i) {
+    fs::path out = dir / ("mem-pull-" + std::to_string(i));
+    (void)c.pull(*id, out, true);
+    fs::remove_all(out);
+  }
+  settle();
+  rows.push_back({"after 15 pulls with the rig client (256 KiB chunks, one at a time)", d->rss_mib(),
+                  d->rss_mib("RssAnon")});
+
+  double set_mib = 0, fetch_mib_s = 0, live_fps = 0;
+  for (int round = 1; round <= rounds; ++round) {
+    const std::string tag = rounds > 1 ? "round " + std::to_string(round) + ": " : "";
+    // A third-party client: the largest chunks, `parallel` fetches at once.
+    std::atomic<int> next{0}, failed{0};
+    std::atomic<uint64_t> bytes{0};
+    std::atomic<bool> fetching{true};
+    double peak = 0;
+    std::thread sampler([&] {
+      while (fetching) {
+        peak = std::max(peak, d->rss_mib());
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      }
+    });
+    auto t0 = Clock::now();
+    std::vector<std::thread> workers;
+    for (int w = 0; w < parallel; ++w) {
+      workers.emplace_back([&] {
+        rigtest::RawConnection raw(d->port());
+        if (!raw.hello(*token)) {
+          ++failed;
+          return;
+        }
+        for (int n; (n = next++) < fetches;) {
+          uint64_t got = raw_fetch(raw, 100 + static_cast<uint64_t>(n), *id, chunk);
+          if (got == 0) ++failed;
+          bytes += got;
+        }
+      });
+    }
+    for (auto& w : workers) w.join();
+    fetch_mib_s = bytes.load() / 1048576.0 / secs(Clock::now() - t0);
+    fetching = false;
+    sampler.join();
+    if (failed > 0) std::fprintf(stderr, "bench_rig: %d fetches failed\n", failed.load());
+    set_mib = bytes.load() / 1048576.0 / std::max(1, fetches - failed.load());
+    rows.push_back({tag + "peak during " + std::to_string(fetches) + " fetches, " + std::to_string(parallel) +
+                        " at once, 4 MiB chunks",
+                    peak});
+    settle();
+    rows.push_back({"**" + tag + "2 s after those fetches**", d->rss_mib(), d->rss_mib("RssAnon")});
+
+    // Live view at 60 fps to two clients, then stopped.
+    std::atomic<int> frames{0};
+    std::vector<std::unique_ptr<veneer::rig::Client>> watchers;
+    for (int i = 0; i < 2; ++i) {
+      auto w = veneer::rig::Client::connect({"127.0.0.1", d->port()}, *token);
+      if (!w) return 1;
+      (*w)->on_live_frame = [&](const veneer::rig::LiveFrame&) { ++frames; };
+      (void)(*w)->start_live_view(60);
+      watchers.push_back(std::move(*w));
+    }
+    const double early_s = std::min(5.0, live_s / 2);
+    double early = 0, highest = 0, last = 0;
+    auto live_start = Clock::now();
+    while (secs(Clock::now() - live_start) < live_s) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(500));
+      double r = d->rss_mib();
+      if (early == 0 && secs(Clock::now() - live_start) >= early_s) early = r;
+      highest = std::max(highest, r);
+      last = r;
+    }
+    live_fps = frames.load() / 2.0 / secs(Clock::now() - live_start);
+    for (auto& w : watchers) (void)w->stop_live_view();
+    watchers.clear();
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%.0f s", early_s);
+    rows.push_back({tag + "live view, 2 clients at 60 fps: after " + std::string(buf), early});
+    std::snprintf(buf, sizeof buf, "%.0f s", live_s);
+    rows.push_back({tag + "live view: highest / at the end of " + std::string(buf), highest});
+    rows.back().moment += " (end: " + std::to_string(static_cast<int>(last + 0.5)) + ")";
+    settle();
+    rows.push_back({"**" + tag + "2 s after live view stopped**", d->rss_mib(), d->rss_mib("RssAnon")});
+  }
+
+  std::printf("\n### veneerd's resident memory (the real binary in its own process; 1024x680 set of %.1f MiB, "
+              "fetches at %.0f MiB/s, live view %.1f fps per client)\n\n",
+              set_mib, fetch_mib_s, live_fps);
+  std::printf("| moment | RSS (MiB) | of which anonymous (MiB) |\n|---|---|---|\n");
+  for (const auto& r : rows) {
+    if (r.anon >= 0) {
+      std::printf("| %s | %.0f | %.0f |\n", r.moment.c_str(), r.rss, r.anon);
+    } else {
+      std::printf("| %s | %.0f | |\n", r.moment.c_str(), r.rss);
+    }
+  }
+  client->reset();
+  d->stop(SIGTERM);
+  return 0;
+}
+
+int main(int argc, char** argv) {
   veneer::log::set_levels("warn");
   fs::path dir = rigtest::temp_dir("bench");
+  if (argc > 1 && std::string(argv[1]) == "--memory") {  // section 3 alone
+    int rc = bench_daemon_memory(dir);
+    fs::remove_all(dir);
+    return rc;
+  }
   veneerd::DaemonOptions o;
   o.simulate = true;
   o.size = {1024, 680};
@@ -167,6 +354,7 @@ int main() {
   live_client->reset();
   client->reset();
   daemon->reset();
+  int rc = bench_daemon_memory(dir);
   fs::remove_all(dir);
-  return 0;
+  return rc;
 }

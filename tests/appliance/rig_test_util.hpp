@@ -12,6 +12,7 @@
 
 #include <chrono>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <memory>
 #include <optional>
@@ -88,6 +89,51 @@ class DaemonProcess {
   ~DaemonProcess() { stop(SIGTERM); }
 
   uint16_t port() const { return port_; }
+  pid_t pid() const { return pid_; }
+  // The daemon's CPU time so far (user + system, from /proc/<pid>/stat) [s].
+  double cpu_seconds() const {
+    FILE* f = std::fopen(("/proc/" + std::to_string(pid_) + "/stat").c_str(), "r");
+    if (!f) return -1;
+    char buf[1024];
+    size_t n = std::fread(buf, 1, sizeof buf - 1, f);
+    std::fclose(f);
+    buf[n] = 0;
+    // Fields after the command name (which may hold spaces) start after the last ')'.
+    const char* p = std::strrchr(buf, ')');
+    if (!p) return -1;
+    unsigned long long utime = 0, stime = 0;
+    // state ppid pgrp session tty tpgid flags minflt cminflt majflt cmajflt utime stime
+    if (std::sscanf(p + 2, "%*c %*d %*d %*d %*d %*d %*u %*u %*u %*u %*u %llu %llu", &utime, &stime) != 2) return -1;
+    return static_cast<double>(utime + stime) / static_cast<double>(::sysconf(_SC_CLK_TCK));
+  }
+  // The daemon's resident memory (VmRSS from /proc/<pid>/status; or another
+  // field of it, e.g. "RssAnon") [MiB].
+  double rss_mib(const char* field = "VmRSS") const {
+    FILE* f = std::fopen(("/proc/" + std::to_string(pid_) + "/status").c_str(), "r");
+    if (!f) return -1;
+    char line[256];
+    double kib = -1;
+    const std::string prefix = std::string(field) + ":";
+    while (std::fgets(line, sizeof line, f)) {
+      if (std::strncmp(line, prefix.c_str(), prefix.size()) == 0 &&
+          std::sscanf(line + prefix.size(), "%lf", &kib) == 1) {
+        break;
+      }
+    }
+    std::fclose(f);
+    return kib / 1024.0;
+  }
+  // The whole log (stderr) so far.
+  std::string full_log() const {
+    FILE* f = std::fopen(log_.c_str(), "r");
+    if (!f) return "";
+    std::string s;
+    char buf[4096];
+    size_t n;
+    while ((n = std::fread(buf, 1, sizeof buf, f)) > 0) s.append(buf, n);
+    std::fclose(f);
+    return s;
+  }
   std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
   bool alive() const { return pid_ > 0 && ::waitpid(pid_, nullptr, WNOHANG) == 0; }
   std::string log() const {
@@ -146,8 +192,20 @@ inline std::string veneer_cli() { return VENEER_BIN_DIR "/veneer"; }
 // A raw TCP connection speaking (or mis-speaking) the protocol.
 class RawConnection {
  public:
-  explicit RawConnection(uint16_t port) {
+  // `from`: the local loopback address to connect from (127.0.0.<from>; 0 =
+  // the kernel's choice), so one test can play several peers.
+  explicit RawConnection(uint16_t port, int from = 0) {
     fd_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    if (from > 0) {
+      sockaddr_in local{};
+      local.sin_family = AF_INET;
+      local.sin_addr.s_addr = htonl(INADDR_LOOPBACK - 1 + static_cast<uint32_t>(from));
+      if (::bind(fd_, reinterpret_cast<sockaddr*>(&local), sizeof local) != 0) {
+        ::close(fd_);
+        fd_ = -1;
+        return;
+      }
+    }
     sockaddr_in a{};
     a.sin_family = AF_INET;
     a.sin_port = htons(port);

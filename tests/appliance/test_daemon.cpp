@@ -3,6 +3,8 @@
 // CLI and the rig client library.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <atomic>
 #include <fstream>
 
 #include <opencv2/imgcodecs.hpp>
@@ -402,5 +404,183 @@ TEST(Daemon, DiskFullFailsTheCaptureClearlyAndStoresNothing) {
     EXPECT_TRUE(name == "token" || name == ".lock") << "left behind: " << name;
   }
   EXPECT_TRUE(d->alive());
+  fs::remove_all(dir);
+}
+
+namespace {
+std::string file_bytes(const fs::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+pb::ClientMessage hello_message(const std::string& token, const std::string& name = "test", uint64_t id = 1) {
+  pb::ClientMessage m;
+  m.set_id(id);
+  m.mutable_hello()->set_protocol_version(veneer::wire::kProtocolVersion);
+  m.mutable_hello()->set_token(token);
+  m.mutable_hello()->set_client_name(name);
+  return m;
+}
+
+size_t count_lines(const std::string& s) { return static_cast<size_t>(std::count(s.begin(), s.end(), '\n')); }
+}  // namespace
+
+// proto/README.md: the token is the token file's content without surrounding
+// whitespace; a client may send the file's bytes as they are.
+TEST(Daemon, TheTokenFileSentWithItsTrailingNewlineIsAccepted) {
+  fs::path dir = rigtest::temp_dir("token");
+  fs::path store = dir / "store";
+  auto d = DaemonProcess::start(store, kSmall);
+  ASSERT_TRUE(d && d->port() != 0) << (d ? d->log() : "");
+  const std::string bytes = file_bytes(store / "token");
+  ASSERT_FALSE(bytes.empty());
+  ASSERT_EQ(bytes.back(), '\n');
+  std::string spaced("  "), tabbed("\t");
+  spaced.append(bytes);
+  tabbed.append(bytes).append("\r\n");
+  for (const std::string& sent : {bytes, spaced, tabbed}) {
+    rigtest::RawConnection c(d->port());
+    c.send(hello_message(sent));
+    auto r = c.next_response(1);
+    ASSERT_TRUE(r);
+    EXPECT_TRUE(r->ok()) << r->error();
+    EXPECT_TRUE(r->has_status());
+  }
+  {  // whitespace inside the token still makes it wrong
+    rigtest::RawConnection c(d->port());
+    std::string inside = bytes;
+    inside.insert(10, " ");
+    c.send(hello_message(inside));
+    auto r = c.next_response(1);
+    ASSERT_TRUE(r);
+    EXPECT_FALSE(r->ok());
+    EXPECT_NE(r->error().find("wrong access token"), std::string::npos) << r->error();
+  }
+  fs::remove_all(dir);
+}
+
+TEST(Daemon, ATooLongClientNameIsRefusedSayingSoWithTheLimit) {
+  fs::path dir = rigtest::temp_dir("name");
+  fs::path store = dir / "store";
+  auto d = DaemonProcess::start(store, kSmall);
+  ASSERT_TRUE(d && d->port() != 0) << (d ? d->log() : "");
+  auto token = veneer::rig::read_token_file(store / "token");
+  ASSERT_TRUE(token);
+  rigtest::RawConnection c(d->port());
+  c.send(hello_message(*token, std::string(129, 'n')));
+  auto r = c.next_response(1);
+  ASSERT_TRUE(r);
+  EXPECT_FALSE(r->ok());
+  EXPECT_NE(r->error().find("hello.client_name: 129 characters is longer than the limit of 128"), std::string::npos)
+      << r->error();
+  EXPECT_TRUE(c.closed_by_peer());
+  rigtest::RawConnection ok(d->port());
+  ok.send(hello_message(*token, std::string(128, 'n')));
+  auto r2 = ok.next_response(1);
+  ASSERT_TRUE(r2);
+  EXPECT_TRUE(r2->ok()) << r2->error();
+  fs::remove_all(dir);
+}
+
+// 1,000 wrong tokens from 100 addresses (127.0.0.2..101, ten each, all at
+// once): the daemon spends under 1 s of CPU on them and logs a handful of
+// lines; each address is slowed (its last tries wait their turn, up to 1 s
+// apart), and a client with the right token is served meanwhile.
+TEST(Daemon, AThousandWrongTokensCostUnderASecondOfCpuAndAFewLogLines) {
+  fs::path dir = rigtest::temp_dir("wrong");
+  fs::path store = dir / "store";
+  auto d = DaemonProcess::start(store, kSmall);
+  ASSERT_TRUE(d && d->port() != 0) << (d ? d->log() : "");
+  auto token = veneer::rig::read_token_file(store / "token");
+  ASSERT_TRUE(token);
+  {  // 127.0.0.2 must be usable as a source address here
+    rigtest::RawConnection probe(d->port(), 2);
+    if (!probe.ok()) GTEST_SKIP() << "cannot connect from 127.0.0.2";
+  }
+  std::this_thread::sleep_for(std::chrono::seconds(1));  // the daemon's start is done
+  const size_t log_before = count_lines(d->full_log());
+  const double cpu_before = d->cpu_seconds();
+  constexpr int kAddresses = 100, kEach = 10;
+  std::atomic<int> refused{0}, other{0};
+  std::vector<double> per_address_s(kAddresses);
+  auto t0 = std::chrono::steady_clock::now();
+  std::vector<std::thread> attackers;
+  for (int a = 0; a < kAddresses; ++a) {
+    attackers.emplace_back([&, a] {
+      auto start = std::chrono::steady_clock::now();
+      for (int i = 0; i < kEach; ++i) {
+        rigtest::RawConnection c(d->port(), 2 + a);
+        std::string guess("not-the-token-");
+        guess.append(std::to_string(i));
+        c.send(hello_message(guess, "guess"));
+        auto r = c.next_response(1, 20);
+        if (r && !r->ok() && r->error().find("wrong access token") != std::string::npos) {
+          ++refused;
+        } else {
+          ++other;
+        }
+      }
+      per_address_s[static_cast<size_t>(a)] =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    });
+  }
+  // Meanwhile the right token from another address is answered at once.
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  auto good_start = std::chrono::steady_clock::now();
+  auto good = connect(*d, store);
+  const double good_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - good_start).count();
+  for (auto& t : attackers) t.join();
+  const double attack_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double cpu = d->cpu_seconds() - cpu_before;
+  ASSERT_TRUE(good);
+  EXPECT_LT(good_s, 1.0);
+  EXPECT_EQ(refused.load(), kAddresses * kEach);
+  EXPECT_EQ(other.load(), 0);
+  // 3 answers at once, then turns 0.1, 0.2, 0.4, 0.8, 1, 1, 1 s apart (4.5 s).
+  EXPECT_GE(*std::min_element(per_address_s.begin(), per_address_s.end()), 4.4);
+  EXPECT_LT(attack_s, 30.0);
+  EXPECT_LT(cpu, 1.0) << "daemon CPU for 1000 wrong tokens";
+  // The burst's summary comes once it has been quiet for 5 s.
+  std::this_thread::sleep_for(std::chrono::seconds(6));
+  std::string log = d->full_log();
+  size_t pos = 0;
+  for (size_t n = 0; n < log_before; ++n) pos = log.find('\n', pos) + 1;
+  std::string added = log.substr(pos);
+  EXPECT_LE(count_lines(added), 5u) << added;
+  EXPECT_NE(added.find("1000 attempts"), std::string::npos) << added;
+  std::printf("1000 wrong tokens: %.2f s of daemon CPU, %zu log lines, %.1f s for the attack; right token answered in "
+              "%.3f s meanwhile\n%s", cpu, count_lines(added), attack_s, good_s, added.c_str());
+  EXPECT_TRUE(d->alive());
+  fs::remove_all(dir);
+}
+
+// Control is taken by the first control request; one that is refused (here:
+// delete of a set that is not there) leaves control free for others.
+TEST(Daemon, ARefusedControlRequestDoesNotKeepControl) {
+  fs::path dir = rigtest::temp_dir("control");
+  fs::path store = dir / "store";
+  auto d = DaemonProcess::start(store, kSmall);
+  ASSERT_TRUE(d && d->port() != 0) << (d ? d->log() : "");
+  auto first = connect(*d, store);
+  auto second = connect(*d, store);
+  ASSERT_TRUE(first && second);
+  auto refused = first->delete_set("no-such-set");
+  ASSERT_FALSE(refused);
+  auto s = first->status();
+  ASSERT_TRUE(s);
+  EXPECT_FALSE(s->you_control);
+  EXPECT_FALSE(s->controller_taken);
+  ASSERT_TRUE(second->set_lamps({true}));  // free: the second takes it
+  auto s2 = second->status();
+  ASSERT_TRUE(s2);
+  EXPECT_TRUE(s2->you_control);
+  auto other = first->set_lamps({false});
+  ASSERT_FALSE(other);
+  EXPECT_NE(other.message().find("controls the rig"), std::string::npos) << other.message();
+  // A controller's own refused request does not cost it control.
+  EXPECT_FALSE(second->delete_set("no-such-set"));
+  s2 = second->status();
+  ASSERT_TRUE(s2);
+  EXPECT_TRUE(s2->you_control);
   fs::remove_all(dir);
 }

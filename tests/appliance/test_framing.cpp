@@ -134,3 +134,72 @@ TEST(Api, UnknownFieldsFromANewerClientAreAnEmptyRequest) {
   ASSERT_FALSE(r);
   EXPECT_NE(r.message().find("unknown"), std::string::npos);
 }
+
+TEST(Api, ATooLongClientNameIsRefusedAsTooLongWithTheLimit) {
+  pb::ClientMessage m;
+  m.set_id(1);
+  m.mutable_hello()->set_protocol_version(veneer::wire::kProtocolVersion);
+  m.mutable_hello()->set_client_name(std::string(veneerd::api::kMaxClientNameChars + 1, 'n'));
+  auto r = veneerd::api::decode(m);
+  ASSERT_FALSE(r);
+  EXPECT_NE(r.message().find("hello.client_name: 129 characters is longer than the limit of 128"), std::string::npos)
+      << r.message();
+  m.mutable_hello()->set_client_name(std::string(veneerd::api::kMaxClientNameChars, 'n'));
+  EXPECT_TRUE(veneerd::api::decode(m));
+  m.mutable_hello()->set_client_name("tab\there");
+  r = veneerd::api::decode(m);
+  ASSERT_FALSE(r);
+  EXPECT_NE(r.message().find("printable"), std::string::npos) << r.message();
+}
+
+TEST(Api, TokensLoseSurroundingWhitespaceOnly) {
+  using veneerd::api::trim_token;
+  EXPECT_EQ(trim_token("abc\n"), "abc");
+  EXPECT_EQ(trim_token("\r\n \tabc def\r\n"), "abc def");
+  EXPECT_EQ(trim_token(" \n\t"), "");
+  EXPECT_EQ(trim_token("abc"), "abc");
+}
+
+// The chunk written by hand around its data reads back as protobuf's own.
+TEST(Api, EncodedChunksParseAsTheGeneratedMessage) {
+  for (size_t size : {size_t{0}, size_t{1}, size_t{127}, size_t{128}, size_t{70000}, veneerd::api::kMaxChunkBytes}) {
+    veneerd::api::ChunkHeader h;
+    h.request_id = 300;
+    h.set_id = "20261122-081530-destination-bull";
+    h.file = "truth/normals.pfm";
+    h.offset = 1ull << 33;
+    h.file_size = (1ull << 33) + size;
+    h.last = true;
+    h.end_of_set = size % 2 == 0;
+    std::string data(size, '\0');
+    for (size_t i = 0; i < size; ++i) data[i] = static_cast<char>(i * 7 + 1);
+    std::string out;
+    ASSERT_TRUE(veneerd::api::encode_chunk(h, size, [&](char* dst, size_t n) {
+      std::copy(data.begin(), data.begin() + static_cast<std::ptrdiff_t>(n), dst);
+      return true;
+    }, out));
+    FrameBuffer in;
+    in.feed(out.data(), out.size());
+    pb::RigMessage m;
+    ASSERT_EQ(in.next(m), ReadResult::message) << in.error();
+    EXPECT_EQ(in.buffered(), 0u);
+    ASSERT_TRUE(m.has_chunk());
+    const auto& c = m.chunk();
+    EXPECT_EQ(c.request_id(), 300u);
+    EXPECT_EQ(c.set_id(), h.set_id);
+    EXPECT_EQ(c.file(), h.file);
+    EXPECT_EQ(c.offset(), h.offset);
+    EXPECT_EQ(c.file_size(), h.file_size);
+    EXPECT_TRUE(c.last());
+    EXPECT_EQ(c.end_of_set(), h.end_of_set);
+    EXPECT_TRUE(c.data() == data) << size;
+    // Same size as protobuf's own encoding of it.
+    pb::RigMessage ref;
+    *ref.mutable_chunk() = c;
+    EXPECT_EQ(veneer::wire::encode_delimited(ref).size(), out.size()) << size;
+  }
+  veneerd::api::ChunkHeader h;
+  std::string out = "x";
+  EXPECT_FALSE(veneerd::api::encode_chunk(h, 10, [](char*, size_t) { return false; }, out));
+  EXPECT_TRUE(out.empty());
+}

@@ -1,5 +1,8 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <fstream>
+
 #include "rig_test_util.hpp"
 #include "veneerd/store.hpp"
 
@@ -69,4 +72,47 @@ TEST(Store, IdsThatAreNotFileNamesAreRefused) {
     EXPECT_FALSE(veneerd::valid_set_id(bad)) << bad;
   }
   EXPECT_TRUE(veneerd::valid_set_id("20261122-081530-destination-bull-2"));
+}
+
+// A leftover of an interrupted write is removed at the first start, even when
+// the pid in its name is alive again: the old writer's unreaped zombie, or the
+// pid reused by an unrelated process (both used to make it survive a restart).
+TEST(Store, LeftoverTemporariesGoAtTheFirstOpenWhateverPidTheyName) {
+  fs::path root = rigtest::temp_dir("store-stale");
+  {
+    auto store = veneerd::Store::open(root);
+    ASSERT_TRUE(store) << store.message();
+    ASSERT_TRUE((*store)->save(tiny_set("kept", veneer::Role::destination)));
+  }
+  pid_t zombie = ::fork();  // exits at once and stays unreaped until the end of the test
+  if (zombie == 0) ::_exit(0);
+  pid_t alive = ::fork();  // a live process that is not a veneerd
+  if (alive == 0) {
+    ::pause();
+    ::_exit(0);
+  }
+  ASSERT_GT(zombie, 0);
+  ASSERT_GT(alive, 0);
+  std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  const std::vector<std::string> stale = {
+      ".20261122-000000-source-stone.tmp-" + std::to_string(zombie) + "-0",
+      ".20261122-000001-destination-bull.tmp-" + std::to_string(alive) + "-3",
+      ".kept.old-" + std::to_string(alive) + "-1",
+      ".kept.deleted-" + std::to_string(::getppid()) + "-0",
+  };
+  for (const auto& name : stale) fs::create_directories(root / name / "truth");
+  { std::ofstream(root / (".token.tmp-" + std::to_string(alive) + "-0")) << "half"; }
+  {
+    auto store = veneerd::Store::open(root);
+    ASSERT_TRUE(store) << store.message();
+    ASSERT_EQ((*store)->list().size(), 1u);
+  }
+  ::kill(alive, SIGKILL);
+  ::waitpid(alive, nullptr, 0);
+  ::waitpid(zombie, nullptr, 0);
+  std::vector<std::string> left;
+  for (const auto& entry : fs::directory_iterator(root)) left.push_back(entry.path().filename().string());
+  std::sort(left.begin(), left.end());
+  EXPECT_EQ(left, (std::vector<std::string>{".lock", "kept"}));
+  fs::remove_all(root);
 }

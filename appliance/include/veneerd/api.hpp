@@ -3,6 +3,7 @@
 // types. Everything a client sends is checked here and refused with an error
 // that says what was wrong; nothing past this file sees a protobuf type.
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <variant>
 #include <vector>
@@ -30,7 +31,7 @@ struct DeleteSetReq { std::string set_id; };
 struct CaptureReq { CaptureRequest capture; };
 struct CancelReq {};
 struct SetLampsReq { std::vector<bool> on; int brightness = 254; };
-struct StartLiveReq { double fps = 10; };
+struct StartLiveReq { double fps = 10; };  // kDefaultLiveFps
 struct StopLiveReq {};
 struct PressReq { bool long_press = false; };
 struct MoveHandLampReq { cv::Vec3d position; };
@@ -47,13 +48,49 @@ struct Request {
 bool needs_control(const Body& body);
 const char* request_name(const Body& body);
 
+// Limits of the requests (proto/README.md lists them; a test checks that the
+// README says these numbers).
+constexpr size_t kMaxTokenBytes = 256;        // hello.token, before trimming
+constexpr size_t kMaxClientNameChars = 128;   // hello.client_name, printable
+constexpr size_t kMinChunkBytes = 1u << 10;   // fetch_images.chunk_size
 constexpr size_t kMaxChunkBytes = 4u << 20;
 constexpr size_t kDefaultChunkBytes = 256u << 10;
+constexpr double kMinLiveFps = 0.1;           // start_live_view.fps
 constexpr double kMaxLiveFps = 60;
+constexpr double kDefaultLiveFps = 10;
+constexpr size_t kMaxObjectChars = 64;        // capture.object, printable
+constexpr double kMaxShutterS = 60;           // capture.exposure.shutter_s
+constexpr double kMaxAperture = 64;           // capture.exposure.aperture (f-number)
+constexpr uint32_t kMaxIso = 409600;          // capture.exposure.iso
+constexpr int kMaxLampsInRequest = 64;        // set_lamps.on
+constexpr uint32_t kMaxBrightness = 254;      // set_lamps.brightness (0 = this)
+constexpr double kMaxHandLampDistanceM = 5;   // move_hand_lamp.position, per coordinate
+constexpr double kMinHandLampDistanceM = 0.05;
+
+// The token as a client sent it, without surrounding whitespace (a client
+// that sends the token file's bytes, newline included, is accepted).
+std::string trim_token(const std::string& token);
 
 // Checks and converts one client message. The error says which field of
 // which request was wrong.
 veneer::Expected<Request> decode(const veneer::v1::ClientMessage& message);
+
+// One piece of a FetchImages stream, as the server knows it.
+struct ChunkHeader {
+  uint64_t request_id = 0;
+  std::string set_id;
+  std::string file;
+  uint64_t offset = 0;
+  uint64_t file_size = 0;
+  bool last = false;
+  bool end_of_set = false;
+};
+// Encodes RigMessage{chunk} length-prefixed into `out` (replacing it), with
+// `data_size` bytes of data that `read(dst, n)` writes straight into place:
+// a chunk of up to 4 MiB is allocated and copied once, not twice.
+// False when `read` fails.
+bool encode_chunk(const ChunkHeader& header, size_t data_size, const std::function<bool(char*, size_t)>& read,
+                  std::string& out);
 
 // Rig -> wire.
 void encode_event(const RigEvent& event, uint64_t seq, veneer::v1::RigMessage& out);

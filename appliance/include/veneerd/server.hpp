@@ -11,6 +11,7 @@
 #include <string>
 
 #include "veneer/util/expected.hpp"
+#include "veneerd/auth_throttle.hpp"
 #include "veneerd/rig.hpp"
 
 namespace veneerd {
@@ -23,6 +24,10 @@ struct ServerOptions {
   size_t live_queue_bytes = 1u << 20;   // live frames are skipped while more than this waits to be sent
   size_t fetch_queue_bytes = 1u << 20;  // image chunks are read while less than this waits
   double hello_timeout_s = 10;       // a connection that does not say hello in time is closed
+  AuthThrottleOptions auth;          // how wrong tokens are slowed and logged
+  // After a download or live view ends, freed memory is handed back to the
+  // system (malloc_trim) this much later, at most once per this interval [s].
+  double release_memory_delay_s = 1;
 };
 
 struct ServerStats {
@@ -30,6 +35,8 @@ struct ServerStats {
   uint64_t live_frames_sent = 0;
   uint64_t live_frames_dropped = 0;
   uint64_t protocol_errors = 0;
+  uint64_t wrong_tokens = 0;
+  uint64_t memory_releases = 0;
 };
 
 class Server {
