@@ -2,9 +2,13 @@
 // C API; the back-end above it never sees a gphoto2 type.
 #include <gphoto2/gphoto2.h>
 
+#include <pthread.h>
+#include <signal.h>
+
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <ctime>
 
 #if defined(__SANITIZE_ADDRESS__)
 #include <sanitizer/lsan_interface.h>
@@ -29,6 +33,39 @@ static_assert(gp::ok == GP_OK && gp::error == GP_ERROR && gp::bad_parameters == 
 
 namespace {
 
+// libgphoto2's PTP/IP driver writes to its sockets with write(): once the
+// camera has gone away that raises SIGPIPE, which ends a process that has not
+// ignored it. Each call runs with SIGPIPE blocked in the calling thread, and a
+// SIGPIPE raised meanwhile is consumed (the call itself fails with an I/O error).
+class SigpipeBlocked {
+ public:
+  SigpipeBlocked() {
+    sigset_t pipe;
+    sigemptyset(&pipe);
+    sigaddset(&pipe, SIGPIPE);
+    pthread_sigmask(SIG_BLOCK, &pipe, &old_);
+    sigset_t pending;
+    sigpending(&pending);
+    was_pending_ = sigismember(&pending, SIGPIPE) == 1;
+  }
+  ~SigpipeBlocked() {
+    sigset_t pipe;
+    sigemptyset(&pipe);
+    sigaddset(&pipe, SIGPIPE);
+    timespec now{0, 0};
+    if (!was_pending_)
+      while (sigtimedwait(&pipe, nullptr, &now) == SIGPIPE) {
+      }
+    pthread_sigmask(SIG_SETMASK, &old_, nullptr);
+  }
+  SigpipeBlocked(const SigpipeBlocked&) = delete;
+  SigpipeBlocked& operator=(const SigpipeBlocked&) = delete;
+
+ private:
+  sigset_t old_;
+  bool was_pending_ = false;
+};
+
 class LibGphoto2 final : public Gphoto2Api {
  public:
   LibGphoto2() : ctx_(gp_context_new()) {}
@@ -38,6 +75,7 @@ class LibGphoto2 final : public Gphoto2Api {
   }
 
   int open(const std::string& model, const std::string& port) override {
+    SigpipeBlocked no_sigpipe;
     close();
     int r = gp_camera_new(&cam_);
     if (r < GP_OK) return r;
@@ -82,6 +120,7 @@ class LibGphoto2 final : public Gphoto2Api {
   }
 
   void close() override {
+    SigpipeBlocked no_sigpipe;
     if (!cam_) return;
     gp_camera_exit(cam_, ctx_);
     gp_camera_unref(cam_);
@@ -91,6 +130,12 @@ class LibGphoto2 final : public Gphoto2Api {
   std::string model() override {
     CameraAbilities a;
     if (!cam_ || gp_camera_get_abilities(cam_, &a) < GP_OK) return "";
+    // Over PTP/IP the abilities only name the driver ("PTP/IP Camera"); the
+    // body's own name is in its device info.
+    if (a.port == GP_PORT_PTPIP) {
+      ConfigValue v;
+      if (get_config("cameramodel", v) >= GP_OK && !v.value.empty()) return v.value;
+    }
     return a.model;
   }
 
@@ -103,6 +148,7 @@ class LibGphoto2 final : public Gphoto2Api {
   }
 
   int get_config(const std::string& name, ConfigValue& out) override {
+    SigpipeBlocked no_sigpipe;
     if (!cam_) return GP_ERROR_IO;
     CameraWidget* w = nullptr;
     int r = gp_camera_get_single_config(cam_, name.c_str(), &w, ctx_);
@@ -154,6 +200,7 @@ class LibGphoto2 final : public Gphoto2Api {
   }
 
   int set_config(const std::string& name, const std::string& value) override {
+    SigpipeBlocked no_sigpipe;
     if (!cam_) return GP_ERROR_IO;
     CameraWidget* w = nullptr;
     int r = gp_camera_get_single_config(cam_, name.c_str(), &w, ctx_);
@@ -180,6 +227,7 @@ class LibGphoto2 final : public Gphoto2Api {
   }
 
   int capture(CameraFilePath& path) override {
+    SigpipeBlocked no_sigpipe;
     if (!cam_) return GP_ERROR_IO;
     ::CameraFilePath p;
     std::memset(&p, 0, sizeof p);
@@ -189,6 +237,7 @@ class LibGphoto2 final : public Gphoto2Api {
   }
 
   int wait_file_added(int timeout_ms, CameraFilePath& added, bool& got) override {
+    SigpipeBlocked no_sigpipe;
     got = false;
     if (!cam_) return GP_ERROR_IO;
     CameraEventType type;
@@ -204,6 +253,7 @@ class LibGphoto2 final : public Gphoto2Api {
   }
 
   int download(const CameraFilePath& path, std::vector<unsigned char>& data) override {
+    SigpipeBlocked no_sigpipe;
     if (!cam_) return GP_ERROR_IO;
     CameraFile* f = nullptr;
     int r = gp_file_new(&f);
@@ -215,11 +265,13 @@ class LibGphoto2 final : public Gphoto2Api {
   }
 
   int remove(const CameraFilePath& path) override {
+    SigpipeBlocked no_sigpipe;
     if (!cam_) return GP_ERROR_IO;
     return gp_camera_file_delete(cam_, path.folder.c_str(), path.name.c_str(), ctx_);
   }
 
   int preview(std::vector<unsigned char>& jpeg) override {
+    SigpipeBlocked no_sigpipe;
     if (!cam_) return GP_ERROR_IO;
     CameraFile* f = nullptr;
     int r = gp_file_new(&f);
@@ -248,6 +300,16 @@ class LibGphoto2 final : public Gphoto2Api {
     }
     gp_list_free(list);
     return r < GP_OK ? r : GP_OK;
+  }
+
+  int probe() override {
+    SigpipeBlocked no_sigpipe;
+    if (!cam_) return GP_ERROR_IO;
+    CameraEventType type;
+    void* data = nullptr;
+    int r = gp_camera_wait_for_event(cam_, 1, &type, &data, ctx_);
+    std::free(data);
+    return r;
   }
 
   std::string error_text(int code) override {
