@@ -2,8 +2,12 @@
 // C API; the back-end above it never sees a gphoto2 type.
 #include <gphoto2/gphoto2.h>
 
+#include <fcntl.h>
 #include <pthread.h>
 #include <signal.h>
+#include <unistd.h>
+
+#include <cerrno>
 
 #include <cstdio>
 #include <cstdlib>
@@ -14,8 +18,10 @@
 #include <sanitizer/lsan_interface.h>
 // libgphoto2 2.5.30's USB port library leaks a libusb device list for every
 // camera model it probes during autodetection (~2500 small blocks per call,
-// in a module it unloads again, so no suppression can name it). Not ours to
-// fix; keep the leak checker quiet for exactly that call.
+// in a module it unloads again, so no suppression can name it). Its camera
+// and port libraries leak a little per session too (the ptp2 camlib's iconv
+// converters and private data, a port list's libusb device list). Not ours
+// to fix; keep the leak checker quiet for exactly those calls.
 #define VENEER_LIBRARY_LEAKS_HERE __lsan::ScopedDisabler lsan_off_for_libgphoto2
 #else
 #define VENEER_LIBRARY_LEAKS_HERE
@@ -66,6 +72,23 @@ class SigpipeBlocked {
   bool was_pending_ = false;
 };
 
+// libgphoto2 2.5.30's PTP/IP driver closes descriptor 0 at every disconnect:
+// its third socket (jpgfd, only opened for Fuji cameras) is left at 0 and
+// closed anyway. Whatever holds number 0 then (the next socket, file or pipe
+// the process opened) would be closed under its owner. Keep /dev/null on 0
+// before a session opens and after it closes; open() takes the lowest free
+// number, so this never replaces a descriptor someone else holds.
+void keep_fd0_on_dev_null() {
+  if (::fcntl(0, F_GETFD) != -1 || errno != EBADF) return;
+  int fd = ::open("/dev/null", O_RDONLY);
+  if (fd > 0) {
+    // Another thread took 0 first: it will be closed at the next disconnect.
+    std::fprintf(stderr, "veneerd: descriptor 0 was reused before it could be refilled; libgphoto2's next PTP/IP "
+                         "disconnect will close it\n");
+    ::close(fd);
+  }
+}
+
 class LibGphoto2 final : public Gphoto2Api {
  public:
   LibGphoto2() : ctx_(gp_context_new()) {}
@@ -76,7 +99,9 @@ class LibGphoto2 final : public Gphoto2Api {
 
   int open(const std::string& model, const std::string& port) override {
     SigpipeBlocked no_sigpipe;
+    VENEER_LIBRARY_LEAKS_HERE;
     close();
+    keep_fd0_on_dev_null();
     int r = gp_camera_new(&cam_);
     if (r < GP_OK) return r;
     if (!model.empty()) {
@@ -115,16 +140,19 @@ class LibGphoto2 final : public Gphoto2Api {
     if (r < GP_OK) {
       gp_camera_unref(cam_);
       cam_ = nullptr;
+      keep_fd0_on_dev_null();
     }
     return r;
   }
 
   void close() override {
     SigpipeBlocked no_sigpipe;
+    VENEER_LIBRARY_LEAKS_HERE;
     if (!cam_) return;
     gp_camera_exit(cam_, ctx_);
     gp_camera_unref(cam_);
     cam_ = nullptr;
+    keep_fd0_on_dev_null();
   }
 
   std::string model() override {

@@ -8,6 +8,9 @@
 // process gets a HOME of its own in a temporary folder.
 #include <gtest/gtest.h>
 
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -289,6 +292,59 @@ TEST(Gphoto2OverPtpip, ACameraThatIsOffIsNamed) {
   EXPECT_TRUE(s.ok()) << s.message();
 }
 
+// A raw TCP connection to the twin; -1 on failure.
+int connect_to(uint16_t port) {
+  int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_port = htons(port);
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  if (fd >= 0 && ::connect(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0) return fd;
+  if (fd >= 0) ::close(fd);
+  return -1;
+}
+
+// Reads until the twin closes the connection; the bytes it sent.
+std::vector<uint8_t> read_to_end(int fd) {
+  std::vector<uint8_t> got;
+  uint8_t buf[256];
+  ssize_t n;
+  while ((n = ::recv(fd, buf, sizeof buf, 0)) > 0) got.insert(got.end(), buf, buf + n);
+  return got;
+}
+
+TEST(PtpipTwin, SurvivesMalformedInitiators) {
+  REQUIRE_PTPIP_DRIVER();
+  auto twin = start_twin(numbered_twin());
+  ASSERT_TRUE(twin);
+  // A length shorter than a header, an absurd length, a first packet that is
+  // no Init request, an Init Event Request for no command connection.
+  const std::vector<std::vector<uint8_t>> garbage = {
+      {3, 0, 0, 0, 1, 0, 0, 0},
+      {0xff, 0xff, 0xff, 0x7f, 1, 0, 0, 0},
+      {8, 0, 0, 0, 6, 0, 0, 0},
+      {12, 0, 0, 0, 3, 0, 0, 0, 99, 0, 0, 0},
+  };
+  for (size_t i = 0; i < garbage.size(); ++i) {
+    int fd = connect_to(twin->port());
+    ASSERT_GE(fd, 0);
+    ASSERT_EQ(::send(fd, garbage[i].data(), garbage[i].size(), MSG_NOSIGNAL), ssize_t(garbage[i].size()));
+    auto reply = read_to_end(fd);  // the twin closes the connection
+    ::close(fd);
+    if (i == 3) {
+      ASSERT_GE(reply.size(), 8u);
+      EXPECT_EQ(reply[4], 5) << "Init Fail";
+    }
+  }
+  // It still serves a real initiator.
+  auto camera = camera_for(*twin, {{"still_size", {160, 120}}});
+  ASSERT_TRUE(camera);
+  auto still = camera->capture();
+  ASSERT_TRUE(still.ok()) << still.message();
+  EXPECT_EQ(still->original, numbered_jpeg(1));
+  EXPECT_EQ(twin->stats().connections, 1u);
+}
+
 // ----------------------------------------------------------------- whole sets
 
 // The rig of veneerd, in this process: Hue lamps through libcurl to the bridge
@@ -371,6 +427,11 @@ struct PtpipRig {
   }
   // Captures a set; the event that ended it (set_stored or capture_failed).
   std::optional<veneerd::RigEvent> capture() {
+    size_t seen = 0;  // set ids are made of the second and the role: only events from now on count
+    {
+      std::lock_guard l(mu);
+      seen = events.size();
+    }
     auto id = rig->capture({veneer::Role::destination, "sphere", {}});
     if (!id) {
       ADD_FAILURE() << id.message();
@@ -380,8 +441,8 @@ struct PtpipRig {
     std::optional<veneerd::RigEvent> end;
     // Generous: a loaded 2-core machine renders and reconnects slowly.
     cv.wait_for(l, std::chrono::seconds(120), [&] {
-      for (const auto& e : events)
-        if (e.set_id == *id &&
+      for (size_t i = seen; i < events.size(); ++i)
+        if (const auto& e = events[i]; e.set_id == *id &&
             (e.kind == veneerd::RigEvent::Kind::set_stored || e.kind == veneerd::RigEvent::Kind::capture_failed)) {
           end = e;
           return true;

@@ -19,6 +19,7 @@
 // replaces the previous one, as a camera does when its host comes back.
 #include <cstdint>
 #include <functional>
+#include <iosfwd>
 #include <memory>
 #include <string>
 #include <vector>
@@ -130,5 +131,12 @@ class PtpipTwin {
 // `quality` (1..100). Live view: the simulated camera's preview frames.
 PtpipShotSource simulated_shot_source(std::shared_ptr<SimulatedCamera> camera, int quality = 95);
 PtpipPreviewSource simulated_preview_source(std::shared_ptr<SimulatedCamera> camera);
+
+// `veneerd ptpip-twin --bridge HOST:PORT --key KEY --lamps 1,2,3 [--scene bull]
+// [--size 1024x680] [--listen 127.0.0.1:15740]`: a twin serving simulator
+// renders lit by the named bridge's lamps, until SIGINT/SIGTERM; a veneerd
+// with camera {"backend": "gphoto2", "port": "ptpip:127.0.0.1:15740"} drives it.
+// args[0] is the subcommand's name. Returns the exit code.
+int ptpip_twin_command(const std::vector<std::string>& args, std::ostream& out, std::ostream& err);
 
 }  // namespace veneerd
