@@ -2,6 +2,7 @@
 //   veneerd --simulate [--scenes bull,stone] [--listen 127.0.0.1:7878] [--store DIR] [--size 1024x680]
 //   veneerd --config /etc/veneer/veneerd.json
 //   veneerd --check-hardware [--config FILE]
+//   veneerd ptpip-twin --bridge HOST:PORT --key KEY --lamps 1,2,3   (a PTP/IP camera twin)
 #include <csignal>
 #include <cstdio>
 #include <fstream>
@@ -16,6 +17,7 @@
 #include "veneer/util/cpu_check.hpp"
 #include "veneer/util/log.hpp"
 #include "veneerd/daemon.hpp"
+#include "veneerd/devices/ptpip_twin.hpp"
 #include "veneerd/hw/hue_setup.hpp"
 #include "veneerd/hw/sd_notify.hpp"
 #if __has_include("veneerd/hw/check.hpp")
@@ -52,6 +54,10 @@ int main(int argc, char** argv) {
   // `veneerd hue discover|pair|lamps|flash ...`: setting up the Hue bridge.
   if (argc > 1 && std::string(argv[1]) == "hue") {
     return veneerd::hw::hue_command({argv + 1, argv + argc}, std::cout, std::cerr);
+  }
+  // `veneerd ptpip-twin ...`: a PTP/IP camera twin serving simulator renders.
+  if (argc > 1 && std::string(argv[1]) == "ptpip-twin") {
+    return veneerd::ptpip_twin_command({argv + 1, argv + argc}, std::cout, std::cerr);
   }
   CLI::App app{"veneerd — the Veneer capture rig daemon (camera, ring of lamps, button; protobuf API on TCP)"};
   veneerd::DaemonOptions o;

@@ -2,16 +2,26 @@
 // C API; the back-end above it never sees a gphoto2 type.
 #include <gphoto2/gphoto2.h>
 
+#include <fcntl.h>
+#include <pthread.h>
+#include <signal.h>
+#include <unistd.h>
+
+#include <cerrno>
+
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <ctime>
 
 #if defined(__SANITIZE_ADDRESS__)
 #include <sanitizer/lsan_interface.h>
 // libgphoto2 2.5.30's USB port library leaks a libusb device list for every
 // camera model it probes during autodetection (~2500 small blocks per call,
-// in a module it unloads again, so no suppression can name it). Not ours to
-// fix; keep the leak checker quiet for exactly that call.
+// in a module it unloads again, so no suppression can name it). Its camera
+// and port libraries leak a little per session too (the ptp2 camlib's iconv
+// converters and private data, a port list's libusb device list). Not ours
+// to fix; keep the leak checker quiet for exactly those calls.
 #define VENEER_LIBRARY_LEAKS_HERE __lsan::ScopedDisabler lsan_off_for_libgphoto2
 #else
 #define VENEER_LIBRARY_LEAKS_HERE
@@ -29,6 +39,56 @@ static_assert(gp::ok == GP_OK && gp::error == GP_ERROR && gp::bad_parameters == 
 
 namespace {
 
+// libgphoto2's PTP/IP driver writes to its sockets with write(): once the
+// camera has gone away that raises SIGPIPE, which ends a process that has not
+// ignored it. Each call runs with SIGPIPE blocked in the calling thread, and a
+// SIGPIPE raised meanwhile is consumed (the call itself fails with an I/O error).
+class SigpipeBlocked {
+ public:
+  SigpipeBlocked() {
+    sigset_t pipe;
+    sigemptyset(&pipe);
+    sigaddset(&pipe, SIGPIPE);
+    pthread_sigmask(SIG_BLOCK, &pipe, &old_);
+    sigset_t pending;
+    sigpending(&pending);
+    was_pending_ = sigismember(&pending, SIGPIPE) == 1;
+  }
+  ~SigpipeBlocked() {
+    sigset_t pipe;
+    sigemptyset(&pipe);
+    sigaddset(&pipe, SIGPIPE);
+    timespec now{0, 0};
+    if (!was_pending_)
+      while (sigtimedwait(&pipe, nullptr, &now) == SIGPIPE) {
+      }
+    pthread_sigmask(SIG_SETMASK, &old_, nullptr);
+  }
+  SigpipeBlocked(const SigpipeBlocked&) = delete;
+  SigpipeBlocked& operator=(const SigpipeBlocked&) = delete;
+
+ private:
+  sigset_t old_;
+  bool was_pending_ = false;
+};
+
+// libgphoto2 2.5.30's PTP/IP driver closes descriptor 0 at every disconnect:
+// its third socket (jpgfd, only opened for Fuji cameras) is left at 0 and
+// closed anyway. Whatever holds number 0 then (the next socket, file or pipe
+// the process opened) would be closed under its owner. Keep /dev/null on 0
+// before a session opens and after it closes; open() takes the lowest free
+// number, so this never replaces a descriptor someone else holds.
+void keep_fd0_on_dev_null() {
+  if (::fcntl(0, F_GETFD) != -1 || errno != EBADF) return;
+  int fd = ::open("/dev/null", O_RDONLY);
+  if (fd > 0) {
+    // Another thread took 0 first: it will be closed at the next disconnect.
+    std::fprintf(stderr, "veneerd: descriptor 0 was reused before it could be refilled; libgphoto2's next PTP/IP "
+                         "disconnect will close it\n");
+    ::close(fd);
+  }
+}
+
 class LibGphoto2 final : public Gphoto2Api {
  public:
   LibGphoto2() : ctx_(gp_context_new()) {}
@@ -38,7 +98,10 @@ class LibGphoto2 final : public Gphoto2Api {
   }
 
   int open(const std::string& model, const std::string& port) override {
+    SigpipeBlocked no_sigpipe;
+    VENEER_LIBRARY_LEAKS_HERE;
     close();
+    keep_fd0_on_dev_null();
     int r = gp_camera_new(&cam_);
     if (r < GP_OK) return r;
     if (!model.empty()) {
@@ -77,20 +140,30 @@ class LibGphoto2 final : public Gphoto2Api {
     if (r < GP_OK) {
       gp_camera_unref(cam_);
       cam_ = nullptr;
+      keep_fd0_on_dev_null();
     }
     return r;
   }
 
   void close() override {
+    SigpipeBlocked no_sigpipe;
+    VENEER_LIBRARY_LEAKS_HERE;
     if (!cam_) return;
     gp_camera_exit(cam_, ctx_);
     gp_camera_unref(cam_);
     cam_ = nullptr;
+    keep_fd0_on_dev_null();
   }
 
   std::string model() override {
     CameraAbilities a;
     if (!cam_ || gp_camera_get_abilities(cam_, &a) < GP_OK) return "";
+    // Over PTP/IP the abilities only name the driver ("PTP/IP Camera"); the
+    // body's own name is in its device info.
+    if (a.port == GP_PORT_PTPIP) {
+      ConfigValue v;
+      if (get_config("cameramodel", v) >= GP_OK && !v.value.empty()) return v.value;
+    }
     return a.model;
   }
 
@@ -103,6 +176,7 @@ class LibGphoto2 final : public Gphoto2Api {
   }
 
   int get_config(const std::string& name, ConfigValue& out) override {
+    SigpipeBlocked no_sigpipe;
     if (!cam_) return GP_ERROR_IO;
     CameraWidget* w = nullptr;
     int r = gp_camera_get_single_config(cam_, name.c_str(), &w, ctx_);
@@ -154,6 +228,7 @@ class LibGphoto2 final : public Gphoto2Api {
   }
 
   int set_config(const std::string& name, const std::string& value) override {
+    SigpipeBlocked no_sigpipe;
     if (!cam_) return GP_ERROR_IO;
     CameraWidget* w = nullptr;
     int r = gp_camera_get_single_config(cam_, name.c_str(), &w, ctx_);
@@ -180,6 +255,7 @@ class LibGphoto2 final : public Gphoto2Api {
   }
 
   int capture(CameraFilePath& path) override {
+    SigpipeBlocked no_sigpipe;
     if (!cam_) return GP_ERROR_IO;
     ::CameraFilePath p;
     std::memset(&p, 0, sizeof p);
@@ -189,6 +265,7 @@ class LibGphoto2 final : public Gphoto2Api {
   }
 
   int wait_file_added(int timeout_ms, CameraFilePath& added, bool& got) override {
+    SigpipeBlocked no_sigpipe;
     got = false;
     if (!cam_) return GP_ERROR_IO;
     CameraEventType type;
@@ -204,6 +281,7 @@ class LibGphoto2 final : public Gphoto2Api {
   }
 
   int download(const CameraFilePath& path, std::vector<unsigned char>& data) override {
+    SigpipeBlocked no_sigpipe;
     if (!cam_) return GP_ERROR_IO;
     CameraFile* f = nullptr;
     int r = gp_file_new(&f);
@@ -215,11 +293,13 @@ class LibGphoto2 final : public Gphoto2Api {
   }
 
   int remove(const CameraFilePath& path) override {
+    SigpipeBlocked no_sigpipe;
     if (!cam_) return GP_ERROR_IO;
     return gp_camera_file_delete(cam_, path.folder.c_str(), path.name.c_str(), ctx_);
   }
 
   int preview(std::vector<unsigned char>& jpeg) override {
+    SigpipeBlocked no_sigpipe;
     if (!cam_) return GP_ERROR_IO;
     CameraFile* f = nullptr;
     int r = gp_file_new(&f);
@@ -248,6 +328,16 @@ class LibGphoto2 final : public Gphoto2Api {
     }
     gp_list_free(list);
     return r < GP_OK ? r : GP_OK;
+  }
+
+  int probe() override {
+    SigpipeBlocked no_sigpipe;
+    if (!cam_) return GP_ERROR_IO;
+    CameraEventType type;
+    void* data = nullptr;
+    int r = gp_camera_wait_for_event(cam_, 1, &type, &data, ctx_);
+    std::free(data);
+    return r;
   }
 
   std::string error_text(int code) override {

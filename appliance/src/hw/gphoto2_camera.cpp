@@ -102,12 +102,45 @@ bool parse_usb_port(const std::string& port, int& bus, int& address) {
   return std::sscanf(port.c_str() + 4, "%d,%d", &bus, &address) == 2;
 }
 
+// "ptpip:HOST[:PORT[:EVENTPORT]]" -> host, ports (defaults 15740, event = command port).
+bool parse_ptpip_port(const std::string& port, std::string& host, int& command, int& event) {
+  if (!is_network_port(port)) return false;
+  std::string rest = port.substr(6);
+  std::vector<std::string> parts;
+  size_t start = 0;
+  for (;;) {
+    size_t colon = rest.find(':', start);
+    parts.push_back(rest.substr(start, colon == std::string::npos ? std::string::npos : colon - start));
+    if (colon == std::string::npos) break;
+    start = colon + 1;
+  }
+  if (parts.empty() || parts.size() > 3) return false;
+  host = parts[0];
+  int a = 0, b = 0, c = 0, d = 0;
+  char tail = 0;
+  if (std::sscanf(host.c_str(), "%d.%d.%d.%d%c", &a, &b, &c, &d, &tail) != 4) return false;
+  for (int v : {a, b, c, d})
+    if (v < 0 || v > 255) return false;
+  auto number = [](const std::string& s, int& out) {
+    if (s.empty() || s.size() > 5 || s.find_first_not_of("0123456789") != std::string::npos) return false;
+    out = std::atoi(s.c_str());
+    return out > 0 && out < 65536;
+  };
+  command = 15740;
+  if (parts.size() > 1 && !number(parts[1], command)) return false;
+  event = command;
+  if (parts.size() > 2 && !number(parts[2], event)) return false;
+  return true;
+}
+
 bool is_jpeg_name(const std::string& name) {
   std::string l = lower(name);
   return l.size() > 4 && (l.ends_with(".jpg") || l.ends_with(".jpeg"));
 }
 
 }  // namespace
+
+bool is_network_port(const std::string& port) { return port.rfind("ptpip:", 0) == 0; }
 
 const std::vector<std::string>& shutter_setting_names() {
   static const std::vector<std::string> n{"shutterspeed", "shutterspeed2", "exposuretime"};
@@ -157,8 +190,18 @@ veneer::Expected<Gphoto2Options> parse_gphoto2_options(const nlohmann::json& s, 
     if (!s[key].is_string()) return veneer::make_error(where + "." + key + ": expected a string");
     *field = s[key].get<std::string>();
   }
-  if (!o.port.empty() && o.port.rfind("usb:", 0) != 0)
-    return veneer::make_error(where + ".port: '" + o.port + "' is not a USB port like \"usb:001,005\"");
+  if (is_network_port(o.port)) {
+    std::string host;
+    int command = 0, event = 0;
+    if (!parse_ptpip_port(o.port, host, command, event))
+      return veneer::make_error(where + ".port: '" + o.port + "' is not a PTP/IP port like \"ptpip:192.168.1.20\" or "
+                                "\"ptpip:192.168.1.20:15740\" (an IPv4 address; libgphoto2 does not resolve host names)");
+    o.port = "ptpip:" + host + ":" + std::to_string(command) + ":" + std::to_string(event);
+    if (o.model.empty()) o.model = "PTP/IP Camera";
+  } else if (!o.port.empty() && o.port.rfind("usb:", 0) != 0) {
+    return veneer::make_error(where + ".port: '" + o.port + "' is neither a USB port like \"usb:001,005\" nor a PTP/IP "
+                              "port like \"ptpip:192.168.1.20\"");
+  }
   for (auto [key, field] : {std::pair{"manual_mode", &o.manual_mode}, std::pair{"autofocus_off", &o.autofocus_off},
                             std::pair{"keep_on_card", &o.keep_on_card}}) {
     if (!s.contains(key)) continue;
@@ -187,7 +230,7 @@ veneer::Expected<Gphoto2Options> parse_gphoto2_options(const nlohmann::json& s, 
 
 Gphoto2Camera::Gphoto2Camera(std::unique_ptr<Gphoto2Api> api, std::unique_ptr<UsbHotplug> hotplug,
                              Gphoto2Options options)
-    : api_(std::move(api)), hotplug_(std::move(hotplug)), opt_(std::move(options)) {
+    : api_(std::move(api)), hotplug_(std::move(hotplug)), opt_(std::move(options)), network_(is_network_port(opt_.port)) {
   if (opt_.still_width > 0) live_size_ = cv::Size(opt_.still_width, opt_.still_height);
   reopen_thread_ = std::thread([this] { reopen_loop(); });
   if (hotplug_) {
@@ -222,12 +265,18 @@ std::string Gphoto2Camera::describe_error(int code, const std::string& doing) {
              "or another gphoto2 session); quit it or unmount the camera, then try again";
     case gp::model_not_found:
     case gp::io_usb_find:
+      if (is_network_port(opt_.port))
+        return "no '" + opt_.model + "' driver in libgphoto2 for " + opt_.port + " (the generic one is \"PTP/IP Camera\")";
       return "no camera found over USB: is it connected, switched on and set to PTP (not mass storage)?";
     case gp::camera_busy:
       return doing + ": the camera is busy (autofocus could not lock, or it is still writing the last shot); "
              "switch the lens to MF";
     default:
       if (unplugged_) return doing + ": the camera was unplugged";
+      if (is_network_port(opt_.port) && !open_)
+        return doing + " failed: no PTP/IP camera answered at " + opt_.port.substr(6) + " (" + api_->error_text(code) +
+               ", gphoto2 error " + std::to_string(code) + "): is it switched on, on this network, and waiting for a "
+               "computer (its PC-remote / Wi-Fi pairing mode)?";
       return doing + " failed: " + api_->error_text(code) + " (gphoto2 error " + std::to_string(code) + ")";
   }
 }
@@ -267,7 +316,7 @@ void Gphoto2Camera::close_locked() {
 std::string Gphoto2Camera::find_setting(const std::vector<std::string>& names, ConfigValue* value) {
   for (const auto& n : names) {
     ConfigValue v;
-    if (api_->get_config(n, v) >= gp::ok) {
+    if (note(api_->get_config(n, v)) >= gp::ok) {
       if (value) *value = v;
       return n;
     }
@@ -298,7 +347,8 @@ veneer::Status Gphoto2Camera::setup_locked() {
         for (const auto& c : v.choices)
           if (!pick && lower(c) == lower(w)) pick = c;
       if (v.readonly || !pick || api_->set_config(n, *pick) < gp::ok) {
-        warn(std::string(what) + " is '" + v.value + "' and cannot be changed over USB: " + hint);
+        warn(std::string(what) + " is '" + v.value + "' and cannot be changed over " + (network_ ? "the network" : "USB") +
+             ": " + hint);
       }
       return;
     }
@@ -316,6 +366,15 @@ veneer::Status Gphoto2Camera::setup_locked() {
 veneer::Expected<CameraDescription> Gphoto2Camera::describe() {
   std::lock_guard<std::mutex> lock(session_);
   if (auto s = open_locked(); !s) return s.error();
+  if (auto s = ensure_alive_locked("describing the camera"); !s) return s.error();
+  lost_seen_ = false;
+  auto d = describe_locked();
+  if (!network_ || !lost_seen_) return d;
+  if (auto s = reconnect_locked("describing the camera"); !s) return s.error();
+  return describe_locked();
+}
+
+CameraDescription Gphoto2Camera::describe_locked() {
   CameraDescription d;
   d.model = model_;
   auto fill = [&](const std::vector<std::string>& names, std::vector<std::string>& out) {
@@ -350,7 +409,7 @@ veneer::Status Gphoto2Camera::set_one(
     return veneer::make_error(std::string(what) + " " + shown + " is not offered by " + model_ + " (" + name +
                               " offers: " + join(v.choices) + ")");
   if (*pick == v.value) return {};
-  int r = api_->set_config(name, *pick);
+  int r = note(api_->set_config(name, *pick));
   if (r < gp::ok) return veneer::make_error(describe_error(r, std::string("setting ") + what + " to " + *pick));
   VLOG_DEBUG("Camera", "{} = {}", name, *pick);
   return {};
@@ -359,6 +418,15 @@ veneer::Status Gphoto2Camera::set_one(
 veneer::Status Gphoto2Camera::set_exposure(const Exposure& e) {
   std::lock_guard<std::mutex> lock(session_);
   if (auto s = open_locked(); !s) return s;
+  if (auto s = ensure_alive_locked("setting the exposure"); !s) return s;
+  lost_seen_ = false;
+  auto s = set_exposure_locked(e);
+  if (s || !network_ || !lost_seen_) return s;
+  if (auto r = reconnect_locked("setting the exposure: " + s.message()); !r) return r;
+  return set_exposure_locked(e);
+}
+
+veneer::Status Gphoto2Camera::set_exposure_locked(const Exposure& e) {
   if (e.aperture > 0) {
     char shown[32];
     std::snprintf(shown, sizeof shown, "f/%g", e.aperture);
@@ -386,15 +454,31 @@ veneer::Expected<Still> Gphoto2Camera::capture() {
   std::lock_guard<std::mutex> lock(session_);
   if (unplugged_) close_locked();
   if (auto s = open_locked(); !s) return s.error();
+  auto still = capture_locked();
+  if (still || !network_ || open_) return still;
+  // The network connection was lost during the shot (capture_locked closed
+  // the session). The lamps are still as the caller set them, so reconnecting
+  // and taking the shot again gives the same picture; a shot the camera took
+  // but could not deliver stays on its card.
+  if (auto s = reconnect_locked(still.message()); !s) return s.error();
+  return capture_locked();
+}
+
+veneer::Expected<Still> Gphoto2Camera::capture_locked() {
   auto lost = [&](int code, const std::string& doing) -> veneer::Error {
     // An I/O failure while the device is gone: drop the session, report it,
-    // and let the hotplug path reopen when the camera is back.
-    bool gone = unplugged_ || code == gp::io || code == gp::io_usb_find || code == gp::timeout;
+    // and let the hotplug path (USB) or the next use (network) reopen it.
+    bool gone = unplugged_ || code == gp::io || code == gp::io_usb_find || code == gp::timeout ||
+                (network_ && lost_code(code));
     std::string msg = describe_error(code, doing);
     if (gone) {
       close_locked();
       if (unplugged_) {
         msg = doing + " failed: the camera was unplugged";
+        set_connected(false);
+      } else if (network_) {
+        msg = doing + " failed: the connection to the camera at " + opt_.port.substr(6) + " was lost (" +
+              api_->error_text(code) + ", gphoto2 error " + std::to_string(code) + ")";
         set_connected(false);
       }
     }
@@ -460,6 +544,10 @@ veneer::Expected<std::vector<unsigned char>> Gphoto2Camera::preview() {
   if (auto s = open_locked(); !s) return s.error();
   std::vector<unsigned char> jpeg;
   int r = api_->preview(jpeg);
+  if (r < gp::ok && network_ && lost_code(r)) {
+    if (auto s = reconnect_locked("live view: " + describe_error(r, "live view")); !s) return s.error();
+    r = api_->preview(jpeg);
+  }
   if (r < gp::ok) {
     std::string msg = describe_error(r, "live view");
     if (unplugged_) {
@@ -473,6 +561,36 @@ veneer::Expected<std::vector<unsigned char>> Gphoto2Camera::preview() {
     if (!m.empty()) live_size_ = m.size();
   }
   return jpeg;
+}
+
+bool Gphoto2Camera::lost_code(int code) const {
+  // What libgphoto2's PTP/IP driver returns when the peer is gone: I/O errors,
+  // timeouts, and a bare error when a read hits the end of the stream.
+  return code == gp::io || code == gp::timeout || code == gp::error;
+}
+
+int Gphoto2Camera::note(int code) {
+  if (code < gp::ok && lost_code(code)) lost_seen_ = true;
+  return code;
+}
+
+veneer::Status Gphoto2Camera::ensure_alive_locked(const char* doing) {
+  if (!network_ || !open_) return {};
+  int r = api_->probe();
+  if (r >= gp::ok || !lost_code(r)) return {};
+  return reconnect_locked(std::string(doing) + ": the connection to the camera at " + opt_.port.substr(6) +
+                          " was lost (" + api_->error_text(r) + ")");
+}
+
+veneer::Status Gphoto2Camera::reconnect_locked(const std::string& why) {
+  close_locked();
+  set_connected(false);
+  VLOG_WARN("Camera", "{}; reconnecting to {} in {} ms", why, opt_.port, opt_.reopen_delay_ms);
+  std::this_thread::sleep_for(std::chrono::milliseconds(opt_.reopen_delay_ms));
+  lost_seen_ = false;
+  if (auto s = open_locked(); !s) return veneer::make_error(why + "; reconnecting failed: " + s.message());
+  VLOG_INFO("Camera", "reconnected to {}", opt_.port);
+  return {};
 }
 
 void Gphoto2Camera::usb_changed(bool arrived, const UsbDeviceId& d) {

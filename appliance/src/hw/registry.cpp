@@ -16,7 +16,9 @@ void register_hardware_devices() {
   DeviceRegistry::add<Camera>(reg.cameras, "gphoto2", [](const nlohmann::json& s) -> veneer::Expected<std::unique_ptr<Camera>> {
     auto o = hw::parse_gphoto2_options(s, "camera");
     if (!o) return o.error();
-    auto cam = std::make_unique<hw::Gphoto2Camera>(hw::make_libgphoto2_api(), hw::make_libusb_hotplug(), *o);
+    // A network camera has no USB arrivals to watch: a lost connection is reopened on use.
+    auto hotplug = hw::is_network_port(o->port) ? nullptr : hw::make_libusb_hotplug();
+    auto cam = std::make_unique<hw::Gphoto2Camera>(hw::make_libgphoto2_api(), std::move(hotplug), *o);
     // A camera that is not there yet is not fatal: it is opened when it arrives.
     return std::unique_ptr<Camera>(std::move(cam));
   });

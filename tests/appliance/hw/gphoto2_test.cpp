@@ -333,5 +333,28 @@ TEST(Gphoto2, OptionsParseAndReject) {
   EXPECT_NE(unknown.message().find("unknown field 'aperture'"), std::string::npos) << unknown.message();
 }
 
+TEST(Gphoto2, PtpipPortsNameBothConnectionsAndTheGenericDriver) {
+  // libgphoto2 2.5.30 opens the event connection on 15740 unless it is named.
+  auto plain = parse_gphoto2_options({{"port", "ptpip:192.168.1.20"}}, "camera");
+  ASSERT_TRUE(plain.ok()) << plain.message();
+  EXPECT_EQ(plain->port, "ptpip:192.168.1.20:15740:15740");
+  EXPECT_EQ(plain->model, "PTP/IP Camera");
+  auto with_port = parse_gphoto2_options({{"port", "ptpip:127.0.0.1:5555"}, {"model", "Nikon DSLR (WLAN)"}}, "camera");
+  ASSERT_TRUE(with_port.ok()) << with_port.message();
+  EXPECT_EQ(with_port->port, "ptpip:127.0.0.1:5555:5555");
+  EXPECT_EQ(with_port->model, "Nikon DSLR (WLAN)");
+  auto both = parse_gphoto2_options({{"port", "ptpip:10.0.0.2:15740:15741"}}, "camera");
+  ASSERT_TRUE(both.ok()) << both.message();
+  EXPECT_EQ(both->port, "ptpip:10.0.0.2:15740:15741");
+  EXPECT_TRUE(is_network_port(both->port));
+  EXPECT_FALSE(is_network_port("usb:001,004"));
+  for (const char* bad : {"ptpip:", "ptpip:camera.local", "ptpip:10.0.0.256", "ptpip:10.0.0.2:0", "ptpip:10.0.0.2:x",
+                          "ptpip:10.0.0.2:1:2:3"}) {
+    auto r = parse_gphoto2_options({{"port", bad}}, "camera");
+    ASSERT_FALSE(r.ok()) << bad;
+    EXPECT_NE(r.message().find("is not a PTP/IP port"), std::string::npos) << r.message();
+  }
+}
+
 }  // namespace
 }  // namespace veneerd::hw

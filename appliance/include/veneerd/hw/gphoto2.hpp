@@ -1,6 +1,6 @@
 #pragma once
-// The "gphoto2" camera: a DSLR over USB (PTP) through libgphoto2, behind a
-// seam. Gphoto2Api is the small part of libgphoto2 the back-end uses, one
+// The "gphoto2" camera: a DSLR over USB (PTP) or over the network (PTP/IP,
+// libgphoto2's "ptpip:" port) through libgphoto2, behind a seam. Gphoto2Api is the small part of libgphoto2 the back-end uses, one
 // method per call sequence; make_libgphoto2_api() wraps the real library and
 // tests substitute a fake. USB hotplug (libusb) sits behind UsbHotplug the
 // same way. No gphoto2 or libusb type appears in this header.
@@ -82,6 +82,10 @@ class Gphoto2Api {
   // gp_camera_capture_preview + gp_file_get_data_and_size
   virtual int preview(std::vector<unsigned char>& jpeg) = 0;
   virtual int autodetect(std::vector<DetectedCamera>& found) = 0;  // gp_camera_autodetect
+  // Whether the session still answers, cheaply: gp_camera_wait_for_event for
+  // 1 ms (over PTP/IP a closed connection shows at once). Used for network
+  // cameras before the first call of a set; USB has hotplug instead.
+  virtual int probe() { return gp::ok; }
   virtual std::string error_text(int code) = 0;                     // gp_result_as_string
 };
 
@@ -106,17 +110,28 @@ class UsbHotplug {
 std::unique_ptr<UsbHotplug> make_libusb_hotplug();
 
 struct Gphoto2Options {
-  std::string model;                 // "" = first camera found
-  std::string port;                  // "" = any ("usb:001,005" pins one)
+  // "" = first camera found; over PTP/IP "" means libgphoto2's generic
+  // "PTP/IP Camera" driver (a vendor's "Nikon DSLR (WLAN)", "Canon EOS (WLAN)"
+  // ... may be named instead).
+  std::string model;
+  // "" = any USB camera; "usb:001,005" pins one; "ptpip:HOST[:PORT[:EVENTPORT]]"
+  // is a camera on the network (IPv4 address, port 15740 by default). The
+  // parser writes both ports out: libgphoto2 2.5.30 would otherwise open the
+  // event connection on 15740 whatever the command port.
+  std::string port;
   bool manual_mode = true;           // put the body in M
   bool autofocus_off = true;         // focus once by hand; a failed AF lock reads as "busy"
   bool keep_on_card = false;         // false: capture to the camera's RAM / delete after download
-  int reopen_delay_ms = 1500;        // wait after a USB arrival before reopening
+  int reopen_delay_ms = 1500;        // wait after a USB arrival (or a lost network
+                                     // connection) before reopening
   int paired_jpeg_wait_ms = 3000;    // how long to wait for the JPEG of a RAW+JPEG pair
   int still_width = 0, still_height = 0;  // set-image size; 0 = the live-view size
 };
 
 veneer::Expected<Gphoto2Options> parse_gphoto2_options(const nlohmann::json& section, const std::string& where);
+
+// True for a libgphoto2 network port ("ptpip:...").
+bool is_network_port(const std::string& port);
 
 // The names vendors give the three exposure settings, in the order tried.
 const std::vector<std::string>& shutter_setting_names();   // shutterspeed, shutterspeed2, ...
@@ -158,10 +173,21 @@ class Gphoto2Camera : public Camera {
   std::string describe_error(int code, const std::string& doing);
   void set_connected(bool c);
   void reopen_loop();
+  // Network cameras: drop a session whose connection failed and open a new
+  // one (after reopen_delay_ms); each operation does this at most once.
+  veneer::Status reconnect_locked(const std::string& why);
+  veneer::Status ensure_alive_locked(const char* doing);  // network: probe, reconnect when gone
+  CameraDescription describe_locked();
+  veneer::Status set_exposure_locked(const Exposure& exposure);
+  veneer::Expected<Still> capture_locked();
+  bool lost_code(int code) const;  // a code that means the network connection is gone
+  int note(int code);              // records lost_code(code) in lost_seen_; returns code
 
   std::unique_ptr<Gphoto2Api> api_;
   std::unique_ptr<UsbHotplug> hotplug_;
   Gphoto2Options opt_;
+  const bool network_;  // a PTP/IP camera: no hotplug, a lost connection is reopened on use
+  bool lost_seen_ = false;  // a call since the last check failed as if the connection were gone
   std::mutex session_;  // one gphoto2 call sequence at a time
   bool open_ = false;
   std::atomic<bool> connected_{false};
