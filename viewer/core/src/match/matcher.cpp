@@ -260,7 +260,8 @@ Expected<Map> compute_map(const ObjectView& destination, const ObjectView& sourc
   if (auto s = options.check(); !s) return s.error();
   if (auto s = check_pair(destination, source, options.feature); !s) return s.error();
   // The fast engine serves what it supports (and `coherent`, which only it has).
-  if (options.method == Method::coherent || (options.fast && fast::supports(options)))
+  if (options.method == Method::coherent || options.method == Method::combined ||
+      (options.fast && fast::supports(options)))
     return fast::compute_map(destination, source, options, progress);
   const auto t0 = std::chrono::steady_clock::now();
   auto dst = make_features(destination, options.feature, options.patch);
@@ -275,7 +276,8 @@ Expected<Map> compute_map(const ObjectView& destination, const ObjectView& sourc
     case Method::patchmatch: map = run_patchmatch(*dst, *src, options, progress); break;
     case Method::regiongrow: map = run_regiongrow(*dst, *src, options, progress); break;
     case Method::baseline: map = run_baseline(*dst, *src); break;
-    case Method::coherent: break;
+    case Method::coherent:
+    case Method::combined: break;
   }
   if (map) {
     progress.report(1.0, "done");

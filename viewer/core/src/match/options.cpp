@@ -13,7 +13,7 @@ struct MethodName {
 constexpr MethodName kMethods[] = {
     {Method::linear, "linear"},         {Method::flann, "flann"},       {Method::candidates, "candidates"},
     {Method::patchmatch, "patchmatch"}, {Method::regiongrow, "regiongrow"}, {Method::baseline, "baseline"},
-    {Method::coherent, "coherent"},
+    {Method::coherent, "coherent"},     {Method::combined, "combined"},
 };
 }  // namespace
 
@@ -29,7 +29,7 @@ Expected<Method> parse_method(const std::string& s) {
   for (const auto& e : kMethods)
     if (s == e.name) return e.method;
   return make_error("unknown method '" + s +
-                    "' (linear, flann, candidates, patchmatch, regiongrow, baseline, coherent)");
+                    "' (combined, coherent, linear, flann, candidates, patchmatch, regiongrow, baseline)");
 }
 
 Expected<Feature> parse_feature(const std::string& s) {

@@ -12,7 +12,7 @@
 namespace veneer::match {
 
 enum class Feature { normals, intensities };
-enum class Method { linear, flann, candidates, patchmatch, regiongrow, baseline, coherent };
+enum class Method { linear, flann, candidates, patchmatch, regiongrow, baseline, coherent, combined };
 const char* method_name(Method);
 const char* feature_name(Feature);
 Expected<Method> parse_method(const std::string&);
@@ -41,7 +41,7 @@ struct MatchOptions {
   int patch = 1;                       // patch side: 1, 3, 5 or 7 (mirrored borders)
   int candidates = 10;                 // K for `candidates` (1..100)
   double threshold = 0.05;             // `regiongrow` smoothness threshold (>= 0; 0 = direct matching)
-  int iterations = 5;                  // `patchmatch` iterations
+  int iterations = 5;                  // `patchmatch` iterations; `combined`: iterations per pyramid level
   double coherent_threshold = 0.10;    // `coherent` normal error allowed for a chunk, radians-ish (|dn|); on
                                        // intensities converted when the destination has normals (fast engine)
   double uniformity = 0.0;             // reuse penalty weight for `coherent`/`patchmatch` (0 = off)

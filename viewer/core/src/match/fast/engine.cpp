@@ -13,6 +13,7 @@
 #include <tbb/parallel_invoke.h>
 
 #include "candidates.hpp"
+#include "combined.hpp"
 #include "engine.hpp"
 #include "index_fast.hpp"
 #include "nearest.hpp"
@@ -446,6 +447,7 @@ bool supports(const MatchOptions& options) {
     case Method::patchmatch:
     case Method::regiongrow:
     case Method::coherent:
+    case Method::combined:
       return true;
     case Method::baseline:
       return false;
@@ -530,6 +532,16 @@ Expected<Map> compute_map(const ObjectView& destination, const ObjectView& sourc
     return make_error(std::string("the fast engine does not serve method '") + method_name(options.method) + "'");
   if (auto s = options.check(); !s) return s.error();
   if (auto s = check_pair(destination, source, options.feature); !s) return s.error();
+  if (options.method == Method::combined) {
+    // its own features (normals, shading, colour) and pyramid
+    auto map = run_combined(destination, source, options, progress);
+    if (stats) {
+      *stats = Stats{};
+      stats->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    }
+    if (map) progress.report(1.0, "done");
+    return map;
+  }
   // pixel -> row lookups: for the methods that walk the image, and for the
   // propagation candidates of the patch search
   const bool grid_needed = options.method == Method::patchmatch || options.method == Method::regiongrow ||
@@ -572,6 +584,7 @@ Expected<Map> compute_map(const ObjectView& destination, const ObjectView& sourc
       map = run_coherent(*dst, *src, o, progress, st);
       break;
     }
+    case Method::combined:
     case Method::baseline: break;
   }
   st->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

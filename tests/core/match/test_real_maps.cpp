@@ -1,0 +1,130 @@
+// core/RealMaps.*: the default correspondence on real photos
+// (../shared/data/real/): self-maps of an object onto its own copy scaled or
+// moved, where the true map is known, and a cross-object pair.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <random>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "veneer/io/imageset.hpp"
+#include "veneer/match/metrics.hpp"
+#include "veneer/match/transfer.hpp"
+
+namespace veneer::match {
+namespace {
+
+const std::filesystem::path kReal = std::filesystem::path(VENEER_SHARED_DATA) / "real";
+
+// A copy of `set` moved by (dx, dy) px (edges replicated) with Gaussian noise of `sigma` added to the photos.
+ImageSet moved_copy(const ImageSet& set, double dx, double dy, double sigma, unsigned seed) {
+  ImageSet out = set;
+  cv::Mat shift = (cv::Mat_<double>(2, 3) << 1, 0, dx, 0, 1, dy);
+  cv::RNG rng(seed);
+  auto move = [&](cv::Mat& m, int interp) {
+    cv::Mat t;
+    cv::warpAffine(m, t, shift, m.size(), interp, cv::BORDER_REPLICATE);
+    m = t;
+  };
+  for (auto& im : out.images) {
+    move(im, cv::INTER_LINEAR);
+    cv::Mat noise(im.size(), im.type());
+    rng.fill(noise, cv::RNG::NORMAL, 0, sigma);
+    im += noise;
+  }
+  if (!out.ambient.empty()) move(out.ambient, cv::INTER_LINEAR);
+  if (!out.mask.empty()) move(out.mask, cv::INTER_NEAREST);
+  return out;
+}
+
+struct SelfMapScore {
+  double within = 0;  // share of mapped destination object pixels within `tolerance` px of the truth
+  double coverage = 0;
+  double coherence = 0;
+};
+
+// Destination pixel (x, y) truly shows source pixel truth(x, y).
+SelfMapScore score(const Map& map, const cv::Mat& dst_mask, const cv::Mat& src_mask,
+                   const std::function<cv::Point2d(int, int)>& truth, double tolerance) {
+  long n = 0, ok = 0;
+  for (int y = 0; y < map.xy.rows; ++y)
+    for (int x = 0; x < map.xy.cols; ++x) {
+      if (!dst_mask.at<uchar>(y, x)) continue;
+      const cv::Point2d t = truth(x, y);
+      // Pixels whose true partner is off the source object cannot be right.
+      const int tx = static_cast<int>(std::lround(t.x)), ty = static_cast<int>(std::lround(t.y));
+      if (tx < 0 || ty < 0 || tx >= src_mask.cols || ty >= src_mask.rows || !src_mask.at<uchar>(ty, tx)) continue;
+      ++n;
+      const cv::Vec2f m = map.xy.at<cv::Vec2f>(y, x);
+      if (m[0] >= 0 && std::hypot(m[0] - t.x, m[1] - t.y) <= tolerance) ++ok;
+    }
+  if (const char* dir = std::getenv("VENEER_DEBUG_DIR")) {
+    cv::Mat pic(map.xy.size(), CV_8UC3, cv::Scalar(0, 0, 0));
+    for (int y = 0; y < map.xy.rows; ++y)
+      for (int x = 0; x < map.xy.cols; ++x) {
+        if (!dst_mask.at<uchar>(y, x)) continue;
+        const cv::Point2d t = truth(x, y);
+        const cv::Vec2f m = map.xy.at<cv::Vec2f>(y, x);
+        double e = std::hypot(m[0] - t.x, m[1] - t.y);
+        pic.at<cv::Vec3b>(y, x) = e <= tolerance ? cv::Vec3b(0, 160, 0) : e <= 4 * tolerance ? cv::Vec3b(0, 200, 255) : cv::Vec3b(0, 0, 255);
+      }
+    static int k = 0;
+    cv::imwrite(std::string(dir) + "/selfmap_error_" + std::to_string(k++) + ".png", pic);
+  }
+  Quality q = evaluate(map, dst_mask, src_mask);
+  return {n ? static_cast<double>(ok) / n : 0.0, q.coverage, q.coherence};
+}
+
+class RealMaps : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(RealMaps, ScaledAndMovedSelfMapsFindTheMotion) {
+  const auto folder = kReal / GetParam();
+  if (!std::filesystem::exists(folder / "filenames.txt")) GTEST_SKIP() << "no " << folder;
+  auto set = read_set(folder);
+  ASSERT_TRUE(set.ok()) << set.message();
+  auto src = prepare_object(*set, false);
+  ASSERT_TRUE(src.ok()) << src.message();
+  MatchOptions o;
+  o.method = Method::combined;
+
+  // Scaled 0.8x: source pixel = (x + 0.5) / 0.8 - 0.5.
+  {
+    ImageSet small = *set;
+    scale_set(small, 0.8);
+    const double sx = static_cast<double>(set->size.width) / small.size.width;
+    const double sy = static_cast<double>(set->size.height) / small.size.height;
+    auto dst = prepare_object(small, false);
+    ASSERT_TRUE(dst.ok()) << dst.message();
+    auto t0 = std::chrono::steady_clock::now();
+    auto map = compute_map(dst->view, src->view, o);
+    double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    ASSERT_TRUE(map.ok()) << map.message();
+    auto s = score(*map, dst->view.mask, src->view.mask,
+                   [&](int x, int y) { return cv::Point2d((x + 0.5) * sx - 0.5, (y + 0.5) * sy - 0.5); }, 2.0);
+    std::printf("%s scaled 0.8: within 2 px %.1f %%, coverage %.1f %%, coherence %.3f, %.0f ms\n", GetParam().c_str(),
+                100 * s.within, 100 * s.coverage, s.coherence, ms);
+    EXPECT_GE(s.within, 0.90);
+    EXPECT_GE(s.coverage, 0.995);
+  }
+  // Moved by (3, -2) px with noise of 2/255.
+  {
+    ImageSet moved = moved_copy(*set, 3, -2, 2.0 / 255, 7);
+    auto dst = prepare_object(moved, false);
+    ASSERT_TRUE(dst.ok()) << dst.message();
+    auto map = compute_map(dst->view, src->view, o);
+    ASSERT_TRUE(map.ok()) << map.message();
+    auto s = score(*map, dst->view.mask, src->view.mask, [&](int x, int y) { return cv::Point2d(x - 3, y + 2); }, 1.5);
+    std::printf("%s moved (3, -2) + noise: within 1.5 px %.1f %%, coverage %.1f %%, coherence %.3f\n",
+                GetParam().c_str(), 100 * s.within, 100 * s.coverage, s.coherence);
+    EXPECT_GE(s.within, 0.97);
+    EXPECT_GE(s.coverage, 0.995);
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Objects, RealMaps, ::testing::Values("cat"));
+
+}  // namespace
+}  // namespace veneer::match

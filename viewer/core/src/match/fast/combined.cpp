@@ -1,0 +1,447 @@
+// The `combined` correspondence: a multi-scale PatchMatch over everything the
+// rig gives for a pixel, with a coherence term (see combined.hpp).
+#include "combined.hpp"
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <cstdlib>
+#include <string>
+#include <random>
+#include <vector>
+
+#include <opencv2/calib3d.hpp>
+#include <opencv2/imgproc.hpp>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
+
+#include "veneer/match/fast.hpp"
+
+namespace veneer::match::fast {
+
+namespace {
+
+// One level of one object: features per pixel (dims floats, padded to a
+// multiple of 8), -1 rows off the object.
+struct Level {
+  cv::Size size;
+  int dims = 0, stride = 0;
+  std::vector<float> f;       // size.area() * stride
+  std::vector<uint8_t> on;    // object pixel
+  cv::Mat normals;            // CV_32FC3 (for the seed)
+  std::vector<cv::Point> pixels;
+
+  bool valid(int x, int y) const {
+    return x >= 0 && y >= 0 && x < size.width && y < size.height && on[static_cast<size_t>(y) * size.width + x];
+  }
+  const float* at(int x, int y) const { return f.data() + (static_cast<size_t>(y) * size.width + x) * stride; }
+};
+
+struct Weights {
+  float normal = 1.0f;    // |dn|^2
+  float shading = 0.5f;   // the per-lamp grey pattern, normalised (albedo-free)
+  float chroma = 0.5f;    // the mean colour's chromaticity
+  float lum = 0.02f;      // log of the mean grey (albedo x shading)
+};
+
+// The pixel's features: normal, shading pattern, chroma, log luminance.
+Level make_level(const cv::Mat& normals, const cv::Mat& mask, const std::vector<cv::Mat>& images,
+                 const Weights& w) {
+  Level l;
+  l.size = normals.size();
+  const int lamps = static_cast<int>(images.size());
+  l.dims = 3 + lamps + 3;
+  l.stride = (l.dims + 7) / 8 * 8;
+  l.f.assign(static_cast<size_t>(l.size.area()) * l.stride, 0.0f);
+  l.on.assign(static_cast<size_t>(l.size.area()), 0);
+  l.normals = normals;
+  const float sn = std::sqrt(w.normal), ss = std::sqrt(w.shading), sc = std::sqrt(w.chroma), sl = std::sqrt(w.lum);
+  std::vector<float> grey(lamps);
+  for (int y = 0; y < l.size.height; ++y) {
+    for (int x = 0; x < l.size.width; ++x) {
+      if (!mask.at<uchar>(y, x)) continue;
+      cv::Vec3f n = normals.at<cv::Vec3f>(y, x);
+      // A pixel without a normal still takes part (every object pixel is
+      // mapped): on its photos alone, its normal part a constant.
+      if (!(std::isfinite(n[0]) && std::isfinite(n[1]) && std::isfinite(n[2])) || n.dot(n) < 0.25f) n = {0, 0, 0};
+      float* f = l.f.data() + (static_cast<size_t>(y) * l.size.width + x) * l.stride;
+      f[0] = sn * n[0];
+      f[1] = sn * n[1];
+      f[2] = sn * n[2];
+      cv::Vec3f mean(0, 0, 0);
+      double norm = 0;
+      for (int j = 0; j < lamps; ++j) {
+        const cv::Vec3f c = images[j].at<cv::Vec3f>(y, x);
+        mean += c;
+        grey[j] = std::max(0.0f, (c[0] + c[1] + c[2]) / 3.0f);
+        norm += static_cast<double>(grey[j]) * grey[j];
+      }
+      const float inv = norm > 0 ? static_cast<float>(1.0 / std::sqrt(norm)) : 0.0f;
+      for (int j = 0; j < lamps; ++j) f[3 + j] = ss * grey[j] * inv;
+      mean /= std::max(1, lamps);
+      const float sum = std::max(1e-6f, mean[0] + mean[1] + mean[2]);
+      f[3 + lamps] = sc * mean[0] / sum;
+      f[4 + lamps] = sc * mean[2] / sum;
+      f[5 + lamps] = sl * std::log(std::max(1e-4f, sum / 3.0f));
+      l.on[static_cast<size_t>(y) * l.size.width + x] = 1;
+      l.pixels.emplace_back(x, y);
+    }
+  }
+  return l;
+}
+
+struct Pyramid {
+  std::vector<Level> levels;  // [0] = full size
+};
+
+Pyramid make_pyramid(const ObjectView& v, int count, const Weights& w) {
+  Pyramid p;
+  cv::Mat normals = v.normals, mask = v.mask;
+  std::vector<cv::Mat> images = v.images;
+  for (int i = 0; i < count; ++i) {
+    p.levels.push_back(make_level(normals, mask, images, w));
+    if (i + 1 == count) break;
+    cv::Size half((normals.cols + 1) / 2, (normals.rows + 1) / 2);
+    cv::Mat n2, m2;
+    cv::resize(normals, n2, half, 0, 0, cv::INTER_AREA);
+    for (auto it = n2.begin<cv::Vec3f>(); it != n2.end<cv::Vec3f>(); ++it) {
+      cv::Vec3f& v = *it;
+      const float len = std::sqrt(v.dot(v));
+      if (len > 1e-6f) v /= len;
+    }
+    cv::Mat mf;
+    mask.convertTo(mf, CV_32F, 1.0 / 255);
+    cv::resize(mf, mf, half, 0, 0, cv::INTER_AREA);
+    m2 = mf > 0.5;
+    for (auto& im : images) cv::resize(im, im, half, 0, 0, cv::INTER_AREA);
+    normals = n2;
+    mask = m2;
+  }
+  return p;
+}
+
+// The patch: the centre (weight 2), 8 samples two pixels away and 8 four
+// pixels away: wide enough to tell a smooth surface's pixels apart.
+const std::array<cv::Point, 17> kOffsets = {
+    cv::Point(0, 0),   cv::Point(-2, 0), cv::Point(2, 0),  cv::Point(0, -2), cv::Point(0, 2),  cv::Point(-2, -2),
+    cv::Point(2, -2),  cv::Point(-2, 2), cv::Point(2, 2),  cv::Point(-4, 0), cv::Point(4, 0),  cv::Point(0, -4),
+    cv::Point(0, 4),   cv::Point(-4, -4), cv::Point(4, -4), cv::Point(-4, 4), cv::Point(4, 4)};
+const std::array<float, 17> kWeights = {2, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1};
+constexpr float kOffObject = 1.0f;  // a patch sample that falls off the source object
+
+inline float sq_dist(const float* a, const float* b, int stride) {
+  float s = 0;
+  for (int i = 0; i < stride; ++i) {
+    const float d = a[i] - b[i];
+    s += d * d;
+  }
+  return s;
+}
+
+struct Matcher {
+  const Level& d;
+  const Level& s;
+  float coherence = 0.05f;  // cost of each 4-neighbour whose match lies more than 1.5 px away
+  std::vector<cv::Point2i> match;  // per destination pixel (size.area()), (-1,-1) = none
+  std::vector<float> cost;         // patch cost (no coherence part)
+
+  float patch_cost(int px, int py, int qx, int qy) const {
+    float total = 0, wsum = 0;
+    for (size_t k = 0; k < kOffsets.size(); ++k) {
+      const int dx = px + kOffsets[k].x, dy = py + kOffsets[k].y;
+      if (!d.valid(dx, dy)) continue;
+      const int sx = qx + kOffsets[k].x, sy = qy + kOffsets[k].y;
+      wsum += kWeights[k];
+      if (!s.valid(sx, sy)) {
+        total += kWeights[k] * kOffObject;
+        continue;
+      }
+      total += kWeights[k] * sq_dist(d.at(dx, dy), s.at(sx, sy), d.stride);
+    }
+    return wsum > 0 ? total / wsum : 0.0f;
+  }
+  // Neighbours whose current match does not continue (qx, qy): more than
+  // one pixel off the neighbour's own step (a uniform scale of 0.5..1.5 stays within it).
+  float incoherence(int px, int py, int qx, int qy) const {
+    int broken = 0;
+    for (const cv::Point o : {cv::Point(1, 0), cv::Point(-1, 0), cv::Point(0, 1), cv::Point(0, -1)}) {
+      const int nx = px + o.x, ny = py + o.y;
+      if (!d.valid(nx, ny)) continue;
+      const cv::Point2i m = match[static_cast<size_t>(ny) * d.size.width + nx];
+      if (m.x < 0) continue;
+      const int ex = m.x - qx - o.x, ey = m.y - qy - o.y;
+      if (ex * ex + ey * ey > 1) ++broken;
+    }
+    return coherence * broken;
+  }
+  float total(int px, int py, int qx, int qy, float patch) const { return patch + incoherence(px, py, qx, qy); }
+
+  // Tries (qx, qy) for p; keeps it when better.
+  inline void try_candidate(int px, int py, int qx, int qy, cv::Point2i& best, float& best_patch, float& best_total) const {
+    if (!s.valid(qx, qy) || (qx == best.x && qy == best.y)) return;
+    const float pc = patch_cost(px, py, qx, qy);
+    if (pc >= best_total) return;  // the coherence part is >= 0
+    const float t = total(px, py, qx, qy, pc);
+    if (t < best_total) {
+      best = {qx, qy};
+      best_patch = pc;
+      best_total = t;
+    }
+  }
+};
+
+// Nearest source normal for every destination pixel of the level (the seed).
+std::vector<cv::Point2i> seed_by_normal(const Level& d, const Level& s) {
+  std::vector<cv::Point2i> out(static_cast<size_t>(d.size.area()), cv::Point2i(-1, -1));
+  if (s.pixels.empty()) return out;
+  std::vector<float> pts(s.pixels.size() * 3);
+  for (size_t i = 0; i < s.pixels.size(); ++i) {
+    const cv::Vec3f n = s.normals.at<cv::Vec3f>(s.pixels[i]);
+    pts[3 * i] = n[0];
+    pts[3 * i + 1] = n[1];
+    pts[3 * i + 2] = n[2];
+  }
+  auto index = make_index("lookup");
+  if (!index) index = make_index("kdtree");
+  index->build(pts.data(), static_cast<int>(s.pixels.size()), 3);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, d.pixels.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      const cv::Point p = d.pixels[i];
+      const cv::Vec3f n = d.normals.at<cv::Vec3f>(p);
+      if (n.dot(n) < 0.25f) continue;
+      int id = -1;
+      float dist = 0;
+      index->knn(&n[0], 1, &id, &dist);
+      if (id >= 0) out[static_cast<size_t>(p.y) * d.size.width + p.x] = s.pixels[id];
+    }
+  });
+  return out;
+}
+
+// The affine motion (2x3, CV_64F) that most matches follow, or empty when
+// fewer than 60 % of a sample of them lie within 1.5 px of the best one.
+cv::Mat global_motion(const Level& d, const std::vector<cv::Point2i>& match, unsigned seed) {
+  std::vector<cv::Point2f> from, to;
+  const size_t step = std::max<size_t>(1, d.pixels.size() / 4000);
+  for (size_t i = 0; i < d.pixels.size(); i += step) {
+    const cv::Point p = d.pixels[i];
+    const cv::Point2i q = match[static_cast<size_t>(p.y) * d.size.width + p.x];
+    if (q.x < 0) continue;
+    from.emplace_back(static_cast<float>(p.x), static_cast<float>(p.y));
+    to.emplace_back(static_cast<float>(q.x), static_cast<float>(q.y));
+  }
+  if (from.size() < 50) return {};
+  cv::setRNGSeed(static_cast<int>(seed));
+  std::vector<uchar> inliers;
+  cv::Mat A = cv::estimateAffine2D(from, to, inliers, cv::RANSAC, 1.5, 2000, 0.995, 10);
+  if (A.empty()) return {};
+  const double share = static_cast<double>(std::count(inliers.begin(), inliers.end(), 1)) / from.size();
+  return share >= 0.6 ? A : cv::Mat();
+}
+
+}  // namespace
+
+Expected<Map> run_combined(const ObjectView& destination, const ObjectView& source, const MatchOptions& options,
+                           const Progress& progress) {
+  if (destination.images.empty() || destination.images.size() != source.images.size())
+    return make_error("combined: both objects need their photos under the same lamps (" +
+                      std::to_string(destination.images.size()) + " and " + std::to_string(source.images.size()) +
+                      " given)");
+  Weights w;
+  float coherence = 0.05f;
+  if (const char* e = std::getenv("VC_COH")) coherence = std::stof(e);
+  if (const char* e = std::getenv("VC_WS")) w.shading = std::stof(e);
+  if (const char* e = std::getenv("VC_WC")) w.chroma = std::stof(e);
+  if (const char* e = std::getenv("VC_WL")) w.lum = std::stof(e);
+  // Levels: halve until the smaller object's bounding side is about 48 px.
+  const cv::Rect bd = cv::boundingRect(destination.mask), bs = cv::boundingRect(source.mask);
+  const int side = std::max(1, std::min(std::max(bd.width, bd.height), std::max(bs.width, bs.height)));
+  int levels = 1;
+  while (levels < 5 && (side >> levels) >= 48) ++levels;
+  Pyramid pd, ps;
+  tbb::parallel_invoke([&] { pd = make_pyramid(destination, levels, w); },
+                       [&] { ps = make_pyramid(source, levels, w); });
+  const int iterations = std::max(1, options.iterations);
+  std::vector<cv::Point2i> previous;
+  cv::Size previous_size;
+  for (int lv = levels - 1; lv >= 0; --lv) {
+    const Level& d = pd.levels[lv];
+    const Level& s = ps.levels[lv];
+    if (s.pixels.empty()) return make_error("combined: the source has no object pixels with normals");
+    Matcher m{d, s, coherence, {}, {}};
+    m.match.assign(static_cast<size_t>(d.size.area()), cv::Point2i(-1, -1));
+    m.cost.assign(static_cast<size_t>(d.size.area()), 0.0f);
+    const std::vector<cv::Point2i> seed = seed_by_normal(d, s);
+    // Start: the coarser level's match, scaled up, or the seed.
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, d.pixels.size(), 2048), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i != r.end(); ++i) {
+        const cv::Point p = d.pixels[i];
+        const size_t at = static_cast<size_t>(p.y) * d.size.width + p.x;
+        cv::Point2i best = seed[at];
+        float best_cost = s.valid(best.x, best.y) ? m.patch_cost(p.x, p.y, best.x, best.y) : 1e30f;
+        if (!previous.empty()) {
+          const int cx = std::min(p.x / 2, previous_size.width - 1), cy = std::min(p.y / 2, previous_size.height - 1);
+          const cv::Point2i c = previous[static_cast<size_t>(cy) * previous_size.width + cx];
+          if (c.x >= 0) {
+            const int qx = 2 * c.x + (p.x - 2 * cx), qy = 2 * c.y + (p.y - 2 * cy);
+            if (s.valid(qx, qy)) {
+              const float pc = m.patch_cost(p.x, p.y, qx, qy);
+              if (pc < best_cost) {
+                best = {qx, qy};
+                best_cost = pc;
+              }
+            }
+          }
+        }
+        m.match[at] = best;
+        m.cost[at] = best_cost;
+      }
+    });
+    // Search radius: the whole source at the coarsest level, a few pixels below it.
+    const int max_radius = lv == levels - 1 ? std::max(s.size.width, s.size.height) : 4;
+    const int bands = std::max(1, std::min(64, d.size.height / 16));
+    for (int it = 0; it < iterations; ++it) {
+      if (progress.cancelled()) return make_error("cancelled during combined");
+      const bool forward = it % 2 == 0;
+      tbb::parallel_for(0, bands, [&](int band) {
+        std::mt19937 rng(options.seed * 7919u + static_cast<unsigned>(lv * 131 + it * 17 + band));
+        const int y0 = d.size.height * band / bands, y1 = d.size.height * (band + 1) / bands;
+        const int step = forward ? 1 : -1;
+        for (int y = forward ? y0 : y1 - 1; forward ? y < y1 : y >= y0; y += step) {
+          for (int x = forward ? 0 : d.size.width - 1; forward ? x < d.size.width : x >= 0; x += step) {
+            if (!d.valid(x, y)) continue;
+            const size_t at = static_cast<size_t>(y) * d.size.width + x;
+            cv::Point2i best = m.match[at];
+            float best_patch = m.cost[at];
+            float best_total = m.total(x, y, best.x, best.y, best_patch);
+            // Propagation from the neighbours already visited.
+            for (const cv::Point o : {cv::Point(-step, 0), cv::Point(0, -step)}) {
+              const int nx = x + o.x, ny = y + o.y;
+              if (!d.valid(nx, ny)) continue;
+              const cv::Point2i q = m.match[static_cast<size_t>(ny) * d.size.width + nx];
+              if (q.x < 0) continue;
+              m.try_candidate(x, y, q.x - o.x, q.y - o.y, best, best_patch, best_total);
+            }
+            // The seed, and random search around the best.
+            const cv::Point2i sd = seed[at];
+            if (sd.x >= 0) m.try_candidate(x, y, sd.x, sd.y, best, best_patch, best_total);
+            for (int r = max_radius; r >= 1; r /= 2) {
+              std::uniform_int_distribution<int> u(-r, r);
+              m.try_candidate(x, y, best.x + u(rng), best.y + u(rng), best, best_patch, best_total);
+            }
+            m.match[at] = best;
+            m.cost[at] = best_patch;
+          }
+        }
+      });
+      progress.report((levels - 1 - lv + (it + 1.0) / iterations) / levels, "combined");
+    }
+    if (lv == 0) {
+      // Votes: each pixel tries the motion of every neighbour within 2 px
+      // (a region stuck on a wrong motion takes over its neighbours' right one).
+      for (int pass = 0; pass < 2; ++pass) {
+        std::vector<cv::Point2i> next = m.match;
+        std::vector<float> next_cost = m.cost;
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, d.pixels.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
+          for (size_t i = r.begin(); i != r.end(); ++i) {
+            const cv::Point p = d.pixels[i];
+            const size_t at = static_cast<size_t>(p.y) * d.size.width + p.x;
+            cv::Point2i best = m.match[at];
+            float best_patch = m.cost[at];
+            float best_total = m.total(p.x, p.y, best.x, best.y, best_patch);
+            for (int oy = -2; oy <= 2; ++oy)
+              for (int ox = -2; ox <= 2; ++ox) {
+                if (!ox && !oy) continue;
+                const int nx = p.x + ox, ny = p.y + oy;
+                if (!d.valid(nx, ny)) continue;
+                const cv::Point2i q = m.match[static_cast<size_t>(ny) * d.size.width + nx];
+                if (q.x >= 0) m.try_candidate(p.x, p.y, q.x - ox, q.y - oy, best, best_patch, best_total);
+              }
+            next[at] = best;
+            next_cost[at] = best_patch;
+          }
+        });
+        m.match.swap(next);
+        m.cost.swap(next_cost);
+      }
+      // One motion for the whole object (the destination is the source moved,
+      // scaled, turned or cropped): an affine fit to the matches by RANSAC.
+      // When most pixels follow it, it is taken wherever its patch fits about
+      // as well as the pixel's own match (where the photos can't tell, the
+      // object's motion can), at its exact sub-pixel position.
+      std::vector<uint8_t> on_motion(static_cast<size_t>(d.size.area()), 0);
+      cv::Mat motion = global_motion(d, m.match, options.seed);
+      if (!motion.empty()) {
+        const double a = motion.at<double>(0, 0), b = motion.at<double>(0, 1), c = motion.at<double>(0, 2);
+        const double e = motion.at<double>(1, 0), f = motion.at<double>(1, 1), g = motion.at<double>(1, 2);
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, d.pixels.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
+          for (size_t i = r.begin(); i != r.end(); ++i) {
+            const cv::Point p = d.pixels[i];
+            const size_t at = static_cast<size_t>(p.y) * d.size.width + p.x;
+            const double tx = a * p.x + b * p.y + c, ty = e * p.x + f * p.y + g;
+            const int qx = static_cast<int>(std::lround(tx)), qy = static_cast<int>(std::lround(ty));
+            if (!s.valid(qx, qy)) continue;
+            const float pc = m.patch_cost(p.x, p.y, qx, qy);
+            if (pc <= 1.5f * m.cost[at] + 1e-3f) {
+              m.match[at] = {qx, qy};
+              m.cost[at] = pc;
+              on_motion[at] = 1;
+            }
+          }
+        });
+      }
+      // Sub-pixel: the mean of the motions of the neighbours within 2 px that
+      // agree with the pixel's own to a pixel (a smooth scale or turn shows
+      // between the integer matches).
+      Map map;
+      map.xy = cv::Mat(d.size, CV_32FC2, cv::Scalar(-1, -1));
+      map.distance = cv::Mat(d.size, CV_32F, cv::Scalar(0));
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, d.pixels.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i != r.end(); ++i) {
+          const cv::Point p = d.pixels[i];
+          const size_t at = static_cast<size_t>(p.y) * d.size.width + p.x;
+          const cv::Point2i q = m.match[at];
+          if (q.x < 0) continue;
+          if (on_motion[at]) {
+            const double* A = motion.ptr<double>(0);
+            const double* B = motion.ptr<double>(1);
+            map.xy.at<cv::Vec2f>(p) = cv::Vec2f(static_cast<float>(A[0] * p.x + A[1] * p.y + A[2]),
+                                                static_cast<float>(B[0] * p.x + B[1] * p.y + B[2]));
+            map.distance.at<float>(p) = std::sqrt(m.cost[at]);
+            continue;
+          }
+          double sx = q.x, sy = q.y;
+          int n = 1;
+          for (int oy = -2; oy <= 2; ++oy)
+            for (int ox = -2; ox <= 2; ++ox) {
+              if (!ox && !oy) continue;
+              const int nx = p.x + ox, ny = p.y + oy;
+              if (!d.valid(nx, ny)) continue;
+              const cv::Point2i o = m.match[static_cast<size_t>(ny) * d.size.width + nx];
+              if (o.x < 0) continue;
+              const int px = o.x - ox, py = o.y - oy;
+              if (std::abs(px - q.x) > 1 || std::abs(py - q.y) > 1) continue;
+              sx += px;
+              sy += py;
+              ++n;
+            }
+          float fx = static_cast<float>(sx / n), fy = static_cast<float>(sy / n);
+          // Stay on the source object: keep the integer match when the mean leaves it.
+          if (!s.valid(static_cast<int>(std::lround(fx)), static_cast<int>(std::lround(fy)))) {
+            fx = static_cast<float>(q.x);
+            fy = static_cast<float>(q.y);
+          }
+          map.xy.at<cv::Vec2f>(p) = cv::Vec2f(fx, fy);
+          map.distance.at<float>(p) = std::sqrt(m.cost[at]);
+        }
+      });
+      return map;
+    }
+    previous = std::move(m.match);
+    previous_size = d.size;
+  }
+  return make_error("unreachable");
+}
+
+}  // namespace veneer::match::fast
