@@ -47,7 +47,7 @@ step "photometric stereo"
 "$bin/veneer" normals "$out/source" --out "$out/source-normals"
 
 step "correspondence + repaint (coherent, the default for textured sources)"
-"$bin/veneer" transfer --dst "$out/destination" --src "$out/source" --method coherent --out "$out/transfer"
+"$bin/veneer" transfer --dst "$out/destination" --src "$out/source" --out "$out/transfer"
 "$bin/veneer" inspect --dst "$out/destination" --src "$out/source" --map "$out/transfer" --out "$out/transfer/inspect.png"
 
 step "live view: the source under a moving hand-held lamp, repainted onto the destination"

@@ -37,7 +37,7 @@
 namespace veneer::app {
 namespace {
 
-const char* kMethods[] = {"coherent", "linear", "flann", "candidates", "patchmatch", "regiongrow", "baseline"};
+const char* kMethods[] = {"combined", "coherent", "linear", "flann", "candidates", "patchmatch", "regiongrow", "baseline"};
 
 QPushButton* button(const QString& text, const QString& name, QWidget* parent) {
   auto* b = new QPushButton(text, parent);

@@ -68,6 +68,15 @@ int run_normals(const NormalsArgs& a) {
   if (a.near_light && a.distant) return fail(2, "--near-light and --distant exclude each other");
   if (a.robust && a.plain) return fail(2, "--robust and --plain exclude each other");
   if (a.otsu && a.threshold >= 0) return fail(2, "--otsu and --threshold exclude each other");
+  if (a.plain) {
+    // The plain least-squares solve keeps every sample: the robust solve's settings would do nothing.
+    const veneer::ps::PsOptions d;
+    for (auto [given, name] : {std::pair{a.shadow != d.shadow_fraction, "--shadow"},
+                               std::pair{a.saturation != d.saturation, "--saturation"},
+                               std::pair{a.outliers != d.outlier_fraction, "--outliers"},
+                               std::pair{a.chroma != d.diffuse_chroma, "--chroma"}})
+      if (given) return fail(2, std::string(name) + " tunes the robust solve, which --plain turns off: drop one of them");
+  }
 
   veneer::ps::PsOptions po;
   po.robust = !a.plain;
@@ -100,6 +109,17 @@ int run_normals(const NormalsArgs& a) {
   veneer::cli::ProgressBar bar("normals");
   bar.update(0.0, "reading " + a.set);
   auto set = veneer::read_set(a.set);
+  if (set && a.near_light) {
+    // Near light needs where each lamp is and the camera's focal length.
+    int without = 0;
+    for (const auto& l : set->lights) without += l.position_m ? 0 : 1;
+    if (without > 0 || set->camera.focal_px <= 0)
+      return fail(2, "--near-light needs the lamps' positions and the camera's focal length, and " + a.set +
+                         (without > 0 ? " gives no position for " + std::to_string(without) + " of its " +
+                                            std::to_string(set->lights.size()) + " lamps"
+                                      : std::string(" gives no camera focal length (camera.focal_px)")) +
+                         ": leave --near-light out (distant lights, from the directions) or add them to set.json");
+  }
   if (!set) return fail(1, set.message());
   bar.update(0.3, "segmenting");
   auto seg = veneer::ps::segment(*set, so);

@@ -11,7 +11,7 @@ namespace veneer::cli {
 namespace {
 
 struct TransferArgs {
-  std::string dst, src, out, method = "flann", feature = "normals";
+  std::string dst, src, out, method = "combined", feature = "normals";
   // the matching defaults are the library's (MatchOptions)
   int patch = 1, candidates = match::MatchOptions{}.candidates, iterations = match::MatchOptions{}.iterations,
       threads = 0, blend = match::TransferOptions{}.blend;
@@ -33,6 +33,10 @@ int run(const TransferArgs& a) {
   match::TransferOptions options;
   auto method = match::parse_method(a.method);
   if (!method) return fail(method.message(), 2);
+  if (*method == match::Method::combined && (a.feature != "normals" || a.patch != 1))
+    return fail("--method combined compares normals, shading and colour over its own patches: drop --feature and "
+                "--patch, or pick a method that takes them (coherent, flann, patchmatch ...)",
+                2);
   auto feature = match::parse_feature(a.feature);
   if (!feature) return fail(feature.message(), 2);
   options.match.method = *method;
@@ -69,6 +73,9 @@ int run(const TransferArgs& a) {
 
   std::printf("transfer %s -> %s: %s %s %dx%d, map written to %s\n", a.src.c_str(), a.dst.c_str(), a.method.c_str(),
               a.feature.c_str(), a.patch, a.patch, a.out.c_str());
+  if (a.scale < 1)
+    std::printf("  computed at %.2fx: the map and the pictures are %dx%d, not the sets' %dx%d\n", a.scale,
+                result->map.xy.cols, result->map.xy.rows, dst->size.width, dst->size.height);
   if (result->quality) {
     const auto& g = *result->quality;
     std::printf("  coverage %.1f %%", 100 * g.coverage);
@@ -93,7 +100,9 @@ VENEER_COMMAND(transfer) {
   cmd->add_option("--out", args->out, "output folder (map.pfm, map.png, result_*.png, reuse.png, metrics.json)")
       ->required();
   cmd->add_option("--method", args->method,
-                  "linear | flann | candidates | patchmatch | regiongrow | baseline | coherent (default flann)");
+                  "combined (the default: finds the motion when the destination is the source moved, scaled or "
+                  "cropped, else coherent chunks of the nearest normals; uses normals and photos, --feature is "
+                  "ignored) | coherent | linear | flann | candidates | patchmatch | regiongrow | baseline");
   cmd->add_option("--feature", args->feature, "normals | intensities (default normals)");
   cmd->add_option("--patch", args->patch, "patch side 1, 3, 5 or 7 (default 1)");
   cmd->add_option("--candidates", args->candidates, "K for candidates, 1..100 (default 10)");

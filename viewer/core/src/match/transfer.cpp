@@ -452,6 +452,16 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
     }
     result.quality = q;
     j["quality"] = quality_json(q);
+    j["quality"]["measured_against"] = "truth (simulated sets)";
+    timings["quality_s"] = since(t0);
+  } else {
+    // Real sets: what can be measured without truth -- coverage of the
+    // segmented object, coherence, and the agreement of the photometric
+    // stereo normals at the matches.
+    t0 = Clock::now();
+    Quality q = evaluate(result.map, dst->view.mask, src->view.mask, dst->view.normals, src->view.normals);
+    j["quality"] = quality_json(q);
+    j["quality"]["measured_against"] = "segmentation masks and photometric-stereo normals (no truth)";
     timings["quality_s"] = since(t0);
   }
   timings["total_s"] = since(t_all);

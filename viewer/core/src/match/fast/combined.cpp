@@ -6,7 +6,6 @@
 #include <array>
 #include <atomic>
 #include <cmath>
-#include <cstdlib>
 #include <string>
 #include <random>
 #include <vector>
@@ -26,16 +25,20 @@ namespace {
 // multiple of 8), -1 rows off the object.
 struct Level {
   cv::Size size;
+  cv::Rect box;               // the object's bounding box with a margin: features are kept there only
   int dims = 0, stride = 0;
-  std::vector<float> f;       // size.area() * stride
-  std::vector<uint8_t> on;    // object pixel
+  std::vector<float> f;       // box.area() * stride
+  std::vector<uint8_t> on;    // object pixel (box.area())
   cv::Mat normals;            // CV_32FC3 (for the seed)
   std::vector<cv::Point> pixels;
 
   bool valid(int x, int y) const {
-    return x >= 0 && y >= 0 && x < size.width && y < size.height && on[static_cast<size_t>(y) * size.width + x];
+    const int bx = x - box.x, by = y - box.y;
+    return bx >= 0 && by >= 0 && bx < box.width && by < box.height && on[static_cast<size_t>(by) * box.width + bx];
   }
-  const float* at(int x, int y) const { return f.data() + (static_cast<size_t>(y) * size.width + x) * stride; }
+  const float* at(int x, int y) const {
+    return f.data() + (static_cast<size_t>(y - box.y) * box.width + (x - box.x)) * stride;
+  }
 };
 
 struct Weights {
@@ -53,19 +56,21 @@ Level make_level(const cv::Mat& normals, const cv::Mat& mask, const std::vector<
   const int lamps = static_cast<int>(images.size());
   l.dims = 3 + lamps + 3;
   l.stride = (l.dims + 7) / 8 * 8;
-  l.f.assign(static_cast<size_t>(l.size.area()) * l.stride, 0.0f);
-  l.on.assign(static_cast<size_t>(l.size.area()), 0);
+  l.box = cv::boundingRect(mask);
+  if (l.box.area() == 0) l.box = cv::Rect(0, 0, 1, 1);
+  l.f.assign(static_cast<size_t>(l.box.area()) * l.stride, 0.0f);
+  l.on.assign(static_cast<size_t>(l.box.area()), 0);
   l.normals = normals;
   const float sn = std::sqrt(w.normal), ss = std::sqrt(w.shading), sc = std::sqrt(w.chroma), sl = std::sqrt(w.lum);
   std::vector<float> grey(lamps);
-  for (int y = 0; y < l.size.height; ++y) {
-    for (int x = 0; x < l.size.width; ++x) {
+  for (int y = l.box.y; y < l.box.y + l.box.height; ++y) {
+    for (int x = l.box.x; x < l.box.x + l.box.width; ++x) {
       if (!mask.at<uchar>(y, x)) continue;
       cv::Vec3f n = normals.at<cv::Vec3f>(y, x);
       // A pixel without a normal still takes part (every object pixel is
       // mapped): on its photos alone, its normal part a constant.
       if (!(std::isfinite(n[0]) && std::isfinite(n[1]) && std::isfinite(n[2])) || n.dot(n) < 0.25f) n = {0, 0, 0};
-      float* f = l.f.data() + (static_cast<size_t>(y) * l.size.width + x) * l.stride;
+      float* f = const_cast<float*>(l.at(x, y));
       f[0] = sn * n[0];
       f[1] = sn * n[1];
       f[2] = sn * n[2];
@@ -84,39 +89,44 @@ Level make_level(const cv::Mat& normals, const cv::Mat& mask, const std::vector<
       f[3 + lamps] = sc * mean[0] / sum;
       f[4 + lamps] = sc * mean[2] / sum;
       f[5 + lamps] = sl * std::log(std::max(1e-4f, sum / 3.0f));
-      l.on[static_cast<size_t>(y) * l.size.width + x] = 1;
+      l.on[static_cast<size_t>(y - l.box.y) * l.box.width + (x - l.box.x)] = 1;
       l.pixels.emplace_back(x, y);
     }
   }
   return l;
 }
 
+// An object's inputs at each level ([0] = full size); features are made per
+// level when it is reached (a pair of different objects needs only the coarsest).
 struct Pyramid {
-  std::vector<Level> levels;  // [0] = full size
+  struct Inputs {
+    cv::Mat normals, mask;
+    std::vector<cv::Mat> images;
+  };
+  std::vector<Inputs> levels;
+  Level level(int i, const Weights& w) const { return make_level(levels[i].normals, levels[i].mask, levels[i].images, w); }
 };
 
-Pyramid make_pyramid(const ObjectView& v, int count, const Weights& w) {
+Pyramid make_pyramid(const ObjectView& v, int count) {
   Pyramid p;
-  cv::Mat normals = v.normals, mask = v.mask;
-  std::vector<cv::Mat> images = v.images;
-  for (int i = 0; i < count; ++i) {
-    p.levels.push_back(make_level(normals, mask, images, w));
-    if (i + 1 == count) break;
-    cv::Size half((normals.cols + 1) / 2, (normals.rows + 1) / 2);
-    cv::Mat n2, m2;
-    cv::resize(normals, n2, half, 0, 0, cv::INTER_AREA);
-    for (auto it = n2.begin<cv::Vec3f>(); it != n2.end<cv::Vec3f>(); ++it) {
-      cv::Vec3f& v = *it;
-      const float len = std::sqrt(v.dot(v));
-      if (len > 1e-6f) v /= len;
+  p.levels.push_back({v.normals, v.mask, v.images});
+  for (int i = 1; i < count; ++i) {
+    const Pyramid::Inputs& up = p.levels.back();
+    Pyramid::Inputs in;
+    cv::Size half((up.normals.cols + 1) / 2, (up.normals.rows + 1) / 2);
+    cv::resize(up.normals, in.normals, half, 0, 0, cv::INTER_AREA);
+    for (auto it = in.normals.begin<cv::Vec3f>(); it != in.normals.end<cv::Vec3f>(); ++it) {
+      cv::Vec3f& n = *it;
+      const float len = std::sqrt(n.dot(n));
+      if (len > 1e-6f) n /= len;
     }
     cv::Mat mf;
-    mask.convertTo(mf, CV_32F, 1.0 / 255);
+    up.mask.convertTo(mf, CV_32F, 1.0 / 255);
     cv::resize(mf, mf, half, 0, 0, cv::INTER_AREA);
-    m2 = mf > 0.5;
-    for (auto& im : images) cv::resize(im, im, half, 0, 0, cv::INTER_AREA);
-    normals = n2;
-    mask = m2;
+    in.mask = mf > 0.5;
+    in.images.resize(up.images.size());
+    for (size_t j = 0; j < up.images.size(); ++j) cv::resize(up.images[j], in.images[j], half, 0, 0, cv::INTER_AREA);
+    p.levels.push_back(std::move(in));
   }
   return p;
 }
@@ -219,6 +229,38 @@ std::vector<cv::Point2i> seed_by_normal(const Level& d, const Level& s) {
   return out;
 }
 
+// Unmapped pixels of `mask` take the match of the nearest mapped pixel.
+void fill_unmapped(Map& map, const cv::Mat& mask) {
+  cv::Mat unmapped(map.xy.size(), CV_8U, cv::Scalar(0));
+  bool any = false, some_mapped = false;
+  for (int y = 0; y < map.xy.rows; ++y)
+    for (int x = 0; x < map.xy.cols; ++x) {
+      const bool mapped = map.xy.at<cv::Vec2f>(y, x)[0] >= 0;
+      some_mapped = some_mapped || mapped;
+      if (!mapped) {
+        unmapped.at<uchar>(y, x) = 255;
+        any = any || mask.at<uchar>(y, x);
+      }
+    }
+  if (!any || !some_mapped) return;
+  cv::Mat dist, labels;
+  cv::distanceTransform(unmapped, dist, labels, cv::DIST_L2, cv::DIST_MASK_5, cv::DIST_LABEL_PIXEL);
+  // label -> a mapped pixel's position
+  std::vector<cv::Point> where;
+  where.resize(static_cast<size_t>(map.xy.total()) + 1, cv::Point(-1, -1));
+  for (int y = 0; y < map.xy.rows; ++y)
+    for (int x = 0; x < map.xy.cols; ++x)
+      if (!unmapped.at<uchar>(y, x)) where[static_cast<size_t>(labels.at<int>(y, x))] = {x, y};
+  for (int y = 0; y < map.xy.rows; ++y)
+    for (int x = 0; x < map.xy.cols; ++x) {
+      if (!unmapped.at<uchar>(y, x) || !mask.at<uchar>(y, x)) continue;
+      const cv::Point n = where[static_cast<size_t>(labels.at<int>(y, x))];
+      if (n.x < 0) continue;
+      map.xy.at<cv::Vec2f>(y, x) = map.xy.at<cv::Vec2f>(n);
+      map.distance.at<float>(y, x) = map.distance.at<float>(n);
+    }
+}
+
 // The affine motion (2x3, CV_64F) that most matches follow, or empty when
 // fewer than 60 % of a sample of them lie within 1.5 px of the best one.
 cv::Mat global_motion(const Level& d, const std::vector<cv::Point2i>& match, unsigned seed) {
@@ -240,6 +282,23 @@ cv::Mat global_motion(const Level& d, const std::vector<cv::Point2i>& match, uns
   return share >= 0.6 ? A : cv::Mat();
 }
 
+// Two different objects: `coherent` on the normals (StyleBlit-style chunks of
+// the nearest normal, seams refined), whose normal agreement stays near the
+// exact nearest's while the texture stays in chunks.
+Expected<Map> different_objects(const ObjectView& destination, const ObjectView& source, const MatchOptions& options,
+                                const Progress& progress) {
+  MatchOptions o = options;
+  o.method = Method::coherent;
+  o.feature = Feature::normals;
+  o.patch = 1;
+  auto map = fast::compute_map(destination, source, o, progress, nullptr);
+  if (!map) return map;
+  // Every destination object pixel mapped: a pixel without a normal takes its
+  // nearest mapped neighbour's match (the chunk it sits in).
+  fill_unmapped(*map, destination.mask);
+  return map;
+}
+
 }  // namespace
 
 Expected<Map> run_combined(const ObjectView& destination, const ObjectView& source, const MatchOptions& options,
@@ -249,25 +308,21 @@ Expected<Map> run_combined(const ObjectView& destination, const ObjectView& sour
                       std::to_string(destination.images.size()) + " and " + std::to_string(source.images.size()) +
                       " given)");
   Weights w;
-  float coherence = 0.05f;
-  if (const char* e = std::getenv("VC_COH")) coherence = std::stof(e);
-  if (const char* e = std::getenv("VC_WS")) w.shading = std::stof(e);
-  if (const char* e = std::getenv("VC_WC")) w.chroma = std::stof(e);
-  if (const char* e = std::getenv("VC_WL")) w.lum = std::stof(e);
+  const float coherence = 0.05f;  // per broken 4-neighbour, in the units of a squared normal difference
   // Levels: halve until the smaller object's bounding side is about 48 px.
   const cv::Rect bd = cv::boundingRect(destination.mask), bs = cv::boundingRect(source.mask);
   const int side = std::max(1, std::min(std::max(bd.width, bd.height), std::max(bs.width, bs.height)));
   int levels = 1;
-  while (levels < 5 && (side >> levels) >= 48) ++levels;
+  while (levels < 6 && (side >> levels) >= 24) ++levels;
   Pyramid pd, ps;
-  tbb::parallel_invoke([&] { pd = make_pyramid(destination, levels, w); },
-                       [&] { ps = make_pyramid(source, levels, w); });
+  tbb::parallel_invoke([&] { pd = make_pyramid(destination, levels); }, [&] { ps = make_pyramid(source, levels); });
   const int iterations = std::max(1, options.iterations);
   std::vector<cv::Point2i> previous;
   cv::Size previous_size;
+  cv::Mat coarse_motion;  // 2x3, at the coarsest level's scale
   for (int lv = levels - 1; lv >= 0; --lv) {
-    const Level& d = pd.levels[lv];
-    const Level& s = ps.levels[lv];
+    Level d, s;
+    tbb::parallel_invoke([&] { d = pd.level(lv, w); }, [&] { s = ps.level(lv, w); });
     if (s.pixels.empty()) return make_error("combined: the source has no object pixels with normals");
     Matcher m{d, s, coherence, {}, {}};
     m.match.assign(static_cast<size_t>(d.size.area()), cv::Point2i(-1, -1));
@@ -294,22 +349,39 @@ Expected<Map> run_combined(const ObjectView& destination, const ObjectView& sour
             }
           }
         }
+        if (!coarse_motion.empty()) {
+          // The object's motion found on the coarser level, at this level's scale.
+          const double* A = coarse_motion.ptr<double>(0);
+          const double* B = coarse_motion.ptr<double>(1);
+          const double scale = std::ldexp(1.0, levels - 1 - lv);
+          const int qx = static_cast<int>(std::lround(A[0] * p.x + A[1] * p.y + A[2] * scale));
+          const int qy = static_cast<int>(std::lround(B[0] * p.x + B[1] * p.y + B[2] * scale));
+          if (s.valid(qx, qy)) {
+            const float pc = m.patch_cost(p.x, p.y, qx, qy);
+            if (pc <= 1.5f * best_cost + 1e-3f) {
+              best = {qx, qy};
+              best_cost = pc;
+            }
+          }
+        }
         m.match[at] = best;
         m.cost[at] = best_cost;
       }
     });
     // Search radius: the whole source at the coarsest level, a few pixels below it.
     const int max_radius = lv == levels - 1 ? std::max(s.size.width, s.size.height) : 4;
-    const int bands = std::max(1, std::min(64, d.size.height / 16));
-    for (int it = 0; it < iterations; ++it) {
+    const int bands = std::max(1, std::min(64, d.box.height / 16));
+    const int level_iterations = lv == levels - 1 ? iterations : std::min(iterations, 2);
+    for (int it = 0; it < level_iterations; ++it) {
       if (progress.cancelled()) return make_error("cancelled during combined");
       const bool forward = it % 2 == 0;
       tbb::parallel_for(0, bands, [&](int band) {
         std::mt19937 rng(options.seed * 7919u + static_cast<unsigned>(lv * 131 + it * 17 + band));
-        const int y0 = d.size.height * band / bands, y1 = d.size.height * (band + 1) / bands;
+        const int y0 = d.box.y + d.box.height * band / bands, y1 = d.box.y + d.box.height * (band + 1) / bands;
+        const int x0 = d.box.x, x1 = d.box.x + d.box.width;
         const int step = forward ? 1 : -1;
         for (int y = forward ? y0 : y1 - 1; forward ? y < y1 : y >= y0; y += step) {
-          for (int x = forward ? 0 : d.size.width - 1; forward ? x < d.size.width : x >= 0; x += step) {
+          for (int x = forward ? x0 : x1 - 1; forward ? x < x1 : x >= x0; x += step) {
             if (!d.valid(x, y)) continue;
             const size_t at = static_cast<size_t>(y) * d.size.width + x;
             cv::Point2i best = m.match[at];
@@ -335,36 +407,17 @@ Expected<Map> run_combined(const ObjectView& destination, const ObjectView& sour
           }
         }
       });
-      progress.report((levels - 1 - lv + (it + 1.0) / iterations) / levels, "combined");
+      progress.report((levels - 1 - lv + (it + 1.0) / level_iterations) / levels, "combined");
+    }
+    if (lv == levels - 1) {
+      // Is the destination the source moved (scaled, turned, cropped)? Then
+      // the finer levels follow that motion; else the objects differ, and
+      // coherent chunks of the nearest normals serve better than patches
+      // (whose shapes differ between objects).
+      coarse_motion = global_motion(d, m.match, options.seed);
+      if (coarse_motion.empty()) return different_objects(destination, source, options, progress);
     }
     if (lv == 0) {
-      // Votes: each pixel tries the motion of every neighbour within 2 px
-      // (a region stuck on a wrong motion takes over its neighbours' right one).
-      for (int pass = 0; pass < 2; ++pass) {
-        std::vector<cv::Point2i> next = m.match;
-        std::vector<float> next_cost = m.cost;
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, d.pixels.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
-          for (size_t i = r.begin(); i != r.end(); ++i) {
-            const cv::Point p = d.pixels[i];
-            const size_t at = static_cast<size_t>(p.y) * d.size.width + p.x;
-            cv::Point2i best = m.match[at];
-            float best_patch = m.cost[at];
-            float best_total = m.total(p.x, p.y, best.x, best.y, best_patch);
-            for (int oy = -2; oy <= 2; ++oy)
-              for (int ox = -2; ox <= 2; ++ox) {
-                if (!ox && !oy) continue;
-                const int nx = p.x + ox, ny = p.y + oy;
-                if (!d.valid(nx, ny)) continue;
-                const cv::Point2i q = m.match[static_cast<size_t>(ny) * d.size.width + nx];
-                if (q.x >= 0) m.try_candidate(p.x, p.y, q.x - ox, q.y - oy, best, best_patch, best_total);
-              }
-            next[at] = best;
-            next_cost[at] = best_patch;
-          }
-        });
-        m.match.swap(next);
-        m.cost.swap(next_cost);
-      }
       // One motion for the whole object (the destination is the source moved,
       // scaled, turned or cropped): an affine fit to the matches by RANSAC.
       // When most pixels follow it, it is taken wherever its patch fits about
