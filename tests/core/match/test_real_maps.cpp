@@ -10,6 +10,10 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include <nlohmann/json.hpp>
+#include <unistd.h>
+
+#include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
 #include "veneer/match/metrics.hpp"
 #include "veneer/match/transfer.hpp"
@@ -122,6 +126,44 @@ TEST_P(RealMaps, ScaledAndMovedSelfMapsFindTheMotion) {
     EXPECT_GE(s.within, 0.97);
     EXPECT_GE(s.coverage, 0.995);
   }
+}
+
+// The repainted photos are written as the sets' photos are (linear, same
+// scale): on a self-map each lamp's result averages what its source photo does.
+TEST_P(RealMaps, RepaintedPhotosKeepTheInputsEncodingAndExposure) {
+  const auto folder = kReal / GetParam();
+  if (!std::filesystem::exists(folder / "filenames.txt")) GTEST_SKIP() << "no " << folder;
+  auto set = read_set(folder);
+  ASSERT_TRUE(set.ok()) << set.message();
+  ImageSet moved = moved_copy(*set, 2, 1, 0.0, 3);
+  TransferOptions o;
+  o.match.method = Method::combined;
+  auto r = transfer(moved, *set, o);
+  ASSERT_TRUE(r.ok()) << r.message();
+  const auto out = std::filesystem::temp_directory_path() / ("veneer-realmaps-" + std::to_string(::getpid()));
+  ASSERT_TRUE(write_transfer(*r, out).ok());
+  auto seg = prepare_object(*set, false);
+  ASSERT_TRUE(seg.ok());
+  for (size_t i : {size_t{0}, set->images.size() / 2}) {
+    char name[64];
+    std::snprintf(name, sizeof name, "result_light_%02zu.png", i);
+    auto result = read_linear_image(out / name);
+    ASSERT_TRUE(result.ok()) << result.message();
+    const double src_mean = cv::mean(set->images[i], seg->view.mask)[1];
+    cv::Mat moved_mask;
+    const cv::Mat shift = (cv::Mat_<double>(2, 3) << 1, 0, 2, 0, 1, 1);
+    cv::warpAffine(seg->view.mask, moved_mask, shift, seg->view.mask.size(),
+                   cv::INTER_NEAREST);
+    const double res_mean = cv::mean(*result, moved_mask)[1];
+    EXPECT_NEAR(res_mean, src_mean, 0.05 * src_mean + 1.0 / 255) << name;
+  }
+  auto metrics = nlohmann::json::parse(r->metrics_json);
+  EXPECT_NE(metrics["pictures"].dump().find("linear 16-bit"), std::string::npos);
+  // Real sets get quality figures, measured without truth.
+  ASSERT_TRUE(metrics.contains("quality"));
+  EXPECT_GE(metrics["quality"]["coverage"].get<double>(), 0.995);
+  EXPECT_NE(metrics["quality"]["measured_against"].get<std::string>().find("no truth"), std::string::npos);
+  std::filesystem::remove_all(out);
 }
 
 INSTANTIATE_TEST_SUITE_P(Objects, RealMaps, ::testing::Values("cat"));

@@ -436,6 +436,10 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
   j["source"] = {{"id", source.id}, {"scene", source.scene}, {"size", {source.size.width, source.size.height}},
                  {"object_pixels", cv::countNonZero(src->view.mask)}};
   j["options"] = options_json(options, guided ? options.blend_guide : 0.0);
+  j["pictures"] = {{"result_light_NN.png, result_median.png",
+                    "linear 16-bit RGB at the sets' photometric scale, as the sets' light_NN.png (no exposure or "
+                    "gamma change)"},
+                   {"map.png, reuse.png, relight_*.png", "8-bit sRGB pictures for viewing"}};
   if (destination.truth.present() && source.truth.present()) {
     t0 = Clock::now();
     Quality q = evaluate(result.map, destination.truth.mask, source.truth.mask, destination.truth.normals,
@@ -587,9 +591,11 @@ Status write_transfer(const TransferResult& r, const std::filesystem::path& fold
   for (size_t i = 0; i < r.repainted.size(); ++i) {
     char name[64];
     std::snprintf(name, sizeof name, "result_light_%02zu.png", i);
-    if (auto s = write_picture(folder / name, tonemap_picture(r.repainted[i])); !s) return s;
+    // Linear 16-bit at the sets' own scale, as their light_NN.png: a
+    // repainted photo and the photos it came from look alike side by side.
+    if (auto s = write_png16(folder / name, r.repainted[i]); !s) return s;
   }
-  if (auto s = write_picture(folder / "result_median.png", tonemap_picture(r.repainted_median)); !s) return s;
+  if (auto s = write_png16(folder / "result_median.png", r.repainted_median); !s) return s;
   if (auto s = write_picture(folder / "reuse.png", reuse_picture(r.reuse, r.source_median)); !s) return s;
   if (r.relit) {
     // one exposure for both, so that they compare
