@@ -313,7 +313,9 @@ int main(int argc, char** argv) {
       {"patchmatch 7x7, 5 it", opt(Method::patchmatch, Feature::normals, 7), 7, Feature::normals, 1, 0.98, 20, 150},
       {"regiongrow 3x3", opt(Method::regiongrow, Feature::normals, 3), 3, Feature::normals, 1, 16, 20, 150},
       {"candidates K=100", opt(Method::candidates, Feature::normals, 1), 1, Feature::normals, 100, 19, 20, 100},
-      {"coherent", opt(Method::coherent, Feature::normals, 1), 1, Feature::normals, 1, 0, 10, 40},
+      {"combined (the default: motion probe, then coherent)", opt(Method::combined, Feature::normals, 1), 1,
+       Feature::normals, 1, 0, 0, 100},
+      {"coherent (the previous default)", opt(Method::coherent, Feature::normals, 1), 1, Feature::normals, 1, 0, 10, 40},
       {"coherent, chunks only", [&] {
          auto o = opt(Method::coherent, Feature::normals, 1);
          o.coherent_smooth = 0;  // without the seam refinement

@@ -96,39 +96,35 @@ Level make_level(const cv::Mat& normals, const cv::Mat& mask, const std::vector<
   return l;
 }
 
-// An object's inputs at each level ([0] = full size); features are made per
+// An object's inputs at a level ([0] = full size); features are made per
 // level when it is reached (a pair of different objects needs only the coarsest).
 struct Pyramid {
   struct Inputs {
     cv::Mat normals, mask;
     std::vector<cv::Mat> images;
   };
-  std::vector<Inputs> levels;
-  Level level(int i, const Weights& w) const { return make_level(levels[i].normals, levels[i].mask, levels[i].images, w); }
 };
 
-Pyramid make_pyramid(const ObjectView& v, int count) {
-  Pyramid p;
-  p.levels.push_back({v.normals, v.mask, v.images});
-  for (int i = 1; i < count; ++i) {
-    const Pyramid::Inputs& up = p.levels.back();
-    Pyramid::Inputs in;
-    cv::Size half((up.normals.cols + 1) / 2, (up.normals.rows + 1) / 2);
-    cv::resize(up.normals, in.normals, half, 0, 0, cv::INTER_AREA);
-    for (auto it = in.normals.begin<cv::Vec3f>(); it != in.normals.end<cv::Vec3f>(); ++it) {
-      cv::Vec3f& n = *it;
-      const float len = std::sqrt(n.dot(n));
-      if (len > 1e-6f) n /= len;
-    }
-    cv::Mat mf;
-    up.mask.convertTo(mf, CV_32F, 1.0 / 255);
-    cv::resize(mf, mf, half, 0, 0, cv::INTER_AREA);
-    in.mask = mf > 0.5;
-    in.images.resize(up.images.size());
-    for (size_t j = 0; j < up.images.size(); ++j) cv::resize(up.images[j], in.images[j], half, 0, 0, cv::INTER_AREA);
-    p.levels.push_back(std::move(in));
+// Level i straight from the full size (one area-average per image, not a
+// chain: the probe needs only the coarsest).
+Pyramid::Inputs downscaled(const ObjectView& v, int i) {
+  if (i == 0) return {v.normals, v.mask, v.images};
+  Pyramid::Inputs in;
+  const int f = 1 << i;
+  const cv::Size small((v.normals.cols + f - 1) / f, (v.normals.rows + f - 1) / f);
+  cv::resize(v.normals, in.normals, small, 0, 0, cv::INTER_AREA);
+  for (auto it = in.normals.begin<cv::Vec3f>(); it != in.normals.end<cv::Vec3f>(); ++it) {
+    cv::Vec3f& n = *it;
+    const float len = std::sqrt(n.dot(n));
+    if (len > 1e-6f) n /= len;
   }
-  return p;
+  cv::Mat mf;
+  v.mask.convertTo(mf, CV_32F, 1.0 / 255);
+  cv::resize(mf, mf, small, 0, 0, cv::INTER_AREA);
+  in.mask = mf > 0.5;
+  in.images.resize(v.images.size());
+  for (size_t j = 0; j < v.images.size(); ++j) cv::resize(v.images[j], in.images[j], small, 0, 0, cv::INTER_AREA);
+  return in;
 }
 
 // The patch: the centre (weight 2), 8 samples two pixels away and 8 four
@@ -265,7 +261,7 @@ void fill_unmapped(Map& map, const cv::Mat& mask) {
 // fewer than 60 % of a sample of them lie within 1.5 px of the best one.
 cv::Mat global_motion(const Level& d, const std::vector<cv::Point2i>& match, unsigned seed) {
   std::vector<cv::Point2f> from, to;
-  const size_t step = std::max<size_t>(1, d.pixels.size() / 4000);
+  const size_t step = std::max<size_t>(1, d.pixels.size() / 1500);
   for (size_t i = 0; i < d.pixels.size(); i += step) {
     const cv::Point p = d.pixels[i];
     const cv::Point2i q = match[static_cast<size_t>(p.y) * d.size.width + p.x];
@@ -276,7 +272,8 @@ cv::Mat global_motion(const Level& d, const std::vector<cv::Point2i>& match, uns
   if (from.size() < 50) return {};
   cv::setRNGSeed(static_cast<int>(seed));
   std::vector<uchar> inliers;
-  cv::Mat A = cv::estimateAffine2D(from, to, inliers, cv::RANSAC, 1.5, 2000, 0.995, 10);
+  // 400 draws of 3 find a motion 60 % of the points follow with certainty ((1 - 0.6^3)^400 ~ 1e-42).
+  cv::Mat A = cv::estimateAffine2D(from, to, inliers, cv::RANSAC, 1.5, 400, 0.995, 10);
   if (A.empty()) return {};
   const double share = static_cast<double>(std::count(inliers.begin(), inliers.end(), 1)) / from.size();
   return share >= 0.6 ? A : cv::Mat();
@@ -314,15 +311,17 @@ Expected<Map> run_combined(const ObjectView& destination, const ObjectView& sour
   const int side = std::max(1, std::min(std::max(bd.width, bd.height), std::max(bs.width, bs.height)));
   int levels = 1;
   while (levels < 6 && (side >> levels) >= 24) ++levels;
-  Pyramid pd, ps;
-  tbb::parallel_invoke([&] { pd = make_pyramid(destination, levels); }, [&] { ps = make_pyramid(source, levels); });
   const int iterations = std::max(1, options.iterations);
   std::vector<cv::Point2i> previous;
   cv::Size previous_size;
   cv::Mat coarse_motion;  // 2x3, at the coarsest level's scale
   for (int lv = levels - 1; lv >= 0; --lv) {
     Level d, s;
-    tbb::parallel_invoke([&] { d = pd.level(lv, w); }, [&] { s = ps.level(lv, w); });
+    auto make = [&](const ObjectView& v, Level& out) {
+      const Pyramid::Inputs in = downscaled(v, lv);
+      out = make_level(in.normals, in.mask, in.images, w);
+    };
+    tbb::parallel_invoke([&] { make(destination, d); }, [&] { make(source, s); });
     if (s.pixels.empty()) return make_error("combined: the source has no object pixels with normals");
     Matcher m{d, s, coherence, {}, {}};
     m.match.assign(static_cast<size_t>(d.size.area()), cv::Point2i(-1, -1));
