@@ -46,7 +46,8 @@ TEST(Transfer, WritesEverythingAndMeasuresQuality) {
 
   const auto dir = std::filesystem::temp_directory_path() / ("veneer-transfer-test-" + std::to_string(::getpid()));
   ASSERT_TRUE(write_transfer(*r, dir).ok());
-  for (const char* f : {"map.pfm", "map.png", "result_light_00.png", "result_median.png", "reuse.png", "metrics.json"})
+  for (const char* f : {"map.pfm", "map.png", "confidence.png", "result_light_00.png", "result_median.png", "reuse.png",
+                        "metrics.json"})
     EXPECT_TRUE(std::filesystem::exists(dir / f)) << f;
   std::ifstream json(dir / "metrics.json");
   const std::string text((std::istreambuf_iterator<char>(json)), std::istreambuf_iterator<char>());

@@ -439,7 +439,9 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
   j["pictures"] = {{"result_light_NN.png, result_median.png",
                     "linear 16-bit RGB at the sets' photometric scale, as the sets' light_NN.png (no exposure or "
                     "gamma change)"},
-                   {"map.png, reuse.png, relight_*.png", "8-bit sRGB pictures for viewing"}};
+                   {"map.png, reuse.png, relight_*.png", "8-bit sRGB pictures for viewing"},
+                   {"confidence.png", "white = the match fits exactly, black = 4x the median match distance or "
+                                      "more, or not mapped"}};
   if (destination.truth.present() && source.truth.present()) {
     t0 = Clock::now();
     Quality q = evaluate(result.map, destination.truth.mask, source.truth.mask, destination.truth.normals,
@@ -582,6 +584,26 @@ Expected<Quality> evaluate_sets(const Map& map, const ImageSet& destination_in, 
   return evaluate(map, dm->mask, sm->mask);
 }
 
+cv::Mat confidence_picture(const Map& map) {
+  cv::Mat pic(map.xy.size(), CV_8UC3, cv::Scalar(0, 0, 0));
+  std::vector<float> d;
+  for (int y = 0; y < map.xy.rows; ++y)
+    for (int x = 0; x < map.xy.cols; ++x)
+      if (map.valid(x, y)) d.push_back(map.distance.at<float>(y, x));
+  if (d.empty()) return pic;
+  auto mid = d.begin() + d.size() / 2;
+  std::nth_element(d.begin(), mid, d.end());
+  const float scale = std::max(*mid, 1e-6f) * 4;  // 4x the median distance and beyond: no confidence
+  for (int y = 0; y < map.xy.rows; ++y)
+    for (int x = 0; x < map.xy.cols; ++x) {
+      if (!map.valid(x, y)) continue;  // unmapped (and background): black
+      const float c = 1.0f - std::min(1.0f, map.distance.at<float>(y, x) / scale);
+      const auto g = static_cast<uchar>(std::lround(255 * c));
+      pic.at<cv::Vec3b>(y, x) = {g, g, g};
+    }
+  return pic;
+}
+
 Status write_transfer(const TransferResult& r, const std::filesystem::path& folder) {
   std::error_code ec;
   std::filesystem::create_directories(folder, ec);
@@ -597,6 +619,7 @@ Status write_transfer(const TransferResult& r, const std::filesystem::path& fold
   }
   if (auto s = write_png16(folder / "result_median.png", r.repainted_median); !s) return s;
   if (auto s = write_picture(folder / "reuse.png", reuse_picture(r.reuse, r.source_median)); !s) return s;
+  if (auto s = write_picture(folder / "confidence.png", confidence_picture(r.map)); !s) return s;
   if (r.relit) {
     // one exposure for both, so that they compare
     cv::Mat both;

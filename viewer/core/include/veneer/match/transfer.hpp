@@ -108,7 +108,7 @@ Expected<TransferOptions> read_transfer_options(const std::filesystem::path& met
 // such a file's text ({"options": {...}}; parse_transfer_options reads it back equal).
 Expected<TransferOptions> parse_transfer_options(std::string_view text, const std::string& name);
 std::string transfer_options_json(const TransferOptions& options);
-// Writes map.pfm, map.png, result_light_NN.png, result_median.png, reuse.png,
+// Writes map.pfm, map.png, confidence.png, result_light_NN.png, result_median.png, reuse.png,
 // metrics.json (and relight_transferred.png / relight_reference.png when the
 // relighting was measured) into `folder` (created when missing).
 Status write_transfer(const TransferResult& result, const std::filesystem::path& folder);
@@ -137,6 +137,9 @@ cv::Mat repaint(const Map& map, const cv::Mat& photo, const cv::Mat& backdrop = 
 // mask or guide that does not fit the photo.
 Expected<cv::Mat> repaint_blended(const Map& map, const cv::Mat& photo, const cv::Mat& source_mask, int radius,
                                   const cv::Mat& backdrop = {}, const fast::BlendGuide* guide = nullptr);
+// How well each match fits (8-bit BGR): white = distance 0, black = 4x the
+// median distance or more, or not mapped.
+cv::Mat confidence_picture(const Map& map);
 // The thesis's picture of a map: R = x / width, G = y / height, B = 1 (8-bit BGR), black unmapped.
 cv::Mat map_picture(const Map& map, cv::Size source_size);
 // Reuse counts as a heat map over the grey source picture (8-bit BGR).
