@@ -449,6 +449,20 @@ Expected<ImageSet> read_veneer(const fs::path& folder, const ReadOptions& option
                       std::string(manifest->ambient_file.empty() ? "" : " and the ambient frame") + " names a RAW file");
   const bool use_raw = options.photos != PhotoSource::developed && all_raw;
 
+  if (!options.load_photos) {
+    if (!manifest->mask_file.empty()) {
+      fs::path f = folder / manifest->mask_file;
+      auto m = read_mask(f);
+      if (!m) return m.error();
+      if (Status s = check_size(f, *m, set.size, "set.json's size"); !s) return s.error();
+      set.mask = std::move(m).value();
+    }
+    if (options.load_truth) {
+      if (Status s = load_truth(folder / "truth", set); !s) return s.error();
+    }
+    set.photos_from = use_raw ? (options.raw.half_size ? "raw-half" : "raw") : "developed";
+    return set;
+  }
   std::vector<Frame> frames;
   for (size_t i = 0; i < manifest->image_files.size(); ++i)
     frames.push_back(use_raw ? Frame{folder / manifest->raw_files[i], true} : Frame{folder / manifest->image_files[i], false});
@@ -1028,6 +1042,7 @@ Expected<ImageSet> read_set(const fs::path& folder, const ReadOptions& options, 
     case SetFormat::automatic: break;
   }
   if (!set) return set;
+  if (!options.load_photos && format == SetFormat::veneer) return set;  // no pixels to check
   // A last check of the invariants every reader promises.
   if (Status s = validate(*set); !s) return make_error(folder.string() + ": " + s.message());
   return set;

@@ -110,6 +110,8 @@ struct ReadOptions {
   bool load_truth = true;                   // read <set>/truth/ when present
   PhotoSource photos = PhotoSource::automatic;  // veneer sets: RAW or developed photos (default: RAW where present)
   RawOptions raw;                           // how RAW files are decoded (half size, demosaic)
+  bool load_photos = true;                  // veneer sets: false reads the manifest, mask and truth only
+                                            // (images left empty; for results taken from a cache)
   Status check() const;
 };
 
