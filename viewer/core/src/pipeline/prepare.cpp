@@ -4,7 +4,10 @@
 #include <chrono>
 
 #include <nlohmann/json.hpp>
+#include <mutex>
+
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 
 #include "veneer/ps/photometric_stereo.hpp"
 #include "veneer/util/log.hpp"
@@ -208,9 +211,26 @@ Expected<match::PreparedPair> prepare_pair(const fs::path& destination, const fs
                                            const match::TransferOptions& transfer, const PrepareOptions& options,
                                            std::vector<SetReport>* reports, const Progress& progress) {
   if (auto s = transfer.check(); !s) return s.error();
-  auto dst = prepare_set(destination, transfer.scale, transfer.truth_normals, options, sub_progress(progress, 0.0, 0.5));
+  // Both sets at once: their frames share the workers, so no core idles
+  // while one set's last frame decodes. Progress is the sum of both halves.
+  std::mutex lock;
+  double done[2] = {0, 0};
+  auto half = [&](int which) {
+    Progress p;
+    p.cancel = progress.cancel;
+    if (progress.on_progress)
+      p.on_progress = [&, which](double f, const std::string& stage) {
+        std::lock_guard<std::mutex> hold(lock);
+        done[which] = f;
+        progress.report(0.5 * (done[0] + done[1]), stage);
+      };
+    return p;
+  };
+  Expected<PreparedSet> dst = make_error("not run"), src = make_error("not run");
+  tbb::parallel_invoke(
+      [&] { dst = prepare_set(destination, transfer.scale, transfer.truth_normals, options, half(0)); },
+      [&] { src = prepare_set(source, transfer.scale, transfer.truth_normals, options, half(1)); });
   if (!dst) return make_error("destination: " + dst.message());
-  auto src = prepare_set(source, transfer.scale, transfer.truth_normals, options, sub_progress(progress, 0.5, 1.0));
   if (!src) return make_error("source: " + src.message());
   match::PreparedPair pair;
   pair.scale = transfer.scale;
