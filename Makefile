@@ -1,5 +1,5 @@
 # Veneer — the front door.
-#   make          build into build/ (programs in build/bin/)
+#   make          install what is missing (tools/install-deps), build into build/ (programs in build/bin/)
 #   make demo     install what is missing, build, run the main job on the simulated rig
 #   make test     install what is missing, build, run every test (CTest)
 #   make bench    run the benchmarks and print their tables
@@ -14,13 +14,15 @@ FUZZ_SECONDS ?= 30
 
 .PHONY: all deps configure build demo test bench asan fuzz clean
 
-all: build
+all: deps
+	@$(MAKE) --no-print-directory build
 
 deps:
 	@tools/install-deps
 
 $(BUILD)/build.ninja:
-	cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=$(BUILD_TYPE) $(CMAKE_ARGS)
+	@cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=$(BUILD_TYPE) $(CMAKE_ARGS) || { \
+	  echo "make: configuring failed; if a library (OpenCV, LibRaw, ...) is missing, run: make deps"; exit 1; }
 
 configure: $(BUILD)/build.ninja
 

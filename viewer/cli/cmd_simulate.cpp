@@ -10,6 +10,7 @@
 #include <opencv2/core.hpp>
 
 #include "command.hpp"
+#include "veneer/io/dng.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
 #include "veneer/sim/simulator.hpp"
@@ -44,7 +45,7 @@ struct SimulateArgs {
   uint64_t seed = 1;
   double noise = 0.005, scale = 1.0, ambient = 0.0, exposure = 1.0, focal = 0.0;
   int threads = 0;
-  bool list = false, overwrite = false;
+  bool list = false, overwrite = false, dng = false;
 };
 
 int run_simulate(const SimulateArgs& a) {
@@ -77,6 +78,10 @@ int run_simulate(const SimulateArgs& a) {
   progress.on_progress = [&bar](double f, const std::string& stage) { bar.update(f * 0.8, stage); };
   auto set = veneer::sim::simulate_set(a.scene, o, *role, progress);
   if (!set) return fail(set.message().rfind("unknown scene", 0) == 0 ? 2 : 1, set.message());
+  if (a.dng) {
+    bar.update(0.82, "DNG files");
+    if (auto st = veneer::add_dng_raw_files(*set); !st) return fail(1, st.message());
+  }
   bar.update(0.85, "writing " + a.out);
   if (auto st = veneer::write_set(*set, a.out, a.overwrite); !st) return fail(1, st.message());
   if (!a.preview.empty()) {
@@ -121,6 +126,9 @@ VENEER_COMMAND(simulate) {
   cmd->add_option("--role", args->role, "destination | source")->capture_default_str();
   cmd->add_option("--threads", args->threads, "worker threads (0 = all cores)")->capture_default_str();
   cmd->add_flag("--overwrite", args->overwrite, "replace an existing set folder");
+  cmd->add_flag("--dng", args->dng,
+                "also write each photo as a camera RAW file (light_NN.dng: RGGB mosaic, 14-bit, as-shot white "
+                "balance), named in set.json, so the set is read through the RAW path");
   cmd->add_option("--preview", args->preview, "also write an 8-bit picture of all lamps on (PNG)");
   return [args] { return run_simulate(*args); };
 }

@@ -1,11 +1,16 @@
 // veneer transfer: two image sets in, the correspondence map and the
 // destination repainted with the source's appearance out.
+#include <chrono>
 #include <cstdio>
 #include <iostream>
 
+#include <nlohmann/json.hpp>
+
 #include "command.hpp"
+#include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
 #include "veneer/match/transfer.hpp"
+#include "veneer/pipeline/prepare.hpp"
 
 namespace veneer::cli {
 namespace {
@@ -22,6 +27,10 @@ struct TransferArgs {
   bool no_grow = false;
   unsigned seed = match::MatchOptions{}.seed;
   bool faithful = false, truth_normals = false;
+  // reading the sets (pipeline::PrepareOptions)
+  std::string photos = "auto", demosaic = "ahd", cache_dir;
+  bool raw_half = false, no_cache = false;
+  double cache_size_gb = 4.0;
 };
 
 int fail(const std::string& what, int code = 1) {
@@ -59,17 +68,50 @@ int run(const TransferArgs& a) {
   options.scale = a.scale;
   if (auto s = options.check(); !s) return fail(s.message(), 2);
 
-  auto dst = read_set(a.dst);
-  if (!dst) return fail(dst.message());
-  auto src = read_set(a.src);
-  if (!src) return fail(src.message());
+  const auto t_wall = std::chrono::steady_clock::now();
+  pipeline::PrepareOptions prep;
+  auto photos = parse_photo_source(a.photos);
+  if (!photos) return fail(photos.message(), 2);
+  auto demosaic = parse_demosaic(a.demosaic);
+  if (!demosaic) return fail(demosaic.message(), 2);
+  prep.read.photos = *photos;
+  prep.read.raw.demosaic = *demosaic;
+  prep.read.raw.half_size = a.raw_half;
+  prep.cache.enabled = !a.no_cache;
+  prep.cache.dir = a.cache_dir;
+  if (!(a.cache_size_gb > 0)) return fail("--cache-size-gb must be > 0", 2);
+  prep.cache.max_bytes = static_cast<uint64_t>(a.cache_size_gb * (1ull << 30));
+  if (auto s = prep.check(); !s) return fail(s.message(), 2);
+
   ProgressBar bar("transfer");
   Progress progress;
   progress.on_progress = [&bar](double f, const std::string& stage) { bar.update(f, stage); };
-  auto result = match::transfer(*dst, *src, options, progress);
-  bar.done();
+  Progress reading;
+  reading.on_progress = [&bar](double f, const std::string& stage) { bar.update(0.4 * f, stage); };
+  Progress matching;
+  matching.on_progress = [&bar](double f, const std::string& stage) { bar.update(0.4 + 0.55 * f, stage); };
+  std::vector<pipeline::SetReport> reports;
+  auto pair = pipeline::prepare_pair(a.dst, a.src, options, prep, &reports, reading);
+  if (!pair) return fail(pair.message());
+  auto result = match::transfer(*pair, options, matching);
   if (!result) return fail(result.message());
+  bar.update(0.95, "writing " + a.out);
   if (auto s = match::write_transfer(*result, a.out); !s) return fail(s.message());
+  bar.done();
+  // metrics.json: how the sets were read (cache hit or miss, RAW or developed) and the wall time.
+  auto metrics = nlohmann::json::parse(result->metrics_json, nullptr, false);
+  if (metrics.is_object()) {
+    metrics["io"] = nlohmann::json::parse(pipeline::reports_json(reports));
+    metrics["io"]["raw_half_size"] = a.raw_half;
+    metrics["io"]["demosaic"] = a.demosaic;
+    metrics["timings"]["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_wall).count();
+    if (auto s = write_file_atomic(std::filesystem::path(a.out) / "metrics.json", metrics.dump(2) + "\n"); !s)
+      return fail(s.message());
+  }
+  for (const auto& r : reports)
+    std::printf("%s: %s, photos from %s, %.2f s\n", r.folder.c_str(),
+                r.checksum.empty() ? "cache off" : (r.cache_hit ? "cache hit" : "cache miss"), r.photos_from.c_str(),
+                r.total_s);
 
   std::printf("transfer %s -> %s: %s %s %dx%d, map written to %s\n", a.src.c_str(), a.dst.c_str(), a.method.c_str(),
               a.feature.c_str(), a.patch, a.patch, a.out.c_str());
@@ -135,5 +177,13 @@ VENEER_COMMAND(transfer) {
   cmd->add_option("--scale", args->scale, "resize both sets first, (0, 1] (default 1)");
   cmd->add_flag("--faithful", args->faithful, "use the thesis's code paths, never the fast engine");
   cmd->add_flag("--truth-normals", args->truth_normals, "match on truth/ normals and masks (simulated sets)");
+  cmd->add_option("--photos", args->photos,
+                  "auto | raw | developed: the sets' RAW files (linear, LibRaw) or their PNG/JPEG photos (default "
+                  "auto = RAW where every photo has one)");
+  cmd->add_flag("--raw-half", args->raw_half, "decode RAW files at half size (one pixel per 2x2 Bayer cell, ~4x faster)");
+  cmd->add_option("--demosaic", args->demosaic, "RAW interpolation: ahd | ppg | vng | bilinear (default ahd)");
+  cmd->add_flag("--no-cache", args->no_cache, "neither read nor write the per-set result cache");
+  cmd->add_option("--cache-dir", args->cache_dir, "result cache folder (default $XDG_CACHE_HOME/veneer or ~/.cache/veneer)");
+  cmd->add_option("--cache-size-gb", args->cache_size_gb, "result cache size cap, GiB (default 4; least recently used go first)");
   return [args] { return veneer::cli::run(*args); };
 }

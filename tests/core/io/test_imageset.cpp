@@ -74,7 +74,9 @@ TEST(ImageSet, RoundTripKeepsPixelsAndManifest) {
   EXPECT_EQ(cv::norm(back->truth.mask, set.truth.mask, cv::NORM_INF), 0.0);
   EXPECT_LE(cv::norm(back->truth.albedo, set.truth.albedo, cv::NORM_INF), kQuant);
 
-  auto no_truth = read_set(dir / "s", {SetFormat::automatic, false});
+  ReadOptions without_truth;
+  without_truth.load_truth = false;
+  auto no_truth = read_set(dir / "s", without_truth);
   ASSERT_TRUE(no_truth);
   EXPECT_FALSE(no_truth->truth.present());
 }

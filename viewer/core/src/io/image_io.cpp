@@ -139,6 +139,44 @@ Expected<cv::Mat> to_linear_bgr(const cv::Mat& raw, const std::string& name) {
   return out;
 }
 
+bool has_jpeg_magic(std::string_view b) {
+  return b.size() >= 3 && static_cast<unsigned char>(b[0]) == 0xFF && static_cast<unsigned char>(b[1]) == 0xD8 &&
+         static_cast<unsigned char>(b[2]) == 0xFF;
+}
+
+// 8-bit sRGB code value -> linear, the camera JPEG's inverse transfer curve.
+const std::array<float, 256>& srgb_to_linear_lut() {
+  static const std::array<float, 256> lut = [] {
+    std::array<float, 256> t{};
+    for (int i = 0; i < 256; ++i) {
+      const double c = i / 255.0;
+      t[static_cast<size_t>(i)] = static_cast<float>(c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4));
+    }
+    return t;
+  }();
+  return lut;
+}
+
+// A JPEG (a camera's developed photo: 8-bit sRGB) as linear CV_32FC3 BGR.
+Expected<cv::Mat> decode_jpeg_linear(std::string_view bytes, const std::string& name) {
+  cv::Mat bgr8;
+  try {
+    cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8UC1, const_cast<char*>(bytes.data()));
+    bgr8 = cv::imdecode(buffer, cv::IMREAD_COLOR);
+  } catch (const cv::Exception& e) {
+    return make_error(name + ": cannot decode JPEG: " + e.what());
+  }
+  if (bgr8.empty() || bgr8.type() != CV_8UC3) return make_error(name + ": corrupt or truncated JPEG (decoder failed)");
+  const auto& lut = srgb_to_linear_lut();
+  cv::Mat out(bgr8.size(), CV_32FC3);
+  for (int y = 0; y < bgr8.rows; ++y) {
+    const uchar* s = bgr8.ptr<uchar>(y);
+    float* o = out.ptr<float>(y);
+    for (int x = 0; x < bgr8.cols * 3; ++x) o[x] = lut[s[x]];
+  }
+  return out;
+}
+
 Expected<cv::Mat> decode_raw(std::string_view bytes, const std::string& name) {
   if (has_png_magic(bytes)) {
     if (Status s = check_png_chunks(bytes, name); !s) return s.error();
@@ -334,9 +372,18 @@ Expected<cv::Mat> decode_linear_image(std::string_view bytes, const std::string&
     cv::cvtColor(*pfm, bgr, cv::COLOR_GRAY2BGR);
     return bgr;
   }
+  if (has_jpeg_magic(bytes)) return decode_jpeg_linear(bytes, name);
   auto raw = decode_raw(bytes, name);
   if (!raw) return raw.error();
   return to_linear_bgr(*raw, name);
+}
+
+std::string image_file_kind(std::string_view bytes) {
+  if (has_png_magic(bytes)) return "png";
+  if (has_jpeg_magic(bytes)) return "jpeg";
+  if (bytes.size() >= 2 && bytes[0] == 'P' && (bytes[1] == 'F' || bytes[1] == 'f')) return "pfm";
+  if (has_pnm_magic(bytes)) return "pnm";
+  return {};
 }
 
 Expected<cv::Mat> read_linear_image(const fs::path& file) {

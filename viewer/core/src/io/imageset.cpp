@@ -40,12 +40,18 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include <atomic>
+#include <mutex>
+
 #include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
+#include <tbb/parallel_for.h>
 #include <opencv2/core/utility.hpp>
 #include <opencv2/imgcodecs.hpp>
 
 #include "file_util.hpp"
 #include "veneer/io/image_io.hpp"
+#include "veneer/io/raw.hpp"
 #include "veneer/util/log.hpp"
 
 namespace veneer {
@@ -112,6 +118,12 @@ std::string light_file_name(int index) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "light_%02d.png", index);
   return buf;
+}
+
+std::string raw_file_name(int index, const std::string& extension) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "light_%02d.", index);
+  return buf + extension;
 }
 
 // --- manifest parsing helpers ------------------------------------------------
@@ -267,9 +279,18 @@ Expected<Manifest> parse_manifest_json(const json& root, const fs::path& folder)
     if (auto e = file_name_problem(file); !e.empty()) return make_error(where + ": " + e);
     if (!seen_files.insert(file).second) return make_error(where + ": file \"" + file + "\" is listed twice");
     m.image_files[static_cast<size_t>(light)] = file;
+    std::string raw;
+    if (auto e = get_string(ji, "raw", raw, false); !e.empty()) return make_error(where + ": " + e);
+    if (!raw.empty()) {
+      if (auto e = file_name_problem(raw); !e.empty()) return make_error(where + ": raw: " + e);
+      if (!seen_files.insert(raw).second) return make_error(where + ": file \"" + raw + "\" is listed twice");
+      if (m.raw_files.empty()) m.raw_files.assign(set.lights.size(), fs::path());
+      m.raw_files[static_cast<size_t>(light)] = raw;
+    }
   }
 
-  for (auto [key, dst] : {std::pair{"ambient", &m.ambient_file}, std::pair{"mask", &m.mask_file}}) {
+  for (auto [key, dst] : {std::pair{"ambient", &m.ambient_file}, std::pair{"mask", &m.mask_file},
+                          std::pair{"ambient_raw", &m.ambient_raw_file}}) {
     std::string file;
     if (auto e = get_string(root, key, file, false); !e.empty()) return make_error(e);
     if (file.empty()) continue;
@@ -289,25 +310,61 @@ Expected<Manifest> parse_manifest_json(const json& root, const fs::path& folder)
 
 // --- loading pixels ------------------------------------------------------------
 
-// Loads `files` (absolute) in parallel into CV_32FC3; the first error wins (by
-// list order, so the message does not depend on thread timing).
-Status load_images(const std::vector<fs::path>& files, std::vector<cv::Mat>& out) {
-  out.assign(files.size(), cv::Mat());
-  std::vector<std::string> errors(files.size());
-  cv::parallel_for_(cv::Range(0, static_cast<int>(files.size())), [&](const cv::Range& r) {
-    for (int i = r.start; i < r.end; ++i) {
-      auto image = read_linear_image(files[static_cast<size_t>(i)]);
-      if (image) {
-        out[static_cast<size_t>(i)] = std::move(image).value();
-      } else {
-        errors[static_cast<size_t>(i)] = image.message();
-      }
+// One file to decode into a photo: through LibRaw when `raw`, else by its magic
+// (PNG, JPEG, PFM, PNM).
+struct Frame {
+  fs::path file;
+  bool raw = false;
+};
+
+// Decodes `frames` in parallel (one task per file, each file read and decoded
+// once) into CV_32FC3; `kinds` gets each file's kind ("raw", "png", ...). The
+// first error wins by list order, so the message does not depend on thread
+// timing. Progress is reported from the worker threads under a lock.
+Status decode_frames(const std::vector<Frame>& frames, const RawOptions& raw_options, const Progress& progress,
+                     const std::string& stage, std::vector<cv::Mat>& out, std::vector<std::string>* kinds = nullptr) {
+  out.assign(frames.size(), cv::Mat());
+  if (kinds) kinds->assign(frames.size(), std::string());
+  std::vector<std::string> errors(frames.size());
+  std::atomic<size_t> done{0};
+  std::mutex report_lock;
+  progress.report(0.0, stage);
+  tbb::parallel_for(size_t(0), frames.size(), [&](size_t i) {
+    if (progress.cancelled()) {
+      errors[i] = "cancelled";
+      return;
+    }
+    const Frame& f = frames[i];
+    auto bytes = read_file_bytes(f.file);
+    if (!bytes) {
+      errors[i] = bytes.message();
+      return;
+    }
+    Expected<cv::Mat> image = f.raw ? decode_raw_linear(*bytes, raw_options, f.file.string())
+                                    : decode_linear_image(*bytes, f.file.string());
+    if (!image) {
+      errors[i] = image.message();
+      return;
+    }
+    out[i] = std::move(image).value();
+    if (kinds) (*kinds)[i] = f.raw ? (raw_options.half_size ? "raw-half" : "raw") : image_file_kind(*bytes);
+    const size_t n = ++done;
+    if (progress.on_progress) {
+      std::lock_guard<std::mutex> lock(report_lock);
+      progress.report(static_cast<double>(n) / static_cast<double>(frames.size()), stage);
     }
   });
   for (const auto& e : errors) {
     if (!e.empty()) return make_error(e);
   }
   return Status::success();
+}
+
+Status load_images(const std::vector<fs::path>& files, std::vector<cv::Mat>& out, const Progress& progress = {},
+                   const std::string& stage = "reading") {
+  std::vector<Frame> frames;
+  for (const auto& f : files) frames.push_back({f, false});
+  return decode_frames(frames, RawOptions{}, progress, stage, out);
 }
 
 Status check_size(const fs::path& file, const cv::Mat& image, cv::Size expected, const std::string& why) {
@@ -351,7 +408,27 @@ Status load_truth(const fs::path& truth_dir, ImageSet& set) {
   return Status::success();
 }
 
-Expected<ImageSet> read_veneer(const fs::path& folder, const ReadOptions& options) {
+// Resizes what comes with the photos (mask, truth, intrinsics) from the
+// manifest's size to the size the RAW files decoded to.
+void fit_to_photos(ImageSet& set, cv::Size size) {
+  if (size == set.size) return;
+  const double sx = static_cast<double>(size.width) / set.size.width;
+  const double sy = static_cast<double>(size.height) / set.size.height;
+  auto nearest = [&](cv::Mat& m) {
+    if (!m.empty()) cv::resize(m, m, size, 0, 0, cv::INTER_NEAREST);
+  };
+  nearest(set.mask);
+  nearest(set.truth.mask);
+  nearest(set.truth.normals);
+  nearest(set.truth.depth);
+  if (!set.truth.albedo.empty()) cv::resize(set.truth.albedo, set.truth.albedo, size, 0, 0, cv::INTER_LINEAR);
+  set.camera.focal_px *= sx;
+  set.camera.cx *= sx;
+  set.camera.cy *= sy;
+  set.size = size;
+}
+
+Expected<ImageSet> read_veneer(const fs::path& folder, const ReadOptions& options, const Progress& progress) {
   const fs::path manifest_file = folder / "set.json";
   std::error_code ec;
   if (auto bytes = fs::file_size(manifest_file, ec); !ec && bytes > kMaxManifestBytes)
@@ -361,29 +438,75 @@ Expected<ImageSet> read_veneer(const fs::path& folder, const ReadOptions& option
   auto manifest = parse_manifest(*text, folder);
   if (!manifest) return manifest.error();
   ImageSet set = std::move(manifest->set);
-  std::vector<fs::path> files;
-  for (const auto& f : manifest->image_files) files.push_back(folder / f);
-  if (Status s = load_images(files, set.images); !s) return s.error();
-  const std::string why = "set.json's size";
-  for (size_t i = 0; i < files.size(); ++i) {
-    if (Status s = check_size(files[i], set.images[i], set.size, why); !s) return s.error();
+
+  // RAW where every photo (and the ambient frame) has its RAW file, unless told otherwise.
+  const bool all_raw =
+      !manifest->raw_files.empty() &&
+      std::all_of(manifest->raw_files.begin(), manifest->raw_files.end(), [](const fs::path& f) { return !f.empty(); }) &&
+      (manifest->ambient_file.empty() || !manifest->ambient_raw_file.empty());
+  if (options.photos == PhotoSource::raw && !all_raw)
+    return make_error(manifest_file.string() + ": RAW photos were asked for, but not every image" +
+                      std::string(manifest->ambient_file.empty() ? "" : " and the ambient frame") + " names a RAW file");
+  const bool use_raw = options.photos != PhotoSource::developed && all_raw;
+
+  if (!options.load_photos) {
+    if (!manifest->mask_file.empty()) {
+      fs::path f = folder / manifest->mask_file;
+      auto m = read_mask(f);
+      if (!m) return m.error();
+      if (Status s = check_size(f, *m, set.size, "set.json's size"); !s) return s.error();
+      set.mask = std::move(m).value();
+    }
+    if (options.load_truth) {
+      if (Status s = load_truth(folder / "truth", set); !s) return s.error();
+    }
+    set.photos_from = use_raw ? (options.raw.half_size ? "raw-half" : "raw") : "developed";
+    return set;
   }
+  std::vector<Frame> frames;
+  for (size_t i = 0; i < manifest->image_files.size(); ++i)
+    frames.push_back(use_raw ? Frame{folder / manifest->raw_files[i], true} : Frame{folder / manifest->image_files[i], false});
+  if (!manifest->ambient_file.empty())
+    frames.push_back(use_raw ? Frame{folder / manifest->ambient_raw_file, true} : Frame{folder / manifest->ambient_file, false});
+  std::vector<cv::Mat> decoded;
+  std::vector<std::string> kinds;
+  const std::string stage = "reading " + (set.id.empty() ? folder.filename().string() : set.id);
+  if (Status s = decode_frames(frames, options.raw, progress, stage, decoded, &kinds); !s) return s.error();
   if (!manifest->ambient_file.empty()) {
-    fs::path f = folder / manifest->ambient_file;
-    auto a = read_linear_image(f);
-    if (!a) return a.error();
-    if (Status s = check_size(f, *a, set.size, why); !s) return s.error();
-    set.ambient = std::move(a).value();
+    set.ambient = std::move(decoded.back());
+    decoded.pop_back();
+  }
+  set.images = std::move(decoded);
+  set.photos_from = kinds.empty() ? std::string() : kinds.front();
+  for (const auto& k : kinds) {
+    if (k != set.photos_from) {
+      set.photos_from = "mixed";
+      break;
+    }
+  }
+
+  // Developed photos must have set.json's size; RAW photos define it.
+  const cv::Size photo_size = set.images.front().size();
+  const std::string why = use_raw ? "the first RAW photo's size" : "set.json's size";
+  const cv::Size expect = use_raw ? photo_size : set.size;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const cv::Mat& m = i < set.images.size() ? set.images[i] : set.ambient;
+    if (Status s = check_size(frames[i].file, m, expect, why); !s) return s.error();
   }
   if (!manifest->mask_file.empty()) {
     fs::path f = folder / manifest->mask_file;
     auto m = read_mask(f);
     if (!m) return m.error();
-    if (Status s = check_size(f, *m, set.size, why); !s) return s.error();
+    if (Status s = check_size(f, *m, set.size, "set.json's size"); !s) return s.error();
     set.mask = std::move(m).value();
   }
   if (options.load_truth) {
     if (Status s = load_truth(folder / "truth", set); !s) return s.error();
+  }
+  if (use_raw && photo_size != set.size) {
+    VLOG_INFO("ImageSet", "{}: RAW photos are {}, set.json says {}; mask, truth and intrinsics scaled to the RAW size",
+              folder.string(), size_text(photo_size), size_text(set.size));
+    fit_to_photos(set, photo_size);
   }
   return set;
 }
@@ -471,7 +594,7 @@ std::string folder_name(const fs::path& folder) {
   return f.filename().string();
 }
 
-Expected<ImageSet> read_diligent(const fs::path& folder) {
+Expected<ImageSet> read_diligent(const fs::path& folder, const Progress& progress) {
   ImageSet set;
   set.origin = folder;
   set.id = set.object = folder_name(folder);
@@ -513,7 +636,7 @@ Expected<ImageSet> read_diligent(const fs::path& folder) {
     files.push_back(folder / line.text);
     set.lights[files.size() - 1].lamp_id = fs::path(line.text).stem().string();
   }
-  if (Status s = load_images(files, set.images); !s) return s.error();
+  if (Status s = load_images(files, set.images, progress, "reading " + set.id); !s) return s.error();
   if (Status s = check_same_sizes(files, set.images); !s) return s.error();
   set.size = set.images[0].size();
   if (fs::path f = folder / "mask.png"; fs::exists(f, ec)) {
@@ -535,7 +658,7 @@ fs::path find_with_ext(const fs::path& folder, const std::string& stem, std::ini
   return {};
 }
 
-Expected<ImageSet> read_thesis(const fs::path& folder) {
+Expected<ImageSet> read_thesis(const fs::path& folder, const Progress& progress) {
   std::error_code ec;
   if (!fs::is_directory(folder, ec)) return make_error(folder.string() + ": not a folder");
   const fs::path lights_file = folder / "lights.txt";
@@ -574,7 +697,7 @@ Expected<ImageSet> read_thesis(const fs::path& folder) {
     set.lights[files.size()].lamp_id = p.stem().string();
     files.push_back(p);
   }
-  if (Status s = load_images(files, set.images); !s) return s.error();
+  if (Status s = load_images(files, set.images, progress, "reading " + set.id); !s) return s.error();
   if (Status s = check_same_sizes(files, set.images); !s) return s.error();
   set.size = set.images[0].size();
   const std::string why = "the images' size";
@@ -655,8 +778,17 @@ Status write_contents(const ImageSet& set, const fs::path& dir) {
     if (Status s = write_bytes(dir / light_file_name(set.lights[i].index), encoded[i]); !s) return s;
     encoded[i] = std::string();
   }
+  for (size_t i = 0; i < set.raw.size() && i < set.lights.size(); ++i) {
+    if (set.raw[i].bytes.empty()) continue;
+    const fs::path f = dir / raw_file_name(set.lights[i].index, set.raw[i].extension);
+    if (Status s = io_detail::write_file_synced(f, set.raw[i].bytes); !s) return s;
+  }
   if (!set.ambient.empty()) {
     if (Status s = write_bytes(dir / "ambient.png", encode_png16(set.ambient)); !s) return s;
+    if (!set.ambient_raw.bytes.empty()) {
+      const fs::path f = dir / ("ambient." + set.ambient_raw.extension);
+      if (Status s = io_detail::write_file_synced(f, set.ambient_raw.bytes); !s) return s;
+    }
   }
   if (!set.mask.empty()) {
     if (Status s = write_bytes(dir / "mask.png", encode_png8(set.mask)); !s) return s;
@@ -748,6 +880,24 @@ std::optional<Role> parse_role(const std::string& name) {
   return std::nullopt;
 }
 
+const char* photo_source_name(PhotoSource p) {
+  switch (p) {
+    case PhotoSource::automatic: return "auto";
+    case PhotoSource::raw: return "raw";
+    case PhotoSource::developed: return "developed";
+  }
+  return "auto";
+}
+
+Expected<PhotoSource> parse_photo_source(const std::string& name) {
+  for (PhotoSource p : {PhotoSource::automatic, PhotoSource::raw, PhotoSource::developed}) {
+    if (name == photo_source_name(p)) return p;
+  }
+  return make_error("photo source \"" + name.substr(0, 32) + "\" is not auto, raw or developed");
+}
+
+Status ReadOptions::check() const { return raw.check(); }
+
 Expected<Manifest> parse_manifest(const std::string& text, const fs::path& folder) {
   const std::string name = (folder / "set.json").string();
   try {
@@ -795,6 +945,8 @@ std::string manifest_json(const ImageSet& set) {
     nlohmann::ordered_json image;
     image["light"] = l.index;
     image["file"] = light_file_name(l.index);
+    if (static_cast<size_t>(l.index) < set.raw.size() && !set.raw[static_cast<size_t>(l.index)].bytes.empty())
+      image["raw"] = raw_file_name(l.index, set.raw[static_cast<size_t>(l.index)].extension);
     images.push_back(image);
   }
   root["lights"] = lights;
@@ -804,6 +956,8 @@ std::string manifest_json(const ImageSet& set) {
   } else {
     root["ambient"] = "ambient.png";
   }
+  if (!set.ambient.empty() && !set.ambient_raw.bytes.empty())
+    root["ambient_raw"] = "ambient." + set.ambient_raw.extension;
   if (!set.mask.empty()) root["mask"] = "mask.png";
   if (!set.warnings.empty()) root["warnings"] = set.warnings;
   if (!set.scene.empty()) root["scene"] = set.scene;
@@ -840,6 +994,16 @@ Status validate(const ImageSet& set) {
       return make_error(std::string(what) + ": is " + size_text(m.size()) + " but the set is " + size_text(set.size));
     return Status::success();
   };
+  if (set.raw.size() > set.images.size()) return make_error("the set has more RAW files than images");
+  auto raw_problem = [](const ImageSet::RawFile& r) {
+    if (r.bytes.empty()) return false;
+    return r.extension.empty() || r.extension.size() > 8 ||
+           !std::all_of(r.extension.begin(), r.extension.end(), [](unsigned char c) { return std::isalnum(c); });
+  };
+  for (const auto& r : set.raw) {
+    if (raw_problem(r)) return make_error("a RAW file's extension must be 1-8 letters or digits");
+  }
+  if (raw_problem(set.ambient_raw)) return make_error("the ambient RAW file's extension must be 1-8 letters or digits");
   if (Status s = check(set.ambient, CV_32FC3, "ambient", "CV_32FC3"); !s) return s;
   if (Status s = check(set.mask, CV_8UC1, "mask", "CV_8UC1"); !s) return s;
   if (Status s = check(set.truth.normals, CV_32FC3, "truth normals", "CV_32FC3 (x, y, z)"); !s) return s;
@@ -855,7 +1019,8 @@ Status validate(const ImageSet& set) {
   return Status::success();
 }
 
-Expected<ImageSet> read_set(const fs::path& folder, const ReadOptions& options) {
+Expected<ImageSet> read_set(const fs::path& folder, const ReadOptions& options, const Progress& progress) {
+  if (Status s = options.check(); !s) return make_error(folder.string() + ": " + s.message());
   std::error_code ec;
   if (!fs::exists(folder, ec)) return make_error(folder.string() + ": no such folder");
   if (!fs::is_directory(folder, ec)) return make_error(folder.string() + ": not a folder");
@@ -871,12 +1036,13 @@ Expected<ImageSet> read_set(const fs::path& folder, const ReadOptions& options) 
   }
   Expected<ImageSet> set = make_error("unknown set format");
   switch (format) {
-    case SetFormat::veneer: set = read_veneer(folder, options); break;
-    case SetFormat::diligent: set = read_diligent(folder); break;
-    case SetFormat::thesis: set = read_thesis(folder); break;
+    case SetFormat::veneer: set = read_veneer(folder, options, progress); break;
+    case SetFormat::diligent: set = read_diligent(folder, progress); break;
+    case SetFormat::thesis: set = read_thesis(folder, progress); break;
     case SetFormat::automatic: break;
   }
   if (!set) return set;
+  if (!options.load_photos && format == SetFormat::veneer) return set;  // no pixels to check
   // A last check of the invariants every reader promises.
   if (Status s = validate(*set); !s) return make_error(folder.string() + ": " + s.message());
   return set;

@@ -24,13 +24,17 @@ std::string encode_pfm(const cv::Mat& image, bool xyz_order);  // the file's byt
 Status write_png16(const std::filesystem::path& file, const cv::Mat& image);
 // The PNG bytes write_png16 writes (1- or 3-channel float input).
 Expected<std::string> encode_png16(const cv::Mat& image);
-// Reads an 8- or 16-bit PNG (or PPM/PGM) as CV_32FC3 BGR scaled to [0,1];
+// Reads an 8- or 16-bit PNG (or PPM/PGM, or a JPEG: see below) as CV_32FC3 BGR scaled to [0,1];
 // grey images are expanded to 3 channels. A PFM photo is read as it is
 // (file RGB -> Mat BGR). Truncated or corrupt files are refused.
 Expected<cv::Mat> read_linear_image(const std::filesystem::path& file);
-// The same from a file's bytes in memory (PNG, PPM/PGM or PFM, told apart by
-// their magic, not the name); `name` is used in error messages.
+// The same from a file's bytes in memory (PNG, PPM/PGM, PFM or JPEG, told
+// apart by their magic, not the name); `name` is used in error messages. A
+// JPEG is a developed 8-bit sRGB photo: it goes through the inverse sRGB
+// curve (the only non-linear input; RAW files are read by raw.hpp).
 Expected<cv::Mat> decode_linear_image(std::string_view bytes, const std::string& name);
+// "png" | "jpeg" | "pfm" | "pnm" by the bytes' magic, "" for anything else.
+std::string image_file_kind(std::string_view bytes);
 // A mask file (PNG/PGM/PPM, any depth) as CV_8UC1: 255 where the file is non-zero.
 Expected<cv::Mat> read_mask(const std::filesystem::path& file);
 // The whole file as bytes; the error names the file.

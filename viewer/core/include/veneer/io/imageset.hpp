@@ -16,7 +16,9 @@
 
 #include <opencv2/core.hpp>
 
+#include "veneer/io/raw.hpp"
 #include "veneer/util/expected.hpp"
+#include "veneer/util/progress.hpp"
 
 namespace veneer {
 
@@ -71,6 +73,21 @@ struct ImageSet {
   std::string scene;            // simulator scene name, when simulated
   Truth truth;
   std::filesystem::path origin;  // folder it was read from (diagnostics)
+  // What the photos were made from when read: "raw" (the camera's RAW files
+  // through LibRaw), "raw-half" (the same at half size), "png" (16-bit
+  // linear), "jpeg" (8-bit sRGB through the inverse sRGB curve), "pfm", "pnm";
+  // empty for a set made in memory.
+  std::string photos_from;
+  // Camera RAW files to keep beside the photos (write_set writes raw[i] as
+  // light_NN.<extension> and names it in set.json's images[i].raw; the
+  // ambient's as ambient.<extension>). Empty = none. read_set does not fill
+  // these (it decodes the files instead).
+  struct RawFile {
+    std::string extension;  // e.g. "dng", "cr2" (no dot)
+    std::string bytes;
+  };
+  std::vector<RawFile> raw;
+  RawFile ambient_raw;
 };
 
 // veneer:   set.json + light_NN.png (+ ambient.png, mask.png, truth/)
@@ -79,13 +96,33 @@ struct ImageSet {
 //           increasing N, optional ambient.*, mask.pgm|.png, normals.pfm (kept as truth)
 enum class SetFormat { automatic, veneer, diligent, thesis };
 
+// Which files a veneer set's photos come from when it has both.
+enum class PhotoSource {
+  automatic,  // the RAW files when every photo (and the ambient frame, if any) has one, else the developed ones
+  raw,        // the RAW files; an error when one is missing
+  developed,  // the PNG/JPEG files named by images[].file, ignoring RAW files
+};
+const char* photo_source_name(PhotoSource);  // "auto" | "raw" | "developed"
+Expected<PhotoSource> parse_photo_source(const std::string&);
+
 struct ReadOptions {
   SetFormat format = SetFormat::automatic;  // automatic: set.json -> veneer, filenames.txt -> DiLiGenT, else thesis
   bool load_truth = true;                   // read <set>/truth/ when present
+  PhotoSource photos = PhotoSource::automatic;  // veneer sets: RAW or developed photos (default: RAW where present)
+  RawOptions raw;                           // how RAW files are decoded (half size, demosaic)
+  bool load_photos = true;                  // veneer sets: false reads the manifest, mask and truth only
+                                            // (images left empty; for results taken from a cache)
+  Status check() const;
 };
 
-// Reads a set folder. Every failure names the file and the problem.
-Expected<ImageSet> read_set(const std::filesystem::path& folder, const ReadOptions& options = {});
+// Reads a set folder. Every failure names the file and the problem. The
+// photos are decoded in parallel, each file once; `progress` hears
+// ("reading <set>", fraction of files decoded) and a cancel stops between files.
+// Photos decoded from RAW files define the set's size: when it differs from
+// set.json's (the rig's developed photos are often smaller), the camera
+// intrinsics are scaled and the mask and truth resized to match.
+Expected<ImageSet> read_set(const std::filesystem::path& folder, const ReadOptions& options = {},
+                            const Progress& progress = {});
 
 // Writes a veneer-set/1 folder atomically: everything goes to a temporary
 // sibling folder that is fsynced and renamed into place, so a reader never sees
@@ -106,7 +143,9 @@ inline constexpr double kUnitTolerance = 1e-3;
 struct Manifest {
   ImageSet set;                             // lights sorted by index, no images loaded
   std::vector<std::filesystem::path> image_files;  // image_files[i] is lit by set.lights[i]
+  std::vector<std::filesystem::path> raw_files;    // the camera RAW file of image i (images[i].raw); empty when none
   std::filesystem::path ambient_file;       // empty when absent
+  std::filesystem::path ambient_raw_file;   // the ambient frame's RAW file ("ambient_raw"); empty when none
   std::filesystem::path mask_file;          // empty when absent
 };
 

@@ -1,0 +1,167 @@
+// bench_pipeline: files -> map ready, end to end, for the demo pair (bull <-
+// orange as `make demo` simulates them, 1024x680, 7 lamps + ambient) and for a
+// full-resolution pair (5600x3750, VENEER_BENCH_FULL=WxH to change, =0 to
+// skip): the pair read through pipeline::prepare_pair with the cache cold
+// (empty folder) and warm (second run), then the coherent map; next to the
+// time OpenCV alone needs to read the same frames (cv::imread, one thread).
+// Prints a markdown table; never fails on a number.
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <opencv2/core/utility.hpp>
+#include <opencv2/imgcodecs.hpp>
+
+#include "veneer/io/imageset.hpp"
+#include "veneer/match/matcher.hpp"
+#include "veneer/pipeline/prepare.hpp"
+#include "veneer/sim/simulator.hpp"
+
+namespace fs = std::filesystem;
+using namespace veneer;
+
+namespace {
+
+double seconds(const std::function<void()>& fn) {
+  auto t0 = std::chrono::steady_clock::now();
+  fn();
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+double peak_rss_gib() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_maxrss / (1024.0 * 1024.0);  // ru_maxrss is in KiB
+}
+
+bool simulate(const std::string& scene, cv::Size size, Role role, const fs::path& out) {
+  sim::RenderOptions o;
+  o.size = size;
+  o.noise_sigma = 0.005;  // veneer simulate's default
+  o.scale = 2.5;          // as the demo's rig fills the frame
+  auto set = sim::simulate_set(scene, o, role);
+  if (!set) {
+    std::fprintf(stderr, "simulate %s: %s\n", scene.c_str(), set.message().c_str());
+    return false;
+  }
+  if (auto s = write_set(*set, out); !s) {
+    std::fprintf(stderr, "write_set: %s\n", s.message().c_str());
+    return false;
+  }
+  return true;
+}
+
+std::vector<fs::path> frames_of(const fs::path& set) {
+  std::vector<fs::path> out;
+  for (const auto& e : fs::directory_iterator(set)) {
+    const std::string n = e.path().filename().string();
+    if (n.rfind("light_", 0) == 0 || n == "ambient.png") out.push_back(e.path());
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+
+struct Row {
+  std::string pair;
+  int frames = 0;
+  double mb = 0, opencv_s = 0, cold_s = 0, cold_prepare_s = 0, warm_s = 0, warm_prepare_s = 0, map_s = 0, rss = 0;
+  std::string photos;
+};
+
+Row run_pair(cv::Size size, const fs::path& root) {
+  Row r;
+  r.pair = "bull <- orange " + std::to_string(size.width) + "x" + std::to_string(size.height);
+  const fs::path dst = root / "dst", src = root / "src";
+  if (!simulate("bull", size, Role::destination, dst) || !simulate("orange", size, Role::source, src)) return r;
+  std::vector<fs::path> files = frames_of(dst), more = frames_of(src);
+  files.insert(files.end(), more.begin(), more.end());
+  r.frames = static_cast<int>(files.size());
+  for (const auto& f : files) r.mb += fs::file_size(f) / 1e6;
+
+  // OpenCV alone, one thread: every frame of both sets, as stored (16-bit).
+  cv::setNumThreads(1);
+  r.opencv_s = seconds([&] {
+    for (const auto& f : files) {
+      cv::Mat m = cv::imread(f.string(), cv::IMREAD_UNCHANGED);
+      if (m.empty()) std::fprintf(stderr, "imread failed: %s\n", f.c_str());
+    }
+  });
+  cv::setNumThreads(-1);
+
+  match::TransferOptions transfer;
+  transfer.match.method = match::Method::coherent;
+  pipeline::PrepareOptions prep;
+  prep.cache.dir = root / "cache";
+  prep.cache.max_bytes = 16ull << 30;
+  for (int pass = 0; pass < 2; ++pass) {
+    double prepare_s = 0;
+    const double total = seconds([&] {
+      std::vector<pipeline::SetReport> reports;
+      Expected<match::PreparedPair> pair = make_error("not run");
+      prepare_s = seconds([&] { pair = pipeline::prepare_pair(dst, src, transfer, prep, &reports); });
+      if (!pair) {
+        std::fprintf(stderr, "prepare_pair: %s\n", pair.message().c_str());
+        return;
+      }
+      r.photos = reports[0].photos_from + (reports[0].cache_hit ? " (hit)" : " (miss)");
+      for (const auto& rep : reports)
+        std::fprintf(stderr, "  %s %s: read %.3f s, normals %.3f s, cache write %.3f s, total %.3f s\n",
+                     rep.id.c_str(), rep.cache_hit ? "hit" : "miss", rep.read_s, rep.normals_s, rep.cache_write_s,
+                     rep.total_s);
+      auto map = match::compute_map(pair->dst.view, pair->src.view, transfer.match);
+      if (!map) std::fprintf(stderr, "compute_map: %s\n", map.message().c_str());
+    });
+    (pass == 0 ? r.cold_s : r.warm_s) = total;
+    (pass == 0 ? r.cold_prepare_s : r.warm_prepare_s) = prepare_s;
+    if (pass == 1) r.map_s = total - prepare_s;
+  }
+  r.rss = peak_rss_gib();
+  return r;
+}
+
+}  // namespace
+
+int main() {
+  std::vector<cv::Size> sizes = {{1024, 680}};
+  cv::Size full(5600, 3750);
+  if (const char* env = std::getenv("VENEER_BENCH_FULL")) {
+    int w = 0, h = 0;
+    if (std::sscanf(env, "%dx%d", &w, &h) == 2 && w > 0 && h > 0) full = {w, h};
+    else full = {};
+  }
+  if (full.area() > 0) sizes.push_back(full);
+  const fs::path root = fs::temp_directory_path() / ("veneer-bench-pipeline-" + std::to_string(::getpid()));
+  std::vector<Row> rows;
+  for (size_t i = 0; i < sizes.size(); ++i) {
+    const fs::path dir = root / std::to_string(i);
+    fs::create_directories(dir);
+    rows.push_back(run_pair(sizes[i], dir));
+    fs::remove_all(dir);
+  }
+  fs::remove_all(root);
+
+  std::printf("## Files -> map ready (bull <- orange, 16-bit PNG sets, coherent map), %d threads\n\n",
+              cv::getNumThreads());
+  std::printf("| pair | frames | MB | OpenCV imread, 1 thread s | cold s (read+normals+cache) | warm s (cache) | map s | "
+              "cold / OpenCV | warm / OpenCV | photos | peak RSS GiB |\n");
+  std::printf("|---|---:|---:|---:|---:|---:|---:|---:|---:|---|---:|\n");
+  for (const Row& r : rows) {
+    std::printf("| %s | %d | %.0f | %.2f | %.2f (%.2f) | %.2f (%.2f) | %.2f | %.2f | %.2f | %s | %.2f |\n", r.pair.c_str(),
+                r.frames, r.mb, r.opencv_s, r.cold_s, r.cold_prepare_s, r.warm_s, r.warm_prepare_s, r.map_s,
+                r.opencv_s > 0 ? r.cold_s / r.opencv_s : 0, r.opencv_s > 0 ? r.warm_s / r.opencv_s : 0,
+                r.photos.c_str(), r.rss);
+  }
+  std::printf("\ncold = the first prepare_pair with an empty result cache + compute_map; warm = the same again; in "
+              "parentheses the preparation alone. Peak RSS is the process's high-water mark after the row "
+              "(the simulator's renders included).\n");
+  return 0;
+}

@@ -1,0 +1,106 @@
+// The per-set result cache: a second preparation of the same set is a hit
+// with the same results; a changed set, a damaged entry or another read
+// option is a miss; the size cap evicts the least recently used entry.
+#include <cstdlib>
+
+#include <gtest/gtest.h>
+
+#include "test_util.hpp"
+#include "veneer/io/cache.hpp"
+#include "veneer/pipeline/prepare.hpp"
+#include "veneer/sim/simulator.hpp"
+
+namespace veneer {
+namespace {
+
+using test::Scratch;
+
+void write_simulated(const std::filesystem::path& folder, const std::string& scene) {
+  sim::RenderOptions o;
+  o.size = {256, 170};
+  o.noise_sigma = 0.005;
+  o.scale = 2.5;
+  auto set = sim::simulate_set(scene, o, Role::destination);
+  ASSERT_TRUE(set) << set.message();
+  ASSERT_TRUE(write_set(*set, folder));
+}
+
+TEST(Cache, SecondPreparationIsAHitWithTheSameResults) {
+  Scratch dir;
+  ::setenv("XDG_CACHE_HOME", (dir / "xdg").c_str(), 1);  // never the user's cache
+  EXPECT_EQ(default_cache_dir(), dir / "xdg" / "veneer");
+  write_simulated(dir / "bull", "bull");
+  pipeline::PrepareOptions options;
+  auto first = pipeline::prepare_set(dir / "bull", 1.0, false, options);
+  ASSERT_TRUE(first) << first.message();
+  EXPECT_FALSE(first->report.cache_hit);
+  EXPECT_FALSE(first->report.checksum.empty());
+  auto second = pipeline::prepare_set(dir / "bull", 1.0, false, options);
+  ASSERT_TRUE(second) << second.message();
+  EXPECT_TRUE(second->report.cache_hit);
+  EXPECT_EQ(second->report.photos_from, "png");
+  EXPECT_EQ(cv::norm(first->object.view.normals, second->object.view.normals, cv::NORM_INF), 0.0);
+  EXPECT_EQ(cv::norm(first->object.view.mask, second->object.view.mask, cv::NORM_INF), 0.0);
+  ASSERT_EQ(second->object.view.images.size(), first->object.view.images.size());
+  // photos are kept as half floats: relative error < 1e-3
+  EXPECT_LT(cv::norm(first->object.view.images[3], second->object.view.images[3], cv::NORM_INF), 1e-3);
+  EXPECT_EQ(second->set.size, first->set.size);
+  EXPECT_TRUE(second->set.truth.present());
+
+  // Another read option is another entry.
+  options.read.photos = PhotoSource::developed;
+  auto other = pipeline::prepare_set(dir / "bull", 1.0, false, options);
+  ASSERT_TRUE(other);
+  EXPECT_FALSE(other->report.cache_hit);
+  // A damaged entry is dropped and recomputed.
+  const auto entry = default_cache_dir() / second->report.checksum;
+  test::spit(entry / "normals", "garbage");
+  options.read.photos = PhotoSource::automatic;
+  auto again = pipeline::prepare_set(dir / "bull", 1.0, false, options);
+  ASSERT_TRUE(again) << again.message();
+  EXPECT_FALSE(again->report.cache_hit);
+  EXPECT_TRUE(pipeline::prepare_set(dir / "bull", 1.0, false, options)->report.cache_hit);
+  // Off means off.
+  options.cache.enabled = false;
+  auto off = pipeline::prepare_set(dir / "bull", 1.0, false, options);
+  ASSERT_TRUE(off);
+  EXPECT_TRUE(off->report.checksum.empty());
+  ::unsetenv("XDG_CACHE_HOME");
+}
+
+TEST(Cache, SizeCapEvictsTheLeastRecentlyUsed) {
+  Scratch dir;
+  CacheOptions o;
+  o.dir = dir / "cache";
+  o.max_bytes = 3u << 20;
+  ResultCache cache(o);
+  const std::string mib(1u << 20, 'x');
+  ASSERT_TRUE(cache.store("a", {{"blob", mib}}));
+  ASSERT_TRUE(cache.store("b", {{"blob", mib}}));
+  // mark "a" used later than "b"
+  std::filesystem::last_write_time(o.dir / "b", std::filesystem::file_time_type::clock::now() - std::chrono::hours(1));
+  ASSERT_TRUE(cache.load("a"));
+  ASSERT_TRUE(cache.store("c", {{"blob", mib + mib}}));
+  EXPECT_TRUE(cache.load("a"));
+  EXPECT_FALSE(cache.load("b"));
+  EXPECT_TRUE(cache.load("c"));
+  EXPECT_LE(cache.size_bytes(), o.max_bytes);
+  EXPECT_FALSE(cache.store("../escape", {{"blob", "x"}}));
+  EXPECT_FALSE(cache.load("../escape"));
+}
+
+TEST(Cache, MatricesRoundTrip) {
+  cv::Mat m(5, 7, CV_32FC3, cv::Scalar(0.25f, -1.5f, 3.0f));
+  auto back = decode_mat(encode_mat(m), "m");
+  ASSERT_TRUE(back);
+  EXPECT_EQ(cv::norm(m, *back, cv::NORM_INF), 0.0);
+  auto half = decode_mat(encode_mat(m, true), "h");
+  ASSERT_TRUE(half);
+  EXPECT_EQ(half->type(), CV_32FC3);
+  EXPECT_LT(cv::norm(m, *half, cv::NORM_INF), 1e-3);
+  EXPECT_FALSE(decode_mat(encode_mat(m).substr(0, 30), "cut"));
+  EXPECT_FALSE(decode_mat("MAT1", "short"));
+}
+
+}  // namespace
+}  // namespace veneer

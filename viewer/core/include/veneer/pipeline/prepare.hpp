@@ -1,0 +1,60 @@
+#pragma once
+// From set folders to objects ready for matching, through the per-set result
+// cache (io/cache.hpp): on a miss the frames are decoded in parallel (RAW
+// where the set has it), segmented and solved by photometric stereo (called
+// as it is), and the results stored; on a hit the normals, mask and the
+// photos the repaint needs come from a few cache files.
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "veneer/io/cache.hpp"
+#include "veneer/io/imageset.hpp"
+#include "veneer/match/transfer.hpp"
+#include "veneer/util/expected.hpp"
+#include "veneer/util/progress.hpp"
+
+namespace veneer::pipeline {
+
+struct PrepareOptions {
+  ReadOptions read;    // RAW or developed photos, half size, demosaic
+  CacheOptions cache;  // where, how large, or off
+  Status check() const;
+};
+
+// What happened to one set, for metrics.json.
+struct SetReport {
+  std::string folder, id, checksum;
+  bool cache_hit = false;
+  std::string photos_from;  // "raw", "raw-half", "png", "jpeg", ... (ImageSet::photos_from)
+  double read_s = 0;        // decoding the frames (miss) or reading the cache files (hit)
+  double normals_s = 0;     // segmentation + photometric stereo (0 on a hit)
+  double cache_write_s = 0;
+  double total_s = 0;
+  std::string cache_error;  // a cache that could not be written is reported, not fatal
+};
+
+// One set prepared: the set's metadata (images = the photos with the ambient
+// frame removed, the same pixels as object.view.images), normals, mask, the
+// photometric stereo's albedo and residual (empty on truth normals), median.
+struct PreparedSet {
+  ImageSet set;
+  match::PreparedObject object;
+  cv::Mat albedo, residual, median;
+  SetReport report;
+};
+
+// `scale` and `truth_normals` as match::TransferOptions.
+Expected<PreparedSet> prepare_set(const std::filesystem::path& folder, double scale, bool truth_normals,
+                                  const PrepareOptions& options, const Progress& progress = {});
+
+// Both sets of a pair, as match::prepare_pair makes them, via prepare_set.
+Expected<match::PreparedPair> prepare_pair(const std::filesystem::path& destination,
+                                           const std::filesystem::path& source,
+                                           const match::TransferOptions& transfer, const PrepareOptions& options,
+                                           std::vector<SetReport>* reports = nullptr, const Progress& progress = {});
+
+// The reports as JSON ({"destination": {...}, "source": {...}} when two).
+std::string reports_json(const std::vector<SetReport>& reports);
+
+}  // namespace veneer::pipeline

@@ -1,0 +1,227 @@
+// The per-set result cache (cache.hpp).
+#include "veneer/io/cache.hpp"
+
+#include <algorithm>
+#include <cstdlib>
+#include <cstring>
+#include <vector>
+
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "file_util.hpp"
+#include "veneer/io/image_io.hpp"
+#include "veneer/util/log.hpp"
+
+namespace veneer {
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr uint32_t kMatMagic = 0x3154414d;  // "MAT1"
+
+// 64-bit FNV-1a: enough to tell sets apart, not a defence against anyone.
+struct Hash {
+  uint64_t h = 1469598103934665603ull;
+  void add(const void* data, size_t n) {
+    const auto* p = static_cast<const unsigned char*>(data);
+    for (size_t i = 0; i < n; ++i) h = (h ^ p[i]) * 1099511628211ull;
+  }
+  void add(const std::string& s) {
+    add(s.data(), s.size());
+    add("\0", 1);
+  }
+  template <class T>
+  void add_value(T v) {
+    add(&v, sizeof v);
+  }
+};
+
+std::string hex(uint64_t v) {
+  char buf[17];
+  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(v));
+  return buf;
+}
+
+bool safe_key(const std::string& key) {
+  return !key.empty() && key.size() <= 64 &&
+         std::all_of(key.begin(), key.end(), [](unsigned char c) { return std::isalnum(c) || c == '-' || c == '_'; });
+}
+
+uint64_t folder_bytes(const fs::path& dir) {
+  uint64_t total = 0;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(dir, ec)) {
+    if (e.is_regular_file(ec)) total += e.file_size(ec);
+  }
+  return total;
+}
+
+}  // namespace
+
+Status CacheOptions::check() const {
+  if (max_bytes < (1u << 20)) return make_error("cache size cap must be at least 1 MiB");
+  return Status::success();
+}
+
+fs::path default_cache_dir() {
+  if (const char* xdg = std::getenv("XDG_CACHE_HOME"); xdg && *xdg == '/') return fs::path(xdg) / "veneer";
+  if (const char* home = std::getenv("HOME"); home && *home) return fs::path(home) / ".cache" / "veneer";
+  return fs::temp_directory_path() / "veneer-cache";
+}
+
+Expected<std::string> set_checksum(const fs::path& folder, const std::string& salt) {
+  std::error_code ec;
+  if (!fs::is_directory(folder, ec)) return make_error(folder.string() + ": not a folder");
+  Hash h;
+  h.add(salt);
+  for (const char* list : {"set.json", "filenames.txt", "lights.txt", "light_directions.txt", "light_intensities.txt"}) {
+    const fs::path f = folder / list;
+    if (!fs::is_regular_file(f, ec)) continue;
+    auto bytes = read_file_bytes(f);
+    if (!bytes) return bytes.error();
+    h.add(list);
+    h.add(*bytes);
+  }
+  // Every file's name, size and modification time, in name order.
+  std::vector<std::pair<std::string, fs::path>> files;
+  for (const fs::path& dir : {folder, folder / "truth"}) {
+    for (const auto& e : fs::directory_iterator(dir, ec)) {
+      if (e.is_regular_file(ec)) files.emplace_back(fs::relative(e.path(), folder, ec).generic_string(), e.path());
+    }
+    ec.clear();
+  }
+  std::sort(files.begin(), files.end());
+  for (const auto& [name, path] : files) {
+    struct stat st {};
+    if (::stat(path.c_str(), &st) != 0) return make_error(path.string() + ": cannot stat");
+    h.add(name);
+    h.add_value(static_cast<int64_t>(st.st_size));
+    h.add_value(static_cast<int64_t>(st.st_mtim.tv_sec));
+    h.add_value(static_cast<int64_t>(st.st_mtim.tv_nsec));
+  }
+  return hex(h.h);
+}
+
+ResultCache::ResultCache(CacheOptions options) : options_(std::move(options)) {
+  dir_ = options_.dir.empty() ? default_cache_dir() : options_.dir;
+}
+
+std::optional<CacheEntry> ResultCache::load(const std::string& key) const {
+  if (!options_.enabled || !safe_key(key)) return std::nullopt;
+  const fs::path entry_dir = dir_ / key;
+  std::error_code ec;
+  if (!fs::is_directory(entry_dir, ec)) return std::nullopt;
+  CacheEntry entry;
+  for (const auto& e : fs::directory_iterator(entry_dir, ec)) {
+    if (!e.is_regular_file(ec)) continue;
+    auto bytes = read_file_bytes(e.path());
+    if (!bytes) {
+      VLOG_WARN("Cache", "{}: unreadable, dropping the entry", e.path().string());
+      fs::remove_all(entry_dir, ec);
+      return std::nullopt;
+    }
+    entry.emplace(e.path().filename().string(), std::move(bytes).value());
+  }
+  // Recently used: the folder's time is the LRU clock.
+  fs::last_write_time(entry_dir, fs::file_time_type::clock::now(), ec);
+  return entry;
+}
+
+Status ResultCache::store(const std::string& key, const CacheEntry& entry) const {
+  if (!options_.enabled) return Status::success();
+  if (!safe_key(key)) return make_error("cache: bad key \"" + key.substr(0, 80) + "\"");
+  std::error_code ec;
+  fs::create_directories(dir_, ec);
+  if (ec) return make_error(dir_.string() + ": cannot create cache folder: " + ec.message());
+  const fs::path target = dir_ / key;
+  const fs::path tmp = io_detail::temp_sibling(target);
+  if (!fs::create_directory(tmp, ec)) return make_error(tmp.string() + ": cannot create: " + ec.message());
+  for (const auto& [name, bytes] : entry) {
+    if (name.find('/') != std::string::npos || name.empty() || name[0] == '.') {
+      fs::remove_all(tmp, ec);
+      return make_error("cache: bad blob name \"" + name + "\"");
+    }
+    // No fsync: a cache entry lost to a power cut is recomputed; sizes are
+    // checked when read (decode_mat).
+    const std::string file = (tmp / name).string();
+    FILE* f = std::fopen(file.c_str(), "wb");
+    const bool ok = f && std::fwrite(bytes.data(), 1, bytes.size(), f) == bytes.size();
+    if (f) std::fclose(f);
+    if (!ok) {
+      fs::remove_all(tmp, ec);
+      return make_error(file + ": cannot write cache file");
+    }
+  }
+  fs::remove_all(target, ec);  // an older entry under the same key
+  if (std::rename(tmp.c_str(), target.c_str()) != 0) {
+    fs::remove_all(tmp, ec);
+    return make_error(target.string() + ": cannot rename cache entry into place");
+  }
+  evict();
+  return Status::success();
+}
+
+uint64_t ResultCache::size_bytes() const {
+  uint64_t total = 0;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(dir_, ec)) {
+    if (e.is_directory(ec)) total += folder_bytes(e.path());
+  }
+  return total;
+}
+
+void ResultCache::evict() const {
+  struct Item {
+    fs::path path;
+    fs::file_time_type used;
+    uint64_t bytes;
+  };
+  std::vector<Item> items;
+  uint64_t total = 0;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(dir_, ec)) {
+    if (!e.is_directory(ec)) continue;
+    const std::string name = e.path().filename().string();
+    if (!name.empty() && name[0] == '.') continue;  // another writer's entry in the making
+    Item it{e.path(), fs::last_write_time(e.path(), ec), folder_bytes(e.path())};
+    total += it.bytes;
+    items.push_back(it);
+  }
+  if (total <= options_.max_bytes) return;
+  std::sort(items.begin(), items.end(), [](const Item& a, const Item& b) { return a.used < b.used; });
+  for (const Item& it : items) {
+    if (total <= options_.max_bytes) break;
+    fs::remove_all(it.path, ec);
+    total -= it.bytes;
+    VLOG_INFO("Cache", "evicted {} ({} MB)", it.path.string(), it.bytes >> 20);
+  }
+}
+
+std::string encode_mat(const cv::Mat& m_in, bool half) {
+  cv::Mat m = m_in.isContinuous() ? m_in : m_in.clone();
+  if (half && m.depth() == CV_32F) m.convertTo(m, CV_MAKETYPE(CV_16F, m.channels()));
+  const uint32_t head[4] = {kMatMagic, static_cast<uint32_t>(m.rows), static_cast<uint32_t>(m.cols),
+                            static_cast<uint32_t>(m.type())};
+  std::string out(sizeof head + m.total() * m.elemSize(), '\0');
+  std::memcpy(out.data(), head, sizeof head);
+  if (!m.empty()) std::memcpy(out.data() + sizeof head, m.data, m.total() * m.elemSize());
+  return out;
+}
+
+Expected<cv::Mat> decode_mat(const std::string& blob, const std::string& name) {
+  uint32_t head[4];
+  if (blob.size() < sizeof head) return make_error(name + ": truncated");
+  std::memcpy(head, blob.data(), sizeof head);
+  if (head[0] != kMatMagic || head[1] > (1u << 16) || head[2] > (1u << 16)) return make_error(name + ": not a cached matrix");
+  const int type = static_cast<int>(head[3]);
+  const int depth = CV_MAT_DEPTH(type);
+  if (depth != CV_8U && depth != CV_16F && depth != CV_32F && depth != CV_32S) return make_error(name + ": bad type");
+  cv::Mat m(static_cast<int>(head[1]), static_cast<int>(head[2]), type);
+  if (blob.size() != sizeof head + m.total() * m.elemSize()) return make_error(name + ": size does not match its header");
+  if (!m.empty()) std::memcpy(m.data, blob.data() + sizeof head, m.total() * m.elemSize());
+  if (depth == CV_16F) m.convertTo(m, CV_MAKETYPE(CV_32F, m.channels()));
+  return m;
+}
+
+}  // namespace veneer

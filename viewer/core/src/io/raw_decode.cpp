@@ -1,0 +1,126 @@
+// RAW decoding through LibRaw (raw.hpp). The only file that sees LibRaw.
+#include <algorithm>
+#include <cctype>
+#include <memory>
+
+#include <libraw/libraw.h>
+
+#include "veneer/io/image_io.hpp"
+#include "veneer/io/raw.hpp"
+
+namespace veneer {
+
+namespace {
+
+// Most pixels we let LibRaw allocate for (a 100 Mpx sensor); a damaged header
+// can claim anything.
+constexpr long long kMaxRawPixels = 100'000'000;
+
+std::string libraw_error(int code) { return libraw_strerror(code); }
+
+}  // namespace
+
+const char* demosaic_name(Demosaic d) {
+  switch (d) {
+    case Demosaic::bilinear: return "bilinear";
+    case Demosaic::vng: return "vng";
+    case Demosaic::ppg: return "ppg";
+    case Demosaic::ahd: return "ahd";
+  }
+  return "ahd";
+}
+
+Expected<Demosaic> parse_demosaic(const std::string& name) {
+  for (Demosaic d : {Demosaic::bilinear, Demosaic::vng, Demosaic::ppg, Demosaic::ahd}) {
+    if (name == demosaic_name(d)) return d;
+  }
+  return make_error("demosaic \"" + name.substr(0, 32) + "\" is not bilinear, vng, ppg or ahd");
+}
+
+Status RawOptions::check() const {
+  switch (demosaic) {
+    case Demosaic::bilinear:
+    case Demosaic::vng:
+    case Demosaic::ppg:
+    case Demosaic::ahd: return Status::success();
+  }
+  return make_error("unknown demosaic method");
+}
+
+bool is_raw_file_name(const std::string& file_name) {
+  const size_t dot = file_name.rfind('.');
+  if (dot == std::string::npos) return false;
+  std::string ext = file_name.substr(dot + 1);
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  static const char* kRaw[] = {"cr2", "cr3", "crw", "nef", "nrw", "arw", "srf", "sr2", "dng",
+                               "orf", "rw2", "raf", "pef", "raw", "rwl", "srw", "3fr", "iiq"};
+  return std::any_of(std::begin(kRaw), std::end(kRaw), [&](const char* r) { return ext == r; });
+}
+
+Expected<cv::Mat> decode_raw_linear(std::string_view bytes, const RawOptions& options, const std::string& name) {
+  if (Status s = options.check(); !s) return make_error(name + ": " + s.message());
+  if (bytes.empty()) return make_error(name + ": empty file");
+  // LibRaw is large (hundreds of kB of state): on the heap, one per call, so
+  // frames decode in parallel on their own instances.
+  auto raw = std::make_unique<LibRaw>(LIBRAW_OPTIONS_NONE);
+  libraw_output_params_t& p = raw->imgdata.params;
+  p.output_bps = 16;
+  p.gamm[0] = 1.0;  // linear: no transfer curve
+  p.gamm[1] = 1.0;
+  p.no_auto_bright = 1;
+  p.use_camera_wb = 1;  // the white balance the camera recorded (DNG: AsShotNeutral)
+  p.use_auto_wb = 0;
+  p.output_color = 1;  // sRGB primaries, linear
+  p.highlight = 0;     // clip at the white level
+  p.half_size = options.half_size ? 1 : 0;
+  switch (options.demosaic) {
+    case Demosaic::bilinear: p.user_qual = 0; break;
+    case Demosaic::vng: p.user_qual = 1; break;
+    case Demosaic::ppg: p.user_qual = 2; break;
+    case Demosaic::ahd: p.user_qual = 3; break;
+  }
+  // LibRaw reads from the buffer without writing to it.
+  int r = raw->open_buffer(const_cast<char*>(bytes.data()), bytes.size());
+  if (r != LIBRAW_SUCCESS) return make_error(name + ": not a RAW file LibRaw can read (" + libraw_error(r) + ")");
+  const auto& sizes = raw->imgdata.sizes;
+  if (sizes.raw_width == 0 || sizes.raw_height == 0 ||
+      static_cast<long long>(sizes.raw_width) * sizes.raw_height > kMaxRawPixels)
+    return make_error(name + ": RAW size " + std::to_string(sizes.raw_width) + "x" + std::to_string(sizes.raw_height) +
+                      " is empty or too large");
+  if (raw->imgdata.idata.colors != 3 || raw->imgdata.idata.filters == 0)
+    return make_error(name + ": only Bayer (RGB colour filter array) RAW files are supported");
+  r = raw->unpack();
+  if (r != LIBRAW_SUCCESS) return make_error(name + ": cannot unpack RAW data (" + libraw_error(r) + ")");
+  r = raw->dcraw_process();
+  if (r != LIBRAW_SUCCESS) return make_error(name + ": cannot develop RAW data (" + libraw_error(r) + ")");
+  int err = 0;
+  std::unique_ptr<libraw_processed_image_t, void (*)(libraw_processed_image_t*)> img(
+      raw->dcraw_make_mem_image(&err), [](libraw_processed_image_t* i) { LibRaw::dcraw_clear_mem(i); });
+  if (!img || err != LIBRAW_SUCCESS) return make_error(name + ": cannot make an image from RAW data (" + libraw_error(err) + ")");
+  if (img->type != LIBRAW_IMAGE_BITMAP || img->bits != 16 || img->colors != 3 || img->width == 0 || img->height == 0)
+    return make_error(name + ": LibRaw returned an unexpected image layout");
+  // RGB 16-bit interleaved (native byte order) -> BGR float, 1.0 = white level.
+  cv::Mat rgb16(img->height, img->width, CV_16UC3, img->data);
+  cv::Mat out(rgb16.size(), CV_32FC3);
+  constexpr float k = 1.0f / 65535.0f;
+  for (int y = 0; y < rgb16.rows; ++y) {
+    const uint16_t* s = rgb16.ptr<uint16_t>(y);
+    float* o = out.ptr<float>(y);
+    for (int x = 0; x < rgb16.cols; ++x) {
+      o[3 * x + 0] = s[3 * x + 2] * k;
+      o[3 * x + 1] = s[3 * x + 1] * k;
+      o[3 * x + 2] = s[3 * x + 0] * k;
+    }
+  }
+  return out;
+}
+
+Expected<cv::Mat> read_raw_linear(const std::filesystem::path& file, const RawOptions& options) {
+  auto bytes = read_file_bytes(file);
+  if (!bytes) return bytes.error();
+  return decode_raw_linear(*bytes, options, file.string());
+}
+
+std::string raw_decoder_version() { return LibRaw::version(); }
+
+}  // namespace veneer

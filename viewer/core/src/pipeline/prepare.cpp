@@ -1,0 +1,269 @@
+// Set folders -> prepared objects through the result cache (prepare.hpp).
+#include "veneer/pipeline/prepare.hpp"
+
+#include <chrono>
+
+#include <nlohmann/json.hpp>
+#include <mutex>
+
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
+
+#include "veneer/ps/photometric_stereo.hpp"
+#include "veneer/util/log.hpp"
+
+namespace veneer::pipeline {
+namespace fs = std::filesystem;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// Bump when what is cached, or how it is computed, changes.
+constexpr const char* kCacheVersion = "prepared-set/1";
+
+Progress sub_progress(const Progress& p, double from, double to) {
+  Progress out;
+  out.cancel = p.cancel;
+  if (p.on_progress)
+    out.on_progress = [p, from, to](double f, const std::string& stage) { p.report(from + (to - from) * f, stage); };
+  return out;
+}
+
+std::string salt_of(const ReadOptions& read, double scale, bool truth_normals) {
+  nlohmann::json j{{"version", kCacheVersion},
+                   {"photos", photo_source_name(read.photos)},
+                   {"half_size", read.raw.half_size},
+                   {"demosaic", demosaic_name(read.raw.demosaic)},
+                   {"scale", scale},
+                   {"truth_normals", truth_normals},
+                   {"libraw", raw_decoder_version()}};
+  return j.dump();
+}
+
+CacheEntry to_entry(const PreparedSet& p) {
+  CacheEntry e;
+  const auto& v = p.object.view;
+  nlohmann::json meta{{"photos_from", p.set.photos_from},
+                      {"images", v.images.size()},
+                      {"segment_s", p.object.segment_seconds},
+                      {"normals_s", p.object.normals_seconds}};
+  e["meta.json"] = meta.dump();
+  e["normals"] = encode_mat(v.normals);
+  e["mask"] = encode_mat(v.mask);
+  if (!p.albedo.empty()) e["albedo"] = encode_mat(p.albedo, true);
+  if (!p.residual.empty()) e["confidence"] = encode_mat(p.residual, true);
+  e["median"] = encode_mat(p.median, true);
+  for (size_t i = 0; i < v.images.size(); ++i) e["photo_" + std::to_string(i)] = encode_mat(v.images[i], true);
+  return e;
+}
+
+// Fills `p` from a cache entry; false when the entry does not fit the set.
+bool from_entry(const CacheEntry& e, PreparedSet& p) {
+  auto get = [&](const std::string& name) -> cv::Mat {
+    auto it = e.find(name);
+    if (it == e.end()) return {};
+    auto m = decode_mat(it->second, name);
+    return m ? std::move(m).value() : cv::Mat();
+  };
+  auto meta_it = e.find("meta.json");
+  if (meta_it == e.end()) return false;
+  const auto meta = nlohmann::json::parse(meta_it->second, nullptr, false);
+  if (meta.is_discarded() || !meta.contains("images")) return false;
+  const size_t n = meta["images"].get<size_t>();
+  if (n != p.set.lights.size()) return false;
+  auto& v = p.object.view;
+  v.normals = get("normals");
+  v.mask = get("mask");
+  p.albedo = get("albedo");
+  p.residual = get("confidence");
+  p.median = get("median");
+  v.images.assign(n, cv::Mat());
+  tbb::parallel_for(size_t(0), n, [&](size_t i) { v.images[i] = get("photo_" + std::to_string(i)); });
+  const cv::Size size = v.normals.size();
+  if (v.normals.type() != CV_32FC3 || v.mask.type() != CV_8UC1 || v.mask.size() != size || p.median.size() != size)
+    return false;
+  for (const auto& im : v.images) {
+    if (im.type() != CV_32FC3 || im.size() != size) return false;
+  }
+  p.set.photos_from = meta.value("photos_from", std::string());
+  p.object.segment_seconds = meta.value("segment_s", 0.0);
+  p.object.normals_seconds = meta.value("normals_s", 0.0);
+  return true;
+}
+
+}  // namespace
+
+Status PrepareOptions::check() const {
+  if (auto s = read.check(); !s) return s;
+  return cache.check();
+}
+
+Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool truth_normals,
+                                  const PrepareOptions& options, const Progress& progress) {
+  if (auto s = options.check(); !s) return s.error();
+  const auto t_all = Clock::now();
+  PreparedSet p;
+  p.report.folder = folder.string();
+  ResultCache cache(options.cache);
+  const bool cacheable = options.cache.enabled && fs::exists(folder / "set.json");
+  std::string key;
+  if (cacheable) {
+    auto sum = set_checksum(folder, salt_of(options.read, scale, truth_normals));
+    if (!sum) return sum.error();
+    key = *sum;
+    p.report.checksum = key;
+  }
+
+  // Hit: metadata, mask and truth from the folder, pixels from the cache.
+  if (cacheable) {
+    auto t0 = Clock::now();
+    progress.report(0.0, "cache " + folder.filename().string());
+    if (auto entry = cache.load(key)) {
+      ReadOptions meta = options.read;
+      meta.load_photos = false;
+      auto set = read_set(folder, meta);
+      if (!set) return set.error();
+      p.set = std::move(set).value();
+      if (from_entry(*entry, p)) {
+        const cv::Size size = p.object.view.normals.size();
+        if (size != p.set.size) match::scale_set(p.set, static_cast<double>(size.width) / p.set.size.width);
+        if (p.set.size == size) {
+          p.set.images = p.object.view.images;  // shared pixels, ambient already removed
+          p.set.ambient.release();
+          for (const auto& light : p.set.lights) p.object.view.lamps.push_back(light.lamp_id);
+          if (p.object.view.lamps.size() != p.object.view.images.size()) p.object.view.lamps.clear();
+          p.report.id = p.set.id;
+          p.report.cache_hit = true;
+          p.report.photos_from = p.set.photos_from;
+          p.report.read_s = since(t0);
+          p.report.total_s = since(t_all);
+          progress.report(1.0, "cache " + folder.filename().string());
+          return p;
+        }
+      }
+      VLOG_WARN("Cache", "{}: cache entry {} does not fit the set; recomputing", folder.string(), key);
+      p = PreparedSet{};
+      p.report.folder = folder.string();
+      p.report.checksum = key;
+    }
+  }
+
+  // Miss: decode every frame once, in parallel; solve; store.
+  auto t0 = Clock::now();
+  auto set = read_set(folder, options.read, sub_progress(progress, 0.0, 0.6));
+  if (!set) return set.error();
+  p.set = std::move(set).value();
+  match::scale_set(p.set, scale);
+  p.report.read_s = since(t0);
+  p.report.id = p.set.id;
+  p.report.photos_from = p.set.photos_from;
+
+  t0 = Clock::now();
+  auto mask = match::object_mask(p.set, truth_normals);
+  if (!mask) return mask.error();
+  p.object.view.mask = std::move(mask).value();
+  p.object.segment_seconds = since(t0);
+  if (truth_normals) {
+    p.object.view.normals = p.set.truth.normals.clone();
+  } else {
+    t0 = Clock::now();
+    auto solved = ps::photometric_stereo(p.set, p.object.view.mask, {}, sub_progress(progress, 0.6, 0.9));
+    if (!solved) return make_error("set " + p.set.id + ": photometric stereo: " + solved.message());
+    p.object.normals_seconds = since(t0);
+    p.object.view.normals = solved->normals;
+    p.albedo = solved->albedo;
+    p.residual = solved->residual;
+  }
+  p.report.normals_s = p.object.segment_seconds + p.object.normals_seconds;
+  // The photos as the matcher and the repaint use them: ambient removed, in place.
+  if (!p.set.ambient.empty()) {
+    tbb::parallel_for(size_t(0), p.set.images.size(), [&](size_t i) {
+      cv::Mat& im = p.set.images[i];
+      if (im.size() != p.set.ambient.size()) return;
+      cv::subtract(im, p.set.ambient, im);
+      im = cv::max(im, 0.0);
+    });
+    p.set.ambient.release();
+  }
+  p.object.view.images = p.set.images;
+  for (const auto& light : p.set.lights) p.object.view.lamps.push_back(light.lamp_id);
+  if (p.object.view.lamps.size() != p.object.view.images.size()) p.object.view.lamps.clear();
+  progress.report(0.9, "median " + p.set.id);
+  p.median = match::median_photo(p.object.view.images);
+
+  if (cacheable) {
+    t0 = Clock::now();
+    progress.report(0.95, "cache " + p.set.id);
+    if (auto s = cache.store(key, to_entry(p)); !s) {
+      p.report.cache_error = s.message();
+      VLOG_WARN("Cache", "{}", s.message());
+    }
+    p.report.cache_write_s = since(t0);
+  }
+  p.report.total_s = since(t_all);
+  progress.report(1.0, "prepared " + p.set.id);
+  return p;
+}
+
+Expected<match::PreparedPair> prepare_pair(const fs::path& destination, const fs::path& source,
+                                           const match::TransferOptions& transfer, const PrepareOptions& options,
+                                           std::vector<SetReport>* reports, const Progress& progress) {
+  if (auto s = transfer.check(); !s) return s.error();
+  // Both sets at once: their frames share the workers, so no core idles
+  // while one set's last frame decodes. Progress is the sum of both halves.
+  std::mutex lock;
+  double done[2] = {0, 0};
+  auto half = [&](int which) {
+    Progress p;
+    p.cancel = progress.cancel;
+    if (progress.on_progress)
+      p.on_progress = [&, which](double f, const std::string& stage) {
+        std::lock_guard<std::mutex> hold(lock);
+        done[which] = f;
+        progress.report(0.5 * (done[0] + done[1]), stage);
+      };
+    return p;
+  };
+  Expected<PreparedSet> dst = make_error("not run"), src = make_error("not run");
+  tbb::parallel_invoke(
+      [&] { dst = prepare_set(destination, transfer.scale, transfer.truth_normals, options, half(0)); },
+      [&] { src = prepare_set(source, transfer.scale, transfer.truth_normals, options, half(1)); });
+  if (!dst) return make_error("destination: " + dst.message());
+  if (!src) return make_error("source: " + src.message());
+  match::PreparedPair pair;
+  pair.scale = transfer.scale;
+  pair.truth_normals = transfer.truth_normals;
+  pair.destination = std::move(dst->set);
+  pair.source = std::move(src->set);
+  pair.dst = std::move(dst->object);
+  pair.src = std::move(src->object);
+  pair.destination_median = dst->median;
+  pair.source_median = src->median;
+  if (reports) *reports = {dst->report, src->report};
+  return pair;
+}
+
+std::string reports_json(const std::vector<SetReport>& reports) {
+  auto one = [](const SetReport& r) {
+    nlohmann::json j{{"folder", r.folder},       {"id", r.id},
+                     {"checksum", r.checksum},   {"cache", r.checksum.empty() ? "off" : (r.cache_hit ? "hit" : "miss")},
+                     {"photos_from", r.photos_from}, {"read_s", r.read_s},
+                     {"normals_s", r.normals_s}, {"cache_write_s", r.cache_write_s},
+                     {"total_s", r.total_s}};
+    if (!r.cache_error.empty()) j["cache_error"] = r.cache_error;
+    return j;
+  };
+  nlohmann::json j;
+  if (reports.size() == 2) {
+    j["destination"] = one(reports[0]);
+    j["source"] = one(reports[1]);
+  } else {
+    j = nlohmann::json::array();
+    for (const auto& r : reports) j.push_back(one(r));
+  }
+  return j.dump();
+}
+
+}  // namespace veneer::pipeline
