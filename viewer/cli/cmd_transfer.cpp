@@ -116,8 +116,8 @@ int run(const TransferArgs& a) {
   std::printf("transfer %s -> %s: %s %s %dx%d, map written to %s\n", a.src.c_str(), a.dst.c_str(), a.method.c_str(),
               a.feature.c_str(), a.patch, a.patch, a.out.c_str());
   if (a.scale < 1)
-    std::printf("  computed at %.2fx: the map and the pictures are %dx%d, not the sets' %dx%d\n", a.scale,
-                result->map.xy.cols, result->map.xy.rows, dst->size.width, dst->size.height);
+    std::printf("  computed at %.2fx (--scale): the map and the pictures are %dx%d, smaller than the sets\n", a.scale,
+                result->map.xy.cols, result->map.xy.rows);
   if (result->quality) {
     const auto& g = *result->quality;
     std::printf("  coverage %.1f %%", 100 * g.coverage);
