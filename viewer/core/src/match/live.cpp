@@ -65,4 +65,39 @@ cv::Mat LiveRepainter::apply(const cv::Mat& frame) {
   return background;
 }
 
+cv::Mat LiveRepainter::apply(const cv::Mat& frame, const cv::Matx23d& source_to_frame) {
+  if (!ready() || frame.empty()) return {};
+  if (blend_) {
+    cv::Mat at_source;
+    cv::warpAffine(frame, at_source, cv::Mat(source_to_frame), source_size_, cv::INTER_LINEAR | cv::WARP_INVERSE_MAP,
+                   cv::BORDER_REPLICATE);
+    return apply(at_source);
+  }
+  cv::Mat background;
+  if (!backdrop_.empty()) {
+    if (frame.type() == CV_8UC3) background = backdrop_.clone();
+    else backdrop_.convertTo(background, frame.type(), 1.0 / 255.0);
+  } else {
+    background = cv::Mat(map_xy_.size(), frame.type(), cv::Scalar::all(0));
+  }
+  table_x_.create(map_xy_.size(), CV_32FC1);
+  table_y_.create(map_xy_.size(), CV_32FC1);
+  prepared_for_ = {};  // the tables no longer hold the fixed lookup
+  const cv::Matx23f a(source_to_frame);
+  cv::parallel_for_(cv::Range(0, map_xy_.rows), [&](const cv::Range& rows) {
+    for (int y = rows.start; y < rows.end; ++y) {
+      const cv::Vec2f* m = map_xy_.ptr<cv::Vec2f>(y);
+      float* tx = table_x_.ptr<float>(y);
+      float* ty = table_y_.ptr<float>(y);
+      for (int x = 0; x < map_xy_.cols; ++x) {
+        const bool mapped = m[x][0] >= 0;
+        tx[x] = mapped ? a(0, 0) * m[x][0] + a(0, 1) * m[x][1] + a(0, 2) : -1e6f;
+        ty[x] = mapped ? a(1, 0) * m[x][0] + a(1, 1) * m[x][1] + a(1, 2) : -1e6f;
+      }
+    }
+  });
+  cv::remap(frame, background, table_x_, table_y_, cv::INTER_LINEAR, cv::BORDER_TRANSPARENT);
+  return background;
+}
+
 }  // namespace veneer::match

@@ -86,6 +86,12 @@ Expected<MotionSequence> simulate_motion(const std::string& scene_name, const Re
   if (auto st = options.check(); !st) return st.error();
   auto scene = make_scene(scene_name, options);
   if (!scene) return scene.error();
+  // The table without the object (shrunk to a speck at its base), for the
+  // pixels the moved object uncovers.
+  RenderOptions empty_options = options;
+  empty_options.scale = options.scale * 1e-4;
+  auto table = make_scene(scene_name, empty_options);
+  if (!table) return table.error();
   MotionSequence seq;
   seq.mask = render_truth(**scene, options).mask;
   const cv::Moments mo = cv::moments(seq.mask, true);
@@ -102,14 +108,15 @@ Expected<MotionSequence> simulate_motion(const std::string& scene_name, const Re
     o.shot = static_cast<uint32_t>(i);
     cv::Mat linear = render(**scene, {lamp}, o);
     if (linear.empty()) return make_error("cancelled");
-    // Only the object moves: it is laid over the table as rendered (with its
-    // shadow where the still pose casts it; close enough for a small motion).
+    // Only the object moves: it is laid over the empty table (which then
+    // shows no shadow of it; the object's own shading is the still pose's).
+    cv::Mat background = render(**table, {lamp}, o);
     cv::Mat moved, alpha, mask_f;
     cv::warpAffine(linear, moved, cv::Mat(m.still_to_frame), options.size, cv::INTER_LINEAR, cv::BORDER_REPLICATE);
     seq.mask.convertTo(mask_f, CV_32F, 1.0 / 255.0);
     cv::warpAffine(mask_f, alpha, cv::Mat(m.still_to_frame), options.size, cv::INTER_LINEAR, cv::BORDER_CONSTANT);
     cv::cvtColor(alpha, alpha, cv::COLOR_GRAY2BGR);
-    moved = moved.mul(alpha) + linear.mul(cv::Scalar::all(1.0) - alpha);
+    moved = moved.mul(alpha) + background.mul(cv::Scalar::all(1.0) - alpha);
     cv::Mat bgr8(moved.size(), CV_8UC3);
     for (int y = 0; y < moved.rows; ++y) {
       const float* src = moved.ptr<float>(y);

@@ -30,6 +30,12 @@ class LiveRepainter {
   // aspect (coordinates are scaled by frame/source size). Returns the
   // destination-sized picture of the same type as `frame`.
   cv::Mat apply(const cv::Mat& frame);
+  // The same for a frame in which the source has moved: `source_to_frame`
+  // takes the map's source pixels (at source_size) to the frame's pixels
+  // (registration, match/track.hpp). Each frame's gather table is made anew
+  // (one pass over the destination) and sampled bilinearly; with a blend,
+  // the frame is first warped back onto the source's pixels.
+  cv::Mat apply(const cv::Mat& frame, const cv::Matx23d& source_to_frame);
 
  private:
   void prepare(cv::Size frame_size);

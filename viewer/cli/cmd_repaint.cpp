@@ -1,0 +1,217 @@
+// veneer repaint — a recorded video (or numbered frames) of the source,
+// each frame registered to the source's stills (match/track.hpp) and carried
+// through the map onto the destination (issue 27's recorded-video path).
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/videoio.hpp>
+
+#include "command.hpp"
+#include "veneer/io/image_io.hpp"
+#include "veneer/io/imageset.hpp"
+#include "veneer/match/live.hpp"
+#include "veneer/match/track.hpp"
+#include "veneer/match/transfer.hpp"
+#include "veneer/sim/motion.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using namespace veneer;
+
+struct RepaintArgs {
+  std::string src, dst, map, video, out;
+  bool no_track = false;
+  double min_correlation = match::TrackOptions{}.min_correlation;
+};
+
+int fail(int code, const std::string& message) {
+  std::cerr << "veneer repaint: " << message << "\n";
+  return code;
+}
+
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const double pos = p * (v.size() - 1);
+  const size_t i = static_cast<size_t>(pos);
+  return i + 1 < v.size() ? v[i] + (pos - i) * (v[i + 1] - v[i]) : v[i];
+}
+
+// The frames of a folder (its motion.json's order when present, else the
+// images sorted by name) or of a video file, read lazily through `next`.
+struct FrameSource {
+  std::vector<fs::path> files;
+  cv::VideoCapture capture;
+  size_t index = 0;
+  bool next(cv::Mat* frame) {
+    if (!files.empty()) {
+      if (index >= files.size()) return false;
+      *frame = cv::imread(files[index++].string(), cv::IMREAD_COLOR);
+      return !frame->empty();
+    }
+    return capture.isOpened() && capture.read(*frame) && !frame->empty();
+  }
+};
+
+cv::Mat lost_picture(const cv::Mat& backdrop) {
+  cv::Mat out = backdrop.clone();
+  out = out * 0.5 + cv::Scalar(0, 0, 110);  // dimmed and red: not a picture to trust
+  const double font = std::max(0.35, out.cols / 900.0);
+  cv::putText(out, "LOST - hold still / recapture", {8, std::max(16, out.rows / 8)}, cv::FONT_HERSHEY_SIMPLEX, font,
+              cv::Scalar(255, 255, 255), std::max(1, out.cols / 500), cv::LINE_AA);
+  return out;
+}
+
+int run_repaint(const RepaintArgs& a) {
+  // the video first: a missing input is the most likely mistake
+  FrameSource frames;
+  std::optional<sim::MotionTruth> truth;
+  const fs::path video(a.video);
+  if (!fs::exists(video)) return fail(2, "--video " + a.video + ": no such file or folder");
+  if (fs::is_directory(video)) {
+    if (fs::exists(video / "motion.json")) {
+      auto t = sim::read_motion_json(video / "motion.json");
+      if (!t) return fail(1, t.message());
+      for (const auto& f : t->files) frames.files.push_back(video / f);
+      truth = std::move(*t);
+    } else {
+      for (const auto& e : fs::directory_iterator(video)) {
+        const auto ext = e.path().extension().string();
+        if (ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".PNG" || ext == ".JPG")
+          frames.files.push_back(e.path());
+      }
+      std::sort(frames.files.begin(), frames.files.end());
+    }
+    if (frames.files.empty()) return fail(2, "--video " + a.video + ": the folder holds no frames (PNG or JPEG)");
+  } else if (!frames.capture.open(a.video)) {
+    return fail(2, "--video " + a.video + ": OpenCV cannot read it as a video");
+  }
+
+  fs::path map_file(a.map);
+  if (fs::is_directory(map_file)) map_file /= "map.pfm";
+  auto map = match::read_map(map_file);
+  if (!map) return fail(1, map.message());
+  match::TransferOptions options;
+  if (fs::exists(map_file.parent_path() / "metrics.json")) {
+    auto read = match::read_transfer_options(map_file.parent_path() / "metrics.json");
+    if (!read) return fail(1, read.message());
+    options = *read;
+  }
+  auto src = read_set(a.src);
+  if (!src) return fail(1, src.message());
+  auto dst = read_set(a.dst);
+  if (!dst) return fail(1, dst.message());
+  if (!fs::exists(map_file.parent_path() / "metrics.json")) options.scale = match::map_scale(*map, *dst);
+  const cv::Mat backdrop = tonemap_picture(match::median_photo(dst->images));
+  auto mask = match::object_mask(*src, false);
+  if (!mask) return fail(1, "source: " + mask.message());
+  cv::Mat still_mask = *mask;
+  if (still_mask.size() != src->size) cv::resize(still_mask, still_mask, src->size, 0, 0, cv::INTER_NEAREST);
+
+  const cv::Size source_size = match::scaled_size(src->size, options.scale);
+  match::LiveRepainter repainter(*map, source_size, backdrop);
+  // map's source pixels (at source_size) -> still pixels (pixel centres)
+  const double kx = static_cast<double>(src->size.width) / source_size.width;
+  const double ky = static_cast<double>(src->size.height) / source_size.height;
+  const cv::Matx33d map_to_still(kx, 0, 0.5 * kx - 0.5, 0, ky, 0.5 * ky - 0.5, 0, 0, 1);
+  match::TrackOptions track_options;
+  track_options.min_correlation = a.min_correlation;
+  if (auto st = track_options.check(); !st) return fail(2, "--min-correlation: " + st.message());
+  match::Tracker tracker(src->images, still_mask, track_options);
+
+  std::error_code ec;
+  fs::create_directories(a.out, ec);
+  if (ec) return fail(1, a.out + ": cannot create: " + ec.message());
+  cv::VideoWriter writer;
+  const fs::path mp4 = fs::path(a.out) / "repainted.mp4";
+  nlohmann::json per_frame = nlohmann::json::array();
+  std::vector<double> ms, errors;
+  int lost = 0, count = 0;
+  cv::Mat frame;
+  while (frames.next(&frame)) {
+    if (frame.size() != src->size)
+      return fail(1, "frame " + std::to_string(count) + " is " + std::to_string(frame.cols) + "x" +
+                         std::to_string(frame.rows) + ", the source's stills " + std::to_string(src->size.width) + "x" +
+                         std::to_string(src->size.height) +
+                         ": a live view framed differently from its stills is not related yet (issue 27, item 2)");
+    const auto t0 = std::chrono::steady_clock::now();
+    match::TrackResult r;
+    if (!a.no_track) r = tracker.track(frame);
+    cv::Mat out;
+    if (r.lost) {
+      out = lost_picture(backdrop);
+    } else {
+      const cv::Matx33d s2f(r.still_to_frame(0, 0), r.still_to_frame(0, 1), r.still_to_frame(0, 2),
+                            r.still_to_frame(1, 0), r.still_to_frame(1, 1), r.still_to_frame(1, 2), 0, 0, 1);
+      const cv::Matx33d m = s2f * map_to_still;
+      out = repainter.apply(frame, cv::Matx23d(m(0, 0), m(0, 1), m(0, 2), m(1, 0), m(1, 1), m(1, 2)));
+    }
+    const double elapsed = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    ms.push_back(elapsed);
+    char name[32];
+    std::snprintf(name, sizeof name, "frame_%04d.png", count);
+    if (auto st = write_picture(fs::path(a.out) / name, out); !st) return fail(1, st.message());
+    if (count == 0) writer.open(mp4.string(), cv::VideoWriter::fourcc('m', 'p', '4', 'v'), 30.0, out.size());
+    if (writer.isOpened()) writer.write(out);
+    nlohmann::json f = {{"file", name}, {"ms", elapsed}, {"lost", r.lost}, {"correlation", r.correlation}};
+    const auto& e = r.still_to_frame;
+    f["still_to_frame"] = {{e(0, 0), e(0, 1), e(0, 2)}, {e(1, 0), e(1, 1), e(1, 2)}};
+    if (truth && static_cast<size_t>(count) < truth->truth.size() && !r.lost) {
+      const double e = match::motion_error_px(r.still_to_frame, truth->truth[count].still_to_frame, still_mask);
+      errors.push_back(e);
+      f["align_error_px"] = e;
+    }
+    per_frame.push_back(f);
+    lost += r.lost;
+    ++count;
+  }
+  if (count == 0) return fail(1, "--video " + a.video + ": no frame could be read");
+  writer.release();
+  nlohmann::json report = {{"frames", count},
+                           {"lost", lost},
+                           {"tracking", !a.no_track},
+                           {"method", a.no_track ? "none (the stills' pose)" : "ECC affine, coarse to fine, seeded from the previous frame"},
+                           {"ms_per_frame", {{"median", percentile(ms, 0.5)}, {"p95", percentile(ms, 0.95)}}},
+                           {"video", fs::exists(mp4) ? "repainted.mp4" : ""},
+                           {"per_frame", per_frame}};
+  if (truth)
+    report["align_error_px"] = {{"median", percentile(errors, 0.5)}, {"p95", percentile(errors, 0.95)},
+                                {"frames_measured", errors.size()}};
+  if (auto st = write_file_atomic(fs::path(a.out) / "report.json", report.dump(1) + "\n"); !st) return fail(1, st.message());
+  std::cout << "repainted " << count << " frames into " << a.out << " (" << lost << " lost), "
+            << percentile(ms, 0.5) << " ms per frame median";
+  if (truth) std::cout << ", alignment error median " << percentile(errors, 0.5) << " px, p95 " << percentile(errors, 0.95) << " px";
+  std::cout << "\n";
+  return 0;
+}
+
+}  // namespace
+
+VENEER_COMMAND(repaint) {
+  auto args = std::make_shared<RepaintArgs>();
+  auto* cmd = app.add_subcommand("repaint",
+                                 "repaint a recorded video of the source onto the destination through a map, each "
+                                 "frame registered to the source's stills");
+  cmd->add_option("--src", args->src, "the source set the map was computed against")->required();
+  cmd->add_option("--dst", args->dst, "the destination set (its picture shows where nothing is mapped)")->required();
+  cmd->add_option("--map", args->map, "a transfer folder or its map.pfm")->required();
+  cmd->add_option("--video", args->video,
+                  "a video file, or a folder of numbered frames (with `veneer simulate --motion`'s motion.json, the "
+                  "alignment error is measured)")
+      ->required();
+  cmd->add_option("--out", args->out, "output folder: frame_NNNN.png, repainted.mp4, report.json")->required();
+  cmd->add_flag("--no-track", args->no_track, "look frames up at the stills' pose (the old live view)");
+  cmd->add_option("--min-correlation", args->min_correlation, "ECC correlation below this marks a frame lost (0..1)")
+      ->capture_default_str();
+  return [args] { return run_repaint(*args); };
+}
