@@ -17,7 +17,7 @@
 namespace veneer::match {
 
 struct TrackOptions {
-  double min_correlation = 0.75;  // ECC correlation below this marks the frame lost (0..1)
+  double min_correlation = 0.5;   // ECC correlation (of the high-passed pictures) below this marks the frame lost (0..1)
   int iterations = 40;            // ECC iterations at the finest level (coarser levels get 2x)
   double epsilon = 1e-3;          // ECC stop: the warp's update below this [px-ish]
   int mask_dilate_px = 2;         // ECC's region: the object's mask grown by this much (its outline's edge) [px]

@@ -1,0 +1,195 @@
+// Registration of live frames (match/track.hpp), the simulated motion with
+// truth it is measured on (sim/motion.hpp), and `veneer simulate --motion` /
+// `veneer repaint --video` end to end (issue 27).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <nlohmann/json.hpp>
+
+#include "veneer/match/live.hpp"
+#include "veneer/match/matcher.hpp"
+#include "veneer/match/track.hpp"
+#include "veneer/sim/motion.hpp"
+#include "veneer/sim/simulator.hpp"
+
+namespace veneer {
+namespace {
+
+namespace fs = std::filesystem;
+
+double percentile(std::vector<double> v, double p) {
+  std::sort(v.begin(), v.end());
+  return v[static_cast<size_t>(p * (v.size() - 1) + 0.5)];
+}
+
+TEST(Motion, ParsesTheSpecAndNamesTheBadPart) {
+  auto m = sim::parse_motion("shift=30:-2,rotate=5,scale=1.05,turn=3,lamp=sweep");
+  ASSERT_TRUE(m) << m.message();
+  EXPECT_DOUBLE_EQ(m->shift_px[0], 30);
+  EXPECT_DOUBLE_EQ(m->shift_px[1], -2);
+  EXPECT_DOUBLE_EQ(m->rotate_deg, 5);
+  EXPECT_DOUBLE_EQ(m->scale, 1.05);
+  EXPECT_DOUBLE_EQ(m->turn_deg, 3);
+  EXPECT_TRUE(m->lamp_sweep);
+  EXPECT_TRUE(sim::parse_motion(""));
+  for (const char* bad : {"shift=30", "rotate=five", "scale=0", "turn=45", "lamp=disco", "wobble=2", "rotate"}) {
+    auto e = sim::parse_motion(std::string("shift=1:1,") + bad);
+    ASSERT_FALSE(e) << bad;
+    EXPECT_NE(e.message().find(bad), std::string::npos) << e.message();
+  }
+}
+
+TEST(Motion, TruthMovesTheCentreAsSpecified) {
+  sim::MotionSpec spec;
+  spec.shift_px = {30, 0};
+  spec.rotate_deg = 5;
+  const cv::Point2d c(100, 50);
+  const auto first = sim::motion_at(spec, 0, 11, c), last = sim::motion_at(spec, 10, 11, c);
+  EXPECT_LT(cv::norm(cv::Mat(first.still_to_frame), cv::Mat(cv::Matx23d(1, 0, 0, 0, 1, 0))), 1e-12);
+  const cv::Vec3d centre(c.x, c.y, 1);
+  const cv::Vec2d moved = last.still_to_frame * centre;
+  EXPECT_NEAR(moved[0], 130, 1e-9);
+  EXPECT_NEAR(moved[1], 50, 1e-9);
+  EXPECT_NEAR(std::atan2(-last.still_to_frame(1, 0), last.still_to_frame(0, 0)) * 180 / CV_PI, 5, 1e-9);
+}
+
+// The source set's photos and a moving sequence of the same scene.
+struct Sequence {
+  ImageSet source;
+  sim::MotionSequence seq;
+};
+
+Sequence make_sequence(const std::string& spec_text, int frames) {
+  sim::RenderOptions o;
+  o.size = {256, 170};
+  o.scale = 2.5;
+  o.ambient = 0.05;
+  o.noise_sigma = 0.005;
+  o.seed = 7;
+  auto source = sim::simulate_set("orange", o, Role::source);
+  EXPECT_TRUE(source) << source.message();
+  auto spec = sim::parse_motion(spec_text);
+  EXPECT_TRUE(spec) << spec.message();
+  auto seq = sim::simulate_motion("orange", o, *spec, frames);
+  EXPECT_TRUE(seq) << seq.message();
+  return {std::move(*source), std::move(*seq)};
+}
+
+TEST(Track, FollowsShiftRotateScaleUnderASweepingLamp) {
+  Sequence s = make_sequence("shift=30:0,rotate=5,scale=1.05,lamp=sweep", 12);
+  match::Tracker tracker(s.source.images, s.source.truth.mask);
+  ASSERT_TRUE(tracker.ready());
+  std::vector<double> errors, untracked;
+  for (size_t i = 0; i < s.seq.frames.size(); ++i) {
+    const auto r = tracker.track(s.seq.frames[i]);
+    EXPECT_FALSE(r.lost) << "frame " << i << " correlation " << r.correlation;
+    errors.push_back(match::motion_error_px(r.still_to_frame, s.seq.truth[i].still_to_frame, s.source.truth.mask));
+    untracked.push_back(
+        match::motion_error_px(cv::Matx23d(1, 0, 0, 0, 1, 0), s.seq.truth[i].still_to_frame, s.source.truth.mask));
+  }
+  EXPECT_LT(percentile(errors, 0.5), 1.0);
+  EXPECT_LT(percentile(errors, 0.95), 2.0);
+  EXPECT_GT(percentile(untracked, 0.95), 10.0);  // the motion matters
+}
+
+TEST(Track, AFrameWithoutTheObjectIsLost) {
+  Sequence s = make_sequence("shift=4:0", 2);
+  match::Tracker tracker(s.source.images, s.source.truth.mask);
+  cv::Mat noise(s.seq.frames[0].size(), CV_8UC3);
+  cv::randu(noise, cv::Scalar::all(0), cv::Scalar::all(255));
+  EXPECT_TRUE(tracker.track(noise).lost);
+  EXPECT_FALSE(tracker.track(s.seq.frames[1]).lost);  // and found again from the last good estimate
+}
+
+TEST(LiveRepainter, AMovedFrameIsReadWhereTheObjectWent) {
+  // map: every destination pixel reads source pixel (x, y); frame: the source moved by (5, 3)
+  const cv::Size size(40, 30);
+  match::Map map;
+  map.xy.create(size, CV_32FC2);
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x) map.xy.at<cv::Vec2f>(y, x) = {float(x), float(y)};
+  map.distance = cv::Mat::zeros(size, CV_32F);
+  cv::Mat still(size, CV_8UC3), frame(size, CV_8UC3, cv::Scalar::all(0));
+  cv::randu(still, cv::Scalar::all(0), cv::Scalar::all(255));
+  still(cv::Rect(0, 0, 35, 27)).copyTo(frame(cv::Rect(5, 3, 35, 27)));
+  match::LiveRepainter repainter(map, size);
+  const cv::Mat out = repainter.apply(frame, cv::Matx23d(1, 0, 5, 0, 1, 3));
+  // (the last column and row read past the frame's edge bilinearly and keep the backdrop)
+  EXPECT_EQ(cv::norm(out(cv::Rect(0, 0, 34, 26)), still(cv::Rect(0, 0, 34, 26)), cv::NORM_INF), 0);
+}
+
+// `veneer` end to end (skipped when it is not built).
+struct Scratch {
+  fs::path path;
+  Scratch() {
+    path = fs::temp_directory_path() / ("veneer-track-" + std::to_string(::getpid()));
+    fs::remove_all(path);
+    fs::create_directories(path);
+  }
+  ~Scratch() { fs::remove_all(path); }
+};
+
+std::pair<std::string, int> run_veneer(const std::string& args) {
+  const std::string cmd = std::string(VENEER_BIN_DIR) + "/veneer " + args + " 2>&1";
+  std::string out;
+  FILE* pipe = ::popen(cmd.c_str(), "r");
+  if (!pipe) return {"", -1};
+  char buf[4096];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, pipe)) > 0) out.append(buf, n);
+  const int status = ::pclose(pipe);
+  return {out, WIFEXITED(status) ? WEXITSTATUS(status) : -1};
+}
+
+TEST(RepaintCommand, SimulatedMotionRepaintedWithReport) {
+  if (!fs::exists(fs::path(VENEER_BIN_DIR) / "veneer")) GTEST_SKIP() << "veneer is not built in " << VENEER_BIN_DIR;
+  Scratch dir;
+  const std::string d = dir.path.string();
+  const std::string common = " --size 256x170 --ambient 0.05";
+  for (const std::string& args :
+       {"simulate --scene orange --scale 2.5 --role source --out " + d + "/src" + common,
+        "simulate --scene bull --role destination --out " + d + "/dst" + common,
+        "transfer --dst " + d + "/dst --src " + d + "/src --out " + d + "/map",
+        "simulate --scene orange --scale 2.5 --motion shift=30:0,rotate=5,scale=1.05,lamp=sweep --frames 12 --out " + d +
+            "/video" + common}) {
+    auto [out, rc] = run_veneer(args);
+    ASSERT_EQ(rc, 0) << args << "\n" << out;
+  }
+  EXPECT_TRUE(fs::exists(dir.path / "video/frame_0011.png"));
+  EXPECT_TRUE(fs::exists(dir.path / "video/motion.json"));
+  auto [out, rc] = run_veneer("repaint --src " + d + "/src --dst " + d + "/dst --map " + d + "/map --video " + d +
+                              "/video --out " + d + "/out");
+  ASSERT_EQ(rc, 0) << out;
+  for (int i : {0, 11}) {
+    char name[32];
+    std::snprintf(name, sizeof name, "out/frame_%04d.png", i);
+    EXPECT_TRUE(fs::exists(dir.path / name)) << name;
+  }
+  std::ifstream in(dir.path / "out/report.json");
+  const auto report = nlohmann::json::parse(in);
+  EXPECT_EQ(report.at("frames"), 12);
+  EXPECT_EQ(report.at("lost"), 0);
+  EXPECT_GT(report.at("ms_per_frame").at("median").get<double>(), 0);
+  EXPECT_LT(report.at("align_error_px").at("median").get<double>(), 1.0);
+  EXPECT_LT(report.at("align_error_px").at("p95").get<double>(), 2.0);
+  EXPECT_EQ(report.at("per_frame").size(), 12u);
+
+  auto [bad, bad_rc] = run_veneer("simulate --scene orange --motion shift=30:0,rotate=lots --frames 3 --out " + d + "/x");
+  EXPECT_EQ(bad_rc, 2);
+  EXPECT_NE(bad.find("'rotate=lots'"), std::string::npos) << bad;
+  auto [missing, missing_rc] = run_veneer("repaint --src " + d + "/src --dst " + d + "/dst --map " + d + "/map --video " +
+                                          d + "/no-such-video.mp4 --out " + d + "/out2");
+  EXPECT_EQ(missing_rc, 2);
+  EXPECT_NE(missing.find("no-such-video.mp4: no such file or folder"), std::string::npos) << missing;
+}
+
+}  // namespace
+}  // namespace veneer
