@@ -59,7 +59,17 @@ int main() {
       for (int x = 0; x < o.size.width; ++x) map.xy.at<cv::Vec2f>(y, x) = {float(x), float(y)};
     map.distance = cv::Mat::zeros(o.size, CV_32F);
     match::LiveRepainter repainter(map, o.size);
-    match::Tracker tracker(set->images, set->truth.mask);
+    struct Variant { int region, rounds, iterations; double epsilon; };
+    const match::TrackOptions d;
+    for (const Variant v : {Variant{d.max_region_px, d.relight_rounds, d.iterations, d.epsilon},
+                            Variant{d.max_region_px, 2, 40, 1e-3}, Variant{4096, 1, 20, 1e-2}}) {
+    match::TrackOptions to;
+    const int region = v.region;
+    to.max_region_px = v.region;
+    to.relight_rounds = v.rounds;
+    to.iterations = v.iterations;
+    to.epsilon = v.epsilon;
+    match::Tracker tracker(set->images, set->truth.mask, to);
     std::vector<double> track_ms, repaint_ms, total_ms, plain_ms, errors;
     int lost = 0;
     for (size_t i = 0; i < seq->frames.size(); ++i) {
@@ -78,9 +88,10 @@ int main() {
       lost += r.lost;
       if (!r.lost) errors.push_back(match::motion_error_px(r.still_to_frame, seq->truth[i].still_to_frame, set->truth.mask));
     }
-    std::printf("| orange x%.1f | %d | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %d |\n", scale,
+    std::printf("| orange x%.1f, region <= %d px, %d relight x %d ECC it, eps %.0e | %d | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %d |\n", scale, region, v.rounds, v.iterations, v.epsilon,
                 cv::countNonZero(set->truth.mask), median(track_ms), p95(track_ms), median(repaint_ms),
                 median(total_ms), median(plain_ms), median(errors), p95(errors), lost);
+    }
   }
   return 0;
 }

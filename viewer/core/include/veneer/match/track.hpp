@@ -18,13 +18,20 @@ namespace veneer::match {
 
 struct TrackOptions {
   double min_correlation = 0.5;   // ECC correlation (of the high-passed pictures) below this marks the frame lost (0..1)
-  int iterations = 40;            // ECC iterations at the finest level (coarser levels get 2x)
-  double epsilon = 1e-3;          // ECC stop: the warp's update below this [px-ish]
+  int iterations = 20;            // ECC iterations at the finest level (coarser levels get 2x)
+  double epsilon = 1e-2;          // ECC stop: the warp's update below this [px-ish]
   int mask_dilate_px = 2;         // ECC's region: the object's mask grown by this much (its outline's edge) [px]
+  int search_px = 32;             // the object may move this far between frames [px]; only that much of the
+                                  // frame around its last place is read
   int margin_px = 12;             // context kept around the object's bounding box in the still [px]
   int coarse_min_width = 64;      // pyramid: halve while the object's region stays at least this wide [px]
+  int max_region_px = 320;        // the finest level: the object's region at most this wide; larger objects are
+                                  // registered on a picture halved until it fits (bench_track, 1024x680 orange
+                                  // x2.5: 0.09 px median in 8 ms; at full size 0.05 px in 33 ms)
   int max_levels = 3;             // at most this many pyramid levels (1 = full size only)
-  int relight_rounds = 2;         // relight the template, then ECC; this many times per frame (1..4)
+  int relight_rounds = 1;         // relight the template (at the last estimate), then ECC; this many times per
+                                  // frame (1..4). bench_track: a second round costs 2x and was no better
+                                  // (orange 1024x680: 0.49 px median with 2, 0.08 px with 1)
   double highpass_sigma_px = 4;   // ECC on picture minus its Gaussian blur of this sigma [px] (0 = off): on the
                                   // orange the shading left over after relighting otherwise drags the estimate
                                   // (12 frames, 256x170 at scale 2.5: 24 px median error without, 0.5 px with)
@@ -54,13 +61,13 @@ class Tracker {
     int factor = 1;       // 2^level
     std::vector<cv::Mat> basis;  // CV_32F grey crops of the photos at this level
     cv::Mat templ;               // the current relit template
-    cv::Mat mask;                // the object's pixels in the crop at this level (ECC's region)
+    cv::Mat mask;                // the object's pixels in the crop at this level, grown (ECC's region)
+    cv::Mat object;              // the same not grown (relighting)
   };
   void relight(const cv::Mat& frame_linear, const cv::Matx23f& w_crop);
   TrackOptions options_;
   cv::Rect crop_;                 // object's region in the still (full size)
   cv::Mat crop_mask_;             // the object's mask inside crop_
-  std::vector<cv::Mat> basis_full_;  // CV_32F grey crops at full size (relighting)
   std::vector<Level> levels_;     // coarsest last
   cv::Matx23d last_ = cv::Matx23d(1, 0, 0, 0, 1, 0);
 };
