@@ -37,6 +37,7 @@ cv::Mat to_gray32(const cv::Mat& image) {
 
 Status TrackOptions::check() const {
   if (!(min_correlation >= 0 && min_correlation <= 1)) return make_error("min_correlation: expected 0..1");
+  if (!(seed_correlation >= 0 && seed_correlation <= 1)) return make_error("seed_correlation: expected 0..1");
   if (iterations < 1 || iterations > 1000) return make_error("iterations: expected 1..1000");
   if (!(epsilon > 0)) return make_error("epsilon: expected > 0");
   if (margin_px < 0) return make_error("margin_px: expected >= 0");
@@ -223,14 +224,17 @@ TrackResult Tracker::track(const cv::Mat& frame) {
   }
   }
   r.correlation = ok ? rho : 0.0;
-  if (!ok || !(rho >= options_.min_correlation)) {
+  if (!ok || !(rho >= options_.seed_correlation)) {
     r.lost = true;
     return r;
   }
   const cv::Matx22d l(w(0, 0), w(0, 1), w(1, 0), w(1, 1));
   const cv::Vec2d t = cv::Vec2d(w(0, 2) + roi.x, w(1, 2) + roi.y) - l * o;
-  r.still_to_frame = cv::Matx23d(l(0, 0), l(0, 1), t[0], l(1, 0), l(1, 1), t[1]);
-  last_ = r.still_to_frame;
+  // A doubtful estimate is not shown, but it still seeds the next frame:
+  // kept at the old place, the object only gets further away.
+  last_ = cv::Matx23d(l(0, 0), l(0, 1), t[0], l(1, 0), l(1, 1), t[1]);
+  r.lost = !(rho >= options_.min_correlation);
+  if (!r.lost) r.still_to_frame = last_;
   return r;
 }
 

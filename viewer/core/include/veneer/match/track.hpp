@@ -17,7 +17,12 @@
 namespace veneer::match {
 
 struct TrackOptions {
-  double min_correlation = 0.5;   // ECC correlation (of the high-passed pictures) below this marks the frame lost (0..1)
+  double min_correlation = 0.85;  // ECC correlation (of the high-passed pictures) below this marks the frame lost
+                                  // (0..1). Not a clean cut: on the simulated 12-frame sweeps, cup-dots at 0.83
+                                  // was 0.3 px off, blocks (cast shadows) at 0.83 1.7 px, the small orange at 0.88
+                                  // 1.3 px; good frames of the orange x2.5 score 0.98
+  double seed_correlation = 0.5;  // an estimate below min_correlation but at least this still seeds the next
+                                  // frame (0..1); below it the last good one does
   int iterations = 20;            // ECC iterations at the finest level (coarser levels get 2x)
   double epsilon = 1e-2;          // ECC stop: the warp's update below this [px-ish]
   int mask_dilate_px = 2;         // ECC's region: the object's mask grown by this much (its outline's edge) [px]
@@ -42,7 +47,7 @@ struct TrackOptions {
 struct TrackResult {
   cv::Matx23d still_to_frame = cv::Matx23d(1, 0, 0, 0, 1, 0);  // still pixel -> frame pixel
   double correlation = 0;  // ECC's at the finest level (1 = same picture up to gain/offset)
-  bool lost = false;       // registration failed: still_to_frame is the last good estimate
+  bool lost = false;       // registration failed or doubtful: still_to_frame is the last good estimate
 };
 
 class Tracker {
