@@ -182,6 +182,28 @@ TEST(RepaintCommand, SimulatedMotionRepaintedWithReport) {
   EXPECT_LT(report.at("align_error_px").at("p95").get<double>(), 2.0);
   EXPECT_EQ(report.at("per_frame").size(), 12u);
 
+  // issue 27's own check: 30 px and 5 deg over 60 frames under a sweeping lamp,
+  // with and without tracking
+  {
+    auto [sim_out, sim_rc] = run_veneer(
+        "simulate --scene orange --scale 2.5 --motion shift=30:0,rotate=5,lamp=sweep --frames 60 --out " + d + "/v60" +
+        common);
+    ASSERT_EQ(sim_rc, 0) << sim_out;
+    nlohmann::json reports[2];
+    for (int track = 0; track < 2; ++track) {
+      const std::string o = d + (track ? "/r60" : "/r60-untracked");
+      auto [r_out, r_rc] = run_veneer("repaint --src " + d + "/src --dst " + d + "/dst --map " + d + "/map --video " +
+                                      d + "/v60 --out " + o + (track ? "" : " --no-track"));
+      ASSERT_EQ(r_rc, 0) << r_out;
+      std::ifstream r_in(o + "/report.json");
+      reports[track] = nlohmann::json::parse(r_in);
+    }
+    EXPECT_LE(reports[1].at("align_error_px").at("median").get<double>(), 1.0);
+    EXPECT_LE(reports[1].at("align_error_px").at("p95").get<double>(), 2.0);
+    EXPECT_EQ(reports[1].at("lost"), 0);
+    EXPECT_GT(reports[0].at("align_error_px").at("median").get<double>(), 10.0);  // the motion matters
+  }
+
   auto [bad, bad_rc] = run_veneer("simulate --scene orange --motion shift=30:0,rotate=lots --frames 3 --out " + d + "/x");
   EXPECT_EQ(bad_rc, 2);
   EXPECT_NE(bad.find("'rotate=lots'"), std::string::npos) << bad;
