@@ -30,7 +30,7 @@ using namespace veneer;
 
 struct RepaintArgs {
   std::string src, dst, map, video, out;
-  bool no_track = false;
+  bool no_track = false, overlay = false;
   double min_correlation = match::TrackOptions{}.min_correlation;
 };
 
@@ -161,6 +161,12 @@ int run_repaint(const RepaintArgs& a) {
     char name[32];
     std::snprintf(name, sizeof name, "frame_%04d.png", count);
     if (auto st = write_picture(fs::path(a.out) / name, out); !st) return fail(1, st.message());
+    if (a.overlay) {
+      std::snprintf(name, sizeof name, "align_%04d.png", count);
+      if (auto st = write_picture(fs::path(a.out) / name, match::alignment_picture(frame, still_mask, r)); !st)
+        return fail(1, st.message());
+      std::snprintf(name, sizeof name, "frame_%04d.png", count);
+    }
     if (count == 0) writer.open(mp4.string(), cv::VideoWriter::fourcc('m', 'p', '4', 'v'), 30.0, out.size());
     if (writer.isOpened()) writer.write(out);
     nlohmann::json f = {{"file", name}, {"ms", elapsed}, {"lost", r.lost}, {"correlation", r.correlation}};
@@ -210,6 +216,9 @@ VENEER_COMMAND(repaint) {
                   "alignment error is measured)")
       ->required();
   cmd->add_option("--out", args->out, "output folder: frame_NNNN.png, repainted.mp4, report.json")->required();
+  cmd->add_flag("--overlay", args->overlay,
+                "also write align_NNNN.png: each frame with the source's outline where it was found (green; red "
+                "when lost) and the ECC correlation");
   cmd->add_flag("--no-track", args->no_track, "look frames up at the stills' pose (the old live view)");
   cmd->add_option("--min-correlation", args->min_correlation, "ECC correlation below this marks a frame lost (0..1)")
       ->capture_default_str();

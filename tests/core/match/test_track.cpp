@@ -166,11 +166,13 @@ TEST(RepaintCommand, SimulatedMotionRepaintedWithReport) {
   EXPECT_TRUE(fs::exists(dir.path / "video/frame_0011.png"));
   EXPECT_TRUE(fs::exists(dir.path / "video/motion.json"));
   auto [out, rc] = run_veneer("repaint --src " + d + "/src --dst " + d + "/dst --map " + d + "/map --video " + d +
-                              "/video --out " + d + "/out");
+                              "/video --out " + d + "/out --overlay");
   ASSERT_EQ(rc, 0) << out;
   for (int i : {0, 11}) {
     char name[32];
     std::snprintf(name, sizeof name, "out/frame_%04d.png", i);
+    EXPECT_TRUE(fs::exists(dir.path / name)) << name;
+    std::snprintf(name, sizeof name, "out/align_%04d.png", i);
     EXPECT_TRUE(fs::exists(dir.path / name)) << name;
   }
   std::ifstream in(dir.path / "out/report.json");

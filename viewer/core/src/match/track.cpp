@@ -1,6 +1,7 @@
 #include "veneer/match/track.hpp"
 
 #include <cmath>
+#include <cstdio>
 
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
@@ -236,6 +237,29 @@ TrackResult Tracker::track(const cv::Mat& frame) {
   r.lost = !(rho >= options_.min_correlation);
   if (!r.lost) r.still_to_frame = last_;
   return r;
+}
+
+cv::Mat alignment_picture(const cv::Mat& frame, const cv::Mat& mask, const TrackResult& result) {
+  cv::Mat out = frame.clone();
+  if (out.type() != CV_8UC3) return out;
+  std::vector<std::vector<cv::Point>> contours;
+  cv::findContours(mask.clone(), contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
+  const cv::Scalar colour = result.lost ? cv::Scalar(0, 0, 255) : cv::Scalar(0, 255, 0);
+  const int shift = 4;  // sub-pixel drawing: coordinates in 1/16 px
+  for (const auto& contour : contours) {
+    std::vector<cv::Point> moved;
+    for (const auto& p : contour) {
+      const cv::Vec2d q = result.still_to_frame * cv::Vec3d(p.x, p.y, 1);
+      moved.emplace_back(cvRound(q[0] * (1 << shift)), cvRound(q[1] * (1 << shift)));
+    }
+    cv::polylines(out, std::vector<std::vector<cv::Point>>{moved}, true, colour, 1, cv::LINE_AA, shift);
+  }
+  char text[64];
+  std::snprintf(text, sizeof text, "%s  ECC %.2f", result.lost ? "LOST - hold still / recapture" : "tracked",
+                result.correlation);
+  const double font = std::max(0.35, out.cols / 1400.0);
+  cv::putText(out, text, {6, std::max(14, out.rows / 14)}, cv::FONT_HERSHEY_SIMPLEX, font, colour, 1, cv::LINE_AA);
+  return out;
 }
 
 double motion_error_px(const cv::Matx23d& a, const cv::Matx23d& b, const cv::Mat& mask) {

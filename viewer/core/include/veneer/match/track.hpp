@@ -77,6 +77,11 @@ class Tracker {
   cv::Matx23d last_ = cv::Matx23d(1, 0, 0, 0, 1, 0);
 };
 
+// What the user sees of the registration: `frame` (8-bit BGR) with the
+// still's object outline (`mask`'s contour) carried by the estimate, green
+// when tracked, red and labelled "LOST" when not, and the correlation.
+cv::Mat alignment_picture(const cv::Mat& frame, const cv::Mat& mask, const TrackResult& result);
+
 // Mean distance [px] over the still's `mask` pixels between where `a` and `b` put them.
 double motion_error_px(const cv::Matx23d& a, const cv::Matx23d& b, const cv::Mat& mask);
 
