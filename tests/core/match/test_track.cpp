@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "veneer/match/live.hpp"
 #include "veneer/match/matcher.hpp"
@@ -205,6 +206,15 @@ TEST(RepaintCommand, SimulatedMotionRepaintedWithReport) {
     EXPECT_EQ(reports[1].at("lost"), 0);
     EXPECT_GT(reports[0].at("align_error_px").at("median").get<double>(), 10.0);  // the motion matters
   }
+
+  // a live view framed otherwise than the stills: refused, both geometries named
+  fs::create_directories(dir.path / "wide");
+  ASSERT_TRUE(cv::imwrite((dir.path / "wide/frame_0000.png").string(), cv::Mat(180, 320, CV_8UC3, cv::Scalar::all(60))));
+  auto [wide, wide_rc] = run_veneer("repaint --src " + d + "/src --dst " + d + "/dst --map " + d + "/map --video " + d +
+                                    "/wide --out " + d + "/out3");
+  EXPECT_EQ(wide_rc, 1);
+  EXPECT_NE(wide.find("320x180"), std::string::npos) << wide;
+  EXPECT_NE(wide.find("256x170"), std::string::npos) << wide;
 
   auto [bad, bad_rc] = run_veneer("simulate --scene orange --motion shift=30:0,rotate=lots --frames 3 --out " + d + "/x");
   EXPECT_EQ(bad_rc, 2);
