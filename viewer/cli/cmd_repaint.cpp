@@ -31,6 +31,7 @@ using namespace veneer;
 struct RepaintArgs {
   std::string src, dst, map, video, out;
   bool no_track = false, overlay = false;
+  int blend = -1;
   double min_correlation = match::TrackOptions{}.min_correlation;
 };
 
@@ -119,7 +120,17 @@ int run_repaint(const RepaintArgs& a) {
   if (still_mask.size() != src->size) cv::resize(still_mask, still_mask, src->size, 0, 0, cv::INTER_NEAREST);
 
   const cv::Size source_size = match::scaled_size(src->size, options.scale);
-  match::LiveRepainter repainter(*map, source_size, backdrop);
+  // Frames are blended as the transfer's pictures were (its metrics.json), as `veneer rig live` does.
+  if (a.blend >= 0) options.blend = a.blend;
+  std::shared_ptr<const match::fast::BlendPlan> plan;
+  if (options.blend > 0) {
+    auto pair = match::prepare_pair(*dst, *src, options);
+    if (!pair) return fail(1, pair.message());
+    auto made = match::blend_plan_for(*pair, options, *map);
+    if (!made) return fail(1, made.message());
+    plan = *made;
+  }
+  match::LiveRepainter repainter(*map, source_size, backdrop, plan);
   // map's source pixels (at source_size) -> still pixels (pixel centres)
   const double kx = static_cast<double>(src->size.width) / source_size.width;
   const double ky = static_cast<double>(src->size.height) / source_size.height;
@@ -186,6 +197,7 @@ int run_repaint(const RepaintArgs& a) {
   nlohmann::json report = {{"frames", count},
                            {"lost", lost},
                            {"tracking", !a.no_track},
+                           {"blend_px", plan ? options.blend : 0},
                            {"method", a.no_track ? "none (the stills' pose)" : "ECC affine, coarse to fine, seeded from the previous frame"},
                            {"ms_per_frame", {{"median", percentile(ms, 0.5)}, {"p95", percentile(ms, 0.95)}}},
                            {"video", fs::exists(mp4) ? "repainted.mp4" : ""},
@@ -219,6 +231,8 @@ VENEER_COMMAND(repaint) {
   cmd->add_flag("--overlay", args->overlay,
                 "also write align_NNNN.png: each frame with the source's outline where it was found (green; red "
                 "when lost) and the ECC correlation");
+  cmd->add_option("--blend", args->blend,
+                  "blend the chunks' seams over this radius, 0..16 px (default: as the transfer did, its metrics.json)");
   cmd->add_flag("--no-track", args->no_track, "look frames up at the stills' pose (the old live view)");
   cmd->add_option("--min-correlation", args->min_correlation, "ECC correlation below this marks a frame lost (0..1)")
       ->capture_default_str();

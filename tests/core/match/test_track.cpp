@@ -184,6 +184,7 @@ TEST(RepaintCommand, SimulatedMotionRepaintedWithReport) {
   EXPECT_LT(report.at("align_error_px").at("median").get<double>(), 1.0);
   EXPECT_LT(report.at("align_error_px").at("p95").get<double>(), 2.0);
   EXPECT_EQ(report.at("per_frame").size(), 12u);
+  EXPECT_EQ(report.at("blend_px"), 2);  // as the transfer blended (its metrics.json)
 
   // issue 27's own check: 30 px and 5 deg over 60 frames under a sweeping lamp,
   // with and without tracking
