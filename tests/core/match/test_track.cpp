@@ -84,8 +84,8 @@ Sequence make_sequence(const std::string& spec_text, int frames) {
   return {std::move(*source), std::move(*seq)};
 }
 
-TEST(Track, FollowsShiftRotateScaleUnderASweepingLamp) {
-  Sequence s = make_sequence("shift=30:0,rotate=5,scale=1.05,lamp=sweep", 12);
+TEST(Track, FollowsShiftRotateScaleTurnUnderASweepingLamp) {
+  Sequence s = make_sequence("shift=30:0,rotate=5,scale=1.05,turn=3,lamp=sweep", 12);
   match::Tracker tracker(s.source.images, s.source.truth.mask);
   ASSERT_TRUE(tracker.ready());
   std::vector<double> errors, untracked;
