@@ -25,13 +25,7 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-Progress sub_progress(const Progress& p, double from, double to) {
-  Progress out;
-  out.cancel = p.cancel;
-  if (p.on_progress)
-    out.on_progress = [p, from, to](double f, const std::string& stage) { p.report(from + (to - from) * f, stage); };
-  return out;
-}
+Progress sub_progress(const Progress& p, double from, double to) { return p.part(from, to); }
 
 nlohmann::json quality_json(const Quality& q) {
   nlohmann::json j;

@@ -23,13 +23,7 @@ double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock:
 // Bump when what is cached, or how it is computed, changes.
 constexpr const char* kCacheVersion = "prepared-set/1";
 
-Progress sub_progress(const Progress& p, double from, double to) {
-  Progress out;
-  out.cancel = p.cancel;
-  if (p.on_progress)
-    out.on_progress = [p, from, to](double f, const std::string& stage) { p.report(from + (to - from) * f, stage); };
-  return out;
-}
+Progress sub_progress(const Progress& p, double from, double to) { return p.part(from, to); }
 
 std::string salt_of(const ReadOptions& read, double scale, bool truth_normals) {
   nlohmann::json j{{"version", kCacheVersion},

@@ -17,6 +17,14 @@ struct Progress {
     if (on_progress) on_progress(fraction, stage);
   }
   bool cancelled() const { return cancel != nullptr && cancel->load(std::memory_order_relaxed); }
+  // A stage of a longer job: its 0..1 reported as from..to of this one, same cancel flag.
+  Progress part(double from, double to) const {
+    Progress out;
+    out.cancel = cancel;
+    if (on_progress)
+      out.on_progress = [cb = on_progress, from, to](double f, const std::string& stage) { cb(from + (to - from) * f, stage); };
+    return out;
+  }
 };
 
 }  // namespace veneer
