@@ -279,6 +279,39 @@ cv::Mat global_motion(const Level& d, const std::vector<cv::Point2i>& match, uns
   return share >= 0.6 ? A : cv::Mat();
 }
 
+// Median angle [deg] between each destination pixel's normal and the source
+// normal the motion (or, for comparison, the nearest-normal seed) gives it;
+// the motion passes when its median is within max(4 deg, 3x the seed's).
+bool motion_keeps_normals(const Level& d, const Level& s, const cv::Mat& motion, const std::vector<cv::Point2i>& seed) {
+  const double* A = motion.ptr<double>(0);
+  const double* B = motion.ptr<double>(1);
+  std::vector<double> by_motion, by_seed;
+  auto angle = [](const cv::Vec3f& a, const cv::Vec3f& b) {
+    return std::acos(std::clamp(static_cast<double>(a.dot(b)), -1.0, 1.0)) * 180.0 / CV_PI;
+  };
+  for (const cv::Point p : d.pixels) {
+    const cv::Vec3f n = d.normals.at<cv::Vec3f>(p);
+    if (n.dot(n) < 0.25f) continue;
+    const size_t at = static_cast<size_t>(p.y) * d.size.width + p.x;
+    const int qx = static_cast<int>(std::lround(A[0] * p.x + A[1] * p.y + A[2]));
+    const int qy = static_cast<int>(std::lround(B[0] * p.x + B[1] * p.y + B[2]));
+    if (!s.valid(qx, qy)) {
+      by_motion.push_back(90.0);
+    } else {
+      by_motion.push_back(angle(n, s.normals.at<cv::Vec3f>(qy, qx)));
+    }
+    if (seed[at].x >= 0) by_seed.push_back(angle(n, s.normals.at<cv::Vec3f>(seed[at].y, seed[at].x)));
+  }
+  if (by_motion.empty() || by_seed.empty()) return false;
+  auto median = [](std::vector<double>& v) {
+    auto mid = v.begin() + v.size() / 2;
+    std::nth_element(v.begin(), mid, v.end());
+    return *mid;
+  };
+  const double m = median(by_motion), n = median(by_seed);
+  return m <= std::max(4.0, 3.0 * n);
+}
+
 // Two different objects: `coherent` on the normals (StyleBlit-style chunks of
 // the nearest normal, seams refined), whose normal agreement stays near the
 // exact nearest's while the texture stays in chunks.
@@ -424,6 +457,12 @@ Expected<Map> run_combined(const ObjectView& destination, const ObjectView& sour
       // object's motion can), at its exact sub-pixel position.
       std::vector<uint8_t> on_motion(static_cast<size_t>(d.size.area()), 0);
       cv::Mat motion = global_motion(d, m.match, options.seed);
+      // Two similar blobs can follow one affine motion too: it is the same
+      // object only when the motion also keeps the normals about as well as
+      // the nearest normal does for each pixel.
+      // (No motion at full size either: not one object moved after all.)
+      if (motion.empty() || !motion_keeps_normals(d, s, motion, seed))
+        return different_objects(destination, source, options, progress);
       if (!motion.empty()) {
         const double a = motion.at<double>(0, 0), b = motion.at<double>(0, 1), c = motion.at<double>(0, 2);
         const double e = motion.at<double>(1, 0), f = motion.at<double>(1, 1), g = motion.at<double>(1, 2);

@@ -1,18 +1,20 @@
 #pragma once
 // Internal: the `combined` correspondence (Method::combined), the default.
 //
-// For every destination pixel, the source pixel whose surroundings look the
-// same by everything the rig gives: the normals, the per-lamp shading pattern
-// (each lamp's grey level over their norm: albedo-free, carrying cast shadows
-// that normals miss), and the mean colour's chromaticity and (weakly)
-// brightness, over a sparse 5x5 patch; plus a coherence term, the cost of
-// each 4-neighbour whose match lies more than 1.5 px away. Minimised by
-// PatchMatch (propagation, random search) over an image pyramid: the coarsest
-// level searches the whole source, seeded by the nearest normal; each finer
-// level starts from the coarser match scaled up and searches a few pixels
-// around it. When the destination is the source moved, scaled or cropped, the
-// patches only fit at the true motion, and the coherence term keeps chunks
-// whole between different objects. Every destination object pixel is mapped.
+// First, is the destination the source moved (scaled, turned, cropped)? A
+// PatchMatch at the coarsest pyramid level compares everything the rig gives
+// for a pixel: the normal, the per-lamp shading pattern (each lamp's grey
+// level over their norm: albedo-free, carrying cast shadows that normals
+// miss), the mean colour's chromaticity and (weakly) brightness, over a
+// sparse 9x9 patch, plus a coherence term (each 4-neighbour whose match does
+// not continue this one costs). If an affine motion found by RANSAC explains
+// 60 % of its matches, the finer levels follow it; at full size the motion is
+// refitted and taken, at sub-pixel positions, wherever its patch fits about
+// as well as the pixel's own match -- provided it keeps the normals nearly as
+// well as the nearest normal does (two similar blobs can follow one motion
+// too). Otherwise the objects differ and `coherent` on the normals maps them:
+// patches of normals compare badly between shapes of different curvature.
+// Every destination object pixel is mapped.
 #include "veneer/match/matcher.hpp"
 #include "veneer/util/expected.hpp"
 #include "veneer/util/progress.hpp"
