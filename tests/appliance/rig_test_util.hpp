@@ -136,14 +136,9 @@ class DaemonProcess {
   }
   std::string address() const { return "127.0.0.1:" + std::to_string(port_); }
   bool alive() const { return pid_ > 0 && ::waitpid(pid_, nullptr, WNOHANG) == 0; }
+  // The log's last 6000 characters (for failure messages).
   std::string log() const {
-    FILE* f = std::fopen(log_.c_str(), "r");
-    if (!f) return "";
-    std::string s;
-    char buf[4096];
-    size_t n;
-    while ((n = std::fread(buf, 1, sizeof buf, f)) > 0) s.append(buf, n);
-    std::fclose(f);
+    std::string s = full_log();
     return s.size() > 6000 ? s.substr(s.size() - 6000) : s;
   }
   // Stops the daemon; SIGKILL simulates a crash / power cut.
