@@ -449,17 +449,20 @@ Expected<ImageSet> read_veneer(const fs::path& folder, const ReadOptions& option
                       std::string(manifest->ambient_file.empty() ? "" : " and the ambient frame") + " names a RAW file");
   const bool use_raw = options.photos != PhotoSource::developed && all_raw;
 
-  if (!options.load_photos) {
+  // The mask (set.json's size) and the truth, with or without the photos.
+  auto load_mask_and_truth = [&]() -> Status {
     if (!manifest->mask_file.empty()) {
       fs::path f = folder / manifest->mask_file;
       auto m = read_mask(f);
       if (!m) return m.error();
-      if (Status s = check_size(f, *m, set.size, "set.json's size"); !s) return s.error();
+      if (Status s = check_size(f, *m, set.size, "set.json's size"); !s) return s;
       set.mask = std::move(m).value();
     }
-    if (options.load_truth) {
-      if (Status s = load_truth(folder / "truth", set); !s) return s.error();
-    }
+    if (options.load_truth) return load_truth(folder / "truth", set);
+    return {};
+  };
+  if (!options.load_photos) {
+    if (Status s = load_mask_and_truth(); !s) return s.error();
     set.photos_from = use_raw ? (options.raw.half_size ? "raw-half" : "raw") : "developed";
     return set;
   }
@@ -493,16 +496,7 @@ Expected<ImageSet> read_veneer(const fs::path& folder, const ReadOptions& option
     const cv::Mat& m = i < set.images.size() ? set.images[i] : set.ambient;
     if (Status s = check_size(frames[i].file, m, expect, why); !s) return s.error();
   }
-  if (!manifest->mask_file.empty()) {
-    fs::path f = folder / manifest->mask_file;
-    auto m = read_mask(f);
-    if (!m) return m.error();
-    if (Status s = check_size(f, *m, set.size, "set.json's size"); !s) return s.error();
-    set.mask = std::move(m).value();
-  }
-  if (options.load_truth) {
-    if (Status s = load_truth(folder / "truth", set); !s) return s.error();
-  }
+  if (Status s = load_mask_and_truth(); !s) return s.error();
   if (use_raw && photo_size != set.size) {
     VLOG_INFO("ImageSet", "{}: RAW photos are {}, set.json says {}; mask, truth and intrinsics scaled to the RAW size",
               folder.string(), size_text(photo_size), size_text(set.size));
