@@ -1,12 +1,9 @@
 #include "veneerd/rig.hpp"
 
 #include <chrono>
-#include <cstdio>
 #include <fstream>
 
-#include <fcntl.h>
-#include <unistd.h>
-
+#include "veneer/io/image_io.hpp"
 #include "veneer/util/log.hpp"
 #include "veneerd/sequencer.hpp"
 
@@ -214,16 +211,8 @@ veneer::Status Rig::save_owner(const std::vector<LampState>& states) {
     doc["lamps"].push_back(l);
   }
   const auto& file = options_.owner_state_file;
-  std::string tmp = file.string() + ".tmp";
-  std::string text = doc.dump(1) + "\n";
-  int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) return make_error("cannot write " + tmp);
-  bool ok = ::write(fd, text.data(), text.size()) == static_cast<ssize_t>(text.size()) && ::fsync(fd) == 0;
-  ::close(fd);
-  if (!ok || std::rename(tmp.c_str(), file.c_str()) != 0) {
-    ::unlink(tmp.c_str());
-    return make_error("cannot write " + file.string() + " (disk full?)");
-  }
+  if (auto s = veneer::write_file_atomic(file, doc.dump(1) + "\n"); !s)
+    return make_error("cannot write " + file.string() + " (disk full?): " + s.message());
   owner_saved_ = true;
   return {};
 }
@@ -258,8 +247,8 @@ void Rig::drop_owner() {
 
 void Rig::give_back_owner(const char* when) {
   if (!owner_saved_ || !dev_.lamps) return;
-  if (options_.owner_state_file.empty()) {
-    if (pending_restore_.needed) (void)dev_.lamps->restore(pending_restore_.states);
+  if (options_.owner_state_file.empty()) {  // nothing kept on disk: only a pending restore can be retried
+    retry_restore();
     drop_owner();
     return;
   }
