@@ -1,6 +1,7 @@
 // veneer normals — photometric stereo on one set: normals (PFM + picture),
 // albedo, mask, residual/confidence picture, and, for simulated sets with
 // truth/, the angular error against it (printed and in metrics.json).
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -25,7 +26,7 @@ struct NormalsArgs {
   std::string set, out, rect, model = "automatic";
   bool robust = false, plain = false, near_light = false, distant = false, otsu = false;
   double threshold = -1;
-  bool supplied_mask = false, no_clean = false;
+  bool supplied_mask = false, no_clean = false, keep_base = false, recorded_lights = false;
   // the solver's defaults are the library's (PsOptions)
   float shadow = veneer::ps::PsOptions{}.shadow_fraction, saturation = veneer::ps::PsOptions{}.saturation,
         outliers = veneer::ps::PsOptions{}.outlier_fraction, chroma = veneer::ps::PsOptions{}.diffuse_chroma;
@@ -86,6 +87,7 @@ int run_normals(const NormalsArgs& a) {
   po.shadow_fraction = a.shadow;
   po.saturation = a.saturation;
   po.outlier_fraction = a.outliers;
+  po.refine_lights = !a.recorded_lights;
   po.diffuse_chroma = a.chroma;
   po.near_iterations = a.iterations;
   po.threads = a.threads;
@@ -128,6 +130,9 @@ int run_normals(const NormalsArgs& a) {
   progress.on_progress = [&bar](double f, const std::string& stage) { bar.update(0.35 + 0.45 * f, stage); };
   auto res = veneer::ps::photometric_stereo(*set, seg->mask, po, progress);
   if (!res) return fail(1, res.message());
+  // A base the object stands on is not the object (a supplied mask is the user's word).
+  veneer::ps::SupportRemoval base;
+  if (seg->method_used != veneer::ps::SegmentMethod::supplied && !a.keep_base) base = veneer::ps::drop_supports(*res);
 
   bar.update(0.85, "writing " + a.out);
   std::error_code ec;
@@ -156,6 +161,19 @@ int run_normals(const NormalsArgs& a) {
   m["robust"] = po.robust;
   m["segmentation"] = veneer::ps::segment_method_name(seg->method_used);
   m["threshold"] = seg->threshold;
+  m["base_dropped_pixels"] = base.removed_pixels;
+  m["lights_refined"] = res->lights_refined;
+  if (res->lights_refined) {
+    nlohmann::json lamps = nlohmann::json::array();
+    for (size_t i = 0; i < res->lights.size(); ++i) {
+      const auto& l = res->lights[i];
+      lamps.push_back({{"index", i},
+                       {"direction", {l.direction[0], l.direction[1], l.direction[2]}},
+                       {"intensity", {l.intensity[0], l.intensity[1], l.intensity[2]}},
+                       {"moved_deg", res->light_change_deg[i]}});
+    }
+    m["refined_lights"] = lamps;
+  }
   m["object_pixels"] = res->solved_pixels;
   m["unreliable_pixels"] = res->unreliable_pixels;
   m["mean_residual"] = cv::mean(res->residual, res->mask)[0];
@@ -164,6 +182,14 @@ int run_normals(const NormalsArgs& a) {
   std::printf("normals: %s, %d object pixels (%s), %s lights%s, %d unreliable\n", a.set.c_str(), res->solved_pixels,
               veneer::ps::segment_method_name(seg->method_used), veneer::ps::light_model_name(res->model_used),
               po.robust ? ", robust" : "", res->unreliable_pixels);
+  if (res->lights_refined) {
+    const auto [lo, hi] = std::minmax_element(res->light_change_deg.begin(), res->light_change_deg.end());
+    std::printf("lamp directions refined from the photos: moved %.1f-%.1f deg (metrics.json: refined_lights; "
+                "--recorded-lights keeps the set's)\n", *lo, *hi);
+  }
+  if (base.removed_pixels > 0)
+    std::printf("left out a base the object stands on: %d pixels on %d flat faces (--keep-base keeps it)\n",
+                base.removed_pixels, base.planes);
   if (set->truth.present()) {
     const cv::Mat& tm = set->truth.mask.empty() ? res->mask : set->truth.mask;
     cv::Mat both;
@@ -201,6 +227,9 @@ VENEER_COMMAND(normals) {
   cmd->add_flag("--supplied-mask", args->supplied_mask, "use the set's own mask (fail when it has none)");
   cmd->add_option("--rect", args->rect, "limit the object to the rectangle x,y,w,h (pixels)");
   cmd->add_flag("--no-clean", args->no_clean, "keep specks and holes in a thresholded mask");
+  cmd->add_flag("--recorded-lights", args->recorded_lights,
+                "use the set's lamp directions and intensities as recorded (by default, with distant lights, they are refined from the photos)");
+  cmd->add_flag("--keep-base", args->keep_base, "keep a plinth, stand or table top the object stands on in the mask (left out by default)");
   cmd->add_option("--shadow", args->shadow, "robust: shadow threshold as a fraction of the pixel's brightest sample")
       ->capture_default_str();
   cmd->add_option("--saturation", args->saturation, "robust: a sample at or above this level is saturated")

@@ -91,11 +91,11 @@ TEST(Segmentation, SuppliedMaskIsTheDefault) {
   ASSERT_TRUE(s.ok()) << s.message();
   EXPECT_EQ(s->method_used, SegmentMethod::supplied);
   EXPECT_EQ(cv::countNonZero(s->mask), 50 * 40);
-  // Without one, automatic means Otsu; `supplied` is an error.
+  // Without one, automatic means contrast; `supplied` is an error.
   set.mask = cv::Mat();
   s = segment(set, {});
   ASSERT_TRUE(s.ok());
-  EXPECT_EQ(s->method_used, SegmentMethod::otsu);
+  EXPECT_EQ(s->method_used, SegmentMethod::contrast);
   SegmentOptions opt;
   opt.method = SegmentMethod::supplied;
   EXPECT_FALSE(segment(set, opt).ok());

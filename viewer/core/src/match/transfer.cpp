@@ -114,6 +114,10 @@ Expected<PreparedObject> prepare_object(const ImageSet& set, bool truth_normals,
     t0 = Clock::now();
     auto solved = ps::photometric_stereo(set, out.view.mask, {}, progress);
     if (!solved) return make_error("set " + who_of(set) + ": photometric stereo: " + solved.message());
+    if (set.mask.empty()) {  // a base the object stands on is not the object (a supplied mask is the user's word)
+      ps::drop_supports(*solved);
+      out.view.mask = solved->mask;
+    }
     out.normals_seconds = since(t0);
     out.view.normals = solved->normals;
   }

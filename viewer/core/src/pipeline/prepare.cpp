@@ -10,6 +10,7 @@
 #include <tbb/parallel_invoke.h>
 
 #include "veneer/ps/photometric_stereo.hpp"
+#include "veneer/ps/segmentation.hpp"
 #include "veneer/util/log.hpp"
 
 namespace veneer::pipeline {
@@ -21,7 +22,7 @@ using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 // Bump when what is cached, or how it is computed, changes.
-constexpr const char* kCacheVersion = "prepared-set/1";
+constexpr const char* kCacheVersion = "prepared-set/2";
 
 Progress sub_progress(const Progress& p, double from, double to) { return p.part(from, to); }
 
@@ -165,6 +166,10 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
     t0 = Clock::now();
     auto solved = ps::photometric_stereo(p.set, p.object.view.mask, {}, sub_progress(progress, 0.6, 0.9));
     if (!solved) return make_error("set " + p.set.id + ": photometric stereo: " + solved.message());
+    if (p.set.mask.empty()) {  // a base the object stands on is not the object (a supplied mask is the user's word)
+      ps::drop_supports(*solved);
+      p.object.view.mask = solved->mask;
+    }
     p.object.normals_seconds = since(t0);
     p.object.view.normals = solved->normals;
     p.albedo = solved->albedo;

@@ -16,15 +16,16 @@ const char* segment_method_name(SegmentMethod m) {
     case SegmentMethod::threshold: return "threshold";
     case SegmentMethod::otsu: return "otsu";
     case SegmentMethod::none: return "none";
+    case SegmentMethod::contrast: return "contrast";
   }
   return "automatic";
 }
 
 Expected<SegmentMethod> parse_segment_method(const std::string& s) {
   for (SegmentMethod m : {SegmentMethod::automatic, SegmentMethod::supplied, SegmentMethod::threshold,
-                          SegmentMethod::otsu, SegmentMethod::none})
+                          SegmentMethod::otsu, SegmentMethod::none, SegmentMethod::contrast})
     if (s == segment_method_name(m)) return m;
-  return make_error("unknown segmentation method '" + s + "' (automatic, supplied, threshold, otsu, none)");
+  return make_error("unknown segmentation method '" + s + "' (automatic, supplied, contrast, threshold, otsu, none)");
 }
 
 Status SegmentOptions::check() const {
@@ -36,6 +37,11 @@ Status SegmentOptions::check() const {
     return make_error("min_component_fraction must be in [0, 1), got " + std::to_string(min_component_fraction));
   if (!(max_hole_fraction >= 0 && max_hole_fraction < 1))
     return make_error("max_hole_fraction must be in [0, 1), got " + std::to_string(max_hole_fraction));
+  if (!(border_fraction > 0 && border_fraction <= 0.25))
+    return make_error("border_fraction must be in (0, 0.25], got " + std::to_string(border_fraction));
+  if (!(contrast_low > 1 && contrast_high >= contrast_low && contrast_high < 1e3))
+    return make_error("contrast thresholds must satisfy 1 < low <= high, got " + std::to_string(contrast_low) + " and " +
+                      std::to_string(contrast_high));
   return Status::success();
 }
 
@@ -56,6 +62,75 @@ cv::Mat summed_intensity(const ImageSet& set, bool subtract_ambient) {
     for (int x = 0; x < size.width; ++x) g[x] = std::max(0.f, (a[x][0] + a[x][1] + a[x][2]) * s);
   }
   return grey;
+}
+
+// The brightest grey over lamps, ambient removed: lit by some lamp.
+cv::Mat brightest_intensity(const ImageSet& set, bool subtract_ambient) {
+  const cv::Size size = set.images[0].size();
+  cv::Mat out(size, CV_32FC1, cv::Scalar(0));
+  const bool amb = subtract_ambient && !set.ambient.empty() && set.ambient.size() == size && set.ambient.type() == CV_32FC3;
+  cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& rows) {
+    for (int y = rows.start; y < rows.end; ++y) {
+      float* o = out.ptr<float>(y);
+      const cv::Vec3f* a = amb ? set.ambient.ptr<cv::Vec3f>(y) : nullptr;
+      for (const cv::Mat& im : set.images) {
+        const cv::Vec3f* p = im.ptr<cv::Vec3f>(y);
+        for (int x = 0; x < size.width; ++x) {
+          float g = p[x][0] + p[x][1] + p[x][2];
+          if (a) g -= a[x][0] + a[x][1] + a[x][2];
+          o[x] = std::max(o[x], g * (1.f / 3.f));
+        }
+      }
+    }
+  });
+  return out;
+}
+
+float percentile(std::vector<float>& v, double q) {
+  if (v.empty()) return 0.f;
+  const size_t k = std::min(v.size() - 1, static_cast<size_t>(q * double(v.size() - 1)));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return v[k];
+}
+
+// The backdrop's level in the brightest-lamp image: the 98th percentile over a
+// band along each of the top, left and right edges, the middle of the three
+// (so an object that reaches one edge does not raise it).
+float backdrop_level(const cv::Mat& bright, double fraction) {
+  const int b = std::max(2, static_cast<int>(fraction * std::min(bright.rows, bright.cols)));
+  std::vector<float> side[3];
+  for (int y = 0; y < bright.rows; ++y) {
+    const float* p = bright.ptr<float>(y);
+    for (int x = 0; x < bright.cols; ++x) {
+      if (y < b) side[0].push_back(p[x]);
+      if (x < b) side[1].push_back(p[x]);
+      if (x >= bright.cols - b) side[2].push_back(p[x]);
+    }
+  }
+  float lv[3];
+  for (int i = 0; i < 3; ++i) lv[i] = percentile(side[i], 0.98);
+  std::sort(lv, lv + 3);
+  return lv[1];
+}
+
+// Hysteresis: pixels above `low` connected (8-neighbours) to a pixel above `high`.
+cv::Mat hysteresis(const cv::Mat& img, float low, float high) {
+  cv::Mat lo = img > low;
+  cv::Mat labels;
+  const int n = cv::connectedComponents(lo, labels, 8, CV_32S);
+  std::vector<uint8_t> keep(n, 0);
+  for (int y = 0; y < img.rows; ++y) {
+    const float* p = img.ptr<float>(y);
+    const int* l = labels.ptr<int>(y);
+    for (int x = 0; x < img.cols; ++x)
+      if (l[x] > 0 && p[x] > high) keep[l[x]] = 255;
+  }
+  for (int y = 0; y < img.rows; ++y) {
+    const int* l = labels.ptr<int>(y);
+    uint8_t* m = lo.ptr<uint8_t>(y);
+    for (int x = 0; x < img.cols; ++x) m[x] = keep[l[x]];
+  }
+  return lo;
 }
 
 // Otsu's threshold on the logarithm of a float image (values >= 0, floored at
@@ -144,7 +219,7 @@ Expected<Segmentation> segment(const ImageSet& set, const SegmentOptions& option
       return make_error("image " + std::to_string(i) + " differs in size or type from image 0");
   Segmentation seg;
   SegmentMethod method = options.method;
-  if (method == SegmentMethod::automatic) method = set.mask.empty() ? SegmentMethod::otsu : SegmentMethod::supplied;
+  if (method == SegmentMethod::automatic) method = set.mask.empty() ? SegmentMethod::contrast : SegmentMethod::supplied;
   seg.method_used = method;
   cv::Mat mask;
   if (method == SegmentMethod::supplied) {
@@ -152,6 +227,15 @@ Expected<Segmentation> segment(const ImageSet& set, const SegmentOptions& option
     if (set.mask.size() != size || set.mask.type() != CV_8UC1)
       return make_error("the set's mask does not match its images (size or type)");
     mask = set.mask.clone();
+  } else if (method == SegmentMethod::contrast) {
+    seg.summed = brightest_intensity(set, options.subtract_ambient);
+    double peak = 0;
+    cv::minMaxLoc(seg.summed, nullptr, &peak);
+    seg.backdrop = backdrop_level(seg.summed, options.border_fraction);
+    // Floors for a black backdrop (no light reaches it, no noise): a fraction of the peak.
+    seg.threshold = std::max(options.contrast_low * seg.backdrop, 0.002 * peak);
+    const double high = std::max(options.contrast_high * seg.backdrop, 0.02 * peak);
+    mask = hysteresis(seg.summed, static_cast<float>(seg.threshold), static_cast<float>(high));
   } else {
     seg.summed = summed_intensity(set, options.subtract_ambient);
     if (method == SegmentMethod::none) {
@@ -183,6 +267,182 @@ Expected<Segmentation> segment(const ImageSet& set, const SegmentOptions& option
     return make_error(std::string("segmentation (") + segment_method_name(method) + ") found no object pixels");
   seg.mask = mask;
   return seg;
+}
+
+}  // namespace veneer::ps
+
+namespace veneer::ps {
+
+namespace {
+
+inline float dot3(const cv::Vec3f& a, const cv::Vec3f& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+}  // namespace
+
+SupportRemoval drop_supports(cv::Mat& mask, const cv::Mat& normals, const SupportOptions& o) {
+  SupportRemoval out;
+  if (mask.empty() || normals.size() != mask.size() || normals.type() != CV_32FC3 || mask.type() != CV_8UC1) return out;
+  const int W = mask.cols, H = mask.rows;
+  const int total = cv::countNonZero(mask);
+  if (total < 100) return out;
+  const float cos_step = static_cast<float>(std::cos(o.plane_deg * CV_PI / 180));
+  const float cos_region = static_cast<float>(std::cos(o.region_deg * CV_PI / 180));
+  // 1. Flat regions: grow from each unlabelled pixel while neighbours agree
+  //    with the pixel they come from and with the region's running mean.
+  cv::Mat labels(mask.size(), CV_32S, cv::Scalar(-1));
+  struct Region {
+    cv::Vec3f mean;
+    int area = 0, bottom = 0;
+  };
+  std::vector<Region> regions;
+  std::vector<cv::Point> stack;
+  const cv::Point nb4[4] = {{1, 0}, {-1, 0}, {0, 1}, {0, -1}};
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      if (!mask.at<uint8_t>(y, x) || labels.at<int>(y, x) >= 0) continue;
+      const cv::Vec3f n0 = normals.at<cv::Vec3f>(y, x);
+      if (dot3(n0, n0) < 0.5f) continue;
+      const int id = static_cast<int>(regions.size());
+      Region r;
+      cv::Vec3f sum = n0;
+      r.area = 1;
+      r.bottom = y;
+      labels.at<int>(y, x) = id;
+      stack.assign(1, {x, y});
+      while (!stack.empty()) {
+        const cv::Point p = stack.back();
+        stack.pop_back();
+        const cv::Vec3f np = normals.at<cv::Vec3f>(p);
+        const cv::Vec3f mean = sum / cv::norm(sum);
+        for (const cv::Point& d : nb4) {
+          const cv::Point q = p + d;
+          if (q.x < 0 || q.y < 0 || q.x >= W || q.y >= H) continue;
+          if (!mask.at<uint8_t>(q) || labels.at<int>(q) >= 0) continue;
+          const cv::Vec3f nq = normals.at<cv::Vec3f>(q);
+          if (dot3(nq, np) < cos_step || dot3(nq, mean) < cos_region) continue;
+          labels.at<int>(q) = id;
+          sum += nq;
+          ++r.area;
+          r.bottom = std::max(r.bottom, q.y);
+          stack.push_back(q);
+        }
+      }
+      r.mean = sum / cv::norm(sum);
+      regions.push_back(r);
+    }
+  // 2. Planes: large flat regions. The object's bottom row.
+  int bottom = 0, top = H;
+  for (int y = 0; y < H; ++y)
+    if (cv::countNonZero(mask.row(y))) {
+      top = std::min(top, y);
+      bottom = y;
+    }
+  const int min_plane = std::max(50, static_cast<int>(o.min_plane_fraction * total));
+  std::vector<uint8_t> support(regions.size(), 0);
+  const int reach = std::max(2, static_cast<int>(0.03 * (bottom - top + 1)));
+  bool any = false;
+  for (size_t i = 0; i < regions.size(); ++i)
+    if (regions[i].area >= min_plane && regions[i].bottom >= bottom - reach) support[i] = 1, any = true;
+  if (!any) return out;
+  // 3. Flat regions touching the support join it (a plinth's top and front).
+  for (bool grew = true; grew;) {
+    grew = false;
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        const int a = labels.at<int>(y, x);
+        if (a < 0) continue;
+        for (const cv::Point& d : {cv::Point(1, 0), cv::Point(0, 1)}) {
+          const int qx = x + d.x, qy = y + d.y;
+          if (qx >= W || qy >= H) continue;
+          const int b = labels.at<int>(qy, qx);
+          if (b < 0 || a == b || support[a] == support[b]) continue;
+          const int other = support[a] ? b : a;
+          if (regions[other].area >= min_plane) support[other] = 1, grew = true;
+        }
+      }
+  }
+  // 4. Guards: small enough, and touched by the rest along a small part of its outline.
+  int area = 0, planes = 0;
+  for (size_t i = 0; i < regions.size(); ++i)
+    if (support[i]) area += regions[i].area, ++planes;
+  if (area > o.max_support_fraction * total) return out;
+  // 4b. With it go the pixels next to it that lean its way (its cast shadows,
+  //     solved less well).
+  auto in_support = [&](int x, int y) {
+    const int l = labels.at<int>(y, x);
+    return l >= 0 && support[l];
+  };
+  cv::Mat dropped(mask.size(), CV_8UC1, cv::Scalar(0));
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x)
+      if (in_support(x, y)) dropped.at<uint8_t>(y, x) = 255;
+  const float cos_absorb = static_cast<float>(std::cos(o.absorb_deg * CV_PI / 180));
+  stack.clear();
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x)
+      if (dropped.at<uint8_t>(y, x)) stack.push_back({x, y});
+  cv::Mat from(mask.size(), CV_32S, cv::Scalar(-1));  // the support region a pixel was absorbed from
+  for (const cv::Point& p : stack) from.at<int>(p) = labels.at<int>(p);
+  while (!stack.empty()) {
+    const cv::Point p = stack.back();
+    stack.pop_back();
+    const cv::Vec3f ref = regions[static_cast<size_t>(from.at<int>(p))].mean;
+    for (const cv::Point& d : nb4) {
+      const cv::Point q = p + d;
+      if (q.x < 0 || q.y < 0 || q.x >= W || q.y >= H) continue;
+      if (!mask.at<uint8_t>(q) || dropped.at<uint8_t>(q)) continue;
+      const cv::Vec3f nq = normals.at<cv::Vec3f>(q);
+      if (dot3(nq, nq) > 0.5f && dot3(nq, ref) < cos_absorb) continue;
+      dropped.at<uint8_t>(q) = 255;
+      from.at<int>(q) = from.at<int>(p);
+      stack.push_back(q);
+    }
+  }
+  if (cv::countNonZero(dropped) > o.max_support_fraction * total) return out;
+  // 5. Touched by the rest along a small part of its outline?
+  int outline = 0, contact = 0;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      if (!dropped.at<uint8_t>(y, x)) continue;
+      bool edge = false, touch = false;
+      for (const cv::Point& d : nb4) {
+        const int qx = x + d.x, qy = y + d.y;
+        if (qx < 0 || qy < 0 || qx >= W || qy >= H || !dropped.at<uint8_t>(qy, qx)) {
+          edge = true;
+          if (qx >= 0 && qy >= 0 && qx < W && qy < H && mask.at<uint8_t>(qy, qx)) touch = true;
+        }
+      }
+      outline += edge;
+      contact += touch;
+    }
+  if (outline == 0 || contact > o.max_contact_fraction * outline) return out;
+  // 6. Drop it; keep the largest remaining part.
+  cv::Mat kept = mask & ~dropped;
+  cv::Mat cl, stats, cent;
+  const int n = cv::connectedComponentsWithStats(kept, cl, stats, cent, 8, CV_32S);
+  int best = 0;
+  for (int l = 1; l < n; ++l)
+    if (best == 0 || stats.at<int>(l, cv::CC_STAT_AREA) > stats.at<int>(best, cv::CC_STAT_AREA)) best = l;
+  if (best == 0) return out;
+  const int remaining = stats.at<int>(best, cv::CC_STAT_AREA);
+  if (remaining < (1.0 - o.max_support_fraction) * total * 0.8) return out;  // that was not a base
+  kept = cl == best;
+  out.removed_pixels = total - remaining;
+  out.planes = planes;
+  mask = kept;
+  return out;
+}
+
+SupportRemoval drop_supports(PsResult& r, const SupportOptions& options) {
+  const cv::Mat before = r.mask.clone();
+  SupportRemoval out = drop_supports(r.mask, r.normals, options);
+  if (out.removed_pixels == 0) return out;
+  const cv::Mat gone = before & ~r.mask;
+  for (cv::Mat* m : {&r.normals, &r.albedo, &r.reliable, &r.residual, &r.depth})
+    if (!m->empty()) m->setTo(cv::Scalar::all(0), gone);
+  r.solved_pixels = cv::countNonZero(r.mask);
+  r.unreliable_pixels = r.solved_pixels - cv::countNonZero(r.reliable & r.mask);
+  return out;
 }
 
 }  // namespace veneer::ps

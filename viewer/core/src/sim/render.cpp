@@ -187,7 +187,7 @@ std::shared_ptr<const GBuffer> Scene::gbuffer(cv::Size size, double focal, int t
         set3(g.albedo, s.albedo);
         g.ks = static_cast<float>(s.ks);
         g.shininess = static_cast<float>(s.shininess);
-        g.kind = 2;
+        g.kind = shape.prims[static_cast<size_t>(prim)].part == support_part ? 3 : 2;
       } else if (d.z < 0) {
         double t = (table_z_world - camera.z) / d.z;
         V3 p = camera + d * t;

@@ -34,7 +34,7 @@ struct GPixel {
   float n[3];       // shading normal
   float albedo[3];  // RGB
   float ks, shininess;
-  uint8_t kind;     // 0 = nothing, 1 = table, 2 = object
+  uint8_t kind;     // 0 = nothing, 1 = table, 2 = object, 3 = its base (a plinth: lit and shaded, not the object)
 };
 
 struct GBuffer {
@@ -48,6 +48,8 @@ class Scene {
   std::string name;
   Shape shape;             // object space: metres, centred near the origin, y up
   MaterialFn material;
+  int support_part = -1;   // Shape part tag of the base the object stands on (a plinth), -1 = none;
+                           // rendered as the object is, but not in the truth's mask
   V3 table_albedo{0.04, 0.04, 0.04};
   double table_z = 0;      // object-space z of the table plane (faces +z, touches the object's back)
   // Placement: world = offset + base + scale * (p - base), base = (0, 0, table_z).

@@ -354,6 +354,7 @@ std::unique_ptr<Scene> bull() {
             kHide);
   P.push_back(f.place(Primitive::ellipsoid({-0.061, -0.030, 0.004}, {0.0035, 0.006, 0.0035}, {}, kHoof)));  // tuft
   P.push_back(f.place(Primitive::box({-0.004, -0.0515, 0}, {0.072, 0.004, 0.024}, {}, kPlinth)));
+  s->support_part = kPlinth;
   s->material = [f](const V3& p, const V3& n, int, int part, SurfaceSample* out) {
     V3 q = f.to_local(p);
     switch (part) {

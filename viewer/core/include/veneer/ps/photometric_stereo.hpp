@@ -15,6 +15,7 @@
 //    (PsOptions::diffuse_chroma), where a glossy dielectric's highlight --
 //    the lamp's colour -- does not reach.
 #include <string>
+#include <vector>
 
 #include <opencv2/core.hpp>
 
@@ -55,7 +56,20 @@ struct PsOptions {
                                    // [0, 2]; 0 = off. Quality table, 512x340: the exact nearest's normal
                                    // error 3.20 -> 2.08 degrees, with the outlier pass
                                    // then off (bench_ps: red glossy sphere 3.85 -> 0.85)
+  bool fill_unreliable = true;     // robust: a pixel left with < 3 lit samples takes its normal from its
+                                   // reliable neighbours (diffused inward) instead of the plain fit over
+                                   // shadowed samples, which errs by tens of degrees (the bull's far legs)
   bool subtract_ambient = true;    // subtract set.ambient when present
+  bool refine_lights = true;       // robust, distant model: refine the lamps' directions and intensities
+                                   // from the photos (calibrated rigs are a few degrees off): each lamp's
+                                   // vector fitted to the solved normals over the pixels it lights
+                                   // clearly, the whole set then brought by one linear map as close as it
+                                   // goes to the recorded lamps (the photos fix them only up to such a map),
+                                   // and the normals solved again; skipped when the normals do not spread
+                                   // enough to fix a lamp. See PsResult::lights_refined
+  int refine_iterations = 3;       // rounds of refine-then-solve (1..10)
+  double refine_max_deg = 15.0;    // a lamp that would move farther than this is not a calibration error:
+                                   // the refinement is dropped and the recorded lamps used
   int near_iterations = 2;         // near: depth refinements after the z = 0 pass (0..5)
   int threads = 0;                 // 0 = all cores (TBB)
   Status check() const;
@@ -63,8 +77,9 @@ struct PsOptions {
 
 struct PsResult {
   cv::Mat normals;   // CV_32FC3 x,y,z rig frame, unit; (0,0,0) outside the mask or where there is
-                     // no signal. A robust pixel with < 3 samples kept falls back to the plain
-                     // least-squares normal (and is marked unreliable), so maps have no holes.
+                     // no signal. A robust pixel with < 3 samples kept takes its neighbours'
+                     // normal (PsOptions::fill_unreliable; else the plain least-squares normal)
+                     // and is marked unreliable, so maps have no holes.
   cv::Mat albedo;    // CV_32FC3 BGR, relative to lamp intensity (1 = white Lambertian); 0 outside
   cv::Mat mask;      // CV_8UC1, the pixels that were solved (the input mask, or all)
   cv::Mat reliable;  // CV_8UC1, 255 where the normal is trustworthy (>= 3 samples kept, signal present)
@@ -73,6 +88,9 @@ struct PsResult {
   cv::Mat depth;     // CV_32FC1, near mode: estimated depth in metres along -z from the camera
                      // (0 outside); empty in distant mode
   LightModel model_used = LightModel::distant;
+  bool lights_refined = false;          // the normals were solved with refined lamps (PsOptions::refine_lights)
+  std::vector<Light> lights;            // lights_refined: the refined lamps (directions, intensities)
+  std::vector<double> light_change_deg; // lights_refined: how far each lamp's direction moved
   int solved_pixels = 0;      // pixels in mask
   int unreliable_pixels = 0;  // pixels in mask that are not reliable
 };

@@ -279,6 +279,33 @@ cv::Mat global_motion(const Level& d, const std::vector<cv::Point2i>& match, uns
   return share >= 0.6 ? A : cv::Mat();
 }
 
+// `coarse` (2x3 at 1/scale) at full size, refitted by least squares to the
+// matches within 3 px of it when at least a third of them are; else empty.
+cv::Mat refit_motion(const Level& d, const std::vector<cv::Point2i>& match, const cv::Mat& coarse, double scale) {
+  if (coarse.empty()) return {};
+  cv::Mat A = coarse.clone();
+  A.at<double>(0, 2) *= scale;
+  A.at<double>(1, 2) *= scale;
+  std::vector<cv::Point2f> from, to;
+  size_t total = 0;
+  const size_t step = std::max<size_t>(1, d.pixels.size() / 4000);
+  for (size_t i = 0; i < d.pixels.size(); i += step) {
+    const cv::Point p = d.pixels[i];
+    const cv::Point2i q = match[static_cast<size_t>(p.y) * d.size.width + p.x];
+    if (q.x < 0) continue;
+    ++total;
+    const double tx = A.at<double>(0, 0) * p.x + A.at<double>(0, 1) * p.y + A.at<double>(0, 2);
+    const double ty = A.at<double>(1, 0) * p.x + A.at<double>(1, 1) * p.y + A.at<double>(1, 2);
+    if (std::hypot(tx - q.x, ty - q.y) > 3.0) continue;
+    from.emplace_back(static_cast<float>(p.x), static_cast<float>(p.y));
+    to.emplace_back(static_cast<float>(q.x), static_cast<float>(q.y));
+  }
+  if (total == 0 || from.size() < 50 || from.size() * 3 < total) return {};
+  std::vector<uchar> inliers;
+  cv::Mat R = cv::estimateAffine2D(from, to, inliers, cv::LMEDS);
+  return R.empty() ? A : R;
+}
+
 // Median angle [deg] between each destination pixel's normal and the source
 // normal the motion (or, for comparison, the nearest-normal seed) gives it;
 // the motion passes when its median is within max(4 deg, 3x the seed's).
@@ -457,6 +484,10 @@ Expected<Map> run_combined(const ObjectView& destination, const ObjectView& sour
       // object's motion can), at its exact sub-pixel position.
       std::vector<uint8_t> on_motion(static_cast<size_t>(d.size.area()), 0);
       cv::Mat motion = global_motion(d, m.match, options.seed);
+      // Fine matches are noisier than coarse ones (a resampled copy's patches
+      // differ pixel by pixel): without a majority at full size, the coarse
+      // motion, scaled up, is refitted to the matches that follow it.
+      if (motion.empty()) motion = refit_motion(d, m.match, coarse_motion, std::ldexp(1.0, levels - 1));
       // Two similar blobs can follow one affine motion too: it is the same
       // object only when the motion also keeps the normals about as well as
       // the nearest normal does for each pixel.
