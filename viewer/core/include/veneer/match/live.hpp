@@ -46,6 +46,9 @@ class LiveRepainter {
   cv::Mat mask_;          // CV_8UC1 255 where mapped
   cv::Size prepared_for_;
   cv::Mat table_x_, table_y_;  // CV_32FC1 gather tables for the current frame size
+  cv::Mat map_nan_;       // map_xy_ with NaN where unmapped
+  cv::Mat table_float_;   // a moved frame's gather table (CV_32FC2)
+  cv::Mat table_xy_, table_frac_;  // the same in remap's fixed point (CV_16SC2 + CV_16UC1)
   std::shared_ptr<const fast::BlendPlan> blend_;
 };
 
