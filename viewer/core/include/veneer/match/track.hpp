@@ -68,6 +68,9 @@ class Tracker {
   // last good estimate (identity at first).
   TrackResult track(const cv::Mat& frame);
   void reset() { last_ = cv::Matx23d(1, 0, 0, 0, 1, 0); }
+  // The next frame's search starts from `still_to_frame` (a live view framed
+  // differently from the stills: match/live_session.hpp).
+  void seed(const cv::Matx23d& still_to_frame) { last_ = still_to_frame; }
 
  private:
   // One pyramid level of the template. Every picture is linear in the
