@@ -420,8 +420,11 @@ cv::Mat alignment_picture(const cv::Mat& frame, const cv::Mat& mask, const Track
     cv::polylines(out, std::vector<std::vector<cv::Point>>{moved}, true, colour, 1, cv::LINE_AA, shift);
   }
   char text[64];
-  std::snprintf(text, sizeof text, "%s  ECC %.2f", result.lost ? "LOST - hold still / recapture" : "tracked",
-                result.correlation);
+  if (!result.lost && result.correlation <= 0)  // no registration ran (--no-track)
+    std::snprintf(text, sizeof text, "stills' pose, not registered");
+  else
+    std::snprintf(text, sizeof text, "%s  ECC %.2f", result.lost ? "LOST - hold still / recapture" : "tracked",
+                  result.correlation);
   const double font = std::max(0.35, out.cols / 1400.0);
   cv::putText(out, text, {6, std::max(14, out.rows / 14)}, cv::FONT_HERSHEY_SIMPLEX, font, colour, 1, cv::LINE_AA);
   return out;
