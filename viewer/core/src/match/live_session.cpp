@@ -181,7 +181,11 @@ LiveFrame LiveSession::finish(const cv::Mat& frame, const TrackResult& r, double
   return out;
 }
 
-Expected<LiveFrame> LiveSession::process(const cv::Mat& input) {
+Expected<LiveFrame> LiveSession::process(const cv::Mat& input) { return run(input, true); }
+
+Expected<LiveFrame> LiveSession::process_untracked(const cv::Mat& input) { return run(input, false); }
+
+Expected<LiveFrame> LiveSession::run(const cv::Mat& input, bool track) {
   if (!ready()) return make_error("live session: not ready (the source set's photos, mask or the map are empty)");
   auto frame = as_bgr8(input);
   if (!frame) return frame.error();
@@ -191,21 +195,15 @@ Expected<LiveFrame> LiveSession::process(const cv::Mat& input) {
     return make_error("live frame " + describe_size(frame->size()) + ": this session's live view is " +
                       describe_size(geometry_->live) + "; start a new session for a new framing");
   }
+  if (!track) {
+    TrackResult r;
+    r.still_to_frame =
+        cv::Matx23d(geometry_->scale, 0, geometry_->offset[0], 0, geometry_->scale, geometry_->offset[1]);
+    return finish(*frame, r, 0.0);
+  }
   const auto t0 = std::chrono::steady_clock::now();
   const TrackResult r = tracker_.track(*frame);
   return finish(*frame, r, ms_since(t0));
-}
-
-Expected<LiveFrame> LiveSession::process_untracked(const cv::Mat& input) {
-  if (!ready()) return make_error("live session: not ready (the source set's photos, mask or the map are empty)");
-  auto frame = as_bgr8(input);
-  if (!frame) return frame.error();
-  if (!geometry_) {
-    if (auto st = fix_geometry(*frame); !st) return st.error();
-  }
-  TrackResult r;
-  r.still_to_frame = cv::Matx23d(geometry_->scale, 0, geometry_->offset[0], 0, geometry_->scale, geometry_->offset[1]);
-  return finish(*frame, r, 0.0);
 }
 
 }  // namespace veneer::match

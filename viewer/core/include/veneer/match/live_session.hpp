@@ -79,6 +79,7 @@ class LiveSession {
   const cv::Mat& still_mask() const { return mask_; }
 
  private:
+  Expected<LiveFrame> run(const cv::Mat& frame, bool track);
   Status fix_geometry(const cv::Mat& frame);
   LiveFrame finish(const cv::Mat& frame, const TrackResult& r, double track_ms);
   Tracker tracker_;
