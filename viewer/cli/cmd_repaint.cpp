@@ -127,6 +127,7 @@ int run_repaint(const RepaintArgs& a) {
   if (auto st = track_options.check(); !st) return fail(2, "--min-correlation: " + st.message());
   // tracking, repaint, outline and the live view's framing: what the viewer's Live tab runs
   match::LiveSession session(src->images, still_mask, *map, source_size, backdrop, plan, track_options);
+  session.set_smooth(true);  // offline: bilinear, no frame budget
 
   cv::VideoWriter writer;
   const fs::path mp4 = fs::path(a.out) / "repainted.mp4";

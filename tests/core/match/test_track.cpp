@@ -127,6 +127,21 @@ TEST(LiveRepainter, AMovedFrameIsReadWhereTheObjectWent) {
   const cv::Mat out = repainter.apply(frame, cv::Matx23d(1, 0, 5, 0, 1, 3));
   // (the last column and row read past the frame's edge bilinearly and keep the backdrop)
   EXPECT_EQ(cv::norm(out(cv::Rect(0, 0, 34, 26)), still(cv::Rect(0, 0, 34, 26)), cv::NORM_INF), 0);
+  // the same at the nearest pixel
+  match::LiveRepainter nearest(map, size);
+  nearest.set_bilinear(false);
+  const cv::Mat near = nearest.apply(frame, cv::Matx23d(1, 0, 5.2, 0, 1, 2.9));
+  EXPECT_EQ(cv::norm(near(cv::Rect(0, 0, 34, 26)), still(cv::Rect(0, 0, 34, 26)), cv::NORM_INF), 0);
+  // a map covering only part of the destination: the rest keeps the backdrop
+  match::Map part = map;
+  part.xy(cv::Rect(0, 0, size.width, 10)).setTo(cv::Scalar(-1, -1));
+  part.xy(cv::Rect(30, 0, 10, size.height)).setTo(cv::Scalar(-1, -1));
+  const cv::Mat backdrop(size, CV_8UC3, cv::Scalar(1, 2, 3));
+  match::LiveRepainter partial(part, size, backdrop);
+  const cv::Mat out2 = partial.apply(frame, cv::Matx23d(1, 0, 5, 0, 1, 3));
+  EXPECT_EQ(cv::norm(out2(cv::Rect(0, 10, 30, 16)), still(cv::Rect(0, 10, 30, 16)), cv::NORM_INF), 0);
+  EXPECT_EQ(cv::norm(out2(cv::Rect(0, 0, size.width, 10)), backdrop(cv::Rect(0, 0, size.width, 10)), cv::NORM_INF), 0);
+  EXPECT_EQ(cv::norm(out2(cv::Rect(30, 0, 10, size.height)), backdrop(cv::Rect(30, 0, 10, size.height)), cv::NORM_INF), 0);
 }
 
 match::Map identity_map(cv::Size size) {

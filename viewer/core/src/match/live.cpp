@@ -14,6 +14,7 @@ LiveRepainter::LiveRepainter(const Map& map, cv::Size source_size, const cv::Mat
   cv::Mat channels[2];
   cv::split(map_xy_, channels);
   mask_ = channels[0] >= 0;
+  mapped_box_ = cv::boundingRect(mask_);
   map_nan_ = map_xy_.clone();
   map_nan_.setTo(cv::Scalar::all(std::numeric_limits<float>::quiet_NaN()), ~mask_);
   if (!backdrop.empty()) {
@@ -91,10 +92,19 @@ cv::Mat LiveRepainter::apply(const cv::Mat& frame, const cv::Matx23d& source_to_
   // BORDER_TRANSPARENT keeps the backdrop there), then one bilinear remap.
   // Each step is OpenCV's vectorised, threaded code: a hand-written fused
   // loop was 3-4x slower than this at 1024x680 (scalar bilinear on 3 bytes).
+  // Only the box of the mapped destination pixels is touched (a real map
+  // covers the destination object, not the whole frame).
   prepared_for_ = {};  // the tables no longer hold the fixed lookup
-  cv::transform(map_nan_, table_float_, cv::Matx23f(source_to_frame));
-  cv::convertMaps(table_float_, cv::noArray(), table_xy_, table_frac_, CV_16SC2);
-  cv::remap(frame, background, table_xy_, table_frac_, cv::INTER_LINEAR, cv::BORDER_TRANSPARENT);
+  if (mapped_box_.empty()) return background;
+  cv::transform(map_nan_(mapped_box_), table_float_, cv::Matx23f(source_to_frame));
+  cv::Mat box = background(mapped_box_);
+  if (bilinear_) {
+    cv::convertMaps(table_float_, cv::noArray(), table_xy_, table_frac_, CV_16SC2);
+    cv::remap(frame, box, table_xy_, table_frac_, cv::INTER_LINEAR, cv::BORDER_TRANSPARENT);
+  } else {
+    cv::convertMaps(table_float_, cv::noArray(), table_xy_, cv::noArray(), CV_16SC2, true);
+    cv::remap(frame, box, table_xy_, cv::noArray(), cv::INTER_NEAREST, cv::BORDER_TRANSPARENT);
+  }
   return background;
 }
 

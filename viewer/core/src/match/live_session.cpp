@@ -115,6 +115,7 @@ LiveSession::LiveSession(const std::vector<cv::Mat>& photos, const cv::Mat& mask
                          cv::Size source_size, const cv::Mat& backdrop,
                          std::shared_ptr<const fast::BlendPlan> blend, const TrackOptions& options)
     : tracker_(photos, mask, options), repainter_(map, source_size, backdrop, std::move(blend)), mask_(mask) {
+  repainter_.set_bilinear(false);  // the live budget (set_smooth)
   still_size_ = photos.empty() ? cv::Size() : photos[0].size();
   // map's source pixels (at source_size) -> still pixels (pixel centres)
   const double kx = source_size.width > 0 ? static_cast<double>(still_size_.width) / source_size.width : 1.0;

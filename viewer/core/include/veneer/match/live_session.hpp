@@ -66,6 +66,7 @@ class LiveSession {
   LiveSession(const std::vector<cv::Mat>& photos, const cv::Mat& mask, const Map& map, cv::Size source_size,
               const cv::Mat& backdrop = {}, std::shared_ptr<const fast::BlendPlan> blend = nullptr,
               const TrackOptions& options = {});
+  // (frames are gathered at the nearest pixel unless set_smooth(true))
   bool ready() const { return tracker_.ready() && repainter_.ready(); }
   // Tracks and repaints one frame (8-bit BGR). The first frame fixes the
   // live geometry; an error (naming both geometries) when it cannot be
@@ -74,6 +75,11 @@ class LiveSession {
   // Without registration: the stills' pose carried by the live geometry (the old live view).
   Expected<LiveFrame> process_untracked(const cv::Mat& frame);
   const std::optional<LiveGeometry>& geometry() const { return geometry_; }
+  // Frames gathered bilinearly instead of at the nearest pixel (the live
+  // default: bench_track, 1024x680 on the loaded 2-core machine, the
+  // bilinear gather alone took 8-12 ms median, the nearest 1-2 ms, at up to
+  // half a pixel of jitter). `veneer repaint --video` turns it on.
+  void set_smooth(bool on) { repainter_.set_bilinear(on); }
   // A new session on the same sets (the object was put back, the camera moved).
   void reset();
   const cv::Mat& still_mask() const { return mask_; }
