@@ -92,6 +92,8 @@ veneer::Expected<std::unique_ptr<Daemon>> Daemon::create(const DaemonOptions& o)
     so.scenes = o.scenes;
     so.size = o.size;
     so.preview_size = o.preview_size.area() > 0 ? o.preview_size : o.size;
+    so.preview_motion = o.preview_motion;
+    so.preview_motion_frames = o.preview_motion_frames;
     so.noise_sigma = o.noise_sigma;
     so.latency_ms = o.hue_latency_ms;
     so.rate_limits = o.hue_rate_limits;

@@ -70,6 +70,12 @@ int main(int argc, char** argv) {
   app.add_option("--scenes", scenes, "simulated rig: destination,source scene names")->capture_default_str();
   app.add_option("--size", size, "simulated rig: still size WxH")->capture_default_str();
   app.add_option("--preview-size", preview_size, "simulated rig: live-view size WxH (default: --size)");
+  app.add_option("--preview-motion", o.preview_motion,
+                 "simulated rig: the live view moves, a SPEC as `veneer simulate --motion` takes (shift=DX:DY, rotate, "
+                 "scale, turn, lamp=sweep), e.g. shift=30:0,rotate=5,lamp=sweep");
+  app.add_option("--preview-motion-frames", o.preview_motion_frames,
+                 "simulated rig: the motion is played back and forth over this many live frames")
+      ->capture_default_str();
   app.add_option("--noise", o.noise_sigma, "simulated rig: sensor noise (fraction of full scale)")->capture_default_str();
   app.add_option("--hue-latency-ms", o.hue_latency_ms, "simulated rig: bridge emulator latency per request [ms]")
       ->capture_default_str();

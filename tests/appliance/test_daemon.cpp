@@ -179,7 +179,18 @@ TEST(Daemon, LiveFramesThroughAMapAreBlendedAsTheStills) {
                " --method coherent --blend 3 --out " + tr.string());
   ASSERT_EQ(t.code, 0) << t.out;
 
-  const std::string live = rig + " live --frames 2 --fps 5 --map " + tr.string() + " --src " + src.string();
+  // tracked (the default): each frame registered to the source's stills, its state printed, the outline drawn
+  auto tracked = run(rig + " live --frames 2 --fps 5 --map " + tr.string() + " --src " + src.string() + " --dst " +
+                     dst.string() + " --out " + (dir / "tracked").string());
+  ASSERT_EQ(tracked.code, 0) << tracked.out;
+  EXPECT_NE(tracked.out.find("frame 1: tracked, ECC 0.9"), std::string::npos) << tracked.out;
+  EXPECT_NE(tracked.out.find("(2 tracked, 0 lost;"), std::string::npos) << tracked.out;
+  EXPECT_TRUE(fs::exists(dir / "tracked" / "align_0001.png"));
+  EXPECT_TRUE(fs::exists(dir / "tracked" / "repainted_0001.png"));
+
+  // untracked: the fixed lookup, compared pixel for pixel below
+  const std::string live =
+      rig + " live --no-track --frames 2 --fps 5 --map " + tr.string() + " --src " + src.string();
   auto blended = run(live + " --dst " + dst.string() + " --out " + (dir / "blended").string());
   ASSERT_EQ(blended.code, 0) << blended.out;
   EXPECT_NE(blended.out.find("3 px, guided"), std::string::npos) << blended.out;
@@ -237,7 +248,7 @@ TEST(Daemon, LiveFramesThroughAMapAreBlendedAsTheStills) {
   ASSERT_EQ(th.code, 0) << th.out;
   fs::create_directories(bare);
   fs::copy_file(half / "map.pfm", bare / "map.pfm");
-  auto scaled = run(rig + " live --frames 1 --fps 5 --map " + (bare / "map.pfm").string() + " --src " + src.string() +
+  auto scaled = run(rig + " live --no-track --frames 1 --fps 5 --map " + (bare / "map.pfm").string() + " --src " + src.string() +
                     " --dst " + dst.string() + " --out " + (dir / "scaled").string());
   ASSERT_EQ(scaled.code, 0) << scaled.out;
   veneer::match::TransferOptions defaults;

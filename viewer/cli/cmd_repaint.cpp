@@ -19,6 +19,7 @@
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
 #include "veneer/match/live.hpp"
+#include "veneer/match/live_session.hpp"
 #include "veneer/match/track.hpp"
 #include "veneer/match/transfer.hpp"
 #include "veneer/sim/motion.hpp"
@@ -63,15 +64,6 @@ struct FrameSource {
     return capture.isOpened() && capture.read(*frame) && !frame->empty();
   }
 };
-
-cv::Mat lost_picture(const cv::Mat& backdrop) {
-  cv::Mat out = backdrop.clone();
-  out = out * 0.5 + cv::Scalar(0, 0, 110);  // dimmed and red: not a picture to trust
-  const double font = std::max(0.35, out.cols / 900.0);
-  cv::putText(out, "LOST - hold still / recapture", {8, std::max(16, out.rows / 8)}, cv::FONT_HERSHEY_SIMPLEX, font,
-              cv::Scalar(255, 255, 255), std::max(1, out.cols / 500), cv::LINE_AA);
-  return out;
-}
 
 int run_repaint(const RepaintArgs& a) {
   // the video first: a missing input is the most likely mistake
@@ -130,19 +122,13 @@ int run_repaint(const RepaintArgs& a) {
     if (!made) return fail(1, made.message());
     plan = *made;
   }
-  match::LiveRepainter repainter(*map, source_size, backdrop, plan);
-  // map's source pixels (at source_size) -> still pixels (pixel centres)
-  const double kx = static_cast<double>(src->size.width) / source_size.width;
-  const double ky = static_cast<double>(src->size.height) / source_size.height;
-  const cv::Matx33d map_to_still(kx, 0, 0.5 * kx - 0.5, 0, ky, 0.5 * ky - 0.5, 0, 0, 1);
   match::TrackOptions track_options;
   track_options.min_correlation = a.min_correlation;
   if (auto st = track_options.check(); !st) return fail(2, "--min-correlation: " + st.message());
-  match::Tracker tracker(src->images, still_mask, track_options);
+  // tracking, repaint, outline and the live view's framing: what the viewer's Live tab runs
+  match::LiveSession session(src->images, still_mask, *map, source_size, backdrop, plan, track_options);
+  session.set_smooth(true);  // offline: bilinear, no frame budget
 
-  std::error_code ec;
-  fs::create_directories(a.out, ec);
-  if (ec) return fail(1, a.out + ": cannot create: " + ec.message());
   cv::VideoWriter writer;
   const fs::path mp4 = fs::path(a.out) / "repainted.mp4";
   nlohmann::json per_frame = nlohmann::json::array();
@@ -150,23 +136,21 @@ int run_repaint(const RepaintArgs& a) {
   int lost = 0, count = 0;
   cv::Mat frame;
   while (frames.next(&frame)) {
-    if (frame.size() != src->size)
-      return fail(1, "frame " + std::to_string(count) + " is " + std::to_string(frame.cols) + "x" +
-                         std::to_string(frame.rows) + ", the source's stills " + std::to_string(src->size.width) + "x" +
-                         std::to_string(src->size.height) +
-                         ": a live view framed differently from its stills is not related yet (issue 27, item 2)");
     const auto t0 = std::chrono::steady_clock::now();
-    match::TrackResult r;
-    if (!a.no_track) r = tracker.track(frame);
-    cv::Mat out;
-    if (r.lost) {
-      out = lost_picture(backdrop);
-    } else {
-      const cv::Matx33d s2f(r.still_to_frame(0, 0), r.still_to_frame(0, 1), r.still_to_frame(0, 2),
-                            r.still_to_frame(1, 0), r.still_to_frame(1, 1), r.still_to_frame(1, 2), 0, 0, 1);
-      const cv::Matx33d m = s2f * map_to_still;
-      out = repainter.apply(frame, cv::Matx23d(m(0, 0), m(0, 1), m(0, 2), m(1, 0), m(1, 1), m(1, 2)));
+    auto live = a.no_track ? session.process_untracked(frame) : session.process(frame);
+    // the first frame decides whether the live view relates to the stills: refused before anything is written
+    if (!live) return fail(1, "frame " + std::to_string(count) + ": " + live.message());
+    if (count == 0) {
+      std::error_code ec;
+      fs::create_directories(a.out, ec);
+      if (ec) return fail(1, a.out + ": cannot create: " + ec.message());
+      if (!session.geometry()->same) std::cout << "live view: " << session.geometry()->describe() << "\n";
     }
+    match::TrackResult r;
+    r.lost = live->lost;
+    r.correlation = live->quality;
+    r.still_to_frame = live->still_to_frame;
+    const cv::Mat& out = live->repainted;
     const double elapsed = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     ms.push_back(elapsed);
     char name[32];
@@ -202,6 +186,14 @@ int run_repaint(const RepaintArgs& a) {
                            {"ms_per_frame", {{"median", percentile(ms, 0.5)}, {"p95", percentile(ms, 0.95)}}},
                            {"video", fs::exists(mp4) ? "repainted.mp4" : ""},
                            {"per_frame", per_frame}};
+  if (const auto& g = session.geometry()) {
+    report["live_view"] = {{"size", {g->live.width, g->live.height}},
+                           {"stills", {g->still.width, g->still.height}},
+                           {"scale", g->scale},
+                           {"offset_px", {g->offset[0], g->offset[1]}},
+                           {"framed_as_stills", g->same},
+                           {"note", g->describe()}};
+  }
   if (truth)
     report["align_error_px"] = {{"median", percentile(errors, 0.5)}, {"p95", percentile(errors, 0.95)},
                                 {"frames_measured", errors.size()}};

@@ -1,5 +1,6 @@
 // veneer rig status|capture|press|list|pull|delete|lamps|live|events — the rig
 // client for scripts and tests, against --rig host:port --token-file F.
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -10,11 +11,14 @@
 #include <optional>
 
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 #include <sstream>
 
 #include "command.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/match/live.hpp"
+#include "veneer/match/live_session.hpp"
+#include "veneer/match/track.hpp"
 #include "veneer/match/transfer.hpp"
 #include "veneer/rig/client.hpp"
 
@@ -177,6 +181,11 @@ VENEER_COMMAND(rig) {
                                      "metrics.json says, else 0.1; needs --dst)")
                         ->check(CLI::Range(0.0, 2.0));
   live->add_flag("--sweep", *live_sweep, "simulated rig: move the hand-held lamp round the source while recording");
+  auto live_no_track = std::make_shared<bool>(false);
+  live->add_flag("--no-track", *live_no_track,
+                 "with --map: look frames up at the stills' pose (the old live view) instead of registering each "
+                 "frame to the source's stills (as `veneer repaint --video` does; then also align_NNNN.png with the "
+                 "outline, and each frame's state printed)");
 
   auto* events = rig_cmd->add_subcommand("events", "print the rig's events, one a line");
   auto count = std::make_shared<int>(0);
@@ -294,6 +303,10 @@ VENEER_COMMAND(rig) {
     if (live->parsed()) {
       // With --map, frames are repainted onto the destination as they would be in the viewer.
       std::optional<match::LiveRepainter> repainter;
+      std::optional<match::LiveSession> session;  // with tracking (the default)
+      cv::Mat still_mask;
+      int tracked = 0, lost = 0;
+      std::vector<double> frame_ms;
       if (!live_map->empty()) {
         if (live_src->empty()) return fail("live", "--map needs --src (the source set the map was computed against)", 2);
         std::filesystem::path mp(*live_map);
@@ -350,6 +363,13 @@ VENEER_COMMAND(rig) {
         }
         // the source's size as the map saw it (scaled like the transfer's)
         repainter.emplace(*map, match::scaled_size(src->size, options.scale), backdrop, plan);
+        if (!*live_no_track) {
+          auto mask = match::object_mask(*src, false);
+          if (!mask) return fail("live", "source: " + mask.message());
+          still_mask = *mask;
+          if (still_mask.size() != src->size) cv::resize(still_mask, still_mask, src->size, 0, 0, cv::INTER_NEAREST);
+          session.emplace(src->images, still_mask, *map, match::scaled_size(src->size, options.scale), backdrop, plan);
+        }
       }
       std::error_code ec;
       std::filesystem::create_directories(*live_out, ec);
@@ -371,6 +391,34 @@ VENEER_COMMAND(rig) {
           std::snprintf(name, sizeof name, "repainted_%04d.png", saved);
           if (frame.empty()) {
             error = "frame " + std::to_string(f.seq) + " is not a JPEG";
+          } else if (session) {
+            // registered to the stills first, as `veneer repaint --video` does
+            auto lf = session->process(frame);
+            if (!lf) {
+              error = "frame " + std::to_string(saved) + ": " + lf.message();
+            } else {
+              if (saved == 0 && !session->geometry()->same)
+                std::cout << "live view: " << session->geometry()->describe() << "\n";
+              match::TrackResult r;
+              r.lost = lf->lost;
+              r.correlation = lf->quality;
+              r.still_to_frame = lf->still_to_frame;
+              (lf->lost ? lost : tracked) += 1;
+              frame_ms.push_back(lf->track_ms + lf->repaint_ms);
+              cv::Point2f centre(0, 0);
+              for (const auto& p : lf->outline) centre += p / static_cast<float>(lf->outline.size());
+              std::printf("frame %d: %s, ECC %.3f, outline of %zu points about (%.1f, %.1f) px, %.1f ms track + "
+                          "%.1f ms repaint\n",
+                          saved, lf->lost ? "LOST - hold still / recapture" : "tracked", lf->quality,
+                          lf->outline.size(), centre.x, centre.y, lf->track_ms, lf->repaint_ms);
+              std::fflush(stdout);
+              char align[32];
+              std::snprintf(align, sizeof align, "align_%04d.png", saved);
+              if (!cv::imwrite((std::filesystem::path(*live_out) / name).string(), lf->repainted) ||
+                  !cv::imwrite((std::filesystem::path(*live_out) / align).string(),
+                               match::alignment_picture(frame, still_mask, r)))
+                error = std::string(name) + ": write failed";
+            }
           } else if (!cv::imwrite((std::filesystem::path(*live_out) / name).string(), repainter->apply(frame))) {
             error = std::string(name) + ": write failed";
           }
@@ -395,7 +443,13 @@ VENEER_COMMAND(rig) {
       client.on_live_frame = nullptr;
       if (!error.empty()) return fail("live", error);
       if (!done || saved < *frames) return fail("live", "got " + std::to_string(saved) + " of " + std::to_string(*frames) + " frames");
-      std::cout << saved << " frames in " << *live_out << "\n";
+      std::cout << saved << " frames in " << *live_out;
+      if (session) {
+        std::sort(frame_ms.begin(), frame_ms.end());
+        std::cout << " (" << tracked << " tracked, " << lost << " lost; "
+                  << (frame_ms.empty() ? 0.0 : frame_ms[frame_ms.size() / 2]) << " ms per frame median)";
+      }
+      std::cout << "\n";
       return 0;
     }
     if (events->parsed()) {

@@ -32,6 +32,8 @@ struct DaemonOptions {
   std::vector<std::string> scenes{"bull", "stone"};
   cv::Size size{1024, 680};               // still size [px]
   cv::Size preview_size{0, 0};            // live-view size [px]; 0 = same as size
+  std::string preview_motion;             // live view in motion: a `veneer simulate --motion` SPEC; empty = still
+  int preview_motion_frames = 60;         // ... played back and forth over this many frames
   double noise_sigma = 0.002;
   int hue_latency_ms = 5;                 // emulator's per-request latency
   bool hue_rate_limits = true;

@@ -6,9 +6,12 @@
 #include <array>
 #include <map>
 #include <mutex>
+#include <optional>
 
 #include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
 
+#include "veneer/sim/motion.hpp"
 #include "veneer/util/log.hpp"
 
 namespace veneerd {
@@ -73,6 +76,15 @@ veneer::Status SimulatedCameraOptions::check() const {
   if (auto st = check_size(preview_size, "preview_size"); !st) return st;
   if (!(noise_sigma >= 0 && noise_sigma <= 0.2)) return veneer::make_error("simulated camera: noise_sigma must be in [0, 0.2]");
   if (preview_quality < 1 || preview_quality > 100) return veneer::make_error("simulated camera: preview_quality must be 1..100");
+  if (!preview_motion.empty()) {
+    auto m = veneer::sim::parse_motion(preview_motion);
+    if (!m) return veneer::make_error("simulated camera: preview_motion: " + m.message());
+    if (m->view.area() > 0)
+      return veneer::make_error("simulated camera: preview_motion '" + preview_motion +
+                                "': the live view's framing is preview_size, not view=");
+  }
+  if (preview_motion_frames < 2 || preview_motion_frames > 100000)
+    return veneer::make_error("simulated camera: preview_motion_frames must be 2..100000");
   return {};
 }
 
@@ -107,6 +119,16 @@ veneer::Expected<SimulatedCameraOptions> SimulatedCameraOptions::from_json(const
       return veneer::make_error("simulated camera: 'preview_quality' must be an integer");
     o.preview_quality = static_cast<int>(std::clamp<int64_t>(s["preview_quality"].get<int64_t>(), -1, 1000));
   }
+  if (s.contains("preview_motion")) {
+    if (!s["preview_motion"].is_string())
+      return veneer::make_error("simulated camera: 'preview_motion' must be a motion SPEC string, e.g. \"shift=30:0,rotate=5\"");
+    o.preview_motion = s["preview_motion"].get<std::string>();
+  }
+  if (s.contains("preview_motion_frames")) {
+    if (!s["preview_motion_frames"].is_number_integer())
+      return veneer::make_error("simulated camera: 'preview_motion_frames' must be an integer");
+    o.preview_motion_frames = static_cast<int>(std::clamp<int64_t>(s["preview_motion_frames"].get<int64_t>(), -1, 1 << 30));
+  }
   if (s.contains("preview_render")) {
     const json& v = s["preview_render"];
     if (!v.is_string() || (v.get<std::string>() != "fast" && v.get<std::string>() != "full"))
@@ -126,6 +148,10 @@ json SimulatedCameraOptions::to_json() const {
   j["noise_sigma"] = noise_sigma;
   j["preview_quality"] = preview_quality;
   j["preview_render"] = preview_full_render ? "full" : "fast";
+  if (!preview_motion.empty()) {
+    j["preview_motion"] = preview_motion;
+    j["preview_motion_frames"] = preview_motion_frames;
+  }
   return j;
 }
 
@@ -358,6 +384,7 @@ veneer::Expected<std::vector<unsigned char>> SimulatedCamera::preview() {
   std::string scene_name;
   veneer::sim::Lamp hand;
   int quality = 80;
+  std::optional<veneer::sim::MotionFrame> motion;
   {
     std::lock_guard lock(impl_->mutex);
     if (!impl_->connected) return veneer::make_error("simulated camera: not connected (unplugged)");
@@ -370,6 +397,18 @@ veneer::Expected<std::vector<unsigned char>> SimulatedCamera::preview() {
     hand.position_m = impl_->hand_lamp;
     hand.brightness = impl_->hand_brightness;
     quality = impl_->options.preview_quality;
+    if (!impl_->options.preview_motion.empty()) {
+      // back and forth: 0 .. N-1 .. 1, 0 ..
+      const uint64_t n = static_cast<uint64_t>(impl_->options.preview_motion_frames);
+      uint64_t i = (impl_->previews - 1) % (2 * (n - 1));
+      if (i >= n) i = 2 * (n - 1) - i;
+      auto spec = veneer::sim::parse_motion(impl_->options.preview_motion);  // checked with the options
+      if (spec) {
+        motion = veneer::sim::motion_at(*spec, static_cast<int>(i), static_cast<int>(n),
+                                        cv::Point2d((r.size.width - 1) / 2.0, (r.size.height - 1) / 2.0));
+        if (spec->lamp_sweep) hand.position_m = motion->lamp_m;
+      }
+    }
   }
   auto scene = impl_->scene_for(impl_->preview_scenes, scene_name, r);
   if (!scene) return veneer::make_error("simulated camera: " + scene.message());
@@ -426,6 +465,7 @@ veneer::Expected<std::vector<unsigned char>> SimulatedCamera::preview() {
       }
     }, 4);
   }
+  if (motion) cv::warpAffine(bytes8, bytes8, cv::Mat(motion->still_to_frame), bytes8.size(), cv::INTER_LINEAR, cv::BORDER_REPLICATE);
   std::vector<unsigned char> jpeg;
   if (!cv::imencode(".jpg", bytes8, jpeg, {cv::IMWRITE_JPEG_QUALITY, quality}))
     return veneer::make_error("simulated camera: JPEG encoding of the live-view frame failed");

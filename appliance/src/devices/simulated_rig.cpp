@@ -78,6 +78,8 @@ json SimulatedRig::camera_config() const {
   c.preview_scene = source_scene();
   c.size = options_.size;
   c.preview_size = options_.preview_size;
+  c.preview_motion = options_.preview_motion;
+  c.preview_motion_frames = options_.preview_motion_frames;
   c.noise_sigma = options_.noise_sigma;
   return c.to_json();
 }

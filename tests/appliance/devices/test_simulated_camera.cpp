@@ -301,3 +301,43 @@ TEST(SimulatedRig, RejectsUnknownScenes) {
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.message().find("dragon"), std::string::npos);
 }
+
+// Issue 27: the simulated live view can play a motion (the SPEC of `veneer
+// simulate --motion`), back and forth; a bad SPEC is refused naming it.
+TEST(SimulatedCameraPreview, PlaysAMotionBackAndForth) {
+  auto o = small_rig();
+  o.scenes = {"sphere-gray"};
+  o.preview_motion = "shift=12:0";
+  o.preview_motion_frames = 3;
+  auto rig = SimulatedRig::start(o);
+  ASSERT_TRUE(rig.ok()) << rig.message();
+  auto cam = (*rig)->make_camera();
+  ASSERT_TRUE(cam.ok()) << cam.message();
+  ASSERT_TRUE((*cam)->open().ok());
+  std::vector<cv::Mat> frames;
+  for (int i = 0; i < 5; ++i) {  // positions 0, 6, 12, 6, 0 px
+    auto jpeg = (*cam)->preview();
+    ASSERT_TRUE(jpeg.ok()) << jpeg.message();
+    frames.push_back(cv::imdecode(*jpeg, cv::IMREAD_GRAYSCALE));
+  }
+  const cv::Rect inner(20, 10, 150, 110);
+  auto mean_diff = [](const cv::Mat& a, const cv::Mat& b) {
+    cv::Mat d;
+    cv::absdiff(a, b, d);
+    return cv::mean(d)[0];
+  };
+  // frame 2 is frame 0 moved 12 px to the right (JPEG's blocks apart); frame 4 is back
+  const double moved = mean_diff(frames[2](inner + cv::Point(12, 0)), frames[0](inner));
+  const double unmoved = mean_diff(frames[2](inner), frames[0](inner));
+  EXPECT_LT(moved, 3.0);
+  EXPECT_GT(unmoved, 3 * moved) << moved;
+  EXPECT_LT(mean_diff(frames[4], frames[0]), 1.0);
+  EXPECT_LT(mean_diff(frames[3], frames[1]), 1.0);
+
+  auto cfg = (*rig)->camera_config();
+  EXPECT_EQ(cfg["preview_motion"], "shift=12:0");
+  cfg["preview_motion"] = "shift=1:1,wobble=2";
+  auto bad = veneerd::SimulatedCameraOptions::from_json(cfg);
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.message().find("wobble=2"), std::string::npos) << bad.message();
+}

@@ -42,6 +42,13 @@ struct SimulatedCameraOptions {
   // no cast shadows or highlights) so 1024x680 frames keep up with 15 fps;
   // "full" runs the simulator's renderer per frame.
   bool preview_full_render = false;
+  // Live view in motion (issue 27): the same SPEC as `veneer simulate
+  // --motion` (shift, rotate, scale, turn, lamp=sweep; not view: that is
+  // preview_size), played back and forth over preview_motion_frames frames.
+  // The whole picture moves (the tripod nudged, the object with its table);
+  // lamp=sweep moves the hand lamp as simulate does. Empty = still.
+  std::string preview_motion;
+  int preview_motion_frames = 60;
   veneer::Status check() const;
   static veneer::Expected<SimulatedCameraOptions> from_json(const nlohmann::json& section);
   nlohmann::json to_json() const;

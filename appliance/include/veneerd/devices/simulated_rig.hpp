@@ -41,6 +41,8 @@ struct SimulatedRigOptions {
   std::string key = "veneer-sim";      // bridge user
   cv::Size size{1024, 680};            // still size [px]
   cv::Size preview_size{1024, 680};    // live-view size [px]
+  std::string preview_motion;          // live view in motion: a `simulate --motion` SPEC (SimulatedCameraOptions)
+  int preview_motion_frames = 60;      // ... played back and forth over this many frames
   double noise_sigma = 0.002;          // sensor noise
   int apply_delay_ms = 50;             // emulator: change visible this long after the ack
   int latency_ms = 5;                  // emulator: per-request latency

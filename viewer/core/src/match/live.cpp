@@ -1,5 +1,8 @@
 #include "veneer/match/live.hpp"
 
+#include <cmath>
+#include <limits>
+
 #include <opencv2/imgproc.hpp>
 
 namespace veneer::match {
@@ -11,6 +14,9 @@ LiveRepainter::LiveRepainter(const Map& map, cv::Size source_size, const cv::Mat
   cv::Mat channels[2];
   cv::split(map_xy_, channels);
   mask_ = channels[0] >= 0;
+  mapped_box_ = cv::boundingRect(mask_);
+  map_nan_ = map_xy_.clone();
+  map_nan_.setTo(cv::Scalar::all(std::numeric_limits<float>::quiet_NaN()), ~mask_);
   if (!backdrop.empty()) {
     cv::Mat b = backdrop;
     if (b.type() != CV_8UC3) b.convertTo(b, CV_8UC3, 255.0);
@@ -80,23 +86,25 @@ cv::Mat LiveRepainter::apply(const cv::Mat& frame, const cv::Matx23d& source_to_
   } else {
     background = cv::Mat(map_xy_.size(), frame.type(), cv::Scalar::all(0));
   }
-  table_x_.create(map_xy_.size(), CV_32FC1);
-  table_y_.create(map_xy_.size(), CV_32FC1);
+  // The gather table is the map carried by the motion: one SIMD affine
+  // transform of the map's coordinates (unmapped ones are NaN and stay NaN),
+  // turned into remap's fixed-point form (NaN lands far outside the frame, so
+  // BORDER_TRANSPARENT keeps the backdrop there), then one bilinear remap.
+  // Each step is OpenCV's vectorised, threaded code: a hand-written fused
+  // loop was 3-4x slower than this at 1024x680 (scalar bilinear on 3 bytes).
+  // Only the box of the mapped destination pixels is touched (a real map
+  // covers the destination object, not the whole frame).
   prepared_for_ = {};  // the tables no longer hold the fixed lookup
-  const cv::Matx23f a(source_to_frame);
-  cv::parallel_for_(cv::Range(0, map_xy_.rows), [&](const cv::Range& rows) {
-    for (int y = rows.start; y < rows.end; ++y) {
-      const cv::Vec2f* m = map_xy_.ptr<cv::Vec2f>(y);
-      float* tx = table_x_.ptr<float>(y);
-      float* ty = table_y_.ptr<float>(y);
-      for (int x = 0; x < map_xy_.cols; ++x) {
-        const bool mapped = m[x][0] >= 0;
-        tx[x] = mapped ? a(0, 0) * m[x][0] + a(0, 1) * m[x][1] + a(0, 2) : -1e6f;
-        ty[x] = mapped ? a(1, 0) * m[x][0] + a(1, 1) * m[x][1] + a(1, 2) : -1e6f;
-      }
-    }
-  });
-  cv::remap(frame, background, table_x_, table_y_, cv::INTER_LINEAR, cv::BORDER_TRANSPARENT);
+  if (mapped_box_.empty()) return background;
+  cv::transform(map_nan_(mapped_box_), table_float_, cv::Matx23f(source_to_frame));
+  cv::Mat box = background(mapped_box_);
+  if (bilinear_) {
+    cv::convertMaps(table_float_, cv::noArray(), table_xy_, table_frac_, CV_16SC2);
+    cv::remap(frame, box, table_xy_, table_frac_, cv::INTER_LINEAR, cv::BORDER_TRANSPARENT);
+  } else {
+    cv::convertMaps(table_float_, cv::noArray(), table_xy_, cv::noArray(), CV_16SC2, true);
+    cv::remap(frame, box, table_xy_, cv::noArray(), cv::INTER_NEAREST, cv::BORDER_TRANSPARENT);
+  }
   return background;
 }
 

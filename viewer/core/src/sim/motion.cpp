@@ -35,7 +35,7 @@ Expected<MotionSpec> parse_motion(const std::string& spec) {
   while (std::getline(parts, part, ',')) {
     if (part.empty()) continue;
     const auto eq = part.find('=');
-    if (eq == std::string::npos) return make_error("motion '" + part + "': expected NAME=VALUE (shift, rotate, scale, turn, lamp)");
+    if (eq == std::string::npos) return make_error("motion '" + part + "': expected NAME=VALUE (shift, rotate, scale, turn, lamp, view)");
     const std::string name = part.substr(0, eq), value = part.substr(eq + 1);
     if (name == "shift") {
       const auto colon = value.find(':');
@@ -55,11 +55,29 @@ Expected<MotionSpec> parse_motion(const std::string& spec) {
       if (value == "sweep") m.lamp_sweep = true;
       else if (value == "fixed") m.lamp_sweep = false;
       else return make_error("motion '" + part + "': expected lamp=sweep or lamp=fixed");
+    } else if (name == "view") {
+      const auto x = value.find('x');
+      double w = 0, h = 0;
+      if (x == std::string::npos || !parse_number(value.substr(0, x), &w) || !parse_number(value.substr(x + 1), &h) ||
+          w < 16 || h < 16 || w > 16384 || h > 16384 || w != std::floor(w) || h != std::floor(h))
+        return make_error("motion '" + part + "': expected view=WIDTHxHEIGHT in pixels (16..16384), e.g. view=320x180");
+      m.view = cv::Size(static_cast<int>(w), static_cast<int>(h));
     } else {
-      return make_error("motion '" + part + "': unknown motion '" + name + "' (shift, rotate, scale, turn, lamp)");
+      return make_error("motion '" + part + "': unknown motion '" + name + "' (shift, rotate, scale, turn, lamp, view)");
     }
   }
   return m;
+}
+
+cv::Matx23d view_transform(cv::Size still, cv::Size view) {
+  if (view.area() == 0 || view == still) return cv::Matx23d(1, 0, 0, 0, 1, 0);
+  const double still_aspect = static_cast<double>(still.width) / still.height;
+  const double view_aspect = static_cast<double>(view.width) / view.height;
+  // a wider view shows the full width (crops top and bottom), a narrower one the full height
+  const double s = view_aspect >= still_aspect ? static_cast<double>(view.width) / still.width
+                                               : static_cast<double>(view.height) / still.height;
+  return cv::Matx23d(s, 0, (view.width - 1) / 2.0 - s * (still.width - 1) / 2.0, 0, s,
+                     (view.height - 1) / 2.0 - s * (still.height - 1) / 2.0);
 }
 
 MotionFrame motion_at(const MotionSpec& spec, int index, int frames, cv::Point2d centre) {
@@ -97,6 +115,8 @@ Expected<MotionSequence> simulate_motion(const std::string& scene_name, const Re
   const cv::Moments mo = cv::moments(seq.mask, true);
   seq.centre = mo.m00 > 0 ? cv::Point2d(mo.m10 / mo.m00, mo.m01 / mo.m00)
                           : cv::Point2d((options.size.width - 1) / 2.0, (options.size.height - 1) / 2.0);
+  const cv::Matx23d view = view_transform(options.size, spec.view);
+  const cv::Size frame_size = spec.view.area() ? spec.view : options.size;
   uint8_t lut[4096];
   for (int i = 0; i < 4096; ++i) lut[i] = srgb_encode(i / 4095.0f);
   for (int i = 0; i < frames; ++i) {
@@ -117,6 +137,16 @@ Expected<MotionSequence> simulate_motion(const std::string& scene_name, const Re
     cv::warpAffine(mask_f, alpha, cv::Mat(m.still_to_frame), options.size, cv::INTER_LINEAR, cv::BORDER_CONSTANT);
     cv::cvtColor(alpha, alpha, cv::COLOR_GRAY2BGR);
     moved = moved.mul(alpha) + background.mul(cv::Scalar::all(1.0) - alpha);
+    if (frame_size != options.size || view != cv::Matx23d(1, 0, 0, 0, 1, 0)) {
+      // the live view's framing; smaller than the still: blurred first, as a sensor's binning would
+      const double s = view(0, 0);
+      if (s < 1) cv::GaussianBlur(moved, moved, cv::Size(), 0.5 * std::sqrt(1 / (s * s) - 1));
+      cv::warpAffine(moved, moved, cv::Mat(view), frame_size, cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+      const cv::Matx33d v(view(0, 0), view(0, 1), view(0, 2), view(1, 0), view(1, 1), view(1, 2), 0, 0, 1);
+      const auto& a = m.still_to_frame;
+      const cv::Matx33d both = v * cv::Matx33d(a(0, 0), a(0, 1), a(0, 2), a(1, 0), a(1, 1), a(1, 2), 0, 0, 1);
+      m.still_to_frame = cv::Matx23d(both(0, 0), both(0, 1), both(0, 2), both(1, 0), both(1, 1), both(1, 2));
+    }
     cv::Mat bgr8(moved.size(), CV_8UC3);
     for (int y = 0; y < moved.rows; ++y) {
       const float* src = moved.ptr<float>(y);

@@ -23,6 +23,8 @@ struct MotionSpec {
   double turn_deg = 0;       // turn=A, small out-of-plane turn about the vertical axis (|A| < 30), approximated
                              // as horizontal foreshortening cos(A) about the centre (no parallax, no occlusion)
   bool lamp_sweep = false;   // lamp=sweep: the hand lamp moves from upper left to upper right; lamp=fixed: stays on top
+  cv::Size view{0, 0};       // view=WxH: the live view is W x H pixels showing the stills' field cropped to its aspect,
+                             // centred (a 16:9 live view of a 3:2 sensor shows its full width); 0x0 = the stills'
   bool operator==(const MotionSpec&) const = default;
 };
 
@@ -35,7 +37,11 @@ struct MotionFrame {
   cv::Vec3d lamp_m;            // the hand lamp's position, rig frame [m]
 };
 
-// The true motion of frame `index` of `frames`, about `centre` (still pixels).
+// The live view's framing: still pixel -> live pixel (one scale, the crop centred), as spec.view describes.
+cv::Matx23d view_transform(cv::Size still, cv::Size view);
+
+// The true motion of frame `index` of `frames`, about `centre` (still pixels),
+// in the still's framing (simulate_motion adds the view's).
 MotionFrame motion_at(const MotionSpec& spec, int index, int frames, cv::Point2d centre);
 
 struct MotionSequence {
@@ -47,7 +53,7 @@ struct MotionSequence {
 
 // Renders `frames` frames of scene `scene_name` (placement and size from
 // `options`) lit by the hand lamp (+ options.ambient), each warped by its true
-// motion. Frame noise: options.seed, one stream per frame.
+// motion and, with spec.view, framed as that live view (truth included). Frame noise: options.seed, one stream per frame.
 Expected<MotionSequence> simulate_motion(const std::string& scene_name, const RenderOptions& options,
                                          const MotionSpec& spec, int frames, const Progress& progress = {});
 
