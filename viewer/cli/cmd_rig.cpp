@@ -14,6 +14,7 @@
 #include <sstream>
 
 #include "command.hpp"
+#include "output.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/match/live.hpp"
 #include "veneer/match/transfer.hpp"
@@ -28,9 +29,10 @@ struct RigArgs {
   double timeout_s = 120;
 };
 
+// Errors as every command reports them (output.hpp): "veneer rig <cmd>: <what>".
 int fail(const std::string& cmd, const std::string& what, int code = 1) {
-  std::cerr << "veneer rig " << cmd << ": " << what << "\n";
-  return code;
+  const Output out(cmd.empty() ? "rig" : "rig " + cmd);
+  return code == 2 ? out.usage(what) : out.fail(what);
 }
 
 Expected<std::unique_ptr<rig::Client>> open_rig(const RigArgs& a) {
