@@ -8,6 +8,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "veneer/proto/discovery.hpp"
 #include "veneer/sim/simulator.hpp"
 #include "veneer/util/log.hpp"
 #include "veneerd/devices/registry.hpp"
@@ -126,6 +127,7 @@ veneer::Expected<std::unique_ptr<Daemon>> Daemon::create(const DaemonOptions& o)
   }
   if (!o.store.empty()) c.store = o.store;
   if (!o.token_file.empty()) c.token_file = o.token_file;
+  d->advertise_ = o.advertise;
 
   auto store = Store::open(c.store);
   if (!store) return store.error();
@@ -217,13 +219,37 @@ veneer::Expected<std::unique_ptr<Daemon>> Daemon::create(const DaemonOptions& o)
   return d;
 }
 
+bool loopback_only(const std::string& host) {
+  return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0;
+}
+
 veneer::Status Daemon::start() {
   if (auto s = server_->start(); !s) return s;
   rig_->start();
+  if (!advertise_) {
+  } else if (loopback_only(config_.listen_host)) {
+    VLOG_INFO("Server", "DNS-SD: not advertised (listening on {} only)", config_.listen_host);
+  } else {
+    veneer::dnssd::Advertisement ad;
+    ad.name = config_.name;
+    ad.type = veneer::wire::kServiceType;
+    ad.port = port();
+    ad.txt = veneer::wire::rig_txt(config_.name, veneer::wire::software_version());
+    auto a = veneer::dnssd::Advertiser::start(ad);
+    if (a) {
+      advertiser_ = std::move(*a);
+      VLOG_INFO("Server", "DNS-SD: advertising '{}' as {} on port {}", ad.name, ad.type, ad.port);
+    } else {
+      VLOG_WARN("Server", "DNS-SD: not advertising {}: {}", ad.type, a.message());
+    }
+  }
   return {};
 }
 
+std::string Daemon::advertised_name() const { return advertiser_ ? advertiser_->name() : ""; }
+
 void Daemon::stop() {
+  advertiser_.reset();
   if (rig_) rig_->stop();
   if (server_) server_->stop();
 }

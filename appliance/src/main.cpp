@@ -84,6 +84,8 @@ int main(int argc, char** argv) {
   app.add_option("--listen", listen, "address to serve the API on, host:port (default 127.0.0.1:7878)");
   app.add_option("--store", store, "folder for the captured sets (and the token)");
   app.add_option("--token-file", token_file, "access token file (default <store>/token, created 0600)");
+  bool no_advertise = false;
+  app.add_flag("--no-advertise", no_advertise, "do not advertise the API on the LAN as _veneer._tcp (DNS-SD)");
   app.add_option("--log", log_spec, "log levels, e.g. 'debug' or 'Camera=debug,Lamps=warn'");
   app.add_option("--max-file-bytes", max_file_bytes, "largest file the daemon may write (RLIMIT_FSIZE; for tests)");
   try {
@@ -120,6 +122,7 @@ int main(int argc, char** argv) {
     return fail("--preview-size '" + preview_size + "': expected WxH", 2);
   }
   o.hue_rate_limits = !no_limits;
+  o.advertise = !no_advertise;
   o.listen = listen.empty() && o.simulate ? "127.0.0.1:7878" : listen;
   o.store = store.empty() && o.simulate ? "veneer-sets" : store;
   o.token_file = token_file;

@@ -5,6 +5,7 @@
 #include <iostream>
 
 #include "command.hpp"
+#include "output.hpp"
 #include "veneer/io/imageset.hpp"
 #include "veneer/match/metrics.hpp"
 #include "veneer/match/transfer.hpp"
@@ -18,16 +19,13 @@ struct EvalArgs {
   std::string size = "512x340";
 };
 
-int fail(const std::string& what, int code = 1) {
-  std::cerr << "veneer eval: " << what << "\n";
-  return code;
-}
+::veneer::cli::Output report{"eval"};
 
 int run_table(const EvalArgs& a) {
   match::TableOptions options;
   int w = 0, h = 0;
   if (std::sscanf(a.size.c_str(), "%dx%d", &w, &h) != 2 || w < 32 || h < 32 || w > 4096 || h > 4096)
-    return fail("--size must be WxH (32..4096), got '" + a.size + "'", 2);
+    return report.usage("--size must be WxH (32..4096), got '" + a.size + "'");
   options.size = {w, h};
   options.full = a.full;
   options.truth_normals = a.truth_normals;
@@ -37,29 +35,27 @@ int run_table(const EvalArgs& a) {
   progress.on_progress = [&bar](double f, const std::string& stage) { bar.update(f, stage); };
   auto rows = match::quality_table(options, progress);
   bar.done();
-  if (!rows) return fail(rows.message());
+  if (!rows) return report.fail(rows.message());
   const std::string text = match::format_table(*rows, options);
   std::fputs(text.c_str(), stdout);
   if (!a.out.empty()) {
-    std::ofstream f(a.out);
-    f << text;
-    if (!f) return fail("cannot write " + a.out);
+    if (auto s = report.text(a.out, text); !s) return report.fail(s.message());
   }
   return 0;
 }
 
 int run_map(const EvalArgs& a) {
-  if (a.dst.empty() || a.src.empty() || a.map.empty()) return fail("--dst, --src and --map are needed (or --table)", 2);
+  if (a.dst.empty() || a.src.empty() || a.map.empty()) return report.usage("--dst, --src and --map are needed (or --table)");
   auto dst = read_set(a.dst);
-  if (!dst) return fail(dst.message());
+  if (!dst) return report.fail(dst.message());
   auto src = read_set(a.src);
-  if (!src) return fail(src.message());
+  if (!src) return report.fail(src.message());
   std::filesystem::path file = a.map;
   if (std::filesystem::is_directory(file)) file /= "map.pfm";
   auto map = match::read_map(file);
-  if (!map) return fail(map.message());
+  if (!map) return report.fail(map.message());
   auto q = match::evaluate_sets(*map, *dst, *src);
-  if (!q) return fail(q.message());
+  if (!q) return report.fail(q.message());
   std::printf("destination object pixels  %d\n", q->destination_pixels);
   std::printf("coverage                   %.2f %%\n", 100 * q->coverage);
   std::printf("mapped into background     %d\n", q->background_hits);

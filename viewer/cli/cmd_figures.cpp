@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "command.hpp"
+#include "output.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/match/metrics.hpp"
 #include "veneer/match/transfer.hpp"
@@ -24,10 +25,7 @@ struct FiguresArgs {
   bool truth_normals = false;
 };
 
-int fail(const std::string& what, int code = 1) {
-  std::cerr << "veneer figures: " << what << "\n";
-  return code;
-}
+::veneer::cli::Output report{"figures"};
 
 struct Tile {
   std::string label;
@@ -117,10 +115,9 @@ struct Figures {
   Status write(const std::string& name, const std::string& caption, const std::vector<Tile>& tiles,
                const std::string& crop_scene) {
     const cv::Mat picture = montage(tiles, object_crop(objects[crop_scene].view.mask, 12));
-    const auto file = std::filesystem::path(args.out) / (name + ".png");
-    if (auto s = write_picture(file, picture); !s) return s;
+    if (auto s = report.picture(name + ".png", picture); !s) return s;
     index << "- `" << name << ".png` — " << caption << "\n";
-    std::printf("%s\n", file.c_str());
+    report.line(report.path(name + ".png").string());
     return {};
   }
 };
@@ -138,12 +135,10 @@ int run(const FiguresArgs& a) {
   F.args = a;
   int w = 0, h = 0;
   if (std::sscanf(a.size.c_str(), "%dx%d", &w, &h) != 2 || w < 64 || h < 64 || w > 4096 || h > 4096)
-    return fail("--size must be WxH (64..4096), got '" + a.size + "'", 2);
+    return report.usage("--size must be WxH (64..4096), got '" + a.size + "'");
   F.size = {w, h};
-  std::error_code ec;
-  std::filesystem::create_directories(a.out, ec);
-  if (ec) return fail("cannot create " + a.out + ": " + ec.message());
-  F.index.open(std::filesystem::path(a.out) / "index.md");
+  if (auto s = report.folder(a.out); !s) return report.fail(s.message());
+  F.index.open(report.path("index.md"));
   F.index << "# Thesis figures 5.2-5.13 re-made on the simulated rig (" << w << "x" << h << ", normals from "
           << (a.truth_normals ? "truth" : "photometric stereo") << ", faithful methods)\n\n";
   auto check = [](const Status& s) {
@@ -172,7 +167,7 @@ int run(const FiguresArgs& a) {
       for (Method m : {Method::baseline, Method::linear, Method::flann, Method::candidates, Method::patchmatch,
                        Method::regiongrow}) {
         auto mp = F.map("bull", "orange", opts(m));
-        if (!mp) return fail(mp.message());
+        if (!mp) return report.fail(mp.message());
         tiles.push_back({method_name(m), map_picture(*mp, F.sets["orange"].size), cv::Rect()});
       }
       check(F.write("fig5_03_maps", "correspondence maps orange -> bull (R = source x, G = source y, B = 1)", tiles,
@@ -254,7 +249,7 @@ int run(const FiguresArgs& a) {
     // 5.12 relighting: sphere-red-gloss -> bull under each lamp
     {
       auto mp = F.map("bull", "sphere-red-gloss", opts(Method::flann));
-      if (!mp) return fail(mp.message());
+      if (!mp) return report.fail(mp.message());
       std::vector<Tile> tiles;
       const auto& src = F.objects["sphere-red-gloss"].view.images;
       const auto& dst = F.objects["bull"].view.images;
@@ -266,16 +261,15 @@ int run(const FiguresArgs& a) {
     // 5.13 origin tool
     {
       auto mp = F.map("bull", "orange", opts(Method::flann, Feature::normals, 3));
-      if (!mp) return fail(mp.message());
+      if (!mp) return report.fail(mp.message());
       const cv::Mat picture =
           origin_picture(*mp, F.medians["bull"], F.medians["orange"], spread_points(*mp, 16));
-      const auto file = std::filesystem::path(a.out) / "fig5_13_origins.png";
-      if (auto s = write_picture(file, picture); !s) return fail(s.message());
+      if (auto s = report.picture("fig5_13_origins.png", picture); !s) return report.fail(s.message());
       F.index << "- `fig5_13_origins.png` — origin tool: where 16 bull pixels took their look from on the orange\n";
-      std::printf("%s\n", file.c_str());
+      report.line(report.path("fig5_13_origins.png").string());
     }
   } catch (const std::exception& e) {
-    return fail(e.what());
+    return report.fail(e.what());
   }
   return 0;
 }

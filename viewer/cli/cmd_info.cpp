@@ -5,6 +5,7 @@
 #include <string>
 
 #include "command.hpp"
+#include "output.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
 
@@ -75,11 +76,12 @@ void print_summary(const ImageSet& set, const fs::path& folder) {
   }
 }
 
+::veneer::cli::Output report{"info"};
+
 int run(const std::string& folder, bool as_json) {
   auto set = read_set(folder);
   if (!set) {
-    std::cerr << "veneer info: " << set.message() << "\n";
-    return 1;
+    return report.fail(set.message());
   }
   if (as_json) {
     // A veneer set's own manifest as stored; other layouts as the manifest
@@ -87,8 +89,7 @@ int run(const std::string& folder, bool as_json) {
     if (fs::exists(fs::path(folder) / "set.json")) {
       auto text = read_file_bytes(fs::path(folder) / "set.json");
       if (!text) {
-        std::cerr << "veneer info: " << text.message() << "\n";
-        return 1;
+        return report.fail(text.message());
       }
       std::cout << *text;
       if (!text->empty() && text->back() != '\n') std::cout << "\n";

@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "command.hpp"
+#include "output.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
 #include "veneer/match/transfer.hpp"
@@ -17,22 +18,19 @@ struct InspectArgs {
   int count = 16;
 };
 
-int fail(const std::string& what, int code = 1) {
-  std::cerr << "veneer inspect: " << what << "\n";
-  return code;
-}
+::veneer::cli::Output report{"inspect"};
 
 int run(const InspectArgs& a) {
   auto dst = read_set(a.dst);
-  if (!dst) return fail(dst.message());
+  if (!dst) return report.fail(dst.message());
   auto src = read_set(a.src);
-  if (!src) return fail(src.message());
+  if (!src) return report.fail(src.message());
   std::filesystem::path file = a.map;
   if (std::filesystem::is_directory(file)) file /= "map.pfm";
   auto map = match::read_map(file);
-  if (!map) return fail(map.message());
+  if (!map) return report.fail(map.message());
   const double scale = match::map_scale(*map, *dst);
-  if (!(scale > 0 && scale <= 1.0001)) return fail("the map is wider than the destination set");
+  if (!(scale > 0 && scale <= 1.0001)) return report.fail("the map is wider than the destination set");
   match::scale_set(*dst, scale);
   match::scale_set(*src, scale);
   std::vector<cv::Point> points;
@@ -44,7 +42,7 @@ int run(const InspectArgs& a) {
       char comma = 0;
       std::stringstream is(item);
       if (!(is >> x >> comma >> y) || comma != ',')
-        return fail("--points wants 'x,y;x,y;...', could not read '" + item + "'", 2);
+        return report.usage("--points wants 'x,y;x,y;...', could not read '" + item + "'");
       points.emplace_back(static_cast<int>(x * scale), static_cast<int>(y * scale));
     }
   } else {
@@ -52,7 +50,7 @@ int run(const InspectArgs& a) {
   }
   const cv::Mat picture =
       match::origin_picture(*map, match::median_photo(dst->images), match::median_photo(src->images), points);
-  if (auto s = write_picture(a.out, picture); !s) return fail(s.message());
+  if (auto s = report.picture(a.out, picture); !s) return report.fail(s.message());
   for (const cv::Point p : points) {
     if (p.x >= 0 && p.y >= 0 && p.x < map->xy.cols && p.y < map->xy.rows && map->valid(p.x, p.y)) {
       const cv::Vec2f m = map->xy.at<cv::Vec2f>(p);

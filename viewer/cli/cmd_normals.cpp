@@ -13,6 +13,7 @@
 #include <opencv2/core.hpp>
 
 #include "command.hpp"
+#include "output.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
 #include "veneer/ps/photometric_stereo.hpp"
@@ -33,10 +34,7 @@ struct NormalsArgs {
   int iterations = veneer::ps::PsOptions{}.near_iterations, threads = 0;
 };
 
-int fail(int code, const std::string& message) {
-  std::cerr << "veneer normals: " << message << "\n";
-  return code;
-}
+::veneer::cli::Output report{"normals"};
 
 bool parse_rect(const std::string& text, cv::Rect* r) {
   std::istringstream in(text);
@@ -64,11 +62,11 @@ cv::Mat albedo_picture(const cv::Mat& albedo) {
 }
 
 int run_normals(const NormalsArgs& a) {
-  if (a.set.empty()) return fail(2, "a SET folder is required");
-  if (a.out.empty()) return fail(2, "--out is required");
-  if (a.near_light && a.distant) return fail(2, "--near-light and --distant exclude each other");
-  if (a.robust && a.plain) return fail(2, "--robust and --plain exclude each other");
-  if (a.otsu && a.threshold >= 0) return fail(2, "--otsu and --threshold exclude each other");
+  if (a.set.empty()) return report.usage("a SET folder is required");
+  if (a.out.empty()) return report.usage("--out is required");
+  if (a.near_light && a.distant) return report.usage("--near-light and --distant exclude each other");
+  if (a.robust && a.plain) return report.usage("--robust and --plain exclude each other");
+  if (a.otsu && a.threshold >= 0) return report.usage("--otsu and --threshold exclude each other");
   if (a.plain) {
     // The plain least-squares solve keeps every sample: the robust solve's settings would do nothing.
     const veneer::ps::PsOptions d;
@@ -76,7 +74,7 @@ int run_normals(const NormalsArgs& a) {
                                std::pair{a.saturation != d.saturation, "--saturation"},
                                std::pair{a.outliers != d.outlier_fraction, "--outliers"},
                                std::pair{a.chroma != d.diffuse_chroma, "--chroma"}})
-      if (given) return fail(2, std::string(name) + " tunes the robust solve, which --plain turns off: drop one of them");
+      if (given) return report.usage(std::string(name) + " tunes the robust solve, which --plain turns off: drop one of them");
   }
 
   veneer::ps::PsOptions po;
@@ -91,7 +89,7 @@ int run_normals(const NormalsArgs& a) {
   po.diffuse_chroma = a.chroma;
   po.near_iterations = a.iterations;
   po.threads = a.threads;
-  if (auto st = po.check(); !st) return fail(2, st.message());
+  if (auto st = po.check(); !st) return report.usage(st.message());
 
   veneer::ps::SegmentOptions so;
   if (a.otsu) so.method = veneer::ps::SegmentMethod::otsu;
@@ -103,10 +101,10 @@ int run_normals(const NormalsArgs& a) {
   so.clean = !a.no_clean;
   if (!a.rect.empty()) {
     cv::Rect r;
-    if (!parse_rect(a.rect, &r)) return fail(2, "--rect '" + a.rect + "': expected x,y,w,h in pixels");
+    if (!parse_rect(a.rect, &r)) return report.usage("--rect '" + a.rect + "': expected x,y,w,h in pixels");
     so.rect = r;
   }
-  if (auto st = so.check(); !st) return fail(2, st.message());
+  if (auto st = so.check(); !st) return report.usage(st.message());
 
   veneer::cli::ProgressBar bar("normals");
   bar.update(0.0, "reading " + a.set);
@@ -116,41 +114,38 @@ int run_normals(const NormalsArgs& a) {
     int without = 0;
     for (const auto& l : set->lights) without += l.position_m ? 0 : 1;
     if (without > 0 || set->camera.focal_px <= 0)
-      return fail(2, "--near-light needs the lamps' positions and the camera's focal length, and " + a.set +
+      return report.usage("--near-light needs the lamps' positions and the camera's focal length, and " + a.set +
                          (without > 0 ? " gives no position for " + std::to_string(without) + " of its " +
                                             std::to_string(set->lights.size()) + " lamps"
                                       : std::string(" gives no camera focal length (camera.focal_px)")) +
                          ": leave --near-light out (distant lights, from the directions) or add them to set.json");
   }
-  if (!set) return fail(1, set.message());
+  if (!set) return report.fail(set.message());
   bar.update(0.3, "segmenting");
   auto seg = veneer::ps::segment(*set, so);
-  if (!seg) return fail(1, seg.message());
+  if (!seg) return report.fail(seg.message());
   veneer::Progress progress;
   progress.on_progress = [&bar](double f, const std::string& stage) { bar.update(0.35 + 0.45 * f, stage); };
   auto res = veneer::ps::photometric_stereo(*set, seg->mask, po, progress);
-  if (!res) return fail(1, res.message());
+  if (!res) return report.fail(res.message());
   // A base the object stands on is not the object (a supplied mask is the user's word).
   veneer::ps::SupportRemoval base;
   if (seg->method_used != veneer::ps::SegmentMethod::supplied && !a.keep_base) base = veneer::ps::drop_supports(*res);
 
   bar.update(0.85, "writing " + a.out);
-  std::error_code ec;
-  fs::create_directories(a.out, ec);
-  if (ec) return fail(1, "cannot create " + a.out + ": " + ec.message());
-  const fs::path out(a.out);
-  if (auto st = veneer::write_pfm(out / "normals.pfm", res->normals, true); !st) return fail(1, st.message());
-  if (auto st = veneer::write_picture(out / "normals.png", veneer::normals_picture(res->normals)); !st)
-    return fail(1, st.message());
-  if (auto st = veneer::write_pfm(out / "albedo.pfm", res->albedo, false); !st) return fail(1, st.message());
-  if (auto st = veneer::write_picture(out / "albedo.png", albedo_picture(res->albedo)); !st) return fail(1, st.message());
-  if (auto st = veneer::write_picture(out / "mask.png", res->mask); !st) return fail(1, st.message());
-  if (auto st = veneer::write_picture(out / "reliable.png", res->reliable); !st) return fail(1, st.message());
-  if (auto st = veneer::write_pfm(out / "residual.pfm", res->residual, false); !st) return fail(1, st.message());
-  if (auto st = veneer::write_picture(out / "residual.png", veneer::ps::residual_picture(*res)); !st)
-    return fail(1, st.message());
+  if (auto st = report.folder(a.out); !st) return report.fail(st.message());
+  if (auto st = report.pfm("normals.pfm", res->normals, true); !st) return report.fail(st.message());
+  if (auto st = report.picture("normals.png", veneer::normals_picture(res->normals)); !st)
+    return report.fail(st.message());
+  if (auto st = report.pfm("albedo.pfm", res->albedo, false); !st) return report.fail(st.message());
+  if (auto st = report.picture("albedo.png", albedo_picture(res->albedo)); !st) return report.fail(st.message());
+  if (auto st = report.picture("mask.png", res->mask); !st) return report.fail(st.message());
+  if (auto st = report.picture("reliable.png", res->reliable); !st) return report.fail(st.message());
+  if (auto st = report.pfm("residual.pfm", res->residual, false); !st) return report.fail(st.message());
+  if (auto st = report.picture("residual.png", veneer::ps::residual_picture(*res)); !st)
+    return report.fail(st.message());
   if (!res->depth.empty()) {
-    if (auto st = veneer::write_pfm(out / "depth.pfm", res->depth, false); !st) return fail(1, st.message());
+    if (auto st = report.pfm("depth.pfm", res->depth, false); !st) return report.fail(st.message());
   }
 
   nlohmann::json m;
@@ -200,10 +195,8 @@ int run_normals(const NormalsArgs& a) {
     std::printf("angular error vs truth: mean %.2f deg, median %.2f, 95th percentile %.2f (%d pixels)\n", e.mean_deg,
                 e.median_deg, e.p95_deg, e.pixels);
   }
-  if (auto st = veneer::write_file_atomic(out / "metrics.json", m.dump(2) + "\n"); !st) return fail(1, st.message());
-  std::printf("wrote %s: normals.pfm normals.png albedo.png mask.png reliable.png residual.png metrics.json\n",
-              a.out.c_str());
-  return 0;
+  if (auto st = report.json("metrics.json", m); !st) return report.fail(st.message());
+  return report.wrote();
 }
 
 }  // namespace

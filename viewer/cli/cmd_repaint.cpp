@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -16,6 +17,7 @@
 #include <opencv2/videoio.hpp>
 
 #include "command.hpp"
+#include "output.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
 #include "veneer/match/live.hpp"
@@ -36,10 +38,7 @@ struct RepaintArgs {
   double min_correlation = match::TrackOptions{}.min_correlation;
 };
 
-int fail(int code, const std::string& message) {
-  std::cerr << "veneer repaint: " << message << "\n";
-  return code;
-}
+::veneer::cli::Output report{"repaint"};
 
 double percentile(std::vector<double> v, double p) {
   if (v.empty()) return 0;
@@ -70,11 +69,11 @@ int run_repaint(const RepaintArgs& a) {
   FrameSource frames;
   std::optional<sim::MotionTruth> truth;
   const fs::path video(a.video);
-  if (!fs::exists(video)) return fail(2, "--video " + a.video + ": no such file or folder");
+  if (!fs::exists(video)) return report.usage("--video " + a.video + ": no such file or folder");
   if (fs::is_directory(video)) {
     if (fs::exists(video / "motion.json")) {
       auto t = sim::read_motion_json(video / "motion.json");
-      if (!t) return fail(1, t.message());
+      if (!t) return report.fail(t.message());
       for (const auto& f : t->files) frames.files.push_back(video / f);
       truth = std::move(*t);
     } else {
@@ -85,29 +84,29 @@ int run_repaint(const RepaintArgs& a) {
       }
       std::sort(frames.files.begin(), frames.files.end());
     }
-    if (frames.files.empty()) return fail(2, "--video " + a.video + ": the folder holds no frames (PNG or JPEG)");
+    if (frames.files.empty()) return report.usage("--video " + a.video + ": the folder holds no frames (PNG or JPEG)");
   } else if (!frames.capture.open(a.video)) {
-    return fail(2, "--video " + a.video + ": OpenCV cannot read it as a video");
+    return report.usage("--video " + a.video + ": OpenCV cannot read it as a video");
   }
 
   fs::path map_file(a.map);
   if (fs::is_directory(map_file)) map_file /= "map.pfm";
   auto map = match::read_map(map_file);
-  if (!map) return fail(1, map.message());
+  if (!map) return report.fail(map.message());
   match::TransferOptions options;
   if (fs::exists(map_file.parent_path() / "metrics.json")) {
     auto read = match::read_transfer_options(map_file.parent_path() / "metrics.json");
-    if (!read) return fail(1, read.message());
+    if (!read) return report.fail(read.message());
     options = *read;
   }
   auto src = read_set(a.src);
-  if (!src) return fail(1, src.message());
+  if (!src) return report.fail(src.message());
   auto dst = read_set(a.dst);
-  if (!dst) return fail(1, dst.message());
+  if (!dst) return report.fail(dst.message());
   if (!fs::exists(map_file.parent_path() / "metrics.json")) options.scale = match::map_scale(*map, *dst);
   const cv::Mat backdrop = tonemap_picture(match::median_photo(dst->images));
   auto mask = match::object_mask(*src, false);
-  if (!mask) return fail(1, "source: " + mask.message());
+  if (!mask) return report.fail("source: " + mask.message());
   cv::Mat still_mask = *mask;
   if (still_mask.size() != src->size) cv::resize(still_mask, still_mask, src->size, 0, 0, cv::INTER_NEAREST);
 
@@ -117,20 +116,20 @@ int run_repaint(const RepaintArgs& a) {
   std::shared_ptr<const match::fast::BlendPlan> plan;
   if (options.blend > 0) {
     auto pair = match::prepare_pair(*dst, *src, options);
-    if (!pair) return fail(1, pair.message());
+    if (!pair) return report.fail(pair.message());
     auto made = match::blend_plan_for(*pair, options, *map);
-    if (!made) return fail(1, made.message());
+    if (!made) return report.fail(made.message());
     plan = *made;
   }
   match::TrackOptions track_options;
   track_options.min_correlation = a.min_correlation;
-  if (auto st = track_options.check(); !st) return fail(2, "--min-correlation: " + st.message());
+  if (auto st = track_options.check(); !st) return report.usage("--min-correlation: " + st.message());
   // tracking, repaint, outline and the live view's framing: what the viewer's Live tab runs
   match::LiveSession session(src->images, still_mask, *map, source_size, backdrop, plan, track_options);
   session.set_smooth(true);  // offline: bilinear, no frame budget
 
   cv::VideoWriter writer;
-  const fs::path mp4 = fs::path(a.out) / "repainted.mp4";
+  const fs::path mp4 = report.path("repainted.mp4");
   nlohmann::json per_frame = nlohmann::json::array();
   std::vector<double> ms, errors;
   int lost = 0, count = 0;
@@ -139,11 +138,9 @@ int run_repaint(const RepaintArgs& a) {
     const auto t0 = std::chrono::steady_clock::now();
     auto live = a.no_track ? session.process_untracked(frame) : session.process(frame);
     // the first frame decides whether the live view relates to the stills: refused before anything is written
-    if (!live) return fail(1, "frame " + std::to_string(count) + ": " + live.message());
+    if (!live) return report.fail("frame " + std::to_string(count) + ": " + live.message());
     if (count == 0) {
-      std::error_code ec;
-      fs::create_directories(a.out, ec);
-      if (ec) return fail(1, a.out + ": cannot create: " + ec.message());
+      if (auto st = report.folder(a.out); !st) return report.fail(st.message());
       if (!session.geometry()->same) std::cout << "live view: " << session.geometry()->describe() << "\n";
     }
     match::TrackResult r;
@@ -155,11 +152,11 @@ int run_repaint(const RepaintArgs& a) {
     ms.push_back(elapsed);
     char name[32];
     std::snprintf(name, sizeof name, "frame_%04d.png", count);
-    if (auto st = write_picture(fs::path(a.out) / name, out); !st) return fail(1, st.message());
+    if (auto st = report.picture(name, out); !st) return report.fail(st.message());
     if (a.overlay) {
       std::snprintf(name, sizeof name, "align_%04d.png", count);
-      if (auto st = write_picture(fs::path(a.out) / name, match::alignment_picture(frame, still_mask, r)); !st)
-        return fail(1, st.message());
+      if (auto st = report.picture(name, match::alignment_picture(frame, still_mask, r)); !st)
+        return report.fail(st.message());
       std::snprintf(name, sizeof name, "frame_%04d.png", count);
     }
     if (count == 0) writer.open(mp4.string(), cv::VideoWriter::fourcc('m', 'p', '4', 'v'), 30.0, out.size());
@@ -176,9 +173,9 @@ int run_repaint(const RepaintArgs& a) {
     lost += r.lost;
     ++count;
   }
-  if (count == 0) return fail(1, "--video " + a.video + ": no frame could be read");
+  if (count == 0) return report.fail("--video " + a.video + ": no frame could be read");
   writer.release();
-  nlohmann::json report = {{"frames", count},
+  nlohmann::json doc = {{"frames", count},
                            {"lost", lost},
                            {"tracking", !a.no_track},
                            {"blend_px", plan ? options.blend : 0},
@@ -187,7 +184,7 @@ int run_repaint(const RepaintArgs& a) {
                            {"video", fs::exists(mp4) ? "repainted.mp4" : ""},
                            {"per_frame", per_frame}};
   if (const auto& g = session.geometry()) {
-    report["live_view"] = {{"size", {g->live.width, g->live.height}},
+    doc["live_view"] = {{"size", {g->live.width, g->live.height}},
                            {"stills", {g->still.width, g->still.height}},
                            {"scale", g->scale},
                            {"offset_px", {g->offset[0], g->offset[1]}},
@@ -195,13 +192,14 @@ int run_repaint(const RepaintArgs& a) {
                            {"note", g->describe()}};
   }
   if (truth)
-    report["align_error_px"] = {{"median", percentile(errors, 0.5)}, {"p95", percentile(errors, 0.95)},
+    doc["align_error_px"] = {{"median", percentile(errors, 0.5)}, {"p95", percentile(errors, 0.95)},
                                 {"frames_measured", errors.size()}};
-  if (auto st = write_file_atomic(fs::path(a.out) / "report.json", report.dump(1) + "\n"); !st) return fail(1, st.message());
-  std::cout << "repainted " << count << " frames into " << a.out << " (" << lost << " lost), "
-            << percentile(ms, 0.5) << " ms per frame median";
-  if (truth) std::cout << ", alignment error median " << percentile(errors, 0.5) << " px, p95 " << percentile(errors, 0.95) << " px";
-  std::cout << "\n";
+  if (auto st = report.json("report.json", doc, 1); !st) return report.fail(st.message());
+  std::ostringstream line;
+  line << "repainted " << count << " frames into " << a.out << " (" << lost << " lost), " << percentile(ms, 0.5)
+       << " ms per frame median";
+  if (truth) line << ", alignment error median " << percentile(errors, 0.5) << " px, p95 " << percentile(errors, 0.95) << " px";
+  report.line(line.str());
   return 0;
 }
 

@@ -1,5 +1,6 @@
-// veneer rig status|capture|press|list|pull|delete|lamps|live|events — the rig
-// client for scripts and tests, against --rig host:port --token-file F.
+// veneer rig find|status|capture|press|list|pull|delete|lamps|live|events — the
+// rig client for scripts and tests, against --rig host:port --token-file F
+// (`find` lists the rigs on the LAN through DNS-SD and needs neither).
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -15,6 +16,7 @@
 #include <sstream>
 
 #include "command.hpp"
+#include "output.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/match/live.hpp"
 #include "veneer/match/live_session.hpp"
@@ -31,9 +33,10 @@ struct RigArgs {
   double timeout_s = 120;
 };
 
+// Errors as every command reports them (output.hpp): "veneer rig <cmd>: <what>".
 int fail(const std::string& cmd, const std::string& what, int code = 1) {
-  std::cerr << "veneer rig " << cmd << ": " << what << "\n";
-  return code;
+  const Output out(cmd.empty() ? "rig" : "rig " + cmd);
+  return code == 2 ? out.usage(what) : out.fail(what);
 }
 
 Expected<std::unique_ptr<rig::Client>> open_rig(const RigArgs& a) {
@@ -111,6 +114,10 @@ VENEER_COMMAND(rig) {
   rig_cmd->add_option("--token-file", args->token_file, "the rig's access token file (<store>/token on the rig)")
       ->capture_default_str();
   rig_cmd->add_option("--timeout", args->timeout_s, "seconds to wait for a capture or download")->capture_default_str();
+
+  auto* find = rig_cmd->add_subcommand("find", "list the rigs on the LAN (DNS-SD _veneer._tcp, through avahi-daemon)");
+  auto find_wait = std::make_shared<double>(2.0);
+  find->add_option("--wait", *find_wait, "seconds to listen for rigs")->capture_default_str()->check(CLI::Range(0.1, 60.0));
 
   auto* status = rig_cmd->add_subcommand("status", "the rig's state");
   auto* list = rig_cmd->add_subcommand("list", "stored sets, one a line, id first");
@@ -192,6 +199,18 @@ VENEER_COMMAND(rig) {
   events->add_option("--count", *count, "stop after this many (0 = until --timeout)");
 
   return [=]() -> int {
+    if (find->parsed()) {
+      auto rigs = rig::find_rigs(static_cast<int>(*find_wait * 1000));
+      if (!rigs) return fail("find", rigs.message() + "; connect with --rig host:port instead");
+      if (rigs->empty()) {
+        char wait[32];
+        std::snprintf(wait, sizeof wait, "%.1f", *find_wait);
+        return fail("find", std::string("no rig answered on the LAN within ") + wait +
+                                " s (is veneerd running with --listen beyond 127.0.0.1?)");
+      }
+      for (const auto& r : *rigs) std::cout << r.describe() << "\n";
+      return 0;
+    }
     auto client_or = open_rig(*args);
     std::string which = rig_cmd->get_subcommands().empty() ? "" : rig_cmd->get_subcommands().front()->get_name();
     if (!client_or) return fail(which, client_or.message());

@@ -11,6 +11,7 @@
 #include <opencv2/core.hpp>
 
 #include "command.hpp"
+#include "output.hpp"
 #include "veneer/io/dng.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
@@ -37,10 +38,7 @@ bool parse_vec3(const std::string& text, cv::Vec3d* v) {
   return true;
 }
 
-int fail(int code, const std::string& message) {
-  std::cerr << "veneer simulate: " << message << "\n";
-  return code;
-}
+::veneer::cli::Output report{"simulate"};
 
 struct SimulateArgs {
   std::string scene, out, size = "1024x680", offset = "0,0,0", role = "destination", preview, motion;
@@ -54,33 +52,30 @@ struct SimulateArgs {
 // --motion: numbered frames of the scene moving (a live view with truth).
 int run_motion(const SimulateArgs& a, const veneer::sim::RenderOptions& o) {
   auto spec = veneer::sim::parse_motion(a.motion);
-  if (!spec) return fail(2, "--motion: " + spec.message());
-  if (a.frames < 1 || a.frames > 100000) return fail(2, "--frames " + std::to_string(a.frames) + ": expected 1..100000");
+  if (!spec) return report.usage("--motion: " + spec.message());
+  if (a.frames < 1 || a.frames > 100000) return report.usage("--frames " + std::to_string(a.frames) + ": expected 1..100000");
   namespace fs = std::filesystem;
-  std::error_code ec;
   if (fs::exists(a.out / fs::path("motion.json")) && !a.overwrite)
-    return fail(1, a.out + ": already holds a sequence (use --overwrite)");
-  fs::create_directories(a.out, ec);
-  if (ec) return fail(1, a.out + ": cannot create: " + ec.message());
+    return report.fail(a.out + ": already holds a sequence (use --overwrite)");
+  if (auto st = report.folder(a.out); !st) return report.fail(st.message());
   veneer::cli::ProgressBar bar("simulate " + a.scene + " moving");
   veneer::Progress progress;
   progress.on_progress = [&bar](double f, const std::string& stage) { bar.update(f * 0.9, stage); };
   auto seq = veneer::sim::simulate_motion(a.scene, o, *spec, a.frames, progress);
-  if (!seq) return fail(seq.message().rfind("unknown scene", 0) == 0 ? 2 : 1, seq.message());
+  if (!seq) return seq.message().rfind("unknown scene", 0) == 0 ? report.usage(seq.message()) : report.fail(seq.message());
   std::vector<std::string> files;
   for (size_t i = 0; i < seq->frames.size(); ++i) {
     char name[32];
     std::snprintf(name, sizeof name, "frame_%04zu.png", i);
     files.emplace_back(name);
-    if (auto st = veneer::write_picture(fs::path(a.out) / name, seq->frames[i]); !st) return fail(1, st.message());
+    if (auto st = report.picture(name, seq->frames[i]); !st) return report.fail(st.message());
   }
-  if (auto st = veneer::sim::write_motion_json(fs::path(a.out) / "motion.json", *seq, a.motion, files); !st)
-    return fail(1, st.message());
+  if (auto st = veneer::sim::write_motion_json(report.path("motion.json"), *seq, a.motion, files); !st)
+    return report.fail(st.message());
   bar.update(1.0, "done");
   bar.done();
-  std::cout << "wrote " << a.out << ": scene " << a.scene << " moving (" << a.motion << "), " << files.size()
-            << " frames " << o.size.width << "x" << o.size.height << " (8-bit sRGB PNG) + motion.json\n";
-  return 0;
+  return report.wrote("scene " + a.scene + " moving (" + a.motion + "), " + std::to_string(files.size()) + " frames " +
+                      std::to_string(o.size.width) + "x" + std::to_string(o.size.height) + " (8-bit sRGB PNG) + motion.json");
 }
 
 int run_simulate(const SimulateArgs& a) {
@@ -92,13 +87,13 @@ int run_simulate(const SimulateArgs& a) {
     }
     return 0;
   }
-  if (a.scene.empty()) return fail(2, "--scene is required (see --list)");
-  if (a.out.empty()) return fail(2, "--out is required");
+  if (a.scene.empty()) return report.usage("--scene is required (see --list)");
+  if (a.out.empty()) return report.usage("--out is required");
   veneer::sim::RenderOptions o;
-  if (!parse_size(a.size, &o.size)) return fail(2, "--size '" + a.size + "': expected WIDTHxHEIGHT, e.g. 1024x680");
-  if (!parse_vec3(a.offset, &o.offset_m)) return fail(2, "--offset '" + a.offset + "': expected x,y,z in metres");
+  if (!parse_size(a.size, &o.size)) return report.usage("--size '" + a.size + "': expected WIDTHxHEIGHT, e.g. 1024x680");
+  if (!parse_vec3(a.offset, &o.offset_m)) return report.usage("--offset '" + a.offset + "': expected x,y,z in metres");
   auto role = veneer::parse_role(a.role);
-  if (!role || *role == veneer::Role::unknown) return fail(2, "--role '" + a.role + "': expected destination or source");
+  if (!role || *role == veneer::Role::unknown) return report.usage("--role '" + a.role + "': expected destination or source");
   o.seed = a.seed;
   o.noise_sigma = a.noise;
   o.scale = a.scale;
@@ -106,31 +101,32 @@ int run_simulate(const SimulateArgs& a) {
   o.exposure = a.exposure;
   o.focal_px = a.focal;
   o.threads = a.threads;
-  if (auto st = o.check(); !st) return fail(2, st.message());
+  if (auto st = o.check(); !st) return report.usage(st.message());
   if (!a.motion.empty()) return run_motion(a, o);
 
   veneer::cli::ProgressBar bar("simulate " + a.scene);
   veneer::Progress progress;
   progress.on_progress = [&bar](double f, const std::string& stage) { bar.update(f * 0.8, stage); };
   auto set = veneer::sim::simulate_set(a.scene, o, *role, progress);
-  if (!set) return fail(set.message().rfind("unknown scene", 0) == 0 ? 2 : 1, set.message());
+  if (!set) return set.message().rfind("unknown scene", 0) == 0 ? report.usage(set.message()) : report.fail(set.message());
   if (a.dng) {
     bar.update(0.82, "DNG files");
-    if (auto st = veneer::add_dng_raw_files(*set); !st) return fail(1, st.message());
+    if (auto st = veneer::add_dng_raw_files(*set); !st) return report.fail(st.message());
   }
   bar.update(0.85, "writing " + a.out);
-  if (auto st = veneer::write_set(*set, a.out, a.overwrite); !st) return fail(1, st.message());
+  if (auto st = veneer::write_set(*set, a.out, a.overwrite); !st) return report.fail(st.message());
   if (!a.preview.empty()) {
     // what a person would want to see first: every lamp on at once
     cv::Mat sum = cv::Mat::zeros(set->size, CV_32FC3);
     for (const auto& im : set->images) sum += im;
-    if (auto st = veneer::write_picture(a.preview, veneer::tonemap_picture(sum)); !st) return fail(1, st.message());
+    if (auto st = report.picture(a.preview, veneer::tonemap_picture(sum)); !st) return report.fail(st.message());
   }
   bar.update(1.0, "done");
   bar.done();
   int pixels = cv::countNonZero(set->truth.mask);
-  std::cout << "wrote " << a.out << ": scene " << a.scene << ", " << set->images.size() << " lamps + ambient, "
-            << o.size.width << "x" << o.size.height << ", " << pixels << " object pixels\n";
+  report.line("wrote " + a.out + ": scene " + a.scene + ", " + std::to_string(set->images.size()) + " lamps + ambient, " +
+              std::to_string(o.size.width) + "x" + std::to_string(o.size.height) + ", " + std::to_string(pixels) +
+              " object pixels");
   return 0;
 }
 

@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include "command.hpp"
+#include "output.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
 #include "veneer/match/transfer.hpp"
@@ -33,21 +34,17 @@ struct TransferArgs {
   double cache_size_gb = 4.0;
 };
 
-int fail(const std::string& what, int code = 1) {
-  std::cerr << "veneer transfer: " << what << "\n";
-  return code;
-}
+::veneer::cli::Output report{"transfer"};
 
 int run(const TransferArgs& a) {
   match::TransferOptions options;
   auto method = match::parse_method(a.method);
-  if (!method) return fail(method.message(), 2);
+  if (!method) return report.usage(method.message());
   if (*method == match::Method::combined && (a.feature != "normals" || a.patch != 1))
-    return fail("--method combined compares normals, shading and colour over its own patches: drop --feature and "
-                "--patch, or pick a method that takes them (coherent, flann, patchmatch ...)",
-                2);
+    return report.usage("--method combined compares normals, shading and colour over its own patches: drop --feature and "
+                "--patch, or pick a method that takes them (coherent, flann, patchmatch ...)");
   auto feature = match::parse_feature(a.feature);
-  if (!feature) return fail(feature.message(), 2);
+  if (!feature) return report.usage(feature.message());
   options.match.method = *method;
   options.match.feature = *feature;
   options.match.patch = a.patch;
@@ -66,22 +63,22 @@ int run(const TransferArgs& a) {
   options.blend = a.blend;
   options.blend_guide = a.blend_guide;
   options.scale = a.scale;
-  if (auto s = options.check(); !s) return fail(s.message(), 2);
+  if (auto s = options.check(); !s) return report.usage(s.message());
 
   const auto t_wall = std::chrono::steady_clock::now();
   pipeline::PrepareOptions prep;
   auto photos = parse_photo_source(a.photos);
-  if (!photos) return fail(photos.message(), 2);
+  if (!photos) return report.usage(photos.message());
   auto demosaic = parse_demosaic(a.demosaic);
-  if (!demosaic) return fail(demosaic.message(), 2);
+  if (!demosaic) return report.usage(demosaic.message());
   prep.read.photos = *photos;
   prep.read.raw.demosaic = *demosaic;
   prep.read.raw.half_size = a.raw_half;
   prep.cache.enabled = !a.no_cache;
   prep.cache.dir = a.cache_dir;
-  if (!(a.cache_size_gb > 0)) return fail("--cache-size-gb must be > 0", 2);
+  if (!(a.cache_size_gb > 0)) return report.usage("--cache-size-gb must be > 0");
   prep.cache.max_bytes = static_cast<uint64_t>(a.cache_size_gb * (1ull << 30));
-  if (auto s = prep.check(); !s) return fail(s.message(), 2);
+  if (auto s = prep.check(); !s) return report.usage(s.message());
 
   ProgressBar bar("transfer");
   Progress progress;
@@ -92,11 +89,11 @@ int run(const TransferArgs& a) {
   matching.on_progress = [&bar](double f, const std::string& stage) { bar.update(0.4 + 0.55 * f, stage); };
   std::vector<pipeline::SetReport> reports;
   auto pair = pipeline::prepare_pair(a.dst, a.src, options, prep, &reports, reading);
-  if (!pair) return fail(pair.message());
+  if (!pair) return report.fail(pair.message());
   auto result = match::transfer(*pair, options, matching);
-  if (!result) return fail(result.message());
+  if (!result) return report.fail(result.message());
   bar.update(0.95, "writing " + a.out);
-  if (auto s = match::write_transfer(*result, a.out); !s) return fail(s.message());
+  if (auto s = match::write_transfer(*result, a.out); !s) return report.fail(s.message());
   bar.done();
   // metrics.json: how the sets were read (cache hit or miss, RAW or developed) and the wall time.
   auto metrics = nlohmann::json::parse(result->metrics_json, nullptr, false);
@@ -105,8 +102,8 @@ int run(const TransferArgs& a) {
     metrics["io"]["raw_half_size"] = a.raw_half;
     metrics["io"]["demosaic"] = a.demosaic;
     metrics["timings"]["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_wall).count();
-    if (auto s = write_file_atomic(std::filesystem::path(a.out) / "metrics.json", metrics.dump(2) + "\n"); !s)
-      return fail(s.message());
+    if (auto s = report.folder(a.out); !s) return report.fail(s.message());  // made by write_transfer
+    if (auto s = report.json("metrics.json", metrics); !s) return report.fail(s.message());
   }
   for (const auto& r : reports)
     std::printf("%s: %s, photos from %s, %.2f s\n", r.folder.c_str(),

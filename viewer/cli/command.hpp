@@ -3,8 +3,9 @@
 //   VENEER_COMMAND(simulate) { auto* cmd = app.add_subcommand("simulate", "...");
 //                              ...; return [=] { return run(...); }; }
 // The returned function runs when the sub-command was chosen and gives the
-// exit code (0 ok, 1 failure, 2 bad usage). Errors go to stderr as one line
-// "veneer <cmd>: <what was wrong>".
+// exit code (0 ok, 1 failure, 2 bad usage). Every command reports through
+// output.hpp: errors as one line on stderr "veneer <cmd>: <what was wrong>",
+// the files it writes, and its closing summary on stdout.
 #include <functional>
 #include <string>
 #include <vector>

@@ -10,6 +10,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "veneer/dnssd/dnssd.hpp"
 #include "veneer/util/expected.hpp"
 #include "veneerd/config.hpp"
 #include "veneerd/rig.hpp"
@@ -37,6 +38,9 @@ struct DaemonOptions {
   double noise_sigma = 0.002;
   int hue_latency_ms = 5;                 // emulator's per-request latency
   bool hue_rate_limits = true;
+  // Advertise the API as _veneer._tcp (DNS-SD, through avahi-daemon) when it
+  // listens beyond loopback. Without avahi-daemon: one log line, no failure.
+  bool advertise = true;
 };
 
 // Reads the token from `file`, creating it (32 random bytes as hex, mode 0600)
@@ -54,6 +58,8 @@ class Daemon {
   void stop();
 
   uint16_t port() const;
+  // The DNS-SD name the rig advertises under ("" when it does not advertise).
+  std::string advertised_name() const;
   const std::string& token() const { return token_; }
   const Config& config() const { return config_; }
   Rig& rig() { return *rig_; }
@@ -72,6 +78,11 @@ class Daemon {
   std::unique_ptr<Rig> rig_;
   std::unique_ptr<Server> server_;
   Camera* camera_ = nullptr;  // owned by rig_
+  bool advertise_ = true;
+  std::unique_ptr<veneer::dnssd::Advertiser> advertiser_;
 };
+
+// Whether `host` (a --listen host) is reachable only from this machine.
+bool loopback_only(const std::string& host);
 
 }  // namespace veneerd

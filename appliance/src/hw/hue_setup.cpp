@@ -12,6 +12,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "veneer/dnssd/dnssd.hpp"
 #include "veneer/util/log.hpp"
 #include "veneerd/devices/hue_lamps.hpp"
 
@@ -201,24 +202,18 @@ std::vector<BridgeInfo> discover_bridges(const DiscoverOptions& o, std::vector<s
   };
   for (const auto& a : o.addresses) add(a, "manual address");
   if (o.mdns) {
-    // avahi-browse -p: "=;iface;proto;name;type;domain;host;address;port;txt"
-    FILE* p = ::popen("avahi-browse -rpt _hue._tcp 2>/dev/null", "r");
-    int seen = 0;
-    if (p) {
-      char line[1024];
-      while (std::fgets(line, sizeof line, p)) {
-        std::vector<std::string> f;
-        std::stringstream ss(line);
-        std::string part;
-        while (std::getline(ss, part, ';')) f.push_back(part);
-        if (f.size() >= 9 && f[0] == "=" && f[2] == "IPv4") {
-          ++seen;
-          add(f[7] + (f[8] == "80" ? "" : ":" + f[8]), "mDNS");
-        }
+    // DNS-SD through Avahi's client library (needs avahi-daemon on the system bus).
+    auto services = veneer::dnssd::browse("_hue._tcp", o.mdns_timeout_ms);
+    if (!services) {
+      note("mDNS: " + services.message());
+    } else {
+      int seen = 0;
+      for (const auto& s : *services) {
+        if (s.ipv6) continue;  // the bridge answers on IPv4; its IPv6 record is the same bridge
+        ++seen;
+        add(s.address + (s.port == 80 || s.port == 0 ? "" : ":" + std::to_string(s.port)), "mDNS");
       }
-      int rc = ::pclose(p);
-      if (rc != 0 && seen == 0) note("mDNS: avahi-browse not available or avahi-daemon not running");
-      else if (seen == 0) note("mDNS: no _hue._tcp service on the network");
+      if (seen == 0) note("mDNS: no _hue._tcp service on the network");
     }
   }
   if (o.cloud) {

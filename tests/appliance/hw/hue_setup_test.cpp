@@ -2,6 +2,7 @@
 // against the bridge emulator over real HTTP on loopback.
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <sstream>
 #include <thread>
 
@@ -122,6 +123,28 @@ TEST(HueSetup, ProbeFindsTheBridgeAndRejectsNothing) {
   auto found = discover_bridges(o, &notes);
   ASSERT_EQ(found.size(), 1u);
   ASSERT_FALSE(notes.empty());
+}
+
+// mDNS through Avahi without avahi-daemon (the system bus pointed nowhere):
+// one note says so, and the manual address is still found.
+TEST(HueSetup, MdnsWithoutAvahiIsOneNoteAndTheAddressStillWorks) {
+  Bridge b;
+  ::setenv("DBUS_SYSTEM_BUS_ADDRESS", "unix:path=/nonexistent/veneer-test-no-dbus", 1);
+  std::vector<std::string> notes;
+  DiscoverOptions o;
+  o.addresses = {b.address()};
+  o.mdns = true;
+  o.mdns_timeout_ms = 500;
+  auto found = discover_bridges(o, &notes);
+  ::unsetenv("DBUS_SYSTEM_BUS_ADDRESS");
+  ASSERT_EQ(found.size(), 1u);
+  int mdns_notes = 0;
+  for (const auto& n : notes) {
+    if (n.rfind("mDNS: ", 0) != 0) continue;
+    ++mdns_notes;
+    EXPECT_EQ(n.rfind("mDNS: DNS-SD unavailable: ", 0), 0u) << n;
+  }
+  EXPECT_EQ(mdns_notes, 1);
 }
 
 TEST(HueSetup, ParsesABridgeConfigAnswer) {

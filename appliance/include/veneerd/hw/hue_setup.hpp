@@ -4,8 +4,8 @@
 // lamp in turn so the owner can write the ring order into the config.
 // Talks the bridge's v1 REST API with libcurl (hue_setup.cpp only).
 //
-// Discovery: a manual address always works; mDNS (_hue._tcp) is asked through
-// avahi-browse when it is installed; the bridge's cloud discovery
+// Discovery: a manual address always works; mDNS (_hue._tcp) is browsed through
+// Avahi's client library (veneer_dnssd) when avahi-daemon runs; the bridge's cloud discovery
 // (discovery.meethue.com) only when asked for, since rigs often run offline.
 // Every candidate is confirmed by its /api/config answer.
 #include <functional>
@@ -43,7 +43,8 @@ veneer::Expected<BridgeInfo> probe_bridge(const std::string& address, long timeo
 
 struct DiscoverOptions {
   std::vector<std::string> addresses;  // manual addresses, tried first
-  bool mdns = true;                    // avahi-browse -rpt _hue._tcp, when installed
+  bool mdns = true;                    // DNS-SD browse for _hue._tcp (Avahi), when avahi-daemon runs
+  int mdns_timeout_ms = 2000;          // how long to browse
   bool cloud = false;                  // https://discovery.meethue.com
   long timeout_ms = 2000;
 };

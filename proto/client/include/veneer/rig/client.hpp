@@ -37,6 +37,27 @@ struct Endpoint {
   std::string str() const { return host + ":" + std::to_string(port); }
 };
 
+// A rig found on the LAN through DNS-SD (it advertises _veneer._tcp, see
+// veneer/proto/discovery.hpp).
+struct FoundRig {
+  std::string name;       // the rig's name (TXT "name", else the instance name)
+  std::string instance;   // DNS-SD instance name
+  std::string host;       // "rig.local"
+  std::string address;    // IPv4 or IPv6 address
+  uint16_t port = 0;
+  std::string version;    // veneerd's version, "" if not advertised
+  uint32_t protocol = 0;  // API protocol version, 0 if not advertised
+  // "address:port" ("[v6]:port" for IPv6), ready for Endpoint::parse / --rig.
+  std::string endpoint() const;
+  // One line for people: "veneer-rig  192.168.1.20:7878  (rig.local, veneerd 0.1.0, protocol 1)".
+  std::string describe() const;
+};
+
+// Browses the LAN for rigs for about `timeout_ms`. IPv4 first, one entry a
+// rig and address. An error when DNS-SD is unavailable (no avahi-daemon or
+// D-Bus): the message says so; an empty list when none answered.
+Expected<std::vector<FoundRig>> find_rigs(int timeout_ms = 2000);
+
 // Reads an access token file (the rig keeps it in <store>/token).
 Expected<std::string> read_token_file(const std::filesystem::path& file);
 

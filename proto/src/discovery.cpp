@@ -1,0 +1,28 @@
+#include "veneer/proto/discovery.hpp"
+
+#include <charconv>
+
+#include "veneer/proto/framing.hpp"
+
+namespace veneer::wire {
+
+std::map<std::string, std::string> rig_txt(const std::string& rig_name, const std::string& version) {
+  return {{"name", rig_name}, {"version", version}, {"proto", std::to_string(kProtocolVersion)}};
+}
+
+RigTxt parse_rig_txt(const std::map<std::string, std::string>& txt) {
+  RigTxt r;
+  if (auto it = txt.find("name"); it != txt.end()) r.name = it->second;
+  if (auto it = txt.find("version"); it != txt.end()) r.version = it->second;
+  if (auto it = txt.find("proto"); it != txt.end()) {
+    uint32_t v = 0;
+    const char* end = it->second.data() + it->second.size();
+    auto [p, ec] = std::from_chars(it->second.data(), end, v);
+    if (ec == std::errc() && p == end) r.protocol = v;
+  }
+  return r;
+}
+
+const char* software_version() { return VENEER_VERSION; }
+
+}  // namespace veneer::wire

@@ -1,0 +1,107 @@
+// `veneer` commands report one way (viewer/cli/output.hpp): one error line
+// "veneer <cmd>: ..." on stderr with exit 1 (2 for bad usage), and a closing
+// "wrote <folder>: <files>" that names exactly the files that were written.
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <set>
+#include <sstream>
+#include <string>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <gtest/gtest.h>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Run {
+  int code = -1;
+  std::string out, err;
+};
+
+Run veneer(const std::string& args, const fs::path& dir) {
+  const fs::path err_file = dir / "stderr.txt";
+  const std::string cmd = "cd '" + dir.string() + "' && " VENEER_BIN_DIR "/veneer " + args + " 2>'" + err_file.string() + "'";
+  Run r;
+  FILE* p = ::popen(cmd.c_str(), "r");
+  if (!p) return r;
+  char buf[4096];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) r.out.append(buf, n);
+  const int status = ::pclose(p);
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  FILE* e = std::fopen(err_file.c_str(), "r");
+  if (e) {
+    while ((n = std::fread(buf, 1, sizeof buf, e)) > 0) r.err.append(buf, n);
+    std::fclose(e);
+  }
+  return r;
+}
+
+std::string last_line(const std::string& text) {
+  std::string t = text;
+  while (!t.empty() && t.back() == '\n') t.pop_back();
+  const auto nl = t.rfind('\n');
+  return nl == std::string::npos ? t : t.substr(nl + 1);
+}
+
+class CliOutput : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("veneer-cli-output-" + std::to_string(::getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  fs::path dir_;
+};
+
+TEST_F(CliOutput, NormalsNamesExactlyTheFilesItWrote) {
+  auto sim = veneer("simulate --scene orange --size 96x64 --out set --role destination", dir_);
+  ASSERT_EQ(sim.code, 0) << sim.err;
+  EXPECT_EQ(last_line(sim.out).rfind("wrote set: scene orange, 7 lamps + ambient, 96x64", 0), 0u) << sim.out;
+
+  auto n = veneer("normals set --out normals", dir_);
+  ASSERT_EQ(n.code, 0) << n.err;
+  const std::string line = last_line(n.out);
+  ASSERT_EQ(line.rfind("wrote normals: ", 0), 0u) << n.out;
+  std::set<std::string> listed;
+  std::istringstream files(line.substr(std::string("wrote normals: ").size()));
+  for (std::string f; files >> f;) listed.insert(f);
+  std::set<std::string> on_disk;
+  for (const auto& e : fs::directory_iterator(dir_ / "normals")) on_disk.insert(e.path().filename().string());
+  EXPECT_EQ(listed, on_disk);
+  EXPECT_TRUE(listed.count("normals.pfm") && listed.count("metrics.json")) << line;
+}
+
+TEST_F(CliOutput, ErrorsAreOneLineNamingTheCommandWithExitCodes) {
+  auto missing = veneer("normals no-such-set --out x", dir_);
+  EXPECT_EQ(missing.code, 1);
+  EXPECT_EQ(missing.err, "veneer normals: no-such-set: no such folder\n");
+  EXPECT_FALSE(fs::exists(dir_ / "x")) << "no half-written output";
+
+  auto usage = veneer("normals no-such-set", dir_);
+  EXPECT_EQ(usage.code, 2);
+  EXPECT_EQ(usage.err, "veneer normals: --out is required\n");
+
+  auto info = veneer("info no-such-set", dir_);
+  EXPECT_EQ(info.code, 1);
+  EXPECT_EQ(info.err, "veneer info: no-such-set: no such folder\n");
+
+  auto bad_size = veneer("simulate --scene orange --size 9x --out s", dir_);
+  EXPECT_EQ(bad_size.code, 2);
+  EXPECT_EQ(bad_size.err.rfind("veneer simulate: --size '9x'", 0), 0u) << bad_size.err;
+
+  // The output folder cannot be made: the error names it.
+  ASSERT_EQ(veneer("simulate --scene orange --size 64x48 --motion rotate=5 --frames 1 --out m", dir_).code, 0);
+  { std::FILE* f = std::fopen((dir_ / "blocker").c_str(), "w"); ASSERT_NE(f, nullptr); std::fclose(f); }
+  auto blocked = veneer("simulate --scene orange --size 64x48 --motion rotate=5 --frames 1 --out blocker/m", dir_);
+  EXPECT_EQ(blocked.code, 1);
+  EXPECT_EQ(blocked.err.rfind("veneer simulate: blocker/m: cannot create: ", 0), 0u) << blocked.err;
+  EXPECT_EQ(std::count(blocked.err.begin(), blocked.err.end(), '\n'), 1) << blocked.err;
+}
+
+}  // namespace
