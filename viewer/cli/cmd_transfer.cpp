@@ -97,7 +97,10 @@ int run(const TransferArgs& a) {
   if (!result) return fail(result.message());
   bar.update(0.95, "writing " + a.out);
   if (auto s = match::write_transfer(*result, a.out); !s) return fail(s.message());
+  bar.update(0.99, "storing the sets' results in the cache");
+  const Status cached = pipeline::finish_cache_writes();  // not fatal: the next run recomputes
   bar.done();
+  if (!cached) std::fprintf(stderr, "veneer transfer: warning: %s\n", cached.message().c_str());
   // metrics.json: how the sets were read (cache hit or miss, RAW or developed) and the wall time.
   auto metrics = nlohmann::json::parse(result->metrics_json, nullptr, false);
   if (metrics.is_object()) {

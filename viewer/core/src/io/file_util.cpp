@@ -14,7 +14,7 @@ namespace {
 std::string errno_text(int err) { return std::strerror(err); }
 }  // namespace
 
-Status write_file_synced(const fs::path& file, std::string_view bytes) {
+Status write_file_synced(const fs::path& file, std::string_view bytes, bool sync) {
   int fd = ::open(file.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) return make_error(file.string() + ": cannot create: " + errno_text(errno));
   size_t done = 0;
@@ -29,7 +29,7 @@ Status write_file_synced(const fs::path& file, std::string_view bytes) {
     }
     done += static_cast<size_t>(n);
   }
-  if (::fsync(fd) != 0) {
+  if (sync && ::fsync(fd) != 0) {
     int err = errno;
     ::close(fd);
     return make_error(file.string() + ": fsync failed: " + errno_text(err));

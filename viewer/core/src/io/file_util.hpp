@@ -8,8 +8,9 @@
 
 namespace veneer::io_detail {
 
-// Writes `bytes` to `file` (created or truncated) and fsyncs it. No rename.
-Status write_file_synced(const std::filesystem::path& file, std::string_view bytes);
+// Writes `bytes` to `file` (created or truncated) and fsyncs it (unless
+// told not to). No rename.
+Status write_file_synced(const std::filesystem::path& file, std::string_view bytes, bool sync = true);
 // fsyncs a folder so that names created, renamed or removed in it are durable.
 Status fsync_dir(const std::filesystem::path& folder);
 // "<folder>/.<name>.tmp-<pid>-<n>": a fresh temporary name beside `target`.

@@ -10,6 +10,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
 #include "veneer/match/fast.hpp"
 #include "veneer/match/matcher.hpp"
@@ -154,7 +155,7 @@ cv::Mat origin_picture(const Map& map, const cv::Mat& destination_photo, const c
 std::vector<cv::Point> spread_points(const Map& map, int count);
 
 // map.pfm (x, y, distance; -1 unmapped) in and out.
-Status write_map(const std::filesystem::path& file, const Map& map);
+Status write_map(const std::filesystem::path& file, const Map& map, Sync sync = Sync::each);
 Expected<Map> read_map(const std::filesystem::path& file);
 
 }  // namespace veneer::match
