@@ -79,6 +79,7 @@ json SimulatedRig::camera_config() const {
   c.size = options_.size;
   c.preview_size = options_.preview_size;
   c.noise_sigma = options_.noise_sigma;
+  c.raw = options_.raw;
   return c.to_json();
 }
 

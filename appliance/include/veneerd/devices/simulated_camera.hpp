@@ -42,6 +42,11 @@ struct SimulatedCameraOptions {
   // no cast shadows or highlights) so 1024x680 frames keep up with 15 fps;
   // "full" runs the simulator's renderer per frame.
   bool preview_full_render = false;
+  // Each still also as the camera's RAW file, as a body set to RAW+JPEG
+  // delivers it: a DNG of the linear render (Bayer mosaic, 14-bit, black and
+  // white levels, as-shot white balance; veneer/io/dng.hpp), which the set
+  // keeps beside its photo and the viewer decodes by default. Config "raw".
+  bool raw = true;
   veneer::Status check() const;
   static veneer::Expected<SimulatedCameraOptions> from_json(const nlohmann::json& section);
   nlohmann::json to_json() const;

@@ -42,6 +42,7 @@ struct SimulatedRigOptions {
   cv::Size size{1024, 680};            // still size [px]
   cv::Size preview_size{1024, 680};    // live-view size [px]
   double noise_sigma = 0.002;          // sensor noise
+  bool raw = true;                     // the camera also delivers a DNG of each still (SimulatedCameraOptions::raw)
   int apply_delay_ms = 50;             // emulator: change visible this long after the ack
   int latency_ms = 5;                  // emulator: per-request latency
   bool rate_limits = true;             // emulator enforces 10 light/s, 1 group/s, 3 in flight
