@@ -1,7 +1,9 @@
 // Set folders -> prepared objects through the result cache (prepare.hpp).
 #include "veneer/pipeline/prepare.hpp"
 
+#include <algorithm>
 #include <chrono>
+#include <cstring>
 
 #include <nlohmann/json.hpp>
 #include <future>
@@ -131,24 +133,40 @@ Status finish_cache_writes() {
 cv::Mat median_of(const std::vector<cv::Mat>& photos) {
   if (photos.empty()) return {};
   const int n = static_cast<int>(photos.size());
-  if (n > 64) return match::median_photo(photos);
+  if (n > 32) return match::median_photo(photos);
+  // An odd-even transposition network (n rounds of compare-exchanges of
+  // neighbours) sorts each sample's n values; run on 256 samples at once,
+  // every compare-exchange is a min and a max over two short arrays, which
+  // the compiler vectorises: no branch per value.
+  std::vector<std::pair<int, int>> network;
+  for (int round = 0; round < n; ++round)
+    for (int i = round % 2; i + 1 < n; i += 2) network.emplace_back(i, i + 1);
   cv::Mat out(photos[0].size(), CV_32FC3);
   const int width = out.cols * 3;
+  constexpr int kLanes = 256;
   cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& rows) {
-    std::vector<const float*> in(n);
-    float v[64];
+    std::vector<float> v(size_t(n) * kLanes);
     for (int y = rows.start; y < rows.end; ++y) {
-      for (int i = 0; i < n; ++i) in[i] = photos[i].ptr<float>(y);
       float* o = out.ptr<float>(y);
-      for (int x = 0; x < width; ++x) {
-        // Insertion sort of a handful of values: no allocation, no calls.
-        for (int i = 0; i < n; ++i) {
-          const float a = in[i][x];
-          int j = i;
-          for (; j > 0 && v[j - 1] > a; --j) v[j] = v[j - 1];
-          v[j] = a;
+      for (int x0 = 0; x0 < width; x0 += kLanes) {
+        const int lanes = std::min(kLanes, width - x0);
+        for (int i = 0; i < n; ++i) std::memcpy(&v[size_t(i) * kLanes], photos[i].ptr<float>(y) + x0, lanes * sizeof(float));
+        for (const auto& [a, b] : network) {
+          float* pa = &v[size_t(a) * kLanes];
+          float* pb = &v[size_t(b) * kLanes];
+          for (int k = 0; k < kLanes; ++k) {
+            const float lo = std::min(pa[k], pb[k]), hi = std::max(pa[k], pb[k]);
+            pa[k] = lo;
+            pb[k] = hi;
+          }
         }
-        o[x] = (n % 2) ? v[n / 2] : 0.5f * (v[n / 2] + v[n / 2 - 1]);
+        const float* mid = &v[size_t(n / 2) * kLanes];
+        if (n % 2) {
+          std::memcpy(o + x0, mid, lanes * sizeof(float));
+        } else {
+          const float* below = mid - kLanes;
+          for (int k = 0; k < lanes; ++k) o[x0 + k] = 0.5f * (mid[k] + below[k]);
+        }
       }
     }
   });
