@@ -95,8 +95,9 @@ int run(const TransferArgs& a) {
   if (!pair) return fail(pair.message());
   auto result = match::transfer(*pair, options, matching);
   if (!result) return fail(result.message());
-  bar.update(0.95, "writing " + a.out);
-  if (auto s = match::write_transfer(*result, a.out); !s) return fail(s.message());
+  Progress writing;
+  writing.on_progress = [&bar](double f, const std::string& stage) { bar.update(0.95 + 0.04 * f, stage); };
+  if (auto s = match::write_transfer(*result, a.out, writing); !s) return fail(s.message());
   bar.update(0.99, "storing the sets' results in the cache");
   const Status cached = pipeline::finish_cache_writes();  // not fatal: the next run recomputes
   bar.done();

@@ -164,11 +164,21 @@ std::optional<Expected<cv::Mat>> decode_png_linear(std::string_view bytes, const
   const size_t bpp = size_t(channels) * size_t(depth) / 8;
   const size_t row_bytes = size_t(width) * bpp;
   const size_t expect = size_t(height) * (row_bytes + 1);
-  std::unique_ptr<unsigned char[]> filtered(new unsigned char[expect]);
-  std::unique_ptr<libdeflate_decompressor, DecompressorFree> inflater(libdeflate_alloc_decompressor());
+  // The inflated rows go to a buffer each thread keeps for its next file (a
+  // set's frames are all of one size, so its pages are faulted in once), up
+  // to 64 MiB (a 10 Mpx 16-bit photo); a larger one is the call's own, so a
+  // full-resolution set leaves no 126 MB per thread behind.
+  constexpr size_t kKeep = size_t(64) << 20;
+  thread_local std::vector<unsigned char> kept;
+  thread_local std::unique_ptr<libdeflate_decompressor, DecompressorFree> inflater;
+  std::vector<unsigned char> own;
+  if (expect <= kKeep && kept.size() < expect) kept.resize(expect);
+  if (expect > kKeep) own.resize(expect);
+  if (!inflater) inflater.reset(libdeflate_alloc_decompressor());
   if (!inflater) return Expected<cv::Mat>(make_error(name + ": out of memory for the PNG decoder"));
+  unsigned char* filtered = expect <= kKeep ? kept.data() : own.data();
   size_t got = 0;
-  const auto r = libdeflate_zlib_decompress(inflater.get(), stream, idat_bytes, filtered.get(), expect, &got);
+  const auto r = libdeflate_zlib_decompress(inflater.get(), stream, idat_bytes, filtered, expect, &got);
   const std::string size_text = std::to_string(width) + "x" + std::to_string(height);
   if (r == LIBDEFLATE_INSUFFICIENT_SPACE)
     return Expected<cv::Mat>(make_error(name + ": corrupt PNG (more image data than " + size_text + " needs)"));
@@ -182,7 +192,7 @@ std::optional<Expected<cv::Mat>> decode_png_linear(std::string_view bytes, const
   std::vector<unsigned char> zeros(row_bytes, 0);
   const unsigned char* prev = zeros.data();
   for (uint32_t y = 0; y < height; ++y) {
-    unsigned char* row = filtered.get() + size_t(y) * (row_bytes + 1);
+    unsigned char* row = filtered + size_t(y) * (row_bytes + 1);
     if (!unfilter(row[0], row + 1, prev, row_bytes, bpp))
       return Expected<cv::Mat>(make_error(name + ": corrupt PNG (unknown row filter " + std::to_string(row[0]) +
                                           " in row " + std::to_string(y) + ")"));

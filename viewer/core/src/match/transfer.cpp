@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <functional>
+#include <mutex>
 #include <optional>
 #include <limits>
 #include <type_traits>
@@ -600,7 +601,7 @@ cv::Mat confidence_picture(const Map& map) {
   return pic;
 }
 
-Status write_transfer(const TransferResult& r, const std::filesystem::path& folder) {
+Status write_transfer(const TransferResult& r, const std::filesystem::path& folder, const Progress& progress) {
   std::error_code ec;
   std::filesystem::create_directories(folder, ec);
   if (ec) return make_error("cannot create " + folder.string() + ": " + ec.message());
@@ -639,7 +640,14 @@ Status write_transfer(const TransferResult& r, const std::filesystem::path& fold
     });
   }
   std::vector<Status> written(files.size(), Status::success());
-  tbb::parallel_for(size_t(0), files.size(), [&](size_t i) { written[i] = files[i](); });
+  std::mutex report_lock;
+  size_t done = 0;
+  progress.report(0.0, "writing " + folder.string());
+  tbb::parallel_for(size_t(0), files.size(), [&](size_t i) {
+    written[i] = files[i]();
+    std::lock_guard<std::mutex> hold(report_lock);
+    progress.report(static_cast<double>(++done) / static_cast<double>(files.size() + 1), "writing " + folder.string());
+  });
   for (const Status& s : written) {
     if (!s) return s;  // the first by file order, whatever finished first
   }

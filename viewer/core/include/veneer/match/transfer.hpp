@@ -112,7 +112,10 @@ std::string transfer_options_json(const TransferOptions& options);
 // Writes map.pfm, map.png, confidence.png, result_light_NN.png, result_median.png, reuse.png,
 // metrics.json (and relight_transferred.png / relight_reference.png when the
 // relighting was measured) into `folder` (created when missing).
-Status write_transfer(const TransferResult& result, const std::filesystem::path& folder);
+// `progress` hears the fraction of the files written (they are encoded in
+// parallel, each written through a temporary and renamed, one folder fsync).
+Status write_transfer(const TransferResult& result, const std::filesystem::path& folder,
+                      const Progress& progress = {});
 
 // Quality of a map between two sets: truth masks and normals when both sets
 // carry truth (else segmentation masks and no normal agreement), relighting
