@@ -1,11 +1,13 @@
 #include "veneerd/sequencer.hpp"
 
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <ctime>
 #include <optional>
 #include <sstream>
 
+#include "veneer/io/raw.hpp"
 #include "veneer/util/log.hpp"
 
 namespace veneerd {
@@ -117,6 +119,7 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
       const std::string step_name = k == 0 ? std::string("ambient frame (all lamps off)")
                                            : "shot " + std::to_string(k + 1) + " (" + lamps.label(k - 1) + " alone)";
       cv::Mat photo;
+      veneer::ImageSet::RawFile raw;
       for (int take = 1;; ++take) {
         // Proven before the exposure: commanded from the bridge's own reading, read back.
         auto proven = lamps.ensure(want, reading, plan.lamp_attempts);
@@ -134,6 +137,16 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
         std::vector<int> spoiled = lamps.differing(*after, want);
         if (spoiled.empty()) {
           photo = to_float_bgr(still->linear);
+          // The camera's RAW file, when it delivered one, is kept beside the
+          // photo (set.json's images[].raw / ambient_raw): the viewer reads
+          // the set from it, linear, by default.
+          raw = {};
+          if (!still->original.empty() && veneer::is_raw_file_name(still->original_name)) {
+            const std::string& n = still->original_name;
+            raw.extension = n.substr(n.rfind('.') + 1);
+            for (char& ch : raw.extension) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+            raw.bytes.assign(still->original.begin(), still->original.end());
+          }
           reading = std::move(*after);
           break;
         }
@@ -154,8 +167,10 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
       }
       if (k == 0) {
         set.ambient = photo;
+        set.ambient_raw = std::move(raw);
       } else {
         set.images.push_back(photo);
+        set.raw.push_back(std::move(raw));
       }
       step_total += seconds_since(step_start);
       ++steps_done;

@@ -126,6 +126,9 @@ veneer::Expected<StoredSet> Store::scan_one(const std::string& id) const {
   for (const auto& f : manifest->image_files) {
     if (!fs::is_regular_file(folder / f, ec)) return make_error((folder / f).string() + ": missing");
   }
+  for (const auto& f : manifest->raw_files) {
+    if (!f.empty() && !fs::is_regular_file(folder / f, ec)) return make_error((folder / f).string() + ": missing");
+  }
   const veneer::ImageSet& s = manifest->set;
   StoredSet out;
   out.id = id;
@@ -172,6 +175,11 @@ veneer::Expected<std::vector<std::string>> Store::files(const std::string& id, b
   std::vector<std::string> out{"set.json"};
   for (const auto& f : manifest->image_files) out.push_back(f.generic_string());
   if (!manifest->ambient_file.empty()) out.push_back(manifest->ambient_file.generic_string());
+  // The camera's RAW files go with the photos (the viewer decodes them by default).
+  for (const auto& f : manifest->raw_files) {
+    if (!f.empty()) out.push_back(f.generic_string());
+  }
+  if (!manifest->ambient_raw_file.empty()) out.push_back(manifest->ambient_raw_file.generic_string());
   if (!manifest->mask_file.empty()) out.push_back(manifest->mask_file.generic_string());
   if (include_truth) {
     std::error_code ec;
@@ -225,8 +233,10 @@ uint64_t Store::free_bytes() const {
 
 veneer::Status Store::save(const veneer::ImageSet& set) {
   if (!valid_set_id(set.id)) return make_error("cannot store a set under the id '" + set.id + "'");
-  const uint64_t need = estimate_bytes(set.size, static_cast<int>(set.images.size()) + (set.ambient.empty() ? 0 : 1),
-                                       set.truth.present());
+  uint64_t need = estimate_bytes(set.size, static_cast<int>(set.images.size()) + (set.ambient.empty() ? 0 : 1),
+                                 set.truth.present());
+  for (const auto& r : set.raw) need += r.bytes.size();
+  need += set.ambient_raw.bytes.size();
   const uint64_t free = free_bytes();
   if (free < need) {
     return make_error("store " + root_.string() + " is full: " + std::to_string(free >> 20) +

@@ -60,6 +60,11 @@ class FakeCamera : public veneerd::Camera {
     }
     veneerd::Still s;
     s.linear = cv::Mat(size_, CV_32FC3, cv::Scalar(v, v, v));
+    if (raw) {  // a RAW+JPEG body: the RAW file as delivered, named by the camera
+      s.original_name = "IMG_" + std::to_string(1000 + shots) + ".CR2";
+      const std::string bytes = "raw of shot " + std::to_string(shots);
+      s.original.assign(bytes.begin(), bytes.end());
+    }
     return s;
   }
   veneer::Expected<std::vector<unsigned char>> preview() override { return std::vector<unsigned char>{0xff, 0xd8}; }
@@ -68,6 +73,7 @@ class FakeCamera : public veneerd::Camera {
   std::function<void(int shot)> during_exposure;  // another client's change while the shutter is open
   int shots = 0, fail_on_shot = 0;
   float ambient = 0;
+  bool raw = false;  // deliver a RAW file with each still
 };
 
 }  // namespace rigtest

@@ -231,3 +231,26 @@ TEST(Sequencer, OwnerStatesAreSavedBeforeAnyLampIsTouched) {
   EXPECT_EQ(lamps2.sets, 0);
   EXPECT_EQ(camera2.shots, 0);
 }
+
+TEST(Sequencer, TheCamerasRawFilesGoWithTheSet) {
+  FakeLamps lamps(3);
+  FakeCamera camera(lamps, {16, 12});
+  camera.raw = true;
+  auto r = veneerd::run_capture(lamps, camera, plan(3), {});
+  ASSERT_TRUE(r) << r.message();
+  const auto& set = r->set;
+  ASSERT_EQ(set.raw.size(), 3u);
+  // Shot 1 is the ambient frame, shot k + 2 lamp k's photo.
+  EXPECT_EQ(set.ambient_raw.extension, "cr2");
+  EXPECT_EQ(set.ambient_raw.bytes, "raw of shot 1");
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_EQ(set.raw[i].extension, "cr2");
+    EXPECT_EQ(set.raw[i].bytes, "raw of shot " + std::to_string(i + 2));
+  }
+  // A camera that gives no RAW file: none in the set.
+  FakeCamera plain(lamps, {16, 12});
+  auto p = veneerd::run_capture(lamps, plain, plan(3), {});
+  ASSERT_TRUE(p) << p.message();
+  for (const auto& f : p->set.raw) EXPECT_TRUE(f.bytes.empty());
+  EXPECT_TRUE(p->set.ambient_raw.bytes.empty());
+}

@@ -116,3 +116,22 @@ TEST(Store, LeftoverTemporariesGoAtTheFirstOpenWhateverPidTheyName) {
   EXPECT_EQ(left, (std::vector<std::string>{".lock", "kept"}));
   fs::remove_all(root);
 }
+
+TEST(Store, TheCamerasRawFilesAreStoredAndListedForTransfer) {
+  fs::path root = rigtest::temp_dir("store-raw");
+  auto store = veneerd::Store::open(root);
+  ASSERT_TRUE(store) << store.message();
+  veneer::ImageSet set = tiny_set("r1", veneer::Role::destination);
+  for (int i = 0; i < 3; ++i) set.raw.push_back({"dng", "RAW bytes of shot " + std::to_string(i)});
+  set.ambient_raw = {"dng", "RAW bytes of the ambient frame"};
+  ASSERT_TRUE((*store)->save(set));
+  auto files = (*store)->files("r1", false);
+  ASSERT_TRUE(files) << files.message();
+  for (const char* f : {"light_00.dng", "light_02.dng", "ambient.dng", "light_00.png", "ambient.png"})
+    EXPECT_NE(std::find(files->begin(), files->end(), f), files->end()) << f;
+  EXPECT_EQ(files->size(), 9u);  // set.json, 3 photos + 3 RAW, ambient + its RAW
+  std::ifstream in(root / "r1" / "light_02.dng", std::ios::binary);
+  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(bytes, "RAW bytes of shot 2");
+  fs::remove_all(root);
+}

@@ -92,9 +92,13 @@ int run(const TransferArgs& a) {
   if (!pair) return report.fail(pair.message());
   auto result = match::transfer(*pair, options, matching);
   if (!result) return report.fail(result.message());
-  bar.update(0.95, "writing " + a.out);
-  if (auto s = match::write_transfer(*result, a.out); !s) return report.fail(s.message());
+  Progress writing;
+  writing.on_progress = [&bar](double f, const std::string& stage) { bar.update(0.95 + 0.04 * f, stage); };
+  if (auto s = match::write_transfer(*result, a.out, writing); !s) return report.fail(s.message());
+  bar.update(0.99, "storing the sets' results in the cache");
+  const Status cached = pipeline::finish_cache_writes();  // not fatal: the next run recomputes
   bar.done();
+  if (!cached) std::fprintf(stderr, "veneer transfer: warning: %s\n", cached.message().c_str());
   // metrics.json: how the sets were read (cache hit or miss, RAW or developed) and the wall time.
   auto metrics = nlohmann::json::parse(result->metrics_json, nullptr, false);
   if (metrics.is_object()) {

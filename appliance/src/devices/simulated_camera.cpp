@@ -12,6 +12,8 @@
 #include <opencv2/imgproc.hpp>
 
 #include "veneer/sim/motion.hpp"
+#include "veneer/io/dng.hpp"
+
 #include "veneer/util/log.hpp"
 
 namespace veneerd {
@@ -135,6 +137,10 @@ veneer::Expected<SimulatedCameraOptions> SimulatedCameraOptions::from_json(const
       return veneer::make_error("simulated camera: 'preview_render' must be \"fast\" or \"full\"");
     o.preview_full_render = v.get<std::string>() == "full";
   }
+  if (s.contains("raw")) {
+    if (!s["raw"].is_boolean()) return veneer::make_error("simulated camera: 'raw' must be true or false");
+    o.raw = s["raw"].get<bool>();
+  }
   if (auto st = o.check(); !st) return st.error();
   return o;
 }
@@ -152,6 +158,7 @@ json SimulatedCameraOptions::to_json() const {
     j["preview_motion"] = preview_motion;
     j["preview_motion_frames"] = preview_motion_frames;
   }
+  j["raw"] = raw;
   return j;
 }
 
@@ -371,9 +378,27 @@ veneer::Expected<Still> SimulatedCamera::capture() {
   Still still;
   still.linear = veneer::sim::render(**scene, lit, r);
   if (still.linear.empty()) return veneer::make_error("simulated camera: the simulator rendered nothing for shot " + std::to_string(shot));
+  bool raw = false;
   {
     std::lock_guard lock(impl_->mutex);
     impl_->last_lamps = all;
+    raw = impl_->options.raw;
+  }
+  if (raw) {
+    // The RAW file a RAW+JPEG body would deliver beside its photo.
+    if (still.linear.cols % 2 || still.linear.rows % 2) {
+      VLOG_WARN(kLog, "simulated shot {}: {}x{} is not whole Bayer cells; no RAW file", shot, still.linear.cols,
+                still.linear.rows);
+    } else {
+      veneer::DngOptions dng;
+      dng.camera_model = "Veneer simulated camera";
+      auto bytes = veneer::encode_dng(still.linear, dng);
+      if (!bytes) return veneer::make_error("simulated camera: shot " + std::to_string(shot) + ": DNG: " + bytes.message());
+      char name[32];
+      std::snprintf(name, sizeof name, "SIM_%04llu.DNG", static_cast<unsigned long long>(shot % 10000));
+      still.original_name = name;
+      still.original.assign(bytes->begin(), bytes->end());
+    }
   }
   VLOG_DEBUG(kLog, "simulated shot {}: scene {}, {} lamp(s) on, gain {:.3f}", shot, scene_name, lit.size(), r.exposure);
   return still;

@@ -81,6 +81,7 @@ json SimulatedRig::camera_config() const {
   c.preview_motion = options_.preview_motion;
   c.preview_motion_frames = options_.preview_motion_frames;
   c.noise_sigma = options_.noise_sigma;
+  c.raw = options_.raw;
   return c.to_json();
 }
 

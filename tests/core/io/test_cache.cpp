@@ -7,6 +7,7 @@
 
 #include "test_util.hpp"
 #include "veneer/io/cache.hpp"
+#include "veneer/match/transfer.hpp"
 #include "veneer/pipeline/prepare.hpp"
 #include "veneer/sim/simulator.hpp"
 
@@ -100,6 +101,47 @@ TEST(Cache, MatricesRoundTrip) {
   EXPECT_LT(cv::norm(m, *half, cv::NORM_INF), 1e-3);
   EXPECT_FALSE(decode_mat(encode_mat(m).substr(0, 30), "cut"));
   EXPECT_FALSE(decode_mat("MAT1", "short"));
+}
+
+}  // namespace
+}  // namespace veneer
+
+namespace veneer {
+namespace {
+using test::Scratch;
+
+TEST(Cache, MedianOfPhotosEqualsTheMatchersMedian) {
+  for (int n : {1, 2, 7, 8}) {
+    std::vector<cv::Mat> photos(static_cast<size_t>(n));
+    for (int i = 0; i < n; ++i) {
+      photos[static_cast<size_t>(i)].create(13, 17, CV_32FC3);
+      cv::RNG(static_cast<uint64_t>(40 + i)).fill(photos[static_cast<size_t>(i)], cv::RNG::UNIFORM, 0.0, 1.0);
+    }
+    photos[0].at<cv::Vec3f>(3, 4) = photos[n - 1].at<cv::Vec3f>(3, 4);  // ties
+    EXPECT_EQ(cv::norm(pipeline::median_of(photos), match::median_photo(photos), cv::NORM_INF), 0.0) << n;
+  }
+}
+
+TEST(Cache, MatrixFilesRoundTripAndRefuseDamage) {
+  Scratch dir;
+  cv::Mat m(300, 211, CV_32FC3);
+  cv::RNG(3).fill(m, cv::RNG::UNIFORM, 0.0, 1.0);
+  ASSERT_TRUE(write_mat_file(dir / "f", m));
+  auto back = read_mat_file(dir / "f");
+  ASSERT_TRUE(back) << back.message();
+  EXPECT_EQ(cv::norm(*back, m, cv::NORM_INF), 0.0);
+  ASSERT_TRUE(write_mat_file(dir / "h", m, true));
+  auto half = read_mat_file(dir / "h");
+  ASSERT_TRUE(half) << half.message();
+  ASSERT_EQ(half->type(), CV_32FC3);
+  EXPECT_LT(cv::norm(*half, m, cv::NORM_INF), 1e-3);
+  // The file is the blob encode_mat makes, byte for byte.
+  EXPECT_EQ(test::slurp(dir / "h"), encode_mat(m, true));
+  test::spit(dir / "cut", encode_mat(m).substr(0, 5000));
+  auto cut = read_mat_file(dir / "cut");
+  ASSERT_FALSE(cut);
+  EXPECT_NE(cut.message().find("cut"), std::string::npos);
+  EXPECT_NE(cut.message().find("size does not match"), std::string::npos) << cut.message();
 }
 
 }  // namespace

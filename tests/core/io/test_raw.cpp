@@ -48,6 +48,20 @@ TEST(Raw, DngOfARampDecodesBack) {
   EXPECT_LT(mean_relative_error(*small, expect, 2), 0.01);
 }
 
+TEST(Raw, EveryFrameKeepsTheFilesWhiteLevel) {
+  // Whatever a frame's brightest sample (a highlight near clipping, or a dim
+  // frame), it decodes at the file's white level like every other frame of
+  // its set, or photometric stereo sees each frame scaled its own way.
+  for (float peak : {0.05f, 0.8f, 0.95f}) {
+    const cv::Mat photo = ramp({64, 48}) * (peak / 0.6f);
+    auto dng = encode_dng(photo);
+    ASSERT_TRUE(dng) << dng.message();
+    auto back = decode_raw_linear(*dng, {}, "dim.dng");
+    ASSERT_TRUE(back) << back.message();
+    EXPECT_LT(mean_relative_error(*back, photo, 4), 0.01) << "peak " << peak;
+  }
+}
+
 TEST(Raw, DamagedFilesAreRefusedWithTheirName) {
   auto dng = encode_dng(ramp({32, 16}));
   ASSERT_TRUE(dng);

@@ -49,6 +49,11 @@ struct SimulatedCameraOptions {
   // lamp=sweep moves the hand lamp as simulate does. Empty = still.
   std::string preview_motion;
   int preview_motion_frames = 60;
+  // Each still also as the camera's RAW file, as a body set to RAW+JPEG
+  // delivers it: a DNG of the linear render (Bayer mosaic, 14-bit, black and
+  // white levels, as-shot white balance; veneer/io/dng.hpp), which the set
+  // keeps beside its photo and the viewer decodes by default. Config "raw".
+  bool raw = true;
   veneer::Status check() const;
   static veneer::Expected<SimulatedCameraOptions> from_json(const nlohmann::json& section);
   nlohmann::json to_json() const;

@@ -44,6 +44,7 @@ struct SimulatedRigOptions {
   std::string preview_motion;          // live view in motion: a `simulate --motion` SPEC (SimulatedCameraOptions)
   int preview_motion_frames = 60;      // ... played back and forth over this many frames
   double noise_sigma = 0.002;          // sensor noise
+  bool raw = true;                     // the camera also delivers a DNG of each still (SimulatedCameraOptions::raw)
   int apply_delay_ms = 50;             // emulator: change visible this long after the ack
   int latency_ms = 5;                  // emulator: per-request latency
   bool rate_limits = true;             // emulator enforces 10 light/s, 1 group/s, 3 in flight

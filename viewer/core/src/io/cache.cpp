@@ -6,8 +6,11 @@
 #include <cstring>
 #include <vector>
 
+#include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
+
+#include <tbb/parallel_for.h>
 
 #include "file_util.hpp"
 #include "veneer/io/image_io.hpp"
@@ -56,6 +59,47 @@ uint64_t folder_bytes(const fs::path& dir) {
   }
   return total;
 }
+
+struct Fd {
+  int fd = -1;
+  ~Fd() {
+    if (fd >= 0) ::close(fd);
+  }
+};
+
+bool write_all(int fd, const void* data, size_t n) {
+  const char* p = static_cast<const char*>(data);
+  while (n > 0) {
+    const ssize_t w = ::write(fd, p, n);
+    if (w < 0 && errno == EINTR) continue;
+    if (w <= 0) return false;
+    p += w;
+    n -= static_cast<size_t>(w);
+  }
+  return true;
+}
+
+bool read_all(int fd, void* data, size_t n) {
+  char* p = static_cast<char*>(data);
+  while (n > 0) {
+    const ssize_t r = ::read(fd, p, n);
+    if (r < 0 && errno == EINTR) continue;
+    if (r <= 0) return false;
+    p += r;
+    n -= static_cast<size_t>(r);
+  }
+  return true;
+}
+
+// A file that starts with the matrix header's magic.
+bool is_mat_file(const fs::path& file) {
+  Fd f{::open(file.c_str(), O_RDONLY | O_CLOEXEC)};
+  uint32_t magic = 0;
+  return f.fd >= 0 && read_all(f.fd, &magic, sizeof magic) && magic == kMatMagic;
+}
+
+// Rows per chunk so that a chunk is about 8 MiB.
+int chunk_rows(const cv::Mat& m) { return std::max(1, static_cast<int>((8u << 20) / std::max<size_t>(1, m.step[0]))); }
 
 }  // namespace
 
@@ -107,14 +151,19 @@ ResultCache::ResultCache(CacheOptions options) : options_(std::move(options)) {
   dir_ = options_.dir.empty() ? default_cache_dir() : options_.dir;
 }
 
-std::optional<CacheEntry> ResultCache::load(const std::string& key) const {
+std::optional<CacheEntry> ResultCache::load(const std::string& key, std::map<std::string, cv::Mat>* mats) const {
   if (!options_.enabled || !safe_key(key)) return std::nullopt;
   const fs::path entry_dir = dir_ / key;
   std::error_code ec;
   if (!fs::is_directory(entry_dir, ec)) return std::nullopt;
   CacheEntry entry;
+  std::vector<fs::path> matrix_files;
   for (const auto& e : fs::directory_iterator(entry_dir, ec)) {
     if (!e.is_regular_file(ec)) continue;
+    if (mats && is_mat_file(e.path())) {
+      matrix_files.push_back(e.path());
+      continue;
+    }
     auto bytes = read_file_bytes(e.path());
     if (!bytes) {
       VLOG_WARN("Cache", "{}: unreadable, dropping the entry", e.path().string());
@@ -123,12 +172,24 @@ std::optional<CacheEntry> ResultCache::load(const std::string& key) const {
     }
     entry.emplace(e.path().filename().string(), std::move(bytes).value());
   }
+  if (mats) {
+    std::vector<Expected<cv::Mat>> read(matrix_files.size(), make_error("not read"));
+    tbb::parallel_for(size_t(0), matrix_files.size(), [&](size_t i) { read[i] = read_mat_file(matrix_files[i]); });
+    for (size_t i = 0; i < read.size(); ++i) {
+      if (!read[i]) {
+        VLOG_WARN("Cache", "{}, dropping the entry", read[i].message());
+        fs::remove_all(entry_dir, ec);
+        return std::nullopt;
+      }
+      (*mats)[matrix_files[i].filename().string()] = std::move(read[i]).value();
+    }
+  }
   // Recently used: the folder's time is the LRU clock.
   fs::last_write_time(entry_dir, fs::file_time_type::clock::now(), ec);
   return entry;
 }
 
-Status ResultCache::store(const std::string& key, const CacheEntry& entry) const {
+Status ResultCache::store(const std::string& key, const CacheEntry& entry, const CacheMats& mats) const {
   if (!options_.enabled) return Status::success();
   if (!safe_key(key)) return make_error("cache: bad key \"" + key.substr(0, 80) + "\"");
   std::error_code ec;
@@ -151,6 +212,16 @@ Status ResultCache::store(const std::string& key, const CacheEntry& entry) const
     if (!ok) {
       fs::remove_all(tmp, ec);
       return make_error(file + ": cannot write cache file");
+    }
+  }
+  for (const auto& [name, m] : mats) {
+    if (name.find('/') != std::string::npos || name.empty() || name[0] == '.' || entry.count(name)) {
+      fs::remove_all(tmp, ec);
+      return make_error("cache: bad matrix name \"" + name + "\"");
+    }
+    if (Status s = write_mat_file(tmp / name, m.mat, m.half); !s) {
+      fs::remove_all(tmp, ec);
+      return s;
     }
   }
   fs::remove_all(target, ec);  // an older entry under the same key
@@ -221,6 +292,67 @@ Expected<cv::Mat> decode_mat(const std::string& blob, const std::string& name) {
   if (blob.size() != sizeof head + m.total() * m.elemSize()) return make_error(name + ": size does not match its header");
   if (!m.empty()) std::memcpy(m.data, blob.data() + sizeof head, m.total() * m.elemSize());
   if (depth == CV_16F) m.convertTo(m, CV_MAKETYPE(CV_32F, m.channels()));
+  return m;
+}
+
+}  // namespace veneer
+
+namespace veneer {
+
+Status write_mat_file(const fs::path& file, const cv::Mat& m, bool half) {
+  const bool to_half = half && m.depth() == CV_32F;
+  const int type = to_half ? CV_MAKETYPE(CV_16F, m.channels()) : m.type();
+  const uint32_t head[4] = {kMatMagic, static_cast<uint32_t>(m.rows), static_cast<uint32_t>(m.cols),
+                            static_cast<uint32_t>(type)};
+  Fd f{::open(file.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644)};
+  if (f.fd < 0) return make_error(file.string() + ": cannot create cache file: " + std::strerror(errno));
+  bool ok = write_all(f.fd, head, sizeof head);
+  const int step = chunk_rows(m);
+  cv::Mat buffer;
+  for (int y = 0; ok && y < m.rows; y += step) {
+    cv::Mat rows = m.rowRange(y, std::min(m.rows, y + step));
+    if (to_half || !rows.isContinuous()) {
+      rows.convertTo(buffer, type);
+      rows = buffer;
+    }
+    ok = write_all(f.fd, rows.data, rows.total() * rows.elemSize());
+  }
+  if (!ok) return make_error(file.string() + ": cannot write cache file: " + std::strerror(errno));
+  return Status::success();
+}
+
+Expected<cv::Mat> read_mat_file(const fs::path& file) {
+  const std::string name = file.string();
+  Fd f{::open(file.c_str(), O_RDONLY | O_CLOEXEC)};
+  if (f.fd < 0) return make_error(name + ": cannot open: " + std::strerror(errno));
+  uint32_t head[4];
+  if (!read_all(f.fd, head, sizeof head)) return make_error(name + ": truncated");
+  if (head[0] != kMatMagic || head[1] > (1u << 16) || head[2] > (1u << 16)) return make_error(name + ": not a cached matrix");
+  const int type = static_cast<int>(head[3]);
+  const int depth = CV_MAT_DEPTH(type), channels = CV_MAT_CN(type);
+  if ((depth != CV_8U && depth != CV_16F && depth != CV_32F && depth != CV_32S) || channels > 4)
+    return make_error(name + ": bad type");
+  struct stat st {};
+  const size_t pixels = size_t(head[1]) * head[2] * CV_ELEM_SIZE(type);
+  if (::fstat(f.fd, &st) != 0 || static_cast<size_t>(st.st_size) != sizeof head + pixels)
+    return make_error(name + ": size does not match its header");
+  const int rows = static_cast<int>(head[1]), cols = static_cast<int>(head[2]);
+  if (depth != CV_16F) {
+    cv::Mat m(rows, cols, type);
+    if (!m.empty() && !read_all(f.fd, m.data, pixels)) return make_error(name + ": truncated");
+    return m;
+  }
+  // Half floats: read a chunk, widen it into its rows of the result.
+  cv::Mat m(rows, cols, CV_MAKETYPE(CV_32F, channels));
+  const int step = std::max(1, static_cast<int>((8u << 20) / std::max<size_t>(1, size_t(cols) * CV_ELEM_SIZE(type))));
+  cv::Mat chunk(std::min(rows, step), cols, type);
+  for (int y = 0; y < rows; y += step) {
+    const int n = std::min(rows - y, step);
+    cv::Mat part = chunk.rowRange(0, n);
+    if (!read_all(f.fd, part.data, part.total() * part.elemSize())) return make_error(name + ": truncated");
+    cv::Mat out = m.rowRange(y, y + n);
+    part.convertTo(out, out.type());
+  }
   return m;
 }
 

@@ -5,6 +5,8 @@
 #include <cstring>
 
 #include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 namespace veneer::io_detail {
@@ -14,7 +16,40 @@ namespace {
 std::string errno_text(int err) { return std::strerror(err); }
 }  // namespace
 
-Status write_file_synced(const fs::path& file, std::string_view bytes) {
+Expected<MappedFile> MappedFile::open(const fs::path& file) {
+  const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) {
+    const int err = errno;
+    if (err == ENOENT) return make_error(file.string() + ": file not found");
+    return make_error(file.string() + ": cannot open: " + errno_text(err));
+  }
+  struct stat st {};
+  if (::fstat(fd, &st) != 0 || !S_ISREG(st.st_mode)) {
+    ::close(fd);
+    return make_error(file.string() + (S_ISDIR(st.st_mode) ? ": is a folder, expected a file" : ": not a regular file"));
+  }
+  const size_t size = static_cast<size_t>(st.st_size);
+  if (size == 0) {
+    ::close(fd);
+    return MappedFile(nullptr, 0);
+  }
+  void* data = ::mmap(nullptr, size, PROT_READ, MAP_PRIVATE | MAP_POPULATE, fd, 0);
+  const int err = errno;
+  ::close(fd);
+  if (data == MAP_FAILED) return make_error(file.string() + ": cannot map: " + errno_text(err));
+  return MappedFile(data, size);
+}
+
+MappedFile::MappedFile(MappedFile&& other) noexcept : data_(other.data_), size_(other.size_) {
+  other.data_ = nullptr;
+  other.size_ = 0;
+}
+
+MappedFile::~MappedFile() {
+  if (data_) ::munmap(data_, size_);
+}
+
+Status write_file_synced(const fs::path& file, std::string_view bytes, bool sync) {
   int fd = ::open(file.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) return make_error(file.string() + ": cannot create: " + errno_text(errno));
   size_t done = 0;
@@ -29,7 +64,7 @@ Status write_file_synced(const fs::path& file, std::string_view bytes) {
     }
     done += static_cast<size_t>(n);
   }
-  if (::fsync(fd) != 0) {
+  if (sync && ::fsync(fd) != 0) {
     int err = errno;
     ::close(fd);
     return make_error(file.string() + ": fsync failed: " + errno_text(err));

@@ -335,19 +335,20 @@ Status decode_frames(const std::vector<Frame>& frames, const RawOptions& raw_opt
       return;
     }
     const Frame& f = frames[i];
-    auto bytes = read_file_bytes(f.file);
-    if (!bytes) {
-      errors[i] = bytes.message();
+    auto mapped = io_detail::MappedFile::open(f.file);  // read in place: no copy, no fresh pages
+    if (!mapped) {
+      errors[i] = mapped.message();
       return;
     }
-    Expected<cv::Mat> image = f.raw ? decode_raw_linear(*bytes, raw_options, f.file.string())
-                                    : decode_linear_image(*bytes, f.file.string());
+    const std::string_view bytes = mapped->bytes();
+    Expected<cv::Mat> image = f.raw ? decode_raw_linear(bytes, raw_options, f.file.string())
+                                    : decode_linear_image(bytes, f.file.string());
     if (!image) {
       errors[i] = image.message();
       return;
     }
     out[i] = std::move(image).value();
-    if (kinds) (*kinds)[i] = f.raw ? (raw_options.half_size ? "raw-half" : "raw") : image_file_kind(*bytes);
+    if (kinds) (*kinds)[i] = f.raw ? (raw_options.half_size ? "raw-half" : "raw") : image_file_kind(bytes);
     const size_t n = ++done;
     if (progress.on_progress) {
       std::lock_guard<std::mutex> lock(report_lock);

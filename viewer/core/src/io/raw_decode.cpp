@@ -72,6 +72,12 @@ Expected<cv::Mat> decode_raw_linear(std::string_view bytes, const RawOptions& op
   p.use_auto_wb = 0;
   p.output_color = 1;  // sRGB primaries, linear
   p.highlight = 0;     // clip at the white level
+  // LibRaw's default (0.75) takes a frame's own data maximum as its white
+  // level when that lies between 75 % and 100 % of the real one: each photo
+  // with a highlight near clipping would be scaled by its own factor
+  // (measured on the rig twin's DNGs: 4 of 7 frames 25-30 % too bright,
+  // normals off by 12 degrees). Off: the file's white level for every frame.
+  p.adjust_maximum_thr = 0.0f;
   p.half_size = options.half_size ? 1 : 0;
   switch (options.demosaic) {
     case Demosaic::bilinear: p.user_qual = 0; break;

@@ -5,6 +5,8 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <functional>
+#include <mutex>
 #include <optional>
 #include <limits>
 #include <type_traits>
@@ -12,6 +14,7 @@
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
+#include <tbb/parallel_for.h>
 
 #include "veneer/io/image_io.hpp"
 #include "veneer/match/fast.hpp"
@@ -266,13 +269,13 @@ std::vector<cv::Point> spread_points(const Map& map, int count) {
   return out;
 }
 
-Status write_map(const std::filesystem::path& file, const Map& map) {
+Status write_map(const std::filesystem::path& file, const Map& map, Sync sync) {
   std::vector<cv::Mat> channels;
   cv::split(map.xy, channels);
   channels.push_back(map.distance);
   cv::Mat xyd;
   cv::merge(channels, xyd);
-  return write_pfm(file, xyd, true);
+  return write_pfm(file, xyd, true, sync);
 }
 
 Expected<Map> read_map(const std::filesystem::path& file) {
@@ -602,31 +605,57 @@ cv::Mat confidence_picture(const Map& map) {
   return pic;
 }
 
-Status write_transfer(const TransferResult& r, const std::filesystem::path& folder) {
+Status write_transfer(const TransferResult& r, const std::filesystem::path& folder, const Progress& progress) {
   std::error_code ec;
   std::filesystem::create_directories(folder, ec);
   if (ec) return make_error("cannot create " + folder.string() + ": " + ec.message());
-  if (auto s = write_map(folder / "map.pfm", r.map); !s) return s;
-  if (auto s = write_picture(folder / "map.png", map_picture(r.map, r.source_size)); !s) return s;
+  // Every file is made and written at once (one task each, encoders on all
+  // cores), each through a temporary and a rename but without an fsync of
+  // its own; one fsync of the folder at the end, then metrics.json, synced,
+  // last: a folder with a metrics.json holds the whole result.
+  std::vector<std::function<Status()>> files;
+  files.push_back([&] { return write_map(folder / "map.pfm", r.map, Sync::later); });
+  files.push_back([&] { return write_picture(folder / "map.png", map_picture(r.map, r.source_size), Sync::later); });
   for (size_t i = 0; i < r.repainted.size(); ++i) {
-    char name[64];
-    std::snprintf(name, sizeof name, "result_light_%02zu.png", i);
-    // Linear 16-bit at the sets' own scale, as their light_NN.png: a
-    // repainted photo and the photos it came from look alike side by side.
-    if (auto s = write_png16(folder / name, r.repainted[i]); !s) return s;
+    files.push_back([&, i] {
+      char name[64];
+      std::snprintf(name, sizeof name, "result_light_%02zu.png", i);
+      // Linear 16-bit at the sets' own scale, as their light_NN.png: a
+      // repainted photo and the photos it came from look alike side by side.
+      return write_png16(folder / name, r.repainted[i], Sync::later);
+    });
   }
-  if (auto s = write_png16(folder / "result_median.png", r.repainted_median); !s) return s;
-  if (auto s = write_picture(folder / "reuse.png", reuse_picture(r.reuse, r.source_median)); !s) return s;
-  if (auto s = write_picture(folder / "confidence.png", confidence_picture(r.map)); !s) return s;
+  files.push_back([&] { return write_png16(folder / "result_median.png", r.repainted_median, Sync::later); });
+  files.push_back(
+      [&] { return write_picture(folder / "reuse.png", reuse_picture(r.reuse, r.source_median), Sync::later); });
+  files.push_back([&] { return write_picture(folder / "confidence.png", confidence_picture(r.map), Sync::later); });
   if (r.relit) {
-    // one exposure for both, so that they compare
-    cv::Mat both;
-    cv::hconcat(r.relit->transferred, r.relit->reference, both);
-    const cv::Mat pic = tonemap_picture(both);
-    const int w = r.relit->transferred.cols;
-    if (auto s = write_picture(folder / "relight_transferred.png", pic(cv::Rect(0, 0, w, pic.rows)).clone()); !s) return s;
-    if (auto s = write_picture(folder / "relight_reference.png", pic(cv::Rect(w, 0, w, pic.rows)).clone()); !s) return s;
+    files.push_back([&] {
+      // one exposure for both, so that they compare
+      cv::Mat both;
+      cv::hconcat(r.relit->transferred, r.relit->reference, both);
+      const cv::Mat pic = tonemap_picture(both);
+      const int w = r.relit->transferred.cols;
+      if (auto s = write_picture(folder / "relight_transferred.png", pic(cv::Rect(0, 0, w, pic.rows)).clone(),
+                                 Sync::later);
+          !s)
+        return s;
+      return write_picture(folder / "relight_reference.png", pic(cv::Rect(w, 0, w, pic.rows)).clone(), Sync::later);
+    });
   }
+  std::vector<Status> written(files.size(), Status::success());
+  std::mutex report_lock;
+  size_t done = 0;
+  progress.report(0.0, "writing " + folder.string());
+  tbb::parallel_for(size_t(0), files.size(), [&](size_t i) {
+    written[i] = files[i]();
+    std::lock_guard<std::mutex> hold(report_lock);
+    progress.report(static_cast<double>(++done) / static_cast<double>(files.size() + 1), "writing " + folder.string());
+  });
+  for (const Status& s : written) {
+    if (!s) return s;  // the first by file order, whatever finished first
+  }
+  if (auto s = sync_folder(folder); !s) return s;
   return write_file_atomic(folder / "metrics.json", r.metrics_json + "\n");
 }
 

@@ -1,9 +1,13 @@
 // Set folders -> prepared objects through the result cache (prepare.hpp).
 #include "veneer/pipeline/prepare.hpp"
 
+#include <algorithm>
 #include <chrono>
+#include <cstring>
 
 #include <nlohmann/json.hpp>
+#include <future>
+#include <map>
 #include <mutex>
 
 #include <tbb/parallel_for.h>
@@ -37,35 +41,36 @@ std::string salt_of(const ReadOptions& read, double scale, bool truth_normals) {
   return j.dump();
 }
 
-CacheEntry to_entry(const PreparedSet& p) {
+// What a set's cache entry holds: a small meta.json, and the matrices
+// written straight from the Mats (photos and float pictures as half floats).
+std::pair<CacheEntry, CacheMats> to_entry(const PreparedSet& p) {
   CacheEntry e;
+  CacheMats mats;
   const auto& v = p.object.view;
   nlohmann::json meta{{"photos_from", p.set.photos_from},
                       {"images", v.images.size()},
                       {"segment_s", p.object.segment_seconds},
                       {"normals_s", p.object.normals_seconds}};
   e["meta.json"] = meta.dump();
-  e["normals"] = encode_mat(v.normals);
-  e["mask"] = encode_mat(v.mask);
-  if (!p.albedo.empty()) e["albedo"] = encode_mat(p.albedo, true);
-  if (!p.residual.empty()) e["confidence"] = encode_mat(p.residual, true);
-  e["median"] = encode_mat(p.median, true);
-  for (size_t i = 0; i < v.images.size(); ++i) e["photo_" + std::to_string(i)] = encode_mat(v.images[i], true);
-  return e;
+  mats["normals"] = {v.normals, false};
+  mats["mask"] = {v.mask, false};
+  if (!p.albedo.empty()) mats["albedo"] = {p.albedo, true};
+  if (!p.residual.empty()) mats["confidence"] = {p.residual, true};
+  mats["median"] = {p.median, true};
+  for (size_t i = 0; i < v.images.size(); ++i) mats["photo_" + std::to_string(i)] = {v.images[i], true};
+  return {std::move(e), std::move(mats)};
 }
 
 // Fills `p` from a cache entry; false when the entry does not fit the set.
-bool from_entry(const CacheEntry& e, PreparedSet& p) {
+bool from_entry(const CacheEntry& e, std::map<std::string, cv::Mat>& mats, PreparedSet& p) {
   auto get = [&](const std::string& name) -> cv::Mat {
-    auto it = e.find(name);
-    if (it == e.end()) return {};
-    auto m = decode_mat(it->second, name);
-    return m ? std::move(m).value() : cv::Mat();
+    auto it = mats.find(name);
+    return it == mats.end() ? cv::Mat() : it->second;
   };
   auto meta_it = e.find("meta.json");
   if (meta_it == e.end()) return false;
   const auto meta = nlohmann::json::parse(meta_it->second, nullptr, false);
-  if (meta.is_discarded() || !meta.contains("images")) return false;
+  if (meta.is_discarded() || !meta.contains("images") || !meta["images"].is_number_unsigned()) return false;
   const size_t n = meta["images"].get<size_t>();
   if (n != p.set.lights.size()) return false;
   auto& v = p.object.view;
@@ -75,7 +80,7 @@ bool from_entry(const CacheEntry& e, PreparedSet& p) {
   p.residual = get("confidence");
   p.median = get("median");
   v.images.assign(n, cv::Mat());
-  tbb::parallel_for(size_t(0), n, [&](size_t i) { v.images[i] = get("photo_" + std::to_string(i)); });
+  for (size_t i = 0; i < n; ++i) v.images[i] = get("photo_" + std::to_string(i));
   const cv::Size size = v.normals.size();
   if (v.normals.type() != CV_32FC3 || v.mask.type() != CV_8UC1 || v.mask.size() != size || p.median.size() != size)
     return false;
@@ -88,7 +93,86 @@ bool from_entry(const CacheEntry& e, PreparedSet& p) {
   return true;
 }
 
+// Cache entries being written in the background, by key: a later
+// preparation of the same set waits for its entry, finish_cache_writes for all.
+struct PendingWrites {
+  std::mutex lock;
+  std::map<std::string, std::shared_future<Status>> by_key;
+};
+PendingWrites& pending_writes() {
+  static PendingWrites p;
+  return p;
+}
+
+void wait_for_write(const std::string& key) {
+  std::shared_future<Status> f;
+  {
+    std::lock_guard<std::mutex> hold(pending_writes().lock);
+    auto it = pending_writes().by_key.find(key);
+    if (it == pending_writes().by_key.end()) return;
+    f = it->second;
+  }
+  f.wait();
+}
+
 }  // namespace
+
+Status finish_cache_writes() {
+  std::map<std::string, std::shared_future<Status>> all;
+  {
+    std::lock_guard<std::mutex> hold(pending_writes().lock);
+    all.swap(pending_writes().by_key);
+  }
+  Status first = Status::success();
+  for (auto& [key, f] : all) {
+    Status s = f.get();
+    if (!s && first) first = s;
+  }
+  return first;
+}
+
+cv::Mat median_of(const std::vector<cv::Mat>& photos) {
+  if (photos.empty()) return {};
+  const int n = static_cast<int>(photos.size());
+  if (n > 32) return match::median_photo(photos);
+  // An odd-even transposition network (n rounds of compare-exchanges of
+  // neighbours) sorts each sample's n values; run on 256 samples at once,
+  // every compare-exchange is a min and a max over two short arrays, which
+  // the compiler vectorises: no branch per value.
+  std::vector<std::pair<int, int>> network;
+  for (int round = 0; round < n; ++round)
+    for (int i = round % 2; i + 1 < n; i += 2) network.emplace_back(i, i + 1);
+  cv::Mat out(photos[0].size(), CV_32FC3);
+  const int width = out.cols * 3;
+  constexpr int kLanes = 256;
+  cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& rows) {
+    std::vector<float> v(size_t(n) * kLanes);
+    for (int y = rows.start; y < rows.end; ++y) {
+      float* o = out.ptr<float>(y);
+      for (int x0 = 0; x0 < width; x0 += kLanes) {
+        const int lanes = std::min(kLanes, width - x0);
+        for (int i = 0; i < n; ++i) std::memcpy(&v[size_t(i) * kLanes], photos[i].ptr<float>(y) + x0, lanes * sizeof(float));
+        for (const auto& [a, b] : network) {
+          float* pa = &v[size_t(a) * kLanes];
+          float* pb = &v[size_t(b) * kLanes];
+          for (int k = 0; k < kLanes; ++k) {
+            const float lo = std::min(pa[k], pb[k]), hi = std::max(pa[k], pb[k]);
+            pa[k] = lo;
+            pb[k] = hi;
+          }
+        }
+        const float* mid = &v[size_t(n / 2) * kLanes];
+        if (n % 2) {
+          std::memcpy(o + x0, mid, lanes * sizeof(float));
+        } else {
+          const float* below = mid - kLanes;
+          for (int k = 0; k < lanes; ++k) o[x0 + k] = 0.5f * (mid[k] + below[k]);
+        }
+      }
+    }
+  });
+  return out;
+}
 
 Status PrepareOptions::check() const {
   if (auto s = read.check(); !s) return s;
@@ -115,13 +199,15 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
   if (cacheable) {
     auto t0 = Clock::now();
     progress.report(0.0, "cache " + folder.filename().string());
-    if (auto entry = cache.load(key)) {
+    wait_for_write(key);
+    std::map<std::string, cv::Mat> mats;
+    if (auto entry = cache.load(key, &mats)) {
       ReadOptions meta = options.read;
       meta.load_photos = false;
       auto set = read_set(folder, meta);
       if (!set) return set.error();
       p.set = std::move(set).value();
-      if (from_entry(*entry, p)) {
+      if (from_entry(*entry, mats, p)) {
         const cv::Size size = p.object.view.normals.size();
         if (size != p.set.size) match::scale_set(p.set, static_cast<double>(size.width) / p.set.size.width);
         if (p.set.size == size) {
@@ -190,16 +276,24 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
   for (const auto& light : p.set.lights) p.object.view.lamps.push_back(light.lamp_id);
   if (p.object.view.lamps.size() != p.object.view.images.size()) p.object.view.lamps.clear();
   progress.report(0.9, "median " + p.set.id);
-  p.median = match::median_photo(p.object.view.images);
+  p.median = median_of(p.object.view.images);
 
   if (cacheable) {
-    t0 = Clock::now();
-    progress.report(0.95, "cache " + p.set.id);
-    if (auto s = cache.store(key, to_entry(p)); !s) {
-      p.report.cache_error = s.message();
-      VLOG_WARN("Cache", "{}", s.message());
-    }
-    p.report.cache_write_s = since(t0);
+    // Written in the background (the Mats are shared, not copied, and
+    // nothing writes into them after this): the map and the pictures are
+    // made meanwhile. finish_cache_writes() waits for it.
+    auto entry = std::make_shared<std::pair<CacheEntry, CacheMats>>(to_entry(p));
+    const std::string id = p.set.id;
+    auto write = std::async(std::launch::async, [cache, key, entry, id]() -> Status {
+      const auto t = Clock::now();
+      Status s = cache.store(key, entry->first, entry->second);
+      if (!s) VLOG_WARN("Cache", "{}", s.message());
+      VLOG_DEBUG("Cache", "{}: entry {} written in {:.2f} s", id, key, since(t));
+      return s;
+    });
+    std::lock_guard<std::mutex> hold(pending_writes().lock);
+    pending_writes().by_key[key] = write.share();
+    p.report.cache_write_s = -1;  // in the background
   }
   p.report.total_s = since(t_all);
   progress.report(1.0, "prepared " + p.set.id);
@@ -249,8 +343,10 @@ std::string reports_json(const std::vector<SetReport>& reports) {
     nlohmann::json j{{"folder", r.folder},       {"id", r.id},
                      {"checksum", r.checksum},   {"cache", r.checksum.empty() ? "off" : (r.cache_hit ? "hit" : "miss")},
                      {"photos_from", r.photos_from}, {"read_s", r.read_s},
-                     {"normals_s", r.normals_s}, {"cache_write_s", r.cache_write_s},
+                     {"normals_s", r.normals_s},
                      {"total_s", r.total_s}};
+    if (r.cache_write_s < 0) j["cache_write"] = "background";
+    else if (r.cache_write_s > 0) j["cache_write_s"] = r.cache_write_s;
     if (!r.cache_error.empty()) j["cache_error"] = r.cache_error;
     return j;
   };

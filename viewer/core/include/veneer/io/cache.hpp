@@ -36,6 +36,14 @@ Expected<std::string> set_checksum(const std::filesystem::path& folder, const st
 
 // One cache entry: named blobs.
 using CacheEntry = std::map<std::string, std::string>;
+// Named matrices stored beside the blobs, each straight from its Mat to its
+// file (write_mat_file): a full-resolution photo is hundreds of MB, so no blob
+// is made of it. `half` stores a CV_32F matrix as half floats.
+struct CachedMat {
+  cv::Mat mat;
+  bool half = false;
+};
+using CacheMats = std::map<std::string, CachedMat>;
 
 class ResultCache {
  public:
@@ -43,10 +51,13 @@ class ResultCache {
   const std::filesystem::path& dir() const { return dir_; }
   // The entry stored under `key`, or nullopt (miss, disabled, or damaged: a
   // damaged entry is removed). A hit marks the entry as recently used.
-  std::optional<CacheEntry> load(const std::string& key) const;
-  // Stores `entry` under `key` (temp folder + rename), then evicts least
-  // recently used entries until the cache is within max_bytes.
-  Status store(const std::string& key, const CacheEntry& entry) const;
+  // With `mats`, the entry's matrix files are read into it (in parallel,
+  // CV_32F where stored as half floats) instead of into the blobs.
+  std::optional<CacheEntry> load(const std::string& key, std::map<std::string, cv::Mat>* mats = nullptr) const;
+  // Stores `entry` and `mats` under `key` (temp folder + rename, no fsync: a
+  // lost entry is recomputed), then evicts least recently used entries until
+  // the cache is within max_bytes.
+  Status store(const std::string& key, const CacheEntry& entry, const CacheMats& mats = {}) const;
   uint64_t size_bytes() const;
 
  private:
@@ -59,5 +70,9 @@ class ResultCache {
 // CV_32F images may be stored as half floats (`half`) to halve the bytes.
 std::string encode_mat(const cv::Mat& m, bool half = false);
 Expected<cv::Mat> decode_mat(const std::string& blob, const std::string& name);
+// The same format straight between a Mat and a file, through a small buffer
+// (no copy of the whole matrix); half floats come back as CV_32F.
+Status write_mat_file(const std::filesystem::path& file, const cv::Mat& m, bool half = false);
+Expected<cv::Mat> read_mat_file(const std::filesystem::path& file);
 
 }  // namespace veneer

@@ -10,18 +10,25 @@
 
 namespace veneer {
 
+// How a file is put in place. Always written to a temporary beside it and
+// renamed over the name, so a reader never sees half a file; `each` also
+// fsyncs the file and its folder before returning, `later` leaves the
+// folder's fsync to one sync_folder() after a batch of files (results that a
+// rerun remakes: a crash may lose them, never leave half of one).
+enum class Sync { each, later };
+
 // PFM: little-endian, bottom row first. 1 or 3 channels, CV_32F.
 // `xyz_order`: the Mat's channel 0 goes to the file's R slot (for normals and
 // maps, whose channels are x,y,z); otherwise the Mat is taken as BGR (a photo)
 // and written so that the file's R slot holds the red channel.
-Status write_pfm(const std::filesystem::path& file, const cv::Mat& image, bool xyz_order);
+Status write_pfm(const std::filesystem::path& file, const cv::Mat& image, bool xyz_order, Sync sync = Sync::each);
 Expected<cv::Mat> read_pfm(const std::filesystem::path& file, bool xyz_order);
 // The same from bytes in memory; `name` is used in error messages.
 Expected<cv::Mat> read_pfm_bytes(std::string_view bytes, bool xyz_order, const std::string& name = "<memory>");
 std::string encode_pfm(const cv::Mat& image, bool xyz_order);  // the file's bytes (image must be CV_32FC1/3)
 
 // 16-bit linear PNG from/to CV_32FC3 BGR in [0,1] (values clamped).
-Status write_png16(const std::filesystem::path& file, const cv::Mat& image);
+Status write_png16(const std::filesystem::path& file, const cv::Mat& image, Sync sync = Sync::each);
 // The PNG bytes write_png16 writes (1- or 3-channel float input).
 Expected<std::string> encode_png16(const cv::Mat& image);
 // Reads an 8- or 16-bit PNG (or PPM/PGM, or a JPEG: see below) as CV_32FC3 BGR scaled to [0,1];
@@ -43,9 +50,11 @@ Expected<std::string> read_file_bytes(const std::filesystem::path& file);
 // Pictures a person looks at (8-bit PNG):
 cv::Mat normals_picture(const cv::Mat& normals);  // RGB = (n+1)/2, black outside
 cv::Mat tonemap_picture(const cv::Mat& linear, double percentile = 99.5);  // sRGB gamma, auto exposure
-Status write_picture(const std::filesystem::path& file, const cv::Mat& bgr8);
+Status write_picture(const std::filesystem::path& file, const cv::Mat& bgr8, Sync sync = Sync::each);
 
-// Writes bytes to `file` via a temporary and rename (fsynced).
-Status write_file_atomic(const std::filesystem::path& file, const std::string& bytes);
+// Writes bytes to `file` via a temporary and rename (fsynced with Sync::each).
+Status write_file_atomic(const std::filesystem::path& file, const std::string& bytes, Sync sync = Sync::each);
+// fsyncs a folder: the names written into it with Sync::later are durable.
+Status sync_folder(const std::filesystem::path& folder);
 
 }  // namespace veneer

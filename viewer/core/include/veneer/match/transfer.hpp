@@ -10,6 +10,7 @@
 
 #include <opencv2/core.hpp>
 
+#include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
 #include "veneer/match/fast.hpp"
 #include "veneer/match/matcher.hpp"
@@ -111,7 +112,10 @@ std::string transfer_options_json(const TransferOptions& options);
 // Writes map.pfm, map.png, confidence.png, result_light_NN.png, result_median.png, reuse.png,
 // metrics.json (and relight_transferred.png / relight_reference.png when the
 // relighting was measured) into `folder` (created when missing).
-Status write_transfer(const TransferResult& result, const std::filesystem::path& folder);
+// `progress` hears the fraction of the files written (they are encoded in
+// parallel, each written through a temporary and renamed, one folder fsync).
+Status write_transfer(const TransferResult& result, const std::filesystem::path& folder,
+                      const Progress& progress = {});
 
 // Quality of a map between two sets: truth masks and normals when both sets
 // carry truth (else segmentation masks and no normal agreement), relighting
@@ -154,7 +158,7 @@ cv::Mat origin_picture(const Map& map, const cv::Mat& destination_photo, const c
 std::vector<cv::Point> spread_points(const Map& map, int count);
 
 // map.pfm (x, y, distance; -1 unmapped) in and out.
-Status write_map(const std::filesystem::path& file, const Map& map);
+Status write_map(const std::filesystem::path& file, const Map& map, Sync sync = Sync::each);
 Expected<Map> read_map(const std::filesystem::path& file);
 
 }  // namespace veneer::match

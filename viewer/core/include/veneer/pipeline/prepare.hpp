@@ -29,7 +29,7 @@ struct SetReport {
   std::string photos_from;  // "raw", "raw-half", "png", "jpeg", ... (ImageSet::photos_from)
   double read_s = 0;        // decoding the frames (miss) or reading the cache files (hit)
   double normals_s = 0;     // segmentation + photometric stereo (0 on a hit)
-  double cache_write_s = 0;
+  double cache_write_s = 0;  // -1: written in the background (finish_cache_writes)
   double total_s = 0;
   std::string cache_error;  // a cache that could not be written is reported, not fatal
 };
@@ -53,6 +53,14 @@ Expected<match::PreparedPair> prepare_pair(const std::filesystem::path& destinat
                                            const std::filesystem::path& source,
                                            const match::TransferOptions& transfer, const PrepareOptions& options,
                                            std::vector<SetReport>* reports = nullptr, const Progress& progress = {});
+
+// Waits for the cache entries prepare_set writes in the background (a
+// program calls it before it exits); the first write's error, if any.
+Status finish_cache_writes();
+
+// The per-pixel, per-channel median of same-sized CV_32FC3 photos, equal to
+// match::median_photo's (the mean of the two middle values for an even count).
+cv::Mat median_of(const std::vector<cv::Mat>& photos);
 
 // The reports as JSON ({"destination": {...}, "source": {...}} when two).
 std::string reports_json(const std::vector<SetReport>& reports);

@@ -1,0 +1,263 @@
+// PNG through libdeflate (png_codec.hpp). The chunk chain has been walked by
+// image_io.cpp's check_png_chunks before decode_png_linear sees the bytes, so
+// lengths stay inside the buffer; this file checks the CRCs of the chunks it
+// uses, the IHDR fields, the image data's size and every row's filter.
+#include "png_codec.hpp"
+
+#include <algorithm>
+#include <cstdint>
+#include <cstdlib>
+#include <cstring>
+#include <memory>
+#include <vector>
+
+#include <libdeflate.h>
+#include <opencv2/core/utility.hpp>
+
+namespace veneer::io_detail {
+
+namespace {
+
+constexpr unsigned char kMagic[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+
+uint32_t be32(const unsigned char* p) {
+  return (uint32_t(p[0]) << 24) | (uint32_t(p[1]) << 16) | (uint32_t(p[2]) << 8) | uint32_t(p[3]);
+}
+
+void put_be32(std::string& out, uint32_t v) {
+  const char b[4] = {char(v >> 24), char(v >> 16), char(v >> 8), char(v)};
+  out.append(b, 4);
+}
+
+struct DecompressorFree {
+  void operator()(libdeflate_decompressor* d) const { libdeflate_free_decompressor(d); }
+};
+struct CompressorFree {
+  void operator()(libdeflate_compressor* c) const { libdeflate_free_compressor(c); }
+};
+
+// The PNG row filters undone in place; `prev` is the previous unfiltered row
+// (zeros above the first). False for an unknown filter type.
+bool unfilter(unsigned type, unsigned char* row, const unsigned char* prev, size_t n, size_t bpp) {
+  switch (type) {
+    case 0: return true;
+    case 1:
+      for (size_t i = bpp; i < n; ++i) row[i] = static_cast<unsigned char>(row[i] + row[i - bpp]);
+      return true;
+    case 2:
+      for (size_t i = 0; i < n; ++i) row[i] = static_cast<unsigned char>(row[i] + prev[i]);
+      return true;
+    case 3:
+      for (size_t i = 0; i < bpp; ++i) row[i] = static_cast<unsigned char>(row[i] + (prev[i] >> 1));
+      for (size_t i = bpp; i < n; ++i)
+        row[i] = static_cast<unsigned char>(row[i] + ((unsigned(row[i - bpp]) + prev[i]) >> 1));
+      return true;
+    case 4:
+      for (size_t i = 0; i < bpp; ++i) row[i] = static_cast<unsigned char>(row[i] + prev[i]);
+      for (size_t i = bpp; i < n; ++i) {
+        const int a = row[i - bpp], b = prev[i], c = prev[i - bpp];
+        const int p = b - c, q = a - c;
+        const int pa = std::abs(p), pb = std::abs(q), pc = std::abs(p + q);
+        const int pred = (pa <= pb && pa <= pc) ? a : (pb <= pc ? b : c);
+        row[i] = static_cast<unsigned char>(row[i] + pred);
+      }
+      return true;
+    default: return false;
+  }
+}
+
+// One unfiltered row (`channels` samples of `depth` bits per pixel, PNG's
+// order R, G, B[, A] or grey[, alpha]) into `out` as float BGR in [0, 1].
+void row_to_bgr(const unsigned char* in, float* out, int width, int channels, int depth) {
+  const bool colour = channels >= 3;
+  if (depth == 16) {
+    constexpr float k = 1.0f / 65535.0f;
+    const size_t step = size_t(channels) * 2;
+    for (int x = 0; x < width; ++x, in += step, out += 3) {
+      const float a = float((unsigned(in[0]) << 8) | in[1]) * k;
+      if (colour) {
+        out[2] = a;
+        out[1] = float((unsigned(in[2]) << 8) | in[3]) * k;
+        out[0] = float((unsigned(in[4]) << 8) | in[5]) * k;
+      } else {
+        out[0] = out[1] = out[2] = a;
+      }
+    }
+  } else {
+    constexpr float k = 1.0f / 255.0f;
+    const size_t step = size_t(channels);
+    for (int x = 0; x < width; ++x, in += step, out += 3) {
+      if (colour) {
+        out[2] = float(in[0]) * k;
+        out[1] = float(in[1]) * k;
+        out[0] = float(in[2]) * k;
+      } else {
+        out[0] = out[1] = out[2] = float(in[0]) * k;
+      }
+    }
+  }
+}
+
+}  // namespace
+
+std::optional<Expected<cv::Mat>> decode_png_linear(std::string_view bytes, const std::string& name) {
+  if (bytes.size() < 8 + 25 || std::memcmp(bytes.data(), kMagic, 8) != 0) return std::nullopt;
+  const auto* b = reinterpret_cast<const unsigned char*>(bytes.data());
+  // The chunks this decoder uses; anything that changes the pixels (a
+  // palette, a transparency key) sends the file to OpenCV.
+  std::vector<std::pair<const unsigned char*, size_t>> idat;
+  uint32_t width = 0, height = 0;
+  int depth = 0, colour_type = 0, interlace = 0, compression = 0, filter_method = 0;
+  size_t pos = 8, idat_bytes = 0;
+  while (pos + 12 <= bytes.size()) {
+    const uint32_t length = be32(b + pos);
+    if (length > bytes.size() - pos - 12) break;  // check_png_chunks reports truncation
+    const unsigned char* type = b + pos + 4;
+    const unsigned char* data = b + pos + 8;
+    const bool ihdr = std::memcmp(type, "IHDR", 4) == 0, is_idat = std::memcmp(type, "IDAT", 4) == 0;
+    if (ihdr || is_idat) {
+      const uint32_t crc = static_cast<uint32_t>(libdeflate_crc32(0, type, size_t(length) + 4));
+      if (crc != be32(data + length))
+        return Expected<cv::Mat>(make_error(name + ": corrupt PNG (CRC error in the " +
+                                            std::string(reinterpret_cast<const char*>(type), 4) +
+                                            " chunk at byte " + std::to_string(pos) + ")"));
+    }
+    if (ihdr) {
+      if (length < 13) return Expected<cv::Mat>(make_error(name + ": corrupt PNG (short IHDR chunk)"));
+      width = be32(data);
+      height = be32(data + 4);
+      depth = data[8];
+      colour_type = data[9];
+      compression = data[10];
+      filter_method = data[11];
+      interlace = data[12];
+    } else if (is_idat) {
+      idat.emplace_back(data, length);
+      idat_bytes += length;
+    } else if (std::memcmp(type, "PLTE", 4) == 0 || std::memcmp(type, "tRNS", 4) == 0) {
+      return std::nullopt;
+    } else if (std::memcmp(type, "IEND", 4) == 0) {
+      break;
+    }
+    pos += size_t(length) + 12;
+  }
+  int channels = 0;
+  switch (colour_type) {
+    case 0: channels = 1; break;
+    case 2: channels = 3; break;
+    case 4: channels = 2; break;
+    case 6: channels = 4; break;
+    default: return std::nullopt;  // palette
+  }
+  if ((depth != 8 && depth != 16) || interlace != 0 || compression != 0 || filter_method != 0 || idat.empty() ||
+      width == 0 || height == 0 || width > (1u << 16) || height > (1u << 16))
+    return std::nullopt;
+
+  // The zlib stream, in one piece (OpenCV writes it in 8 KiB chunks).
+  std::string joined;
+  const unsigned char* stream = idat.front().first;
+  if (idat.size() > 1) {
+    joined.reserve(idat_bytes);
+    for (const auto& [p, n] : idat) joined.append(reinterpret_cast<const char*>(p), n);
+    stream = reinterpret_cast<const unsigned char*>(joined.data());
+  }
+  const size_t bpp = size_t(channels) * size_t(depth) / 8;
+  const size_t row_bytes = size_t(width) * bpp;
+  const size_t expect = size_t(height) * (row_bytes + 1);
+  // The inflated rows go to a buffer each thread keeps for its next file (a
+  // set's frames are all of one size, so its pages are faulted in once), up
+  // to 64 MiB (a 10 Mpx 16-bit photo); a larger one is the call's own, so a
+  // full-resolution set leaves no 126 MB per thread behind.
+  constexpr size_t kKeep = size_t(64) << 20;
+  thread_local std::vector<unsigned char> kept;
+  thread_local std::unique_ptr<libdeflate_decompressor, DecompressorFree> inflater;
+  std::vector<unsigned char> own;
+  if (expect <= kKeep && kept.size() < expect) kept.resize(expect);
+  if (expect > kKeep) own.resize(expect);
+  if (!inflater) inflater.reset(libdeflate_alloc_decompressor());
+  if (!inflater) return Expected<cv::Mat>(make_error(name + ": out of memory for the PNG decoder"));
+  unsigned char* filtered = expect <= kKeep ? kept.data() : own.data();
+  size_t got = 0;
+  const auto r = libdeflate_zlib_decompress(inflater.get(), stream, idat_bytes, filtered, expect, &got);
+  const std::string size_text = std::to_string(width) + "x" + std::to_string(height);
+  if (r == LIBDEFLATE_INSUFFICIENT_SPACE)
+    return Expected<cv::Mat>(make_error(name + ": corrupt PNG (more image data than " + size_text + " needs)"));
+  if (r != LIBDEFLATE_SUCCESS)
+    return Expected<cv::Mat>(make_error(name + ": corrupt PNG (its compressed image data does not inflate)"));
+  if (got != expect)
+    return Expected<cv::Mat>(make_error(name + ": truncated PNG (image data holds " + std::to_string(got) +
+                                        " of the " + std::to_string(expect) + " bytes " + size_text + " needs)"));
+
+  cv::Mat out(static_cast<int>(height), static_cast<int>(width), CV_32FC3);
+  std::vector<unsigned char> zeros(row_bytes, 0);
+  const unsigned char* prev = zeros.data();
+  for (uint32_t y = 0; y < height; ++y) {
+    unsigned char* row = filtered + size_t(y) * (row_bytes + 1);
+    if (!unfilter(row[0], row + 1, prev, row_bytes, bpp))
+      return Expected<cv::Mat>(make_error(name + ": corrupt PNG (unknown row filter " + std::to_string(row[0]) +
+                                          " in row " + std::to_string(y) + ")"));
+    row_to_bgr(row + 1, out.ptr<float>(static_cast<int>(y)), static_cast<int>(width), channels, depth);
+    prev = row + 1;
+  }
+  return Expected<cv::Mat>(std::move(out));
+}
+
+std::string encode_png(const cv::Mat& image, int level) {
+  const int channels = image.channels();
+  const int depth = image.depth() == CV_16U ? 16 : 8;
+  const int width = image.cols, height = image.rows;
+  const size_t bpp = size_t(channels) * size_t(depth) / 8;
+  const size_t row_bytes = size_t(width) * bpp;
+  std::vector<unsigned char> filtered(size_t(height) * (row_bytes + 1));
+  cv::parallel_for_(cv::Range(0, height), [&](const cv::Range& rows) {
+    std::vector<unsigned char> plain(row_bytes);
+    for (int y = rows.start; y < rows.end; ++y) {
+      // PNG order (R, G, B; big-endian samples), then Sub: each byte minus
+      // the same byte of the pixel to its left.
+      unsigned char* p = plain.data();
+      if (depth == 16) {
+        const uint16_t* s = image.ptr<uint16_t>(y);
+        for (int x = 0; x < width; ++x)
+          for (int c = 0; c < channels; ++c) {
+            const uint16_t v = s[x * channels + (channels == 3 ? 2 - c : c)];
+            *p++ = static_cast<unsigned char>(v >> 8);
+            *p++ = static_cast<unsigned char>(v);
+          }
+      } else {
+        const unsigned char* s = image.ptr<unsigned char>(y);
+        for (int x = 0; x < width; ++x)
+          for (int c = 0; c < channels; ++c) *p++ = s[x * channels + (channels == 3 ? 2 - c : c)];
+      }
+      unsigned char* row = filtered.data() + size_t(y) * (row_bytes + 1);
+      row[0] = 1;
+      for (size_t i = 0; i < row_bytes; ++i)
+        row[1 + i] = static_cast<unsigned char>(plain[i] - (i >= bpp ? plain[i - bpp] : 0));
+    }
+  });
+  std::unique_ptr<libdeflate_compressor, CompressorFree> deflater(libdeflate_alloc_compressor(level));
+  std::string z(libdeflate_zlib_compress_bound(deflater.get(), filtered.size()), '\0');
+  z.resize(libdeflate_zlib_compress(deflater.get(), filtered.data(), filtered.size(), z.data(), z.size()));
+
+  std::string out(reinterpret_cast<const char*>(kMagic), 8);
+  auto chunk = [&out](const char* type, const char* data, size_t n) {
+    put_be32(out, static_cast<uint32_t>(n));
+    const size_t start = out.size();
+    out.append(type, 4);
+    out.append(data, n);
+    put_be32(out, static_cast<uint32_t>(libdeflate_crc32(0, out.data() + start, n + 4)));
+  };
+  std::string ihdr;
+  put_be32(ihdr, static_cast<uint32_t>(width));
+  put_be32(ihdr, static_cast<uint32_t>(height));
+  const char colour_type = channels == 3 ? 2 : 0;
+  const char tail[5] = {static_cast<char>(depth), colour_type, 0, 0, 0};
+  ihdr.append(tail, 5);
+  out.reserve(z.size() + 128);
+  chunk("IHDR", ihdr.data(), ihdr.size());
+  constexpr size_t kMaxChunk = size_t(1) << 30;
+  for (size_t at = 0; at < z.size(); at += kMaxChunk) chunk("IDAT", z.data() + at, std::min(kMaxChunk, z.size() - at));
+  chunk("IEND", "", 0);
+  return out;
+}
+
+}  // namespace veneer::io_detail
