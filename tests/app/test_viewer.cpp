@@ -10,6 +10,7 @@
 #include <QComboBox>
 #include <QDoubleSpinBox>
 #include <QLabel>
+#include <QLineEdit>
 #include <QProcess>
 #include <QProgressBar>
 #include <QPushButton>
@@ -127,6 +128,7 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
   QTemporaryDir work;
   MainWindow w({QString(), QString(), QString(), QString(), work.path()});
   w.show();
+  w.setAutoFlow(false);  // every step by hand here; the automatic one is app/workflow.*
   w.connectToRig(rig.endpoint(), rig.token_file());
   ASSERT_TRUE(wait_for([&] { return w.rig().isConnected(); }, 10000)) << w.lastMessage().toStdString();
   EXPECT_TRUE(w.lastMessage().contains("connected"));
@@ -212,6 +214,81 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
   w.showTab("Look");
   const QStringList shots_written = w.saveScreenshots(VENEER_SCREENSHOT_DIR);
   EXPECT_EQ(shots_written.size(), 3);
+}
+
+namespace {
+// The window as the user sees it, 1280x720, saved as <screenshots>/workflow-<stage>.png.
+void save_stage(MainWindow& w, const QString& stage) {
+  QDir().mkpath(VENEER_SCREENSHOT_DIR);
+  QApplication::processEvents();
+  const QString file = QString(VENEER_SCREENSHOT_DIR "/workflow-%1.png").arg(stage);
+  EXPECT_TRUE(w.grab().save(file)) << file.toStdString();
+}
+}  // namespace
+
+// Issue 28's one flow: from launch to a live repaint with only connect,
+// capture source, capture destination. Everything between -- pulling both
+// sets, assigning their roles, computing the map with the default settings,
+// starting the live view -- happens by itself, told in one status line.
+TEST(workflow, ConnectCaptureSourceCaptureDestinationRepaintsLive) {
+  SimulatedRig rig;
+  ASSERT_TRUE(rig.started()) << rig.log().toStdString();
+  QTemporaryDir work;
+  MainWindow w({QString(), QString(), QString(), QString(), work.path()});
+  w.resize(1280, 720);
+  w.show();
+  ASSERT_TRUE(w.autoFlow()) << "the flow is on by default";
+  QStringList lines;  // every status line shown, sampled as the test waits
+  auto seen = [&] {
+    if (lines.isEmpty() || lines.back() != w.stepLine()) lines << w.stepLine();
+  };
+  save_stage(w, "1-launched");
+
+  // connect: the address and token typed, Connect clicked
+  child<QLineEdit>(w, "rigAddress")->setText(rig.endpoint());
+  child<QLineEdit>(w, "tokenFile")->setText(rig.token_file());
+  QTest::mouseClick(child<QPushButton>(w, "connect"), Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { return w.rig().isConnected(); }, 10000)) << w.lastMessage().toStdString();
+  save_stage(w, "2-connected");
+
+  // capture source: from the Capture panel
+  QTest::mouseClick(child<QPushButton>(w, "captureSource"), Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { seen(); return w.source() != nullptr; }, 60000)) << w.lastMessage().toStdString();
+  EXPECT_EQ(w.destination(), nullptr);
+  save_stage(w, "3-source-captured");
+
+  // capture destination: from the Live tab's own button
+  w.showTab("Live");
+  QTest::mouseClick(child<QPushButton>(w, "liveCaptureDestination"), Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { seen(); return w.destination() != nullptr; }, 60000)) << w.lastMessage().toStdString();
+  save_stage(w, "4-destination-captured");
+
+  // the map, computed by itself with the default method
+  ASSERT_TRUE(wait_for([&] { seen(); return w.result() != nullptr && !w.computing(); }, 120000))
+      << w.lastMessage().toStdString();
+  EXPECT_EQ(w.source()->set.role, veneer::Role::source);
+  EXPECT_EQ(w.destination()->set.role, veneer::Role::destination);
+  EXPECT_EQ(w.result()->match_options.method, veneer::match::Method::combined);
+  cv::Mat xy[2];
+  cv::split(w.result()->map.xy, xy);
+  EXPECT_GT(cv::countNonZero(xy[0] >= 0), 200) << "mapped pixels";
+  save_stage(w, "5-map-computed");
+
+  // live frames arrive and are repainted through that map
+  ASSERT_TRUE(wait_for([&] { seen(); return w.liveFramesShown() >= 3 && !w.lastRepaintedFrame().empty(); }, 20000))
+      << w.lastMessage().toStdString();
+  EXPECT_EQ(w.lastRepaintedFrame().size(), w.result()->map.xy.size());
+  EXPECT_TRUE(child<QPushButton>(w, "liveToggle")->isChecked());
+  seen();
+  EXPECT_TRUE(w.stepLine().contains("live repaint")) << w.stepLine().toStdString();
+  save_stage(w, "6-live");
+
+  // the line told each step, and never a finished-looking "0 s left"
+  const QString all = lines.join("\n");
+  for (const char* step : {"capturing the source", "pulling", "loading", "computing the map", "live repaint"})
+    EXPECT_TRUE(all.contains(step)) << step << " not in:\n" << all.toStdString();
+  EXPECT_FALSE(all.contains(" 0 s left")) << all.toStdString();
+  child<QPushButton>(w, "liveToggle")->setChecked(false);
 }
 
 TEST(Viewer, CancelledComputationLeavesUiUsable) {

@@ -86,13 +86,18 @@ MainWindow::MainWindow(const Options& options, QWidget* parent)
   connect(&rig_, &RigLink::pullProgress, this, [this](QString, double f) {
     pull_bar_->setVisible(true);
     pull_bar_->setValue(static_cast<int>(f * 100));
+    if (step_.running()) {
+      step_.update(f);
+      showStep();
+    }
   });
   connect(&rig_, &RigLink::pulled, this, [this](QString id, QString folder) {
     pull_bar_->setValue(100);
     message(tr("pulled %1 into %2").arg(id, folder));
-    auto read = veneer::read_set(folder.toStdString());
-    if (read) addLocalItem(folder, *read);
+    flowPulled(id, folder);
   });
+  step_timer_.setInterval(250);
+  connect(&step_timer_, &QTimer::timeout, this, &MainWindow::showStep);
   connect(&transfer_watch_, &QFutureWatcher<void>::finished, this, &MainWindow::onTransferDone);
 
   if (!options.destination.isEmpty()) loadLocalSet(options.destination, veneer::Role::destination);
@@ -136,7 +141,17 @@ void MainWindow::buildUi() {
   statusBar()->addPermanentWidget(status_label_);
   message_label_ = new QLabel;
   message_label_->setObjectName("message");
-  statusBar()->addWidget(message_label_, 1);
+  step_bar_ = new QProgressBar;
+  step_bar_->setObjectName("stepProgress");
+  step_bar_->setMaximumWidth(140);
+  step_bar_->setTextVisible(false);
+  step_bar_->setVisible(false);
+  step_label_ = new QLabel(tr("connect to a rig, then capture a source and a destination"));
+  step_label_->setObjectName("stepStatus");
+  // the one line: the step running and its progress first, the last message, the rig
+  statusBar()->addWidget(step_label_, 3);
+  statusBar()->addWidget(step_bar_);
+  statusBar()->addWidget(message_label_, 2);
   resize(1400, 860);
 }
 
@@ -194,11 +209,17 @@ QWidget* MainWindow::buildCapturePanel() {
   iso_->setObjectName("iso");
   iso_->setRange(0, 25600);
   iso_->setSpecialValueText(tr("rig default"));
+  auto_flow_ = new QCheckBox(tr("automatic: pull, compute the map, go live"));
+  auto_flow_->setObjectName("autoFlow");
+  auto_flow_->setChecked(true);
+  auto_flow_->setToolTip(tr("every capture stored on the rig is pulled and used as its role; the map is computed "
+                            "as soon as both sets are there and the live repaint starts"));
+  form->addRow(auto_flow_);
   form->addRow(tr("Object"), object_edit_);
   form->addRow(tr("Shutter [s]"), shutter_);
   form->addRow(tr("Aperture f/"), aperture_);
   form->addRow(tr("ISO"), iso_);
-  auto capture = [this](veneer::Role role) {
+  auto capture = capture_ = [this](veneer::Role role) {
     veneer::rig::CaptureOptions o;
     o.role = role;
     o.object = object_edit_->text().toStdString();
@@ -464,6 +485,12 @@ QWidget* MainWindow::buildLiveTab() {
     }
   });
   top->addWidget(live_btn_);
+  auto* live_cap_src = button(tr("Capture source"), "liveCaptureSource", w);
+  auto* live_cap_dst = button(tr("Capture destination"), "liveCaptureDestination", w);
+  connect(live_cap_src, &QPushButton::clicked, this, [this] { capture_(veneer::Role::source); });
+  connect(live_cap_dst, &QPushButton::clicked, this, [this] { capture_(veneer::Role::destination); });
+  top->addWidget(live_cap_src);
+  top->addWidget(live_cap_dst);
   top->addWidget(new QLabel(tr("fps")));
   top->addWidget(fps_);
   top->addWidget(new QLabel(tr("Lamps:")));
@@ -584,15 +611,16 @@ void MainWindow::updateStatusLine() {
   }
   const auto& s = rig_.lastStatus();
   int on = static_cast<int>(std::count(s.lamps_on.begin(), s.lamps_on.end(), true));
-  status_label_->setText(tr("%1%2 · camera: %3 · lamps: %4 (%5 on) · storage: %6 GB free · %7 · %8 sets")
+  status_label_->setText(tr("%1%2 · %3%4 lamps (%5 on) · %6 GB free · %7 · %8 sets")
                              .arg(rig_.endpoint(), s.simulated ? tr(" (simulated)") : QString(),
-                                  s.camera_connected ? qs(s.camera_model) : tr("missing"))
+                                  s.camera_connected ? QString() : tr("NO CAMERA · "))
                              .arg(s.lamp_count)
                              .arg(on)
                              .arg(s.free_bytes / 1e9, 0, 'f', 1)
                              .arg(s.you_control ? tr("you control")
                                                 : (s.controller_taken ? tr("another client controls") : tr("free")))
                              .arg(s.sets_stored));
+  status_label_->setToolTip(tr("camera: %1").arg(s.camera_connected ? qs(s.camera_model) : tr("missing")));
 }
 
 void MainWindow::onRigEvent(const veneer::rig::Event& e) {
@@ -605,24 +633,43 @@ void MainWindow::onRigEvent(const veneer::rig::Event& e) {
       shot_bar_->setRange(0, std::max(1, e.n));
       shot_bar_->setValue(0);
       capture_label_->setText(tr("capturing %1 (%2)…").arg(qs(veneer::role_name(e.role)), qs(e.object)));
+      step_.start("capture", tr("capturing the %1").arg(qs(veneer::role_name(e.role))));
+      step_.update(0);
+      showStep();
       break;
     case K::shot_taken:
       shot_bar_->setRange(0, std::max(1, e.n));
       shot_bar_->setValue(e.k);
-      capture_label_->setText(tr("shot %1 of %2 · %3 s left").arg(e.k).arg(e.n).arg(e.eta_s, 0, 'f', 1));
+      if (e.k < e.n) {
+        step_.update(static_cast<double>(e.k) / std::max(1, e.n),
+                     tr("capturing the %1: shot %2 of %3").arg(qs(veneer::role_name(e.role))).arg(e.k).arg(e.n));
+      } else {  // the shots are done, the rig now writes the set: a step of its own
+        step_.finish();
+        step_.start("store", tr("storing the %1 on the rig").arg(qs(veneer::role_name(e.role))));
+      }
+      capture_label_->setText(step_.line());
+      showStep();
       break;
     case K::set_stored: {
+      step_.finish();
       shot_bar_->setValue(shot_bar_->maximum());
-      QString text = tr("stored %1 (%2)").arg(qs(e.set_id), qs(veneer::role_name(e.role)));
+      QString text = e.role == veneer::Role::unknown
+                         ? tr("stored %1").arg(qs(e.set_id))
+                         : tr("stored %1 (%2)").arg(qs(e.set_id), qs(veneer::role_name(e.role)));
       for (const auto& w : e.warnings) text += "\n⚠ " + qs(w);
       capture_label_->setText(text);
       pending_role_.clear();
       rig_.listSets();
       rig_.refreshStatus();
+      step_label_->setText(tr("stored %1").arg(qs(e.set_id)));
+      flowSetStored(qs(e.set_id), e.role);
       break;
     }
     case K::capture_failed:
       capture_label_->setText(e.cancelled ? tr("capture cancelled") : tr("capture failed: %1").arg(qs(e.reason)));
+      step_.finish();
+      showStep();
+      step_label_->setText(capture_label_->text());
       message(capture_label_->text(), !e.cancelled);
       pending_role_.clear();
       rig_.refreshStatus();
@@ -672,7 +719,7 @@ void MainWindow::pullSelected() {
   rig_.pull(item->text(0), workdir_ + "/sets/" + item->text(0));
 }
 
-void MainWindow::addLocalItem(const QString& folder, const veneer::ImageSet& set) {
+void MainWindow::addLocalItem(const QString& folder, const veneer::ImageSet& set, const cv::Mat& thumbnail) {
   // A folder already listed is updated in place (its row keeps its position).
   QTreeWidgetItem* item = nullptr;
   for (int i = 0; i < local_root_->childCount() && !item; ++i)
@@ -683,7 +730,9 @@ void MainWindow::addLocalItem(const QString& folder, const veneer::ImageSet& set
   item->setText(2, qs(set.object));
   item->setData(0, Qt::UserRole, folder);
   item->setToolTip(0, folder);
-  if (!set.images.empty()) {
+  if (!thumbnail.empty()) {
+    item->setIcon(0, QIcon(QPixmap::fromImage(to_qimage(thumbnail))));
+  } else if (!set.images.empty()) {
     cv::Mat small;
     cv::resize(set.images.front(), small, cv::Size(96, std::max(1, 96 * set.size.height / std::max(1, set.size.width))),
                0, 0, cv::INTER_AREA);
@@ -796,6 +845,9 @@ void MainWindow::startTransfer() {
   cancel_btn_->setEnabled(true);
   transfer_bar_->setValue(0);
   transfer_label_->setText(tr("computing…"));
+  step_.start("compute", tr("computing the map (%1)").arg(method_->currentText()));
+  step_.update(0);
+  showStep();
   transfer_error_.clear();
   relight_error_.clear();
   pending_result_.reset();
@@ -831,6 +883,10 @@ void MainWindow::startTransfer() {
           if (!self) return;
           self->transfer_bar_->setValue(static_cast<int>(f * 100));
           self->transfer_label_->setText(s);
+          if (self->computing_) {
+            self->step_.update(f, tr("computing the map: %1").arg(s));
+            self->showStep();
+          }
         });
     };
     std::shared_ptr<const veneer::match::PreparedPair> pair = cached;
@@ -916,6 +972,7 @@ void MainWindow::matchOptionChanged() {
 
 void MainWindow::onTransferDone() {
   computing_ = false;
+  step_.finish();
   compute_btn_->setEnabled(true);
   cancel_btn_->setEnabled(false);
   if (pending_prepared_) {
@@ -938,6 +995,8 @@ void MainWindow::onTransferDone() {
     transfer_label_->setText(cancelled ? tr("cancelled") : tr("failed: %1").arg(transfer_error_));
     message(cancelled ? tr("transfer cancelled") : tr("transfer failed: %1").arg(transfer_error_), !cancelled);
     transfer_bar_->setValue(0);
+    step_label_->setText(transfer_label_->text());
+    showStep();
     return;
   }
   result_ = pending_result_;
@@ -955,6 +1014,8 @@ void MainWindow::onTransferDone() {
     text += tr(" · map %1 ms").arg(result_->match_seconds * 1000, 0, 'f', 1);
   transfer_label_->setText(text);
   message(tr("transfer done (%1)").arg(method_->currentText()));
+  showStep();
+  step_label_->setText(tr("map computed: ") + text);
   result_picture_ = pending_result_picture_;
   if (pending_repainter_) repainter_ = std::move(*pending_repainter_);
   pending_repainter_.reset();
@@ -970,6 +1031,7 @@ void MainWindow::onTransferDone() {
   } else {
     refreshRelight();
   }
+  flowMaybeGoLive();
 }
 
 // ---------------------------------------------------------------- views
@@ -1066,6 +1128,9 @@ void MainWindow::onLiveFrame(const veneer::rig::LiveFrame& frame) {
     live_dst_view_->setImage(to_qimage(live_repainted_));
   }
   live_label_->setText(tr("frame %1 · %2 fps").arg(frame.seq).arg(live_fps_, 0, 'f', 1));
+  if (!step_.running())
+    step_label_->setText((repainter_.ready() ? tr("live repaint · ") : tr("live view (no map yet) · ")) +
+                         live_label_->text());
 }
 
 // ---------------------------------------------------------------- export

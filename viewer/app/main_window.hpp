@@ -4,6 +4,8 @@
 // view repainted onto the destination, relight, export. Every computation is a
 // call into viewer/core, run off the GUI thread; this file only wires widgets.
 #include <atomic>
+#include <functional>
+#include <map>
 #include <memory>
 #include <optional>
 
@@ -11,10 +13,12 @@
 #include <QFutureWatcher>
 #include <QMainWindow>
 #include <QSettings>
+#include <QTimer>
 
 #include "image_view.hpp"
 #include "rig_link.hpp"
 #include "sphere_pad.hpp"
+#include "step_clock.hpp"
 #include "veneer/io/imageset.hpp"
 #include "veneer/match/live.hpp"
 #include "veneer/match/relight.hpp"
@@ -80,6 +84,20 @@ class MainWindow : public QMainWindow {
   QStringList saveScreenshots(const QString& dir);
   void showTab(const QString& name);
 
+  // The one flow (flow.cpp): with it on (the default), every capture stored
+  // on the rig -- from its button, the Capture panel or the Live tab -- is
+  // pulled and loaded as its role, the map is computed with the current
+  // settings as soon as both sets exist, and the live repaint starts.
+  bool autoFlow() const;
+  void setAutoFlow(bool on);
+  // The one line of status: the step running, its progress and time left.
+  QString stepLine() const;
+  // Loads a set off the GUI thread (read, median, thumbnail), then shows it.
+  // Without a role the set is only listed (a pull in manual mode); with
+  // Role::unknown it is used as the role its manifest gives.
+  void loadSetInBackground(const QString& folder, std::optional<veneer::Role> as);
+  int loadsRunning() const { return loads_running_; }
+
  private:
   void buildUi();
   QWidget* buildConnectPanel();
@@ -105,7 +123,7 @@ class MainWindow : public QMainWindow {
   void refreshRelight();
   void setLoaded(std::shared_ptr<LoadedSet> loaded, veneer::Role as);
   void computeNormals(std::shared_ptr<LoadedSet> loaded);
-  void addLocalItem(const QString& folder, const veneer::ImageSet& set);
+  void addLocalItem(const QString& folder, const veneer::ImageSet& set, const cv::Mat& thumbnail = {});
   QTreeWidgetItem* selectedItem() const;
   void pullSelected();
   void useSelected(veneer::Role as);
@@ -113,6 +131,13 @@ class MainWindow : public QMainWindow {
   void exportResults();
   void exportRelightVideo();
   void rememberRig(const QString& endpoint);
+
+  // flow.cpp
+  void flowSetStored(const QString& id, veneer::Role role);
+  void flowPulled(const QString& id, const QString& folder);
+  void flowMaybeCompute();
+  void flowMaybeGoLive();
+  void showStep();
 
   RigLink rig_;
   ViewSync sync_;
@@ -149,6 +174,11 @@ class MainWindow : public QMainWindow {
   QElapsedTimer live_clock_;
   QRect seg_rect_;
   QString pending_role_;  // "destination"/"source" while a UI capture runs
+  std::function<void(veneer::Role)> capture_;  // the Capture panel's settings, used by both capture rows
+  StepClock step_;
+  QTimer step_timer_;  // redraws the status line so the time left counts down
+  std::map<QString, veneer::Role> auto_pulls_;  // rig set id -> role, pulled by the flow
+  int loads_running_ = 0;
 
   // widgets
   QTabWidget* tabs_ = nullptr;
@@ -173,6 +203,9 @@ class MainWindow : public QMainWindow {
   SpherePad *relight_pad_ = nullptr, *hand_pad_ = nullptr;
   std::vector<QCheckBox*> lamp_boxes_;
   QPushButton* live_btn_ = nullptr;
+  QCheckBox* auto_flow_ = nullptr;
+  QLabel* step_label_ = nullptr;
+  QProgressBar* step_bar_ = nullptr;
 };
 
 }  // namespace veneer::app
