@@ -9,7 +9,11 @@
 #include <QCheckBox>
 #include <QComboBox>
 #include <QDoubleSpinBox>
+#include <QDate>
+#include <QFileInfo>
 #include <QLabel>
+#include <QMessageBox>
+#include <QDateTime>
 #include <QLineEdit>
 #include <QProcess>
 #include <QProgressBar>
@@ -160,6 +164,9 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
     const bool is_source = local->child(i)->text(1) == "source";
     QTest::mouseClick(child<QPushButton>(w, is_source ? "useSource" : "useDestination"), Qt::LeftButton);
   }
+  // loaded off the GUI thread
+  ASSERT_TRUE(wait_for([&] { return w.loadsRunning() == 0 && w.destination() && w.source(); }, 30000))
+      << w.lastMessage().toStdString();
   ASSERT_NE(w.destination(), nullptr) << local->child(0)->text(1).toStdString() << " " << local->child(1)->text(1).toStdString();
   ASSERT_NE(w.source(), nullptr) << local->child(0)->text(1).toStdString() << " " << local->child(1)->text(1).toStdString();
   EXPECT_EQ(w.destination()->set.role, veneer::Role::destination);
@@ -289,6 +296,95 @@ TEST(workflow, ConnectCaptureSourceCaptureDestinationRepaintsLive) {
     EXPECT_TRUE(all.contains(step)) << step << " not in:\n" << all.toStdString();
   EXPECT_FALSE(all.contains(" 0 s left")) << all.toStdString();
   child<QPushButton>(w, "liveToggle")->setChecked(false);
+}
+
+// Deleting a rig capture asks first, naming the set and its date; the set
+// goes into the rig's trash and Undo brings it back.
+TEST(Viewer, DeletingARigSetAsksAndUndoRestoresIt) {
+  SimulatedRig rig;
+  ASSERT_TRUE(rig.started()) << rig.log().toStdString();
+  QTemporaryDir work;
+  MainWindow w({QString(), QString(), QString(), QString(), work.path()});
+  w.show();
+  w.setAutoFlow(false);
+  w.connectToRig(rig.endpoint(), rig.token_file());
+  ASSERT_TRUE(wait_for([&] { return w.rig().isConnected(); }, 10000)) << w.lastMessage().toStdString();
+  QTest::mouseClick(child<QPushButton>(w, "pressButton"), Qt::LeftButton);
+  auto* tree = child<QTreeWidget>(w, "sets");
+  QTreeWidgetItem *on_rig = tree->topLevelItem(0), *trash = tree->topLevelItem(2);
+  ASSERT_TRUE(wait_for([&] { return on_rig->childCount() == 1; }, 60000)) << w.lastMessage().toStdString();
+  const QString id = on_rig->child(0)->text(0), date = on_rig->child(0)->text(3);
+  EXPECT_TRUE(date.startsWith(QDateTime::currentDateTimeUtc().date().toString(Qt::ISODate))) << date.toStdString();
+
+  // asked; Cancel keeps it
+  auto ask = [&]() -> QMessageBox* {
+    select_item(tree, on_rig->child(0));
+    QTest::mouseClick(child<QPushButton>(w, "deleteSet"), Qt::LeftButton);
+    QMessageBox* box = nullptr;
+    wait_for([&] { return (box = w.findChild<QMessageBox*>("confirmDelete")) && box->isVisible(); }, 5000);
+    return box;
+  };
+  QMessageBox* box = ask();
+  ASSERT_NE(box, nullptr) << "delete asks";
+  EXPECT_TRUE(box->text().contains(id)) << box->text().toStdString();
+  EXPECT_TRUE(box->text().contains(date)) << box->text().toStdString();
+  QTest::mouseClick(box->button(QMessageBox::Cancel), Qt::LeftButton);
+  QTest::qWait(300);
+  EXPECT_EQ(on_rig->childCount(), 1) << "Cancel deletes nothing";
+  EXPECT_FALSE(child<QPushButton>(w, "undoDelete")->isVisible());
+
+  // Yes: into the trash, listed there
+  box = ask();
+  ASSERT_NE(box, nullptr);
+  QTest::mouseClick(box->button(QMessageBox::Yes), Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { return on_rig->childCount() == 0 && trash->childCount() == 1; }, 10000))
+      << w.lastMessage().toStdString();
+  EXPECT_EQ(trash->child(0)->text(0), id);
+  auto* undo = child<QPushButton>(w, "undoDelete");
+  ASSERT_TRUE(undo->isVisible());
+
+  // Undo: back on the rig, whole (it pulls)
+  QTest::mouseClick(undo, Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { return on_rig->childCount() == 1 && trash->childCount() == 0; }, 10000))
+      << w.lastMessage().toStdString();
+  EXPECT_EQ(on_rig->child(0)->text(0), id);
+  EXPECT_FALSE(undo->isVisible());
+  select_item(tree, on_rig->child(0));
+  QTest::mouseClick(child<QPushButton>(w, "pullSet"), Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { return tree->topLevelItem(1)->childCount() == 1; }, 30000)) << w.lastMessage().toStdString();
+}
+
+// The local library -- pulled or opened sets with their roles, dates and
+// thumbnails, and the maps computed from them -- is there after a restart.
+TEST(Viewer, TheLibrarySurvivesARestart) {
+  QTemporaryDir dir;
+  {
+    auto window = open_pair(dir);
+    ASSERT_TRUE(window);
+    child<QComboBox>(*window, "method")->setCurrentText("coherent");
+    ASSERT_TRUE(compute_and_wait(*window));
+    auto* maps = child<QTreeWidget>(*window, "sets")->topLevelItem(3);
+    ASSERT_TRUE(wait_for([&] { return maps->childCount() == 1; }, 10000)) << window->lastMessage().toStdString();
+  }
+  MainWindow w({QString(), QString(), QString(), QString(), dir.path()});
+  auto* tree = child<QTreeWidget>(w, "sets");
+  QTreeWidgetItem *local = tree->topLevelItem(1), *maps = tree->topLevelItem(3);
+  ASSERT_EQ(local->childCount(), 2);
+  EXPECT_EQ(local->child(0)->text(0), "bull");
+  EXPECT_EQ(local->child(0)->text(1), "destination");
+  EXPECT_EQ(local->child(1)->text(1), "source");
+  for (int i = 0; i < 2; ++i) {
+    EXPECT_FALSE(local->child(i)->text(3).isEmpty()) << "dated";
+    EXPECT_FALSE(local->child(i)->icon(0).isNull()) << "a thumbnail";
+  }
+  ASSERT_EQ(maps->childCount(), 1);
+  EXPECT_EQ(maps->child(0)->text(0), "bull ← orange");
+  EXPECT_EQ(maps->child(0)->text(2), "coherent");
+  EXPECT_TRUE(QFileInfo::exists(maps->child(0)->data(0, Qt::UserRole).toString() + "/map.pfm"));
+  // and a library row is used as a set: loaded from its folder
+  select_item(tree, local->child(1));
+  QTest::mouseClick(child<QPushButton>(w, "useSource"), Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { return w.source() != nullptr; }, 20000)) << w.lastMessage().toStdString();
 }
 
 TEST(Viewer, CancelledComputationLeavesUiUsable) {

@@ -45,8 +45,10 @@ MainWindow::MainWindow(const Options& options, QWidget* parent)
                  ? QStandardPaths::writableLocation(QStandardPaths::AppLocalDataLocation)
                  : options.workdir;
   QDir().mkpath(workdir_ + "/sets");
+  library_ = std::make_unique<Library>(workdir_);
   buildUi();
   buildMenus();
+  showLibrary();
 
   connect(&rig_, &RigLink::connectedChanged, this, [this](bool ok, QString msg) {
     message(msg, !ok);
@@ -238,7 +240,7 @@ void MainWindow::buildMenus() {
   QMenu* file = menuBar()->addMenu(tr("&File"));
   file->addAction(tr("Open set folder…"), this, [this] {
     QString dir = QFileDialog::getExistingDirectory(this, tr("Image set folder"));
-    if (!dir.isEmpty()) loadLocalSet(dir, veneer::Role::destination);
+    if (!dir.isEmpty()) loadSetInBackground(dir, veneer::Role::destination);
   });
   QMenu* exp = menuBar()->addMenu(tr("&Export"));
   exp->addAction(tr("Map (map.pfm, map.png)…"), this, &MainWindow::exportMap);

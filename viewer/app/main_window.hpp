@@ -16,6 +16,7 @@
 #include <QTimer>
 
 #include "image_view.hpp"
+#include "library.hpp"
 #include "rig_link.hpp"
 #include "sphere_pad.hpp"
 #include "step_clock.hpp"
@@ -124,6 +125,14 @@ class MainWindow : public QMainWindow {
   void setLoaded(std::shared_ptr<LoadedSet> loaded, veneer::Role as);
   void computeNormals(std::shared_ptr<LoadedSet> loaded);
   void addLocalItem(const QString& folder, const veneer::ImageSet& set, const cv::Mat& thumbnail = {});
+  // sets_panel.cpp
+  QTreeWidgetItem* localItem(const QString& folder, bool create);
+  void showLibrary();
+  void addMapItem(const LibraryMap& map);
+  void saveMapToLibrary();
+  void askDelete(QTreeWidgetItem* item);
+  void onTrashListed(const std::vector<veneer::rig::SetSummary>& sets);
+  void restoreFromTrash(const QString& id);
   QTreeWidgetItem* selectedItem() const;
   void pullSelected();
   void useSelected(veneer::Role as);
@@ -196,7 +205,10 @@ class MainWindow : public QMainWindow {
             *recent_ = nullptr;
   QCheckBox *fast_ = nullptr, *truth_normals_ = nullptr, *live_update_ = nullptr;
   QTreeWidget* sets_tree_ = nullptr;
-  QTreeWidgetItem *rig_root_ = nullptr, *local_root_ = nullptr;
+  QTreeWidgetItem *rig_root_ = nullptr, *local_root_ = nullptr, *trash_root_ = nullptr, *maps_root_ = nullptr;
+  QPushButton* undo_btn_ = nullptr;
+  QString last_deleted_;  // the rig set the Undo button brings back
+  std::unique_ptr<Library> library_;
   ImageView *dst_view_ = nullptr, *src_view_ = nullptr, *result_view_ = nullptr, *origin_view_ = nullptr,
             *live_src_view_ = nullptr, *live_dst_view_ = nullptr, *relight_view_ = nullptr,
             *relight_src_view_ = nullptr;

@@ -223,7 +223,32 @@ void RigLink::moveHandLamp(const cv::Vec3d& position) {
 void RigLink::deleteSet(const QString& id) {
   const std::string sid = id.toStdString();
   run(tr("delete %1").arg(id), [sid](veneer::rig::Client& c) { return c.delete_set(sid); },
-      [this] { listSets(); });
+      [this, id] {
+        emit deleted(id);
+        listSets();
+      });
+}
+
+void RigLink::listTrash() {
+  QPointer<RigLink> self(this);
+  run(tr("list the rig's trash"), [self](veneer::rig::Client& c) -> veneer::Status {
+    auto sets = c.list_trash();
+    if (!sets) return sets.error();
+    auto v = *sets;
+    QMetaObject::invokeMethod(self.data(), [self, v] {
+      if (self) emit self->trashListed(v);
+    });
+    return {};
+  });
+}
+
+void RigLink::restoreSet(const QString& id) {
+  const std::string sid = id.toStdString();
+  run(tr("restore %1").arg(id), [sid](veneer::rig::Client& c) { return c.restore_set(sid); },
+      [this, id] {
+        emit restored(id);
+        listSets();
+      });
 }
 
 void RigLink::pull(const QString& id, const QString& folder) {

@@ -40,13 +40,18 @@ class RigLink : public QObject {
   void startLive(double fps);
   void stopLive();
   void moveHandLamp(const cv::Vec3d& position);
-  void deleteSet(const QString& id);
+  void deleteSet(const QString& id);  // into the rig's trash
+  void listTrash();
+  void restoreSet(const QString& id);
   void pull(const QString& id, const QString& folder);
 
  signals:
   void connectedChanged(bool connected, QString message);
   void statusUpdated(veneer::rig::RigStatus status);
   void setsListed(std::vector<veneer::rig::SetSummary> sets);
+  void trashListed(std::vector<veneer::rig::SetSummary> sets);
+  void deleted(QString id);
+  void restored(QString id);
   void rigEvent(veneer::rig::Event event);
   void liveFrame(veneer::rig::LiveFrame frame);
   void pullProgress(QString id, double fraction);

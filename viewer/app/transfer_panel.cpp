@@ -385,6 +385,7 @@ void MainWindow::onTransferDone() {
   } else {
     refreshRelight();
   }
+  if (!result_->map_given) saveMapToLibrary();
   flowMaybeGoLive();
 }
 
