@@ -31,6 +31,7 @@ void MainWindow::showStep() {
     step_bar_->setValue(f < 0 ? 0 : static_cast<int>(f * 100));
   }
   step_bar_->setVisible(step_.running());
+  step_cancel_->setVisible(step_.running() || computing_ || job_running_ || loads_running_ > 0 || rig_.pulling());
   if (step_.running() && !step_timer_.isActive()) step_timer_.start();
   if (!step_.running()) step_timer_.stop();
 }
@@ -86,7 +87,8 @@ void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer
   }
   const bool full = as.has_value();
   QPointer<MainWindow> self(this);
-  (void)QtConcurrent::run([self, folder, as, full] {
+  auto cancel = load_cancel_;
+  (void)QtConcurrent::run([self, folder, as, full, cancel] {
     ReadSet r;
     auto read = veneer::read_set(folder.toStdString());
     if (!read) {
@@ -101,10 +103,15 @@ void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer
         r.loaded->median_picture = tonemap_picture(r.loaded->median);
       }
     }
-    QMetaObject::invokeMethod(self.data(), [self, r, as, folder] {
+    QMetaObject::invokeMethod(self.data(), [self, r, as, folder, cancel] {
       if (!self) return;
       --self->loads_running_;
       if (as) self->step_.finish();
+      if (cancel->load()) {
+        self->message(tr("loading %1 cancelled").arg(folder));
+        self->showStep();
+        return;
+      }
       if (!r.loaded) {
         self->message(r.error, true);
         self->showStep();
@@ -129,6 +136,21 @@ void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer
       self->flowMaybeCompute();
     });
   });
+}
+
+void MainWindow::cancelStep() {
+  if (computing_) cancelTransfer();
+  if (job_running_) job_cancel_ = true;
+  if (rig_.pulling()) {
+    rig_.cancelPulls();
+    auto_pulls_.clear();
+  }
+  if (loads_running_ > 0) {
+    load_cancel_->store(true);
+    load_cancel_ = std::make_shared<std::atomic<bool>>(false);
+  }
+  if (step_.running() && (step_.kind() == "capture" || step_.kind() == "store")) rig_.cancelCapture();
+  message(tr("cancelling…"));
 }
 
 // Both sets there: the map, with the settings shown (the defaults unless the

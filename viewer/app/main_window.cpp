@@ -86,6 +86,8 @@ MainWindow::MainWindow(const Options& options, QWidget* parent)
 
 MainWindow::~MainWindow() {
   cancel_ = true;
+  job_cancel_ = true;
+  job_future_.waitForFinished();
   transfer_watch_.waitForFinished();
 }
 
@@ -130,6 +132,10 @@ void MainWindow::buildUi() {
   // the one line: the step running and its progress first, the last message, the rig
   statusBar()->addWidget(step_label_, 3);
   statusBar()->addWidget(step_bar_);
+  step_cancel_ = button(tr("Cancel"), "stepCancel", this);
+  step_cancel_->setVisible(false);
+  connect(step_cancel_, &QPushButton::clicked, this, &MainWindow::cancelStep);
+  statusBar()->addWidget(step_cancel_);
   statusBar()->addWidget(message_label_, 2);
   resize(1400, 860);
 }

@@ -91,6 +91,15 @@ class MainWindow : public QMainWindow {
   // settings as soon as both sets exist, and the live repaint starts.
   bool autoFlow() const;
   void setAutoFlow(bool on);
+  // Exports without a dialog (the menu's entries ask for the place, then
+  // call these); each runs off the GUI thread with progress and cancel.
+  void exportMapTo(const QString& dir);
+  void exportResultsTo(const QString& dir);
+  void exportRelightVideoTo(const QString& file);
+  bool exporting() const { return job_running_; }
+  // Cancels whatever the status line shows running (compute, capture, pull,
+  // load, export).
+  void cancelStep();
   // The one line of status: the step running, its progress and time left.
   QString stepLine() const;
   // Loads a set off the GUI thread (read, median, thumbnail), then shows it.
@@ -120,6 +129,7 @@ class MainWindow : public QMainWindow {
   void updateRelightLabel(const cv::Vec3d& direction);
   QString preparationKey() const;
   void refreshLook();
+  void refreshLookNow();
   void showOrigin(QPoint destination_pixel);
   void refreshRelight();
   void setLoaded(std::shared_ptr<LoadedSet> loaded, veneer::Role as);
@@ -147,6 +157,9 @@ class MainWindow : public QMainWindow {
   void flowMaybeCompute();
   void flowMaybeGoLive();
   void showStep();
+  // export.cpp: runs `job` off the GUI thread as a step of the status line.
+  void runJob(const QString& kind, const QString& text,
+              std::function<veneer::Status(const veneer::Progress&)> job, const QString& done);
 
   RigLink rig_;
   ViewSync sync_;
@@ -188,6 +201,11 @@ class MainWindow : public QMainWindow {
   QTimer step_timer_;  // redraws the status line so the time left counts down
   std::map<QString, veneer::Role> auto_pulls_;  // rig set id -> role, pulled by the flow
   int loads_running_ = 0;
+  std::shared_ptr<std::atomic<bool>> load_cancel_ = std::make_shared<std::atomic<bool>>(false);
+  std::atomic<bool> job_cancel_{false};
+  bool job_running_ = false;
+  QFuture<void> job_future_;
+  QPushButton* step_cancel_ = nullptr;
 
   // widgets
   QTabWidget* tabs_ = nullptr;

@@ -339,7 +339,7 @@ void MainWindow::computeNormals(std::shared_ptr<LoadedSet> loaded) {
     if (!self) return;
     QMetaObject::invokeMethod(self.data(), [self, loaded, result] {
       if (!self) return;
-      loaded->normals = *result;
+      loaded->normals.emplace(std::move(*result));  // moved: a 10 Mpx result is ~200 MB
       self->refreshLook();
     });
   });

@@ -26,6 +26,7 @@ class StepClock {
   // Seconds left (< 0 when there is nothing to estimate from yet).
   double secondsLeft() const;
   double fraction() const { return fraction_; }
+  const QString& kind() const { return kind_; }
 
  private:
   QString kind_, text_;

@@ -170,6 +170,10 @@ QWidget* MainWindow::buildRelightTab() {
 // ---------------------------------------------------------------- views
 
 void MainWindow::refreshLook() {
+  gui_work([this] { refreshLookNow(); });
+}
+
+void MainWindow::refreshLookNow() {
   const int what = look_what_->currentIndex();
   auto pick = [what](const std::shared_ptr<LoadedSet>& s) -> cv::Mat {
     if (!s) return {};
@@ -255,11 +259,13 @@ void MainWindow::onLiveFrame(const veneer::rig::LiveFrame& frame) {
   live_frame_ = decoded;
   ++live_frames_;
   if (live_clock_.isValid() && live_clock_.elapsed() > 0) live_fps_ = live_frames_ * 1000.0 / live_clock_.elapsed();
-  live_src_view_->setImage(to_qimage(decoded));
-  if (repainter_.ready()) {
-    live_repainted_ = repainter_.apply(decoded);
-    live_dst_view_->setImage(to_qimage(live_repainted_));
-  }
+  gui_work([&] {
+    live_src_view_->setImage(to_qimage(decoded));
+    if (repainter_.ready()) {
+      live_repainted_ = repainter_.apply(decoded);
+      live_dst_view_->setImage(to_qimage(live_repainted_));
+    }
+  });
   live_label_->setText(tr("frame %1 · %2 fps").arg(frame.seq).arg(live_fps_, 0, 'f', 1));
   if (!step_.running())
     step_label_->setText((repainter_.ready() ? tr("live repaint · ") : tr("live view (no map yet) · ")) +

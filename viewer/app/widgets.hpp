@@ -4,6 +4,8 @@
 #include <QPushButton>
 #include <QString>
 
+#include <functional>
+
 #include <opencv2/core.hpp>
 
 namespace veneer::app {
@@ -26,6 +28,13 @@ inline QDoubleSpinBox* number_box(const QString& name, double lo, double hi, int
   if (!tip.isEmpty()) b->setToolTip(tip);
   return b;
 }
+
+// Parallel work done on the GUI thread (a live frame's repaint, a view's
+// picture). Isolated, so that while it waits for its own parallel loop the
+// GUI thread does not take a task of a background job's loop (one photo of a
+// 10 Mpx set being decoded: seconds) -- measured as a 10 s stall in bench_app.
+// (widgets.cpp: TBB's headers and Qt's `emit` do not mix.)
+void gui_work(const std::function<void()>& f);
 
 // A linear picture tonemapped for the views (empty stays empty).
 cv::Mat picture_of(const cv::Mat& linear);
