@@ -22,7 +22,10 @@
 #include <QTcpServer>
 #include <QTemporaryDir>
 #include <QTest>
+#include <QScrollArea>
+#include <QToolButton>
 #include <QTreeWidget>
+#include <QWheelEvent>
 
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
@@ -224,11 +227,11 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
 }
 
 namespace {
-// The window as the user sees it, 1280x720, saved as <screenshots>/workflow-<stage>.png.
+// The window as the user sees it (1280x720), saved as <screenshots>/<stage>.png.
 void save_stage(MainWindow& w, const QString& stage) {
   QDir().mkpath(VENEER_SCREENSHOT_DIR);
   QApplication::processEvents();
-  const QString file = QString(VENEER_SCREENSHOT_DIR "/workflow-%1.png").arg(stage);
+  const QString file = QString(VENEER_SCREENSHOT_DIR "/%1.png").arg(stage);
   EXPECT_TRUE(w.grab().save(file)) << file.toStdString();
 }
 }  // namespace
@@ -249,26 +252,26 @@ TEST(workflow, ConnectCaptureSourceCaptureDestinationRepaintsLive) {
   auto seen = [&] {
     if (lines.isEmpty() || lines.back() != w.stepLine()) lines << w.stepLine();
   };
-  save_stage(w, "1-launched");
+  save_stage(w, "workflow-1-launched");
 
   // connect: the address and token typed, Connect clicked
   child<QLineEdit>(w, "rigAddress")->setText(rig.endpoint());
   child<QLineEdit>(w, "tokenFile")->setText(rig.token_file());
   QTest::mouseClick(child<QPushButton>(w, "connect"), Qt::LeftButton);
   ASSERT_TRUE(wait_for([&] { return w.rig().isConnected(); }, 10000)) << w.lastMessage().toStdString();
-  save_stage(w, "2-connected");
+  save_stage(w, "workflow-2-connected");
 
   // capture source: from the Capture panel
   QTest::mouseClick(child<QPushButton>(w, "captureSource"), Qt::LeftButton);
   ASSERT_TRUE(wait_for([&] { seen(); return w.source() != nullptr; }, 60000)) << w.lastMessage().toStdString();
   EXPECT_EQ(w.destination(), nullptr);
-  save_stage(w, "3-source-captured");
+  save_stage(w, "workflow-3-source-captured");
 
   // capture destination: from the Live tab's own button
   w.showTab("Live");
   QTest::mouseClick(child<QPushButton>(w, "liveCaptureDestination"), Qt::LeftButton);
   ASSERT_TRUE(wait_for([&] { seen(); return w.destination() != nullptr; }, 60000)) << w.lastMessage().toStdString();
-  save_stage(w, "4-destination-captured");
+  save_stage(w, "workflow-4-destination-captured");
 
   // the map, computed by itself with the default method
   ASSERT_TRUE(wait_for([&] { seen(); return w.result() != nullptr && !w.computing(); }, 120000))
@@ -279,7 +282,7 @@ TEST(workflow, ConnectCaptureSourceCaptureDestinationRepaintsLive) {
   cv::Mat xy[2];
   cv::split(w.result()->map.xy, xy);
   EXPECT_GT(cv::countNonZero(xy[0] >= 0), 200) << "mapped pixels";
-  save_stage(w, "5-map-computed");
+  save_stage(w, "workflow-5-map-computed");
 
   // live frames arrive and are repainted through that map
   ASSERT_TRUE(wait_for([&] { seen(); return w.liveFramesShown() >= 3 && !w.lastRepaintedFrame().empty(); }, 20000))
@@ -288,7 +291,7 @@ TEST(workflow, ConnectCaptureSourceCaptureDestinationRepaintsLive) {
   EXPECT_TRUE(child<QPushButton>(w, "liveToggle")->isChecked());
   seen();
   EXPECT_TRUE(w.stepLine().contains("live repaint")) << w.stepLine().toStdString();
-  save_stage(w, "6-live");
+  save_stage(w, "workflow-6-live");
 
   // the line told each step, and never a finished-looking "0 s left"
   const QString all = lines.join("\n");
@@ -385,6 +388,76 @@ TEST(Viewer, TheLibrarySurvivesARestart) {
   select_item(tree, local->child(1));
   QTest::mouseClick(child<QPushButton>(w, "useSource"), Qt::LeftButton);
   ASSERT_TRUE(wait_for([&] { return w.source() != nullptr; }, 20000)) << w.lastMessage().toStdString();
+}
+
+namespace {
+int lamp_boxes(MainWindow& w) {
+  int n = 0;
+  for (auto* b : w.findChildren<QCheckBox*>())
+    if (b->objectName().startsWith("lamp")) ++n;
+  return n;
+}
+bool wheel(QWidget* target) {
+  QWheelEvent e(QPointF(5, 5), target->mapToGlobal(QPointF(5, 5)), QPoint(), QPoint(0, 120), Qt::NoButton,
+                Qt::NoModifier, Qt::NoScrollPhase, false);
+  QApplication::sendEvent(target, &e);
+  return e.isAccepted();
+}
+}  // namespace
+
+// Expert parameters sit in a closed "Advanced" fold with presets; the wheel
+// changes only a field with focus; the lamp boxes follow the set's manifest.
+TEST(Viewer, AdvancedFoldPresetsWheelFocusAndLampsFromTheManifest) {
+  QTemporaryDir dir;
+  auto window = open_pair(dir);
+  ASSERT_TRUE(window);
+  MainWindow& w = *window;
+  w.resize(1280, 720);
+  w.show();
+  ASSERT_TRUE(QTest::qWaitForWindowExposed(&w));
+  auto* advanced = child<QWidget>(w, "advanced");
+  EXPECT_FALSE(advanced->isVisible()) << "closed at first";
+  EXPECT_EQ(child<QComboBox>(w, "method")->currentText(), "combined") << "the CLI's default";
+  auto* side = w.findChild<QScrollArea*>();
+  side->ensureWidgetVisible(child<QWidget>(w, "transferStatus"));
+  save_stage(w, "advanced-closed");
+  QTest::mouseClick(child<QToolButton>(w, "advancedToggle"), Qt::LeftButton);
+  EXPECT_TRUE(advanced->isVisible());
+  QApplication::processEvents();
+  side->ensureWidgetVisible(child<QWidget>(w, "preset"), 50, 10);
+  save_stage(w, "advanced-open");
+
+  auto* preset = child<QComboBox>(w, "preset");
+  preset->setCurrentIndex(1);
+  EXPECT_EQ(child<QComboBox>(w, "method")->currentText(), "coherent");
+  preset->setCurrentIndex(2);
+  EXPECT_EQ(child<QComboBox>(w, "method")->currentText(), "linear");
+  EXPECT_EQ(child<QComboBox>(w, "patch")->currentText(), "3");
+  EXPECT_FALSE(child<QCheckBox>(w, "fast")->isChecked());
+  child<QComboBox>(w, "patch")->setCurrentText("5");
+  EXPECT_EQ(preset->currentText(), "custom") << "a setting changed by hand";
+
+  // the wheel passes over a field without focus, and changes it with focus
+  auto* candidates = child<QSpinBox>(w, "candidates");
+  const int before = candidates->value();
+  EXPECT_FALSE(wheel(candidates));
+  EXPECT_EQ(candidates->value(), before);
+  w.activateWindow();
+  candidates->setFocus();
+  if (candidates->hasFocus()) {
+    wheel(candidates);
+    EXPECT_NE(candidates->value(), before);
+  }
+
+  // one lamp box per light of the set's manifest
+  EXPECT_EQ(lamp_boxes(w), static_cast<int>(w.destination()->set.lights.size()));
+  veneer::ImageSet three = w.destination()->set;
+  three.images.resize(3);
+  three.lights.resize(3);
+  const QString folder = dir.path() + "/bull3";
+  ASSERT_TRUE(veneer::write_set(three, folder.toStdString()).ok());
+  ASSERT_TRUE(w.loadLocalSet(folder, veneer::Role::destination)) << w.lastMessage().toStdString();
+  EXPECT_EQ(lamp_boxes(w), 3);
 }
 
 TEST(Viewer, CancelledComputationLeavesUiUsable) {

@@ -48,6 +48,7 @@ MainWindow::MainWindow(const Options& options, QWidget* parent)
   library_ = std::make_unique<Library>(workdir_);
   buildUi();
   buildMenus();
+  guard_wheel(this);
   showLibrary();
 
   connect(&rig_, &RigLink::connectedChanged, this, [this](bool ok, QString msg) {
@@ -57,7 +58,10 @@ MainWindow::MainWindow(const Options& options, QWidget* parent)
     if (!ok) qDeleteAll(rig_root_->takeChildren());
     updateStatusLine();
   });
-  connect(&rig_, &RigLink::statusUpdated, this, [this](veneer::rig::RigStatus) { updateStatusLine(); });
+  connect(&rig_, &RigLink::statusUpdated, this, [this](veneer::rig::RigStatus) {
+    updateStatusLine();
+    updateLampBoxes();
+  });
   connect(&rig_, &RigLink::setsListed, this, &MainWindow::onSetsListed);
   connect(&rig_, &RigLink::rigEvent, this, &MainWindow::onRigEvent);
   connect(&rig_, &RigLink::liveFrame, this, &MainWindow::onLiveFrame);

@@ -29,6 +29,7 @@
 class QCheckBox;
 class QComboBox;
 class QDoubleSpinBox;
+class QHBoxLayout;
 class QLabel;
 class QLineEdit;
 class QProgressBar;
@@ -126,10 +127,24 @@ class MainWindow : public QMainWindow {
   void onLiveFrame(const veneer::rig::LiveFrame& frame);
   void onTransferDone();
   void matchOptionChanged();
+  // transfer_panel.cpp: the presets of the Transfer panel
+  struct Preset {
+    QString name, method, feature;
+    int patch, candidates;
+    double threshold;
+    int iterations;
+    double coherent_threshold, coherent_smooth, coherent_guide, uniformity;
+    int blend;
+    double blend_guide;
+    bool fast;
+  };
+  static const std::vector<Preset>& presets();
+  void applyPreset(const Preset& preset);
   void updateRelightLabel(const cv::Vec3d& direction);
   QString preparationKey() const;
   void refreshLook();
   void refreshLookNow();
+  void updateLampBoxes();
   void showOrigin(QPoint destination_pixel);
   void refreshRelight();
   void setLoaded(std::shared_ptr<LoadedSet> loaded, veneer::Role as);
@@ -232,8 +247,11 @@ class MainWindow : public QMainWindow {
             *relight_src_view_ = nullptr;
   SpherePad *relight_pad_ = nullptr, *hand_pad_ = nullptr;
   std::vector<QCheckBox*> lamp_boxes_;
+  QHBoxLayout* lamp_row_ = nullptr;
   QPushButton* live_btn_ = nullptr;
   QCheckBox* auto_flow_ = nullptr;
+  QComboBox* preset_ = nullptr;
+  bool applying_preset_ = false;
   QLabel* step_label_ = nullptr;
   QProgressBar* step_bar_ = nullptr;
 };

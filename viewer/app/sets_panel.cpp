@@ -326,6 +326,7 @@ void MainWindow::setLoaded(std::shared_ptr<LoadedSet> loaded, veneer::Role as) {
   relighter_.reset();
   repainter_ = {};
   refreshLook();
+  updateLampBoxes();
 }
 
 void MainWindow::computeNormals(std::shared_ptr<LoadedSet> loaded) {

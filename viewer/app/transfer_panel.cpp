@@ -20,7 +20,9 @@
 #include <QProgressBar>
 #include <QPushButton>
 #include <QScrollArea>
+#include <QSignalBlocker>
 #include <QSpinBox>
+#include <QToolButton>
 #include <QSplitter>
 #include <QStandardPaths>
 #include <QStatusBar>
@@ -44,7 +46,34 @@ const char* kMethods[] = {"combined", "coherent", "linear", "flann", "candidates
 
 QWidget* MainWindow::buildTransferPanel() {
   auto* box = new QGroupBox(tr("Transfer"));
-  auto* form = new QFormLayout(box);
+  auto* outer = new QVBoxLayout(box);
+  auto* top = new QFormLayout;
+  outer->addLayout(top);
+  preset_ = new QComboBox;
+  preset_->setObjectName("preset");
+  for (const auto& p : presets()) preset_->addItem(p.name);
+  preset_->addItem(tr("custom"));
+  preset_->setToolTip(tr("settings for common needs; changing a setting under Advanced makes it \"custom\""));
+  top->addRow(tr("Preset"), preset_);
+  // Every expert parameter lives in a fold, closed at first.
+  auto* fold = new QToolButton;
+  fold->setObjectName("advancedToggle");
+  fold->setText(tr("Advanced"));
+  fold->setCheckable(true);
+  fold->setToolButtonStyle(Qt::ToolButtonTextBesideIcon);
+  fold->setArrowType(Qt::RightArrow);
+  fold->setAutoRaise(true);
+  outer->addWidget(fold);
+  auto* advanced = new QWidget;
+  advanced->setObjectName("advanced");
+  advanced->setVisible(false);
+  outer->addWidget(advanced);
+  connect(fold, &QToolButton::toggled, this, [fold, advanced](bool open) {
+    fold->setArrowType(open ? Qt::DownArrow : Qt::RightArrow);
+    advanced->setVisible(open);
+  });
+  auto* form = new QFormLayout(advanced);
+  form->setContentsMargins(12, 0, 0, 0);
   method_ = new QComboBox;
   method_->setObjectName("method");
   for (const char* m : kMethods) method_->addItem(m);
@@ -117,7 +146,7 @@ QWidget* MainWindow::buildTransferPanel() {
   live_update_->setChecked(true);
   live_update_->setToolTip(tr("after a first Compute, changing a matching option recomputes the map alone "
                               "(normals and masks are kept)"));
-  form->addRow(live_update_);
+  top->addRow(live_update_);
   form->addRow(tr("Segmentation"), seg_method_);
   form->addRow(tr("Seg. threshold"), seg_threshold_);
   form->addRow(rect_label_);
@@ -137,20 +166,83 @@ QWidget* MainWindow::buildTransferPanel() {
   connect(truth_normals_, &QCheckBox::toggled, this, &MainWindow::matchOptionChanged);
   connect(seg_method_, &QComboBox::currentIndexChanged, this, &MainWindow::matchOptionChanged);
   connect(seg_threshold_, &QDoubleSpinBox::valueChanged, this, &MainWindow::matchOptionChanged);
+  connect(preset_, &QComboBox::currentIndexChanged, this, [this](int i) {
+    if (i >= 0 && i < static_cast<int>(presets().size())) applyPreset(presets()[i]);
+  });
+  // a setting changed by hand: no preset describes it any more
+  auto custom = [this] {
+    if (applying_preset_) return;
+    QSignalBlocker block(preset_);
+    preset_->setCurrentIndex(preset_->count() - 1);
+  };
+  for (QComboBox* c : {method_, feature_, patch_}) connect(c, &QComboBox::currentIndexChanged, this, custom);
+  for (QSpinBox* b : {candidates_, iterations_, blend_}) connect(b, &QSpinBox::valueChanged, this, custom);
+  for (QDoubleSpinBox* b : {threshold_, coherent_threshold_, coherent_smooth_, coherent_guide_, uniformity_, blend_guide_})
+    connect(b, &QDoubleSpinBox::valueChanged, this, custom);
+  connect(fast_, &QCheckBox::toggled, this, custom);
+  applyPreset(presets().front());
+  auto* bottom = new QFormLayout;
+  outer->addLayout(bottom);
   auto* row = new QHBoxLayout;
   row->addWidget(compute_btn_);
   row->addWidget(cancel_btn_);
-  form->addRow(row);
+  bottom->addRow(row);
   transfer_bar_ = new QProgressBar;
   transfer_bar_->setObjectName("transferProgress");
   transfer_label_ = new QLabel;
   transfer_label_->setObjectName("transferStatus");
   transfer_label_->setWordWrap(true);
-  form->addRow(transfer_bar_);
-  form->addRow(transfer_label_);
+  bottom->addRow(transfer_bar_);
+  bottom->addRow(transfer_label_);
   return box;
 }
 
+
+// The presets: the CLI's defaults first (what the flow computes with).
+const std::vector<MainWindow::Preset>& MainWindow::presets() {
+  static const std::vector<Preset> list = [] {
+    const veneer::match::MatchOptions m;
+    const veneer::match::TransferOptions t;
+    Preset standard{tr("default (combined)"), "combined", "normals", 1, m.candidates, m.threshold, m.iterations,
+                    m.coherent_threshold, m.coherent_smooth, m.coherent_guide, m.uniformity, t.blend, t.blend_guide,
+                    true};
+    Preset quick = standard;
+    quick.name = tr("quick preview (coherent)");
+    quick.method = "coherent";
+    Preset faithful = standard;
+    faithful.name = tr("faithful, slow (linear, 3x3 patches)");
+    faithful.method = "linear";
+    faithful.patch = 3;
+    faithful.fast = false;
+    return std::vector<Preset>{standard, quick, faithful};
+  }();
+  return list;
+}
+
+void MainWindow::applyPreset(const Preset& p) {
+  applying_preset_ = true;
+  {
+    // one recomputation for the whole preset, not one per field
+    const bool was = live_update_ && live_update_->isChecked();
+    if (live_update_) live_update_->setChecked(false);
+    method_->setCurrentText(p.method);
+    feature_->setCurrentText(p.feature);
+    patch_->setCurrentText(QString::number(p.patch));
+    candidates_->setValue(p.candidates);
+    threshold_->setValue(p.threshold);
+    iterations_->setValue(p.iterations);
+    coherent_threshold_->setValue(p.coherent_threshold);
+    coherent_smooth_->setValue(p.coherent_smooth);
+    coherent_guide_->setValue(p.coherent_guide);
+    uniformity_->setValue(p.uniformity);
+    blend_->setValue(p.blend);
+    blend_guide_->setValue(p.blend_guide);
+    fast_->setChecked(p.fast);
+    if (live_update_) live_update_->setChecked(was);
+  }
+  applying_preset_ = false;
+  matchOptionChanged();
+}
 
 // ---------------------------------------------------------------- transfer
 

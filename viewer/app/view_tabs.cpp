@@ -106,19 +106,8 @@ QWidget* MainWindow::buildLiveTab() {
   top->addWidget(new QLabel(tr("fps")));
   top->addWidget(fps_);
   top->addWidget(new QLabel(tr("Lamps:")));
-  for (int i = 0; i < 7; ++i) {
-    auto* box = new QCheckBox(QString::number(i + 1));
-    box->setObjectName(QString("lamp%1").arg(i + 1));
-    lamp_boxes_.push_back(box);
-    top->addWidget(box);
-    connect(box, &QCheckBox::toggled, this, [this] {
-      std::vector<bool> on;
-      for (auto* b : lamp_boxes_) on.push_back(b->isChecked());
-      on.resize(std::max<size_t>(on.size(), static_cast<size_t>(rig_.lastStatus().lamp_count)), false);
-      if (rig_.lastStatus().lamp_count > 0) on.resize(static_cast<size_t>(rig_.lastStatus().lamp_count));
-      rig_.setLamps(on, 254);
-    });
-  }
+  lamp_row_ = new QHBoxLayout;
+  top->addLayout(lamp_row_);
   top->addStretch();
   live_label_ = new QLabel;
   live_label_->setObjectName("liveStatus");
@@ -248,6 +237,49 @@ void MainWindow::updateRelightLabel(const cv::Vec3d& d) {
                               .arg(d[0], 0, 'f', 2).arg(d[1], 0, 'f', 2).arg(d[2], 0, 'f', 2)
                               .arg(relighter_->basis_name())
                               .arg(relighter_->fit_rms(), 0, 'f', 4));
+}
+
+// One box per lamp: the lamps of the set loaded (its manifest's light list),
+// else the rig's lamp count; none before either is known.
+void MainWindow::updateLampBoxes() {
+  QStringList names, tips;
+  const LoadedSet* set = dst_ ? dst_.get() : src_.get();
+  if (set && !set->set.lights.empty()) {
+    for (const auto& l : set->set.lights) {
+      names << QString::number(l.index + 1);
+      tips << tr("lamp %1 (%2), direction (%3, %4, %5)")
+                  .arg(l.index + 1)
+                  .arg(qs(l.lamp_id))
+                  .arg(l.direction[0], 0, 'f', 2)
+                  .arg(l.direction[1], 0, 'f', 2)
+                  .arg(l.direction[2], 0, 'f', 2);
+    }
+  } else {
+    for (int i = 0; i < rig_.lastStatus().lamp_count; ++i) {
+      names << QString::number(i + 1);
+      tips << tr("rig lamp %1").arg(i + 1);
+    }
+  }
+  if (static_cast<int>(lamp_boxes_.size()) == names.size()) {
+    for (size_t i = 0; i < lamp_boxes_.size(); ++i) lamp_boxes_[i]->setToolTip(tips[static_cast<int>(i)]);
+    return;
+  }
+  qDeleteAll(lamp_boxes_);
+  lamp_boxes_.clear();
+  for (int i = 0; i < names.size(); ++i) {
+    auto* box = new QCheckBox(names[i]);
+    box->setObjectName(QString("lamp%1").arg(i + 1));
+    box->setToolTip(tips[i]);
+    lamp_boxes_.push_back(box);
+    lamp_row_->addWidget(box);
+    connect(box, &QCheckBox::toggled, this, [this] {
+      std::vector<bool> on;
+      for (auto* b : lamp_boxes_) on.push_back(b->isChecked());
+      // the rig takes one entry per lamp of its own
+      if (rig_.lastStatus().lamp_count > 0) on.resize(static_cast<size_t>(rig_.lastStatus().lamp_count), false);
+      rig_.setLamps(on, 254);
+    });
+  }
 }
 
 void MainWindow::onLiveFrame(const veneer::rig::LiveFrame& frame) {

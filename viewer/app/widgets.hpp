@@ -36,6 +36,11 @@ inline QDoubleSpinBox* number_box(const QString& name, double lo, double hi, int
 // (widgets.cpp: TBB's headers and Qt's `emit` do not mix.)
 void gui_work(const std::function<void()>& f);
 
+// The mouse wheel changes a spin box, combo box or slider under `root` only
+// when it has focus (clicked or tabbed into); otherwise the wheel scrolls the
+// panel, as when scrolling past the field.
+void guard_wheel(QWidget* root);
+
 // A linear picture tonemapped for the views (empty stays empty).
 cv::Mat picture_of(const cv::Mat& linear);
 
