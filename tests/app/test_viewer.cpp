@@ -460,6 +460,42 @@ TEST(Viewer, AdvancedFoldPresetsWheelFocusAndLampsFromTheManifest) {
   EXPECT_EQ(lamp_boxes(w), 3);
 }
 
+// Every view mode shows a picture; the histogram carries the manifest's
+// exposure; a snapshot writes the view shown as a PNG (and refuses another name).
+TEST(Viewer, ViewModesHistogramExposureAndSnapshot) {
+  QTemporaryDir dir;
+  auto window = open_pair(dir);
+  ASSERT_TRUE(window);
+  MainWindow& w = *window;
+  w.resize(1280, 720);
+  w.show();
+  child<QComboBox>(w, "method")->setCurrentText("coherent");
+  ASSERT_TRUE(compute_and_wait(w));
+  ASSERT_TRUE(wait_for([&] { return w.destination()->normals && w.source()->normals; }, 30000));
+  // the simulator records 1/30 s at exposure 1, f/8, ISO 100
+  EXPECT_TRUE(w.exposureText().contains("1/30 s")) << w.exposureText().toStdString();
+  EXPECT_TRUE(w.exposureText().contains("f/8")) << w.exposureText().toStdString();
+  EXPECT_TRUE(w.exposureText().contains("ISO 100")) << w.exposureText().toStdString();
+  EXPECT_FALSE(child<QLabel>(w, "histogram")->pixmap().isNull());
+  auto* look = child<QComboBox>(w, "lookWhat");
+  for (int i = 0; i < look->count(); ++i) {
+    const QString mode = look->itemText(i);
+    ASSERT_TRUE(w.showLook(mode));
+    QString slug = mode;
+    slug.replace(' ', '-');
+    save_stage(w, "view-" + slug);
+  }
+  ASSERT_TRUE(w.showLook("specular enhancement"));
+  const QString file = dir.path() + "/snap.png";
+  EXPECT_EQ(w.snapshotTo(file), file) << w.lastMessage().toStdString();
+  QImage shot(file);
+  ASSERT_FALSE(shot.isNull());
+  EXPECT_GT(shot.width(), 600);
+  EXPECT_TRUE(w.snapshotTo(dir.path() + "/snap.jpg").isEmpty());
+  EXPECT_TRUE(w.lastMessage().contains("snap.jpg")) << w.lastMessage().toStdString();
+  EXPECT_FALSE(QFileInfo::exists(dir.path() + "/snap.jpg"));
+}
+
 TEST(Viewer, CancelledComputationLeavesUiUsable) {
   QTemporaryDir dir;
   auto window = open_pair(dir);

@@ -85,6 +85,12 @@ class MainWindow : public QMainWindow {
   // Grabs every view as <dir>/<tab>.png; returns the files written.
   QStringList saveScreenshots(const QString& dir);
   void showTab(const QString& name);
+  // Saves the tab shown, as on screen, as a PNG; returns the file ("" and a
+  // message when it cannot).
+  QString snapshotTo(const QString& file);
+  // The Look tab's "Show" choice by its text (e.g. "specular enhancement").
+  bool showLook(const QString& what);
+  QString exposureText() const { return exposure_text_; }
 
   // The one flow (flow.cpp): with it on (the default), every capture stored
   // on the rig -- from its button, the Capture panel or the Live tab -- is
@@ -145,6 +151,7 @@ class MainWindow : public QMainWindow {
   void refreshLook();
   void refreshLookNow();
   void updateLampBoxes();
+  void updateHistogram();
   void showOrigin(QPoint destination_pixel);
   void refreshRelight();
   void setLoaded(std::shared_ptr<LoadedSet> loaded, veneer::Role as);
@@ -251,6 +258,8 @@ class MainWindow : public QMainWindow {
   QPushButton* live_btn_ = nullptr;
   QCheckBox* auto_flow_ = nullptr;
   QComboBox* preset_ = nullptr;
+  QLabel *histogram_ = nullptr, *exposure_label_ = nullptr;
+  QString exposure_text_;
   bool applying_preset_ = false;
   QLabel* step_label_ = nullptr;
   QProgressBar* step_bar_ = nullptr;

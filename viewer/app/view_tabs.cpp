@@ -9,6 +9,8 @@
 #include <QCheckBox>
 #include <QComboBox>
 #include <QDir>
+#include <QPainter>
+#include <QSaveFile>
 #include <QDoubleSpinBox>
 #include <QFileDialog>
 #include <QFormLayout>
@@ -45,14 +47,31 @@ QWidget* MainWindow::buildLookTab() {
   look_what_ = new QComboBox;
   look_what_->setObjectName("lookWhat");
   look_what_->addItems({tr("median of all lamps"), tr("normals"), tr("albedo"), tr("mask"),
-                        tr("correspondence map"), tr("source reuse")});
+                        tr("correspondence map"), tr("source reuse"), tr("confidence"),
+                        tr("specular enhancement")});
+  look_what_->setToolTip(tr("confidence: the photometric-stereo fit per set (bright = the lamps agree) and the "
+                            "map's match distance on the result (bright = close match); specular enhancement: "
+                            "the normals shaded shiny under the Relight tab's light"));
   connect(look_what_, &QComboBox::currentIndexChanged, this, [this] { refreshLook(); });
   top->addWidget(new QLabel(tr("Show")));
   top->addWidget(look_what_);
   auto* reset = button(tr("Fit"), "fitViews", w);
   connect(reset, &QPushButton::clicked, this, [this] { sync_.reset(); });
   top->addWidget(reset);
+  auto* snap = button(tr("Snapshot…"), "snapshot", w);
+  snap->setToolTip(tr("save the view shown (this tab, as on screen) as a PNG"));
+  connect(snap, &QPushButton::clicked, this, [this] {
+    const QString f = QFileDialog::getSaveFileName(this, tr("Snapshot"), "snapshot.png", "PNG (*.png)");
+    if (!f.isEmpty()) snapshotTo(f);
+  });
+  top->addWidget(snap);
   top->addStretch();
+  histogram_ = new QLabel;
+  histogram_->setObjectName("histogram");
+  top->addWidget(histogram_);
+  exposure_label_ = new QLabel;
+  exposure_label_->setObjectName("exposure");
+  top->addWidget(exposure_label_);
   layout->addLayout(top);
   auto* row = new QHBoxLayout;
   dst_view_ = new ImageView(tr("destination"));
@@ -141,7 +160,10 @@ QWidget* MainWindow::buildRelightTab() {
   relight_pad_ = new SpherePad;
   relight_pad_->setObjectName("relightPad");
   relight_pad_->setDirection(cv::Vec3d(-0.4, 0.4, std::sqrt(1 - 0.32)));
-  connect(relight_pad_, &SpherePad::directionChanged, this, [this] { refreshRelight(); });
+  connect(relight_pad_, &SpherePad::directionChanged, this, [this] {
+    refreshRelight();
+    if (look_what_->currentIndex() == 7) refreshLook();  // specular enhancement follows the light
+  });
   left->addWidget(relight_pad_);
   relight_label_ = new QLabel;
   relight_label_->setWordWrap(true);
@@ -162,23 +184,70 @@ void MainWindow::refreshLook() {
   gui_work([this] { refreshLookNow(); });
 }
 
+namespace {
+// 0..1 (1 = best) shown with a colour scale; black outside `valid`.
+cv::Mat confidence_picture(const cv::Mat& goodness, const cv::Mat& valid) {
+  cv::Mat g8, out;
+  goodness.convertTo(g8, CV_8U, 255.0);
+  cv::applyColorMap(g8, out, cv::COLORMAP_VIRIDIS);
+  if (!valid.empty()) out.setTo(cv::Scalar::all(0), valid == 0);
+  return out;
+}
+
+// RTI's specular enhancement: the normals shaded as a grey glossy surface
+// (Lambert plus a Blinn-Phong highlight) under light `l`, so relief and
+// small dents show that the albedo hides. A view of the normals, not an
+// estimate of anything.
+cv::Mat specular_picture(const veneer::ps::PsResult& ps, const cv::Vec3d& light) {
+  const cv::Vec3f l(light), h = cv::normalize(cv::Vec3f(light) + cv::Vec3f(0, 0, 1));
+  cv::Mat out(ps.normals.size(), CV_8UC3, cv::Scalar::all(0));
+  for (int y = 0; y < out.rows; ++y) {
+    const auto* n = ps.normals.ptr<cv::Vec3f>(y);
+    auto* o = out.ptr<cv::Vec3b>(y);
+    for (int x = 0; x < out.cols; ++x) {
+      if (n[x] == cv::Vec3f()) continue;
+      const float diffuse = std::max(0.f, n[x].dot(l)), spec = std::pow(std::max(0.f, n[x].dot(h)), 60.f);
+      o[x] = cv::Vec3b::all(cv::saturate_cast<uchar>(255 * std::min(1.f, 0.55f * diffuse + 0.7f * spec)));
+    }
+  }
+  return out;
+}
+}  // namespace
+
 void MainWindow::refreshLookNow() {
   const int what = look_what_->currentIndex();
-  auto pick = [what](const std::shared_ptr<LoadedSet>& s) -> cv::Mat {
+  const cv::Vec3d light = relight_pad_ ? relight_pad_->direction() : cv::Vec3d(0, 0, 1);
+  auto pick = [what, light](const std::shared_ptr<LoadedSet>& s) -> cv::Mat {
     if (!s) return {};
     switch (what) {
       case 1: return s->normals ? normals_picture(s->normals->normals) : cv::Mat();
       case 2: return s->normals ? picture_of(s->normals->albedo) : cv::Mat();
       case 3: return s->normals ? s->normals->mask : cv::Mat();
+      case 6: {
+        if (!s->normals || s->normals->residual.empty()) return {};
+        cv::Mat good = 1.0 - cv::min(s->normals->residual * 10.0, 1.0);  // residual 0.1 of the brightest: none
+        return confidence_picture(good, s->normals->mask);
+      }
+      case 7: return s->normals ? specular_picture(*s->normals, light) : cv::Mat();
       default: return s->median_picture.empty() ? picture_of(s->median) : s->median_picture;
     }
   };
+  updateHistogram();
   dst_view_->setImage(to_qimage(pick(dst_)));
   src_view_->setImage(to_qimage(pick(src_)));
   if (result_) {
     cv::Mat r;
     if (what == 4) {
       r = veneer::match::map_picture(result_->map, result_->source_size);
+    } else if (what == 6) {
+      const cv::Mat& d = result_->map.distance;
+      cv::Mat xy[2];
+      cv::split(result_->map.xy, xy);
+      cv::Mat valid = xy[0] >= 0, good;  // unmapped pixels: black
+      double hi = 0;
+      cv::minMaxLoc(d, nullptr, &hi, nullptr, nullptr, valid);
+      good = 1.0 - d / std::max(1e-6, hi);
+      r = confidence_picture(good, valid);
     } else if (what == 5) {
       r = veneer::match::reuse_picture(result_->reuse, result_->source_median);
       src_view_->setImage(to_qimage(r));
@@ -190,6 +259,69 @@ void MainWindow::refreshLookNow() {
   } else {
     result_view_->setImage({});
   }
+}
+
+// The destination's luminance histogram (of the picture shown on the Look
+// tab's median) with the exposure its manifest records.
+void MainWindow::updateHistogram() {
+  const LoadedSet* s = dst_ ? dst_.get() : src_.get();
+  if (!s || s->median_picture.empty()) {
+    histogram_->clear();
+    return;
+  }
+  cv::Mat grey, hist;
+  cv::cvtColor(s->median_picture, grey, cv::COLOR_BGR2GRAY);
+  const int bins = 64, channels[] = {0}, size[] = {bins};
+  const float range[] = {0, 256};
+  const float* ranges[] = {range};
+  cv::calcHist(&grey, 1, channels, cv::Mat(), hist, 1, size, ranges);
+  double peak = 0;
+  cv::minMaxLoc(hist, nullptr, &peak);
+  QPixmap pixmap(bins * 2, 36);
+  pixmap.fill(QColor(24, 24, 28));
+  QPainter p(&pixmap);
+  p.setPen(QColor(220, 220, 220));
+  for (int i = 0; i < bins; ++i) {
+    const int h = static_cast<int>(std::round(35 * std::sqrt(hist.at<float>(i) / std::max(1.0, peak))));
+    p.fillRect(i * 2, 36 - h, 2, h, QColor(200, 200, 200));
+  }
+  p.end();
+  const auto& c = s->set.camera;
+  QString exposure = c.exposure_s <= 0 ? tr("exposure not recorded")
+                     : c.exposure_s < 1 ? tr("1/%1 s").arg(std::round(1 / c.exposure_s))
+                                        : tr("%1 s").arg(c.exposure_s, 0, 'g', 3);
+  if (c.aperture > 0) exposure += tr(" · f/%1").arg(c.aperture, 0, 'g', 3);
+  if (c.iso > 0) exposure += tr(" · ISO %1").arg(c.iso);
+  histogram_->setPixmap(pixmap);
+  histogram_->setToolTip(tr("%1: median picture's luminance (square-root scale)\n%2 (%3)")
+                             .arg(QFileInfo(s->folder).fileName(), exposure, qs(c.model)));
+  exposure_text_ = exposure;
+  if (exposure_label_) exposure_label_->setText(exposure);
+}
+
+bool MainWindow::showLook(const QString& what) {
+  const int i = look_what_->findText(what);
+  if (i < 0) return false;
+  showTab("Look");
+  look_what_->setCurrentIndex(i);
+  refreshLook();
+  return true;
+}
+
+QString MainWindow::snapshotTo(const QString& file) {
+  QWidget* view = tabs_->currentWidget();
+  if (!view) return {};
+  if (!file.endsWith(".png", Qt::CaseInsensitive)) {
+    message(tr("a snapshot is a PNG: %1 does not end in .png").arg(file), true);
+    return {};
+  }
+  QSaveFile out(file);  // whole or not at all
+  if (!out.open(QIODevice::WriteOnly) || !view->grab().save(&out, "PNG") || !out.commit()) {
+    message(tr("cannot write the snapshot %1: %2").arg(file, out.errorString()), true);
+    return {};
+  }
+  message(tr("snapshot saved as %1").arg(file));
+  return file;
 }
 
 void MainWindow::showOrigin(QPoint p) {
