@@ -496,6 +496,64 @@ TEST(Viewer, ViewModesHistogramExposureAndSnapshot) {
   EXPECT_FALSE(QFileInfo::exists(dir.path() + "/snap.jpg"));
 }
 
+// Segmentation by hand: a rectangle on the destination and a brush on the
+// source each change the map -- nothing is mapped outside the rectangle and
+// nothing is taken from the brushed-out disc -- and show as outlines.
+TEST(Viewer, HandRectangleAndBrushMasksChangeTheMap) {
+  QTemporaryDir dir;
+  auto window = open_pair(dir);
+  ASSERT_TRUE(window);
+  MainWindow& w = *window;
+  child<QComboBox>(w, "method")->setCurrentText("coherent");
+  ASSERT_TRUE(compute_and_wait(w));
+  auto mapped = [&](const cv::Rect& inside) {  // destination pixels mapped within `inside`
+    cv::Mat xy[2];
+    cv::split(w.result()->map.xy, xy);
+    return cv::countNonZero(xy[0](inside) >= 0);
+  };
+  const cv::Size size = w.result()->map.xy.size();
+  const cv::Rect left(0, 0, size.width / 2, size.height), right(size.width / 2, 0, size.width - size.width / 2, size.height);
+  const int left_before = mapped(left), right_before = mapped(right);
+  ASSERT_GT(left_before, 100);
+  ASSERT_GT(right_before, 100);
+
+  // the rectangle: the right half of the destination only
+  const auto* first = w.result();
+  w.setHandRect(veneer::Role::destination, QRect(right.x, right.y, right.width, right.height));
+  ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.result() != first; }, 60000))
+      << w.lastMessage().toStdString();
+  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
+  EXPECT_EQ(mapped(left), 0) << "outside the rectangle nothing is the object";
+  EXPECT_GT(mapped(right), right_before / 2);
+
+  // the brush: a disc at the source's object centre taken out
+  cv::Mat sm = w.source()->hand_mask.empty() ? w.source()->normals->mask : w.source()->hand_mask;
+  const cv::Moments m = cv::moments(sm, true);
+  const QPoint centre(static_cast<int>(m.m10 / m.m00), static_cast<int>(m.m01 / m.m00));
+  auto from_disc = [&] {
+    int n = 0;
+    const cv::Mat& xy = w.result()->map.xy;
+    for (int y = 0; y < xy.rows; ++y)
+      for (int x = 0; x < xy.cols; ++x) {
+        const cv::Vec2f v = xy.at<cv::Vec2f>(y, x);
+        if (v[0] >= 0 && std::hypot(v[0] - centre.x(), v[1] - centre.y()) < 7) ++n;
+      }
+    return n;
+  };
+  ASSERT_GT(from_disc(), 0) << "the map takes from the centre before";
+  const auto* second = w.result();
+  w.brushHandMask(veneer::Role::source, centre, false, 10);
+  ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.result() != second; }, 60000))
+      << w.lastMessage().toStdString();
+  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
+  EXPECT_EQ(from_disc(), 0) << "nothing comes from the brushed-out disc";
+  EXPECT_FALSE(w.source()->hand_mask.empty());
+  // and a brush adds back
+  w.brushHandMask(veneer::Role::source, centre, true, 10);
+  EXPECT_EQ(w.source()->hand_mask.at<uchar>(centre.y(), centre.x()), 255);
+  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
+}
+
 TEST(Viewer, CancelledComputationLeavesUiUsable) {
   QTemporaryDir dir;
   auto window = open_pair(dir);

@@ -48,6 +48,8 @@ struct LoadedSet {
   std::optional<veneer::ps::PsResult> normals;  // filled in the background after loading
   cv::Mat median;                               // per-pixel median photo (linear BGR)
   cv::Mat median_picture;                       // the same, tonemapped (8-bit), for the views
+  cv::Mat hand_mask;  // segmentation by hand (CV_8UC1, 255 = object); empty = automatic
+  int hand_version = 0;
 };
 
 class MainWindow : public QMainWindow {
@@ -91,6 +93,12 @@ class MainWindow : public QMainWindow {
   // The Look tab's "Show" choice by its text (e.g. "specular enhancement").
   bool showLook(const QString& what);
   QString exposureText() const { return exposure_text_; }
+  // Segmentation by hand (segmentation.cpp), what the views' shift+drag
+  // (rectangle) and ctrl/alt+drag (brush in/out) do: the object mask the
+  // transfer then uses for that set, shown as an outline.
+  void setHandRect(veneer::Role set, const QRect& rect);
+  void brushHandMask(veneer::Role set, QPoint pixel, bool add, int radius = 0);
+  void clearHandMask(veneer::Role set);
 
   // The one flow (flow.cpp): with it on (the default), every capture stored
   // on the rig -- from its button, the Capture panel or the Live tab -- is
@@ -152,6 +160,9 @@ class MainWindow : public QMainWindow {
   void refreshLookNow();
   void updateLampBoxes();
   void updateHistogram();
+  std::shared_ptr<LoadedSet> setFor(veneer::Role role) const { return role == veneer::Role::source ? src_ : dst_; }
+  bool startHandMask(LoadedSet& s);
+  void handMaskChanged(veneer::Role role);
   void showOrigin(QPoint destination_pixel);
   void refreshRelight();
   void setLoaded(std::shared_ptr<LoadedSet> loaded, veneer::Role as);

@@ -284,6 +284,7 @@ void MainWindow::startTransfer() {
   seg.threshold = seg_threshold_->value();
   if (!seg_rect_.isEmpty()) seg.rect = cv::Rect(seg_rect_.x(), seg_rect_.y(), seg_rect_.width(), seg_rect_.height());
   const bool custom_segmentation = seg.method != veneer::ps::SegmentMethod::automatic || seg.rect.has_value();
+  const cv::Mat dst_hand = dst_->hand_mask.clone(), src_hand = src_->hand_mask.clone();
 
   computing_ = true;
   cancel_ = false;
@@ -318,7 +319,7 @@ void MainWindow::startTransfer() {
   pending_relit_ = pending_relit_source_ = cv::Mat();
   const cv::Vec3d light = relight_pad_->direction();
   QPointer<MainWindow> self(this);
-  transfer_watch_.setFuture(QtConcurrent::run([this, self, dst, src, options, seg, custom_segmentation, cached,
+  transfer_watch_.setFuture(QtConcurrent::run([this, self, dst, src, options, seg, custom_segmentation, dst_hand, src_hand, cached,
                                                previous, relighter, light] {
     veneer::Progress progress;
     progress.cancel = &cancel_;
@@ -338,7 +339,9 @@ void MainWindow::startTransfer() {
     std::shared_ptr<const veneer::match::PreparedPair> pair = cached;
     if (!pair) {
       veneer::ImageSet d = dst->set;
-      if (custom_segmentation) {
+      if (!dst_hand.empty()) {
+        d.mask = dst_hand;  // by hand: the supplied mask
+      } else if (custom_segmentation) {
         // The user's threshold / rectangle decide the destination's object pixels.
         auto m = veneer::ps::segment(d, seg);
         if (!m) {
@@ -347,7 +350,12 @@ void MainWindow::startTransfer() {
         }
         d.mask = m->mask;
       }
-      auto prepared = veneer::match::prepare_pair(d, src->set, options, progress);
+      veneer::ImageSet s;
+      if (!src_hand.empty()) {
+        s = src->set;
+        s.mask = src_hand;
+      }
+      auto prepared = veneer::match::prepare_pair(d, src_hand.empty() ? src->set : s, options, progress);
       if (!prepared) {
         transfer_error_ = qs(prepared.message());
         return;
@@ -393,7 +401,7 @@ void MainWindow::cancelTransfer() {
 // What the prepared objects depend on: the sets loaded, truth normals, the
 // segmentation settings. Anything else is a matching option.
 QString MainWindow::preparationKey() const {
-  return QString("%1|%2|%3|%4|%5,%6,%7,%8")
+  return QString("%1|%2|%3|%4|%5,%6,%7,%8|%9,%10")
       .arg(sets_loaded_)  // a set (re)loaded: everything is prepared again
       .arg(truth_normals_->isChecked())
       .arg(seg_method_->currentText())
@@ -401,7 +409,9 @@ QString MainWindow::preparationKey() const {
       .arg(seg_rect_.x())
       .arg(seg_rect_.y())
       .arg(seg_rect_.width())
-      .arg(seg_rect_.height());
+      .arg(seg_rect_.height())
+      .arg(dst_ ? dst_->hand_version : 0)
+      .arg(src_ ? src_->hand_version : 0);
 }
 
 // An option changed: once a transfer has been shown, recompute (the map alone

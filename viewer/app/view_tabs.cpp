@@ -87,11 +87,17 @@ QWidget* MainWindow::buildLookTab() {
   connect(dst_view_, &ImageView::pixelClicked, this, &MainWindow::showOrigin);
   connect(result_view_, &ImageView::pixelClicked, this, &MainWindow::showOrigin);
   connect(dst_view_, &ImageView::rectDrawn, this, [this](QRect r) {
-    seg_rect_ = r;
-    rect_label_->setText(r.isEmpty() ? tr("no rectangle")
-                                     : tr("rectangle %1,%2 %3x%4").arg(r.x()).arg(r.y()).arg(r.width()).arg(r.height()));
-    matchOptionChanged();  // a new object outline: prepared again and matched
+    dst_view_->setRect({});
+    setHandRect(veneer::Role::destination, r);
   });
+  connect(src_view_, &ImageView::rectDrawn, this, [this](QRect r) {
+    src_view_->setRect({});
+    setHandRect(veneer::Role::source, r);
+  });
+  connect(dst_view_, &ImageView::brushed, this,
+          [this](QPoint p, bool add) { brushHandMask(veneer::Role::destination, p, add); });
+  connect(src_view_, &ImageView::brushed, this,
+          [this](QPoint p, bool add) { brushHandMask(veneer::Role::source, p, add); });
   return w;
 }
 
