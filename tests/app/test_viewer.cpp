@@ -28,10 +28,13 @@
 #include <QWheelEvent>
 
 #include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "main_window.hpp"
 #include "wait_for.hpp"
+#include "veneer/match/transfer.hpp"
+#include "veneer/ps/segmentation.hpp"
 #include "veneer/sim/simulator.hpp"
 
 namespace fs = std::filesystem;
@@ -552,6 +555,56 @@ TEST(Viewer, HandRectangleAndBrushMasksChangeTheMap) {
   w.brushHandMask(veneer::Role::source, centre, true, 10);
   EXPECT_EQ(w.source()->hand_mask.at<uchar>(centre.y(), centre.x()), 255);
   ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
+  // exported for the CLI, as drawn
+  const QStringList files = w.exportMasksTo(dir.path());
+  ASSERT_EQ(files.size(), 2);
+  cv::Mat back = cv::imread(files[0].toStdString(), cv::IMREAD_GRAYSCALE);
+  EXPECT_EQ(cv::norm(back, w.destination()->hand_mask, cv::NORM_INF), 0.0);
+}
+
+// The CLI reuses a mask drawn by hand: `veneer transfer --dst-mask` maps
+// nothing outside it; a mask of another size is refused naming the file.
+TEST(Viewer, CliTransferTakesMaskFiles) {
+  QTemporaryDir dir;
+  QString dst, src;
+  write_pair(dir.path(), dst, src);
+  auto d = veneer::read_set(dst.toStdString());
+  ASSERT_TRUE(d);
+  auto seg = veneer::ps::segment(*d);
+  ASSERT_TRUE(seg);
+  cv::Mat mask = seg->mask.clone();
+  mask(cv::Rect(0, 0, mask.cols / 2, mask.rows)).setTo(0);  // the right half of the object only
+  const QString mask_file = dir.path() + "/dst-mask.png";
+  ASSERT_TRUE(cv::imwrite(mask_file.toStdString(), mask));
+  auto run = [&](const QStringList& extra, QString& out) {
+    QProcess p;
+    p.setProcessChannelMode(QProcess::MergedChannels);
+    p.start(VENEER_BIN_DIR "/veneer", QStringList{"transfer", "--dst", dst, "--src", src, "--method", "coherent"} + extra);
+    p.waitForFinished(120000);
+    out = QString::fromUtf8(p.readAll());
+    return p.exitCode();
+  };
+  QString out;
+  ASSERT_EQ(run({"--out", dir.path() + "/plain"}, out), 0) << out.toStdString();
+  ASSERT_EQ(run({"--out", dir.path() + "/masked", "--dst-mask", mask_file}, out), 0) << out.toStdString();
+  auto plain = veneer::match::read_map((dir.path() + "/plain/map.pfm").toStdString());
+  auto masked = veneer::match::read_map((dir.path() + "/masked/map.pfm").toStdString());
+  ASSERT_TRUE(plain && masked);
+  auto mapped = [](const veneer::match::Map& m, const cv::Rect& r) {
+    cv::Mat xy[2];
+    cv::split(m.xy, xy);
+    return cv::countNonZero(xy[0](r) >= 0);
+  };
+  const cv::Rect left(0, 0, mask.cols / 2, mask.rows), right(mask.cols / 2, 0, mask.cols - mask.cols / 2, mask.rows);
+  EXPECT_GT(mapped(*plain, left), 100);
+  EXPECT_EQ(mapped(*masked, left), 0);
+  EXPECT_GT(mapped(*masked, right), 100);
+  // a mask of another size
+  cv::Mat small(10, 10, CV_8UC1, cv::Scalar(255));
+  ASSERT_TRUE(cv::imwrite((dir.path() + "/small.png").toStdString(), small));
+  EXPECT_EQ(run({"--out", dir.path() + "/bad", "--src-mask", dir.path() + "/small.png"}, out), 2) << out.toStdString();
+  EXPECT_TRUE(out.contains("--src-mask") && out.contains("small.png") && out.contains("10x10")) << out.toStdString();
+  EXPECT_FALSE(QFileInfo::exists(dir.path() + "/bad/map.pfm"));
 }
 
 TEST(Viewer, CancelledComputationLeavesUiUsable) {

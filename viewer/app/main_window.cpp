@@ -256,6 +256,10 @@ void MainWindow::buildMenus() {
   exp->addAction(tr("Map (map.pfm, map.png)…"), this, &MainWindow::exportMap);
   exp->addAction(tr("Result pictures…"), this, &MainWindow::exportResults);
   exp->addAction(tr("Relight sweep video…"), this, &MainWindow::exportRelightVideo);
+  exp->addAction(tr("Masks drawn by hand (for veneer transfer --dst-mask)…"), this, [this] {
+    const QString dir = QFileDialog::getExistingDirectory(this, tr("Write the masks into"));
+    if (!dir.isEmpty()) exportMasksTo(dir);
+  });
   file->addSeparator();
   file->addAction(tr("Quit"), qApp, &QApplication::quit);
 }

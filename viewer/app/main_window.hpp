@@ -99,6 +99,9 @@ class MainWindow : public QMainWindow {
   void setHandRect(veneer::Role set, const QRect& rect);
   void brushHandMask(veneer::Role set, QPoint pixel, bool add, int radius = 0);
   void clearHandMask(veneer::Role set);
+  // Writes the hand masks as <dir>/dst-mask.png and src-mask.png, what
+  // `veneer transfer --dst-mask/--src-mask` reads; returns the files written.
+  QStringList exportMasksTo(const QString& dir);
 
   // The one flow (flow.cpp): with it on (the default), every capture stored
   // on the rig -- from its button, the Capture panel or the Live tab -- is

@@ -3,6 +3,7 @@
 // (its supplied mask), drawn as an outline on the views.
 #include <QLabel>
 
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "main_window.hpp"
@@ -53,6 +54,23 @@ void MainWindow::clearHandMask(veneer::Role role) {
   if (!s || s->hand_mask.empty()) return;
   s->hand_mask.release();
   handMaskChanged(role);
+}
+
+QStringList MainWindow::exportMasksTo(const QString& dir) {
+  QStringList written;
+  for (auto [set, name] : {std::pair{dst_, "dst-mask.png"}, std::pair{src_, "src-mask.png"}}) {
+    if (!set || set->hand_mask.empty()) continue;
+    const QString file = dir + "/" + name;
+    if (!cv::imwrite(file.toStdString(), set->hand_mask)) {
+      message(tr("cannot write %1").arg(file), true);
+      return written;
+    }
+    written << file;
+  }
+  message(written.isEmpty() ? tr("no mask drawn by hand to export")
+                            : tr("masks written: %1 (veneer transfer --dst-mask / --src-mask)").arg(written.join(", ")),
+          written.isEmpty());
+  return written;
 }
 
 void MainWindow::handMaskChanged(veneer::Role role) {
