@@ -499,6 +499,15 @@ TEST(Viewer, ViewModesHistogramExposureAndSnapshot) {
   EXPECT_FALSE(QFileInfo::exists(dir.path() + "/snap.jpg"));
 }
 
+namespace {
+// Destination pixels the map gives a source pixel, within `inside`.
+int mapped_in(const veneer::match::Map& map, const cv::Rect& inside) {
+  cv::Mat xy[2];
+  cv::split(map.xy, xy);
+  return cv::countNonZero(xy[0](inside) >= 0);
+}
+}  // namespace
+
 // Segmentation by hand: a rectangle on the destination and a brush on the
 // source each change the map -- nothing is mapped outside the rectangle and
 // nothing is taken from the brushed-out disc -- and show as outlines.
@@ -509,11 +518,7 @@ TEST(Viewer, HandRectangleAndBrushMasksChangeTheMap) {
   MainWindow& w = *window;
   child<QComboBox>(w, "method")->setCurrentText("coherent");
   ASSERT_TRUE(compute_and_wait(w));
-  auto mapped = [&](const cv::Rect& inside) {  // destination pixels mapped within `inside`
-    cv::Mat xy[2];
-    cv::split(w.result()->map.xy, xy);
-    return cv::countNonZero(xy[0](inside) >= 0);
-  };
+  auto mapped = [&](const cv::Rect& inside) { return mapped_in(w.result()->map, inside); };
   const cv::Size size = w.result()->map.xy.size();
   const cv::Rect left(0, 0, size.width / 2, size.height), right(size.width / 2, 0, size.width - size.width / 2, size.height);
   const int left_before = mapped(left), right_before = mapped(right);
@@ -590,15 +595,10 @@ TEST(Viewer, CliTransferTakesMaskFiles) {
   auto plain = veneer::match::read_map((dir.path() + "/plain/map.pfm").toStdString());
   auto masked = veneer::match::read_map((dir.path() + "/masked/map.pfm").toStdString());
   ASSERT_TRUE(plain && masked);
-  auto mapped = [](const veneer::match::Map& m, const cv::Rect& r) {
-    cv::Mat xy[2];
-    cv::split(m.xy, xy);
-    return cv::countNonZero(xy[0](r) >= 0);
-  };
   const cv::Rect left(0, 0, mask.cols / 2, mask.rows), right(mask.cols / 2, 0, mask.cols - mask.cols / 2, mask.rows);
-  EXPECT_GT(mapped(*plain, left), 100);
-  EXPECT_EQ(mapped(*masked, left), 0);
-  EXPECT_GT(mapped(*masked, right), 100);
+  EXPECT_GT(mapped_in(*plain, left), 100);
+  EXPECT_EQ(mapped_in(*masked, left), 0);
+  EXPECT_GT(mapped_in(*masked, right), 100);
   // a mask of another size
   cv::Mat small(10, 10, CV_8UC1, cv::Scalar(255));
   ASSERT_TRUE(cv::imwrite((dir.path() + "/small.png").toStdString(), small));
