@@ -59,13 +59,14 @@ std::string trim_token(const std::string& token) {
 bool needs_control(const Body& body) {
   return std::holds_alternative<CaptureReq>(body) || std::holds_alternative<CancelReq>(body) ||
          std::holds_alternative<SetLampsReq>(body) || std::holds_alternative<PressReq>(body) ||
-         std::holds_alternative<MoveHandLampReq>(body) || std::holds_alternative<DeleteSetReq>(body);
+         std::holds_alternative<MoveHandLampReq>(body) || std::holds_alternative<DeleteSetReq>(body) ||
+         std::holds_alternative<RestoreSetReq>(body);
 }
 
 const char* request_name(const Body& body) {
   static const char* names[] = {"hello", "status", "list_sets", "get_manifest", "fetch_images", "delete_set", "capture",
                                 "cancel_capture", "set_lamps", "start_live_view", "stop_live_view", "press_button",
-                                "move_hand_lamp"};
+                                "move_hand_lamp", "restore_set"};
   return names[body.index()];
 }
 
@@ -90,7 +91,7 @@ veneer::Expected<Request> decode(const pb::ClientMessage& m) {
       return r;
     }
     case pb::ClientMessage::kStatus: r.body = StatusReq{}; return r;
-    case pb::ClientMessage::kListSets: r.body = ListSetsReq{}; return r;
+    case pb::ClientMessage::kListSets: r.body = ListSetsReq{m.list_sets().trash()}; return r;
     case pb::ClientMessage::kGetManifest:
       if (auto s = check_set_id("get_manifest.set_id", m.get_manifest().set_id()); !s) return s.error();
       r.body = GetManifestReq{m.get_manifest().set_id()};
@@ -169,6 +170,10 @@ veneer::Expected<Request> decode(const pb::ClientMessage& m) {
       r.body = MoveHandLampReq{v};
       return r;
     }
+    case pb::ClientMessage::kRestoreSet:
+      if (auto s = check_set_id("restore_set.set_id", m.restore_set().set_id()); !s) return s.error();
+      r.body = RestoreSetReq{m.restore_set().set_id()};
+      return r;
     case pb::ClientMessage::BODY_NOT_SET:
       break;
   }
@@ -228,6 +233,7 @@ void encode_set(const StoredSet& s, pb::SetInfo& info) {
   out->set_has_truth(s.has_truth);
   out->set_bytes(s.bytes);
   out->set_scene(s.scene);
+  out->set_deleted(s.deleted);
 }
 
 void encode_event(const RigEvent& e, uint64_t seq, pb::RigMessage& out) {

@@ -413,13 +413,14 @@ class Session : public std::enable_shared_from_this<Session> {
     send(m);
   }
 
-  void on(uint64_t id, api::ListSetsReq&) {
+  void on(uint64_t id, api::ListSetsReq& l) {
     pb::RigMessage m;
     auto* r = m.mutable_response();
     r->set_id(id);
     r->set_ok(true);
     auto* list = r->mutable_sets();
-    for (const auto& s : srv_.rig.store().list()) api::encode_set(s, *list->add_sets());
+    for (const auto& s : l.trash ? srv_.rig.store().trash() : srv_.rig.store().list())
+      api::encode_set(s, *list->add_sets());
     send(m);
   }
 
@@ -570,6 +571,7 @@ class Session : public std::enable_shared_from_this<Session> {
   }
 
   void on(uint64_t id, api::MoveHandLampReq& h) { respond(id, srv_.rig.move_hand_lamp(h.position)); }
+  void on(uint64_t id, api::RestoreSetReq& r) { respond(id, srv_.rig.store().restore(r.set_id)); }
 
   struct FetchFile {
     std::string rel;

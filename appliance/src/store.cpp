@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cstring>
 #include <ctime>
+#include <fstream>
 
 #include <fcntl.h>
 #include <sys/file.h>
@@ -106,6 +107,7 @@ veneer::Expected<std::unique_ptr<Store>> Store::open(const fs::path& root) {
   std::sort(store->sets_.begin(), store->sets_.end(), [](const StoredSet& a, const StoredSet& b) {
     return a.created != b.created ? a.created < b.created : a.id < b.id;
   });
+  if (int purged = store->purge_trash(); purged > 0) log->info("store {}: {} old set(s) purged from the trash", root.string(), purged);
   log->info("store {}: {} set(s)", root.string(), store->sets_.size());
   return store;
 }
@@ -237,6 +239,7 @@ veneer::Status Store::save(const veneer::ImageSet& set) {
                                  set.truth.present());
   for (const auto& r : set.raw) need += r.bytes.size();
   need += set.ambient_raw.bytes.size();
+  if (free_bytes() < need) purge_trash(need);  // the trash gives way first
   const uint64_t free = free_bytes();
   if (free < need) {
     return make_error("store " + root_.string() + " is full: " + std::to_string(free >> 20) +
@@ -257,22 +260,124 @@ veneer::Status Store::save(const veneer::ImageSet& set) {
   return {};
 }
 
+namespace {
+std::string iso_utc(std::time_t t) {
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char text[32];
+  std::strftime(text, sizeof text, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return text;
+}
+
+// <trash>/<id>.deleted holds when the set was deleted (Unix seconds).
+std::time_t deleted_at(const fs::path& stamp) {
+  std::ifstream in(stamp);
+  long long t = 0;
+  if (!(in >> t)) return 0;  // unreadable: the oldest, so the first to go
+  return static_cast<std::time_t>(t);
+}
+}  // namespace
+
 veneer::Status Store::remove(const std::string& id) {
   if (auto set = find(id); !set) return set.error();
-  fs::path folder = root_ / id;
-  // Rename first so the set vanishes at once; the bytes go afterwards.
-  fs::path doomed = root_ / ("." + id + ".deleted-" + std::to_string(::getpid()) + "-0");
-  if (::rename(folder.c_str(), doomed.c_str()) != 0) {
-    return make_error("cannot delete set " + id + ": " + std::strerror(errno));
-  }
-  {
-    std::lock_guard lock(mutex_);
-    sets_.erase(std::remove_if(sets_.begin(), sets_.end(), [&](const StoredSet& s) { return s.id == id; }),
-                sets_.end());
-  }
+  const fs::path trash = trash_folder();
   std::error_code ec;
-  fs::remove_all(doomed, ec);
+  fs::create_directories(trash, ec);
+  if (ec) return make_error("cannot delete set " + id + ": cannot create " + trash.string() + ": " + ec.message());
+  // An older deletion of the same id makes way (only the newest is restorable).
+  fs::remove_all(trash / id, ec);
+  const std::time_t now = std::time(nullptr);
+  {
+    std::ofstream stamp(trash / (id + ".deleted"));
+    stamp << static_cast<long long>(now) << "\n";
+    if (!stamp) return make_error("cannot delete set " + id + ": cannot write into " + trash.string());
+  }
+  // One rename: the set leaves the list at once and nothing is copied.
+  if (::rename((root_ / id).c_str(), (trash / id).c_str()) != 0) {
+    const int err = errno;
+    fs::remove(trash / (id + ".deleted"), ec);
+    return make_error("cannot delete set " + id + ": " + std::strerror(err));
+  }
+  std::lock_guard lock(mutex_);
+  sets_.erase(std::remove_if(sets_.begin(), sets_.end(), [&](const StoredSet& s) { return s.id == id; }),
+              sets_.end());
   return {};
+}
+
+std::vector<StoredSet> Store::trash() const {
+  std::vector<std::pair<std::time_t, StoredSet>> found;
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(trash_folder(), ec)) {
+    const std::string id = entry.path().filename().string();
+    if (!entry.is_directory() || !valid_set_id(id)) continue;
+    auto text = veneer::read_file_bytes(entry.path() / "set.json");
+    if (!text) continue;
+    auto manifest = veneer::parse_manifest(*text, entry.path());
+    if (!manifest) continue;
+    StoredSet out;
+    out.id = id;
+    out.role = manifest->set.role;
+    out.object = manifest->set.object;
+    out.created = manifest->set.created;
+    out.scene = manifest->set.scene;
+    out.size = manifest->set.size;
+    out.lights = static_cast<int>(manifest->set.lights.size());
+    out.warnings = manifest->set.warnings;
+    out.bytes = folder_bytes(entry.path());
+    const std::time_t when = deleted_at(trash_folder() / (id + ".deleted"));
+    out.deleted = iso_utc(when);
+    found.emplace_back(when, std::move(out));
+  }
+  std::sort(found.begin(), found.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+  std::vector<StoredSet> out;
+  for (auto& f : found) out.push_back(std::move(f.second));
+  return out;
+}
+
+veneer::Status Store::restore(const std::string& id) {
+  if (!valid_set_id(id)) return make_error("'" + id + "' is not a set id");
+  const fs::path from = trash_folder() / id;
+  std::error_code ec;
+  if (!fs::is_directory(from, ec)) return make_error("no set '" + id + "' in the trash");
+  if (fs::exists(root_ / id, ec) || find(id)) return make_error("cannot restore " + id + ": a set of that id is stored");
+  if (::rename(from.c_str(), (root_ / id).c_str()) != 0)
+    return make_error("cannot restore set " + id + ": " + std::strerror(errno));
+  fs::remove(trash_folder() / (id + ".deleted"), ec);
+  auto scanned = scan_one(id);
+  if (!scanned) return make_error("set " + id + " restored but does not read: " + scanned.message());
+  std::lock_guard lock(mutex_);
+  sets_.push_back(std::move(*scanned));
+  std::sort(sets_.begin(), sets_.end(), [](const StoredSet& a, const StoredSet& b) {
+    return a.created != b.created ? a.created < b.created : a.id < b.id;
+  });
+  return {};
+}
+
+int Store::purge_trash(uint64_t need_bytes) {
+  auto log = veneer::log::get("Store");
+  const std::time_t now = std::time(nullptr);
+  std::vector<std::pair<std::time_t, std::string>> entries;  // oldest first after the sort
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(trash_folder(), ec)) {
+    const std::string id = entry.path().filename().string();
+    if (entry.is_directory() && valid_set_id(id))
+      entries.emplace_back(deleted_at(trash_folder() / (id + ".deleted")), id);
+  }
+  std::sort(entries.begin(), entries.end());
+  int purged = 0;
+  for (const auto& [when, id] : entries) {
+    const bool old = static_cast<double>(now - when) > trash_keep_s_;
+    if (!old && (need_bytes == 0 || free_bytes() >= need_bytes)) continue;
+    fs::remove_all(trash_folder() / id, ec);
+    if (ec) {
+      log->warn("cannot purge {} from the trash: {}", id, ec.message());
+      continue;
+    }
+    fs::remove(trash_folder() / (id + ".deleted"), ec);
+    log->info("purged {} from the trash ({})", id, old ? "kept long enough" : "its space was needed");
+    ++purged;
+  }
+  return purged;
 }
 
 }  // namespace veneerd

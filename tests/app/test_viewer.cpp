@@ -9,7 +9,12 @@
 #include <QCheckBox>
 #include <QComboBox>
 #include <QDoubleSpinBox>
+#include <QDate>
+#include <QFileInfo>
 #include <QLabel>
+#include <QMessageBox>
+#include <QDateTime>
+#include <QLineEdit>
 #include <QProcess>
 #include <QProgressBar>
 #include <QPushButton>
@@ -17,13 +22,19 @@
 #include <QTcpServer>
 #include <QTemporaryDir>
 #include <QTest>
+#include <QScrollArea>
+#include <QToolButton>
 #include <QTreeWidget>
+#include <QWheelEvent>
 
 #include <gtest/gtest.h>
+#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "main_window.hpp"
 #include "wait_for.hpp"
+#include "veneer/match/transfer.hpp"
+#include "veneer/ps/segmentation.hpp"
 #include "veneer/sim/simulator.hpp"
 
 namespace fs = std::filesystem;
@@ -127,6 +138,7 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
   QTemporaryDir work;
   MainWindow w({QString(), QString(), QString(), QString(), work.path()});
   w.show();
+  w.setAutoFlow(false);  // every step by hand here; the automatic one is app/workflow.*
   w.connectToRig(rig.endpoint(), rig.token_file());
   ASSERT_TRUE(wait_for([&] { return w.rig().isConnected(); }, 10000)) << w.lastMessage().toStdString();
   EXPECT_TRUE(w.lastMessage().contains("connected"));
@@ -158,6 +170,9 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
     const bool is_source = local->child(i)->text(1) == "source";
     QTest::mouseClick(child<QPushButton>(w, is_source ? "useSource" : "useDestination"), Qt::LeftButton);
   }
+  // loaded off the GUI thread
+  ASSERT_TRUE(wait_for([&] { return w.loadsRunning() == 0 && w.destination() && w.source(); }, 30000))
+      << w.lastMessage().toStdString();
   ASSERT_NE(w.destination(), nullptr) << local->child(0)->text(1).toStdString() << " " << local->child(1)->text(1).toStdString();
   ASSERT_NE(w.source(), nullptr) << local->child(0)->text(1).toStdString() << " " << local->child(1)->text(1).toStdString();
   EXPECT_EQ(w.destination()->set.role, veneer::Role::destination);
@@ -212,6 +227,384 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
   w.showTab("Look");
   const QStringList shots_written = w.saveScreenshots(VENEER_SCREENSHOT_DIR);
   EXPECT_EQ(shots_written.size(), 3);
+}
+
+namespace {
+// The window as the user sees it (1280x720), saved as <screenshots>/<stage>.png.
+void save_stage(MainWindow& w, const QString& stage) {
+  QDir().mkpath(VENEER_SCREENSHOT_DIR);
+  QApplication::processEvents();
+  const QString file = QString(VENEER_SCREENSHOT_DIR "/%1.png").arg(stage);
+  EXPECT_TRUE(w.grab().save(file)) << file.toStdString();
+}
+}  // namespace
+
+// Issue 28's one flow: from launch to a live repaint with only connect,
+// capture source, capture destination. Everything between -- pulling both
+// sets, assigning their roles, computing the map with the default settings,
+// starting the live view -- happens by itself, told in one status line.
+TEST(workflow, ConnectCaptureSourceCaptureDestinationRepaintsLive) {
+  SimulatedRig rig;
+  ASSERT_TRUE(rig.started()) << rig.log().toStdString();
+  QTemporaryDir work;
+  MainWindow w({QString(), QString(), QString(), QString(), work.path()});
+  w.resize(1280, 720);
+  w.show();
+  ASSERT_TRUE(w.autoFlow()) << "the flow is on by default";
+  QStringList lines;  // every status line shown, sampled as the test waits
+  auto seen = [&] {
+    if (lines.isEmpty() || lines.back() != w.stepLine()) lines << w.stepLine();
+  };
+  save_stage(w, "workflow-1-launched");
+
+  // connect: the address and token typed, Connect clicked
+  child<QLineEdit>(w, "rigAddress")->setText(rig.endpoint());
+  child<QLineEdit>(w, "tokenFile")->setText(rig.token_file());
+  QTest::mouseClick(child<QPushButton>(w, "connect"), Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { return w.rig().isConnected(); }, 10000)) << w.lastMessage().toStdString();
+  save_stage(w, "workflow-2-connected");
+
+  // capture source: from the Capture panel
+  QTest::mouseClick(child<QPushButton>(w, "captureSource"), Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { seen(); return w.source() != nullptr; }, 60000)) << w.lastMessage().toStdString();
+  EXPECT_EQ(w.destination(), nullptr);
+  save_stage(w, "workflow-3-source-captured");
+
+  // capture destination: from the Live tab's own button
+  w.showTab("Live");
+  QTest::mouseClick(child<QPushButton>(w, "liveCaptureDestination"), Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { seen(); return w.destination() != nullptr; }, 60000)) << w.lastMessage().toStdString();
+  save_stage(w, "workflow-4-destination-captured");
+
+  // the map, computed by itself with the default method
+  ASSERT_TRUE(wait_for([&] { seen(); return w.result() != nullptr && !w.computing(); }, 120000))
+      << w.lastMessage().toStdString();
+  EXPECT_EQ(w.source()->set.role, veneer::Role::source);
+  EXPECT_EQ(w.destination()->set.role, veneer::Role::destination);
+  EXPECT_EQ(w.result()->match_options.method, veneer::match::Method::combined);
+  cv::Mat xy[2];
+  cv::split(w.result()->map.xy, xy);
+  EXPECT_GT(cv::countNonZero(xy[0] >= 0), 200) << "mapped pixels";
+  save_stage(w, "workflow-5-map-computed");
+
+  // live frames arrive and are repainted through that map
+  ASSERT_TRUE(wait_for([&] { seen(); return w.liveFramesShown() >= 3 && !w.lastRepaintedFrame().empty(); }, 20000))
+      << w.lastMessage().toStdString();
+  EXPECT_EQ(w.lastRepaintedFrame().size(), w.result()->map.xy.size());
+  EXPECT_TRUE(child<QPushButton>(w, "liveToggle")->isChecked());
+  seen();
+  EXPECT_TRUE(w.stepLine().contains("live repaint")) << w.stepLine().toStdString();
+  save_stage(w, "workflow-6-live");
+
+  // the line told each step, and never a finished-looking "0 s left"
+  const QString all = lines.join("\n");
+  for (const char* step : {"capturing the source", "pulling", "loading", "computing the map", "live repaint"})
+    EXPECT_TRUE(all.contains(step)) << step << " not in:\n" << all.toStdString();
+  EXPECT_FALSE(all.contains(" 0 s left")) << all.toStdString();
+  child<QPushButton>(w, "liveToggle")->setChecked(false);
+}
+
+// Deleting a rig capture asks first, naming the set and its date; the set
+// goes into the rig's trash and Undo brings it back.
+TEST(Viewer, DeletingARigSetAsksAndUndoRestoresIt) {
+  SimulatedRig rig;
+  ASSERT_TRUE(rig.started()) << rig.log().toStdString();
+  QTemporaryDir work;
+  MainWindow w({QString(), QString(), QString(), QString(), work.path()});
+  w.show();
+  w.setAutoFlow(false);
+  w.connectToRig(rig.endpoint(), rig.token_file());
+  ASSERT_TRUE(wait_for([&] { return w.rig().isConnected(); }, 10000)) << w.lastMessage().toStdString();
+  QTest::mouseClick(child<QPushButton>(w, "pressButton"), Qt::LeftButton);
+  auto* tree = child<QTreeWidget>(w, "sets");
+  QTreeWidgetItem *on_rig = tree->topLevelItem(0), *trash = tree->topLevelItem(2);
+  ASSERT_TRUE(wait_for([&] { return on_rig->childCount() == 1; }, 60000)) << w.lastMessage().toStdString();
+  const QString id = on_rig->child(0)->text(0), date = on_rig->child(0)->text(3);
+  EXPECT_TRUE(date.startsWith(QDateTime::currentDateTimeUtc().date().toString(Qt::ISODate))) << date.toStdString();
+
+  // asked; Cancel keeps it
+  auto ask = [&]() -> QMessageBox* {
+    select_item(tree, on_rig->child(0));
+    QTest::mouseClick(child<QPushButton>(w, "deleteSet"), Qt::LeftButton);
+    QMessageBox* box = nullptr;
+    wait_for([&] { return (box = w.findChild<QMessageBox*>("confirmDelete")) && box->isVisible(); }, 5000);
+    return box;
+  };
+  QMessageBox* box = ask();
+  ASSERT_NE(box, nullptr) << "delete asks";
+  EXPECT_TRUE(box->text().contains(id)) << box->text().toStdString();
+  EXPECT_TRUE(box->text().contains(date)) << box->text().toStdString();
+  QTest::mouseClick(box->button(QMessageBox::Cancel), Qt::LeftButton);
+  QTest::qWait(300);
+  EXPECT_EQ(on_rig->childCount(), 1) << "Cancel deletes nothing";
+  EXPECT_FALSE(child<QPushButton>(w, "undoDelete")->isVisible());
+
+  // Yes: into the trash, listed there
+  box = ask();
+  ASSERT_NE(box, nullptr);
+  QTest::mouseClick(box->button(QMessageBox::Yes), Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { return on_rig->childCount() == 0 && trash->childCount() == 1; }, 10000))
+      << w.lastMessage().toStdString();
+  EXPECT_EQ(trash->child(0)->text(0), id);
+  auto* undo = child<QPushButton>(w, "undoDelete");
+  ASSERT_TRUE(undo->isVisible());
+
+  // Undo: back on the rig, whole (it pulls)
+  QTest::mouseClick(undo, Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { return on_rig->childCount() == 1 && trash->childCount() == 0; }, 10000))
+      << w.lastMessage().toStdString();
+  EXPECT_EQ(on_rig->child(0)->text(0), id);
+  EXPECT_FALSE(undo->isVisible());
+  select_item(tree, on_rig->child(0));
+  QTest::mouseClick(child<QPushButton>(w, "pullSet"), Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { return tree->topLevelItem(1)->childCount() == 1; }, 30000)) << w.lastMessage().toStdString();
+}
+
+// The local library -- pulled or opened sets with their roles, dates and
+// thumbnails, and the maps computed from them -- is there after a restart.
+TEST(Viewer, TheLibrarySurvivesARestart) {
+  QTemporaryDir dir;
+  {
+    auto window = open_pair(dir);
+    ASSERT_TRUE(window);
+    child<QComboBox>(*window, "method")->setCurrentText("coherent");
+    ASSERT_TRUE(compute_and_wait(*window));
+    auto* maps = child<QTreeWidget>(*window, "sets")->topLevelItem(3);
+    ASSERT_TRUE(wait_for([&] { return maps->childCount() == 1; }, 10000)) << window->lastMessage().toStdString();
+  }
+  MainWindow w({QString(), QString(), QString(), QString(), dir.path()});
+  auto* tree = child<QTreeWidget>(w, "sets");
+  QTreeWidgetItem *local = tree->topLevelItem(1), *maps = tree->topLevelItem(3);
+  ASSERT_EQ(local->childCount(), 2);
+  EXPECT_EQ(local->child(0)->text(0), "bull");
+  EXPECT_EQ(local->child(0)->text(1), "destination");
+  EXPECT_EQ(local->child(1)->text(1), "source");
+  for (int i = 0; i < 2; ++i) {
+    EXPECT_FALSE(local->child(i)->text(3).isEmpty()) << "dated";
+    EXPECT_FALSE(local->child(i)->icon(0).isNull()) << "a thumbnail";
+  }
+  ASSERT_EQ(maps->childCount(), 1);
+  EXPECT_EQ(maps->child(0)->text(0), "bull ← orange");
+  EXPECT_EQ(maps->child(0)->text(2), "coherent");
+  EXPECT_TRUE(QFileInfo::exists(maps->child(0)->data(0, Qt::UserRole).toString() + "/map.pfm"));
+  // and a library row is used as a set: loaded from its folder
+  select_item(tree, local->child(1));
+  QTest::mouseClick(child<QPushButton>(w, "useSource"), Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { return w.source() != nullptr; }, 20000)) << w.lastMessage().toStdString();
+}
+
+namespace {
+int lamp_boxes(MainWindow& w) {
+  int n = 0;
+  for (auto* b : w.findChildren<QCheckBox*>())
+    if (b->objectName().startsWith("lamp")) ++n;
+  return n;
+}
+bool wheel(QWidget* target) {
+  QWheelEvent e(QPointF(5, 5), target->mapToGlobal(QPointF(5, 5)), QPoint(), QPoint(0, 120), Qt::NoButton,
+                Qt::NoModifier, Qt::NoScrollPhase, false);
+  QApplication::sendEvent(target, &e);
+  return e.isAccepted();
+}
+}  // namespace
+
+// Expert parameters sit in a closed "Advanced" fold with presets; the wheel
+// changes only a field with focus; the lamp boxes follow the set's manifest.
+TEST(Viewer, AdvancedFoldPresetsWheelFocusAndLampsFromTheManifest) {
+  QTemporaryDir dir;
+  auto window = open_pair(dir);
+  ASSERT_TRUE(window);
+  MainWindow& w = *window;
+  w.resize(1280, 720);
+  w.show();
+  ASSERT_TRUE(QTest::qWaitForWindowExposed(&w));
+  auto* advanced = child<QWidget>(w, "advanced");
+  EXPECT_FALSE(advanced->isVisible()) << "closed at first";
+  EXPECT_EQ(child<QComboBox>(w, "method")->currentText(), "combined") << "the CLI's default";
+  auto* side = w.findChild<QScrollArea*>();
+  side->ensureWidgetVisible(child<QWidget>(w, "transferStatus"));
+  save_stage(w, "advanced-closed");
+  QTest::mouseClick(child<QToolButton>(w, "advancedToggle"), Qt::LeftButton);
+  EXPECT_TRUE(advanced->isVisible());
+  QApplication::processEvents();
+  side->ensureWidgetVisible(child<QWidget>(w, "preset"), 50, 10);
+  save_stage(w, "advanced-open");
+
+  auto* preset = child<QComboBox>(w, "preset");
+  preset->setCurrentIndex(1);
+  EXPECT_EQ(child<QComboBox>(w, "method")->currentText(), "coherent");
+  preset->setCurrentIndex(2);
+  EXPECT_EQ(child<QComboBox>(w, "method")->currentText(), "linear");
+  EXPECT_EQ(child<QComboBox>(w, "patch")->currentText(), "3");
+  EXPECT_FALSE(child<QCheckBox>(w, "fast")->isChecked());
+  child<QComboBox>(w, "patch")->setCurrentText("5");
+  EXPECT_EQ(preset->currentText(), "custom") << "a setting changed by hand";
+
+  // the wheel passes over a field without focus, and changes it with focus
+  auto* candidates = child<QSpinBox>(w, "candidates");
+  const int before = candidates->value();
+  EXPECT_FALSE(wheel(candidates));
+  EXPECT_EQ(candidates->value(), before);
+  w.activateWindow();
+  candidates->setFocus();
+  if (candidates->hasFocus()) {
+    wheel(candidates);
+    EXPECT_NE(candidates->value(), before);
+  }
+
+  // one lamp box per light of the set's manifest
+  EXPECT_EQ(lamp_boxes(w), static_cast<int>(w.destination()->set.lights.size()));
+  veneer::ImageSet three = w.destination()->set;
+  three.images.resize(3);
+  three.lights.resize(3);
+  const QString folder = dir.path() + "/bull3";
+  ASSERT_TRUE(veneer::write_set(three, folder.toStdString()).ok());
+  ASSERT_TRUE(w.loadLocalSet(folder, veneer::Role::destination)) << w.lastMessage().toStdString();
+  EXPECT_EQ(lamp_boxes(w), 3);
+}
+
+// Every view mode shows a picture; the histogram carries the manifest's
+// exposure; a snapshot writes the view shown as a PNG (and refuses another name).
+TEST(Viewer, ViewModesHistogramExposureAndSnapshot) {
+  QTemporaryDir dir;
+  auto window = open_pair(dir);
+  ASSERT_TRUE(window);
+  MainWindow& w = *window;
+  w.resize(1280, 720);
+  w.show();
+  child<QComboBox>(w, "method")->setCurrentText("coherent");
+  ASSERT_TRUE(compute_and_wait(w));
+  ASSERT_TRUE(wait_for([&] { return w.destination()->normals && w.source()->normals; }, 30000));
+  // the simulator records 1/30 s at exposure 1, f/8, ISO 100
+  EXPECT_TRUE(w.exposureText().contains("1/30 s")) << w.exposureText().toStdString();
+  EXPECT_TRUE(w.exposureText().contains("f/8")) << w.exposureText().toStdString();
+  EXPECT_TRUE(w.exposureText().contains("ISO 100")) << w.exposureText().toStdString();
+  EXPECT_FALSE(child<QLabel>(w, "histogram")->pixmap().isNull());
+  auto* look = child<QComboBox>(w, "lookWhat");
+  for (int i = 0; i < look->count(); ++i) {
+    const QString mode = look->itemText(i);
+    ASSERT_TRUE(w.showLook(mode));
+    QString slug = mode;
+    slug.replace(' ', '-');
+    save_stage(w, "view-" + slug);
+  }
+  ASSERT_TRUE(w.showLook("specular enhancement"));
+  const QString file = dir.path() + "/snap.png";
+  EXPECT_EQ(w.snapshotTo(file), file) << w.lastMessage().toStdString();
+  QImage shot(file);
+  ASSERT_FALSE(shot.isNull());
+  EXPECT_GT(shot.width(), 600);
+  EXPECT_TRUE(w.snapshotTo(dir.path() + "/snap.jpg").isEmpty());
+  EXPECT_TRUE(w.lastMessage().contains("snap.jpg")) << w.lastMessage().toStdString();
+  EXPECT_FALSE(QFileInfo::exists(dir.path() + "/snap.jpg"));
+}
+
+namespace {
+// Destination pixels the map gives a source pixel, within `inside`.
+int mapped_in(const veneer::match::Map& map, const cv::Rect& inside) {
+  cv::Mat xy[2];
+  cv::split(map.xy, xy);
+  return cv::countNonZero(xy[0](inside) >= 0);
+}
+}  // namespace
+
+// Segmentation by hand: a rectangle on the destination and a brush on the
+// source each change the map -- nothing is mapped outside the rectangle and
+// nothing is taken from the brushed-out disc -- and show as outlines.
+TEST(Viewer, HandRectangleAndBrushMasksChangeTheMap) {
+  QTemporaryDir dir;
+  auto window = open_pair(dir);
+  ASSERT_TRUE(window);
+  MainWindow& w = *window;
+  child<QComboBox>(w, "method")->setCurrentText("coherent");
+  ASSERT_TRUE(compute_and_wait(w));
+  auto mapped = [&](const cv::Rect& inside) { return mapped_in(w.result()->map, inside); };
+  const cv::Size size = w.result()->map.xy.size();
+  const cv::Rect left(0, 0, size.width / 2, size.height), right(size.width / 2, 0, size.width - size.width / 2, size.height);
+  const int left_before = mapped(left), right_before = mapped(right);
+  ASSERT_GT(left_before, 100);
+  ASSERT_GT(right_before, 100);
+
+  // the rectangle: the right half of the destination only
+  const auto* first = w.result();
+  w.setHandRect(veneer::Role::destination, QRect(right.x, right.y, right.width, right.height));
+  ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.result() != first; }, 60000))
+      << w.lastMessage().toStdString();
+  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
+  EXPECT_EQ(mapped(left), 0) << "outside the rectangle nothing is the object";
+  EXPECT_GT(mapped(right), right_before / 2);
+
+  // the brush: a disc at the source's object centre taken out
+  cv::Mat sm = w.source()->hand_mask.empty() ? w.source()->normals->mask : w.source()->hand_mask;
+  const cv::Moments m = cv::moments(sm, true);
+  const QPoint centre(static_cast<int>(m.m10 / m.m00), static_cast<int>(m.m01 / m.m00));
+  auto from_disc = [&] {
+    int n = 0;
+    const cv::Mat& xy = w.result()->map.xy;
+    for (int y = 0; y < xy.rows; ++y)
+      for (int x = 0; x < xy.cols; ++x) {
+        const cv::Vec2f v = xy.at<cv::Vec2f>(y, x);
+        if (v[0] >= 0 && std::hypot(v[0] - centre.x(), v[1] - centre.y()) < 7) ++n;
+      }
+    return n;
+  };
+  ASSERT_GT(from_disc(), 0) << "the map takes from the centre before";
+  const auto* second = w.result();
+  w.brushHandMask(veneer::Role::source, centre, false, 10);
+  ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.result() != second; }, 60000))
+      << w.lastMessage().toStdString();
+  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
+  EXPECT_EQ(from_disc(), 0) << "nothing comes from the brushed-out disc";
+  EXPECT_FALSE(w.source()->hand_mask.empty());
+  // and a brush adds back
+  w.brushHandMask(veneer::Role::source, centre, true, 10);
+  EXPECT_EQ(w.source()->hand_mask.at<uchar>(centre.y(), centre.x()), 255);
+  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
+  // exported for the CLI, as drawn
+  const QStringList files = w.exportMasksTo(dir.path());
+  ASSERT_EQ(files.size(), 2);
+  cv::Mat back = cv::imread(files[0].toStdString(), cv::IMREAD_GRAYSCALE);
+  EXPECT_EQ(cv::norm(back, w.destination()->hand_mask, cv::NORM_INF), 0.0);
+}
+
+// The CLI reuses a mask drawn by hand: `veneer transfer --dst-mask` maps
+// nothing outside it; a mask of another size is refused naming the file.
+TEST(Viewer, CliTransferTakesMaskFiles) {
+  QTemporaryDir dir;
+  QString dst, src;
+  write_pair(dir.path(), dst, src);
+  auto d = veneer::read_set(dst.toStdString());
+  ASSERT_TRUE(d);
+  auto seg = veneer::ps::segment(*d);
+  ASSERT_TRUE(seg);
+  cv::Mat mask = seg->mask.clone();
+  mask(cv::Rect(0, 0, mask.cols / 2, mask.rows)).setTo(0);  // the right half of the object only
+  const QString mask_file = dir.path() + "/dst-mask.png";
+  ASSERT_TRUE(cv::imwrite(mask_file.toStdString(), mask));
+  auto run = [&](const QStringList& extra, QString& out) {
+    QProcess p;
+    p.setProcessChannelMode(QProcess::MergedChannels);
+    p.start(VENEER_BIN_DIR "/veneer", QStringList{"transfer", "--dst", dst, "--src", src, "--method", "coherent"} + extra);
+    p.waitForFinished(120000);
+    out = QString::fromUtf8(p.readAll());
+    return p.exitCode();
+  };
+  QString out;
+  ASSERT_EQ(run({"--out", dir.path() + "/plain"}, out), 0) << out.toStdString();
+  ASSERT_EQ(run({"--out", dir.path() + "/masked", "--dst-mask", mask_file}, out), 0) << out.toStdString();
+  auto plain = veneer::match::read_map((dir.path() + "/plain/map.pfm").toStdString());
+  auto masked = veneer::match::read_map((dir.path() + "/masked/map.pfm").toStdString());
+  ASSERT_TRUE(plain && masked);
+  const cv::Rect left(0, 0, mask.cols / 2, mask.rows), right(mask.cols / 2, 0, mask.cols - mask.cols / 2, mask.rows);
+  EXPECT_GT(mapped_in(*plain, left), 100);
+  EXPECT_EQ(mapped_in(*masked, left), 0);
+  EXPECT_GT(mapped_in(*masked, right), 100);
+  // a mask of another size
+  cv::Mat small(10, 10, CV_8UC1, cv::Scalar(255));
+  ASSERT_TRUE(cv::imwrite((dir.path() + "/small.png").toStdString(), small));
+  EXPECT_EQ(run({"--out", dir.path() + "/bad", "--src-mask", dir.path() + "/small.png"}, out), 2) << out.toStdString();
+  EXPECT_TRUE(out.contains("--src-mask") && out.contains("small.png") && out.contains("10x10")) << out.toStdString();
+  EXPECT_FALSE(QFileInfo::exists(dir.path() + "/bad/map.pfm"));
 }
 
 TEST(Viewer, CancelledComputationLeavesUiUsable) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <fstream>
+#include <limits>
 
 #include "rig_test_util.hpp"
 #include "veneerd/store.hpp"
@@ -64,6 +65,51 @@ TEST(Store, SavesListsAndFindsSetsAfterReopening) {
   EXPECT_FALSE((*store)->find("a1"));
   EXPECT_FALSE(fs::exists(root / "a1"));
   EXPECT_FALSE((*store)->find("../etc"));
+  fs::remove_all(root);
+}
+
+// A deleted set goes into the trash, is listed there with its deletion
+// time, comes back whole, and is purged when old or when space is needed.
+TEST(Store, DeleteMovesIntoTheTrashWhereTheSetCanBeRestoredUntilPurged) {
+  fs::path root = rigtest::temp_dir("store-trash");
+  auto store = veneerd::Store::open(root);
+  ASSERT_TRUE(store) << store.message();
+  veneerd::Store& st = **store;
+  ASSERT_TRUE(st.save(tiny_set("a1", veneer::Role::destination)));
+  ASSERT_TRUE(st.save(tiny_set("b2", veneer::Role::source)));
+  EXPECT_TRUE(st.trash().empty());
+  ASSERT_TRUE(st.remove("a1"));
+  EXPECT_FALSE(st.find("a1"));
+  auto trash = st.trash();
+  ASSERT_EQ(trash.size(), 1u);
+  EXPECT_EQ(trash[0].id, "a1");
+  EXPECT_EQ(trash[0].role, veneer::Role::destination);
+  EXPECT_EQ(trash[0].created, "2026-11-22T08:00:00Z");
+  EXPECT_EQ(trash[0].deleted.size(), 20u) << trash[0].deleted;  // 2026-11-25T20:00:00Z
+  EXPECT_FALSE(st.restore("no-such-set"));
+  ASSERT_TRUE(st.restore("a1"));
+  EXPECT_TRUE(st.trash().empty());
+  ASSERT_TRUE(st.find("a1"));
+  EXPECT_EQ(st.list().front().id, "a1") << "in its place, oldest first";
+  auto files = st.files("a1", false);
+  ASSERT_TRUE(files);
+  EXPECT_EQ(files->size(), 5u) << "every photo came back";
+  // restoring over a stored set of the same id is refused
+  ASSERT_TRUE(st.remove("b2"));
+  ASSERT_TRUE(st.save(tiny_set("b2", veneer::Role::source)));
+  auto clash = st.restore("b2");
+  ASSERT_FALSE(clash);
+  EXPECT_NE(clash.message().find("a set of that id is stored"), std::string::npos) << clash.message();
+  // young sets stay, old ones go; space wanted takes the oldest first
+  EXPECT_EQ(st.purge_trash(), 0);
+  ASSERT_TRUE(st.remove("a1"));
+  st.set_trash_keep(-1);  // everything is "old"
+  EXPECT_EQ(st.purge_trash(), 2);
+  EXPECT_TRUE(st.trash().empty());
+  EXPECT_FALSE(fs::exists(st.trash_folder() / "a1"));
+  st.set_trash_keep(3600);
+  ASSERT_TRUE(st.remove("b2"));
+  EXPECT_EQ(st.purge_trash(std::numeric_limits<uint64_t>::max()), 1) << "no space would do: the trash empties";
   fs::remove_all(root);
 }
 

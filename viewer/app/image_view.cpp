@@ -43,6 +43,11 @@ void ImageView::setTitle(const QString& title) {
   update();
 }
 
+void ImageView::setOutline(std::vector<QPolygonF> outline) {
+  outline_ = std::move(outline);
+  update();
+}
+
 void ImageView::setMarkers(std::vector<Marker> markers) {
   markers_ = std::move(markers);
   update();
@@ -95,6 +100,14 @@ void ImageView::paintEvent(QPaintEvent*) {
       p.drawEllipse(w, 5, 5);
     }
   }
+  if (!outline_.empty()) {
+    p.setPen(QPen(QColor(255, 220, 0), 1.5));
+    for (const QPolygonF& poly : outline_) {
+      QPolygonF w;
+      for (const QPointF& q : poly) w << toWidget(q + QPointF(0.5, 0.5));
+      p.drawPolygon(w);
+    }
+  }
   if (!rect_px_.isEmpty()) {
     p.setPen(QPen(QColor(255, 200, 0), 1, Qt::DashLine));
     p.drawRect(QRectF(toWidget(rect_px_.topLeft()), toWidget(rect_px_.bottomRight() + QPoint(1, 1))));
@@ -117,12 +130,19 @@ void ImageView::mousePressEvent(QMouseEvent* e) {
   press_pos_ = last_pos_ = e->position();
   moved_ = false;
   drawing_ = (e->modifiers() & Qt::ShiftModifier) && e->button() == Qt::LeftButton;
-  dragging_ = !drawing_;
+  brush_ = e->button() != Qt::LeftButton || drawing_ ? 0
+           : (e->modifiers() & Qt::ControlModifier) ? 1
+           : (e->modifiers() & Qt::AltModifier)     ? -1
+                                                    : 0;
+  dragging_ = !drawing_ && brush_ == 0;
+  if (brush_ != 0 && !image_.isNull()) emit brushed(toPixel(e->position()).toPoint(), brush_ > 0);
 }
 
 void ImageView::mouseMoveEvent(QMouseEvent* e) {
   if ((e->position() - press_pos_).manhattanLength() > 3) moved_ = true;
-  if (drawing_) {
+  if (brush_ != 0 && !image_.isNull()) {
+    emit brushed(toPixel(e->position()).toPoint(), brush_ > 0);
+  } else if (drawing_) {
     const QPoint a = toPixel(press_pos_).toPoint(), b = toPixel(e->position()).toPoint();
     rect_px_ = QRect(a, b).normalized().intersected(image_.rect());
     update();
@@ -135,6 +155,7 @@ void ImageView::mouseMoveEvent(QMouseEvent* e) {
 }
 
 void ImageView::mouseReleaseEvent(QMouseEvent* e) {
+  if (brush_ != 0) moved_ = true;  // a stroke is not a click
   if (drawing_ && moved_) {
     emit rectDrawn(rect_px_);
   } else if (!moved_ && !image_.isNull()) {
@@ -143,6 +164,7 @@ void ImageView::mouseReleaseEvent(QMouseEvent* e) {
     if (image_.rect().contains(p)) emit pixelClicked(p);
   }
   drawing_ = dragging_ = false;
+  brush_ = 0;
 }
 
 }  // namespace veneer::app

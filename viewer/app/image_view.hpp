@@ -6,6 +6,7 @@
 #include <QImage>
 #include <QObject>
 #include <QPointF>
+#include <QPolygonF>
 #include <QRect>
 #include <QWidget>
 
@@ -47,6 +48,8 @@ class ImageView : public QWidget {
   };
   void setMarkers(std::vector<Marker> markers);
   void setRect(const QRect& rect);  // picture pixels; empty = none
+  // The hand segmentation's outline, in picture pixels (drawn in yellow).
+  void setOutline(std::vector<QPolygonF> outline);
   QRect rect_() const { return rect_px_; }
 
   // The widget point of a picture pixel, and back.
@@ -56,6 +59,8 @@ class ImageView : public QWidget {
  signals:
   void pixelClicked(QPoint pixel);
   void rectDrawn(QRect rect);
+  // ctrl+drag paints the object mask in (add), alt+drag out; one per mouse move
+  void brushed(QPoint pixel, bool add);
 
  protected:
   void paintEvent(QPaintEvent*) override;
@@ -73,6 +78,8 @@ class ImageView : public QWidget {
   ViewSync own_sync_;
   std::vector<Marker> markers_;
   QRect rect_px_;
+  std::vector<QPolygonF> outline_;
+  int brush_ = 0;  // +1 adding, -1 removing, 0 not brushing
   bool dragging_ = false, drawing_ = false, moved_ = false;
   QPointF press_pos_, last_pos_;
 };

@@ -4,6 +4,8 @@
 // view repainted onto the destination, relight, export. Every computation is a
 // call into viewer/core, run off the GUI thread; this file only wires widgets.
 #include <atomic>
+#include <functional>
+#include <map>
 #include <memory>
 #include <optional>
 
@@ -11,10 +13,13 @@
 #include <QFutureWatcher>
 #include <QMainWindow>
 #include <QSettings>
+#include <QTimer>
 
 #include "image_view.hpp"
+#include "library.hpp"
 #include "rig_link.hpp"
 #include "sphere_pad.hpp"
+#include "step_clock.hpp"
 #include "veneer/io/imageset.hpp"
 #include "veneer/match/live.hpp"
 #include "veneer/match/relight.hpp"
@@ -24,6 +29,7 @@
 class QCheckBox;
 class QComboBox;
 class QDoubleSpinBox;
+class QHBoxLayout;
 class QLabel;
 class QLineEdit;
 class QProgressBar;
@@ -42,6 +48,8 @@ struct LoadedSet {
   std::optional<veneer::ps::PsResult> normals;  // filled in the background after loading
   cv::Mat median;                               // per-pixel median photo (linear BGR)
   cv::Mat median_picture;                       // the same, tonemapped (8-bit), for the views
+  cv::Mat hand_mask;  // segmentation by hand (CV_8UC1, 255 = object); empty = automatic
+  int hand_version = 0;
 };
 
 class MainWindow : public QMainWindow {
@@ -79,6 +87,44 @@ class MainWindow : public QMainWindow {
   // Grabs every view as <dir>/<tab>.png; returns the files written.
   QStringList saveScreenshots(const QString& dir);
   void showTab(const QString& name);
+  // Saves the tab shown, as on screen, as a PNG; returns the file ("" and a
+  // message when it cannot).
+  QString snapshotTo(const QString& file);
+  // The Look tab's "Show" choice by its text (e.g. "specular enhancement").
+  bool showLook(const QString& what);
+  QString exposureText() const { return exposure_text_; }
+  // Segmentation by hand (segmentation.cpp), what the views' shift+drag
+  // (rectangle) and ctrl/alt+drag (brush in/out) do: the object mask the
+  // transfer then uses for that set, shown as an outline.
+  void setHandRect(veneer::Role set, const QRect& rect);
+  void brushHandMask(veneer::Role set, QPoint pixel, bool add, int radius = 0);
+  void clearHandMask(veneer::Role set);
+  // Writes the hand masks as <dir>/dst-mask.png and src-mask.png, what
+  // `veneer transfer --dst-mask/--src-mask` reads; returns the files written.
+  QStringList exportMasksTo(const QString& dir);
+
+  // The one flow (flow.cpp): with it on (the default), every capture stored
+  // on the rig -- from its button, the Capture panel or the Live tab -- is
+  // pulled and loaded as its role, the map is computed with the current
+  // settings as soon as both sets exist, and the live repaint starts.
+  bool autoFlow() const;
+  void setAutoFlow(bool on);
+  // Exports without a dialog (the menu's entries ask for the place, then
+  // call these); each runs off the GUI thread with progress and cancel.
+  void exportMapTo(const QString& dir);
+  void exportResultsTo(const QString& dir);
+  void exportRelightVideoTo(const QString& file);
+  bool exporting() const { return job_running_; }
+  // Cancels whatever the status line shows running (compute, capture, pull,
+  // load, export).
+  void cancelStep();
+  // The one line of status: the step running, its progress and time left.
+  QString stepLine() const;
+  // Loads a set off the GUI thread (read, median, thumbnail), then shows it.
+  // Without a role the set is only listed (a pull in manual mode); with
+  // Role::unknown it is used as the role its manifest gives.
+  void loadSetInBackground(const QString& folder, std::optional<veneer::Role> as);
+  int loadsRunning() const { return loads_running_; }
 
  private:
   void buildUi();
@@ -98,14 +144,41 @@ class MainWindow : public QMainWindow {
   void onLiveFrame(const veneer::rig::LiveFrame& frame);
   void onTransferDone();
   void matchOptionChanged();
+  // transfer_panel.cpp: the presets of the Transfer panel
+  struct Preset {
+    QString name, method, feature;
+    int patch, candidates;
+    double threshold;
+    int iterations;
+    double coherent_threshold, coherent_smooth, coherent_guide, uniformity;
+    int blend;
+    double blend_guide;
+    bool fast;
+  };
+  static const std::vector<Preset>& presets();
+  void applyPreset(const Preset& preset);
   void updateRelightLabel(const cv::Vec3d& direction);
   QString preparationKey() const;
   void refreshLook();
+  void refreshLookNow();
+  void updateLampBoxes();
+  void updateHistogram();
+  std::shared_ptr<LoadedSet> setFor(veneer::Role role) const { return role == veneer::Role::source ? src_ : dst_; }
+  bool startHandMask(LoadedSet& s);
+  void handMaskChanged(veneer::Role role);
   void showOrigin(QPoint destination_pixel);
   void refreshRelight();
   void setLoaded(std::shared_ptr<LoadedSet> loaded, veneer::Role as);
   void computeNormals(std::shared_ptr<LoadedSet> loaded);
-  void addLocalItem(const QString& folder, const veneer::ImageSet& set);
+  void addLocalItem(const QString& folder, const veneer::ImageSet& set, const cv::Mat& thumbnail = {});
+  // sets_panel.cpp
+  QTreeWidgetItem* localItem(const QString& folder, bool create);
+  void showLibrary();
+  void addMapItem(const LibraryMap& map);
+  void saveMapToLibrary();
+  void askDelete(QTreeWidgetItem* item);
+  void onTrashListed(const std::vector<veneer::rig::SetSummary>& sets);
+  void restoreFromTrash(const QString& id);
   QTreeWidgetItem* selectedItem() const;
   void pullSelected();
   void useSelected(veneer::Role as);
@@ -113,6 +186,16 @@ class MainWindow : public QMainWindow {
   void exportResults();
   void exportRelightVideo();
   void rememberRig(const QString& endpoint);
+
+  // flow.cpp
+  void flowSetStored(const QString& id, veneer::Role role);
+  void flowPulled(const QString& id, const QString& folder);
+  void flowMaybeCompute();
+  void flowMaybeGoLive();
+  void showStep();
+  // export.cpp: runs `job` off the GUI thread as a step of the status line.
+  void runJob(const QString& kind, const QString& text,
+              std::function<veneer::Status(const veneer::Progress&)> job, const QString& done);
 
   RigLink rig_;
   ViewSync sync_;
@@ -149,6 +232,16 @@ class MainWindow : public QMainWindow {
   QElapsedTimer live_clock_;
   QRect seg_rect_;
   QString pending_role_;  // "destination"/"source" while a UI capture runs
+  std::function<void(veneer::Role)> capture_;  // the Capture panel's settings, used by both capture rows
+  StepClock step_;
+  QTimer step_timer_;  // redraws the status line so the time left counts down
+  std::map<QString, veneer::Role> auto_pulls_;  // rig set id -> role, pulled by the flow
+  int loads_running_ = 0;
+  std::shared_ptr<std::atomic<bool>> load_cancel_ = std::make_shared<std::atomic<bool>>(false);
+  std::atomic<bool> job_cancel_{false};
+  bool job_running_ = false;
+  QFuture<void> job_future_;
+  QPushButton* step_cancel_ = nullptr;
 
   // widgets
   QTabWidget* tabs_ = nullptr;
@@ -166,13 +259,24 @@ class MainWindow : public QMainWindow {
             *recent_ = nullptr;
   QCheckBox *fast_ = nullptr, *truth_normals_ = nullptr, *live_update_ = nullptr;
   QTreeWidget* sets_tree_ = nullptr;
-  QTreeWidgetItem *rig_root_ = nullptr, *local_root_ = nullptr;
+  QTreeWidgetItem *rig_root_ = nullptr, *local_root_ = nullptr, *trash_root_ = nullptr, *maps_root_ = nullptr;
+  QPushButton* undo_btn_ = nullptr;
+  QString last_deleted_;  // the rig set the Undo button brings back
+  std::unique_ptr<Library> library_;
   ImageView *dst_view_ = nullptr, *src_view_ = nullptr, *result_view_ = nullptr, *origin_view_ = nullptr,
             *live_src_view_ = nullptr, *live_dst_view_ = nullptr, *relight_view_ = nullptr,
             *relight_src_view_ = nullptr;
   SpherePad *relight_pad_ = nullptr, *hand_pad_ = nullptr;
   std::vector<QCheckBox*> lamp_boxes_;
+  QHBoxLayout* lamp_row_ = nullptr;
   QPushButton* live_btn_ = nullptr;
+  QCheckBox* auto_flow_ = nullptr;
+  QComboBox* preset_ = nullptr;
+  QLabel *histogram_ = nullptr, *exposure_label_ = nullptr;
+  QString exposure_text_;
+  bool applying_preset_ = false;
+  QLabel* step_label_ = nullptr;
+  QProgressBar* step_bar_ = nullptr;
 };
 
 }  // namespace veneer::app

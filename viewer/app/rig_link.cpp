@@ -106,8 +106,29 @@ void RigLink::tryConnect() {
           client->on_event = [weak](const veneer::rig::Event& e) {
             if (weak) emit weak->rigEvent(e);
           };
-          client->on_live_frame = [weak](const veneer::rig::LiveFrame& f) {
-            if (weak) emit weak->liveFrame(f);
+          // The latest frame wins: while the GUI thread has one waiting, a
+          // newer one replaces it instead of queueing behind it, so a busy
+          // GUI never works through a backlog of stale frames.
+          auto slot = self->live_slot_;
+          client->on_live_frame = [weak, slot](const veneer::rig::LiveFrame& f) {
+            {
+              std::lock_guard lock(slot->mutex);
+              slot->frame = f;
+              if (slot->posted) {
+                ++slot->dropped;
+                return;
+              }
+              slot->posted = true;
+            }
+            QMetaObject::invokeMethod(weak.data(), [weak, slot] {
+              veneer::rig::LiveFrame latest;
+              {
+                std::lock_guard lock(slot->mutex);
+                latest = std::move(slot->frame);
+                slot->posted = false;
+              }
+              if (weak) emit weak->liveFrame(latest);
+            });
           };
           client->on_disconnect = [weak](const std::string& why) {
             QString w = qs(why);
@@ -223,16 +244,57 @@ void RigLink::moveHandLamp(const cv::Vec3d& position) {
 void RigLink::deleteSet(const QString& id) {
   const std::string sid = id.toStdString();
   run(tr("delete %1").arg(id), [sid](veneer::rig::Client& c) { return c.delete_set(sid); },
-      [this] { listSets(); });
+      [this, id] {
+        emit deleted(id);
+        listSets();
+      });
+}
+
+void RigLink::listTrash() {
+  QPointer<RigLink> self(this);
+  run(tr("list the rig's trash"), [self](veneer::rig::Client& c) -> veneer::Status {
+    auto sets = c.list_trash();
+    if (!sets) return sets.error();
+    auto v = *sets;
+    QMetaObject::invokeMethod(self.data(), [self, v] {
+      if (self) emit self->trashListed(v);
+    });
+    return {};
+  });
+}
+
+void RigLink::restoreSet(const QString& id) {
+  const std::string sid = id.toStdString();
+  run(tr("restore %1").arg(id), [sid](veneer::rig::Client& c) { return c.restore_set(sid); },
+      [this, id] {
+        emit restored(id);
+        listSets();
+      });
+}
+
+void RigLink::cancelPulls() {
+  pull_cancel_->store(true);
+  pull_cancel_ = std::make_shared<std::atomic<bool>>(false);  // the next pull is not cancelled
 }
 
 void RigLink::pull(const QString& id, const QString& folder) {
   QPointer<RigLink> self(this);
   const std::string sid = id.toStdString(), dir = folder.toStdString();
+  auto cancel = pull_cancel_;
+  ++pulls_running_;
   run(
       tr("pull %1").arg(id),
-      [self, id, sid, dir](veneer::rig::Client& c) {
+      [self, id, sid, dir, cancel](veneer::rig::Client& c) {
+        struct Done {  // counted down however the pull ends
+          QPointer<RigLink> self;
+          ~Done() {
+            QMetaObject::invokeMethod(self.data(), [s = self] {
+              if (s) --s->pulls_running_;
+            });
+          }
+        } done{self};
         veneer::Progress progress;
+        progress.cancel = cancel.get();
         progress.on_progress = [self, id](double f, const std::string&) {
           QMetaObject::invokeMethod(self.data(), [self, id, f] {
             if (self) emit self->pullProgress(id, f);

@@ -2,6 +2,7 @@
 // The viewer's link to a rig: wraps the Qt-free veneer::rig::Client, runs its
 // blocking requests on worker threads and hands every answer, event and live
 // frame to the GUI thread as a signal. Reconnects by itself after a drop.
+#include <atomic>
 #include <functional>
 #include <memory>
 #include <mutex>
@@ -40,13 +41,20 @@ class RigLink : public QObject {
   void startLive(double fps);
   void stopLive();
   void moveHandLamp(const cv::Vec3d& position);
-  void deleteSet(const QString& id);
+  void deleteSet(const QString& id);  // into the rig's trash
+  void listTrash();
+  void restoreSet(const QString& id);
   void pull(const QString& id, const QString& folder);
+  void cancelPulls();  // the pulls running stop (their temporary folders go)
+  bool pulling() const { return pulls_running_ > 0; }
 
  signals:
   void connectedChanged(bool connected, QString message);
   void statusUpdated(veneer::rig::RigStatus status);
   void setsListed(std::vector<veneer::rig::SetSummary> sets);
+  void trashListed(std::vector<veneer::rig::SetSummary> sets);
+  void deleted(QString id);
+  void restored(QString id);
   void rigEvent(veneer::rig::Event event);
   void liveFrame(veneer::rig::LiveFrame frame);
   void pullProgress(QString id, double fraction);
@@ -70,6 +78,15 @@ class RigLink : public QObject {
   int generation_ = 0;
   QTimer reconnect_timer_;
   veneer::rig::RigStatus status_;
+  struct LiveSlot {  // the newest live frame not yet shown
+    std::mutex mutex;
+    veneer::rig::LiveFrame frame;
+    bool posted = false;
+    long dropped = 0;
+  };
+  std::shared_ptr<LiveSlot> live_slot_ = std::make_shared<LiveSlot>();
+  std::shared_ptr<std::atomic<bool>> pull_cancel_ = std::make_shared<std::atomic<bool>>(false);
+  int pulls_running_ = 0;
 };
 
 }  // namespace veneer::app

@@ -5,6 +5,7 @@
 #include <iostream>
 
 #include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "command.hpp"
 #include "output.hpp"
@@ -18,6 +19,7 @@ namespace {
 
 struct TransferArgs {
   std::string dst, src, out, method = "combined", feature = "normals";
+  std::string dst_mask, src_mask;  // object masks drawn elsewhere (e.g. the viewer's hand segmentation)
   // the matching defaults are the library's (MatchOptions)
   int patch = 1, candidates = match::MatchOptions{}.candidates, iterations = match::MatchOptions{}.iterations,
       threads = 0, blend = match::TransferOptions{}.blend;
@@ -35,6 +37,19 @@ struct TransferArgs {
 };
 
 ::veneer::cli::Output report{"transfer"};
+
+// A mask PNG for a set: pixels above 127 are the object. One clear error
+// for a file that does not read, has another size, or marks nothing.
+Status apply_mask(const std::string& option, const std::string& file, ImageSet& set) {
+  cv::Mat m = cv::imread(file, cv::IMREAD_GRAYSCALE);
+  if (m.empty()) return make_error(option + " " + file + ": cannot read it as an image");
+  if (m.size() != set.size)
+    return make_error(option + " " + file + " is " + std::to_string(m.cols) + "x" + std::to_string(m.rows) +
+                      ", the set is " + std::to_string(set.size.width) + "x" + std::to_string(set.size.height));
+  set.mask = m > 127;
+  if (cv::countNonZero(set.mask) == 0) return make_error(option + " " + file + " marks no object pixel (all dark)");
+  return {};
+}
 
 int run(const TransferArgs& a) {
   match::TransferOptions options;
@@ -88,7 +103,21 @@ int run(const TransferArgs& a) {
   Progress matching;
   matching.on_progress = [&bar](double f, const std::string& stage) { bar.update(0.4 + 0.55 * f, stage); };
   std::vector<pipeline::SetReport> reports;
-  auto pair = pipeline::prepare_pair(a.dst, a.src, options, prep, &reports, reading);
+  Expected<match::PreparedPair> pair = make_error("not prepared");
+  if (a.dst_mask.empty() && a.src_mask.empty()) {
+    pair = pipeline::prepare_pair(a.dst, a.src, options, prep, &reports, reading);
+  } else {
+    // a mask given: the sets are read as they are and prepared with it (the
+    // result cache, keyed by the sets alone, is not used)
+    auto d = read_set(a.dst, prep.read), s = read_set(a.src, prep.read);
+    if (!d) return report.fail(d.message());
+    if (!s) return report.fail(s.message());
+    if (!a.dst_mask.empty())
+      if (auto st = apply_mask("--dst-mask", a.dst_mask, *d); !st) return report.usage(st.message());
+    if (!a.src_mask.empty())
+      if (auto st = apply_mask("--src-mask", a.src_mask, *s); !st) return report.usage(st.message());
+    pair = match::prepare_pair(*d, *s, options, reading);
+  }
   if (!pair) return report.fail(pair.message());
   auto result = match::transfer(*pair, options, matching);
   if (!result) return report.fail(result.message());
@@ -102,7 +131,10 @@ int run(const TransferArgs& a) {
   // metrics.json: how the sets were read (cache hit or miss, RAW or developed) and the wall time.
   auto metrics = nlohmann::json::parse(result->metrics_json, nullptr, false);
   if (metrics.is_object()) {
-    metrics["io"] = nlohmann::json::parse(pipeline::reports_json(reports));
+    if (reports.empty())  // read with a mask, past the cache
+      metrics["io"] = {{"dst_mask", a.dst_mask}, {"src_mask", a.src_mask}};
+    else
+      metrics["io"] = nlohmann::json::parse(pipeline::reports_json(reports));
     metrics["io"]["raw_half_size"] = a.raw_half;
     metrics["io"]["demosaic"] = a.demosaic;
     metrics["timings"]["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_wall).count();
@@ -140,6 +172,10 @@ VENEER_COMMAND(transfer) {
   auto* cmd = app.add_subcommand("transfer", "correspondence map + destination repainted with the source's look");
   cmd->add_option("--dst", args->dst, "destination image set (folder)")->required();
   cmd->add_option("--src", args->src, "source image set (folder)")->required();
+  cmd->add_option("--dst-mask", args->dst_mask,
+                  "the destination's object mask, a PNG of its size (pixels above 127 are the object), instead of "
+                  "the automatic segmentation; e.g. drawn by hand in veneer-viewer");
+  cmd->add_option("--src-mask", args->src_mask, "the source's object mask, as --dst-mask");
   cmd->add_option("--out", args->out, "output folder (map.pfm, map.png, result_*.png, reuse.png, metrics.json)")
       ->required();
   cmd->add_option("--method", args->method,

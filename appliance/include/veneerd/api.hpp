@@ -24,7 +24,7 @@ namespace veneerd::api {
 
 struct Hello { uint32_t protocol_version = 0; std::string token; std::string client_name; };
 struct StatusReq {};
-struct ListSetsReq {};
+struct ListSetsReq { bool trash = false; };
 struct GetManifestReq { std::string set_id; };
 struct FetchImagesReq { std::string set_id; bool include_truth = false; size_t chunk_size = 0; };
 struct DeleteSetReq { std::string set_id; };
@@ -35,9 +35,11 @@ struct StartLiveReq { double fps = 10; };  // kDefaultLiveFps
 struct StopLiveReq {};
 struct PressReq { bool long_press = false; };
 struct MoveHandLampReq { cv::Vec3d position; };
+struct RestoreSetReq { std::string set_id; };
 
 using Body = std::variant<Hello, StatusReq, ListSetsReq, GetManifestReq, FetchImagesReq, DeleteSetReq, CaptureReq,
-                          CancelReq, SetLampsReq, StartLiveReq, StopLiveReq, PressReq, MoveHandLampReq>;
+                          CancelReq, SetLampsReq, StartLiveReq, StopLiveReq, PressReq, MoveHandLampReq,
+                          RestoreSetReq>;
 
 struct Request {
   uint64_t id = 0;

@@ -28,6 +28,7 @@ struct StoredSet {
   std::vector<std::string> warnings;
   bool has_truth = false;
   uint64_t bytes = 0;
+  std::string deleted;  // sets in the trash: when it was deleted (UTC, ISO 8601)
 };
 
 // Set ids are file names: 1..96 of [A-Za-z0-9._-], not starting with '.'.
@@ -57,7 +58,18 @@ class Store {
   // Stores the set under set.id. Fails with a clear error (disk full, ...)
   // and leaves nothing behind.
   veneer::Status save(const veneer::ImageSet& set);
-  veneer::Status remove(const std::string& id);
+
+  // The trash: a deleted set is moved into <root>/.trash and can be restored
+  // until it is purged -- when it is older than trash_keep_s, or, oldest
+  // first, when a new set needs its space.
+  veneer::Status remove(const std::string& id);  // into the trash
+  std::vector<StoredSet> trash() const;          // newest deletion first
+  veneer::Status restore(const std::string& id);
+  // Removes for good what is older than trash_keep_s and, oldest first, what
+  // must go to leave `need_bytes` free; returns how many sets went.
+  int purge_trash(uint64_t need_bytes = 0);
+  void set_trash_keep(double seconds) { trash_keep_s_ = seconds; }
+  std::filesystem::path trash_folder() const { return root_ / ".trash"; }
 
  private:
   explicit Store(std::filesystem::path root, int lock_fd);
@@ -67,6 +79,7 @@ class Store {
   int lock_fd_ = -1;
   mutable std::mutex mutex_;
   std::vector<StoredSet> sets_;
+  double trash_keep_s_ = 7 * 24 * 3600.0;  // a week
 };
 
 }  // namespace veneerd

@@ -515,9 +515,13 @@ Expected<RigStatus> Client::status() {
   return convert(r->status());
 }
 
-Expected<std::vector<SetSummary>> Client::list_sets() {
+Expected<std::vector<SetSummary>> Client::list_sets() { return list(false); }
+
+Expected<std::vector<SetSummary>> Client::list_trash() { return list(true); }
+
+Expected<std::vector<SetSummary>> Client::list(bool trash) {
   pb::ClientMessage m;
-  m.mutable_list_sets();
+  m.mutable_list_sets()->set_trash(trash);
   auto r = impl_->request(m);
   if (!r) return r.error();
   std::vector<SetSummary> out;
@@ -533,6 +537,7 @@ Expected<std::vector<SetSummary>> Client::list_sets() {
     x.has_truth = s.has_truth();
     x.bytes = s.bytes();
     x.scene = s.scene();
+    x.deleted = s.deleted();
     out.push_back(std::move(x));
   }
   return out;
@@ -658,6 +663,14 @@ Status Client::pull(const std::string& set_id, const fs::path& folder, bool incl
 Status Client::delete_set(const std::string& set_id) {
   pb::ClientMessage m;
   m.mutable_delete_set()->set_set_id(set_id);
+  auto r = impl_->request(m);
+  if (!r) return r.error();
+  return {};
+}
+
+Status Client::restore_set(const std::string& set_id) {
+  pb::ClientMessage m;
+  m.mutable_restore_set()->set_set_id(set_id);
   auto r = impl_->request(m);
   if (!r) return r.error();
   return {};

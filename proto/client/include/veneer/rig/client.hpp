@@ -104,6 +104,7 @@ struct SetSummary {
   bool has_truth = false;
   uint64_t bytes = 0;
   std::string scene;
+  std::string deleted;  // sets in the rig's trash: when it was deleted (UTC, ISO 8601)
 };
 
 struct Event {
@@ -174,7 +175,9 @@ class Client {
   // asked and present), atomically: a temporary sibling renamed into place.
   Status pull(const std::string& set_id, const std::filesystem::path& folder, bool include_truth = true,
               bool overwrite = false, const Progress& progress = {});
-  Status delete_set(const std::string& set_id);
+  Status delete_set(const std::string& set_id);  // into the rig's trash
+  Expected<std::vector<SetSummary>> list_trash();  // newest deletion first
+  Status restore_set(const std::string& set_id);
   // Starts a capture; returns the id the set will be stored under. Progress
   // and the outcome arrive as events (capture_started, shot_taken, set_stored
   // or capture_failed).
@@ -196,6 +199,7 @@ class Client {
 
  private:
   Client();
+  Expected<std::vector<SetSummary>> list(bool trash);
   std::unique_ptr<Impl> impl_;
 };
 

@@ -1,0 +1,52 @@
+#pragma once
+// The local library: every set pulled or opened on this computer, and the maps
+// computed from them, remembered across restarts in <workdir>/library.json
+// (written whole through a temporary file, so a crash leaves the old one)
+// with a thumbnail per set in <workdir>/thumbnails/.
+#include <vector>
+
+#include <QString>
+
+#include <opencv2/core.hpp>
+
+#include "veneer/io/imageset.hpp"
+
+namespace veneer::app {
+
+struct LibrarySet {
+  QString folder;     // the set's folder (the key)
+  QString role;       // "destination" | "source" | "unknown"
+  QString object;
+  QString created;    // the capture's date (UTC, ISO 8601), from the manifest
+  QString thumbnail;  // PNG path, may be empty
+};
+
+struct LibraryMap {
+  QString folder;  // holds map.pfm and map.png
+  QString destination, source;  // the sets' folders
+  QString method;
+  QString computed;  // UTC, ISO 8601
+};
+
+class Library {
+ public:
+  // Reads <workdir>/library.json when there is one; a damaged file is set
+  // aside as library.json.bad and named in `problem`.
+  explicit Library(const QString& workdir);
+  const QString& problem() const { return problem_; }
+  const std::vector<LibrarySet>& sets() const { return sets_; }
+  const std::vector<LibraryMap>& maps() const { return maps_; }
+  // Adds or updates the set at `folder` (thumbnail: 8-bit BGR, may be empty).
+  void addSet(const QString& folder, const veneer::ImageSet& set, const cv::Mat& thumbnail);
+  void forgetSet(const QString& folder);
+  void addMap(const LibraryMap& map);
+  QString mapsFolder() const { return workdir_ + "/maps"; }
+  bool save();  // false (with `problem`) when it cannot be written
+
+ private:
+  QString workdir_, problem_;
+  std::vector<LibrarySet> sets_;
+  std::vector<LibraryMap> maps_;
+};
+
+}  // namespace veneer::app

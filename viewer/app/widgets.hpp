@@ -1,0 +1,47 @@
+#pragma once
+// Small helpers the panels share to build their widgets.
+#include <QDoubleSpinBox>
+#include <QPushButton>
+#include <QString>
+
+#include <functional>
+
+#include <opencv2/core.hpp>
+
+namespace veneer::app {
+
+inline QPushButton* button(const QString& text, const QString& name, QWidget* parent) {
+  auto* b = new QPushButton(text, parent);
+  b->setObjectName(name);
+  return b;
+}
+
+// A number box of the transfer panel: range, decimals, step and start value.
+inline QDoubleSpinBox* number_box(const QString& name, double lo, double hi, int decimals, double step, double value,
+                                  const QString& tip = {}) {
+  auto* b = new QDoubleSpinBox;
+  b->setObjectName(name);
+  b->setRange(lo, hi);
+  b->setDecimals(decimals);
+  b->setSingleStep(step);
+  b->setValue(value);
+  if (!tip.isEmpty()) b->setToolTip(tip);
+  return b;
+}
+
+// Parallel work done on the GUI thread (a live frame's repaint, a view's
+// picture). Isolated, so that while it waits for its own parallel loop the
+// GUI thread does not take a task of a background job's loop (one photo of a
+// 10 Mpx set being decoded: seconds) -- measured as a 10 s stall in bench_app.
+// (widgets.cpp: TBB's headers and Qt's `emit` do not mix.)
+void gui_work(const std::function<void()>& f);
+
+// The mouse wheel changes a spin box, combo box or slider under `root` only
+// when it has focus (clicked or tabbed into); otherwise the wheel scrolls the
+// panel, as when scrolling past the field.
+void guard_wheel(QWidget* root);
+
+// A linear picture tonemapped for the views (empty stays empty).
+cv::Mat picture_of(const cv::Mat& linear);
+
+}  // namespace veneer::app
