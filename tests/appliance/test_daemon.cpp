@@ -142,9 +142,10 @@ TEST(Daemon, TwoPressesStoreTwoSetsThatPullWithTheRenderedPixelsAndTrueNormals) 
 
   // Photometric stereo (the ps module behind `veneer normals`) on the pulled
   // destination, from its photos (within 3 degrees of the truth) and read as
-  // the viewer reads it by default, from the camera's RAW files (within 4:
+  // the viewer reads it by default, from the camera's RAW files (within 5:
   // the 256x170 mosaic's demosaicing blurs the small bull's edges, so its
-  // median error measured 3.0 degrees against the photos' 0.4).
+  // median error measured 4.0 degrees over the bull alone -- 3.0 while the
+  // truth still counted its flat plinth -- against the photos' 0.4).
   for (bool raw : {false, true}) {
     veneer::ReadOptions read;
     read.photos = raw ? veneer::PhotoSource::automatic : veneer::PhotoSource::developed;
@@ -164,7 +165,7 @@ TEST(Daemon, TwoPressesStoreTwoSetsThatPullWithTheRenderedPixelsAndTrueNormals) 
     }
     ASSERT_GT(err.size(), 500u);
     std::nth_element(err.begin(), err.begin() + err.size() / 2, err.end());
-    EXPECT_LT(err[err.size() / 2], raw ? 4.0 : 3.0) << "median angular error of the recovered normals, "
+    EXPECT_LT(err[err.size() / 2], raw ? 5.0 : 3.0) << "median angular error of the recovered normals, "
                                                     << (raw ? "RAW" : "photos");
   }
   fs::remove_all(dir);

@@ -22,6 +22,7 @@
 #include "step_clock.hpp"
 #include "veneer/io/imageset.hpp"
 #include "veneer/match/live.hpp"
+#include "veneer/match/live_session.hpp"
 #include "veneer/match/relight.hpp"
 #include "veneer/match/transfer.hpp"
 #include "veneer/ps/photometric_stereo.hpp"
@@ -204,12 +205,15 @@ class MainWindow : public QMainWindow {
   std::shared_ptr<LoadedSet> dst_, src_;
   std::shared_ptr<veneer::match::TransferResult> result_;
   std::shared_ptr<veneer::match::Relighter> relighter_;
-  veneer::match::LiveRepainter repainter_;
+  // The live repaint: each frame registered to the source's stills, carried
+  // through the map, with the outline, a quality figure and a lost state.
+  std::shared_ptr<veneer::match::LiveSession> live_session_;
+  QString live_refusal_;  // the live view's framing could not be related to the stills
   // Made by the transfer's worker, so that showing a result costs the GUI
   // thread almost nothing: the result's picture, the live repainter, the
   // relit pictures for the light direction the run started with.
   cv::Mat result_picture_, pending_result_picture_;
-  std::optional<veneer::match::LiveRepainter> pending_repainter_;
+  std::shared_ptr<veneer::match::LiveSession> pending_session_;
   cv::Mat pending_relit_, pending_relit_source_;
   cv::Vec3d pending_relit_direction_;
   std::atomic<bool> cancel_{false};

@@ -324,7 +324,8 @@ void MainWindow::setLoaded(std::shared_ptr<LoadedSet> loaded, veneer::Role as) {
   ++sets_loaded_;
   result_.reset();
   relighter_.reset();
-  repainter_ = {};
+  live_session_.reset();
+  live_refusal_.clear();
   refreshLook();
   updateLampBoxes();
 }

@@ -314,7 +314,7 @@ void MainWindow::startTransfer() {
     ++map_only_runs_;
   pending_prepared_.reset();
   pending_key_ = key;
-  pending_repainter_.reset();
+  pending_session_.reset();
   pending_result_picture_ = cv::Mat();
   pending_relit_ = pending_relit_source_ = cv::Mat();
   const cv::Vec3d light = relight_pad_->direction();
@@ -372,8 +372,14 @@ void MainWindow::startTransfer() {
     pending_result_ = std::make_shared<veneer::match::TransferResult>(std::move(*result));
     // what showing the result needs, made here rather than on the GUI thread
     pending_result_picture_ = picture_of(pending_result_->repainted_median);
-    pending_repainter_.emplace(pending_result_->map, pending_result_->source_size, dst->median_picture,
-                               pending_result_->blend);
+    {  // the live session: the source's stills (full size) and its object there
+      cv::Mat still_mask = pair->src.view.mask;
+      if (still_mask.size() != src->set.size)
+        cv::resize(pair->src.view.mask, still_mask, src->set.size, 0, 0, cv::INTER_NEAREST);
+      pending_session_ = std::make_shared<veneer::match::LiveSession>(
+          src->set.images, still_mask, pending_result_->map, pending_result_->source_size, dst->median_picture,
+          pending_result_->blend);
+    }
     if (relighter) {  // same source as last time
       pending_relighter_ = relighter;
     } else {
@@ -473,8 +479,11 @@ void MainWindow::onTransferDone() {
   showStep();
   step_label_->setText(tr("map computed: ") + text);
   result_picture_ = pending_result_picture_;
-  if (pending_repainter_) repainter_ = std::move(*pending_repainter_);
-  pending_repainter_.reset();
+  if (pending_session_) {
+    live_session_ = std::move(pending_session_);
+    live_refusal_.clear();
+  }
+  pending_session_.reset();
   if (look_what_->currentIndex() != 0)
     look_what_->setCurrentIndex(0);  // refreshes the views
   else

@@ -429,16 +429,40 @@ void MainWindow::onLiveFrame(const veneer::rig::LiveFrame& frame) {
   live_frame_ = decoded;
   ++live_frames_;
   if (live_clock_.isValid() && live_clock_.elapsed() > 0) live_fps_ = live_frames_ * 1000.0 / live_clock_.elapsed();
+  QString state;
   gui_work([&] {
-    live_src_view_->setImage(to_qimage(decoded));
-    if (repainter_.ready()) {
-      live_repainted_ = repainter_.apply(decoded);
-      live_dst_view_->setImage(to_qimage(live_repainted_));
+    cv::Mat shown = decoded;
+    if (live_session_ && live_session_->ready() && live_refusal_.isEmpty()) {
+      auto r = live_session_->process(decoded);
+      if (!r) {
+        // the live view's framing can't be related to the stills: said once, no wrong picture
+        live_refusal_ = qs(r.message());
+        message(tr("live view: %1").arg(live_refusal_), true);
+      } else {
+        live_repainted_ = r->repainted;
+        live_dst_view_->setImage(to_qimage(live_repainted_));
+        // where the source was found: its outline over the frame, green when tracked, red when lost
+        shown = decoded.clone();
+        if (r->outline.size() >= 3) {
+          std::vector<cv::Point> poly;
+          for (const cv::Point2f& p : r->outline) poly.emplace_back(cvRound(p.x), cvRound(p.y));
+          cv::polylines(shown, std::vector<std::vector<cv::Point>>{poly}, true,
+                        r->lost ? cv::Scalar(0, 0, 255) : cv::Scalar(0, 220, 0), std::max(1, shown.cols / 500),
+                        cv::LINE_AA);
+        }
+        state = r->lost ? tr("LOST - hold still / recapture (match %1)").arg(r->quality, 0, 'f', 2)
+                        : tr("tracked, match %1").arg(r->quality, 0, 'f', 2);
+      }
     }
+    live_src_view_->setImage(to_qimage(shown));
   });
-  live_label_->setText(tr("frame %1 · %2 fps").arg(frame.seq).arg(live_fps_, 0, 'f', 1));
+  const bool repainting = live_session_ && live_refusal_.isEmpty();
+  live_label_->setText(tr("frame %1 · %2 fps").arg(frame.seq).arg(live_fps_, 0, 'f', 1) +
+                       (state.isEmpty() ? QString() : " · " + state));
   if (!step_.running())
-    step_label_->setText((repainter_.ready() ? tr("live repaint · ") : tr("live view (no map yet) · ")) +
+    step_label_->setText((repainting ? tr("live repaint · ")
+                                     : live_session_ ? tr("live view (framing not related to the stills) · ")
+                                                     : tr("live view (no map yet) · ")) +
                          live_label_->text());
 }
 
