@@ -141,6 +141,21 @@ std::optional<Expected<cv::Mat>> decode_png_linear(std::string_view bytes, const
     }
     pos += size_t(length) + 12;
   }
+  // DEFLATE expands at most ~1032:1: a file whose image data is too small
+  // for the size its header declares is damaged (or hostile), and is named
+  // so here, before this decoder or OpenCV's (interlaced, palette and
+  // low-depth files) asks for a buffer of that size -- the fuzzer found a
+  // 69-byte interlaced file declaring 8962x65280 (2.3 GB).
+  {
+    static constexpr int kSamples[7] = {1, 0, 3, 1, 2, 0, 4};  // per colour type; 0 = not a PNG type
+    const int samples = colour_type >= 0 && colour_type < 7 ? kSamples[colour_type] : 0;
+    const uint64_t row = (uint64_t(width) * uint64_t(samples) * uint64_t(depth) + 7) / 8 + 1;
+    const uint64_t declared = uint64_t(height) * row;
+    if (samples > 0 && declared / 1032 > idat_bytes + 64)
+      return Expected<cv::Mat>(make_error(name + ": truncated PNG (" + std::to_string(idat_bytes) +
+                                          " bytes of image data can't hold the " + std::to_string(width) + "x" +
+                                          std::to_string(height) + " its header declares)"));
+  }
   int channels = 0;
   switch (colour_type) {
     case 0: channels = 1; break;
