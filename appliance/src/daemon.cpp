@@ -11,6 +11,7 @@
 #include "veneer/proto/discovery.hpp"
 #include "veneer/sim/simulator.hpp"
 #include "veneer/util/log.hpp"
+#include "veneer/util/token_file.hpp"
 #include "veneerd/devices/registry.hpp"
 #include "veneerd/devices/simulated_camera.hpp"
 #include "veneerd/devices/simulated_rig.hpp"
@@ -20,18 +21,6 @@ namespace veneerd {
 namespace fs = std::filesystem;
 using veneer::make_error;
 
-veneer::Expected<std::string> read_token(const fs::path& file) {
-  std::ifstream in(file);
-  if (!in) return make_error(file.string() + ": cannot read the access token");
-  std::string token;
-  std::getline(in, token);
-  // Whitespace around the token is not part of it (as the server trims what a client sends).
-  const char* space = " \t\r\n\v\f";
-  const size_t first = token.find_first_not_of(space);
-  token = first == std::string::npos ? std::string() : token.substr(first, token.find_last_not_of(space) - first + 1);
-  if (token.empty()) return make_error(file.string() + ": the token file is empty");
-  return token;
-}
 
 veneer::Expected<std::string> ensure_token(const fs::path& file) {
   std::error_code ec;
@@ -40,7 +29,7 @@ veneer::Expected<std::string> ensure_token(const fs::path& file) {
     if (::stat(file.c_str(), &st) == 0 && (st.st_mode & 077) != 0) {
       VLOG_WARN("Server", "{} is readable by others (mode {:o}); it should be 0600", file.string(), st.st_mode & 0777);
     }
-    return read_token(file);
+    return veneer::read_token_file(file);
   }
   if (!file.parent_path().empty()) fs::create_directories(file.parent_path(), ec);
   unsigned char raw[32];

@@ -19,6 +19,7 @@
 
 #include "veneer/proto/framing.hpp"
 #include "veneer/util/log.hpp"
+#include "veneer/util/token_file.hpp"
 #include "veneer/v1/rig.pb.h"
 
 namespace veneer::rig {
@@ -49,18 +50,7 @@ Expected<Endpoint> Endpoint::parse(const std::string& text) {
   return e;
 }
 
-Expected<std::string> read_token_file(const fs::path& file) {
-  std::ifstream in(file);
-  if (!in) return make_error(file.string() + ": cannot read the rig's access token");
-  std::string token;
-  std::getline(in, token);
-  // Whitespace around the token is not part of it (as the server trims what a client sends).
-  const char* space = " \t\r\n\v\f";
-  const size_t first = token.find_first_not_of(space);
-  token = first == std::string::npos ? std::string() : token.substr(first, token.find_last_not_of(space) - first + 1);
-  if (token.empty()) return make_error(file.string() + ": the token file is empty");
-  return token;
-}
+Expected<std::string> read_token_file(const fs::path& file) { return veneer::read_token_file(file); }
 
 const char* event_name(Event::Kind kind) {
   switch (kind) {
