@@ -900,20 +900,16 @@ bool refine_round(const ImageSet& set, const PsResult& r, const PsOptions& optio
       if (!(rho > 0)) continue;
       p.b = cv::Vec3d(nr[x][0], nr[x][1], nr[x][2]) * rho;
       p.peak = 0;
-      bool saturated = false;
       for (int i = 0; i < n; ++i) {
         const cv::Vec3f v = set.images[i].at<cv::Vec3f>(y, x);
-        if (std::max({v[0], v[1], v[2]}) >= options.saturation) saturated = true;
         float g = (v[0] + v[1] + v[2]) / 3.f;
         if (amb) {
           const cv::Vec3f a = set.ambient.at<cv::Vec3f>(y, x);
           g -= (a[0] + a[1] + a[2]) / 3.f;
         }
-        p.g[i] = g;
         p.peak = std::max(p.peak, g);
-      }
-      if (saturated && options.saturation < 1.f) {
-        // keep the pixel; its saturated samples are dropped below by the level test
+        // a sample with any channel saturated is left out of the fit (as the solve leaves it out)
+        p.g[i] = std::max({v[0], v[1], v[2]}) >= options.saturation ? -1.f : g;
       }
       px.push_back(p);
     }
@@ -925,7 +921,7 @@ bool refine_round(const ImageSet& set, const PsResult& r, const PsOptions& optio
     const double e = (l.intensity[0] + l.intensity[1] + l.intensity[2]) / 3.0;
     recorded[i] = l.direction / cv::norm(l.direction) * e;
     cv::Vec3d cur = recorded[i];
-    // Two rounds: fit, then drop samples off by more than 3 robust sigmas (highlights, cast shadows).
+    // Three rounds: fit, then drop samples off by more than 3 robust sigmas (highlights, cast shadows).
     double cut = 1e30;
     for (int round = 0; round < 3; ++round) {
       cv::Matx33d A = cv::Matx33d::zeros();
@@ -935,7 +931,7 @@ bool refine_round(const ImageSet& set, const PsResult& r, const PsOptions& optio
       int used = 0;
       for (const Px& p : px) {
         const float g = p.g[i];
-        if (g < options.shadow_fraction * p.peak || g >= options.saturation) continue;
+        if (g < options.shadow_fraction * p.peak) continue;  // shadowed, or saturated (-1)
         const double pred = p.b.dot(cur);
         if (pred <= 0.05 * p.peak) continue;  // near the terminator: attached shadow's edge
         const double d = g - pred;
