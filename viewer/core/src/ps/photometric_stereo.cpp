@@ -988,27 +988,22 @@ Status photometric_stereo_into(const ImageSet& set, const cv::Mat& mask_in, cons
   if (!options.refine_lights || !options.robust || result.model_used != LightModel::distant) return Status::success();
   std::vector<Light> lights = set.lights;
   ImageSet view = set;  // shares the photos; only the lights differ
+  std::vector<double> moved(set.lights.size());
   for (int it = 0; it < options.refine_iterations; ++it) {
     if (!refine_round(set, result, options, lights)) break;
-    // Directions that moved implausibly far are not a calibration error: keep the set's.
-    bool plausible = true;
+    // Directions that moved implausibly far are not a calibration error: keep the last plausible ones.
     for (size_t i = 0; i < lights.size(); ++i) {
       const double c = lights[i].direction.dot(set.lights[i].direction / cv::norm(set.lights[i].direction));
-      if (std::acos(std::clamp(c, -1.0, 1.0)) * 180 / CV_PI > options.refine_max_deg) plausible = false;
+      moved[i] = std::acos(std::clamp(c, -1.0, 1.0)) * 180 / CV_PI;
     }
-    if (!plausible) break;
+    if (*std::max_element(moved.begin(), moved.end()) > options.refine_max_deg) break;
     view.lights = lights;
     PsResult next;
     if (Status st = solve_once(view, mask_in, options, {}, next); !st) break;
     result = std::move(next);
     result.lights_refined = true;
-  }
-  if (result.lights_refined) {
-    for (size_t i = 0; i < set.lights.size(); ++i) {
-      const double c = view.lights[i].direction.dot(set.lights[i].direction / cv::norm(set.lights[i].direction));
-      result.light_change_deg.push_back(std::acos(std::clamp(c, -1.0, 1.0)) * 180 / CV_PI);
-    }
     result.lights = view.lights;
+    result.light_change_deg = moved;
   }
   return Status::success();
 }

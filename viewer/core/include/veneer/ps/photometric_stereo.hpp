@@ -69,7 +69,8 @@ struct PsOptions {
                                    // enough to fix a lamp. See PsResult::lights_refined
   int refine_iterations = 3;       // rounds of refine-then-solve (1..10)
   double refine_max_deg = 15.0;    // a lamp that would move farther than this is not a calibration error:
-                                   // the refinement is dropped and the recorded lamps used
+                                   // that round is dropped and the last plausible lamps (at first the
+                                   // recorded ones) kept
   int near_iterations = 2;         // near: depth refinements after the z = 0 pass (0..5)
   int threads = 0;                 // 0 = all cores (TBB)
   Status check() const;
