@@ -10,6 +10,8 @@
 #include <QComboBox>
 #include <QDoubleSpinBox>
 #include <QDate>
+#include <QDir>
+#include <QSpinBox>
 #include <QFileInfo>
 #include <QLabel>
 #include <QMessageBox>
@@ -409,6 +411,85 @@ TEST(Viewer, TheLibrarySurvivesARestart) {
 }
 
 namespace {
+// Destination pixels the map gives a source pixel, within `inside`.
+int mapped_in(const veneer::match::Map& map, const cv::Rect& inside) {
+  cv::Mat xy[2];
+  cv::split(map.xy, xy);
+  return cv::countNonZero(xy[0](inside) >= 0);
+}
+}  // namespace
+
+// A map kept in the library is shown again after a restart without matching:
+// its sets load in their roles with the options it was computed with, and the
+// result is painted through the stored map. The stored map is altered on disk
+// first, so a map matched again would differ from it. A set that is gone is
+// named in one message.
+TEST(Viewer, ALibraryMapReopensAfterARestartWithoutMatchingAgain) {
+  QTemporaryDir dir;
+  QString map_folder, dst, src;
+  {
+    auto window = open_pair(dir);
+    ASSERT_TRUE(window);
+    dst = window->destination()->folder;
+    src = window->source()->folder;
+    child<QComboBox>(*window, "method")->setCurrentText("coherent");
+    child<QSpinBox>(*window, "blend")->setValue(3);
+    ASSERT_TRUE(compute_and_wait(*window));
+    auto* maps = child<QTreeWidget>(*window, "sets")->topLevelItem(3);
+    ASSERT_TRUE(wait_for([&] { return maps->childCount() == 1; }, 10000)) << window->lastMessage().toStdString();
+    map_folder = maps->child(0)->data(0, Qt::UserRole).toString();
+  }
+  // the stored map, altered: its top half unmapped
+  const std::string pfm = (map_folder + "/map.pfm").toStdString();
+  auto stored = veneer::match::read_map(pfm);
+  ASSERT_TRUE(stored) << stored.message();
+  const cv::Rect top(0, 0, stored->xy.cols, stored->xy.rows / 2);
+  const int mapped_before = mapped_in(*stored, top);
+  ASSERT_GT(mapped_before, 100) << "the bull reaches into the top half";
+  stored->xy(top).setTo(cv::Scalar::all(-1));
+  ASSERT_TRUE(veneer::match::write_map(pfm, *stored).ok());
+
+  {
+    MainWindow w({QString(), QString(), QString(), QString(), dir.path()});
+    w.show();
+    auto* tree = child<QTreeWidget>(w, "sets");
+    QTreeWidgetItem* maps = tree->topLevelItem(3);
+    ASSERT_EQ(maps->childCount(), 1);
+    EXPECT_EQ(child<QComboBox>(w, "method")->currentText(), "combined") << "the default before reopening";
+    select_item(tree, maps->child(0));
+    QTest::mouseClick(child<QPushButton>(w, "openMap"), Qt::LeftButton);
+    ASSERT_TRUE(wait_for([&] { return w.result() != nullptr && !w.computing(); }, 60000))
+        << w.lastMessage().toStdString();
+    ASSERT_TRUE(w.destination() && w.source());
+    EXPECT_EQ(w.destination()->folder, dst);
+    EXPECT_EQ(w.source()->folder, src);
+    EXPECT_TRUE(w.result()->map_given) << "repainted through the stored map";
+    EXPECT_EQ(w.result()->match_seconds, 0.0);
+    EXPECT_EQ(mapped_in(w.result()->map, top), 0) << "the stored (altered) map, not one matched again";
+    EXPECT_EQ(cv::norm(w.result()->map.xy, stored->xy, cv::NORM_INF), 0.0);
+    EXPECT_EQ(w.result()->match_options.method, veneer::match::Method::coherent);
+    EXPECT_EQ(child<QComboBox>(w, "method")->currentText(), "coherent") << "the options it was computed with";
+    EXPECT_EQ(child<QSpinBox>(w, "blend")->value(), 3);
+    EXPECT_TRUE(w.lastMessage().contains("reopened")) << w.lastMessage().toStdString();
+    QTest::qWait(300);
+    EXPECT_EQ(maps->childCount(), 1) << "a reopened map is not stored twice";
+  }
+
+  // the source set gone: one message naming it, nothing loaded
+  ASSERT_TRUE(QDir(src).removeRecursively());
+  MainWindow w({QString(), QString(), QString(), QString(), dir.path()});
+  auto* maps = child<QTreeWidget>(w, "sets")->topLevelItem(3);
+  ASSERT_EQ(maps->childCount(), 1);
+  EXPECT_FALSE(w.openLibraryMap(maps->child(0)->data(0, Qt::UserRole).toString()));
+  EXPECT_TRUE(w.lastMessage().contains("source set") && w.lastMessage().contains(src) &&
+              w.lastMessage().contains("gone"))
+      << w.lastMessage().toStdString();
+  QTest::qWait(200);
+  EXPECT_EQ(w.destination(), nullptr);
+  EXPECT_EQ(w.result(), nullptr);
+}
+
+namespace {
 int lamp_boxes(MainWindow& w) {
   int n = 0;
   for (auto* b : w.findChildren<QCheckBox*>())
@@ -513,15 +594,6 @@ TEST(Viewer, ViewModesHistogramExposureAndSnapshot) {
   EXPECT_TRUE(w.lastMessage().contains("snap.jpg")) << w.lastMessage().toStdString();
   EXPECT_FALSE(QFileInfo::exists(dir.path() + "/snap.jpg"));
 }
-
-namespace {
-// Destination pixels the map gives a source pixel, within `inside`.
-int mapped_in(const veneer::match::Map& map, const cv::Rect& inside) {
-  cv::Mat xy[2];
-  cv::split(map.xy, xy);
-  return cv::countNonZero(xy[0](inside) >= 0);
-}
-}  // namespace
 
 // Segmentation by hand: a rectangle on the destination and a brush on the
 // source each change the map -- nothing is mapped outside the rectangle and

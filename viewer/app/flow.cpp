@@ -113,6 +113,12 @@ void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer
         return;
       }
       if (!r.loaded) {
+        if (self->reopen_ && (folder == self->reopen_->entry.destination || folder == self->reopen_->entry.source)) {
+          self->reopen_.reset();
+          self->message(tr("cannot reopen the map: %1").arg(r.error), true);
+          self->showStep();
+          return;
+        }
         self->message(r.error, true);
         self->showStep();
         return;
@@ -133,7 +139,7 @@ void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer
       self->computeNormals(r.loaded);
       self->message(tr("loaded %1 as the %2").arg(folder, qs(veneer::role_name(role))));
       self->showStep();
-      self->flowMaybeCompute();
+      if (!self->reopenWhenLoaded(folder, role)) self->flowMaybeCompute();
     });
   });
 }
@@ -145,6 +151,7 @@ void MainWindow::cancelStep() {
     rig_.cancelPulls();
     auto_pulls_.clear();
   }
+  reopen_.reset();
   if (loads_running_ > 0) {
     load_cancel_->store(true);
     load_cancel_ = std::make_shared<std::atomic<bool>>(false);

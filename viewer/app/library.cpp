@@ -40,8 +40,10 @@ Library::Library(const QString& workdir) : workdir_(workdir) {
   }
   for (const auto& v : doc.object().value("maps").toArray()) {
     const QJsonObject o = v.toObject();
-    LibraryMap m{o.value("folder").toString(), o.value("destination").toString(), o.value("source").toString(),
-                 o.value("method").toString(), o.value("computed").toString()};
+    LibraryMap m{o.value("folder").toString(),         o.value("destination").toString(),
+                 o.value("source").toString(),         o.value("destination_id").toString(),
+                 o.value("source_id").toString(),      o.value("method").toString(),
+                 o.value("computed").toString()};
     if (!m.folder.isEmpty()) maps_.push_back(m);
   }
 }
@@ -71,6 +73,12 @@ void Library::addMap(const LibraryMap& map) {
   maps_.push_back(map);
 }
 
+const LibraryMap* Library::findMap(const QString& folder) const {
+  for (const auto& m : maps_)
+    if (m.folder == folder) return &m;
+  return nullptr;
+}
+
 bool Library::save() {
   QJsonArray sets, maps;
   for (const auto& s : sets_)
@@ -78,6 +86,7 @@ bool Library::save() {
                             {"thumbnail", s.thumbnail}});
   for (const auto& m : maps_)
     maps.append(QJsonObject{{"folder", m.folder}, {"destination", m.destination}, {"source", m.source},
+                            {"destination_id", m.destination_id}, {"source_id", m.source_id},
                             {"method", m.method}, {"computed", m.computed}});
   QDir().mkpath(workdir_);
   QSaveFile f(workdir_ + "/library.json");

@@ -21,9 +21,15 @@ struct LibrarySet {
   QString thumbnail;  // PNG path, may be empty
 };
 
+// A map kept in the library, enough to show it again after a restart
+// without matching: its folder holds map.pfm, map.png (thumbnail),
+// options.json (the transfer options it was computed and repainted with,
+// match::transfer_options_json) and, when the sets were segmented by hand,
+// dst-mask.png / src-mask.png.
 struct LibraryMap {
-  QString folder;  // holds map.pfm and map.png
-  QString destination, source;  // the sets' folders
+  QString folder;
+  QString destination, source;  // the sets' folders, in their roles
+  QString destination_id, source_id;  // the sets' ids (manifest) when computed: a set replaced is noticed
   QString method;
   QString computed;  // UTC, ISO 8601
 };
@@ -40,6 +46,7 @@ class Library {
   void addSet(const QString& folder, const veneer::ImageSet& set, const cv::Mat& thumbnail);
   void forgetSet(const QString& folder);
   void addMap(const LibraryMap& map);
+  const LibraryMap* findMap(const QString& folder) const;
   QString mapsFolder() const { return workdir_ + "/maps"; }
   bool save();  // false (with `problem`) when it cannot be written
 

@@ -126,6 +126,13 @@ class MainWindow : public QMainWindow {
   // Role::unknown it is used as the role its manifest gives.
   void loadSetInBackground(const QString& folder, std::optional<veneer::Role> as);
   int loadsRunning() const { return loads_running_; }
+  // Shows a map kept in the library again (the Sets panel's "Open map" and a
+  // double click on a map row): loads its destination and source in their
+  // roles, with the options and hand masks it was computed with, and repaints
+  // through the stored map -- no matching. False, with a message naming what
+  // is missing, when its map file or one of its sets is gone; a set found
+  // replaced (another id in its folder) is said once both are loaded.
+  bool openLibraryMap(const QString& map_folder);
 
  private:
   void buildUi();
@@ -177,6 +184,9 @@ class MainWindow : public QMainWindow {
   void showLibrary();
   void addMapItem(const LibraryMap& map);
   void saveMapToLibrary();
+  // A set finished loading as `role`: true while a library map being reopened
+  // waits for its sets (and when it then starts), so the flow does not compute.
+  bool reopenWhenLoaded(const QString& folder, veneer::Role role);
   void askDelete(QTreeWidgetItem* item);
   void onTrashListed(const std::vector<veneer::rig::SetSummary>& sets);
   void restoreFromTrash(const QString& id);
@@ -216,6 +226,25 @@ class MainWindow : public QMainWindow {
   std::shared_ptr<veneer::match::LiveSession> pending_session_;
   cv::Mat pending_relit_, pending_relit_source_;
   cv::Vec3d pending_relit_direction_;
+  // What a transfer ran with (the options, the hand masks), kept with the
+  // result it made so that the library stores the map with them.
+  struct RunSettings {
+    veneer::match::TransferOptions options;
+    cv::Mat dst_hand, src_hand;
+    QString reopened;  // the library map it repainted through ("" = matched)
+  };
+  RunSettings running_, shown_;
+  // A library map being reopened: shown once both its sets are loaded.
+  struct Reopen {
+    LibraryMap entry;
+    std::shared_ptr<const veneer::match::Map> map;
+    veneer::match::TransferOptions options;
+    cv::Mat dst_hand, src_hand;
+    bool dst_loaded = false, src_loaded = false;
+  };
+  std::optional<Reopen> reopen_;
+  std::shared_ptr<const veneer::match::Map> given_map_;  // the next transfer repaints through it
+  QString reopened_folder_;                              // ... the library map it came from
   std::atomic<bool> cancel_{false};
   bool computing_ = false;
   bool rerun_ = false;  // a matching option changed while computing: run again when done

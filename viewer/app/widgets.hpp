@@ -41,6 +41,12 @@ void gui_work(const std::function<void()>& f);
 // panel, as when scrolling past the field.
 void guard_wheel(QWidget* root);
 
+// "2026-11-25T20:08:18Z" -> "2026-11-25 20:08" (as written when it is not ISO 8601)
+inline QString short_date(const std::string& iso) {
+  const QString t = QString::fromStdString(iso);
+  return t.size() >= 16 && t[10] == 'T' ? t.left(10) + " " + t.mid(11, 5) : t;
+}
+
 // A linear picture tonemapped for the views (empty stays empty).
 cv::Mat picture_of(const cv::Mat& linear);
 
