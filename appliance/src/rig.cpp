@@ -499,6 +499,15 @@ veneer::Status Rig::delete_set(const std::string& id) {
   return {};
 }
 
+veneer::Status Rig::restore_set(const std::string& id) {
+  if (auto s = store_.restore(id); !s) return s;
+  RigEvent e;
+  e.kind = RigEvent::Kind::set_restored;
+  e.set_id = id;
+  emit(e);
+  return {};
+}
+
 void Rig::set_live_fps(double fps) {
   {
     std::lock_guard lock(live_mutex_);

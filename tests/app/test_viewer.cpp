@@ -338,6 +338,14 @@ TEST(Viewer, DeletingARigSetAsksAndUndoRestoresIt) {
   ASSERT_TRUE(wait_for([&] { return on_rig->childCount() == 1; }, 60000)) << w.lastMessage().toStdString();
   const QString id = on_rig->child(0)->text(0), date = on_rig->child(0)->text(3);
   EXPECT_TRUE(date.startsWith(QDateTime::currentDateTimeUtc().date().toString(Qt::ISODate))) << date.toStdString();
+  // a second viewer on the same rig sees the delete and the undo without listing again
+  QTemporaryDir other_work;
+  MainWindow other({QString(), QString(), QString(), QString(), other_work.path()});
+  other.setAutoFlow(false);
+  other.connectToRig(rig.endpoint(), rig.token_file());
+  ASSERT_TRUE(wait_for([&] { return other.rig().isConnected(); }, 10000)) << other.lastMessage().toStdString();
+  QTreeWidgetItem* other_rig = child<QTreeWidget>(other, "sets")->topLevelItem(0);
+  ASSERT_TRUE(wait_for([&] { return other_rig->childCount() == 1; }, 10000));
 
   // asked; Cancel keeps it
   auto ask = [&]() -> QMessageBox* {
@@ -363,6 +371,7 @@ TEST(Viewer, DeletingARigSetAsksAndUndoRestoresIt) {
   ASSERT_TRUE(wait_for([&] { return on_rig->childCount() == 0 && trash->childCount() == 1; }, 10000))
       << w.lastMessage().toStdString();
   EXPECT_EQ(trash->child(0)->text(0), id);
+  EXPECT_TRUE(wait_for([&] { return other_rig->childCount() == 0; }, 10000)) << "the other viewer saw the delete";
   auto* undo = child<QPushButton>(w, "undoDelete");
   ASSERT_TRUE(undo->isVisible());
 
@@ -372,6 +381,8 @@ TEST(Viewer, DeletingARigSetAsksAndUndoRestoresIt) {
       << w.lastMessage().toStdString();
   EXPECT_EQ(on_rig->child(0)->text(0), id);
   EXPECT_FALSE(undo->isVisible());
+  ASSERT_TRUE(wait_for([&] { return other_rig->childCount() == 1; }, 10000)) << "the other viewer saw it come back";
+  EXPECT_EQ(other_rig->child(0)->text(0), id);
   select_item(tree, on_rig->child(0));
   QTest::mouseClick(child<QPushButton>(w, "pullSet"), Qt::LeftButton);
   ASSERT_TRUE(wait_for([&] { return tree->topLevelItem(1)->childCount() == 1; }, 30000)) << w.lastMessage().toStdString();

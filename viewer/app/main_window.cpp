@@ -382,6 +382,7 @@ void MainWindow::onRigEvent(const veneer::rig::Event& e) {
       rig_.refreshStatus();
       break;
     case K::set_deleted:
+    case K::set_restored:  // by this viewer or another client: both lists change
       rig_.listSets();
       break;
   }
