@@ -36,6 +36,7 @@
 #include <opencv2/videoio.hpp>
 
 #include "veneer/io/image_io.hpp"
+#include "veneer/match/specular.hpp"
 #include "veneer/ps/segmentation.hpp"
 
 namespace veneer::app {
@@ -200,24 +201,6 @@ cv::Mat confidence_picture(const cv::Mat& goodness, const cv::Mat& valid) {
   return out;
 }
 
-// RTI's specular enhancement: the normals shaded as a grey glossy surface
-// (Lambert plus a Blinn-Phong highlight) under light `l`, so relief and
-// small dents show that the albedo hides. A view of the normals, not an
-// estimate of anything.
-cv::Mat specular_picture(const veneer::ps::PsResult& ps, const cv::Vec3d& light) {
-  const cv::Vec3f l(light), h = cv::normalize(cv::Vec3f(light) + cv::Vec3f(0, 0, 1));
-  cv::Mat out(ps.normals.size(), CV_8UC3, cv::Scalar::all(0));
-  for (int y = 0; y < out.rows; ++y) {
-    const auto* n = ps.normals.ptr<cv::Vec3f>(y);
-    auto* o = out.ptr<cv::Vec3b>(y);
-    for (int x = 0; x < out.cols; ++x) {
-      if (n[x] == cv::Vec3f()) continue;
-      const float diffuse = std::max(0.f, n[x].dot(l)), spec = std::pow(std::max(0.f, n[x].dot(h)), 60.f);
-      o[x] = cv::Vec3b::all(cv::saturate_cast<uchar>(255 * std::min(1.f, 0.55f * diffuse + 0.7f * spec)));
-    }
-  }
-  return out;
-}
 }  // namespace
 
 void MainWindow::refreshLookNow() {
@@ -234,7 +217,11 @@ void MainWindow::refreshLookNow() {
         cv::Mat good = 1.0 - cv::min(s->normals->residual * 10.0, 1.0);  // residual 0.1 of the brightest: none
         return confidence_picture(good, s->normals->mask);
       }
-      case 7: return s->normals ? specular_picture(*s->normals, light) : cv::Mat();
+      case 7: {  // specular enhancement (core), following the relight pad's light
+        if (!s->normals) return {};
+        auto shaded = veneer::match::specular_enhancement(s->normals->normals, light);
+        return shaded ? *shaded : cv::Mat();
+      }
       default: return s->median_picture.empty() ? picture_of(s->median) : s->median_picture;
     }
   };
