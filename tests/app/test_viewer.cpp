@@ -20,10 +20,12 @@
 #include <QProcess>
 #include <QProgressBar>
 #include <QPushButton>
+#include <QSemaphore>
 #include <QSignalSpy>
 #include <QTcpServer>
 #include <QTemporaryDir>
 #include <QTest>
+#include <QThreadPool>
 #include <QScrollArea>
 #include <QToolButton>
 #include <QTreeWidget>
@@ -728,6 +730,55 @@ TEST(Viewer, CancelledComputationLeavesUiUsable) {
   ASSERT_TRUE(compute_and_wait(w));
   ASSERT_TRUE(w.result()->quality.has_value());
   EXPECT_GT(w.result()->quality->coverage, 0.9);
+}
+
+// Exports cancelled leave nothing behind: not the results folder, not its
+// temporary sibling, not the video or its temporary. The export is held in
+// the thread pool's queue behind a gate until the cancel is in, so the cancel
+// always comes before the first file (core/Transfer.WritingStopsBetweenFiles
+// WhenCancelled shows the stop between files); uncancelled, the same exports
+// are written whole.
+TEST(Viewer, CancelledExportsLeaveNoHalfWrittenFile) {
+  QTemporaryDir dir;
+  auto window = open_pair(dir);
+  ASSERT_TRUE(window);
+  MainWindow& w = *window;
+  child<QComboBox>(w, "method")->setCurrentText("coherent");
+  ASSERT_TRUE(compute_and_wait(w));
+  QThreadPool* pool = QThreadPool::globalInstance();
+  pool->waitForDone();  // the normals' background solve
+  const int threads = pool->maxThreadCount();
+  const QString results = dir.path() + "/results", video = dir.path() + "/sweep.avi";
+  auto held_then_cancelled = [&](const std::function<void()>& start) {
+    pool->setMaxThreadCount(1);
+    QSemaphore gate;
+    pool->start([&gate] { gate.acquire(); });
+    start();
+    EXPECT_TRUE(w.exporting());
+    w.cancelStep();
+    gate.release();
+    EXPECT_TRUE(wait_for([&] { return !w.exporting(); }, 30000));
+    pool->setMaxThreadCount(threads);
+  };
+  held_then_cancelled([&] { w.exportResultsTo(results); });
+  EXPECT_TRUE(w.lastMessage().contains("cancelled")) << w.lastMessage().toStdString();
+  EXPECT_TRUE(QDir(results).isEmpty()) << "nothing moved into the folder";
+  EXPECT_FALSE(QFileInfo::exists(results + ".part")) << "the temporary sibling removed";
+  held_then_cancelled([&] { w.exportRelightVideoTo(video); });
+  EXPECT_TRUE(w.lastMessage().contains("cancelled")) << w.lastMessage().toStdString();
+  EXPECT_EQ(QDir(dir.path()).entryList({"*.avi", ".*.avi"}, QDir::Files | QDir::Hidden), QStringList())
+      << "no video, no temporary";
+
+  w.exportResultsTo(results);
+  ASSERT_TRUE(wait_for([&] { return !w.exporting(); }, 30000));
+  EXPECT_TRUE(w.lastMessage().contains("results written")) << w.lastMessage().toStdString();
+  EXPECT_TRUE(QFileInfo::exists(results + "/metrics.json"));
+  EXPECT_TRUE(QFileInfo::exists(results + "/result_median.png"));
+  EXPECT_FALSE(QFileInfo::exists(results + ".part"));
+  w.exportRelightVideoTo(video);
+  ASSERT_TRUE(wait_for([&] { return !w.exporting(); }, 60000));
+  EXPECT_EQ(QDir(dir.path()).entryList({"*.avi", ".*.avi"}, QDir::Files | QDir::Hidden), QStringList{"sweep.avi"});
+  EXPECT_GT(QFileInfo(video).size(), 1000);
 }
 
 TEST(Viewer, BadInputGivesClearMessages) {

@@ -647,11 +647,15 @@ Status write_transfer(const TransferResult& r, const std::filesystem::path& fold
   std::mutex report_lock;
   size_t done = 0;
   progress.report(0.0, "writing " + folder.string());
+  const Status cancelled = make_error("writing " + folder.string() + " cancelled");
   tbb::parallel_for(size_t(0), files.size(), [&](size_t i) {
-    written[i] = files[i]();
+    // a cancel stops the files not yet begun; those being encoded finish
+    // (each is whole under its own name or absent, never half-written)
+    written[i] = progress.cancelled() ? cancelled : files[i]();
     std::lock_guard<std::mutex> hold(report_lock);
     progress.report(static_cast<double>(++done) / static_cast<double>(files.size() + 1), "writing " + folder.string());
   });
+  if (progress.cancelled()) return cancelled;  // and no metrics.json: the folder is not a whole result
   for (const Status& s : written) {
     if (!s) return s;  // the first by file order, whatever finished first
   }
