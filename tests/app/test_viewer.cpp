@@ -781,6 +781,34 @@ TEST(Viewer, CancelledExportsLeaveNoHalfWrittenFile) {
   EXPECT_GT(QFileInfo(video).size(), 1000);
 }
 
+// A set loaded in the background comes with the picture the views show and
+// its histogram made off the GUI thread: the view shows the loader's image
+// itself (the same pixels, not a conversion made on the GUI thread), and the
+// histogram is the median picture's.
+TEST(Viewer, ALoadedSetsPictureIsMadeByTheLoader) {
+  QTemporaryDir dir;
+  QString dst, src;
+  write_pair(dir.path(), dst, src);
+  MainWindow w({QString(), QString(), QString(), QString(), dir.path()});
+  w.show();
+  w.setAutoFlow(false);
+  w.loadSetInBackground(dst, veneer::Role::destination);
+  ASSERT_TRUE(wait_for([&] { return w.destination() != nullptr && w.loadsRunning() == 0; }, 20000))
+      << w.lastMessage().toStdString();
+  const veneer::app::LoadedSet* d = w.destination();
+  ASSERT_FALSE(d->median_image.isNull());
+  EXPECT_EQ(d->median_image.size(), QSize(d->set.size.width, d->set.size.height));
+  int showing = 0;
+  for (auto* view : w.findChildren<veneer::app::ImageView*>())
+    showing += view->image().cacheKey() == d->median_image.cacheKey();
+  EXPECT_EQ(showing, 1) << "the destination view shows the loader's image";
+  ASSERT_FALSE(d->histogram.empty());
+  EXPECT_EQ(cv::sum(d->histogram)[0], double(d->set.size.area())) << "every pixel counted once";
+  // the picture is the median tonemapped: a pixel checked through the QImage
+  const cv::Vec3b bgr = d->median_picture.at<cv::Vec3b>(85, 128);
+  EXPECT_EQ(d->median_image.pixel(128, 85), qRgb(bgr[2], bgr[1], bgr[0]));
+}
+
 TEST(Viewer, BadInputGivesClearMessages) {
   QTemporaryDir dir;
   MainWindow w({QString(), QString(), QString(), QString(), dir.path()});

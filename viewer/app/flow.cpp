@@ -11,7 +11,9 @@
 #include <opencv2/imgproc.hpp>
 
 #include "main_window.hpp"
+#include "qt_convert.hpp"
 #include "veneer/io/image_io.hpp"
+#include "widgets.hpp"
 
 namespace veneer::app {
 
@@ -101,6 +103,8 @@ void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer
       if (full) {
         r.loaded->median = veneer::match::median_photo(r.loaded->set.images);
         r.loaded->median_picture = tonemap_picture(r.loaded->median);
+        r.loaded->median_image = to_qimage(r.loaded->median_picture);  // what the views show, made here
+        r.loaded->histogram = luminance_histogram(r.loaded->median_picture);
       }
     }
     QMetaObject::invokeMethod(self.data(), [self, r, as, folder, cancel] {

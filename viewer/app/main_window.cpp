@@ -79,6 +79,8 @@ MainWindow::MainWindow(const Options& options, QWidget* parent)
     message(tr("pulled %1 into %2").arg(id, folder));
     flowPulled(id, folder);
   });
+  live_pool_.setMaxThreadCount(1);
+  live_pool_.setExpiryTimeout(-1);  // the live view's thread stays while the window lives
   step_timer_.setInterval(250);
   connect(&step_timer_, &QTimer::timeout, this, &MainWindow::showStep);
   connect(&transfer_watch_, &QFutureWatcher<void>::finished, this, &MainWindow::onTransferDone);
@@ -93,6 +95,7 @@ MainWindow::~MainWindow() {
   job_cancel_ = true;
   job_future_.waitForFinished();
   transfer_watch_.waitForFinished();
+  live_pool_.waitForDone();
 }
 
 // ---------------------------------------------------------------- layout

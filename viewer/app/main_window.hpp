@@ -13,6 +13,7 @@
 #include <QFutureWatcher>
 #include <QMainWindow>
 #include <QSettings>
+#include <QThreadPool>
 #include <QTimer>
 
 #include "image_view.hpp"
@@ -49,6 +50,8 @@ struct LoadedSet {
   std::optional<veneer::ps::PsResult> normals;  // filled in the background after loading
   cv::Mat median;                               // per-pixel median photo (linear BGR)
   cv::Mat median_picture;                       // the same, tonemapped (8-bit), for the views
+  QImage median_image;                          // ... as the views show it (made by the loader)
+  cv::Mat histogram;                            // ... its 64-bin luminance histogram (CV_32F)
   cv::Mat hand_mask;  // segmentation by hand (CV_8UC1, 255 = object); empty = automatic
   int hand_version = 0;
 };
@@ -150,6 +153,14 @@ class MainWindow : public QMainWindow {
   void onRigEvent(const veneer::rig::Event& e);
   void onSetsListed(const std::vector<veneer::rig::SetSummary>& sets);
   void onLiveFrame(const veneer::rig::LiveFrame& frame);
+  // What the live view's thread makes of one frame, for the GUI to show.
+  struct LiveOut {
+    uint64_t seq = 0;
+    cv::Mat frame, repainted;  // empty frame: not a JPEG
+    QImage shown_image, repainted_image;
+    QString state, refusal;
+  };
+  void showLiveFrame(const LiveOut& out, const veneer::match::LiveSession* session);
   void onTransferDone();
   void matchOptionChanged();
   // transfer_panel.cpp: the presets of the Transfer panel
@@ -223,6 +234,7 @@ class MainWindow : public QMainWindow {
   // thread almost nothing: the result's picture, the live repainter, the
   // relit pictures for the light direction the run started with.
   cv::Mat result_picture_, pending_result_picture_;
+  QImage result_image_, pending_result_image_;  // the same as the result view shows it
   std::shared_ptr<veneer::match::LiveSession> pending_session_;
   cv::Mat pending_relit_, pending_relit_source_;
   cv::Vec3d pending_relit_direction_;
@@ -260,6 +272,9 @@ class MainWindow : public QMainWindow {
   std::shared_ptr<veneer::match::TransferResult> pending_result_;
   std::shared_ptr<veneer::match::Relighter> pending_relighter_;
   cv::Mat live_frame_, live_repainted_;
+  QThreadPool live_pool_;  // the live frames' one worker thread (not the pool computes and exports queue in)
+  bool live_busy_ = false;  // a frame is being processed there
+  std::optional<veneer::rig::LiveFrame> live_next_;  // the newest frame that came meanwhile
   int live_frames_ = 0;
   double live_fps_ = 0;
   QElapsedTimer live_clock_;

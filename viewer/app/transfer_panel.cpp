@@ -320,6 +320,7 @@ void MainWindow::startTransfer() {
   pending_key_ = key;
   pending_session_.reset();
   pending_result_picture_ = cv::Mat();
+  pending_result_image_ = QImage();
   pending_relit_ = pending_relit_source_ = cv::Mat();
   const cv::Vec3d light = relight_pad_->direction();
   QPointer<MainWindow> self(this);
@@ -377,6 +378,7 @@ void MainWindow::startTransfer() {
     pending_result_ = std::make_shared<veneer::match::TransferResult>(std::move(*result));
     // what showing the result needs, made here rather than on the GUI thread
     pending_result_picture_ = picture_of(pending_result_->repainted_median);
+    pending_result_image_ = to_qimage(pending_result_picture_);
     {  // the live session: the source's stills (full size) and its object there
       cv::Mat still_mask = pair->src.view.mask;
       if (still_mask.size() != src->set.size)
@@ -454,6 +456,7 @@ void MainWindow::onTransferDone() {
       shown_ = running_;
       relighter_ = pending_relighter_;
       result_picture_ = pending_result_picture_;
+      result_image_ = pending_result_image_;
     }
     startTransfer();
     return;
@@ -489,6 +492,7 @@ void MainWindow::onTransferDone() {
   showStep();
   step_label_->setText(tr("map computed: ") + text);
   result_picture_ = pending_result_picture_;
+  result_image_ = pending_result_image_;
   if (pending_session_) {
     live_session_ = std::move(pending_session_);
     live_refusal_.clear();

@@ -47,6 +47,10 @@ inline QString short_date(const std::string& iso) {
   return t.size() >= 16 && t[10] == 'T' ? t.left(10) + " " + t.mid(11, 5) : t;
 }
 
+// The 64-bin luminance histogram (CV_32F) of an 8-bit BGR picture, what the
+// Look tab draws; made where the picture is made (off the GUI thread).
+cv::Mat luminance_histogram(const cv::Mat& bgr8);
+
 // A linear picture tonemapped for the views (empty stays empty).
 cv::Mat picture_of(const cv::Mat& linear);
 
