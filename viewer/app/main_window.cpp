@@ -46,6 +46,7 @@ MainWindow::MainWindow(const Options& options, QWidget* parent)
                  : options.workdir;
   QDir().mkpath(workdir_ + "/sets");
   library_ = std::make_unique<Library>(workdir_);
+  library_->setProblemHandler(this, [this](const QString& problem) { message(problem, true); });
   buildUi();
   buildMenus();
   guard_wheel(this);
@@ -96,6 +97,7 @@ MainWindow::~MainWindow() {
   job_future_.waitForFinished();
   transfer_watch_.waitForFinished();
   live_pool_.waitForDone();
+  library_->flush();
 }
 
 // ---------------------------------------------------------------- layout

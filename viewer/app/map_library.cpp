@@ -77,7 +77,7 @@ void MainWindow::saveMapToLibrary() {
       if (!self) return;
       if (!error.isEmpty()) return self->message(tr("the map could not be kept in the library: %1").arg(error), true);
       self->library_->addMap(m);
-      if (!self->library_->save()) self->message(self->library_->problem(), true);
+      self->library_->save();
       self->addMapItem(m);
     });
   });

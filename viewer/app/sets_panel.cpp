@@ -229,7 +229,7 @@ void MainWindow::addLocalItem(const QString& folder, const veneer::ImageSet& set
   if (!small.empty()) item->setIcon(0, QIcon(QPixmap::fromImage(to_qimage(small))));
   local_root_->setExpanded(true);
   library_->addSet(folder, set, small.depth() == CV_8U ? small : tonemap_picture(small));
-  if (!library_->save()) message(library_->problem(), true);
+  library_->save();
 }
 
 // What the library remembers from earlier runs: rows without reading a set.
