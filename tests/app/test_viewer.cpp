@@ -484,6 +484,8 @@ TEST(Viewer, ALibraryMapReopensAfterARestartWithoutMatchingAgain) {
     EXPECT_EQ(child<QComboBox>(w, "method")->currentText(), "coherent") << "the options it was computed with";
     EXPECT_EQ(child<QSpinBox>(w, "blend")->value(), 3);
     EXPECT_TRUE(w.lastMessage().contains("reopened")) << w.lastMessage().toStdString();
+    w.resize(1280, 720);
+    save_stage(w, "library-map-reopened");
     QTest::qWait(300);
     EXPECT_EQ(maps->childCount(), 1) << "a reopened map is not stored twice";
   }

@@ -490,7 +490,8 @@ void MainWindow::onTransferDone() {
   else
     message(tr("transfer done (%1)").arg(method_->currentText()));
   showStep();
-  step_label_->setText(tr("map computed: ") + text);
+  step_label_->setText((shown_.reopened.isEmpty() ? tr("map computed: ") : tr("map reopened from the library: ")) +
+                       text);
   result_picture_ = pending_result_picture_;
   result_image_ = pending_result_image_;
   if (pending_session_) {
