@@ -3,6 +3,7 @@
 // view's rate and the GUI's longest stall while a transfer computes.
 #include <algorithm>
 #include <chrono>
+#include <ctime>
 #include <cstdio>
 #include <random>
 #include <vector>
@@ -33,6 +34,14 @@ double now_ms() {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
+// CPU time of the calling thread: a stall with little of it was the thread
+// waiting (for a core, a lock), not working.
+double cpu_ms() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return ts.tv_sec * 1e3 + ts.tv_nsec / 1e6;
+}
+
 template <class F>
 double median_ms(F f, int runs) {
   std::vector<double> t;
@@ -56,13 +65,13 @@ class TracingApp : public QApplication {
   using QApplication::QApplication;
   bool notify(QObject* receiver, QEvent* event) override {
     if (!trace_ || !g_measuring) return QApplication::notify(receiver, event);
-    const double t = now_ms();
+    const double t = now_ms(), cpu = cpu_ms();
     const int type = event->type();
     const bool r = QApplication::notify(receiver, event);
     const double ms = now_ms() - t;
     if (ms > 30)
-      std::fprintf(stderr, "stall trace (%s): %.1f ms in %s '%s' event %d\n", g_measuring, ms,
-                   receiver->metaObject()->className(),
+      std::fprintf(stderr, "stall trace (%s): %.1f ms (%.1f ms of GUI-thread CPU) in %s '%s' event %d\n", g_measuring,
+                   ms, cpu_ms() - cpu, receiver->metaObject()->className(),
                    receiver->objectName().toStdString().c_str(), type);
     return r;
   }

@@ -36,6 +36,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "main_window.hpp"
+#include "widgets.hpp"
 #include "wait_for.hpp"
 #include "veneer/match/transfer.hpp"
 #include "veneer/ps/segmentation.hpp"
@@ -736,7 +737,7 @@ TEST(Viewer, CancelledComputationLeavesUiUsable) {
 
 // Exports cancelled leave nothing behind: not the results folder, not its
 // temporary sibling, not the video or its temporary. The export is held in
-// the thread pool's queue behind a gate until the cancel is in, so the cancel
+// the job pool's queue behind a gate until the cancel is in, so the cancel
 // always comes before the first file (core/Transfer.WritingStopsBetweenFiles
 // WhenCancelled shows the stop between files); uncancelled, the same exports
 // are written whole.
@@ -747,7 +748,7 @@ TEST(Viewer, CancelledExportsLeaveNoHalfWrittenFile) {
   MainWindow& w = *window;
   child<QComboBox>(w, "method")->setCurrentText("coherent");
   ASSERT_TRUE(compute_and_wait(w));
-  QThreadPool* pool = QThreadPool::globalInstance();
+  QThreadPool* pool = veneer::app::job_pool();
   pool->waitForDone();  // the normals' background solve
   const int threads = pool->maxThreadCount();
   const QString results = dir.path() + "/results", video = dir.path() + "/sweep.avi";

@@ -53,7 +53,7 @@ void MainWindow::runJob(const QString& kind, const QString& text,
   step_.start(kind, text);
   showStep();
   QPointer<MainWindow> self(this);
-  job_future_ = QtConcurrent::run([this, self, job, done] {
+  job_future_ = QtConcurrent::run(job_pool(), [this, self, job, done] {
     veneer::Progress progress;
     progress.cancel = &job_cancel_;
     progress.on_progress = [self](double f, const std::string& stage) {

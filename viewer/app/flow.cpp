@@ -90,7 +90,7 @@ void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer
   const bool full = as.has_value();
   QPointer<MainWindow> self(this);
   auto cancel = load_cancel_;
-  (void)QtConcurrent::run([self, folder, as, full, cancel] {
+  (void)QtConcurrent::run(job_pool(), [self, folder, as, full, cancel] {
     ReadSet r;
     auto read = veneer::read_set(folder.toStdString());
     if (!read) {

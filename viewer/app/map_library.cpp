@@ -50,7 +50,7 @@ void MainWindow::saveMapToLibrary() {
   auto result = result_;
   const RunSettings settings = shown_;
   QPointer<MainWindow> self(this);
-  (void)QtConcurrent::run([self, result, settings, m] {
+  (void)QtConcurrent::run(job_pool(), [self, result, settings, m] {
     QDir().mkpath(m.folder);
     QString error;
     if (auto s = veneer::match::write_map((m.folder + "/map.pfm").toStdString(), result->map); !s)
@@ -151,7 +151,7 @@ bool MainWindow::openLibraryMap(const QString& map_folder) {
   ++loads_running_;
   QPointer<MainWindow> self(this);
   auto cancel = load_cancel_;
-  (void)QtConcurrent::run([self, m, name, cancel] {
+  (void)QtConcurrent::run(job_pool(), [self, m, name, cancel] {
     ReadMap r = read_library_map(m);
     QMetaObject::invokeMethod(self.data(), [self, m, name, cancel, r] {
       if (!self) return;

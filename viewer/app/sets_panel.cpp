@@ -290,7 +290,7 @@ void MainWindow::setLoaded(std::shared_ptr<LoadedSet> loaded, veneer::Role as) {
 
 void MainWindow::computeNormals(std::shared_ptr<LoadedSet> loaded) {
   QPointer<MainWindow> self(this);
-  (void)QtConcurrent::run([self, loaded] {
+  (void)QtConcurrent::run(job_pool(), [self, loaded] {
     auto seg = veneer::ps::segment(loaded->set);
     if (!seg) return;
     auto ps = veneer::ps::photometric_stereo(loaded->set, seg->mask);

@@ -324,7 +324,7 @@ void MainWindow::startTransfer() {
   pending_relit_ = pending_relit_source_ = cv::Mat();
   const cv::Vec3d light = relight_pad_->direction();
   QPointer<MainWindow> self(this);
-  transfer_watch_.setFuture(QtConcurrent::run([this, self, dst, src, options, seg, custom_segmentation, dst_hand, src_hand, cached,
+  transfer_watch_.setFuture(QtConcurrent::run(job_pool(), [this, self, dst, src, options, seg, custom_segmentation, dst_hand, src_hand, cached,
                                                previous, given, relighter, light] {
     veneer::Progress progress;
     progress.cancel = &cancel_;

@@ -3,6 +3,7 @@
 #include <QDoubleSpinBox>
 #include <QPushButton>
 #include <QString>
+#include <QThreadPool>
 
 #include <functional>
 
@@ -35,6 +36,12 @@ inline QDoubleSpinBox* number_box(const QString& name, double lo, double hi, int
 // 10 Mpx set being decoded: seconds) -- measured as a 10 s stall in bench_app.
 // (widgets.cpp: TBB's headers and Qt's `emit` do not mix.)
 void gui_work(const std::function<void()>& f);
+
+// The pool the window's long jobs run in (compute, load, normals, export,
+// library maps): not Qt's global pool, whose threads Qt 6.4's own image
+// conversion and scaling borrow while the GUI thread waits for them -- a
+// transfer holding one there stalled the painting of the views.
+QThreadPool* job_pool();
 
 // The mouse wheel changes a spin box, combo box or slider under `root` only
 // when it has focus (clicked or tabbed into); otherwise the wheel scrolls the
