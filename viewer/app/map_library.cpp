@@ -235,6 +235,10 @@ bool MainWindow::reopenWhenLoaded(const QString& folder, veneer::Role role) {
   }
   given_map_ = r.map;
   reopened_folder_ = r.entry.folder;
+  if (computing_) {
+    rerun_ = true;  // the transfer cancelled when the reopening began has not ended yet: after it
+    return true;
+  }
   startTransfer();
   return true;
 }
