@@ -123,6 +123,7 @@ TEST(Daemon, TwoPressesStoreTwoSetsThatPullWithTheRenderedPixelsAndTrueNormals) 
     veneer::sim::RenderOptions o;
     o.size = {256, 170};
     o.noise_sigma = 0;
+    o.camera_optics();  // as the camera twin renders its stills
     auto scene = veneer::sim::make_scene(scenes[s], o);
     ASSERT_TRUE(scene) << scene.message();
     auto ring = veneer::sim::thesis_rig();

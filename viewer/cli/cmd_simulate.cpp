@@ -46,7 +46,7 @@ struct SimulateArgs {
   uint64_t seed = 1;
   double noise = 0.005, scale = 1.0, ambient = 0.0, exposure = 1.0, focal = 0.0;
   int threads = 0;
-  bool list = false, overwrite = false, dng = false;
+  bool list = false, overwrite = false, dng = false, optics = false;
 };
 
 // --motion: numbered frames of the scene moving (a live view with truth).
@@ -101,6 +101,7 @@ int run_simulate(const SimulateArgs& a) {
   o.exposure = a.exposure;
   o.focal_px = a.focal;
   o.threads = a.threads;
+  if (a.optics) o.camera_optics();
   if (auto st = o.check(); !st) return report.usage(st.message());
   if (!a.motion.empty()) return run_motion(a, o);
 
@@ -158,6 +159,10 @@ VENEER_COMMAND(simulate) {
   cmd->add_option("--role", args->role, "destination | source")->capture_default_str();
   cmd->add_option("--threads", args->threads, "worker threads (0 = all cores)")->capture_default_str();
   cmd->add_flag("--overwrite", args->overwrite, "replace an existing set folder");
+  cmd->add_flag("--optics", args->optics,
+                "render through a camera's optics, as the simulated rig does: 4x4 samples per pixel at outlines and "
+                "creases, a 1 px optical low-pass filter, truth over the same footprint (what a RAW file's "
+                "demosaicing needs; default: point-sampled)");
   cmd->add_flag("--dng", args->dng,
                 "also write each photo as a camera RAW file (light_NN.dng: RGGB mosaic, 14-bit, as-shot white "
                 "balance), named in set.json, so the set is read through the RAW path");

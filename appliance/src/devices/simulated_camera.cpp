@@ -268,6 +268,7 @@ struct SimulatedCamera::Impl {
     r.exposure = gain_locked();
     r.noise_sigma = options.noise_sigma;
     r.seed = shots + 1;
+    r.camera_optics();  // a band-limited image, as a real sensor sees (its DNG's demosaicing relies on it)
     return r;
   }
 

@@ -30,7 +30,8 @@ TEST(Raw, DngOfARampDecodesBack) {
   const cv::Mat photo = ramp({96, 64});
   auto dng = encode_dng(photo);
   ASSERT_TRUE(dng) << dng.message();
-  for (Demosaic d : {Demosaic::ahd, Demosaic::ppg, Demosaic::bilinear}) {
+  for (Demosaic d : {Demosaic::ahd, Demosaic::ppg, Demosaic::bilinear, Demosaic::vng, Demosaic::dcb, Demosaic::dht,
+                     Demosaic::aahd}) {
     RawOptions o;
     o.demosaic = d;
     auto back = decode_raw_linear(*dng, o, "ramp.dng");
@@ -80,9 +81,12 @@ TEST(Raw, FileNamesAndOptions) {
   EXPECT_TRUE(is_raw_file_name("light_00.dng"));
   EXPECT_FALSE(is_raw_file_name("light_00.png"));
   EXPECT_FALSE(is_raw_file_name("dng"));
-  for (auto d : {Demosaic::bilinear, Demosaic::vng, Demosaic::ppg, Demosaic::ahd})
+  for (auto d : {Demosaic::bilinear, Demosaic::vng, Demosaic::ppg, Demosaic::ahd, Demosaic::dcb, Demosaic::dht,
+                 Demosaic::aahd})
     EXPECT_EQ(*parse_demosaic(demosaic_name(d)), d);
-  EXPECT_FALSE(parse_demosaic("amaze"));
+  auto amaze = parse_demosaic("amaze");  // not in Debian's LibRaw (no GPL demosaic packs)
+  ASSERT_FALSE(amaze);
+  EXPECT_NE(amaze.message().find("dcb"), std::string::npos) << amaze.message();
   for (auto p : {PhotoSource::automatic, PhotoSource::raw, PhotoSource::developed})
     EXPECT_EQ(*parse_photo_source(photo_source_name(p)), p);
   EXPECT_FALSE(parse_photo_source("jpeg"));

@@ -1,7 +1,7 @@
 // The RAW path on the simulator's renders: a set written with DNG files
 // (add_dng_raw_files) reads back through LibRaw to within 1 % of the linear
 // render, and photometric stereo gets the truth's normals from it as well as
-// from the render itself.
+// from the render itself (issue 29's "what must show").
 #include <cmath>
 #include <cstdio>
 
@@ -23,7 +23,8 @@ ImageSet simulated(const std::string& scene, double noise, cv::Size size = {512,
   o.size = size;
   o.noise_sigma = noise;
   o.seed = 3;
-  o.scale = 2.5;  // the object fills the frame, as the demo's sets
+  o.scale = 2.5;  // the object fills the frame
+  o.camera_optics();  // as the rig's camera twin renders
   auto set = sim::simulate_set(scene, o, Role::destination);
   EXPECT_TRUE(set) << set.message();
   return set ? std::move(set).value() : ImageSet{};
@@ -64,10 +65,11 @@ double mean_angle_deg(const cv::Mat& normals, const Truth& truth) {
 }
 
 // Every photo of a DNG set decodes to the render within 1 %: exactly (to the
-// 14-bit quantization) at the channel each pixel measured, and in full RGB on
-// the smooth bull, whose missing colours demosaicing can interpolate. (On the
-// orange's pixel-scale texture the interpolated colours are ~3 % off: that is
-// the Bayer mosaic, not the decoder; bull 1.1 %, orange 3.2 %, bounded loosely.)
+// 14-bit quantization) at the channel each pixel measured, and in full RGB
+// too: the simulator's camera optics (sim::RenderOptions::camera_optics)
+// band-limit the image as a real sensor's filter does, so demosaicing can
+// interpolate the missing colours. (Point-sampled, the orange's pixel-scale
+// texture left them 3.2 % off.)
 TEST(RawSim, DngSetDecodesToTheLinearRender) {
   for (const std::string scene : {"bull", "orange"}) {
     SCOPED_TRACE(scene);
@@ -88,10 +90,10 @@ TEST(RawSim, DngSetDecodesToTheLinearRender) {
       worst_rgb = std::max(worst_rgb, relative_error(raw->images[i], rendered.images[i], object));
     }
     worst_measured = std::max(worst_measured, measured_channel_error(raw->ambient, rendered.ambient, object));
-    std::printf("%s: DNG -> RAW path vs the render, worst photo: %.3f %% measured channel, %.2f %% full RGB\n",
-                scene.c_str(), 100 * worst_measured, 100 * worst_rgb);
+    std::printf("%s: DNG -> RAW path (%s) vs the render, worst photo: %.3f %% measured channel, %.2f %% full RGB\n",
+                scene.c_str(), demosaic_name(RawOptions{}.demosaic), 100 * worst_measured, 100 * worst_rgb);
     EXPECT_LT(worst_measured, 0.01);
-    EXPECT_LT(worst_rgb, scene == "bull" ? 0.015 : 0.04);  // demosaicing's interpolated colours
+    EXPECT_LT(worst_rgb, 0.01);
 
     // The developed photos (PNG) when asked, and a set without RAW files.
     ReadOptions developed;
@@ -113,49 +115,51 @@ TEST(RawSim, DngSetDecodesToTheLinearRender) {
 }
 
 // Normals from the RAW path against the truth, next to normals from the
-// render itself (photometric stereo called as it is). A camera's pixel
-// measures one colour; to compare like with like the DNG is written at twice
-// the size and read at half size (one RGB pixel per 2x2 Bayer cell), against
-// the render at the target size. The full-size demosaiced read is reported.
+// render itself (photometric stereo called as it is). Measured (noise 0.002,
+// DCB): orange 2.09 deg from the render, 2.58 from the full-size RAW; bull
+// 5.56 / 5.63. The orange's gap is its pixel-scale texture that demosaicing
+// must still interpolate (0.16 deg at 1024x680, bench_raw); point-sampled
+// renders with AHD gave 0.93 here. The half-size read (the user's fast
+// option) is compared with the render at that size.
 TEST(RawSim, NormalsFromDngMatchTheTruthAsFromTheRender) {
   for (const std::string scene : {"orange", "bull"}) {
     SCOPED_TRACE(scene);
-    const double noise = 0.005;
+    const double noise = 0.002;  // the rig twin's
     ImageSet rendered = simulated(scene, noise);
-    ImageSet fine = simulated(scene, noise, {1024, 680});
-    ASSERT_TRUE(add_dng_raw_files(fine));
+    ImageSet with_raw = rendered;
+    ASSERT_TRUE(add_dng_raw_files(with_raw));
     Scratch dir;
-    ASSERT_TRUE(write_set(fine, dir / "set"));
-    ReadOptions half;
-    half.raw.half_size = true;
-    auto raw = read_set(dir / "set", half);
+    ASSERT_TRUE(write_set(with_raw, dir / "set"));
+    auto raw = read_set(dir / "set");
     ASSERT_TRUE(raw) << raw.message();
-    EXPECT_EQ(raw->photos_from, "raw-half");
-    ASSERT_EQ(raw->size, rendered.size);
-    EXPECT_NEAR(raw->camera.focal_px, rendered.camera.focal_px, 1e-6);
-    EXPECT_EQ(raw->truth.mask.size(), raw->size);
+    EXPECT_EQ(raw->photos_from, "raw");
     auto from_raw = ps::photometric_stereo(*raw, raw->truth.mask);
     auto from_render = ps::photometric_stereo(rendered, rendered.truth.mask);
     ASSERT_TRUE(from_raw) << from_raw.message();
     ASSERT_TRUE(from_render) << from_render.message();
     const double e_raw = mean_angle_deg(from_raw->normals, raw->truth);
     const double e_render = mean_angle_deg(from_render->normals, rendered.truth);
-    auto full = read_set(dir / "set");
-    ASSERT_TRUE(full) << full.message();
-    auto from_full = ps::photometric_stereo(*full, full->truth.mask);
-    ASSERT_TRUE(from_full) << from_full.message();
-    auto from_fine = ps::photometric_stereo(fine, fine.truth.mask);
-    ASSERT_TRUE(from_fine) << from_fine.message();
-    const double e_fine = mean_angle_deg(from_fine->normals, fine.truth);
-    const double e_full = mean_angle_deg(from_full->normals, full->truth);
-    std::printf("%s normals, mean angle to the truth: 512x340 render %.2f deg, half-size RAW of a 1024x680 DNG "
-                "%.2f deg; 1024x680 render %.2f deg, full-size RAW (AHD) %.2f deg\n",
-                scene.c_str(), e_render, e_raw, e_fine, e_full);
-    // Measured (noise 0.005): orange 2.68 / 2.73 and 2.69 / 3.64 (the texture's
-    // interpolated colours), bull 5.39 / 6.39 (LibRaw's half size takes each
-    // colour from its own corner of the cell: shadow edges) and 5.28 / 5.69.
-    // The better of the two RAW reads stays within 0.5 degrees of the render.
-    EXPECT_LT(std::min(e_raw - e_render, e_full - e_fine), 0.5);
+
+    ReadOptions half;
+    half.raw.half_size = true;
+    auto small = read_set(dir / "set", half);
+    ASSERT_TRUE(small) << small.message();
+    EXPECT_EQ(small->photos_from, "raw-half");
+    ImageSet small_render = simulated(scene, noise, small->size);
+    EXPECT_NEAR(small->camera.focal_px, small_render.camera.focal_px, 1e-6);
+    auto from_small = ps::photometric_stereo(*small, small->truth.mask);
+    auto from_small_render = ps::photometric_stereo(small_render, small_render.truth.mask);
+    ASSERT_TRUE(from_small) << from_small.message();
+    ASSERT_TRUE(from_small_render) << from_small_render.message();
+    const double e_small = mean_angle_deg(from_small->normals, small->truth);
+    const double e_small_render = mean_angle_deg(from_small_render->normals, small_render.truth);
+    std::printf("%s normals, mean angle to the truth: %dx%d render %.2f deg, full-size RAW (%s) %.2f deg; "
+                "%dx%d render %.2f deg, half-size RAW %.2f deg\n",
+                scene.c_str(), rendered.size.width, rendered.size.height, e_render,
+                demosaic_name(RawOptions{}.demosaic), e_raw, small->size.width, small->size.height, e_small_render,
+                e_small);
+    EXPECT_LT(e_raw - e_render, 0.6);
+    EXPECT_LT(e_small - e_small_render, 1.0);
   }
 }
 

@@ -20,31 +20,45 @@ std::string libraw_error(int code) { return libraw_strerror(code); }
 
 }  // namespace
 
-const char* demosaic_name(Demosaic d) {
-  switch (d) {
-    case Demosaic::bilinear: return "bilinear";
-    case Demosaic::vng: return "vng";
-    case Demosaic::ppg: return "ppg";
-    case Demosaic::ahd: return "ahd";
+namespace {
+
+struct DemosaicInfo {
+  Demosaic method;
+  const char* name;
+  int user_qual;  // LibRaw's output_params.user_qual
+};
+constexpr DemosaicInfo kDemosaics[] = {
+    {Demosaic::bilinear, "bilinear", 0}, {Demosaic::vng, "vng", 1},  {Demosaic::ppg, "ppg", 2},
+    {Demosaic::ahd, "ahd", 3},           {Demosaic::dcb, "dcb", 4},  {Demosaic::dht, "dht", 11},
+    {Demosaic::aahd, "aahd", 12},
+};
+
+const DemosaicInfo* find_demosaic(Demosaic d) {
+  for (const auto& i : kDemosaics) {
+    if (i.method == d) return &i;
   }
-  return "ahd";
+  return nullptr;
+}
+
+}  // namespace
+
+const char* demosaic_name(Demosaic d) {
+  const DemosaicInfo* i = find_demosaic(d);
+  return i ? i->name : "unknown";
 }
 
 Expected<Demosaic> parse_demosaic(const std::string& name) {
-  for (Demosaic d : {Demosaic::bilinear, Demosaic::vng, Demosaic::ppg, Demosaic::ahd}) {
-    if (name == demosaic_name(d)) return d;
+  std::string known;
+  for (const auto& i : kDemosaics) {
+    if (name == i.name) return i.method;
+    known += (known.empty() ? "" : ", ") + std::string(i.name);
   }
-  return make_error("demosaic \"" + name.substr(0, 32) + "\" is not bilinear, vng, ppg or ahd");
+  return make_error("demosaic \"" + name.substr(0, 32) + "\" is not one of " + known);
 }
 
 Status RawOptions::check() const {
-  switch (demosaic) {
-    case Demosaic::bilinear:
-    case Demosaic::vng:
-    case Demosaic::ppg:
-    case Demosaic::ahd: return Status::success();
-  }
-  return make_error("unknown demosaic method");
+  if (!find_demosaic(demosaic)) return make_error("unknown demosaic method");
+  return Status::success();
 }
 
 bool is_raw_file_name(const std::string& file_name) {
@@ -79,12 +93,7 @@ Expected<cv::Mat> decode_raw_linear(std::string_view bytes, const RawOptions& op
   // normals off by 12 degrees). Off: the file's white level for every frame.
   p.adjust_maximum_thr = 0.0f;
   p.half_size = options.half_size ? 1 : 0;
-  switch (options.demosaic) {
-    case Demosaic::bilinear: p.user_qual = 0; break;
-    case Demosaic::vng: p.user_qual = 1; break;
-    case Demosaic::ppg: p.user_qual = 2; break;
-    case Demosaic::ahd: p.user_qual = 3; break;
-  }
+  p.user_qual = find_demosaic(options.demosaic)->user_qual;
   // LibRaw reads from the buffer without writing to it.
   int r = raw->open_buffer(const_cast<char*>(bytes.data()), bytes.size());
   if (r != LIBRAW_SUCCESS) return make_error(name + ": not a RAW file LibRaw can read (" + libraw_error(r) + ")");

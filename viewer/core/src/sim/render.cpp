@@ -1,8 +1,10 @@
 // The ray caster: camera rays once per image geometry (a cached G-buffer of
-// hit point, normals, albedo, specular parameters), then one cheap shading
-// pass per shot: Lambert x albedo + Blinn-Phong lobe, attached and cast
-// shadows (a shadow ray to the point lamp), 1/r^2 falloff, ambient, exposure,
-// counter-based Gaussian noise, clipping to [0, 1] like a sensor.
+// hit point, normals, albedo, specular parameters; pixels on an outline or a
+// crease also get a grid of samples over their square), then one cheap
+// shading pass per shot: Lambert x albedo + Blinn-Phong lobe, attached and
+// cast shadows (a shadow ray to the point lamp), 1/r^2 falloff, ambient,
+// exposure, the optical low-pass filter, counter-based Gaussian noise,
+// clipping to [0, 1] like a sensor.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -11,6 +13,7 @@
 #include <numbers>
 #include <vector>
 
+#include <opencv2/imgproc.hpp>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
@@ -135,6 +138,8 @@ Status RenderOptions::check() const {
       return make_error("render options: offset_m components must be within +-0.5 m");
   }
   if (threads < 0) return make_error("render options: threads must be >= 0");
+  if (edge_samples < 1 || edge_samples > 16) return make_error("render options: edge_samples must be in 1..16");
+  if (!(olpf_spread_px >= 0) || olpf_spread_px > 2) return make_error("render options: olpf_spread_px must be in [0, 2]");
   return Status::success();
 }
 
@@ -152,58 +157,106 @@ Expected<std::shared_ptr<const Scene>> make_scene(const std::string& name, const
   return shared;
 }
 
-std::shared_ptr<const GBuffer> Scene::gbuffer(cv::Size size, double focal, int threads) const {
+namespace {
+
+// Whether two neighbouring centre samples see different geometry, where a
+// point sample per pixel would alias: another surface (outline, the table, a
+// plinth), another primitive (a crease where two meet), or a fold. Texture
+// (albedo, bumps) at pixel scale is left to the optical low-pass filter, as
+// sampling it finer would cost several material evaluations per pixel.
+bool geometry_differs(const GPixel& a, const GPixel& b) {
+  if (a.kind != b.kind) return true;
+  if (a.kind == 0 || a.kind == 1) return false;
+  if (a.prim != b.prim) return true;
+  return dot(f3(a.ng), f3(b.ng)) < 0.9962;  // 5 degrees
+}
+
+}  // namespace
+
+std::shared_ptr<const GBuffer> Scene::gbuffer(cv::Size size, double focal, int edge_samples, int threads) const {
+  edge_samples = std::max(1, edge_samples);
   {
     std::lock_guard lock(mutex_);
-    if (cache_ && cache_->size == size && cache_->focal == focal) return cache_;
+    if (cache_ && cache_->size == size && cache_->focal == focal && cache_->edge_samples == edge_samples) return cache_;
   }
   auto gb = std::make_shared<GBuffer>();
   gb->size = size;
   gb->focal = focal;
+  gb->edge_samples = edge_samples;
   gb->cx = (size.width - 1) * 0.5;
   gb->cy = (size.height - 1) * 0.5;
   gb->px.resize(static_cast<size_t>(size.area()));
   const V3 camera{0, 0, kCameraZ};
   const V3 cam_obj = to_object(camera);
   const double table_z_world = table_world_z();
-  for_rows(size.height, threads, [&](int y) {
-    for (int x = 0; x < size.width; ++x) {
-      GPixel& g = gb->px[static_cast<size_t>(y) * size.width + x];
-      g = GPixel{};
-      V3 d = normalize({(x - gb->cx) / focal, -(y - gb->cy) / focal, -1.0});
-      V3 n;
-      int prim = -1;
-      double t_obj = shape.intersect(cam_obj, d, 1e-9, 1e9, &n, &prim);
-      if (t_obj > 0) {
-        V3 p_obj = cam_obj + d * t_obj;
-        SurfaceSample s;
-        s.normal = n;
-        material(p_obj, n, prim, shape.prims[static_cast<size_t>(prim)].part, &s);
-        V3 ns = normalize(s.normal);
-        if (dot(ns, d) > -0.02) ns = normalize(ns - d * (dot(ns, d) + 0.02));  // keep bumps facing the camera
-        set3(g.p, to_world(p_obj));
-        set3(g.ng, n);
-        set3(g.n, ns);
-        set3(g.albedo, s.albedo);
-        g.ks = static_cast<float>(s.ks);
-        g.shininess = static_cast<float>(s.shininess);
-        g.kind = shape.prims[static_cast<size_t>(prim)].part == support_part ? 3 : 2;
-      } else if (d.z < 0) {
-        double t = (table_z_world - camera.z) / d.z;
-        V3 p = camera + d * t;
-        // a faint speckled cloth (cells of 0.5 mm, about a pixel): dark, never flat zero
-        double v = 0.85 + 0.3 * cell_rand(static_cast<int>(std::floor(p.x * 2000)),
-                                          static_cast<int>(std::floor(p.y * 2000)), 0, 991);
-        set3(g.p, p);
-        set3(g.ng, {0, 0, 1});
-        set3(g.n, {0, 0, 1});
-        set3(g.albedo, table_albedo * v);
-        g.ks = 0;
-        g.shininess = 1;
-        g.kind = 1;
-      }
+  // The camera ray through image point (x, y) (pixel centres at integers).
+  auto cast = [&](double x, double y, GPixel& g) {
+    g = GPixel{};
+    g.prim = -1;
+    V3 d = normalize({(x - gb->cx) / focal, -(y - gb->cy) / focal, -1.0});
+    V3 n;
+    int prim = -1;
+    double t_obj = shape.intersect(cam_obj, d, 1e-9, 1e9, &n, &prim);
+    if (t_obj > 0) {
+      V3 p_obj = cam_obj + d * t_obj;
+      SurfaceSample s;
+      s.normal = n;
+      material(p_obj, n, prim, shape.prims[static_cast<size_t>(prim)].part, &s);
+      V3 ns = normalize(s.normal);
+      if (dot(ns, d) > -0.02) ns = normalize(ns - d * (dot(ns, d) + 0.02));  // keep bumps facing the camera
+      set3(g.p, to_world(p_obj));
+      set3(g.ng, n);
+      set3(g.n, ns);
+      set3(g.albedo, s.albedo);
+      g.ks = static_cast<float>(s.ks);
+      g.shininess = static_cast<float>(s.shininess);
+      g.prim = prim;
+      g.kind = shape.prims[static_cast<size_t>(prim)].part == support_part ? 3 : 2;
+    } else if (d.z < 0) {
+      double t = (table_z_world - camera.z) / d.z;
+      V3 p = camera + d * t;
+      // a faint speckled cloth (cells of 0.5 mm, about a pixel): dark, never flat zero
+      double v = 0.85 + 0.3 * cell_rand(static_cast<int>(std::floor(p.x * 2000)),
+                                        static_cast<int>(std::floor(p.y * 2000)), 0, 991);
+      set3(g.p, p);
+      set3(g.ng, {0, 0, 1});
+      set3(g.n, {0, 0, 1});
+      set3(g.albedo, table_albedo * v);
+      g.ks = 0;
+      g.shininess = 1;
+      g.kind = 1;
     }
+  };
+  for_rows(size.height, threads, [&](int y) {
+    for (int x = 0; x < size.width; ++x) cast(x, y, gb->px[static_cast<size_t>(y) * size.width + x]);
   });
+  if (edge_samples > 1) {
+    // Pixels whose centre differs from a 4-neighbour's get the box aperture.
+    const int w = size.width, h = size.height;
+    std::vector<uint8_t> flagged(static_cast<size_t>(size.area()), 0);
+    for_rows(h, threads, [&](int y) {
+      for (int x = 0; x < w; ++x) {
+        const size_t i = static_cast<size_t>(y) * w + x;
+        const GPixel& g = gb->px[i];
+        flagged[i] = (x > 0 && geometry_differs(g, gb->px[i - 1])) || (x + 1 < w && geometry_differs(g, gb->px[i + 1])) ||
+                     (y > 0 && geometry_differs(g, gb->px[i - w])) || (y + 1 < h && geometry_differs(g, gb->px[i + w]));
+      }
+    });
+    const uint32_t per = static_cast<uint32_t>(edge_samples * edge_samples);
+    gb->first.assign(flagged.size() + 1, 0);
+    for (size_t i = 0; i < flagged.size(); ++i) gb->first[i + 1] = gb->first[i] + (flagged[i] ? per : 0);
+    gb->sub.resize(gb->first.back());
+    for_rows(h, threads, [&](int y) {
+      for (int x = 0; x < w; ++x) {
+        const size_t i = static_cast<size_t>(y) * w + x;
+        if (!flagged[i]) continue;
+        GPixel* out = gb->sub.data() + gb->first[i];
+        for (int sy = 0; sy < edge_samples; ++sy)
+          for (int sx = 0; sx < edge_samples; ++sx)
+            cast(x - 0.5 + (sx + 0.5) / edge_samples, y - 0.5 + (sy + 0.5) / edge_samples, *out++);
+      }
+    });
+  }
   std::shared_ptr<const GBuffer> result = gb;
   std::lock_guard lock(mutex_);
   cache_ = result;
@@ -217,51 +270,77 @@ struct ShotLamp {
   V3 radiant;  // RGB radiant intensity (irradiance = radiant / r^2)
 };
 
-// Shades one shot from the G-buffer into a BGR CV_32FC3.
+// The optical low-pass filter on a float image, in place: a birefringent
+// filter splits each ray into spots +-spread/2 px apart in x and in y (4
+// spots), here on the pixel grid by linear interpolation. spread 1 is the
+// kernel [1/4 1/2 1/4] per axis, which has a zero at the sensor's Nyquist
+// frequency (where a Bayer mosaic's colours alias into each other).
+void low_pass(cv::Mat& img, double spread) {
+  if (!(spread > 0)) return;
+  const double h = spread / 2;  // each spot's shift, <= 1 px
+  const cv::Mat k = (cv::Mat_<float>(3, 1) << static_cast<float>(h / 2), static_cast<float>(1 - h), static_cast<float>(h / 2));
+  cv::sepFilter2D(img, img, -1, k, k, cv::Point(-1, -1), 0, cv::BORDER_REFLECT);
+}
+
+// Shades one shot from the G-buffer into a BGR CV_32FC3: each pixel the mean
+// radiance over its samples, x exposure, low-pass filtered, then sensor noise
+// and clipping.
 cv::Mat shade(const Scene& scene, const GBuffer& gb, const std::vector<ShotLamp>& lamps, const RenderOptions& o) {
   cv::Mat out(gb.size, CV_32FC3);
   const V3 camera{0, 0, kCameraZ};
   const uint64_t key = hash_combine(hash_combine(0x7665'6e65'6572ULL, o.seed), o.shot);
   const double inv_scale = 1.0 / scene.scale;
   const float* quantiles = normal_quantiles().data();
+  auto radiance = [&](const GPixel& g) {
+    V3 rgb{0, 0, 0};
+    if (g.kind == 0) return rgb;
+    V3 p = f3(g.p), n = f3(g.n), ng = f3(g.ng), albedo = f3(g.albedo);
+    V3 v = normalize(camera - p);
+    V3 shadow_origin = scene.to_object(p + ng * kShadowEps);
+    for (const auto& lamp : lamps) {
+      V3 L = lamp.pos - p;
+      double r2 = dot(L, L), r = std::sqrt(r2);
+      V3 l = L / r;
+      double ndl = dot(n, l);
+      if (ndl <= 0 || dot(ng, l) <= 0) continue;  // attached shadow
+      if (o.cast_shadows && scene.shape.occluded(shadow_origin, l, 1e-9, (r - kShadowEps) * inv_scale))
+        continue;  // cast shadow
+      V3 E = lamp.radiant / r2;
+      double spec = 0;
+      if (g.ks > 0) {
+        V3 hv = normalize(l + v);
+        double ndh = dot(n, hv);
+        if (ndh > 0) spec = g.ks * std::pow(ndh, static_cast<double>(g.shininess));
+      }
+      rgb += mul(E, albedo * ndl + V3{spec, spec, spec});
+    }
+    rgb += albedo * o.ambient;
+    return rgb;
+  };
   for_rows(gb.size.height, o.threads, [&](int y) {
     auto* row = out.ptr<cv::Vec3f>(y);
     for (int x = 0; x < gb.size.width; ++x) {
-      const size_t idx = static_cast<size_t>(y) * gb.size.width + x;
-      const GPixel& g = gb.px[idx];
+      const auto [begin, end] = gb.samples(static_cast<size_t>(y) * gb.size.width + x);
       V3 rgb{0, 0, 0};
-      if (g.kind != 0) {
-        V3 p = f3(g.p), n = f3(g.n), ng = f3(g.ng), albedo = f3(g.albedo);
-        V3 v = normalize(camera - p);
-        V3 shadow_origin = scene.to_object(p + ng * kShadowEps);
-        for (const auto& lamp : lamps) {
-          V3 L = lamp.pos - p;
-          double r2 = dot(L, L), r = std::sqrt(r2);
-          V3 l = L / r;
-          double ndl = dot(n, l);
-          if (ndl <= 0 || dot(ng, l) <= 0) continue;  // attached shadow
-          if (o.cast_shadows && scene.shape.occluded(shadow_origin, l, 1e-9, (r - kShadowEps) * inv_scale))
-            continue;  // cast shadow
-          V3 E = lamp.radiant / r2;
-          double spec = 0;
-          if (g.ks > 0) {
-            V3 hv = normalize(l + v);
-            double ndh = dot(n, hv);
-            if (ndh > 0) spec = g.ks * std::pow(ndh, static_cast<double>(g.shininess));
-          }
-          rgb += mul(E, albedo * ndl + V3{spec, spec, spec});
-        }
-        rgb += albedo * o.ambient;
-      }
-      rgb = rgb * o.exposure;
+      for (const GPixel* g = begin; g != end; ++g) rgb += radiance(*g);
+      rgb = rgb * (o.exposure / static_cast<double>(end - begin));
+      row[x] = cv::Vec3f(static_cast<float>(rgb.z), static_cast<float>(rgb.y), static_cast<float>(rgb.x));  // BGR
+    }
+  });
+  low_pass(out, o.olpf_spread_px);
+  for_rows(gb.size.height, o.threads, [&](int y) {
+    auto* row = out.ptr<cv::Vec3f>(y);
+    for (int x = 0; x < gb.size.width; ++x) {
+      cv::Vec3f& v = row[x];
       if (o.noise_sigma > 0) {
         double nz[3];
-        gauss3(quantiles, key, idx, nz);
-        rgb += V3{nz[0], nz[1], nz[2]} * o.noise_sigma;
+        gauss3(quantiles, key, static_cast<size_t>(y) * gb.size.width + x, nz);
+        // (the noise triple is drawn in r, g, b order)
+        v[2] = static_cast<float>(v[2] + nz[0] * o.noise_sigma);
+        v[1] = static_cast<float>(v[1] + nz[1] * o.noise_sigma);
+        v[0] = static_cast<float>(v[0] + nz[2] * o.noise_sigma);
       }
-      // BGR, clipped like a sensor
-      row[x] = cv::Vec3f(static_cast<float>(std::clamp(rgb.z, 0.0, 1.0)), static_cast<float>(std::clamp(rgb.y, 0.0, 1.0)),
-                         static_cast<float>(std::clamp(rgb.x, 0.0, 1.0)));
+      for (int c = 0; c < 3; ++c) v[c] = std::clamp(v[c], 0.0f, 1.0f);  // clipped like a sensor
     }
   });
   return out;
@@ -289,7 +368,7 @@ cv::Mat render(const Scene& scene, const std::vector<Lamp>& lamps, const RenderO
     return {};
   }
   progress.report(0.0, "casting camera rays");
-  auto gb = scene.gbuffer(options.size, focal_for(options), options.threads);
+  auto gb = scene.gbuffer(options.size, focal_for(options), options.edge_samples, options.threads);
   if (progress.cancelled()) return {};
   progress.report(0.5, "shading");
   cv::Mat out = shade(scene, *gb, shot_lamps(lamps), options);
@@ -303,20 +382,52 @@ Truth render_truth(const Scene& scene, const RenderOptions& options) {
     VLOG_ERROR("Sim", "render_truth: {}", st.message());
     return t;
   }
-  auto gb = scene.gbuffer(options.size, focal_for(options), options.threads);
+  auto gb = scene.gbuffer(options.size, focal_for(options), options.edge_samples, options.threads);
   const cv::Size size = gb->size;
+  // Per pixel, over its samples: the object's coverage, its albedo-weighted
+  // normal, albedo and depth sums (as fractions of the samples); then the
+  // same low-pass filter as the photos.
+  cv::Mat cover(size, CV_32FC1), weighted_n(size, CV_32FC3), albedo(size, CV_32FC3), depth(size, CV_32FC1);
+  for_rows(size.height, options.threads, [&](int y) {
+    for (int x = 0; x < size.width; ++x) {
+      const auto [begin, end] = gb->samples(static_cast<size_t>(y) * size.width + x);
+      double c = 0, d = 0;
+      V3 n{0, 0, 0}, a{0, 0, 0};
+      for (const GPixel* g = begin; g != end; ++g) {
+        if (g->kind != 2) continue;
+        const V3 ga = f3(g->albedo);
+        c += 1;
+        n += f3(g->n) * ((ga.x + ga.y + ga.z) / 3 + 1e-6);
+        a += ga;
+        d += kCameraZ - g->p[2];
+      }
+      const double k = 1.0 / static_cast<double>(end - begin);
+      cover.at<float>(y, x) = static_cast<float>(c * k);
+      weighted_n.at<cv::Vec3f>(y, x) = {static_cast<float>(n.x * k), static_cast<float>(n.y * k), static_cast<float>(n.z * k)};
+      albedo.at<cv::Vec3f>(y, x) = {static_cast<float>(a.z * k), static_cast<float>(a.y * k), static_cast<float>(a.x * k)};
+      depth.at<float>(y, x) = static_cast<float>(d * k);
+    }
+  });
+  for (cv::Mat* m : {&cover, &weighted_n, &albedo, &depth}) low_pass(*m, options.olpf_spread_px);
   t.normals = cv::Mat(size, CV_32FC3, cv::Scalar::all(0));
   t.mask = cv::Mat(size, CV_8UC1, cv::Scalar::all(0));
   t.albedo = cv::Mat(size, CV_32FC3, cv::Scalar::all(0));
   t.depth = cv::Mat(size, CV_32FC1, cv::Scalar::all(0));
   for (int y = 0; y < size.height; ++y) {
     for (int x = 0; x < size.width; ++x) {
-      const GPixel& g = gb->px[static_cast<size_t>(y) * size.width + x];
-      if (g.kind != 2) continue;
-      t.normals.at<cv::Vec3f>(y, x) = {g.n[0], g.n[1], g.n[2]};
+      const float c = cover.at<float>(y, x);
+      const cv::Vec3f n = weighted_n.at<cv::Vec3f>(y, x);
+      const double len = cv::norm(n);
+      if (c < 0.5f || !(len > 0)) continue;
+      t.normals.at<cv::Vec3f>(y, x) = n / static_cast<float>(len);
+      if (!(options.olpf_spread_px > 0)) {
+        // a point-sampled pixel keeps its sample's normal bit for bit (whatever the albedo)
+        const auto [begin, end] = gb->samples(static_cast<size_t>(y) * size.width + x);
+        if (end - begin == 1) t.normals.at<cv::Vec3f>(y, x) = {begin->n[0], begin->n[1], begin->n[2]};
+      }
       t.mask.at<uint8_t>(y, x) = 255;
-      t.albedo.at<cv::Vec3f>(y, x) = {g.albedo[2], g.albedo[1], g.albedo[0]};
-      t.depth.at<float>(y, x) = static_cast<float>(kCameraZ - g.p[2]);
+      t.albedo.at<cv::Vec3f>(y, x) = albedo.at<cv::Vec3f>(y, x) / c;
+      t.depth.at<float>(y, x) = depth.at<float>(y, x) / c;
     }
   }
   return t;
@@ -347,7 +458,7 @@ Expected<ImageSet> simulate_set(const std::string& scene_name, const RenderOptio
 
   const int shots = static_cast<int>(lamps.size()) + 1;
   progress.report(0.0, "casting camera rays");
-  auto gb = scene.gbuffer(options.size, focal, options.threads);
+  auto gb = scene.gbuffer(options.size, focal, options.edge_samples, options.threads);
   for (size_t i = 0; i < lamps.size(); ++i) {
     if (progress.cancelled()) return make_error("simulate " + scene_name + ": cancelled");
     progress.report((0.3 + i) / shots, "lamp " + std::to_string(i + 1));

@@ -2,10 +2,12 @@
 // The inside of a simulator scene: a union of primitives in object space, a
 // material (albedo texture, bump, specular lobe) and the dark table behind it,
 // plus the placement chosen by RenderOptions::offset_m and ::scale.
+#include <cstdint>
 #include <functional>
 #include <memory>
 #include <mutex>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -34,13 +36,28 @@ struct GPixel {
   float n[3];       // shading normal
   float albedo[3];  // RGB
   float ks, shininess;
+  int32_t prim;     // primitive hit (-1 = none: table or nothing)
   uint8_t kind;     // 0 = nothing, 1 = table, 2 = object, 3 = its base (a plinth: lit and shaded, not the object)
 };
 
+// The camera rays of one image geometry. Every pixel has its centre sample;
+// a pixel whose centre differs from a neighbour's (an outline, a crease, an
+// albedo edge, a bump at pixel scale) also has edge_samples^2 stratified
+// samples over its square, which it is shaded from instead (the pixel's box
+// aperture, where point sampling would alias).
 struct GBuffer {
   cv::Size size;
   double focal = 0, cx = 0, cy = 0;
-  std::vector<GPixel> px;  // row-major
+  int edge_samples = 1;          // samples per side at flagged pixels (1 = point sampling only)
+  std::vector<GPixel> px;        // centre samples, row-major
+  std::vector<uint32_t> first;   // size area + 1: the samples of pixel i are sub[first[i] .. first[i + 1])
+                                 // (an empty range: the centre sample alone); empty when edge_samples = 1
+  std::vector<GPixel> sub;
+  // The samples a pixel integrates: [begin, end).
+  std::pair<const GPixel*, const GPixel*> samples(size_t i) const {
+    if (!first.empty() && first[i + 1] > first[i]) return {sub.data() + first[i], sub.data() + first[i + 1]};
+    return {&px[i], &px[i] + 1};
+  }
 };
 
 class Scene {
@@ -67,7 +84,7 @@ class Scene {
   double table_world_z() const { return offset.z + table_z; }
 
   // The G-buffer for this image geometry, built once and cached.
-  std::shared_ptr<const GBuffer> gbuffer(cv::Size size, double focal, int threads) const;
+  std::shared_ptr<const GBuffer> gbuffer(cv::Size size, double focal, int edge_samples, int threads) const;
 
  private:
   mutable std::mutex mutex_;

@@ -15,15 +15,17 @@
 
 namespace veneer {
 
-enum class Demosaic { bilinear, vng, ppg, ahd };
-const char* demosaic_name(Demosaic);                    // "bilinear" | "vng" | "ppg" | "ahd"
+// LibRaw's interpolations (user_qual 0, 1, 2, 3, 4, 11, 12).
+enum class Demosaic { bilinear, vng, ppg, ahd, dcb, dht, aahd };
+const char* demosaic_name(Demosaic);                    // "bilinear" | "vng" | "ppg" | "ahd" | "dcb" | "dht" | "aahd"
 Expected<Demosaic> parse_demosaic(const std::string&);
 
 struct RawOptions {
   bool half_size = false;             // one pixel per 2x2 Bayer cell (half width and height, no
                                       // interpolation, ~4x faster); default off = full resolution
-  Demosaic demosaic = Demosaic::ahd;  // interpolation at full resolution (default AHD, dcraw's default;
-                                      // ppg is ~3x faster, bilinear ~6x)
+  Demosaic demosaic = Demosaic::dcb;  // interpolation at full resolution. DCB: of LibRaw's methods the one
+                                      // whose photometric stereo comes nearest the linear render's on the
+                                      // simulator's sets (bench_raw); ~1.7x AHD's time, ppg ~4x faster
   Status check() const;
 };
 

@@ -48,6 +48,24 @@ struct RenderOptions {
   int threads = 0;              // 0 = all cores
   bool cast_shadows = true;     // false: a lamp lights every point facing it, blocked or not (the
                                 // relighting measure's way to find the cast shadows, match/metrics.hpp)
+  // The camera's optics: a real sensor sees a band-limited image (lens and optical low-pass filter,
+  // each pixel integrating its square), which is what demosaicing a Bayer mosaic relies on. Both the
+  // photo and its RAW mosaic come from that image, and the truth is what the same footprint averages.
+  // Off by default (point sampling, what the quality tests' thresholds were set on); the rig's camera
+  // twin and the RAW tests turn them on with camera_optics().
+  int edge_samples = 1;         // samples per side over each pixel whose neighbours see other geometry
+                                // (outline, crease, fold): the pixel's box aperture where a point
+                                // sample would alias; 1 = point sampling only
+  double olpf_spread_px = 0.0;  // optical low-pass filter: a birefringent filter splitting each ray
+                                // into 4 spots this far apart [px] in x and y, applied before noise
+                                // and clipping; 1 (a camera's usual) = kernel [1/4 1/2 1/4] per axis,
+                                // zero response at the Nyquist frequency; 0 = none; at most 2
+  // A real camera's optics: 4x4 samples at outlines and creases, a 1 px low-pass filter.
+  RenderOptions& camera_optics() {
+    edge_samples = 4;
+    olpf_spread_px = 1.0;
+    return *this;
+  }
   Status check() const;
 };
 
@@ -70,14 +88,20 @@ Expected<std::shared_ptr<const Scene>> make_scene_with_material(const std::strin
 // Renders linear BGR CV_32FC3 (clipped at 1.0 like a sensor) under `lamps`
 // (all on at once; none = the ambient frame). The object's placement (offset_m,
 // scale) is the one given to make_scene; here size, focal_px, exposure, noise,
-// ambient, seed, shot and threads apply. Camera rays are cast once per image
+// ambient, seed, shot, threads and the optics apply. Camera rays are cast once per image
 // geometry and cached in the scene, so repeated renders only shade. Pixel
 // value = exposure * (sum over lamps of albedo * E * max(0, n.l) + Blinn-Phong
 // lobe * E, unless shadowed; + ambient * albedo) + noise, with E = the lamp's
-// irradiance at the point (1/r^2). Thread-safe; empty when cancelled.
+// irradiance at the point (1/r^2), averaged over the pixel's samples and low-pass
+// filtered before the noise. Thread-safe; empty when cancelled.
 cv::Mat render(const Scene& scene, const std::vector<Lamp>& lamps, const RenderOptions& options,
                const Progress& progress = {});
-// Truth for the scene as seen by the camera: normals, mask, albedo, depth.
+// Truth for the scene as seen by the camera, over each pixel's footprint (its
+// samples, then the optical low-pass filter): normals = the albedo-weighted
+// mean normal of the object there, renormalised (what Lambertian photometric
+// stereo recovers from a pixel that mixes several); mask = the object covers
+// at least half the footprint; albedo and depth = their means over the object.
+// Point-sampled when edge_samples = 1 and olpf_spread_px = 0.
 Truth render_truth(const Scene& scene, const RenderOptions& options);
 
 // A whole image set as the thesis rig would capture it: ambient frame + one shot
