@@ -15,11 +15,12 @@
 namespace veneer::ps {
 namespace {
 
-ImageSet simulate(const std::string& scene, double ambient = 0.02) {
+ImageSet simulate(const std::string& scene, double ambient = 0.02, bool optics = false) {
   sim::RenderOptions o;
   o.size = {512, 340};
   o.seed = 5;
   o.ambient = ambient;
+  if (optics) o.camera_optics();
   auto s = sim::simulate_set(scene, o);
   EXPECT_TRUE(s.ok()) << (s.ok() ? "" : s.message());
   return s.ok() ? std::move(*s) : ImageSet{};
@@ -60,10 +61,34 @@ TEST(SegmentObjects, TheBullWithoutItsPlinthWithItsShadowedLegsAndTail) {
   EXPECT_LT(o.extra, 0.03);  // specks of the plinth in the legs' shadows at most
 }
 
-// Objects without a base keep every pixel, flat faces included.
+// Through a camera's optics (the rig twin's: a lens-blurred crease between
+// the plinth's faces, penumbrae of the legs' shadows across its top, its edge
+// mixed with the backdrop) the plinth is still found whole: its faces join
+// across the seams, and the seams and rim go with it.
+TEST(SegmentObjects, ThePlinthThroughACamerasOpticsSeamsAndRimIncluded) {
+  ImageSet set = simulate("bull", 0.02, true);
+  SupportRemoval base;
+  const cv::Mat m = object_of(set, &base);
+  const Overlap o = overlap(m, set.truth.mask);
+  std::printf("bull through optics: missed %.2f %%, extra %.2f %%, base %d px on %d faces\n", 100 * o.missed,
+              100 * o.extra, base.removed_pixels, base.planes);
+  EXPECT_GT(base.removed_pixels, 1000);
+  EXPECT_LT(o.missed, 0.03);
+  // The truth is where the object covers half a pixel or more; the contrast
+  // threshold also keeps the outline's mixed pixels (a ring of ~1 px: 4-7 %
+  // of objects this small, see below), and a patch of the plinth in the hind
+  // legs' shadow (no lamp lights it: its normals are filled from the legs')
+  // stays with them: 9.5 % in all. Before the seams were crossed, no base
+  // was found here at all.
+  EXPECT_LT(o.extra, 0.11);
+}
+
+// Objects without a base keep every pixel, flat faces included (also through optics).
 TEST(SegmentObjects, ObjectsWithoutABaseStayWhole) {
-  for (const char* scene : {"blocks", "cup-white", "stone", "two-spheres", "banana"}) {
-    ImageSet set = simulate(scene);
+  for (const char* scene : {"blocks", "cup-white", "stone", "two-spheres", "banana"})
+   for (const bool optics : {false, true}) {
+    SCOPED_TRACE(optics ? "camera optics" : "point-sampled");
+    ImageSet set = simulate(scene, 0.02, optics);
     SupportRemoval base;
     const cv::Mat m = object_of(set, &base);
     const Overlap o = overlap(m, set.truth.mask);
@@ -71,7 +96,7 @@ TEST(SegmentObjects, ObjectsWithoutABaseStayWhole) {
                 base.removed_pixels);
     EXPECT_EQ(base.removed_pixels, 0) << scene;
     EXPECT_LT(o.missed, 0.01) << scene;
-    EXPECT_LT(o.extra, 0.01) << scene;
+    EXPECT_LT(o.extra, optics ? 0.08 : 0.01) << scene;  // through optics: the outline's mixed pixels
   }
 }
 

@@ -344,27 +344,63 @@ SupportRemoval drop_supports(cv::Mat& mask, const cv::Mat& normals, const Suppor
   for (size_t i = 0; i < regions.size(); ++i)
     if (regions[i].area >= min_plane && regions[i].bottom >= bottom - reach) support[i] = 1, any = true;
   if (!any) return out;
-  // 3. Flat regions touching the support join it (a plinth's top and front).
+  // 3. Flat regions touching the support, or across a seam of at most
+  //    seam_px, join it (a plinth's top and front; a top cut by the penumbrae
+  //    of cast shadows). A region too small to be a plane joins only when it
+  //    is as flat as a support region near it (a piece of the top between
+  //    two shadow edges).
+  const int seam = std::max(0, o.seam_px);
+  const cv::Mat near_kernel = cv::getStructuringElement(cv::MORPH_RECT, {2 * seam + 1, 2 * seam + 1});
   for (bool grew = true; grew;) {
     grew = false;
+    cv::Mat in(mask.size(), CV_8UC1, cv::Scalar(0));
     for (int y = 0; y < H; ++y)
       for (int x = 0; x < W; ++x) {
-        const int a = labels.at<int>(y, x);
-        if (a < 0) continue;
-        for (const cv::Point& d : {cv::Point(1, 0), cv::Point(0, 1)}) {
-          const int qx = x + d.x, qy = y + d.y;
-          if (qx >= W || qy >= H) continue;
-          const int b = labels.at<int>(qy, qx);
-          if (b < 0 || a == b || support[a] == support[b]) continue;
-          const int other = support[a] ? b : a;
-          if (regions[other].area >= min_plane) support[other] = 1, grew = true;
-        }
+        const int l = labels.at<int>(y, x);
+        if (l >= 0 && support[static_cast<size_t>(l)]) in.at<uint8_t>(y, x) = 255;
       }
+    cv::Mat reach_in;
+    cv::dilate(in, reach_in, near_kernel);
+    // Per candidate region: the nearest support region's mean it came within reach of.
+    std::vector<int> via(regions.size(), -1);
+    cv::Mat nearest_label(mask.size(), CV_32F, cv::Scalar(-1));  // float: what dilate takes (ids < 2^24)
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        const int l = labels.at<int>(y, x);
+        if (l >= 0 && support[static_cast<size_t>(l)]) nearest_label.at<float>(y, x) = static_cast<float>(l);
+      }
+    {
+      // The support label spread seam px (max-filtered labels: any support neighbour will do).
+      cv::Mat spread;
+      cv::dilate(nearest_label, spread, near_kernel);
+      nearest_label = spread;
+    }
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        const int l = labels.at<int>(y, x);
+        if (l < 0 || support[static_cast<size_t>(l)] || !reach_in.at<uint8_t>(y, x)) continue;
+        via[static_cast<size_t>(l)] = static_cast<int>(nearest_label.at<float>(y, x));
+      }
+    for (size_t i = 0; i < regions.size(); ++i) {
+      if (support[i] || via[i] < 0) continue;
+      const bool plane = regions[i].area >= min_plane;
+      const bool same_face = regions[i].area >= 4 &&
+                             dot3(regions[i].mean, regions[static_cast<size_t>(via[i])].mean) >= cos_region;
+      if (plane || same_face) support[i] = 1, grew = true;
+    }
   }
   // 4. Guards: small enough, and touched by the rest along a small part of its outline.
+  // Faces: the support's regions grouped by their normal (pieces of one face cut by seams count once).
   int area = 0, planes = 0;
-  for (size_t i = 0; i < regions.size(); ++i)
-    if (support[i]) area += regions[i].area, ++planes;
+  std::vector<cv::Vec3f> faces;
+  for (size_t i = 0; i < regions.size(); ++i) {
+    if (!support[i]) continue;
+    area += regions[i].area;
+    bool known = false;
+    for (const cv::Vec3f& f : faces) known = known || dot3(f, regions[i].mean) >= cos_region;
+    if (!known) faces.push_back(regions[i].mean);
+  }
+  planes = static_cast<int>(faces.size());
   if (area > o.max_support_fraction * total) return out;
   // 4b. With it go the pixels next to it that lean its way (its cast shadows,
   //     solved less well).
@@ -397,6 +433,19 @@ SupportRemoval drop_supports(cv::Mat& mask, const cv::Mat& normals, const Suppor
       from.at<int>(q) = from.at<int>(p);
       stack.push_back(q);
     }
+  }
+  // 4c. The seams between its faces and pieces (narrower than 2 seam_px) go with it.
+  if (seam > 0) {
+    cv::Mat closed;
+    cv::morphologyEx(dropped, closed, cv::MORPH_CLOSE, near_kernel);
+    dropped = closed & mask;
+    // And its rim: the mask's pixels within seam_px of both the support and
+    // the background (the lens mixes the plinth's edge with the backdrop;
+    // such pixels fit no face and would stay as an outline of the plinth).
+    cv::Mat near_support, near_outside;
+    cv::dilate(dropped, near_support, near_kernel);
+    cv::dilate(~mask, near_outside, near_kernel);
+    dropped |= near_support & near_outside & mask;
   }
   if (cv::countNonZero(dropped) > o.max_support_fraction * total) return out;
   // 5. Touched by the rest along a small part of its outline?

@@ -91,6 +91,11 @@ struct SupportOptions {
   double max_support_fraction = 0.5;
   double max_contact_fraction = 0.45;
   double absorb_deg = 12.0;  // pixels next to a dropped support within this of its normal (its cast shadows) go with it
+  // Flat regions this close to the support join it across a thin seam of
+  // pixels that belong to no flat region: a crease blurred by the lens, the
+  // penumbra of a leg's cast shadow (mixed pixels photometric stereo can't
+  // solve). Seams up to twice this wide are dropped with the support.
+  int seam_px = 3;
 };
 struct SupportRemoval {
   int removed_pixels = 0;  // pixels dropped from the mask
