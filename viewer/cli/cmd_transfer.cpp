@@ -83,6 +83,7 @@ int run(const TransferArgs& a) {
   options.blend = a.blend;
   options.blend_guide = a.blend_guide;
   options.scale = a.scale;
+  options.keep_pictures = false;  // painted and written one at a time (write_transfer with the pair)
   if (auto s = options.check(); !s) return report.usage(s.message());
 
   const auto t_wall = std::chrono::steady_clock::now();
@@ -122,7 +123,7 @@ int run(const TransferArgs& a) {
   if (!result) return report.fail(result.message());
   Progress writing;
   writing.on_progress = [&bar](double f, const std::string& stage) { bar.update(0.95 + 0.04 * f, stage); };
-  if (auto s = match::write_transfer(*result, a.out, writing); !s) return report.fail(s.message());
+  if (auto s = match::write_transfer(*result, *pair, a.out, writing); !s) return report.fail(s.message());
   bar.update(0.99, "storing the sets' results in the cache");
   const Status cached = pipeline::finish_cache_writes();  // not fatal: the next run recomputes
   bar.done();

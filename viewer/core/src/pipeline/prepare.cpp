@@ -208,6 +208,13 @@ Status PrepareOptions::check() const {
 }
 
 namespace {
+// A transfer measures against the truth's normals and mask only: its albedo
+// and depth (a third of a photo's bytes and more, per set) are let go.
+void drop_unused_truth(ImageSet& set) {
+  set.truth.albedo.release();
+  set.truth.depth.release();
+}
+
 // The hand-drawn mask on the set as read: one clear error for another size
 // or a mask that marks nothing.
 Status apply_mask(const cv::Mat& mask, ImageSet& set) {
@@ -262,6 +269,7 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
           p.set.ambient.release();
           for (const auto& light : p.set.lights) p.object.view.lamps.push_back(light.lamp_id);
           if (p.object.view.lamps.size() != p.object.view.images.size()) p.object.view.lamps.clear();
+          drop_unused_truth(p.set);
           p.report.id = p.set.id;
           p.report.cache_hit = true;
           p.report.photos_from = p.set.photos_from;
@@ -286,6 +294,7 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
   if (!options.mask.empty()) {
     if (auto s = apply_mask(options.mask, p.set); !s) return s.error();
   }
+  drop_unused_truth(p.set);
   match::scale_set(p.set, scale);
   p.report.read_s = since(t0);
   p.report.id = p.set.id;
@@ -334,9 +343,13 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
     // made meanwhile. finish_cache_writes() waits for it.
     auto entry = std::make_shared<std::pair<CacheEntry, CacheMats>>(to_entry(p));
     const std::string id = p.set.id;
-    auto write = std::async(std::launch::async, [cache, key, entry, id]() -> Status {
+    auto write = std::async(std::launch::async, [cache, key, entry, id]() mutable -> Status {
       const auto t = Clock::now();
       Status s = cache.store(key, entry->first, entry->second);
+      // The future keeps this lambda (and its captures) until it is
+      // collected: let go of the matrices now, so that a photo the caller
+      // releases is freed.
+      entry.reset();
       if (!s) VLOG_WARN("Cache", "{}", s.message());
       VLOG_DEBUG("Cache", "{}: entry {} written in {:.2f} s", id, key, since(t));
       return s;

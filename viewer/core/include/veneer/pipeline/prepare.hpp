@@ -40,7 +40,8 @@ struct SetReport {
 };
 
 // One set prepared: the set's metadata (images = the photos with the ambient
-// frame removed, the same pixels as object.view.images), normals, mask, the
+// frame removed, the same pixels as object.view.images; of the truth only its
+// normals and mask, all a transfer measures with), normals, mask, the
 // photometric stereo's albedo and residual (empty on truth normals), median.
 struct PreparedSet {
   ImageSet set;

@@ -101,8 +101,15 @@ Expected<BlendPlan> blend_plan(const Map& map, const cv::Mat& destination_mask, 
               wgt *= std::exp(-e.dot(e) * inv_2s2);
             }
             if (!(wgt > 0)) continue;
-            r.terms.push_back({qy * sw + qx, wgt});
             weight += wgt;
+            // Inside a chunk the neighbours all continue to the same source
+            // pixel: one term per source pixel, its weights summed (a
+            // full-resolution plan held up to 25 terms a pixel, ~1 GB).
+            const int source = qy * sw + qx;
+            bool merged = false;
+            for (size_t t = first; t < r.terms.size() && !merged; ++t)
+              if (r.terms[t].source == source) r.terms[t].weight += wgt, merged = true;
+            if (!merged) r.terms.push_back({source, wgt});
           }
         if (weight > 1e-20f) {
           for (size_t t = first; t < r.terms.size(); ++t) r.terms[t].weight /= weight;
