@@ -375,7 +375,7 @@ Status check_size(const fs::path& file, const cv::Mat& image, cv::Size expected,
   return Status::success();
 }
 
-Status load_truth(const fs::path& truth_dir, ImageSet& set) {
+Status load_truth(const fs::path& truth_dir, ImageSet& set, bool appearance) {
   std::error_code ec;
   if (!fs::is_directory(truth_dir, ec)) return Status::success();
   Truth& t = set.truth;
@@ -393,6 +393,7 @@ Status load_truth(const fs::path& truth_dir, ImageSet& set) {
     if (Status s = check_size(f, *m, set.size, why); !s) return s;
     t.mask = std::move(m).value();
   }
+  if (!appearance) return Status::success();
   if (fs::path f = truth_dir / "albedo.png"; fs::exists(f, ec)) {
     auto a = read_linear_image(f);
     if (!a) return a.error();
@@ -459,7 +460,7 @@ Expected<ImageSet> read_veneer(const fs::path& folder, const ReadOptions& option
       if (Status s = check_size(f, *m, set.size, "set.json's size"); !s) return s;
       set.mask = std::move(m).value();
     }
-    if (options.load_truth) return load_truth(folder / "truth", set);
+    if (options.load_truth) return load_truth(folder / "truth", set, options.load_truth_appearance);
     return {};
   };
   if (!options.load_photos) {

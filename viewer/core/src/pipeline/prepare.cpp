@@ -208,13 +208,6 @@ Status PrepareOptions::check() const {
 }
 
 namespace {
-// A transfer measures against the truth's normals and mask only: its albedo
-// and depth (a third of a photo's bytes and more, per set) are let go.
-void drop_unused_truth(ImageSet& set) {
-  set.truth.albedo.release();
-  set.truth.depth.release();
-}
-
 // The hand-drawn mask on the set as read: one clear error for another size
 // or a mask that marks nothing.
 Status apply_mask(const cv::Mat& mask, ImageSet& set) {
@@ -252,6 +245,7 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
     if (auto entry = cache.load(key, &mats)) {
       ReadOptions meta = options.read;
       meta.load_photos = false;
+      meta.load_truth_appearance = false;
       auto set = read_set(folder, meta);
       if (!set) return set.error();
       p.set = std::move(set).value();
@@ -269,7 +263,6 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
           p.set.ambient.release();
           for (const auto& light : p.set.lights) p.object.view.lamps.push_back(light.lamp_id);
           if (p.object.view.lamps.size() != p.object.view.images.size()) p.object.view.lamps.clear();
-          drop_unused_truth(p.set);
           p.report.id = p.set.id;
           p.report.cache_hit = true;
           p.report.photos_from = p.set.photos_from;
@@ -288,13 +281,14 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
 
   // Miss: decode every frame once, in parallel; solve; store.
   auto t0 = Clock::now();
-  auto set = read_set(folder, options.read, sub_progress(progress, 0.0, 0.6));
+  ReadOptions read = options.read;
+  read.load_truth_appearance = false;  // the truth's albedo and depth: a transfer measures with neither
+  auto set = read_set(folder, read, sub_progress(progress, 0.0, 0.6));
   if (!set) return set.error();
   p.set = std::move(set).value();
   if (!options.mask.empty()) {
     if (auto s = apply_mask(options.mask, p.set); !s) return s.error();
   }
-  drop_unused_truth(p.set);
   match::scale_set(p.set, scale);
   p.report.read_s = since(t0);
   p.report.id = p.set.id;
