@@ -123,7 +123,7 @@ int run(const TransferArgs& a) {
   if (!result) return report.fail(result.message());
   Progress writing;
   writing.on_progress = [&bar](double f, const std::string& stage) { bar.update(0.95 + 0.04 * f, stage); };
-  if (auto s = match::write_transfer(*result, *pair, a.out, writing); !s) return report.fail(s.message());
+  if (auto s = match::write_transfer(*result, std::move(*pair), a.out, writing); !s) return report.fail(s.message());
   bar.update(0.99, "storing the sets' results in the cache");
   const Status cached = pipeline::finish_cache_writes();  // not fatal: the next run recomputes
   bar.done();

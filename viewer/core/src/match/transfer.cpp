@@ -708,11 +708,16 @@ Status write_transfer(const TransferResult& r, const std::filesystem::path& fold
   return write_files(r, nullptr, folder, progress);
 }
 
-Status write_transfer(const TransferResult& r, PreparedPair& pair, const std::filesystem::path& folder,
+Status write_transfer(const TransferResult& r, PreparedPair&& pair_in, const std::filesystem::path& folder,
                       const Progress& progress) {
   if (!r.repainted.empty()) return make_error("write_transfer: the result already holds its pictures");
-  if (r.map.xy.size() != pair.dst.view.mask.size())
+  if (r.map.xy.size() != pair_in.dst.view.mask.size())
     return make_error("write_transfer: the map is not the pair's (another size)");
+  PreparedPair pair = std::move(pair_in);
+  // the pictures need the photos (and the plan made from the rest): the
+  // normals and the truth, a photo's bytes each, go before painting starts
+  for (ImageSet* set : {&pair.destination, &pair.source}) set->truth = Truth{};
+  for (PreparedObject* object : {&pair.dst, &pair.src}) object->view.normals.release();
   return write_files(r, &pair, folder, progress);
 }
 

@@ -122,9 +122,9 @@ Status write_transfer(const TransferResult& result, const std::filesystem::path&
 // The same for a result made with keep_pictures = false: each of the pair's
 // photos is repainted through the result's map (and blend plan) in place of
 // its destination photo, written and released before the next, so the
-// pictures never all exist at once. Consumes the pair's photos: it is left
-// with none (its medians, normals and masks stay).
-Status write_transfer(const TransferResult& result, PreparedPair& pair, const std::filesystem::path& folder,
+// pictures never all exist at once. Consumes the pair: what the pictures do
+// not need (normals, truth) goes first, and each photo once painted.
+Status write_transfer(const TransferResult& result, PreparedPair&& pair, const std::filesystem::path& folder,
                       const Progress& progress = {});
 
 // Quality of a map between two sets: truth masks and normals when both sets
