@@ -280,6 +280,7 @@ void encode_event(const RigEvent& e, uint64_t seq, pb::RigMessage& out) {
     case K::camera_connected: ev->mutable_camera_connected()->set_model(e.camera_model); break;
     case K::camera_lost: ev->mutable_camera_lost()->set_reason(e.reason); break;
     case K::set_deleted: ev->mutable_set_deleted()->set_id(e.set_id); break;
+    case K::set_restored: ev->mutable_set_restored()->set_id(e.set_id); break;
   }
 }
 

@@ -486,16 +486,29 @@ veneer::Status Rig::move_hand_lamp(const cv::Vec3d& position) {
   return {};
 }
 
+namespace {
+// An event about one stored set (deleted, restored).
+RigEvent set_event(RigEvent::Kind kind, const std::string& id) {
+  RigEvent e;
+  e.kind = kind;
+  e.set_id = id;
+  return e;
+}
+}  // namespace
+
 veneer::Status Rig::delete_set(const std::string& id) {
   {
     std::lock_guard lock(mutex_);
     if (capturing_ && capture_id_ == id) return make_error("set " + id + " is being captured");
   }
   if (auto s = store_.remove(id); !s) return s;
-  RigEvent e;
-  e.kind = RigEvent::Kind::set_deleted;
-  e.set_id = id;
-  emit(e);
+  emit(set_event(RigEvent::Kind::set_deleted, id));
+  return {};
+}
+
+veneer::Status Rig::restore_set(const std::string& id) {
+  if (auto s = store_.restore(id); !s) return s;
+  emit(set_event(RigEvent::Kind::set_restored, id));
   return {};
 }
 

@@ -571,7 +571,7 @@ class Session : public std::enable_shared_from_this<Session> {
   }
 
   void on(uint64_t id, api::MoveHandLampReq& h) { respond(id, srv_.rig.move_hand_lamp(h.position)); }
-  void on(uint64_t id, api::RestoreSetReq& r) { respond(id, srv_.rig.store().restore(r.set_id)); }
+  void on(uint64_t id, api::RestoreSetReq& r) { respond(id, srv_.rig.restore_set(r.set_id)); }
 
   struct FetchFile {
     std::string rel;

@@ -3,6 +3,7 @@
 // view's rate and the GUI's longest stall while a transfer computes.
 #include <algorithm>
 #include <chrono>
+#include <ctime>
 #include <cstdio>
 #include <random>
 #include <vector>
@@ -33,6 +34,14 @@ double now_ms() {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
+// CPU time of the calling thread: a stall with little of it was the thread
+// waiting (for a core, a lock), not working.
+double cpu_ms() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return ts.tv_sec * 1e3 + ts.tv_nsec / 1e6;
+}
+
 template <class F>
 double median_ms(F f, int runs) {
   std::vector<double> t;
@@ -46,11 +55,36 @@ double median_ms(F f, int runs) {
 }
 
 
+// With VENEER_BENCH_TRACE set, every GUI event handled in over 30 ms while a
+// stall is measured is printed to stderr (what was measured, receiver class,
+// name, event type, ms): what a stall was.
+const char* g_measuring = nullptr;
+
+class TracingApp : public QApplication {
+ public:
+  using QApplication::QApplication;
+  bool notify(QObject* receiver, QEvent* event) override {
+    if (!trace_ || !g_measuring) return QApplication::notify(receiver, event);
+    const double t = now_ms(), cpu = cpu_ms();
+    const int type = event->type();
+    const bool r = QApplication::notify(receiver, event);
+    const double ms = now_ms() - t;
+    if (ms > 30)
+      std::fprintf(stderr, "stall trace (%s): %.1f ms (%.1f ms of GUI-thread CPU) in %s '%s' event %d\n", g_measuring,
+                   ms, cpu_ms() - cpu, receiver->metaObject()->className(),
+                   receiver->objectName().toStdString().c_str(), type);
+    return r;
+  }
+
+ private:
+  bool trace_ = !qEnvironmentVariableIsEmpty("VENEER_BENCH_TRACE");
+};
+
 }  // namespace
 
 int main(int argc, char** argv) {
   if (qEnvironmentVariableIsEmpty("QT_QPA_PLATFORM")) qputenv("QT_QPA_PLATFORM", "offscreen");
-  QApplication app(argc, argv);
+  TracingApp app(argc, argv);
   const cv::Size size(1024, 680);
 
   // 1. Repaint through a map: a real map (destination bull, source orange, truth normals).
@@ -145,6 +179,7 @@ int main(int argc, char** argv) {
   w.startTransfer();
   last = now_ms();
   beat.start(10);
+  g_measuring = "live while computing";
   double window_ms = 0;
   int frames = 0;
   wait_for([&] { return !w.computing() || now_ms() - t0 > 8000; }, 60000);
@@ -152,6 +187,7 @@ int main(int argc, char** argv) {
   frames = w.liveFramesShown() - frames_before;
   const bool still_computing = w.computing();
   beat.stop();
+  g_measuring = nullptr;
   w.cancelTransfer();
   wait_for([&] { return !w.computing(); }, 60000);
   std::printf("## Live view while a transfer computes (rig asked for 15 fps, 1024x680 frames; the simulated\n"
@@ -169,20 +205,22 @@ int main(int argc, char** argv) {
   //    blocks 2-3 s"). Same heartbeat; the peer is the old synchronous path,
   //    measured in the same run.
   w.setAutoFlow(false);  // the big set alone: no transfer starts by itself
-  auto stall_during = [&](auto start, auto done) {
+  auto stall_during = [&](const char* what, auto start, auto done) {
     last = now_ms();
     worst = 0;
     beat.start(10);
+    g_measuring = what;
     const double t = now_ms();
     start();
     wait_for(done, 300000);
     const double total = now_ms() - t;
     beat.stop();
+    g_measuring = nullptr;
     return std::make_pair(worst, total);
   };
-  const auto results_export = stall_during([&] { w.exportResultsTo(dir.path() + "/export"); },
+  const auto results_export = stall_during("export results", [&] { w.exportResultsTo(dir.path() + "/export"); },
                                            [&] { return !w.exporting(); });
-  const auto video_export = stall_during([&] { w.exportRelightVideoTo(dir.path() + "/relight.avi"); },
+  const auto video_export = stall_during("export video", [&] { w.exportRelightVideoTo(dir.path() + "/relight.avi"); },
                                          [&] { return !w.exporting(); });
   const cv::Size big(3872, 2592);  // 10.0 Mpx
   veneer::ImageSet large = *dst;
@@ -197,7 +235,7 @@ int main(int argc, char** argv) {
     return 1;
   }
   large = {};
-  const auto load = stall_during([&] { w.loadSetInBackground(lpath, veneer::Role::destination); },
+  const auto load = stall_during("load 10 Mpx", [&] { w.loadSetInBackground(lpath, veneer::Role::destination); },
                                  [&] { return w.loadsRunning() == 0; });
   const double sync_t = now_ms();
   w.loadLocalSet(lpath, veneer::Role::destination);  // the old way: all on the GUI thread

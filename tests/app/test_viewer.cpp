@@ -10,6 +10,8 @@
 #include <QComboBox>
 #include <QDoubleSpinBox>
 #include <QDate>
+#include <QDir>
+#include <QSpinBox>
 #include <QFileInfo>
 #include <QLabel>
 #include <QMessageBox>
@@ -18,10 +20,12 @@
 #include <QProcess>
 #include <QProgressBar>
 #include <QPushButton>
+#include <QSemaphore>
 #include <QSignalSpy>
 #include <QTcpServer>
 #include <QTemporaryDir>
 #include <QTest>
+#include <QThreadPool>
 #include <QScrollArea>
 #include <QToolButton>
 #include <QTreeWidget>
@@ -32,6 +36,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "main_window.hpp"
+#include "widgets.hpp"
 #include "wait_for.hpp"
 #include "veneer/match/transfer.hpp"
 #include "veneer/ps/segmentation.hpp"
@@ -336,6 +341,14 @@ TEST(Viewer, DeletingARigSetAsksAndUndoRestoresIt) {
   ASSERT_TRUE(wait_for([&] { return on_rig->childCount() == 1; }, 60000)) << w.lastMessage().toStdString();
   const QString id = on_rig->child(0)->text(0), date = on_rig->child(0)->text(3);
   EXPECT_TRUE(date.startsWith(QDateTime::currentDateTimeUtc().date().toString(Qt::ISODate))) << date.toStdString();
+  // a second viewer on the same rig sees the delete and the undo without listing again
+  QTemporaryDir other_work;
+  MainWindow other({QString(), QString(), QString(), QString(), other_work.path()});
+  other.setAutoFlow(false);
+  other.connectToRig(rig.endpoint(), rig.token_file());
+  ASSERT_TRUE(wait_for([&] { return other.rig().isConnected(); }, 10000)) << other.lastMessage().toStdString();
+  QTreeWidgetItem* other_rig = child<QTreeWidget>(other, "sets")->topLevelItem(0);
+  ASSERT_TRUE(wait_for([&] { return other_rig->childCount() == 1; }, 10000));
 
   // asked; Cancel keeps it
   auto ask = [&]() -> QMessageBox* {
@@ -361,6 +374,7 @@ TEST(Viewer, DeletingARigSetAsksAndUndoRestoresIt) {
   ASSERT_TRUE(wait_for([&] { return on_rig->childCount() == 0 && trash->childCount() == 1; }, 10000))
       << w.lastMessage().toStdString();
   EXPECT_EQ(trash->child(0)->text(0), id);
+  EXPECT_TRUE(wait_for([&] { return other_rig->childCount() == 0; }, 10000)) << "the other viewer saw the delete";
   auto* undo = child<QPushButton>(w, "undoDelete");
   ASSERT_TRUE(undo->isVisible());
 
@@ -370,6 +384,8 @@ TEST(Viewer, DeletingARigSetAsksAndUndoRestoresIt) {
       << w.lastMessage().toStdString();
   EXPECT_EQ(on_rig->child(0)->text(0), id);
   EXPECT_FALSE(undo->isVisible());
+  ASSERT_TRUE(wait_for([&] { return other_rig->childCount() == 1; }, 10000)) << "the other viewer saw it come back";
+  EXPECT_EQ(other_rig->child(0)->text(0), id);
   select_item(tree, on_rig->child(0));
   QTest::mouseClick(child<QPushButton>(w, "pullSet"), Qt::LeftButton);
   ASSERT_TRUE(wait_for([&] { return tree->topLevelItem(1)->childCount() == 1; }, 30000)) << w.lastMessage().toStdString();
@@ -406,6 +422,87 @@ TEST(Viewer, TheLibrarySurvivesARestart) {
   select_item(tree, local->child(1));
   QTest::mouseClick(child<QPushButton>(w, "useSource"), Qt::LeftButton);
   ASSERT_TRUE(wait_for([&] { return w.source() != nullptr; }, 20000)) << w.lastMessage().toStdString();
+}
+
+namespace {
+// Destination pixels the map gives a source pixel, within `inside`.
+int mapped_in(const veneer::match::Map& map, const cv::Rect& inside) {
+  cv::Mat xy[2];
+  cv::split(map.xy, xy);
+  return cv::countNonZero(xy[0](inside) >= 0);
+}
+}  // namespace
+
+// A map kept in the library is shown again after a restart without matching:
+// its sets load in their roles with the options it was computed with, and the
+// result is painted through the stored map. The stored map is altered on disk
+// first, so a map matched again would differ from it. A set that is gone is
+// named in one message.
+TEST(Viewer, ALibraryMapReopensAfterARestartWithoutMatchingAgain) {
+  QTemporaryDir dir;
+  QString map_folder, dst, src;
+  {
+    auto window = open_pair(dir);
+    ASSERT_TRUE(window);
+    dst = window->destination()->folder;
+    src = window->source()->folder;
+    child<QComboBox>(*window, "method")->setCurrentText("coherent");
+    child<QSpinBox>(*window, "blend")->setValue(3);
+    ASSERT_TRUE(compute_and_wait(*window));
+    auto* maps = child<QTreeWidget>(*window, "sets")->topLevelItem(3);
+    ASSERT_TRUE(wait_for([&] { return maps->childCount() == 1; }, 10000)) << window->lastMessage().toStdString();
+    map_folder = maps->child(0)->data(0, Qt::UserRole).toString();
+  }
+  // the stored map, altered: its top half unmapped
+  const std::string pfm = (map_folder + "/map.pfm").toStdString();
+  auto stored = veneer::match::read_map(pfm);
+  ASSERT_TRUE(stored) << stored.message();
+  const cv::Rect top(0, 0, stored->xy.cols, stored->xy.rows / 2);
+  const int mapped_before = mapped_in(*stored, top);
+  ASSERT_GT(mapped_before, 100) << "the bull reaches into the top half";
+  stored->xy(top).setTo(cv::Scalar::all(-1));
+  ASSERT_TRUE(veneer::match::write_map(pfm, *stored).ok());
+
+  {
+    MainWindow w({QString(), QString(), QString(), QString(), dir.path()});
+    w.show();
+    auto* tree = child<QTreeWidget>(w, "sets");
+    QTreeWidgetItem* maps = tree->topLevelItem(3);
+    ASSERT_EQ(maps->childCount(), 1);
+    EXPECT_EQ(child<QComboBox>(w, "method")->currentText(), "combined") << "the default before reopening";
+    select_item(tree, maps->child(0));
+    QTest::mouseClick(child<QPushButton>(w, "openMap"), Qt::LeftButton);
+    ASSERT_TRUE(wait_for([&] { return w.result() != nullptr && !w.computing(); }, 60000))
+        << w.lastMessage().toStdString();
+    ASSERT_TRUE(w.destination() && w.source());
+    EXPECT_EQ(w.destination()->folder, dst);
+    EXPECT_EQ(w.source()->folder, src);
+    EXPECT_TRUE(w.result()->map_given) << "repainted through the stored map";
+    EXPECT_EQ(w.result()->match_seconds, 0.0);
+    EXPECT_EQ(mapped_in(w.result()->map, top), 0) << "the stored (altered) map, not one matched again";
+    EXPECT_EQ(cv::norm(w.result()->map.xy, stored->xy, cv::NORM_INF), 0.0);
+    EXPECT_EQ(w.result()->match_options.method, veneer::match::Method::coherent);
+    EXPECT_EQ(child<QComboBox>(w, "method")->currentText(), "coherent") << "the options it was computed with";
+    EXPECT_EQ(child<QSpinBox>(w, "blend")->value(), 3);
+    EXPECT_TRUE(w.lastMessage().contains("reopened")) << w.lastMessage().toStdString();
+    w.resize(1280, 720);
+    save_stage(w, "library-map-reopened");
+    QTest::qWait(300);
+    EXPECT_EQ(maps->childCount(), 1) << "a reopened map is not stored twice";
+  }
+
+  // the source set gone: one message naming it, nothing loaded
+  ASSERT_TRUE(QDir(src).removeRecursively());
+  MainWindow w({QString(), QString(), QString(), QString(), dir.path()});
+  auto* maps = child<QTreeWidget>(w, "sets")->topLevelItem(3);
+  ASSERT_EQ(maps->childCount(), 1);
+  EXPECT_FALSE(w.openLibraryMap(maps->child(0)->data(0, Qt::UserRole).toString()));
+  EXPECT_TRUE(w.lastMessage().contains("source set") && w.lastMessage().contains(src) &&
+              w.lastMessage().contains("gone"))
+      << w.lastMessage().toStdString();
+  QTest::qWait(200);
+  EXPECT_EQ(w.destination(), nullptr);
+  EXPECT_EQ(w.result(), nullptr);
 }
 
 namespace {
@@ -513,15 +610,6 @@ TEST(Viewer, ViewModesHistogramExposureAndSnapshot) {
   EXPECT_TRUE(w.lastMessage().contains("snap.jpg")) << w.lastMessage().toStdString();
   EXPECT_FALSE(QFileInfo::exists(dir.path() + "/snap.jpg"));
 }
-
-namespace {
-// Destination pixels the map gives a source pixel, within `inside`.
-int mapped_in(const veneer::match::Map& map, const cv::Rect& inside) {
-  cv::Mat xy[2];
-  cv::split(map.xy, xy);
-  return cv::countNonZero(xy[0](inside) >= 0);
-}
-}  // namespace
 
 // Segmentation by hand: a rectangle on the destination and a brush on the
 // source each change the map -- nothing is mapped outside the rectangle and
@@ -645,6 +733,83 @@ TEST(Viewer, CancelledComputationLeavesUiUsable) {
   ASSERT_TRUE(compute_and_wait(w));
   ASSERT_TRUE(w.result()->quality.has_value());
   EXPECT_GT(w.result()->quality->coverage, 0.9);
+}
+
+// Exports cancelled leave nothing behind: not the results folder, not its
+// temporary sibling, not the video or its temporary. The export is held in
+// the job pool's queue behind a gate until the cancel is in, so the cancel
+// always comes before the first file (core/Transfer.WritingStopsBetweenFiles
+// WhenCancelled shows the stop between files); uncancelled, the same exports
+// are written whole.
+TEST(Viewer, CancelledExportsLeaveNoHalfWrittenFile) {
+  QTemporaryDir dir;
+  auto window = open_pair(dir);
+  ASSERT_TRUE(window);
+  MainWindow& w = *window;
+  child<QComboBox>(w, "method")->setCurrentText("coherent");
+  ASSERT_TRUE(compute_and_wait(w));
+  QThreadPool* pool = veneer::app::job_pool();
+  pool->waitForDone();  // the normals' background solve
+  const int threads = pool->maxThreadCount();
+  const QString results = dir.path() + "/results", video = dir.path() + "/sweep.avi";
+  auto held_then_cancelled = [&](const std::function<void()>& start) {
+    pool->setMaxThreadCount(1);
+    QSemaphore gate;
+    pool->start([&gate] { gate.acquire(); });
+    start();
+    EXPECT_TRUE(w.exporting());
+    w.cancelStep();
+    gate.release();
+    EXPECT_TRUE(wait_for([&] { return !w.exporting(); }, 30000));
+    pool->setMaxThreadCount(threads);
+  };
+  held_then_cancelled([&] { w.exportResultsTo(results); });
+  EXPECT_TRUE(w.lastMessage().contains("cancelled")) << w.lastMessage().toStdString();
+  EXPECT_TRUE(QDir(results).isEmpty()) << "nothing moved into the folder";
+  EXPECT_FALSE(QFileInfo::exists(results + ".part")) << "the temporary sibling removed";
+  held_then_cancelled([&] { w.exportRelightVideoTo(video); });
+  EXPECT_TRUE(w.lastMessage().contains("cancelled")) << w.lastMessage().toStdString();
+  EXPECT_EQ(QDir(dir.path()).entryList({"*.avi", ".*.avi"}, QDir::Files | QDir::Hidden), QStringList())
+      << "no video, no temporary";
+
+  w.exportResultsTo(results);
+  ASSERT_TRUE(wait_for([&] { return !w.exporting(); }, 30000));
+  EXPECT_TRUE(w.lastMessage().contains("results written")) << w.lastMessage().toStdString();
+  EXPECT_TRUE(QFileInfo::exists(results + "/metrics.json"));
+  EXPECT_TRUE(QFileInfo::exists(results + "/result_median.png"));
+  EXPECT_FALSE(QFileInfo::exists(results + ".part"));
+  w.exportRelightVideoTo(video);
+  ASSERT_TRUE(wait_for([&] { return !w.exporting(); }, 60000));
+  EXPECT_EQ(QDir(dir.path()).entryList({"*.avi", ".*.avi"}, QDir::Files | QDir::Hidden), QStringList{"sweep.avi"});
+  EXPECT_GT(QFileInfo(video).size(), 1000);
+}
+
+// A set loaded in the background comes with the picture the views show and
+// its histogram made off the GUI thread: the view shows the loader's image
+// itself (the same pixels, not a conversion made on the GUI thread), and the
+// histogram is the median picture's.
+TEST(Viewer, ALoadedSetsPictureIsMadeByTheLoader) {
+  QTemporaryDir dir;
+  QString dst, src;
+  write_pair(dir.path(), dst, src);
+  MainWindow w({QString(), QString(), QString(), QString(), dir.path()});
+  w.show();
+  w.setAutoFlow(false);
+  w.loadSetInBackground(dst, veneer::Role::destination);
+  ASSERT_TRUE(wait_for([&] { return w.destination() != nullptr && w.loadsRunning() == 0; }, 20000))
+      << w.lastMessage().toStdString();
+  const veneer::app::LoadedSet* d = w.destination();
+  ASSERT_FALSE(d->median_image.isNull());
+  EXPECT_EQ(d->median_image.size(), QSize(d->set.size.width, d->set.size.height));
+  int showing = 0;
+  for (auto* view : w.findChildren<veneer::app::ImageView*>())
+    showing += view->image().cacheKey() == d->median_image.cacheKey();
+  EXPECT_EQ(showing, 1) << "the destination view shows the loader's image";
+  ASSERT_FALSE(d->histogram.empty());
+  EXPECT_EQ(cv::sum(d->histogram)[0], double(d->set.size.area())) << "every pixel counted once";
+  // the picture is the median tonemapped: a pixel checked through the QImage
+  const cv::Vec3b bgr = d->median_picture.at<cv::Vec3b>(85, 128);
+  EXPECT_EQ(d->median_image.pixel(128, 85), qRgb(bgr[2], bgr[1], bgr[0]));
 }
 
 TEST(Viewer, BadInputGivesClearMessages) {

@@ -610,3 +610,43 @@ TEST(Daemon, ARefusedControlRequestDoesNotKeepControl) {
   EXPECT_TRUE(s2->you_control);
   fs::remove_all(dir);
 }
+
+// A set restored from the trash is announced to every client, as its delete
+// was: another viewer sees it come back without listing again.
+TEST(Daemon, RestoringASetFromTheTrashIsAnnouncedToOtherClients) {
+  fs::path dir = rigtest::temp_dir("restore");
+  fs::path store = dir / "store";
+  auto d = DaemonProcess::start(store, kSmall);
+  ASSERT_TRUE(d && d->port() != 0) << (d ? d->log() : "");
+  auto actor = connect(*d, store);
+  auto watcher = connect(*d, store);
+  ASSERT_TRUE(actor && watcher);
+  using K = veneer::rig::Event::Kind;
+  ASSERT_TRUE(actor->press_button());
+  auto stored = actor->wait_event([](const veneer::rig::Event& e) { return e.kind == K::set_stored; }, 60);
+  ASSERT_TRUE(stored) << stored.message() << d->log();
+  const std::string id = stored->set_id;
+
+  ASSERT_TRUE(actor->delete_set(id));
+  auto deleted = watcher->wait_event([](const veneer::rig::Event& e) { return e.kind == K::set_deleted; }, 10);
+  ASSERT_TRUE(deleted) << deleted.message();
+  EXPECT_EQ(deleted->set_id, id);
+
+  ASSERT_TRUE(actor->restore_set(id));
+  auto restored = watcher->wait_event([](const veneer::rig::Event& e) { return e.kind == K::set_restored; }, 10);
+  ASSERT_TRUE(restored) << restored.message();
+  EXPECT_EQ(restored->set_id, id);
+  EXPECT_EQ(restored->seq, deleted->seq + 1) << "one event per change, in order";
+  EXPECT_EQ(veneer::rig::describe(*restored), "set_restored " + id);
+  // the actor hears it too, and the set is listed again
+  EXPECT_TRUE(actor->wait_event([](const veneer::rig::Event& e) { return e.kind == K::set_restored; }, 10));
+  auto sets = watcher->list_sets();
+  ASSERT_TRUE(sets);
+  ASSERT_EQ(sets->size(), 1u);
+  EXPECT_EQ(sets->front().id, id);
+
+  // a refused restore (nothing of that id in the trash) announces nothing
+  EXPECT_FALSE(actor->restore_set(id));
+  EXPECT_FALSE(watcher->wait_event([](const veneer::rig::Event& e) { return e.kind == K::set_restored; }, 0.5));
+  fs::remove_all(dir);
+}

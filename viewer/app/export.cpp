@@ -3,6 +3,7 @@
 #include "widgets.hpp"
 
 #include <algorithm>
+#include <filesystem>
 #include <cmath>
 
 #include <QApplication>
@@ -10,6 +11,7 @@
 #include <QComboBox>
 #include <QDir>
 #include <QFile>
+#include <QFileInfo>
 #include <QPointer>
 #include <QDoubleSpinBox>
 #include <QFileDialog>
@@ -51,7 +53,7 @@ void MainWindow::runJob(const QString& kind, const QString& text,
   step_.start(kind, text);
   showStep();
   QPointer<MainWindow> self(this);
-  job_future_ = QtConcurrent::run([this, self, job, done] {
+  job_future_ = QtConcurrent::run(job_pool(), [this, self, job, done] {
     veneer::Progress progress;
     progress.cancel = &job_cancel_;
     progress.on_progress = [self](double f, const std::string& stage) {
@@ -63,7 +65,9 @@ void MainWindow::runJob(const QString& kind, const QString& text,
       });
     };
     const veneer::Status s = job(progress);
-    const bool cancelled = job_cancel_.load();
+    // cancelled: the job stopped on the cancel (a cancel that came after it
+    // finished changes nothing: what it wrote is whole and in place)
+    const bool cancelled = !s && job_cancel_.load();
     const QString error = s ? QString() : qs(s.message());
     QMetaObject::invokeMethod(self.data(), [self, done, error, cancelled] {
       if (!self) return;
@@ -92,10 +96,12 @@ void MainWindow::exportMapTo(const QString& dir) {
     p.report(0.5, "map.png");
     if (p.cancelled()) {
       QFile::remove(dir + "/map.pfm");
-      return {};
+      return veneer::make_error("cancelled");
     }
-    if (!cv::imwrite((dir + "/map.png").toStdString(), veneer::match::map_picture(result->map, result->source_size)))
-      return veneer::make_error("cannot write " + (dir + "/map.png").toStdString());
+    if (auto s = veneer::write_picture((dir + "/map.png").toStdString(),
+                                       veneer::match::map_picture(result->map, result->source_size));
+        !s)
+      return s;
     p.report(1, "done");
     return {};
   }, tr("map written to %1").arg(dir));
@@ -111,18 +117,19 @@ void MainWindow::exportResultsTo(const QString& dir) {
   if (!result_) return message(tr("nothing to export: compute a transfer first"), true);
   auto result = result_;
   // written into a temporary sibling and moved into place, so a cancel or a
-  // failure leaves no half-written folder
+  // failure leaves no half-written folder; a cancel stops between files
+  // (write_transfer checks it before each one) and removes the sibling
   runJob("export-results", tr("writing the result pictures into %1").arg(dir),
          [result, dir](const veneer::Progress& p) -> veneer::Status {
            const QString temp = dir + ".part";
            QDir(temp).removeRecursively();
-           if (auto s = veneer::match::write_transfer(*result, temp.toStdString()); !s) {
+           if (auto s = veneer::match::write_transfer(*result, temp.toStdString(), p.part(0, 0.95)); !s) {
              QDir(temp).removeRecursively();
              return s;
            }
            if (p.cancelled()) {
              QDir(temp).removeRecursively();
-             return {};
+             return veneer::make_error("cancelled");
            }
            QDir target(dir);
            QDir().mkpath(dir);
@@ -152,19 +159,30 @@ void MainWindow::exportRelightVideoTo(const QString& file) {
   runJob("export-video", tr("writing the relight sweep %1").arg(file),
          [result, relighter, backdrop, file](const veneer::Progress& p) -> veneer::Status {
            const cv::Size size = result->map.xy.size();
-           cv::VideoWriter writer(file.toStdString(), cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 25, size);
+           // written under a temporary name beside it (same suffix: it picks
+           // the container) and renamed when whole
+           const QFileInfo info(file);
+           const QString temp = info.dir().filePath("." + info.completeBaseName() + ".part." + info.suffix());
+           cv::VideoWriter writer(temp.toStdString(), cv::VideoWriter::fourcc('M', 'J', 'P', 'G'), 25, size);
            if (!writer.isOpened()) return veneer::make_error("cannot write a video to " + file.toStdString());
            const int frames = 100;
            for (int i = 0; i < frames; ++i) {
              if (p.cancelled()) {
                writer.release();
-               QFile::remove(file);
-               return {};
+               QFile::remove(temp);
+               return veneer::make_error("cancelled");
              }
              const double a = 2 * M_PI * i / frames;
              const cv::Vec3d d = veneer::match::direction_on_sphere(0.7 * std::cos(a), 0.7 * std::sin(a));
              writer << tonemap_picture(relighter->render(result->map, d, backdrop));
              p.report((i + 1.0) / frames, "frame");
+           }
+           writer.release();
+           std::error_code ec;  // replaces an older file in one step
+           std::filesystem::rename(temp.toStdString(), file.toStdString(), ec);
+           if (ec) {
+             QFile::remove(temp);
+             return veneer::make_error("cannot move the video into " + file.toStdString() + ": " + ec.message());
            }
            return {};
          },

@@ -11,7 +11,9 @@
 #include <opencv2/imgproc.hpp>
 
 #include "main_window.hpp"
+#include "qt_convert.hpp"
 #include "veneer/io/image_io.hpp"
+#include "widgets.hpp"
 
 namespace veneer::app {
 
@@ -88,7 +90,7 @@ void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer
   const bool full = as.has_value();
   QPointer<MainWindow> self(this);
   auto cancel = load_cancel_;
-  (void)QtConcurrent::run([self, folder, as, full, cancel] {
+  (void)QtConcurrent::run(job_pool(), [self, folder, as, full, cancel] {
     ReadSet r;
     auto read = veneer::read_set(folder.toStdString());
     if (!read) {
@@ -101,6 +103,8 @@ void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer
       if (full) {
         r.loaded->median = veneer::match::median_photo(r.loaded->set.images);
         r.loaded->median_picture = tonemap_picture(r.loaded->median);
+        r.loaded->median_image = to_qimage(r.loaded->median_picture);  // what the views show, made here
+        r.loaded->histogram = luminance_histogram(r.loaded->median_picture);
       }
     }
     QMetaObject::invokeMethod(self.data(), [self, r, as, folder, cancel] {
@@ -113,6 +117,12 @@ void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer
         return;
       }
       if (!r.loaded) {
+        if (self->reopen_ && (folder == self->reopen_->entry.destination || folder == self->reopen_->entry.source)) {
+          self->reopen_.reset();
+          self->message(tr("cannot reopen the map: %1").arg(r.error), true);
+          self->showStep();
+          return;
+        }
         self->message(r.error, true);
         self->showStep();
         return;
@@ -133,7 +143,7 @@ void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer
       self->computeNormals(r.loaded);
       self->message(tr("loaded %1 as the %2").arg(folder, qs(veneer::role_name(role))));
       self->showStep();
-      self->flowMaybeCompute();
+      if (!self->reopenWhenLoaded(folder, role)) self->flowMaybeCompute();
     });
   });
 }
@@ -145,6 +155,7 @@ void MainWindow::cancelStep() {
     rig_.cancelPulls();
     auto_pulls_.clear();
   }
+  reopen_.reset();
   if (loads_running_ > 0) {
     load_cancel_->store(true);
     load_cancel_ = std::make_shared<std::atomic<bool>>(false);

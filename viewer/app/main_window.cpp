@@ -46,6 +46,7 @@ MainWindow::MainWindow(const Options& options, QWidget* parent)
                  : options.workdir;
   QDir().mkpath(workdir_ + "/sets");
   library_ = std::make_unique<Library>(workdir_);
+  library_->setProblemHandler(this, [this](const QString& problem) { message(problem, true); });
   buildUi();
   buildMenus();
   guard_wheel(this);
@@ -79,6 +80,8 @@ MainWindow::MainWindow(const Options& options, QWidget* parent)
     message(tr("pulled %1 into %2").arg(id, folder));
     flowPulled(id, folder);
   });
+  live_pool_.setMaxThreadCount(1);
+  live_pool_.setExpiryTimeout(-1);  // the live view's thread stays while the window lives
   step_timer_.setInterval(250);
   connect(&step_timer_, &QTimer::timeout, this, &MainWindow::showStep);
   connect(&transfer_watch_, &QFutureWatcher<void>::finished, this, &MainWindow::onTransferDone);
@@ -93,6 +96,8 @@ MainWindow::~MainWindow() {
   job_cancel_ = true;
   job_future_.waitForFinished();
   transfer_watch_.waitForFinished();
+  live_pool_.waitForDone();
+  library_->flush();
 }
 
 // ---------------------------------------------------------------- layout
@@ -382,6 +387,7 @@ void MainWindow::onRigEvent(const veneer::rig::Event& e) {
       rig_.refreshStatus();
       break;
     case K::set_deleted:
+    case K::set_restored:  // by this viewer or another client: both lists change
       rig_.listSets();
       break;
   }

@@ -13,6 +13,7 @@
 #include <QFutureWatcher>
 #include <QMainWindow>
 #include <QSettings>
+#include <QThreadPool>
 #include <QTimer>
 
 #include "image_view.hpp"
@@ -49,6 +50,8 @@ struct LoadedSet {
   std::optional<veneer::ps::PsResult> normals;  // filled in the background after loading
   cv::Mat median;                               // per-pixel median photo (linear BGR)
   cv::Mat median_picture;                       // the same, tonemapped (8-bit), for the views
+  QImage median_image;                          // ... as the views show it (made by the loader)
+  cv::Mat histogram;                            // ... its 64-bin luminance histogram (CV_32F)
   cv::Mat hand_mask;  // segmentation by hand (CV_8UC1, 255 = object); empty = automatic
   int hand_version = 0;
 };
@@ -126,6 +129,13 @@ class MainWindow : public QMainWindow {
   // Role::unknown it is used as the role its manifest gives.
   void loadSetInBackground(const QString& folder, std::optional<veneer::Role> as);
   int loadsRunning() const { return loads_running_; }
+  // Shows a map kept in the library again (the Sets panel's "Open map" and a
+  // double click on a map row): loads its destination and source in their
+  // roles, with the options and hand masks it was computed with, and repaints
+  // through the stored map -- no matching. False, with a message naming what
+  // is missing, when its map file or one of its sets is gone; a set found
+  // replaced (another id in its folder) is said once both are loaded.
+  bool openLibraryMap(const QString& map_folder);
 
  private:
   void buildUi();
@@ -143,6 +153,14 @@ class MainWindow : public QMainWindow {
   void onRigEvent(const veneer::rig::Event& e);
   void onSetsListed(const std::vector<veneer::rig::SetSummary>& sets);
   void onLiveFrame(const veneer::rig::LiveFrame& frame);
+  // What the live view's thread makes of one frame, for the GUI to show.
+  struct LiveOut {
+    uint64_t seq = 0;
+    cv::Mat frame, repainted;  // empty frame: not a JPEG
+    QImage shown_image, repainted_image;
+    QString state, refusal;
+  };
+  void showLiveFrame(const LiveOut& out, const veneer::match::LiveSession* session);
   void onTransferDone();
   void matchOptionChanged();
   // transfer_panel.cpp: the presets of the Transfer panel
@@ -177,6 +195,9 @@ class MainWindow : public QMainWindow {
   void showLibrary();
   void addMapItem(const LibraryMap& map);
   void saveMapToLibrary();
+  // A set finished loading as `role`: true while a library map being reopened
+  // waits for its sets (and when it then starts), so the flow does not compute.
+  bool reopenWhenLoaded(const QString& folder, veneer::Role role);
   void askDelete(QTreeWidgetItem* item);
   void onTrashListed(const std::vector<veneer::rig::SetSummary>& sets);
   void restoreFromTrash(const QString& id);
@@ -213,9 +234,29 @@ class MainWindow : public QMainWindow {
   // thread almost nothing: the result's picture, the live repainter, the
   // relit pictures for the light direction the run started with.
   cv::Mat result_picture_, pending_result_picture_;
+  QImage result_image_, pending_result_image_;  // the same as the result view shows it
   std::shared_ptr<veneer::match::LiveSession> pending_session_;
   cv::Mat pending_relit_, pending_relit_source_;
   cv::Vec3d pending_relit_direction_;
+  // What a transfer ran with (the options, the hand masks), kept with the
+  // result it made so that the library stores the map with them.
+  struct RunSettings {
+    veneer::match::TransferOptions options;
+    cv::Mat dst_hand, src_hand;
+    QString reopened;  // the library map it repainted through ("" = matched)
+  };
+  RunSettings running_, shown_;
+  // A library map being reopened: shown once both its sets are loaded.
+  struct Reopen {
+    LibraryMap entry;
+    std::shared_ptr<const veneer::match::Map> map;
+    veneer::match::TransferOptions options;
+    cv::Mat dst_hand, src_hand;
+    bool dst_loaded = false, src_loaded = false;
+  };
+  std::optional<Reopen> reopen_;
+  std::shared_ptr<const veneer::match::Map> given_map_;  // the next transfer repaints through it
+  QString reopened_folder_;                              // ... the library map it came from
   std::atomic<bool> cancel_{false};
   bool computing_ = false;
   bool rerun_ = false;  // a matching option changed while computing: run again when done
@@ -231,6 +272,9 @@ class MainWindow : public QMainWindow {
   std::shared_ptr<veneer::match::TransferResult> pending_result_;
   std::shared_ptr<veneer::match::Relighter> pending_relighter_;
   cv::Mat live_frame_, live_repainted_;
+  QThreadPool live_pool_;  // the live frames' one worker thread (not the pool computes and exports queue in)
+  bool live_busy_ = false;  // a frame is being processed there
+  std::optional<veneer::rig::LiveFrame> live_next_;  // the newest frame that came meanwhile
   int live_frames_ = 0;
   double live_fps_ = 0;
   QElapsedTimer live_clock_;

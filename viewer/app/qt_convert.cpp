@@ -21,10 +21,14 @@ QImage to_qimage(const cv::Mat& picture) {
   } else {
     bgr = picture;
   }
-  cv::Mat rgb;
-  cv::cvtColor(bgr, rgb, cv::COLOR_BGR2RGB);
-  QImage image(rgb.data, rgb.cols, rgb.rows, static_cast<int>(rgb.step), QImage::Format_RGB888);
-  return image.copy();
+  // Format_RGB32 (0xffRRGGBB: bytes B, G, R, 255 in memory) is what the
+  // raster painter scales fastest; RGB888 was converted on every paint.
+  // The QImage owns the converted buffer: no second copy.
+  auto* bgra = new cv::Mat;
+  cv::cvtColor(bgr, *bgra, cv::COLOR_BGR2BGRA);
+  return QImage(
+      bgra->data, bgra->cols, bgra->rows, static_cast<qsizetype>(bgra->step), QImage::Format_RGB32,
+      [](void* m) { delete static_cast<cv::Mat*>(m); }, bgra);
 }
 
 cv::Mat to_mat(const QImage& image) {

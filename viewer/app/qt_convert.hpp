@@ -10,7 +10,8 @@
 
 namespace veneer::app {
 
-// 8-bit BGR / grey, or linear float BGR (tonemapped for display) → QImage (deep copy).
+// 8-bit BGR / grey, or linear float BGR (tonemapped for display) → QImage
+// (Format_RGB32, its own pixels).
 QImage to_qimage(const cv::Mat& picture);
 // QImage → 8-bit BGR.
 cv::Mat to_mat(const QImage& image);

@@ -68,10 +68,14 @@ QWidget* MainWindow::buildSetsPanel() {
   undo_btn_->setVisible(false);
   auto* use_dst = button(tr("→ Destination"), "useDestination", box);
   auto* use_src = button(tr("→ Source"), "useSource", box);
+  auto* open_map = button(tr("Open map"), "openMap", box);
+  open_map->setToolTip(tr("show the map chosen under \"Maps on this computer\" again: its sets are loaded and "
+                          "repainted through it, without matching"));
   for (auto* b : {open, pull, del, restore}) row->addWidget(b);
   auto* row2 = new QHBoxLayout;
   row2->addWidget(use_dst);
   row2->addWidget(use_src);
+  row2->addWidget(open_map);
   layout->addLayout(row);
   layout->addLayout(row2);
   layout->addWidget(undo_btn_);
@@ -115,6 +119,11 @@ QWidget* MainWindow::buildSetsPanel() {
       delete item;
     }
   });
+  connect(open_map, &QPushButton::clicked, this, [this] {
+    QTreeWidgetItem* item = selectedItem();
+    if (!item || item->parent() != maps_root_) return message(tr("choose a map under \"Maps on this computer\""), true);
+    openLibraryMap(item->data(0, Qt::UserRole).toString());
+  });
   connect(use_dst, &QPushButton::clicked, this, [this] { useSelected(veneer::Role::destination); });
   connect(use_src, &QPushButton::clicked, this, [this] { useSelected(veneer::Role::source); });
   connect(sets_tree_, &QTreeWidget::itemDoubleClicked, this, [this](QTreeWidgetItem* item) {
@@ -124,19 +133,13 @@ QWidget* MainWindow::buildSetsPanel() {
       pullSelected();
     } else if (item->parent() == trash_root_) {
       restoreFromTrash(item->text(0));
+    } else if (item->parent() == maps_root_) {
+      openLibraryMap(item->data(0, Qt::UserRole).toString());
     }
   });
   return box;
 }
 
-
-namespace {
-// "2026-11-25T20:08:18Z" -> "2026-11-25 20:08" (as written when it is not ISO 8601)
-QString short_date(const std::string& iso) {
-  const QString t = qs(iso);
-  return t.size() >= 16 && t[10] == 'T' ? t.left(10) + " " + t.mid(11, 5) : t;
-}
-}  // namespace
 
 void MainWindow::onSetsListed(const std::vector<veneer::rig::SetSummary>& sets) {
   qDeleteAll(rig_root_->takeChildren());
@@ -226,7 +229,7 @@ void MainWindow::addLocalItem(const QString& folder, const veneer::ImageSet& set
   if (!small.empty()) item->setIcon(0, QIcon(QPixmap::fromImage(to_qimage(small))));
   local_root_->setExpanded(true);
   library_->addSet(folder, set, small.depth() == CV_8U ? small : tonemap_picture(small));
-  if (!library_->save()) message(library_->problem(), true);
+  library_->save();
 }
 
 // What the library remembers from earlier runs: rows without reading a set.
@@ -241,51 +244,6 @@ void MainWindow::showLibrary() {
     if (!s.thumbnail.isEmpty() && QFileInfo::exists(s.thumbnail)) item->setIcon(0, QIcon(s.thumbnail));
   }
   for (const auto& m : library_->maps()) addMapItem(m);
-}
-
-void MainWindow::addMapItem(const LibraryMap& m) {
-  QTreeWidgetItem* item = nullptr;
-  for (int i = 0; i < maps_root_->childCount() && !item; ++i)
-    if (maps_root_->child(i)->data(0, Qt::UserRole).toString() == m.folder) item = maps_root_->child(i);
-  if (!item) item = new QTreeWidgetItem(maps_root_);
-  item->setText(0, QFileInfo(m.destination).fileName() + " ← " + QFileInfo(m.source).fileName());
-  item->setText(1, tr("map"));
-  item->setText(2, m.method);
-  item->setText(3, short_date(m.computed.toStdString()));
-  item->setData(0, Qt::UserRole, m.folder);
-  item->setToolTip(0, m.folder);
-  const QString picture = m.folder + "/map.png";
-  if (QFileInfo::exists(picture)) item->setIcon(0, QIcon(picture));
-  maps_root_->setExpanded(true);
-}
-
-// The map shown goes into the library (written off the GUI thread).
-void MainWindow::saveMapToLibrary() {
-  if (!result_ || !dst_ || !src_) return;
-  LibraryMap m;
-  m.destination = dst_->folder;
-  m.source = src_->folder;
-  m.method = method_->currentText();
-  m.computed = QDateTime::currentDateTimeUtc().toString(Qt::ISODate);
-  m.folder = library_->mapsFolder() + "/" + QFileInfo(m.destination).fileName() + "--" + QFileInfo(m.source).fileName();
-  auto result = result_;
-  QPointer<MainWindow> self(this);
-  (void)QtConcurrent::run([self, result, m] {
-    QDir().mkpath(m.folder);
-    auto s = veneer::match::write_map((m.folder + "/map.pfm").toStdString(), result->map);
-    cv::Mat picture = veneer::match::map_picture(result->map, result->source_size), small;
-    const double k = 96.0 / std::max(1, picture.cols);
-    cv::resize(picture, small, cv::Size(), k, k, cv::INTER_AREA);
-    const bool ok = s.ok() && cv::imwrite((m.folder + "/map.png").toStdString(), small);
-    const QString error = s ? QString() : qs(s.message());
-    QMetaObject::invokeMethod(self.data(), [self, m, ok, error] {
-      if (!self) return;
-      if (!ok) return self->message(tr("the map could not be kept in the library: %1").arg(error), true);
-      self->library_->addMap(m);
-      self->library_->save();
-      self->addMapItem(m);
-    });
-  });
 }
 
 void MainWindow::useSelected(veneer::Role as) {
@@ -332,7 +290,7 @@ void MainWindow::setLoaded(std::shared_ptr<LoadedSet> loaded, veneer::Role as) {
 
 void MainWindow::computeNormals(std::shared_ptr<LoadedSet> loaded) {
   QPointer<MainWindow> self(this);
-  (void)QtConcurrent::run([self, loaded] {
+  (void)QtConcurrent::run(job_pool(), [self, loaded] {
     auto seg = veneer::ps::segment(loaded->set);
     if (!seg) return;
     auto ps = veneer::ps::photometric_stereo(loaded->set, seg->mask);

@@ -248,6 +248,9 @@ void MainWindow::applyPreset(const Preset& p) {
 
 void MainWindow::startTransfer() {
   if (computing_) return;
+  // a library map reopened: repainted through it, not matched (this run only)
+  std::shared_ptr<const veneer::match::Map> given = std::move(given_map_);
+  given_map_.reset();
   if (!dst_ || !src_) {
     message(tr("load a destination and a source set first"), true);
     return;
@@ -285,6 +288,7 @@ void MainWindow::startTransfer() {
   if (!seg_rect_.isEmpty()) seg.rect = cv::Rect(seg_rect_.x(), seg_rect_.y(), seg_rect_.width(), seg_rect_.height());
   const bool custom_segmentation = seg.method != veneer::ps::SegmentMethod::automatic || seg.rect.has_value();
   const cv::Mat dst_hand = dst_->hand_mask.clone(), src_hand = src_->hand_mask.clone();
+  running_ = RunSettings{options, dst_hand, src_hand, given ? reopened_folder_ : QString()};
 
   computing_ = true;
   cancel_ = false;
@@ -307,7 +311,7 @@ void MainWindow::startTransfer() {
   // the same matching options as the map shown (only the blend changed, or
   // Compute again): repainted from that map, not matched again
   std::shared_ptr<const veneer::match::TransferResult> previous =
-      cached && result_ && result_->match_options == options.match ? result_ : nullptr;
+      !given && cached && result_ && result_->match_options == options.match ? result_ : nullptr;
   if (previous)
     ++repaint_only_runs_;
   else if (cached)
@@ -316,11 +320,12 @@ void MainWindow::startTransfer() {
   pending_key_ = key;
   pending_session_.reset();
   pending_result_picture_ = cv::Mat();
+  pending_result_image_ = QImage();
   pending_relit_ = pending_relit_source_ = cv::Mat();
   const cv::Vec3d light = relight_pad_->direction();
   QPointer<MainWindow> self(this);
-  transfer_watch_.setFuture(QtConcurrent::run([this, self, dst, src, options, seg, custom_segmentation, dst_hand, src_hand, cached,
-                                               previous, relighter, light] {
+  transfer_watch_.setFuture(QtConcurrent::run(job_pool(), [this, self, dst, src, options, seg, custom_segmentation, dst_hand, src_hand, cached,
+                                               previous, given, relighter, light] {
     veneer::Progress progress;
     progress.cancel = &cancel_;
     progress.on_progress = [self](double f, const std::string& stage) {
@@ -364,6 +369,7 @@ void MainWindow::startTransfer() {
       pending_prepared_ = pair;
     }
     auto result = previous ? veneer::match::transfer(*pair, options, previous->map, progress)
+                  : given  ? veneer::match::transfer(*pair, options, *given, progress)
                            : veneer::match::transfer(*pair, options, progress);
     if (!result) {
       transfer_error_ = qs(result.message());
@@ -372,6 +378,7 @@ void MainWindow::startTransfer() {
     pending_result_ = std::make_shared<veneer::match::TransferResult>(std::move(*result));
     // what showing the result needs, made here rather than on the GUI thread
     pending_result_picture_ = picture_of(pending_result_->repainted_median);
+    pending_result_image_ = to_qimage(pending_result_picture_);
     {  // the live session: the source's stills (full size) and its object there
       cv::Mat still_mask = pair->src.view.mask;
       if (still_mask.size() != src->set.size)
@@ -446,8 +453,10 @@ void MainWindow::onTransferDone() {
     rerun_ = false;
     if (pending_result_) {
       result_ = pending_result_;
+      shown_ = running_;
       relighter_ = pending_relighter_;
       result_picture_ = pending_result_picture_;
+      result_image_ = pending_result_image_;
     }
     startTransfer();
     return;
@@ -462,6 +471,7 @@ void MainWindow::onTransferDone() {
     return;
   }
   result_ = pending_result_;
+  shown_ = running_;
   relighter_ = pending_relighter_;
   transfer_bar_->setValue(100);
   QString text = tr("done");
@@ -475,10 +485,15 @@ void MainWindow::onTransferDone() {
   else
     text += tr(" · map %1 ms").arg(result_->match_seconds * 1000, 0, 'f', 1);
   transfer_label_->setText(text);
-  message(tr("transfer done (%1)").arg(method_->currentText()));
+  if (!shown_.reopened.isEmpty())
+    message(tr("map reopened from the library, not matched again: %1").arg(shown_.reopened));
+  else
+    message(tr("transfer done (%1)").arg(method_->currentText()));
   showStep();
-  step_label_->setText(tr("map computed: ") + text);
+  step_label_->setText((shown_.reopened.isEmpty() ? tr("map computed: ") : tr("map reopened from the library: ")) +
+                       text);
   result_picture_ = pending_result_picture_;
+  result_image_ = pending_result_image_;
   if (pending_session_) {
     live_session_ = std::move(pending_session_);
     live_refusal_.clear();

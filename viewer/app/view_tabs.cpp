@@ -10,6 +10,7 @@
 #include <QComboBox>
 #include <QDir>
 #include <QPainter>
+#include <QPointer>
 #include <QSaveFile>
 #include <QDoubleSpinBox>
 #include <QFileDialog>
@@ -36,6 +37,7 @@
 #include <opencv2/videoio.hpp>
 
 #include "veneer/io/image_io.hpp"
+#include "veneer/match/specular.hpp"
 #include "veneer/ps/segmentation.hpp"
 
 namespace veneer::app {
@@ -200,47 +202,40 @@ cv::Mat confidence_picture(const cv::Mat& goodness, const cv::Mat& valid) {
   return out;
 }
 
-// RTI's specular enhancement: the normals shaded as a grey glossy surface
-// (Lambert plus a Blinn-Phong highlight) under light `l`, so relief and
-// small dents show that the albedo hides. A view of the normals, not an
-// estimate of anything.
-cv::Mat specular_picture(const veneer::ps::PsResult& ps, const cv::Vec3d& light) {
-  const cv::Vec3f l(light), h = cv::normalize(cv::Vec3f(light) + cv::Vec3f(0, 0, 1));
-  cv::Mat out(ps.normals.size(), CV_8UC3, cv::Scalar::all(0));
-  for (int y = 0; y < out.rows; ++y) {
-    const auto* n = ps.normals.ptr<cv::Vec3f>(y);
-    auto* o = out.ptr<cv::Vec3b>(y);
-    for (int x = 0; x < out.cols; ++x) {
-      if (n[x] == cv::Vec3f()) continue;
-      const float diffuse = std::max(0.f, n[x].dot(l)), spec = std::pow(std::max(0.f, n[x].dot(h)), 60.f);
-      o[x] = cv::Vec3b::all(cv::saturate_cast<uchar>(255 * std::min(1.f, 0.55f * diffuse + 0.7f * spec)));
-    }
-  }
-  return out;
-}
 }  // namespace
 
 void MainWindow::refreshLookNow() {
   const int what = look_what_->currentIndex();
   const cv::Vec3d light = relight_pad_ ? relight_pad_->direction() : cv::Vec3d(0, 0, 1);
-  auto pick = [what, light](const std::shared_ptr<LoadedSet>& s) -> cv::Mat {
+  // the median, the view shown most, comes ready from the loader (a 10 Mpx
+  // set's conversion is not done on the GUI thread); the other views are made here
+  auto pick_image = [what, light](const std::shared_ptr<LoadedSet>& s) -> QImage {
     if (!s) return {};
+    if (what == 0 && !s->median_image.isNull()) return s->median_image;
+    cv::Mat picture;
     switch (what) {
-      case 1: return s->normals ? normals_picture(s->normals->normals) : cv::Mat();
-      case 2: return s->normals ? picture_of(s->normals->albedo) : cv::Mat();
-      case 3: return s->normals ? s->normals->mask : cv::Mat();
-      case 6: {
-        if (!s->normals || s->normals->residual.empty()) return {};
-        cv::Mat good = 1.0 - cv::min(s->normals->residual * 10.0, 1.0);  // residual 0.1 of the brightest: none
-        return confidence_picture(good, s->normals->mask);
-      }
-      case 7: return s->normals ? specular_picture(*s->normals, light) : cv::Mat();
-      default: return s->median_picture.empty() ? picture_of(s->median) : s->median_picture;
+      case 1: picture = s->normals ? normals_picture(s->normals->normals) : cv::Mat(); break;
+      case 2: picture = s->normals ? picture_of(s->normals->albedo) : cv::Mat(); break;
+      case 3: picture = s->normals ? s->normals->mask : cv::Mat(); break;
+      case 6:
+        if (s->normals && !s->normals->residual.empty()) {
+          cv::Mat good = 1.0 - cv::min(s->normals->residual * 10.0, 1.0);  // residual 0.1 of the brightest: none
+          picture = confidence_picture(good, s->normals->mask);
+        }
+        break;
+      case 7:  // specular enhancement (core), following the relight pad's light
+        if (s->normals) {
+          auto shaded = veneer::match::specular_enhancement(s->normals->normals, light);
+          if (shaded) picture = *shaded;
+        }
+        break;
+      default: picture = s->median_picture.empty() ? picture_of(s->median) : s->median_picture;
     }
+    return to_qimage(picture);
   };
   updateHistogram();
-  dst_view_->setImage(to_qimage(pick(dst_)));
-  src_view_->setImage(to_qimage(pick(src_)));
+  dst_view_->setImage(pick_image(dst_));
+  src_view_->setImage(pick_image(src_));
   if (result_) {
     cv::Mat r;
     if (what == 4) {
@@ -258,6 +253,9 @@ void MainWindow::refreshLookNow() {
       r = veneer::match::reuse_picture(result_->reuse, result_->source_median);
       src_view_->setImage(to_qimage(r));
       r = result_picture_.empty() ? picture_of(result_->repainted_median) : result_picture_;
+    } else if (!result_image_.isNull()) {
+      result_view_->setImage(result_image_);  // made by the transfer's worker
+      return;
     } else {
       r = result_picture_.empty() ? picture_of(result_->repainted_median) : result_picture_;
     }
@@ -269,18 +267,25 @@ void MainWindow::refreshLookNow() {
 
 // The destination's luminance histogram (of the picture shown on the Look
 // tab's median) with the exposure its manifest records.
+cv::Mat luminance_histogram(const cv::Mat& bgr8) {
+  if (bgr8.empty()) return {};
+  cv::Mat grey, hist;
+  cv::cvtColor(bgr8, grey, cv::COLOR_BGR2GRAY);
+  const int bins = 64, channels[] = {0}, size[] = {bins};
+  const float range[] = {0, 256};
+  const float* ranges[] = {range};
+  cv::calcHist(&grey, 1, channels, cv::Mat(), hist, 1, size, ranges);
+  return hist;
+}
+
 void MainWindow::updateHistogram() {
   const LoadedSet* s = dst_ ? dst_.get() : src_.get();
   if (!s || s->median_picture.empty()) {
     histogram_->clear();
     return;
   }
-  cv::Mat grey, hist;
-  cv::cvtColor(s->median_picture, grey, cv::COLOR_BGR2GRAY);
-  const int bins = 64, channels[] = {0}, size[] = {bins};
-  const float range[] = {0, 256};
-  const float* ranges[] = {range};
-  cv::calcHist(&grey, 1, channels, cv::Mat(), hist, 1, size, ranges);
+  const cv::Mat hist = s->histogram.empty() ? luminance_histogram(s->median_picture) : s->histogram;
+  const int bins = hist.rows;
   double peak = 0;
   cv::minMaxLoc(hist, nullptr, &peak);
   QPixmap pixmap(bins * 2, 36);
@@ -420,50 +425,85 @@ void MainWindow::updateLampBoxes() {
   }
 }
 
+// A live frame is decoded, registered and repainted off the GUI thread (one
+// at a time, on the live view's own thread; frames arriving meanwhile wait as
+// the newest one only); the GUI thread only shows the pictures made there.
 void MainWindow::onLiveFrame(const veneer::rig::LiveFrame& frame) {
-  cv::Mat decoded = cv::imdecode(frame.jpeg, cv::IMREAD_COLOR);
-  if (decoded.empty()) {
-    message(tr("live view: a frame that is not a JPEG was dropped"), true);
+  if (live_busy_) {
+    live_next_ = frame;  // coalesced: an older waiting frame is dropped
     return;
   }
-  live_frame_ = decoded;
-  ++live_frames_;
-  if (live_clock_.isValid() && live_clock_.elapsed() > 0) live_fps_ = live_frames_ * 1000.0 / live_clock_.elapsed();
-  QString state;
-  gui_work([&] {
-    cv::Mat shown = decoded;
-    if (live_session_ && live_session_->ready() && live_refusal_.isEmpty()) {
-      auto r = live_session_->process(decoded);
-      if (!r) {
-        // the live view's framing can't be related to the stills: said once, no wrong picture
-        live_refusal_ = qs(r.message());
-        message(tr("live view: %1").arg(live_refusal_), true);
-      } else {
-        live_repainted_ = r->repainted;
-        live_dst_view_->setImage(to_qimage(live_repainted_));
-        // where the source was found: its outline over the frame, green when tracked, red when lost
-        shown = decoded.clone();
-        if (r->outline.size() >= 3) {
-          std::vector<cv::Point> poly;
-          for (const cv::Point2f& p : r->outline) poly.emplace_back(cvRound(p.x), cvRound(p.y));
-          cv::polylines(shown, std::vector<std::vector<cv::Point>>{poly}, true,
-                        r->lost ? cv::Scalar(0, 0, 255) : cv::Scalar(0, 220, 0), std::max(1, shown.cols / 500),
-                        cv::LINE_AA);
+  live_busy_ = true;
+  auto session = live_session_ && live_session_->ready() && live_refusal_.isEmpty() ? live_session_ : nullptr;
+  QPointer<MainWindow> self(this);
+  (void)QtConcurrent::run(&live_pool_, [self, frame, session] {
+    auto out = std::make_shared<LiveOut>();
+    out->seq = frame.seq;
+    out->frame = cv::imdecode(frame.jpeg, cv::IMREAD_COLOR);
+    if (!out->frame.empty()) {
+      cv::Mat shown = out->frame;
+      if (session) {
+        auto r = session->process(out->frame);
+        if (!r) {
+          out->refusal = qs(r.message());
+        } else {
+          out->repainted = r->repainted;
+          out->repainted_image = to_qimage(r->repainted);
+          // where the source was found: its outline over the frame, green when tracked, red when lost
+          shown = out->frame.clone();
+          if (r->outline.size() >= 3) {
+            std::vector<cv::Point> poly;
+            for (const cv::Point2f& p : r->outline) poly.emplace_back(cvRound(p.x), cvRound(p.y));
+            cv::polylines(shown, std::vector<std::vector<cv::Point>>{poly}, true,
+                          r->lost ? cv::Scalar(0, 0, 255) : cv::Scalar(0, 220, 0), std::max(1, shown.cols / 500),
+                          cv::LINE_AA);
+          }
+          out->state = r->lost ? tr("LOST - hold still / recapture (match %1)").arg(r->quality, 0, 'f', 2)
+                               : tr("tracked, match %1").arg(r->quality, 0, 'f', 2);
         }
-        state = r->lost ? tr("LOST - hold still / recapture (match %1)").arg(r->quality, 0, 'f', 2)
-                        : tr("tracked, match %1").arg(r->quality, 0, 'f', 2);
       }
+      out->shown_image = to_qimage(shown);
     }
-    live_src_view_->setImage(to_qimage(shown));
+    QMetaObject::invokeMethod(self.data(), [self, out, session] {
+      if (self) self->showLiveFrame(*out, session.get());
+    });
   });
-  const bool repainting = live_session_ && live_refusal_.isEmpty();
-  live_label_->setText(tr("frame %1 · %2 fps").arg(frame.seq).arg(live_fps_, 0, 'f', 1) +
-                       (state.isEmpty() ? QString() : " · " + state));
-  if (!step_.running())
-    step_label_->setText((repainting ? tr("live repaint · ")
-                                     : live_session_ ? tr("live view (framing not related to the stills) · ")
-                                                     : tr("live view (no map yet) · ")) +
-                         live_label_->text());
+}
+
+void MainWindow::showLiveFrame(const LiveOut& out, const veneer::match::LiveSession* session) {
+  live_busy_ = false;
+  if (out.frame.empty()) {
+    message(tr("live view: a frame that is not a JPEG was dropped"), true);
+  } else {
+    live_frame_ = out.frame;
+    ++live_frames_;
+    if (live_clock_.isValid() && live_clock_.elapsed() > 0) live_fps_ = live_frames_ * 1000.0 / live_clock_.elapsed();
+    // the session may have been replaced meanwhile (a new map): its verdicts only for itself
+    const bool current = session && session == live_session_.get();
+    if (current && !out.refusal.isEmpty() && live_refusal_.isEmpty()) {
+      // the live view's framing can't be related to the stills: said once, no wrong picture
+      live_refusal_ = out.refusal;
+      message(tr("live view: %1").arg(live_refusal_), true);
+    }
+    if (current && !out.repainted.empty()) {
+      live_repainted_ = out.repainted;
+      live_dst_view_->setImage(out.repainted_image);
+    }
+    live_src_view_->setImage(out.shown_image);
+    const bool repainting = live_session_ && live_refusal_.isEmpty();
+    live_label_->setText(tr("frame %1 · %2 fps").arg(out.seq).arg(live_fps_, 0, 'f', 1) +
+                         (out.state.isEmpty() || !current ? QString() : " · " + out.state));
+    if (!step_.running())
+      step_label_->setText((repainting ? tr("live repaint · ")
+                                       : live_session_ ? tr("live view (framing not related to the stills) · ")
+                                                       : tr("live view (no map yet) · ")) +
+                           live_label_->text());
+  }
+  if (live_next_) {
+    const veneer::rig::LiveFrame next = std::move(*live_next_);
+    live_next_.reset();
+    onLiveFrame(next);
+  }
 }
 
 }  // namespace veneer::app

@@ -6,10 +6,24 @@
 #include <QAbstractSpinBox>
 #include <QComboBox>
 #include <QEvent>
+#include <QThread>
+
+#include <algorithm>
 
 namespace veneer::app {
 
 void gui_work(const std::function<void()>& f) { tbb::this_task_arena::isolate(f); }
+
+QThreadPool* job_pool() {
+  static QThreadPool pool;
+  static const bool sized = [] {
+    // jobs spend their time in TBB's loops or on the disk: more jobs than cores may wait side by side
+    pool.setMaxThreadCount(std::max(4, QThread::idealThreadCount()));
+    return true;
+  }();
+  (void)sized;
+  return &pool;
+}
 
 namespace {
 class WheelGuard : public QObject {

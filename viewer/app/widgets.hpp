@@ -3,6 +3,7 @@
 #include <QDoubleSpinBox>
 #include <QPushButton>
 #include <QString>
+#include <QThreadPool>
 
 #include <functional>
 
@@ -36,10 +37,26 @@ inline QDoubleSpinBox* number_box(const QString& name, double lo, double hi, int
 // (widgets.cpp: TBB's headers and Qt's `emit` do not mix.)
 void gui_work(const std::function<void()>& f);
 
+// The pool the window's long jobs run in (compute, load, normals, export,
+// library maps): not Qt's global pool, whose threads Qt 6.4's own image
+// conversion and scaling borrow while the GUI thread waits for them -- a
+// transfer holding one there stalled the painting of the views.
+QThreadPool* job_pool();
+
 // The mouse wheel changes a spin box, combo box or slider under `root` only
 // when it has focus (clicked or tabbed into); otherwise the wheel scrolls the
 // panel, as when scrolling past the field.
 void guard_wheel(QWidget* root);
+
+// "2026-11-25T20:08:18Z" -> "2026-11-25 20:08" (as written when it is not ISO 8601)
+inline QString short_date(const std::string& iso) {
+  const QString t = QString::fromStdString(iso);
+  return t.size() >= 16 && t[10] == 'T' ? t.left(10) + " " + t.mid(11, 5) : t;
+}
+
+// The 64-bin luminance histogram (CV_32F) of an 8-bit BGR picture, what the
+// Look tab draws; made where the picture is made (off the GUI thread).
+cv::Mat luminance_histogram(const cv::Mat& bgr8);
 
 // A linear picture tonemapped for the views (empty stays empty).
 cv::Mat picture_of(const cv::Mat& linear);

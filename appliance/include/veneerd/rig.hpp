@@ -40,7 +40,7 @@ namespace veneerd {
 struct RigEvent {
   enum class Kind {
     button_pressed, capture_started, shot_taken, set_stored, capture_failed,
-    lamp_state, camera_connected, camera_lost, set_deleted,
+    lamp_state, camera_connected, camera_lost, set_deleted, set_restored,
   };
   Kind kind = Kind::button_pressed;
   std::string set_id;
@@ -144,6 +144,8 @@ class Rig {
   void set_live_fps(double fps);
   // Deletes a stored set (not one being written).
   veneer::Status delete_set(const std::string& id);
+  // Brings a set back from the store's trash; every client hears set_restored.
+  veneer::Status restore_set(const std::string& id);
 
   RigState state() const;
   Store& store() { return store_; }

@@ -63,6 +63,7 @@ const char* event_name(Event::Kind kind) {
     case Event::Kind::camera_connected: return "camera_connected";
     case Event::Kind::camera_lost: return "camera_lost";
     case Event::Kind::set_deleted: return "set_deleted";
+    case Event::Kind::set_restored: return "set_restored";
   }
   return "?";
 }
@@ -93,7 +94,8 @@ std::string describe(const Event& e) {
     }
     case Event::Kind::camera_connected: s += " " + e.camera_model; break;
     case Event::Kind::camera_lost: s += " " + e.reason; break;
-    case Event::Kind::set_deleted: s += " " + e.set_id; break;
+    case Event::Kind::set_deleted:
+    case Event::Kind::set_restored: s += " " + e.set_id; break;
   }
   return s;
 }
@@ -192,6 +194,10 @@ Event convert(const pb::Event& w) {
     case pb::Event::kSetDeleted:
       e.kind = Event::Kind::set_deleted;
       e.set_id = w.set_deleted().id();
+      break;
+    case pb::Event::kSetRestored:
+      e.kind = Event::Kind::set_restored;
+      e.set_id = w.set_restored().id();
       break;
     case pb::Event::KIND_NOT_SET:
       break;

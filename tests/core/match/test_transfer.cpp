@@ -2,8 +2,12 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
 
+#include <tbb/global_control.h>
+
+#include <atomic>
 #include <filesystem>
 #include <fstream>
+#include <set>
 
 #include "veneer/match/metrics.hpp"
 #include "veneer/match/transfer.hpp"
@@ -223,6 +227,43 @@ TEST(Transfer, FromAGivenMapRepaintsWithoutMatching) {
   auto bad = transfer(*pair, o, small);
   ASSERT_FALSE(bad.ok());
   EXPECT_NE(bad.message().find("map given"), std::string::npos) << bad.message();
+}
+
+// A cancel while the result is written stops the files not yet begun: here,
+// one file at a time, after the first -- that one is whole, nothing else is
+// there (no temporary), no metrics.json, and the call says "cancelled".
+TEST(Transfer, WritingStopsBetweenFilesWhenCancelled) {
+  const ImageSet dst = simulated("cup-white", Role::destination);
+  const ImageSet src = simulated("cup-dots", Role::source);
+  auto r = transfer(dst, src, options(Method::coherent));
+  ASSERT_TRUE(r.ok()) << r.message();
+  const auto dir = std::filesystem::temp_directory_path() / ("veneer-cancel-write-" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::atomic<bool> cancel{false};
+  int files_done = 0;
+  Progress p;
+  p.cancel = &cancel;
+  p.on_progress = [&](double f, const std::string&) {
+    if (f > 0 && ++files_done == 1) cancel = true;
+  };
+  {
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);  // the files one after another
+    auto s = write_transfer(*r, dir, p);
+    ASSERT_FALSE(s.ok());
+    EXPECT_NE(s.message().find("cancelled"), std::string::npos) << s.message();
+  }
+  std::set<std::string> names;
+  for (const auto& e : std::filesystem::directory_iterator(dir)) names.insert(e.path().filename().string());
+  EXPECT_EQ(names, std::set<std::string>{"map.pfm"}) << "the first file only, no temporary";
+  auto back = read_map(dir / "map.pfm");
+  ASSERT_TRUE(back.ok()) << back.message();
+  EXPECT_EQ(cv::norm(back->xy, r->map.xy, cv::NORM_INF), 0.0) << "whole";
+  // not cancelled: everything, metrics.json last
+  cancel = false;
+  files_done = 2;
+  ASSERT_TRUE(write_transfer(*r, dir, p).ok());
+  EXPECT_TRUE(std::filesystem::exists(dir / "metrics.json"));
+  std::filesystem::remove_all(dir);
 }
 
 // What the live view needs to repaint frames as the stills were: the options

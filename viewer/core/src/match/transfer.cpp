@@ -684,17 +684,20 @@ Status write_files(const TransferResult& r, PreparedPair* pair, const std::files
     progress.report(static_cast<double>(++done) / total, "writing " + folder.string());
   };
   progress.report(0.0, "writing " + folder.string());
+  const Status cancelled = make_error("writing " + folder.string() + " cancelled");
   // the painted ones first: they release the pair's photos, the largest
   // part of what is held, before the other files are made all at once
   for (size_t i = 0; i < painted.size(); ++i) {
-    if (progress.cancelled()) return make_error("cancelled");
-    written[files.size() + i] = painted[i]();
+    written[files.size() + i] = progress.cancelled() ? cancelled : painted[i]();
     one_done();
   }
   tbb::parallel_for(size_t(0), files.size(), [&](size_t i) {
-    written[i] = files[i]();
+    // a cancel stops the files not yet begun; those being encoded finish
+    // (each is whole under its own name or absent, never half-written)
+    written[i] = progress.cancelled() ? cancelled : files[i]();
     one_done();
   });
+  if (progress.cancelled()) return cancelled;  // and no metrics.json: the folder is not a whole result
   for (const Status& s : written) {
     if (!s) return s;  // the first by file order, whatever finished first
   }

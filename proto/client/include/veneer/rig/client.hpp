@@ -110,7 +110,7 @@ struct SetSummary {
 struct Event {
   enum class Kind {
     button_pressed, capture_started, shot_taken, set_stored, capture_failed,
-    lamp_state, camera_connected, camera_lost, set_deleted,
+    lamp_state, camera_connected, camera_lost, set_deleted, set_restored,
   };
   Kind kind = Kind::button_pressed;
   uint64_t seq = 0;

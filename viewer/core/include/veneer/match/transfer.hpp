@@ -117,6 +117,9 @@ std::string transfer_options_json(const TransferOptions& options);
 // relighting was measured) into `folder` (created when missing).
 // `progress` hears the fraction of the files written (they are encoded in
 // parallel, each written through a temporary and renamed, one folder fsync).
+// Its cancel stops the files not yet begun (those being encoded finish) and
+// the call fails saying "cancelled", without metrics.json: each file there is
+// whole, and a folder without metrics.json is not a whole result.
 Status write_transfer(const TransferResult& result, const std::filesystem::path& folder,
                       const Progress& progress = {});
 // The same for a result made with keep_pictures = false: each of the pair's
