@@ -39,15 +39,20 @@ struct TransferArgs {
 ::veneer::cli::Output report{"transfer"};
 
 // A mask PNG for a set: pixels above 127 are the object. One clear error
-// for a file that does not read, has another size, or marks nothing.
-Status apply_mask(const std::string& option, const std::string& file, ImageSet& set) {
-  cv::Mat m = cv::imread(file, cv::IMREAD_GRAYSCALE);
-  if (m.empty()) return make_error(option + " " + file + ": cannot read it as an image");
-  if (m.size() != set.size)
-    return make_error(option + " " + file + " is " + std::to_string(m.cols) + "x" + std::to_string(m.rows) +
-                      ", the set is " + std::to_string(set.size.width) + "x" + std::to_string(set.size.height));
-  set.mask = m > 127;
-  if (cv::countNonZero(set.mask) == 0) return make_error(option + " " + file + " marks no object pixel (all dark)");
+// for a file that does not read, has another size than the set, or marks nothing.
+Status read_mask(const std::string& option, const std::string& file, const std::string& folder,
+                 const ReadOptions& read, cv::Mat& mask) {
+  mask = cv::imread(file, cv::IMREAD_GRAYSCALE);
+  if (mask.empty()) return make_error(option + " " + file + ": cannot read it as an image");
+  ReadOptions manifest = read;
+  manifest.load_photos = false;
+  manifest.load_truth = false;
+  auto set = read_set(folder, manifest);
+  if (!set) return set.error();
+  if (mask.size() != set->size)
+    return make_error(option + " " + file + " is " + std::to_string(mask.cols) + "x" + std::to_string(mask.rows) +
+                      ", the set is " + std::to_string(set->size.width) + "x" + std::to_string(set->size.height));
+  if (cv::countNonZero(mask > 127) == 0) return make_error(option + " " + file + " marks no object pixel (all dark)");
   return {};
 }
 
@@ -78,6 +83,7 @@ int run(const TransferArgs& a) {
   options.blend = a.blend;
   options.blend_guide = a.blend_guide;
   options.scale = a.scale;
+  options.keep_pictures = false;  // painted and written one at a time (write_transfer with the pair)
   if (auto s = options.check(); !s) return report.usage(s.message());
 
   const auto t_wall = std::chrono::steady_clock::now();
@@ -104,26 +110,20 @@ int run(const TransferArgs& a) {
   matching.on_progress = [&bar](double f, const std::string& stage) { bar.update(0.4 + 0.55 * f, stage); };
   std::vector<pipeline::SetReport> reports;
   Expected<match::PreparedPair> pair = make_error("not prepared");
-  if (a.dst_mask.empty() && a.src_mask.empty()) {
-    pair = pipeline::prepare_pair(a.dst, a.src, options, prep, &reports, reading);
-  } else {
-    // a mask given: the sets are read as they are and prepared with it (the
-    // result cache, keyed by the sets alone, is not used)
-    auto d = read_set(a.dst, prep.read), s = read_set(a.src, prep.read);
-    if (!d) return report.fail(d.message());
-    if (!s) return report.fail(s.message());
-    if (!a.dst_mask.empty())
-      if (auto st = apply_mask("--dst-mask", a.dst_mask, *d); !st) return report.usage(st.message());
-    if (!a.src_mask.empty())
-      if (auto st = apply_mask("--src-mask", a.src_mask, *s); !st) return report.usage(st.message());
-    pair = match::prepare_pair(*d, *s, options, reading);
-  }
+  // hand-drawn masks replace the segmentation and are part of the cache key
+  if (!a.dst_mask.empty())
+    if (auto st = read_mask("--dst-mask", a.dst_mask, a.dst, prep.read, prep.destination_mask); !st)
+      return report.usage(st.message());
+  if (!a.src_mask.empty())
+    if (auto st = read_mask("--src-mask", a.src_mask, a.src, prep.read, prep.source_mask); !st)
+      return report.usage(st.message());
+  pair = pipeline::prepare_pair(a.dst, a.src, options, prep, &reports, reading);
   if (!pair) return report.fail(pair.message());
   auto result = match::transfer(*pair, options, matching);
   if (!result) return report.fail(result.message());
   Progress writing;
   writing.on_progress = [&bar](double f, const std::string& stage) { bar.update(0.95 + 0.04 * f, stage); };
-  if (auto s = match::write_transfer(*result, a.out, writing); !s) return report.fail(s.message());
+  if (auto s = match::write_transfer(*result, std::move(*pair), a.out, writing); !s) return report.fail(s.message());
   bar.update(0.99, "storing the sets' results in the cache");
   const Status cached = pipeline::finish_cache_writes();  // not fatal: the next run recomputes
   bar.done();
@@ -131,10 +131,9 @@ int run(const TransferArgs& a) {
   // metrics.json: how the sets were read (cache hit or miss, RAW or developed) and the wall time.
   auto metrics = nlohmann::json::parse(result->metrics_json, nullptr, false);
   if (metrics.is_object()) {
-    if (reports.empty())  // read with a mask, past the cache
-      metrics["io"] = {{"dst_mask", a.dst_mask}, {"src_mask", a.src_mask}};
-    else
-      metrics["io"] = nlohmann::json::parse(pipeline::reports_json(reports));
+    metrics["io"] = nlohmann::json::parse(pipeline::reports_json(reports));
+    if (!a.dst_mask.empty()) metrics["io"]["dst_mask"] = a.dst_mask;
+    if (!a.src_mask.empty()) metrics["io"]["src_mask"] = a.src_mask;
     metrics["io"]["raw_half_size"] = a.raw_half;
     metrics["io"]["demosaic"] = a.demosaic;
     metrics["timings"]["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_wall).count();

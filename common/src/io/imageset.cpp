@@ -375,7 +375,7 @@ Status check_size(const fs::path& file, const cv::Mat& image, cv::Size expected,
   return Status::success();
 }
 
-Status load_truth(const fs::path& truth_dir, ImageSet& set) {
+Status load_truth(const fs::path& truth_dir, ImageSet& set, bool appearance) {
   std::error_code ec;
   if (!fs::is_directory(truth_dir, ec)) return Status::success();
   Truth& t = set.truth;
@@ -393,6 +393,7 @@ Status load_truth(const fs::path& truth_dir, ImageSet& set) {
     if (Status s = check_size(f, *m, set.size, why); !s) return s;
     t.mask = std::move(m).value();
   }
+  if (!appearance) return Status::success();
   if (fs::path f = truth_dir / "albedo.png"; fs::exists(f, ec)) {
     auto a = read_linear_image(f);
     if (!a) return a.error();
@@ -459,7 +460,7 @@ Expected<ImageSet> read_veneer(const fs::path& folder, const ReadOptions& option
       if (Status s = check_size(f, *m, set.size, "set.json's size"); !s) return s;
       set.mask = std::move(m).value();
     }
-    if (options.load_truth) return load_truth(folder / "truth", set);
+    if (options.load_truth) return load_truth(folder / "truth", set, options.load_truth_appearance);
     return {};
   };
   if (!options.load_photos) {
@@ -764,14 +765,18 @@ Expected<std::string> encode_png8(const cv::Mat& mask) {
 }
 
 Status write_contents(const ImageSet& set, const fs::path& dir) {
-  // Encode the photos in parallel (the slow part), then write them in order.
-  std::vector<Expected<std::string>> encoded(set.images.size(), Expected<std::string>(std::string()));
+  // Encode the photos in parallel (the slow part), each written as soon as
+  // it is encoded and its bytes dropped: a full-resolution PNG is ~100 MB,
+  // so only those being encoded are held, not every one (the rig's capture).
+  std::vector<Status> written(set.images.size(), Status::success());
   cv::parallel_for_(cv::Range(0, static_cast<int>(set.images.size())), [&](const cv::Range& r) {
-    for (int i = r.start; i < r.end; ++i) encoded[static_cast<size_t>(i)] = encode_png16(set.images[static_cast<size_t>(i)]);
+    for (int i = r.start; i < r.end; ++i) {
+      const size_t k = static_cast<size_t>(i);
+      written[k] = write_bytes(dir / light_file_name(set.lights[k].index), encode_png16(set.images[k]));
+    }
   });
-  for (size_t i = 0; i < set.images.size(); ++i) {
-    if (Status s = write_bytes(dir / light_file_name(set.lights[i].index), encoded[i]); !s) return s;
-    encoded[i] = std::string();
+  for (const Status& s : written) {
+    if (!s) return s;  // the first by file order
   }
   for (size_t i = 0; i < set.raw.size() && i < set.lights.size(); ++i) {
     if (set.raw[i].bytes.empty()) continue;

@@ -4,8 +4,11 @@
 // skip): the pair read through pipeline::prepare_pair with the cache cold
 // (empty folder) and warm (second run), then the coherent map; next to the
 // time OpenCV alone needs to read the same frames (cv::imread, one thread).
-// Prints a markdown table; never fails on a number.
+// Then the same pair through `veneer transfer` (a child process: files in,
+// every result file written), cold and warm, with the child's peak RSS.
+// Prints markdown tables; never fails on a number.
 #include <sys/resource.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -91,11 +94,44 @@ std::vector<fs::path> frames_of(const fs::path& set) {
 }
 
 
+// `veneer transfer` as a child: its wall time and peak RSS (GiB, from
+// wait4's rusage: the child's own high-water mark); -1 when it failed.
+struct Child {
+  double seconds = -1, rss = -1;
+};
+Child run_cli(const std::vector<std::string>& args) {
+  Child c;
+  std::vector<char*> argv;
+  const std::string bin = std::string(VENEER_BIN_DIR) + "/veneer";
+  argv.push_back(const_cast<char*>(bin.c_str()));
+  for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  const auto t0 = std::chrono::steady_clock::now();
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    if (std::FILE* null = std::fopen("/dev/null", "w")) ::dup2(::fileno(null), 1);  // its summary; errors stay
+    ::execv(bin.c_str(), argv.data());
+    std::_Exit(127);
+  }
+  if (pid < 0) return c;
+  int status = 0;
+  rusage u{};
+  if (::wait4(pid, &status, 0, &u) != pid || !WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+    std::fprintf(stderr, "veneer transfer failed (status %d)\n", status);
+    return c;
+  }
+  c.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  c.rss = static_cast<double>(u.ru_maxrss) / (1024.0 * 1024.0);
+  return c;
+}
+
 struct Row {
   std::string pair;
   int frames = 0;
   double mb = 0, opencv_s = 0, cold_s = 0, cache_left_s = 0, cold_prepare_s = 0, warm_s = 0, warm_prepare_s = 0, map_s = 0, rss = 0;
   std::string photos;
+  Child cli_cold, cli_warm;
+  double float_gib = 0;  // every frame of both sets as float RGB: the scale of what is held
 };
 
 Row run_pair(cv::Size size, const fs::path& root) {
@@ -106,6 +142,7 @@ Row run_pair(cv::Size size, const fs::path& root) {
   std::vector<fs::path> files = frames_of(dst), more = frames_of(src);
   files.insert(files.end(), more.begin(), more.end());
   r.frames = static_cast<int>(files.size());
+  r.float_gib = r.frames * static_cast<double>(size.area()) * 12.0 / (1ull << 30);
   for (const auto& f : files) r.mb += fs::file_size(f) / 1e6;
 
   // OpenCV alone, one thread: every frame of both sets, as stored (16-bit).
@@ -150,6 +187,14 @@ Row run_pair(cv::Size size, const fs::path& root) {
     if (pass == 1) r.map_s = total - prepare_s;
   }
   r.rss = peak_rss_gib();
+  // The CLI end to end: reading, normals, map, repaint, every file written.
+  for (int pass = 0; pass < 2; ++pass) {
+    const fs::path out = root / ("cli-out-" + std::to_string(pass));
+    (pass == 0 ? r.cli_cold : r.cli_warm) =
+        run_cli({"transfer", "--dst", dst.string(), "--src", src.string(), "--out", out.string(), "--cache-dir",
+                 (root / "cli-cache").string(), "--cache-size-gb", "16"});
+    fs::remove_all(out);
+  }
   return r;
 }
 
@@ -185,6 +230,13 @@ int main() {
                 r.warm_prepare_s, r.map_s,
                 r.opencv_s > 0 ? r.cold_s / r.opencv_s : 0, r.opencv_s > 0 ? r.warm_s / r.opencv_s : 0,
                 r.photos.c_str(), r.rss);
+  }
+  std::printf("\n## `veneer transfer` (a child process: files in, map and every result file written)\n\n");
+  std::printf("| pair | cold s | cold peak RSS GiB | warm s | warm peak RSS GiB | frames as float GiB |\n");
+  std::printf("|---|---:|---:|---:|---:|---:|\n");
+  for (const Row& r : rows) {
+    std::printf("| %s | %.2f | %.2f | %.2f | %.2f | %.2f |\n", r.pair.c_str(), r.cli_cold.seconds, r.cli_cold.rss,
+                r.cli_warm.seconds, r.cli_warm.rss, r.float_gib);
   }
   std::printf("\ncold = the first prepare_pair with an empty result cache + compute_map (the map ready; the cache "
               "entries are written in the background meanwhile, and 'cache write after' is what was left of that "

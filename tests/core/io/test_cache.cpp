@@ -69,6 +69,50 @@ TEST(Cache, SecondPreparationIsAHitWithTheSameResults) {
   ::unsetenv("XDG_CACHE_HOME");
 }
 
+// A mask drawn by hand is part of the key: the same mask again is a hit with
+// the masked results, another mask (or none) is another entry.
+TEST(Cache, AHandDrawnMaskIsKeyedByItsContent) {
+  Scratch dir;
+  pipeline::PrepareOptions options;
+  options.cache.dir = dir / "cache";
+  write_simulated(dir / "bull", "bull");
+  auto plain = pipeline::prepare_set(dir / "bull", 1.0, false, options);
+  ASSERT_TRUE(plain) << plain.message();
+  cv::Mat right = plain->object.view.mask.clone();
+  right(cv::Rect(0, 0, right.cols / 2, right.rows)).setTo(0);  // the right half of the object
+  ASSERT_GT(cv::countNonZero(right), 100);
+  options.mask = right;
+  auto first = pipeline::prepare_set(dir / "bull", 1.0, false, options);
+  ASSERT_TRUE(first) << first.message();
+  EXPECT_FALSE(first->report.cache_hit);
+  EXPECT_NE(first->report.checksum, plain->report.checksum);
+  const cv::Rect left(0, 0, right.cols / 2, right.rows);
+  EXPECT_EQ(cv::countNonZero(first->object.view.mask(left)), 0);
+  (void)pipeline::finish_cache_writes();
+  // the same mask, made anew (another Mat of the same content): a hit
+  options.mask = right.clone();
+  auto second = pipeline::prepare_set(dir / "bull", 1.0, false, options);
+  ASSERT_TRUE(second) << second.message();
+  EXPECT_TRUE(second->report.cache_hit);
+  EXPECT_EQ(second->report.checksum, first->report.checksum);
+  EXPECT_EQ(cv::norm(first->object.view.mask, second->object.view.mask, cv::NORM_INF), 0.0);
+  EXPECT_EQ(cv::norm(first->object.view.normals, second->object.view.normals, cv::NORM_INF), 0.0);
+  EXPECT_EQ(cv::countNonZero(second->set.mask != (right > 127)), 0);
+  // one pixel more is another mask
+  cv::Mat more = right.clone();
+  more.at<uchar>(right.rows / 2, right.cols / 2 - 1) = 255;
+  options.mask = more;
+  auto third = pipeline::prepare_set(dir / "bull", 1.0, false, options);
+  ASSERT_TRUE(third) << third.message();
+  EXPECT_FALSE(third->report.cache_hit);
+  // a mask of another size is refused, naming both sizes
+  options.mask = cv::Mat(10, 10, CV_8UC1, cv::Scalar(255));
+  auto bad = pipeline::prepare_set(dir / "bull", 1.0, false, options);
+  ASSERT_FALSE(bad);
+  EXPECT_NE(bad.message().find("10x10"), std::string::npos) << bad.message();
+  (void)pipeline::finish_cache_writes();
+}
+
 TEST(Cache, SizeCapEvictsTheLeastRecentlyUsed) {
   Scratch dir;
   CacheOptions o;

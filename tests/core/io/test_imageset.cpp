@@ -74,6 +74,16 @@ TEST(ImageSet, RoundTripKeepsPixelsAndManifest) {
   EXPECT_EQ(cv::norm(back->truth.mask, set.truth.mask, cv::NORM_INF), 0.0);
   EXPECT_LE(cv::norm(back->truth.albedo, set.truth.albedo, cv::NORM_INF), kQuant);
 
+  // the truth's geometry only: normals and mask, no albedo or depth decoded
+  ReadOptions geometry;
+  geometry.load_truth_appearance = false;
+  auto shape = read_set(dir / "s", geometry);
+  ASSERT_TRUE(shape);
+  EXPECT_EQ(cv::norm(shape->truth.normals, set.truth.normals, cv::NORM_INF), 0.0);
+  EXPECT_EQ(cv::norm(shape->truth.mask, set.truth.mask, cv::NORM_INF), 0.0);
+  EXPECT_TRUE(shape->truth.albedo.empty());
+  EXPECT_TRUE(shape->truth.depth.empty());
+
   ReadOptions without_truth;
   without_truth.load_truth = false;
   auto no_truth = read_set(dir / "s", without_truth);

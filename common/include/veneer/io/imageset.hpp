@@ -108,6 +108,9 @@ Expected<PhotoSource> parse_photo_source(const std::string&);
 struct ReadOptions {
   SetFormat format = SetFormat::automatic;  // automatic: set.json -> veneer, filenames.txt -> DiLiGenT, else thesis
   bool load_truth = true;                   // read <set>/truth/ when present
+  bool load_truth_appearance = true;        // with load_truth: also truth/albedo.png and depth.pfm (a
+                                            // transfer measures with normals and mask only; at 5600x3750
+                                            // they are 340 MB to decode per set)
   PhotoSource photos = PhotoSource::automatic;  // veneer sets: RAW or developed photos (default: RAW where present)
   RawOptions raw;                           // how RAW files are decoded (half size, demosaic)
   bool load_photos = true;                  // veneer sets: false reads the manifest, mask and truth only

@@ -419,7 +419,7 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
     if (!plan) return repaint(result.map, photo, backdrop);
     return repaint_planned(*plan, photo, backdrop);
   };
-  for (size_t i = 0; i < src->view.images.size() && i < dst->view.images.size(); ++i) {
+  for (size_t i = 0; options.keep_pictures && i < src->view.images.size() && i < dst->view.images.size(); ++i) {
     auto painted = paint(src->view.images[i], dst->view.images[i]);
     if (!painted) return make_error("repaint: " + painted.message());
     result.repainted.push_back(std::move(*painted));
@@ -605,7 +605,12 @@ cv::Mat confidence_picture(const Map& map) {
   return pic;
 }
 
-Status write_transfer(const TransferResult& r, const std::filesystem::path& folder, const Progress& progress) {
+namespace {
+
+// write_transfer's files; with `pair`, the per-lamp pictures are painted from
+// its photos one at a time (each into its destination photo, then released).
+Status write_files(const TransferResult& r, PreparedPair* pair, const std::filesystem::path& folder,
+                   const Progress& progress) {
   std::error_code ec;
   std::filesystem::create_directories(folder, ec);
   if (ec) return make_error("cannot create " + folder.string() + ": " + ec.message());
@@ -643,17 +648,54 @@ Status write_transfer(const TransferResult& r, const std::filesystem::path& fold
       return write_picture(folder / "relight_reference.png", pic(cv::Rect(w, 0, w, pic.rows)).clone(), Sync::later);
     });
   }
-  std::vector<Status> written(files.size(), Status::success());
+  // The pictures painted from the pair's photos: one after another (each
+  // painting and encoding is parallel within), so one is in memory at a time.
+  std::vector<std::function<Status()>> painted;
+  if (pair) {
+    const size_t lamps = std::min(pair->src.view.images.size(), pair->dst.view.images.size());
+    for (size_t i = 0; i < lamps; ++i) {
+      painted.push_back([&r, pair, &folder, i]() -> Status {
+        cv::Mat& backdrop = pair->dst.view.images[i];
+        const cv::Mat& photo = pair->src.view.images[i];
+        cv::Mat out;
+        if (r.blend) {
+          out = backdrop;  // painted in place: the photo is released next
+          if (auto s = fast::apply_blend(*r.blend, photo, out); !s) return make_error("repaint: " + s.message());
+        } else {
+          out = repaint(r.map, photo, backdrop);
+        }
+        // this lamp's photos are done with: every copy of them goes
+        pair->dst.view.images[i].release();
+        pair->src.view.images[i].release();
+        if (i < pair->destination.images.size()) pair->destination.images[i].release();
+        if (i < pair->source.images.size()) pair->source.images[i].release();
+        char name[64];
+        std::snprintf(name, sizeof name, "result_light_%02zu.png", i);
+        return write_png16(folder / name, out, Sync::later);
+      });
+    }
+  }
+  std::vector<Status> written(files.size() + painted.size(), Status::success());
   std::mutex report_lock;
   size_t done = 0;
+  const double total = static_cast<double>(written.size() + 1);
+  auto one_done = [&] {
+    std::lock_guard<std::mutex> hold(report_lock);
+    progress.report(static_cast<double>(++done) / total, "writing " + folder.string());
+  };
   progress.report(0.0, "writing " + folder.string());
   const Status cancelled = make_error("writing " + folder.string() + " cancelled");
+  // the painted ones first: they release the pair's photos, the largest
+  // part of what is held, before the other files are made all at once
+  for (size_t i = 0; i < painted.size(); ++i) {
+    written[files.size() + i] = progress.cancelled() ? cancelled : painted[i]();
+    one_done();
+  }
   tbb::parallel_for(size_t(0), files.size(), [&](size_t i) {
     // a cancel stops the files not yet begun; those being encoded finish
     // (each is whole under its own name or absent, never half-written)
     written[i] = progress.cancelled() ? cancelled : files[i]();
-    std::lock_guard<std::mutex> hold(report_lock);
-    progress.report(static_cast<double>(++done) / static_cast<double>(files.size() + 1), "writing " + folder.string());
+    one_done();
   });
   if (progress.cancelled()) return cancelled;  // and no metrics.json: the folder is not a whole result
   for (const Status& s : written) {
@@ -661,6 +703,25 @@ Status write_transfer(const TransferResult& r, const std::filesystem::path& fold
   }
   if (auto s = sync_folder(folder); !s) return s;
   return write_file_atomic(folder / "metrics.json", r.metrics_json + "\n");
+}
+
+}  // namespace
+
+Status write_transfer(const TransferResult& r, const std::filesystem::path& folder, const Progress& progress) {
+  return write_files(r, nullptr, folder, progress);
+}
+
+Status write_transfer(const TransferResult& r, PreparedPair&& pair_in, const std::filesystem::path& folder,
+                      const Progress& progress) {
+  if (!r.repainted.empty()) return make_error("write_transfer: the result already holds its pictures");
+  if (r.map.xy.size() != pair_in.dst.view.mask.size())
+    return make_error("write_transfer: the map is not the pair's (another size)");
+  PreparedPair pair = std::move(pair_in);
+  // the pictures need the photos (and the plan made from the rest): the
+  // normals and the truth, a photo's bytes each, go before painting starts
+  for (ImageSet* set : {&pair.destination, &pair.source}) set->truth = Truth{};
+  for (PreparedObject* object : {&pair.dst, &pair.src}) object->view.normals.release();
+  return write_files(r, &pair, folder, progress);
 }
 
 }  // namespace veneer::match

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cstring>
 
 #include <nlohmann/json.hpp>
@@ -10,6 +11,7 @@
 #include <map>
 #include <mutex>
 
+#include <opencv2/imgproc.hpp>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 
@@ -30,8 +32,32 @@ constexpr const char* kCacheVersion = "prepared-set/3";
 
 Progress sub_progress(const Progress& p, double from, double to) { return p.part(from, to); }
 
-std::string salt_of(const ReadOptions& read, double scale, bool truth_normals) {
-  nlohmann::json j{{"version", kCacheVersion},
+// A digest of a hand-drawn mask as the pipeline applies it (object = above
+// 127): FNV-1a over its size and its object bits, row by row.
+std::string mask_digest(const cv::Mat& mask) {
+  uint64_t h = 1469598103934665603ull;
+  auto add = [&h](uint64_t byte) {
+    h ^= byte;
+    h *= 1099511628211ull;
+  };
+  for (int v : {mask.cols, mask.rows})
+    for (int b = 0; b < 4; ++b) add((static_cast<uint32_t>(v) >> (8 * b)) & 0xff);
+  for (int y = 0; y < mask.rows; ++y) {
+    const uchar* row = mask.ptr<uchar>(y);
+    for (int x = 0; x < mask.cols; x += 8) {
+      uint64_t bits = 0;
+      for (int k = 0; k < 8 && x + k < mask.cols; ++k) bits |= uint64_t(row[x + k] > 127) << k;
+      add(bits);
+    }
+  }
+  char hex[17];
+  std::snprintf(hex, sizeof hex, "%016llx", static_cast<unsigned long long>(h));
+  return hex;
+}
+
+std::string salt_of(const ReadOptions& read, double scale, bool truth_normals, const cv::Mat& mask) {
+  nlohmann::json j{{"mask", mask.empty() ? std::string("segmented") : mask_digest(mask)},
+                   {"version", kCacheVersion},
                    {"photos", photo_source_name(read.photos)},
                    {"half_size", read.raw.half_size},
                    {"demosaic", demosaic_name(read.raw.demosaic)},
@@ -176,8 +202,23 @@ cv::Mat median_of(const std::vector<cv::Mat>& photos) {
 
 Status PrepareOptions::check() const {
   if (auto s = read.check(); !s) return s;
+  for (const cv::Mat* m : {&mask, &destination_mask, &source_mask})
+    if (!m->empty() && m->type() != CV_8UC1) return make_error("a hand-drawn mask must be 8-bit, one channel");
   return cache.check();
 }
+
+namespace {
+// The hand-drawn mask on the set as read: one clear error for another size
+// or a mask that marks nothing.
+Status apply_mask(const cv::Mat& mask, ImageSet& set) {
+  if (mask.size() != set.size)
+    return make_error("the mask is " + std::to_string(mask.cols) + "x" + std::to_string(mask.rows) + ", the set " +
+                      set.id + " is " + std::to_string(set.size.width) + "x" + std::to_string(set.size.height));
+  set.mask = mask > 127;
+  if (cv::countNonZero(set.mask) == 0) return make_error("the mask marks no object pixel (all dark)");
+  return {};
+}
+}  // namespace
 
 Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool truth_normals,
                                   const PrepareOptions& options, const Progress& progress) {
@@ -189,7 +230,7 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
   const bool cacheable = options.cache.enabled && fs::exists(folder / "set.json");
   std::string key;
   if (cacheable) {
-    auto sum = set_checksum(folder, salt_of(options.read, scale, truth_normals));
+    auto sum = set_checksum(folder, salt_of(options.read, scale, truth_normals, options.mask));
     if (!sum) return sum.error();
     key = *sum;
     p.report.checksum = key;
@@ -204,9 +245,16 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
     if (auto entry = cache.load(key, &mats)) {
       ReadOptions meta = options.read;
       meta.load_photos = false;
+      meta.load_truth_appearance = false;
       auto set = read_set(folder, meta);
       if (!set) return set.error();
       p.set = std::move(set).value();
+      if (!options.mask.empty()) {
+        // as on the miss that made the entry (its key holds the mask's size
+        // and bits, checked then); the manifest's size can differ from the
+        // decoded RAW size the mask was drawn at
+        cv::resize(options.mask > 127, p.set.mask, p.set.size, 0, 0, cv::INTER_NEAREST);
+      }
       if (from_entry(*entry, mats, p)) {
         const cv::Size size = p.object.view.normals.size();
         if (size != p.set.size) match::scale_set(p.set, static_cast<double>(size.width) / p.set.size.width);
@@ -233,9 +281,14 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
 
   // Miss: decode every frame once, in parallel; solve; store.
   auto t0 = Clock::now();
-  auto set = read_set(folder, options.read, sub_progress(progress, 0.0, 0.6));
+  ReadOptions read = options.read;
+  read.load_truth_appearance = false;  // the truth's albedo and depth: a transfer measures with neither
+  auto set = read_set(folder, read, sub_progress(progress, 0.0, 0.6));
   if (!set) return set.error();
   p.set = std::move(set).value();
+  if (!options.mask.empty()) {
+    if (auto s = apply_mask(options.mask, p.set); !s) return s.error();
+  }
   match::scale_set(p.set, scale);
   p.report.read_s = since(t0);
   p.report.id = p.set.id;
@@ -284,9 +337,13 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
     // made meanwhile. finish_cache_writes() waits for it.
     auto entry = std::make_shared<std::pair<CacheEntry, CacheMats>>(to_entry(p));
     const std::string id = p.set.id;
-    auto write = std::async(std::launch::async, [cache, key, entry, id]() -> Status {
+    auto write = std::async(std::launch::async, [cache, key, entry, id]() mutable -> Status {
       const auto t = Clock::now();
       Status s = cache.store(key, entry->first, entry->second);
+      // The future keeps this lambda (and its captures) until it is
+      // collected: let go of the matrices now, so that a photo the caller
+      // releases is freed.
+      entry.reset();
       if (!s) VLOG_WARN("Cache", "{}", s.message());
       VLOG_DEBUG("Cache", "{}: entry {} written in {:.2f} s", id, key, since(t));
       return s;
@@ -320,9 +377,12 @@ Expected<match::PreparedPair> prepare_pair(const fs::path& destination, const fs
     return p;
   };
   Expected<PreparedSet> dst = make_error("not run"), src = make_error("not run");
+  PrepareOptions for_dst = options, for_src = options;
+  for_dst.mask = options.destination_mask;
+  for_src.mask = options.source_mask;
   tbb::parallel_invoke(
-      [&] { dst = prepare_set(destination, transfer.scale, transfer.truth_normals, options, half(0)); },
-      [&] { src = prepare_set(source, transfer.scale, transfer.truth_normals, options, half(1)); });
+      [&] { dst = prepare_set(destination, transfer.scale, transfer.truth_normals, for_dst, half(0)); },
+      [&] { src = prepare_set(source, transfer.scale, transfer.truth_normals, for_src, half(1)); });
   if (!dst) return make_error("destination: " + dst.message());
   if (!src) return make_error("source: " + src.message());
   match::PreparedPair pair;

@@ -30,6 +30,9 @@ struct TransferOptions {
   double blend_guide = 0.1;    // blend: weigh each proposal by its normal's fit, fall-off |dn| (0 = off,
                                // plain Gaussian; [0, 2]; see fast::BlendGuide); maps matched on
                                // normals only (an intensities map is blended plain)
+  bool keep_pictures = true;   // transfer(): every photo repainted into result.repainted (~250 MB
+                               // each at full resolution); false leaves them out, for
+                               // write_transfer(result, pair, ...) to paint and write one at a time
   Status check() const;
 };
 
@@ -118,6 +121,13 @@ std::string transfer_options_json(const TransferOptions& options);
 // the call fails saying "cancelled", without metrics.json: each file there is
 // whole, and a folder without metrics.json is not a whole result.
 Status write_transfer(const TransferResult& result, const std::filesystem::path& folder,
+                      const Progress& progress = {});
+// The same for a result made with keep_pictures = false: each of the pair's
+// photos is repainted through the result's map (and blend plan) in place of
+// its destination photo, written and released before the next, so the
+// pictures never all exist at once. Consumes the pair: what the pictures do
+// not need (normals, truth) goes first, and each photo once painted.
+Status write_transfer(const TransferResult& result, PreparedPair&& pair, const std::filesystem::path& folder,
                       const Progress& progress = {});
 
 // Quality of a map between two sets: truth masks and normals when both sets

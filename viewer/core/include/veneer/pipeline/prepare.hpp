@@ -19,6 +19,11 @@ namespace veneer::pipeline {
 struct PrepareOptions {
   ReadOptions read;    // RAW or developed photos, half size, demosaic
   CacheOptions cache;  // where, how large, or off
+  // An object mask drawn by hand (CV_8UC1 of the set's size as read, > 127 =
+  // object) instead of the automatic segmentation; empty = segment. Keyed into
+  // the cache by its content, so a re-run with the same mask hits.
+  // prepare_set uses `mask`; prepare_pair `destination_mask` and `source_mask`.
+  cv::Mat mask, destination_mask, source_mask;
   Status check() const;
 };
 
@@ -35,7 +40,8 @@ struct SetReport {
 };
 
 // One set prepared: the set's metadata (images = the photos with the ambient
-// frame removed, the same pixels as object.view.images), normals, mask, the
+// frame removed, the same pixels as object.view.images; of the truth only its
+// normals and mask, all a transfer measures with), normals, mask, the
 // photometric stereo's albedo and residual (empty on truth normals), median.
 struct PreparedSet {
   ImageSet set;

@@ -83,7 +83,11 @@ Expected<BlendPlan> blend_plan(const Map& map, const cv::Mat& destination_mask, 
         const cv::Vec3f nd = guide ? guide->destination.at<cv::Vec3f>(y, x) : cv::Vec3f();
         const bool guided = guide && usable(nd);
         const size_t first = r.terms.size();
-        float weight = 0;
+        // Inside a chunk the neighbours all continue to the same source
+        // pixel: one term per source pixel with its Gaussian weights summed
+        // (a full-resolution plan held up to 25 terms a pixel, ~1 GB), and
+        // the guide's factor, which depends on the source pixel alone, is
+        // worked out once per term instead of once per neighbour.
         for (int dy = -radius; dy <= radius; ++dy)
           for (int dx = -radius; dx <= radius; ++dx) {
             const int nx = x + dx, ny = y + dy;
@@ -93,17 +97,28 @@ Expected<BlendPlan> blend_plan(const Map& map, const cv::Mat& destination_mask, 
             // the neighbour's chunk, continued to this pixel
             const int qx = static_cast<int>(m[0]) - dx, qy = static_cast<int>(m[1]) - dy;
             if (qx < 0 || qy < 0 || qx >= sw || qy >= source_mask.rows || !source_mask.at<uchar>(qy, qx)) continue;
-            float wgt = weight_of[(dy + radius) * side + dx + radius];
-            if (guided) {
-              const cv::Vec3f ns = guide->source.at<cv::Vec3f>(qy, qx);
-              if (!usable(ns)) continue;
-              const cv::Vec3f e = nd - ns;
-              wgt *= std::exp(-e.dot(e) * inv_2s2);
-            }
-            if (!(wgt > 0)) continue;
-            r.terms.push_back({qy * sw + qx, wgt});
-            weight += wgt;
+            const float wgt = weight_of[(dy + radius) * side + dx + radius];
+            const int source = qy * sw + qx;
+            bool merged = false;
+            for (size_t t = first; t < r.terms.size() && !merged; ++t)
+              if (r.terms[t].source == source) r.terms[t].weight += wgt, merged = true;
+            if (!merged) r.terms.push_back({source, wgt});
           }
+        float weight = 0;
+        size_t kept = first;
+        for (size_t t = first; t < r.terms.size(); ++t) {
+          BlendPlan::Term term = r.terms[t];
+          if (guided) {
+            const cv::Vec3f ns = guide->source.at<cv::Vec3f>(term.source / sw, term.source % sw);
+            if (!usable(ns)) continue;
+            const cv::Vec3f e = nd - ns;
+            term.weight *= std::exp(-e.dot(e) * inv_2s2);
+          }
+          if (!(term.weight > 0)) continue;
+          weight += term.weight;
+          r.terms[kept++] = term;
+        }
+        r.terms.resize(kept);
         if (weight > 1e-20f) {
           for (size_t t = first; t < r.terms.size(); ++t) r.terms[t].weight /= weight;
         } else {  // no proposal fits (or none is on the source): the pixel's own match (none off the photo: black)
