@@ -31,7 +31,7 @@ struct TransferArgs {
   unsigned seed = match::MatchOptions{}.seed;
   bool faithful = false, truth_normals = false;
   // reading the sets (pipeline::PrepareOptions)
-  std::string photos = "auto", demosaic = "ahd", cache_dir;
+  std::string photos = "auto", demosaic = demosaic_name(RawOptions{}.demosaic), cache_dir;
   bool raw_half = false, no_cache = false;
   double cache_size_gb = 4.0;
 };
@@ -217,7 +217,7 @@ VENEER_COMMAND(transfer) {
                   "auto | raw | developed: the sets' RAW files (linear, LibRaw) or their PNG/JPEG photos (default "
                   "auto = RAW where every photo has one)");
   cmd->add_flag("--raw-half", args->raw_half, "decode RAW files at half size (one pixel per 2x2 Bayer cell, ~4x faster)");
-  cmd->add_option("--demosaic", args->demosaic, "RAW interpolation: ahd | ppg | vng | bilinear (default ahd)");
+  cmd->add_option("--demosaic", args->demosaic, "RAW interpolation (LibRaw): dcb | ahd | ppg | vng | dht | aahd | bilinear");
   cmd->add_flag("--no-cache", args->no_cache, "neither read nor write the per-set result cache");
   cmd->add_option("--cache-dir", args->cache_dir, "result cache folder (default $XDG_CACHE_HOME/veneer or ~/.cache/veneer)");
   cmd->add_option("--cache-size-gb", args->cache_size_gb, "result cache size cap, GiB (default 4; least recently used go first)");

@@ -211,3 +211,25 @@ TEST(Relight, RefusesTooFewOrAlikeLamps) {
   ASSERT_FALSE(same.ok());
   EXPECT_NE(same.message().find("too alike"), std::string::npos);
 }
+
+// The fit divides each photo by its lamp's intensity into buffers of its own:
+// a set without an ambient frame, lamps of intensity 2, keeps its photos as
+// they were (the division wrote into the caller's pixels, which share them).
+TEST(Relight, FittingLeavesTheCallersPhotosAsTheyWere) {
+  sim::RenderOptions o;
+  o.size = cv::Size(96, 64);
+  o.noise_sigma = 0;
+  auto set = sim::simulate_set("sphere-gray", o, Role::source);
+  ASSERT_TRUE(set.ok()) << set.message();
+  set->ambient.release();
+  std::vector<cv::Mat> before;
+  for (auto& l : set->lights) l.intensity = cv::Vec3f(2, 2, 2);
+  for (const cv::Mat& m : set->images) before.push_back(m.clone());
+  auto relit = match::Relighter::fit(*set);
+  ASSERT_TRUE(relit.ok()) << relit.message();
+  for (size_t i = 0; i < before.size(); ++i) EXPECT_EQ(cv::norm(set->images[i], before[i], cv::NORM_INF), 0.0) << i;
+  // And the fit saw unit lamps: lamp 2's photo is predicted at half its level.
+  const cv::Mat again = relit->render_source(set->lights[2].direction);
+  const cv::Scalar a = cv::mean(again, set->truth.mask), b = cv::mean(set->images[2], set->truth.mask);
+  EXPECT_NEAR(a[1] / b[1], 0.5, 0.05);
+}

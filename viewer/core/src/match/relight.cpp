@@ -77,11 +77,11 @@ Expected<Relighter> Relighter::fit(const ImageSet& source) {
   const int k = terms(chosen);
   std::vector<cv::Mat> photos(n);
   for (int i = 0; i < n; ++i) {
-    photos[i] = source.ambient.empty() ? source.images[i] : source.images[i] - source.ambient;
-    // Divide out each lamp's intensity so the fit sees unit lamps.
+    const cv::Mat lit = source.ambient.empty() ? source.images[i] : cv::Mat(source.images[i] - source.ambient);
+    // Divide out each lamp's intensity so the fit sees unit lamps (into a
+    // buffer of its own: `lit` may be the caller's photo).
     const cv::Vec3f in = source.lights[i].intensity;  // r, g, b
-    cv::multiply(photos[i], cv::Scalar(1.0 / std::max(1e-6f, in[2]), 1.0 / std::max(1e-6f, in[1]),
-                                       1.0 / std::max(1e-6f, in[0])),
+    cv::multiply(lit, cv::Scalar(1.0 / std::max(1e-6f, in[2]), 1.0 / std::max(1e-6f, in[1]), 1.0 / std::max(1e-6f, in[0])),
                  photos[i]);
   }
   // Only the object is relit: its background (the table, whose look at a new
