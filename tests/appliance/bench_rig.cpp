@@ -12,8 +12,9 @@
 //     VENEER_BENCH_ROUNDS how often both are repeated (2),
 //     VENEER_BENCH_PREVIEW_SIZE the live-view size (default the still size). `bench_rig --memory`
 //     runs this section alone.
-//  4. the real veneerd binary's peak resident memory over one capture at the
-//     camera's full resolution (5600x3750), next to the frames' own bytes.
+//  4. the real veneerd binary's peak resident memory over a pair of captures
+//     (destination, source) at the camera's full resolution (5600x3750), next
+//     to the frames' own bytes.
 //     `bench_rig --capture-peak` runs this section alone.
 #include <algorithm>
 #include <atomic>
@@ -238,30 +239,36 @@ static int bench_capture_peak(const fs::path& dir) {
   }
   auto& c = **client;
   const double idle = d->rss_mib("VmHWM");
-  const auto t0 = Clock::now();
-  auto id = c.capture();
-  if (!id) return 1;
-  std::fprintf(stderr, "bench_rig: capturing one %s set (several minutes on 2 cores)...\n", size.c_str());
-  auto done = c.wait_event([&](const veneer::rig::Event& e) {
-    if (e.set_id == *id && e.kind == Kind::shot_taken)
-      std::fprintf(stderr, "bench_rig:   shot %d of %d (peak so far %.0f MiB)\n", e.k, e.n, d->rss_mib("VmHWM"));
-    return e.set_id == *id && (e.kind == Kind::set_stored || e.kind == Kind::capture_failed);
-  }, 3600);
-  if (!done || done->kind != Kind::set_stored) {
-    std::fprintf(stderr, "bench_rig: the %s capture failed: %s\n", size.c_str(), d->log().c_str());
-    return 1;
+  // The pair, as `make demo` takes it: a destination, then a source (another scene).
+  double peak[2] = {0, 0}, seconds[2] = {0, 0};
+  for (int set = 0; set < 2; ++set) {
+    const auto t0 = Clock::now();
+    veneer::rig::CaptureOptions co;
+    auto id = c.capture(co);
+    if (!id) return 1;
+    std::fprintf(stderr, "bench_rig: capturing set %d of 2 at %s (a minute or more on 2 cores)...\n", set + 1, size.c_str());
+    auto done = c.wait_event([&](const veneer::rig::Event& e) {
+      if (e.set_id == *id && e.kind == Kind::shot_taken)
+        std::fprintf(stderr, "bench_rig:   shot %d of %d (peak so far %.0f MiB)\n", e.k, e.n, d->rss_mib("VmHWM"));
+      return e.set_id == *id && (e.kind == Kind::set_stored || e.kind == Kind::capture_failed);
+    }, 3600);
+    if (!done || done->kind != Kind::set_stored) {
+      std::fprintf(stderr, "bench_rig: the %s capture failed: %s\n", size.c_str(), d->log().c_str());
+      return 1;
+    }
+    seconds[set] = secs(Clock::now() - t0);
+    peak[set] = d->rss_mib("VmHWM");
   }
-  const double seconds = secs(Clock::now() - t0);
-  const double peak = d->rss_mib("VmHWM");
   const double frame16 = static_cast<double>(w) * h * 6 / 1048576.0;
   const int frames = 8;
-  std::printf("\n### veneerd's peak memory over one %dx%d capture (7 lamps + ambient, truth, DNGs; %.0f s)\n\n", w, h,
-              seconds);
+  std::printf("\n### veneerd's peak memory over a %dx%d pair (7 lamps + ambient, truth, DNGs; %.0f s + %.0f s)\n\n", w,
+              h, seconds[0], seconds[1]);
   std::printf("| measure | MiB |\n|---|---|\n");
   std::printf("| peak RSS before the capture (idle) | %.0f |\n", idle);
-  std::printf("| **peak RSS over the capture (VmHWM)** | **%.0f** |\n", peak);
-  std::printf("| peer: the %d frames as the camera delivers them (16-bit) | %.0f |\n", frames, frames * frame16);
-  std::printf("| peer: the %d frames as float (what holding them all costs) | %.0f |\n", frames, frames * frame16 * 2);
+  std::printf("| **peak RSS over the first set (destination; VmHWM)** | **%.0f** |\n", peak[0]);
+  std::printf("| **peak RSS over both sets (the source is another scene)** | **%.0f** |\n", peak[1]);
+  std::printf("| peer: one set's %d frames as the camera delivers them (16-bit) | %.0f |\n", frames, frames * frame16);
+  std::printf("| peer: one set's %d frames as float (what holding them all costs) | %.0f |\n", frames, frames * frame16 * 2);
   std::printf("| budget of the issue (a 4 GiB board) | 4096 |\n");
   client->reset();
   d->stop(SIGTERM);
