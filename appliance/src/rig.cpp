@@ -391,7 +391,7 @@ void Rig::run_capture_job(const std::string& id, CaptureRequest req) {
   // full-resolution set as float is 2 GiB; the board holds one frame).
   veneer::Expected<CaptureResult> result = make_error("not run");
   std::unique_ptr<SetWriter> writer;
-  if (auto w = store_.begin(id); w) {
+  if (auto w = store_.begin(id, options_.simulated); w) {
     writer = std::move(*w);
     hooks.on_frame = [&writer](int k, int shots, const cv::Mat& photo, const veneer::ImageSet::RawFile& raw) {
       return writer->add_frame(k, photo, raw, shots);

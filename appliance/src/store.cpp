@@ -279,7 +279,8 @@ veneer::Status write_synced(const fs::path& file, std::string_view bytes) {
       if (errno == EINTR) continue;
       const int err = errno;
       ::close(fd);
-      return make_error(file.string() + ": write failed after " + std::to_string(done) + " bytes: " + std::strerror(err));
+      return make_error(file.string() + ": write failed after " + std::to_string(done) +
+                        " bytes: " + std::strerror(err));
     }
     done += static_cast<size_t>(n);
   }
@@ -326,7 +327,7 @@ std::string light_png(int index) {
 
 }  // namespace
 
-veneer::Expected<std::unique_ptr<SetWriter>> Store::begin(const std::string& id) {
+veneer::Expected<std::unique_ptr<SetWriter>> Store::begin(const std::string& id, bool truth) {
   if (!valid_set_id(id)) return make_error("cannot store a set under the id '" + id + "'");
   std::error_code ec;
   if (fs::exists(root_ / id, ec)) return make_error("cannot store set " + id + ": it exists");
@@ -335,7 +336,7 @@ veneer::Expected<std::unique_ptr<SetWriter>> Store::begin(const std::string& id)
   fs::remove_all(tmp, ec);
   if (!fs::create_directory(tmp, ec))
     return make_error("cannot store set " + id + ": cannot create " + tmp.string() + ": " + ec.message());
-  return std::unique_ptr<SetWriter>(new SetWriter(*this, id, tmp));
+  return std::unique_ptr<SetWriter>(new SetWriter(*this, id, tmp, truth));
 }
 
 SetWriter::~SetWriter() {
@@ -346,11 +347,14 @@ SetWriter::~SetWriter() {
 
 veneer::Status SetWriter::add_frame(int k, const cv::Mat& photo, const veneer::ImageSet::RawFile& raw, int photos) {
   if (tmp_.empty()) return make_error("set " + id_ + " is already stored");
+  auto fail = [&](const veneer::Status& s) {
+    return make_error("storing set " + id_ + " failed: " + s.message() + "; no set stored");
+  };
   if (k < 0 || photo.empty()) return make_error("set " + id_ + ": frame " + std::to_string(k) + " is empty");
   if (size_.area() == 0) {
     size_ = photo.size();
     // The space for the whole set, checked before its first file (the trash gives way first).
-    uint64_t need = Store::estimate_bytes(size_, photos, false) + raw.bytes.size() * static_cast<uint64_t>(photos);
+    uint64_t need = Store::estimate_bytes(size_, photos, truth_) + raw.bytes.size() * static_cast<uint64_t>(photos);
     if (store_.free_bytes() < need) store_.purge_trash(need);
     const uint64_t free = store_.free_bytes();
     if (free < need) {
@@ -361,11 +365,11 @@ veneer::Status SetWriter::add_frame(int k, const cv::Mat& photo, const veneer::I
   if (photo.size() != size_) return make_error("set " + id_ + ": frame " + std::to_string(k) + " changed size");
   const int index = k - 1;
   const fs::path png = tmp_ / (k == 0 ? std::string("ambient.png") : light_png(index));
-  if (auto s = write_encoded(png, veneer::encode_png16(photo)); !s) return make_error("storing set " + id_ + " failed: " + s.message() + "; no set stored");
+  if (auto s = write_encoded(png, veneer::encode_png16(photo)); !s) return fail(s);
   veneer::ImageSet::RawFile name;
   if (!raw.bytes.empty()) {
     const std::string file = k == 0 ? "ambient." + raw.extension : light_png(index).substr(0, 9) + raw.extension;
-    if (auto s = write_synced(tmp_ / file, raw.bytes); !s) return make_error("storing set " + id_ + " failed: " + s.message() + "; no set stored");
+    if (auto s = write_synced(tmp_ / file, raw.bytes); !s) return fail(s);
     name.extension = raw.extension;
     name.bytes = "1";  // manifest_json names a RAW file where its bytes are not empty
   }
@@ -385,11 +389,14 @@ veneer::Status SetWriter::add_frame(int k, const cv::Mat& photo, const veneer::I
 
 veneer::Status SetWriter::commit(veneer::ImageSet& set) {
   if (tmp_.empty()) return make_error("set " + id_ + " is already stored");
-  auto fail = [&](const veneer::Status& s) { return make_error("storing set " + id_ + " failed: " + s.message() + "; no set stored"); };
+  auto fail = [&](const veneer::Status& s) {
+    return make_error("storing set " + id_ + " failed: " + s.message() + "; no set stored");
+  };
   if (set.id != id_) return make_error("set " + set.id + " is not the set being written (" + id_ + ")");
   if (set.lights.empty() || lit_.size() != set.lights.size() ||
       std::find(lit_.begin(), lit_.end(), false) != lit_.end())
-    return make_error("set " + id_ + ": " + std::to_string(set.lights.size()) + " lights but not every frame was taken; no set stored");
+    return make_error("set " + id_ + ": " + std::to_string(set.lights.size()) +
+                      " lights but not every frame was taken; no set stored");
   if (!set.mask.empty()) {
     if (auto s = write_encoded(tmp_ / "mask.png", encode_mask(set.mask)); !s) return fail(s);
   }
@@ -398,7 +405,8 @@ veneer::Status SetWriter::commit(veneer::ImageSet& set) {
     // One image at a time, each let go once written (at 5600x3750 they are 0.6 GB together).
     const fs::path truth = tmp_ / "truth";
     std::error_code ec;
-    if (!fs::create_directory(truth, ec)) return fail(make_error(truth.string() + ": cannot create folder: " + ec.message()));
+    if (!fs::create_directory(truth, ec))
+      return fail(make_error(truth.string() + ": cannot create folder: " + ec.message()));
     if (!t.normals.empty()) {
       if (auto s = write_synced(truth / "normals.pfm", veneer::encode_pfm(t.normals, true)); !s) return fail(s);
     }
@@ -440,7 +448,7 @@ veneer::Status SetWriter::commit(veneer::ImageSet& set) {
   const fs::path folder = store_.root() / id_;
   if (::renameat2(AT_FDCWD, tmp_.c_str(), AT_FDCWD, folder.c_str(), RENAME_NOREPLACE) != 0) {
     const int err = errno;
-    return make_error("storing set " + id_ + " failed: cannot rename it into place: " + std::strerror(err) + "; no set stored");
+    return fail(make_error("cannot rename it into place: " + std::string(std::strerror(err))));
   }
   tmp_.clear();
   if (auto s = fsync_folder(store_.root()); !s) return fail(s);

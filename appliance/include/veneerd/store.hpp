@@ -65,7 +65,9 @@ class Store {
 
   // Starts writing set `id` frame by frame (a capture at the camera's full
   // resolution holds one frame at a time, not the whole set): see SetWriter.
-  veneer::Expected<std::unique_ptr<SetWriter>> begin(const std::string& id);
+  // `truth`: the set will have ground truth (the simulated rig), counted in
+  // the free space it needs.
+  veneer::Expected<std::unique_ptr<SetWriter>> begin(const std::string& id, bool truth = false);
 
   // The trash: a deleted set is moved into <root>/.trash and can be restored
   // until it is purged -- when it is older than trash_keep_s, or, oldest
@@ -114,10 +116,12 @@ class SetWriter {
 
  private:
   friend class Store;
-  SetWriter(Store& store, std::string id, std::filesystem::path tmp) : store_(store), id_(std::move(id)), tmp_(std::move(tmp)) {}
+  SetWriter(Store& store, std::string id, std::filesystem::path tmp, bool truth)
+      : store_(store), id_(std::move(id)), tmp_(std::move(tmp)), truth_(truth) {}
   Store& store_;
   std::string id_;
   std::filesystem::path tmp_;  // removed by the destructor unless committed
+  bool truth_ = false;
   cv::Size size_;
   bool ambient_ = false;
   std::vector<bool> lit_;                          // lit_[i]: light i's frame is written

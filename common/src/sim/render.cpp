@@ -418,8 +418,10 @@ Truth render_truth(const Scene& scene, const RenderOptions& options) {
         }
         const double k = 1.0 / static_cast<double>(end - begin);
         cover.at<float>(by, x) = static_cast<float>(c * k);
-        weighted_n.at<cv::Vec3f>(by, x) = {static_cast<float>(n.x * k), static_cast<float>(n.y * k), static_cast<float>(n.z * k)};
-        albedo.at<cv::Vec3f>(by, x) = {static_cast<float>(al.z * k), static_cast<float>(al.y * k), static_cast<float>(al.x * k)};
+        weighted_n.at<cv::Vec3f>(by, x) = {static_cast<float>(n.x * k), static_cast<float>(n.y * k),
+                                           static_cast<float>(n.z * k)};
+        albedo.at<cv::Vec3f>(by, x) = {static_cast<float>(al.z * k), static_cast<float>(al.y * k),
+                                       static_cast<float>(al.x * k)};
         depth.at<float>(by, x) = static_cast<float>(d * k);
       }
     });
