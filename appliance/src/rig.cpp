@@ -387,8 +387,19 @@ void Rig::run_capture_job(const std::string& id, CaptureRequest req) {
     emit(failed);
     return;
   }
+  // Each frame goes into the store's temporary folder as it is taken (a
+  // full-resolution set as float is 2 GiB; the board holds one frame).
   veneer::Expected<CaptureResult> result = make_error("not run");
-  {
+  std::unique_ptr<SetWriter> writer;
+  if (auto w = store_.begin(id, options_.simulated); w) {
+    writer = std::move(*w);
+    hooks.on_frame = [&writer](int k, int shots, const cv::Mat& photo, const veneer::ImageSet::RawFile& raw) {
+      return writer->add_frame(k, photo, raw, shots);
+    };
+  } else {
+    result = w.error();
+  }
+  if (writer) {
     std::lock_guard cam(camera_mutex_);
     result = run_capture(*dev_.lamps, *dev_.camera, plan, hooks, &pending_restore_);
   }
@@ -401,11 +412,12 @@ void Rig::run_capture_job(const std::string& id, CaptureRequest req) {
     if (cancel_) {
       stored = make_error("cancelled");
     } else {
-      stored = store_.save(set);
+      stored = writer->commit(set);
     }
   } else {
     stored = result.error();
   }
+  writer.reset();  // a set not stored leaves nothing
 
   RigEvent done;
   done.set_id = id;

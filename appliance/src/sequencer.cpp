@@ -75,6 +75,8 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
 
   CaptureResult result;
   veneer::ImageSet& set = result.set;
+  double ambient_level = 0, lit_level = 0;  // mean levels, for the ambient check
+  int lit_frames = 0;
   set.id = plan.set_id;
   set.role = plan.role;
   set.object = plan.object;
@@ -166,6 +168,14 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
         return make_error("camera, shot " + std::to_string(k + 1) + ": size changed mid-set");
       }
       if (k == 0) {
+        ambient_level = mean_level(photo);
+      } else {
+        lit_level += mean_level(photo);
+        ++lit_frames;
+      }
+      if (hooks.on_frame) {
+        if (auto s = hooks.on_frame(k, shots, photo, raw); !s) return s;
+      } else if (k == 0) {
         set.ambient = photo;
         set.ambient_raw = std::move(raw);
       } else {
@@ -208,10 +218,8 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
     set.lights.push_back(light);
   }
 
-  const double ambient = mean_level(set.ambient);
-  double lit = 0;
-  for (const auto& img : set.images) lit += mean_level(img);
-  lit /= std::max<size_t>(1, set.images.size());
+  const double ambient = ambient_level;
+  const double lit = lit_level / std::max(1, lit_frames);
   if (ambient > plan.ambient_warning || (lit > 0 && ambient > 0.25 * lit)) {
     std::ostringstream w;
     w.precision(3);

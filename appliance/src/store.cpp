@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <chrono>
+#include <cstdio>
 #include <cstring>
 #include <ctime>
 #include <fstream>
@@ -11,6 +12,8 @@
 #include <sys/file.h>
 #include <sys/statvfs.h>
 #include <unistd.h>
+
+#include <opencv2/imgcodecs.hpp>
 
 #include "veneer/io/image_io.hpp"
 #include "veneer/util/log.hpp"
@@ -257,6 +260,206 @@ veneer::Status Store::save(const veneer::ImageSet& set) {
   }
   std::lock_guard lock(mutex_);
   sets_.push_back(std::move(*scanned));
+  return {};
+}
+
+
+// --- a set written frame by frame --------------------------------------------
+
+namespace {
+
+// Writes `bytes` to `file` (created) and fsyncs it: as write_set does.
+veneer::Status write_synced(const fs::path& file, std::string_view bytes) {
+  int fd = ::open(file.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) return make_error(file.string() + ": cannot create: " + std::strerror(errno));
+  size_t done = 0;
+  while (done < bytes.size()) {
+    ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      const int err = errno;
+      ::close(fd);
+      return make_error(file.string() + ": write failed after " + std::to_string(done) +
+                        " bytes: " + std::strerror(err));
+    }
+    done += static_cast<size_t>(n);
+  }
+  if (::fsync(fd) != 0) {
+    const int err = errno;
+    ::close(fd);
+    return make_error(file.string() + ": fsync failed: " + std::strerror(err));
+  }
+  if (::close(fd) != 0) return make_error(file.string() + ": close failed: " + std::strerror(errno));
+  return {};
+}
+
+veneer::Status write_encoded(const fs::path& file, const veneer::Expected<std::string>& bytes) {
+  if (!bytes) return make_error(file.string() + ": " + bytes.message());
+  return write_synced(file, *bytes);
+}
+
+veneer::Status fsync_folder(const fs::path& folder) {
+  int fd = ::open(folder.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd < 0) return make_error(folder.string() + ": cannot open folder: " + std::strerror(errno));
+  const int rc = ::fsync(fd);
+  const int err = errno;
+  ::close(fd);
+  if (rc != 0 && err != EINVAL) return make_error(folder.string() + ": fsync failed: " + std::strerror(err));
+  return {};
+}
+
+// The 8-bit mask PNG write_set writes (mask.png, truth/mask.png).
+veneer::Expected<std::string> encode_mask(const cv::Mat& mask) {
+  std::vector<uchar> buffer;
+  try {
+    if (!cv::imencode(".png", mask, buffer)) return make_error("PNG encoder failed");
+  } catch (const cv::Exception& e) {
+    return make_error(std::string("PNG encoder failed: ") + e.what());
+  }
+  return std::string(buffer.begin(), buffer.end());
+}
+
+std::string light_png(int index) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "light_%02d.png", index);
+  return buf;
+}
+
+}  // namespace
+
+veneer::Expected<std::unique_ptr<SetWriter>> Store::begin(const std::string& id, bool truth) {
+  if (!valid_set_id(id)) return make_error("cannot store a set under the id '" + id + "'");
+  std::error_code ec;
+  if (fs::exists(root_ / id, ec)) return make_error("cannot store set " + id + ": it exists");
+  // ".<id>.capture-<pid>-0": a name Store::open removes as a leftover after a crash.
+  fs::path tmp = root_ / ("." + id + ".capture-" + std::to_string(::getpid()) + "-0");
+  fs::remove_all(tmp, ec);
+  if (!fs::create_directory(tmp, ec))
+    return make_error("cannot store set " + id + ": cannot create " + tmp.string() + ": " + ec.message());
+  return std::unique_ptr<SetWriter>(new SetWriter(*this, id, tmp, truth));
+}
+
+SetWriter::~SetWriter() {
+  if (tmp_.empty()) return;
+  std::error_code ec;
+  fs::remove_all(tmp_, ec);
+}
+
+veneer::Status SetWriter::add_frame(int k, const cv::Mat& photo, const veneer::ImageSet::RawFile& raw, int photos) {
+  if (tmp_.empty()) return make_error("set " + id_ + " is already stored");
+  auto fail = [&](const veneer::Status& s) {
+    return make_error("storing set " + id_ + " failed: " + s.message() + "; no set stored");
+  };
+  if (k < 0 || photo.empty()) return make_error("set " + id_ + ": frame " + std::to_string(k) + " is empty");
+  if (size_.area() == 0) {
+    size_ = photo.size();
+    // The space for the whole set, checked before its first file (the trash gives way first).
+    uint64_t need = Store::estimate_bytes(size_, photos, truth_) + raw.bytes.size() * static_cast<uint64_t>(photos);
+    if (store_.free_bytes() < need) store_.purge_trash(need);
+    const uint64_t free = store_.free_bytes();
+    if (free < need) {
+      return make_error("store " + store_.root().string() + " is full: " + std::to_string(free >> 20) +
+                        " MiB free, the set needs about " + std::to_string((need >> 20) + 1) + " MiB; no set stored");
+    }
+  }
+  if (photo.size() != size_) return make_error("set " + id_ + ": frame " + std::to_string(k) + " changed size");
+  const int index = k - 1;
+  const fs::path png = tmp_ / (k == 0 ? std::string("ambient.png") : light_png(index));
+  if (auto s = write_encoded(png, veneer::encode_png16(photo)); !s) return fail(s);
+  veneer::ImageSet::RawFile name;
+  if (!raw.bytes.empty()) {
+    const std::string file = k == 0 ? "ambient." + raw.extension : light_png(index).substr(0, 9) + raw.extension;
+    if (auto s = write_synced(tmp_ / file, raw.bytes); !s) return fail(s);
+    name.extension = raw.extension;
+    name.bytes = "1";  // manifest_json names a RAW file where its bytes are not empty
+  }
+  if (k == 0) {
+    ambient_ = true;
+    ambient_raw_ = name;
+  } else {
+    if (lit_.size() <= static_cast<size_t>(index)) {
+      lit_.resize(index + 1, false);
+      raw_names_.resize(index + 1);
+    }
+    lit_[index] = true;
+    raw_names_[index] = name;
+  }
+  return {};
+}
+
+veneer::Status SetWriter::commit(veneer::ImageSet& set) {
+  if (tmp_.empty()) return make_error("set " + id_ + " is already stored");
+  auto fail = [&](const veneer::Status& s) {
+    return make_error("storing set " + id_ + " failed: " + s.message() + "; no set stored");
+  };
+  if (set.id != id_) return make_error("set " + set.id + " is not the set being written (" + id_ + ")");
+  if (set.lights.empty() || lit_.size() != set.lights.size() ||
+      std::find(lit_.begin(), lit_.end(), false) != lit_.end())
+    return make_error("set " + id_ + ": " + std::to_string(set.lights.size()) +
+                      " lights but not every frame was taken; no set stored");
+  if (!set.mask.empty()) {
+    if (auto s = write_encoded(tmp_ / "mask.png", encode_mask(set.mask)); !s) return fail(s);
+  }
+  veneer::Truth& t = set.truth;
+  if (!t.normals.empty() || !t.mask.empty() || !t.albedo.empty() || !t.depth.empty()) {
+    // One image at a time, each let go once written (at 5600x3750 they are 0.6 GB together).
+    const fs::path truth = tmp_ / "truth";
+    std::error_code ec;
+    if (!fs::create_directory(truth, ec))
+      return fail(make_error(truth.string() + ": cannot create folder: " + ec.message()));
+    if (!t.normals.empty()) {
+      if (auto s = write_synced(truth / "normals.pfm", veneer::encode_pfm(t.normals, true)); !s) return fail(s);
+    }
+    t.normals.release();
+    if (!t.mask.empty()) {
+      if (auto s = write_encoded(truth / "mask.png", encode_mask(t.mask)); !s) return fail(s);
+    }
+    t.mask.release();
+    if (!t.albedo.empty()) {
+      if (auto s = write_encoded(truth / "albedo.png", veneer::encode_png16(t.albedo)); !s) return fail(s);
+    }
+    t.albedo.release();
+    if (!t.depth.empty()) {
+      if (auto s = write_synced(truth / "depth.pfm", veneer::encode_pfm(t.depth, true)); !s) return fail(s);
+    }
+    t.depth.release();
+    if (auto s = fsync_folder(truth); !s) return fail(s);
+  }
+  // set.json last, from what was written: manifest_json asks only whether a
+  // photo or RAW file is there (images are named after the lights).
+  veneer::ImageSet named;
+  named.id = set.id;
+  named.role = set.role;
+  named.object = set.object;
+  named.created = set.created;
+  named.size = size_;
+  named.camera = set.camera;
+  named.lights = set.lights;
+  named.warnings = set.warnings;
+  named.scene = set.scene;
+  named.mask = set.mask;
+  named.raw = raw_names_;
+  if (ambient_) {
+    named.ambient = cv::Mat(1, 1, CV_32FC3, cv::Scalar::all(0));  // a marker: ambient.png is written
+    named.ambient_raw = ambient_raw_;
+  }
+  if (auto s = write_synced(tmp_ / "set.json", veneer::manifest_json(named)); !s) return fail(s);
+  if (auto s = fsync_folder(tmp_); !s) return fail(s);
+  const fs::path folder = store_.root() / id_;
+  if (::renameat2(AT_FDCWD, tmp_.c_str(), AT_FDCWD, folder.c_str(), RENAME_NOREPLACE) != 0) {
+    const int err = errno;
+    return fail(make_error("cannot rename it into place: " + std::string(std::strerror(err))));
+  }
+  tmp_.clear();
+  if (auto s = fsync_folder(store_.root()); !s) return fail(s);
+  auto scanned = store_.scan_one(id_);
+  if (!scanned) {
+    std::error_code ec;
+    fs::remove_all(folder, ec);
+    return make_error("set " + id_ + " did not read back: " + scanned.message() + "; no set stored");
+  }
+  std::lock_guard lock(store_.mutex_);
+  store_.sets_.push_back(std::move(*scanned));
   return {};
 }
 

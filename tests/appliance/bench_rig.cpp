@@ -12,6 +12,10 @@
 //     VENEER_BENCH_ROUNDS how often both are repeated (2),
 //     VENEER_BENCH_PREVIEW_SIZE the live-view size (default the still size). `bench_rig --memory`
 //     runs this section alone.
+//  4. the real veneerd binary's peak resident memory over a pair of captures
+//     (destination, source) at the camera's full resolution (5600x3750), next
+//     to the frames' own bytes.
+//     `bench_rig --capture-peak` runs this section alone.
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -206,11 +210,81 @@ static int bench_daemon_memory(const fs::path& dir) {
   return 0;
 }
 
+
+// Section 4: the daemon's peak resident memory (VmHWM) over one capture at the
+// camera's full resolution (issue 29: a 4 GiB board). Its peer in the same
+// run: the set's frames as the camera delivers them (16-bit) and as floats,
+// what a daemon holding all of them would need on top of its idle size.
+// VENEER_BENCH_FULL_SIZE sets the size (default 5600x3750).
+static int bench_capture_peak(const fs::path& dir) {
+  const char* env = std::getenv("VENEER_BENCH_FULL_SIZE");
+  const std::string size = env && *env ? env : "5600x3750";
+  int w = 0, h = 0;
+  if (std::sscanf(size.c_str(), "%dx%d", &w, &h) != 2 || w <= 0 || h <= 0) {
+    std::fprintf(stderr, "bench_rig: VENEER_BENCH_FULL_SIZE '%s': expected WxH\n", size.c_str());
+    return 1;
+  }
+  fs::path store = dir / "peak-store";
+  auto d = rigtest::DaemonProcess::start(store, {"--size", size, "--preview-size", "320x213", "--log", "warn"});
+  if (!d || d->port() == 0) {
+    std::fprintf(stderr, "bench_rig: veneerd did not start: %s\n", d ? d->log().c_str() : "");
+    return 1;
+  }
+  auto token = veneer::rig::read_token_file(store / "token");
+  if (!token) return 1;
+  auto client = veneer::rig::Client::connect({"127.0.0.1", d->port()}, *token);
+  if (!client) {
+    std::fprintf(stderr, "bench_rig: %s\n", client.message().c_str());
+    return 1;
+  }
+  auto& c = **client;
+  const double idle = d->rss_mib("VmHWM");
+  // The pair, as `make demo` takes it: a destination, then a source (another scene).
+  double peak[2] = {0, 0}, seconds[2] = {0, 0};
+  for (int set = 0; set < 2; ++set) {
+    const auto t0 = Clock::now();
+    veneer::rig::CaptureOptions co;
+    auto id = c.capture(co);
+    if (!id) return 1;
+    std::fprintf(stderr, "bench_rig: capturing set %d of 2 at %s (a minute or more on 2 cores)...\n", set + 1, size.c_str());
+    auto done = c.wait_event([&](const veneer::rig::Event& e) {
+      if (e.set_id == *id && e.kind == Kind::shot_taken)
+        std::fprintf(stderr, "bench_rig:   shot %d of %d (peak so far %.0f MiB)\n", e.k, e.n, d->rss_mib("VmHWM"));
+      return e.set_id == *id && (e.kind == Kind::set_stored || e.kind == Kind::capture_failed);
+    }, 3600);
+    if (!done || done->kind != Kind::set_stored) {
+      std::fprintf(stderr, "bench_rig: the %s capture failed: %s\n", size.c_str(), d->log().c_str());
+      return 1;
+    }
+    seconds[set] = secs(Clock::now() - t0);
+    peak[set] = d->rss_mib("VmHWM");
+  }
+  const double frame16 = static_cast<double>(w) * h * 6 / 1048576.0;
+  const int frames = 8;
+  std::printf("\n### veneerd's peak memory over a %dx%d pair (7 lamps + ambient, truth, DNGs; %.0f s + %.0f s)\n\n", w,
+              h, seconds[0], seconds[1]);
+  std::printf("| measure | MiB |\n|---|---|\n");
+  std::printf("| peak RSS before the capture (idle) | %.0f |\n", idle);
+  std::printf("| **peak RSS over the first set (destination; VmHWM)** | **%.0f** |\n", peak[0]);
+  std::printf("| **peak RSS over both sets (the source is another scene)** | **%.0f** |\n", peak[1]);
+  std::printf("| peer: one set's %d frames as the camera delivers them (16-bit) | %.0f |\n", frames, frames * frame16);
+  std::printf("| peer: one set's %d frames as float (what holding them all costs) | %.0f |\n", frames, frames * frame16 * 2);
+  std::printf("| budget of the issue (a 4 GiB board) | 4096 |\n");
+  client->reset();
+  d->stop(SIGTERM);
+  return 0;
+}
+
 int main(int argc, char** argv) {
   veneer::log::set_levels("warn");
   fs::path dir = rigtest::temp_dir("bench");
   if (argc > 1 && std::string(argv[1]) == "--memory") {  // section 3 alone
     int rc = bench_daemon_memory(dir);
+    fs::remove_all(dir);
+    return rc;
+  }
+  if (argc > 1 && std::string(argv[1]) == "--capture-peak") {  // section 4 alone
+    int rc = bench_capture_peak(dir);
     fs::remove_all(dir);
     return rc;
   }
@@ -355,6 +429,7 @@ int main(int argc, char** argv) {
   client->reset();
   daemon->reset();
   int rc = bench_daemon_memory(dir);
+  if (rc == 0) rc = bench_capture_peak(dir);
   fs::remove_all(dir);
   return rc;
 }

@@ -651,3 +651,51 @@ TEST(Daemon, RestoringASetFromTheTrashIsAnnouncedToOtherClients) {
   EXPECT_FALSE(watcher->wait_event([](const veneer::rig::Event& e) { return e.kind == K::set_restored; }, 0.5));
   fs::remove_all(dir);
 }
+
+// Issue 29: the rig side holds one frame at a time, not the set, and one
+// scene's G-buffer, not the pair's. Capturing a pair at 1600x1064 (the
+// destination, then the source: another scene) may grow the daemon's peak
+// resident memory (VmHWM) by at most 16 frames' worth of float pixels: the
+// scene's G-buffer (~5 of them), the frame being shaded, encoded and its RAW
+// file (~4), the truth (~2, after the shots). Holding a set's 8 frames as
+// float until the end, as before, adds 7 more and fails; so does keeping the
+// first scene's G-buffer while the second is made, or a truth twice its size.
+TEST(Daemon, ACapturesPeakMemoryIsAFewFramesNotTheWholeSetAsFloat) {
+  fs::path dir = rigtest::temp_dir("peak");
+  fs::path store = dir / "store";
+  const int w = 1600, h = 1064;
+  auto d = DaemonProcess::start(store, {"--size", std::to_string(w) + "x" + std::to_string(h), "--preview-size", "160x106"});
+  ASSERT_TRUE(d && d->port() != 0) << (d ? d->log() : "");
+  auto c = connect(*d, store);
+  ASSERT_TRUE(c);
+  const double idle_mib = d->rss_mib("VmHWM");
+  ASSERT_GT(idle_mib, 0);
+  const double frame_mib = static_cast<double>(w) * h * 3 * sizeof(float) / 1048576.0;
+  using K = veneer::rig::Event::Kind;
+  std::vector<std::string> ids;
+  for (const char* role : {"destination", "source"}) {
+    auto id = c->capture();
+    ASSERT_TRUE(id) << id.message();
+    auto done = c->wait_event([&](const veneer::rig::Event& e) {
+      return e.set_id == *id && (e.kind == K::set_stored || e.kind == K::capture_failed);
+    }, 120);
+    ASSERT_TRUE(done) << done.message() << d->log();
+    ASSERT_EQ(done->kind, K::set_stored) << done->reason;
+    const double peak_mib = d->rss_mib("VmHWM");
+    EXPECT_LT(peak_mib - idle_mib, 16 * frame_mib)
+        << "after the " << role << ": idle " << idle_mib << " MiB, peak " << peak_mib << " MiB, one float frame "
+        << frame_mib << " MiB";
+    ids.push_back(*id);
+  }
+  // ... and the sets are whole: every photo, RAW file and the truth.
+  for (size_t i = 0; i < ids.size(); ++i) {
+    auto set = veneer::read_set(store / ids[i], {});
+    ASSERT_TRUE(set) << set.message();
+    EXPECT_EQ(set->role, i == 0 ? veneer::Role::destination : veneer::Role::source);
+    EXPECT_EQ(set->size, cv::Size(w, h));
+    EXPECT_EQ(set->images.size(), 7u);
+    EXPECT_FALSE(set->ambient.empty());
+    EXPECT_TRUE(set->truth.present());
+  }
+  fs::remove_all(dir);
+}

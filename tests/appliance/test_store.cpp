@@ -181,3 +181,110 @@ TEST(Store, TheCamerasRawFilesAreStoredAndListedForTransfer) {
   EXPECT_EQ(bytes, "RAW bytes of shot 2");
   fs::remove_all(root);
 }
+
+namespace {
+std::string file_bytes(const fs::path& f) {
+  std::ifstream in(f, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+// A set with what a simulated capture brings: noisy photos, RAW files, a
+// mask and the truth.
+veneer::ImageSet full_set(const std::string& id) {
+  veneer::ImageSet s = tiny_set(id, veneer::Role::source);
+  cv::RNG rng(29);
+  for (auto& img : s.images) {
+    img = cv::Mat(s.size, CV_32FC3);
+    rng.fill(img, cv::RNG::UNIFORM, 0.0, 1.0);
+  }
+  rng.fill(s.ambient, cv::RNG::UNIFORM, 0.0, 0.02);
+  for (size_t i = 0; i < s.images.size(); ++i) s.raw.push_back({"dng", "raw bytes of shot " + std::to_string(i)});
+  s.ambient_raw = {"dng", "the ambient's raw bytes"};
+  s.mask = cv::Mat(s.size, CV_8UC1, cv::Scalar(255));
+  s.truth.normals = cv::Mat(s.size, CV_32FC3, cv::Scalar(0, 0.6, 0.8));
+  s.truth.mask = cv::Mat(s.size, CV_8UC1, cv::Scalar(255));
+  s.truth.albedo = cv::Mat(s.size, CV_32FC3);
+  rng.fill(s.truth.albedo, cv::RNG::UNIFORM, 0.0, 1.0);
+  s.truth.depth = cv::Mat(s.size, CV_32FC1, cv::Scalar(1.25));
+  s.warnings = {"bright ambient frame"};
+  s.scene = "bull";
+  return s;
+}
+}  // namespace
+
+// A capture's frames go into the store one by one (a full-resolution set is
+// 2 GiB as float): the folder is byte for byte what save() writes.
+TEST(Store, ASetWrittenFrameByFrameIsTheSetSaveWrites) {
+  fs::path root = rigtest::temp_dir("writer");
+  auto store = veneerd::Store::open(root);
+  ASSERT_TRUE(store) << store.message();
+  veneer::ImageSet whole = full_set("whole");
+  ASSERT_TRUE((*store)->save(whole));
+
+  veneer::ImageSet framed = full_set("framed");
+  auto writer = (*store)->begin("framed");
+  ASSERT_TRUE(writer) << writer.message();
+  const int photos = static_cast<int>(framed.images.size()) + 1;
+  ASSERT_TRUE((*writer)->add_frame(0, framed.ambient, framed.ambient_raw, photos));
+  for (size_t i = 0; i < framed.images.size(); ++i)
+    ASSERT_TRUE((*writer)->add_frame(static_cast<int>(i) + 1, framed.images[i], framed.raw[i], photos));
+  EXPECT_FALSE((*store)->find("framed")) << "not listed before commit";
+  veneer::ImageSet meta = framed;  // what the rig has at the end: no photos
+  meta.images.clear();
+  meta.ambient.release();
+  meta.raw.clear();
+  meta.ambient_raw = {};
+  auto committed = (*writer)->commit(meta);
+  ASSERT_TRUE(committed) << committed.message();
+  EXPECT_TRUE(meta.truth.albedo.empty()) << "the truth is let go once written";
+  ASSERT_TRUE((*store)->find("framed"));
+
+  auto a = (*store)->files("whole", true), b = (*store)->files("framed", true);
+  ASSERT_TRUE(a && b);
+  ASSERT_EQ(*a, *b);
+  EXPECT_EQ(a->size(), 1u + 3 + 1 + 3 + 1 + 1 + 4);  // set.json, photos, ambient, RAW files, mask, truth
+  for (const auto& f : *a) {
+    std::string x = file_bytes(root / "whole" / f), y = file_bytes(root / "framed" / f);
+    if (f == "set.json") {
+      // the same but for the id
+      const std::string from = "\"id\": \"whole\"", to = "\"id\": \"framed\"";
+      ASSERT_NE(x.find(from), std::string::npos);
+      x.replace(x.find(from), from.size(), to);
+    }
+    EXPECT_EQ(x, y) << f;
+  }
+  EXPECT_TRUE(fs::exists(root / "framed" / "mask.png"));
+  EXPECT_TRUE(fs::exists(root / "framed" / "truth" / "depth.pfm"));
+}
+
+// A capture that fails or is cancelled leaves nothing; a set short of a
+// frame is refused, naming why.
+TEST(Store, AFrameByFrameSetNotCommittedOrShortOfAFrameLeavesNothing) {
+  fs::path root = rigtest::temp_dir("writer-drop");
+  auto store = veneerd::Store::open(root);
+  ASSERT_TRUE(store) << store.message();
+  veneer::ImageSet s = full_set("dropped");
+  {
+    auto writer = (*store)->begin("dropped");
+    ASSERT_TRUE(writer) << writer.message();
+    ASSERT_TRUE((*writer)->add_frame(0, s.ambient, s.ambient_raw, 4));
+    ASSERT_TRUE((*writer)->add_frame(1, s.images[0], s.raw[0], 4));
+  }
+  {
+    auto writer = (*store)->begin("short");
+    ASSERT_TRUE(writer) << writer.message();
+    ASSERT_TRUE((*writer)->add_frame(0, s.ambient, s.ambient_raw, 4));
+    ASSERT_TRUE((*writer)->add_frame(1, s.images[0], s.raw[0], 4));
+    EXPECT_FALSE((*writer)->add_frame(2, cv::Mat(3, 3, CV_32FC3, cv::Scalar::all(0)), {}, 4)) << "size changed";
+    veneer::ImageSet meta = s;
+    meta.id = "short";
+    auto committed = (*writer)->commit(meta);
+    ASSERT_FALSE(committed);
+    EXPECT_NE(committed.message().find("not every frame"), std::string::npos) << committed.message();
+  }
+  EXPECT_TRUE((*store)->list().empty());
+  std::vector<std::string> left;
+  for (const auto& e : fs::directory_iterator(root)) left.push_back(e.path().filename().string());
+  std::sort(left.begin(), left.end());
+  EXPECT_EQ(left, (std::vector<std::string>{".lock"})) << "no temporary folder left";
+}

@@ -1,8 +1,10 @@
 #pragma once
 // The set store: one veneer-set/1 folder per captured set under a root folder.
-// Sets are written with veneer::write_set (temporary folder, fsync, rename), so
-// after a crash or power cut a set is either all there or not at all; opening
-// the store removes leftover temporary folders and lists what is stored.
+// Sets are written with veneer::write_set, or frame by frame as the camera
+// delivers them (SetWriter), both into a temporary folder that is fsynced and
+// renamed into place, so after a crash or power cut a set is either all there
+// or not at all; opening the store removes leftover temporary folders and
+// lists what is stored.
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -34,6 +36,8 @@ struct StoredSet {
 // Set ids are file names: 1..96 of [A-Za-z0-9._-], not starting with '.'.
 bool valid_set_id(const std::string& id);
 
+class SetWriter;
+
 class Store {
  public:
   // Opens (creating if needed) the store folder, takes its lock (one daemon
@@ -59,6 +63,12 @@ class Store {
   // and leaves nothing behind.
   veneer::Status save(const veneer::ImageSet& set);
 
+  // Starts writing set `id` frame by frame (a capture at the camera's full
+  // resolution holds one frame at a time, not the whole set): see SetWriter.
+  // `truth`: the set will have ground truth (the simulated rig), counted in
+  // the free space it needs.
+  veneer::Expected<std::unique_ptr<SetWriter>> begin(const std::string& id, bool truth = false);
+
   // The trash: a deleted set is moved into <root>/.trash and can be restored
   // until it is purged -- when it is older than trash_keep_s, or, oldest
   // first, when a new set needs its space.
@@ -72,6 +82,7 @@ class Store {
   std::filesystem::path trash_folder() const { return root_ / ".trash"; }
 
  private:
+  friend class SetWriter;
   explicit Store(std::filesystem::path root, int lock_fd);
   veneer::Expected<StoredSet> scan_one(const std::string& id) const;
 
@@ -80,6 +91,42 @@ class Store {
   mutable std::mutex mutex_;
   std::vector<StoredSet> sets_;
   double trash_keep_s_ = 7 * 24 * 3600.0;  // a week
+};
+
+// One set being written into a temporary folder of the store as its frames
+// are taken; commit() adds the manifest (and truth) and renames it into place.
+// The files are byte for byte those Store::save writes for the same set.
+// Dropped without commit (a failed or cancelled capture), it leaves nothing.
+class SetWriter {
+ public:
+  ~SetWriter();
+  SetWriter(const SetWriter&) = delete;
+  SetWriter& operator=(const SetWriter&) = delete;
+
+  // Frame k of the capture: k = 0 the ambient frame, k >= 1 lit by light k - 1.
+  // `photo` is CV_32FC3 as in veneer::ImageSet; `raw` the camera's RAW file
+  // (empty bytes = none). Written (and fsynced) before this returns; the first
+  // frame checks the free space for the whole set (`photos` frames).
+  veneer::Status add_frame(int k, const cv::Mat& photo, const veneer::ImageSet::RawFile& raw, int photos);
+  // Writes the supplied mask, the truth (releasing each of its images once
+  // written) and set.json for `set` (metadata and lights; its photos may be
+  // empty: the frames added are what set.json names), then renames the folder
+  // into place and lists the set. Every light needs its frame.
+  veneer::Status commit(veneer::ImageSet& set);
+
+ private:
+  friend class Store;
+  SetWriter(Store& store, std::string id, std::filesystem::path tmp, bool truth)
+      : store_(store), id_(std::move(id)), tmp_(std::move(tmp)), truth_(truth) {}
+  Store& store_;
+  std::string id_;
+  std::filesystem::path tmp_;  // removed by the destructor unless committed
+  bool truth_ = false;
+  cv::Size size_;
+  bool ambient_ = false;
+  std::vector<bool> lit_;                          // lit_[i]: light i's frame is written
+  std::vector<veneer::ImageSet::RawFile> raw_names_;  // extension only (bytes "1" when a RAW file was written)
+  veneer::ImageSet::RawFile ambient_raw_;
 };
 
 }  // namespace veneerd

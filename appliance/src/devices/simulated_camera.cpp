@@ -252,7 +252,8 @@ struct SimulatedCamera::Impl {
   uint64_t fail_at = 0;  // shot number that fails; 0 = none
   uint64_t previews = 0;
   std::vector<veneer::sim::Lamp> last_lamps;
-  // Scenes keep their G-buffer for one size: stills and live view use separate objects.
+  // Scenes keep their G-buffer for one size: stills and live view use separate
+  // objects; each map holds the scene last used (scene_for).
   std::map<std::string, std::shared_ptr<const veneer::sim::Scene>> still_scenes, preview_scenes;
   std::shared_ptr<const PreviewBuffer> preview_buffer;  // fast live view of preview_scene
 
@@ -272,12 +273,17 @@ struct SimulatedCamera::Impl {
     return r;
   }
 
+  // The scene `name` from `cache`, made when missing. A cache keeps one scene:
+  // a scene's G-buffer at 5600x3750 is 1.5 GiB, and the rig's pair
+  // (destination, source) is two scenes, too many for a 4 GiB board; the one
+  // left is let go before the next is made, so they are never both held.
   veneer::Expected<std::shared_ptr<const veneer::sim::Scene>> scene_for(
       std::map<std::string, std::shared_ptr<const veneer::sim::Scene>>& cache, const std::string& name,
       const veneer::sim::RenderOptions& r) {
     {
       std::lock_guard lock(mutex);
       if (auto it = cache.find(name); it != cache.end()) return it->second;
+      cache.clear();
     }
     auto made = veneer::sim::make_scene(name, r);
     if (!made) return made.error();
