@@ -1,6 +1,8 @@
 #include "veneerd/daemon.hpp"
 
+#include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <fstream>
 
@@ -19,6 +21,8 @@
 namespace veneerd {
 
 namespace fs = std::filesystem;
+
+constexpr int kLiveViewMaxWidth = 1024;  // the simulated camera's live view, at most (px)
 using veneer::make_error;
 
 
@@ -81,7 +85,16 @@ veneer::Expected<std::unique_ptr<Daemon>> Daemon::create(const DaemonOptions& o)
     SimulatedRigOptions so;
     so.scenes = o.scenes;
     so.size = o.size;
-    so.preview_size = o.preview_size.area() > 0 ? o.preview_size : o.size;
+    // A DSLR's live view is a small picture of the still's framing (about
+    // 1024 px wide); the twin's is the stills' size up to that width, so a
+    // full-resolution rig does not render a second full-size live view.
+    so.preview_size = o.preview_size;
+    if (so.preview_size.area() <= 0) {
+      so.preview_size = o.size;
+      if (o.size.width > kLiveViewMaxWidth)
+        so.preview_size = {kLiveViewMaxWidth, std::max(2, 2 * static_cast<int>(std::lround(0.5 * o.size.height *
+                                                                                          kLiveViewMaxWidth / o.size.width)))};
+    }
     so.preview_motion = o.preview_motion;
     so.preview_motion_frames = o.preview_motion_frames;
     so.noise_sigma = o.noise_sigma;

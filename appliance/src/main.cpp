@@ -69,7 +69,8 @@ int main(int argc, char** argv) {
   app.add_flag("--check-hardware", check_hardware, "probe the configured hardware and exit");
   app.add_option("--scenes", scenes, "simulated rig: destination,source scene names")->capture_default_str();
   app.add_option("--size", size, "simulated rig: still size WxH")->capture_default_str();
-  app.add_option("--preview-size", preview_size, "simulated rig: live-view size WxH (default: --size)");
+  app.add_option("--preview-size", preview_size,
+                 "simulated rig: live-view size WxH (default: --size, at most 1024 px wide as a DSLR's live view)");
   app.add_option("--preview-motion", o.preview_motion,
                  "simulated rig: the live view moves, a SPEC as `veneer simulate --motion` takes (shift=DX:DY, rotate, "
                  "scale, turn, lamp=sweep), e.g. shift=30:0,rotate=5,lamp=sweep");
