@@ -15,6 +15,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 
+#include "veneer/io/big_buffers.hpp"
 #include "veneer/ps/photometric_stereo.hpp"
 #include "veneer/ps/segmentation.hpp"
 #include "veneer/util/log.hpp"
@@ -157,10 +158,23 @@ Status finish_cache_writes() {
   return first;
 }
 
-cv::Mat median_of(const std::vector<cv::Mat>& photos) {
+namespace {
+// The median of `photos` per sample; with `ambient`, first each photo minus
+// the ambient frame, clamped at 0, written back in place, in the same pass
+// (one read of every photo instead of three: subtract, clamp, median).
+cv::Mat median_minus_ambient(const std::vector<cv::Mat>& photos, const cv::Mat* ambient) {
   if (photos.empty()) return {};
   const int n = static_cast<int>(photos.size());
-  if (n > 32) return match::median_photo(photos);
+  if (n > 32) {
+    if (ambient) {
+      for (const cv::Mat& im : photos) {
+        cv::Mat m = im;  // shares the pixels: in place
+        cv::subtract(m, *ambient, m);
+        cv::max(m, 0.0, m);
+      }
+    }
+    return match::median_photo(photos);
+  }
   // An odd-even transposition network (n rounds of compare-exchanges of
   // neighbours) sorts each sample's n values; run on 256 samples at once,
   // every compare-exchange is a min and a max over two short arrays, which
@@ -168,7 +182,7 @@ cv::Mat median_of(const std::vector<cv::Mat>& photos) {
   std::vector<std::pair<int, int>> network;
   for (int round = 0; round < n; ++round)
     for (int i = round % 2; i + 1 < n; i += 2) network.emplace_back(i, i + 1);
-  cv::Mat out(photos[0].size(), CV_32FC3);
+  cv::Mat out = big_mat(photos[0].size(), CV_32FC3);
   const int width = out.cols * 3;
   constexpr int kLanes = 256;
   cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& rows) {
@@ -177,7 +191,17 @@ cv::Mat median_of(const std::vector<cv::Mat>& photos) {
       float* o = out.ptr<float>(y);
       for (int x0 = 0; x0 < width; x0 += kLanes) {
         const int lanes = std::min(kLanes, width - x0);
-        for (int i = 0; i < n; ++i) std::memcpy(&v[size_t(i) * kLanes], photos[i].ptr<float>(y) + x0, lanes * sizeof(float));
+        if (ambient) {
+          const float* a = ambient->ptr<float>(y) + x0;
+          for (int i = 0; i < n; ++i) {
+            float* p = const_cast<float*>(photos[i].ptr<float>(y)) + x0;
+            float* d = &v[size_t(i) * kLanes];
+            for (int k = 0; k < lanes; ++k) d[k] = p[k] = std::max(p[k] - a[k], 0.0f);
+          }
+        } else {
+          for (int i = 0; i < n; ++i)
+            std::memcpy(&v[size_t(i) * kLanes], photos[i].ptr<float>(y) + x0, lanes * sizeof(float));
+        }
         for (const auto& [a, b] : network) {
           float* pa = &v[size_t(a) * kLanes];
           float* pb = &v[size_t(b) * kLanes];
@@ -199,6 +223,9 @@ cv::Mat median_of(const std::vector<cv::Mat>& photos) {
   });
   return out;
 }
+}  // namespace
+
+cv::Mat median_of(const std::vector<cv::Mat>& photos) { return median_minus_ambient(photos, nullptr); }
 
 Status PrepareOptions::check() const {
   if (auto s = read.check(); !s) return s;
@@ -315,21 +342,18 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
     p.residual = solved->residual;
   }
   p.report.normals_s = p.object.segment_seconds + p.object.normals_seconds;
-  // The photos as the matcher and the repaint use them: ambient removed, in place.
-  if (!p.set.ambient.empty()) {
-    tbb::parallel_for(size_t(0), p.set.images.size(), [&](size_t i) {
-      cv::Mat& im = p.set.images[i];
-      if (im.size() != p.set.ambient.size()) return;
-      cv::subtract(im, p.set.ambient, im);
-      im = cv::max(im, 0.0);
-    });
-    p.set.ambient.release();
-  }
+  // The photos as the matcher and the repaint use them: ambient removed, in
+  // place, in the median's pass (read_set made every frame the set's size).
+  progress.report(0.9, "median " + p.set.id);
+  const bool ambient = !p.set.ambient.empty() && !p.set.images.empty() &&
+                       std::all_of(p.set.images.begin(), p.set.images.end(), [&](const cv::Mat& im) {
+                         return im.size() == p.set.ambient.size() && im.type() == p.set.ambient.type();
+                       });
+  p.median = median_minus_ambient(p.set.images, ambient ? &p.set.ambient : nullptr);
+  p.set.ambient.release();
   p.object.view.images = p.set.images;
   for (const auto& light : p.set.lights) p.object.view.lamps.push_back(light.lamp_id);
   if (p.object.view.lamps.size() != p.object.view.images.size()) p.object.view.lamps.clear();
-  progress.report(0.9, "median " + p.set.id);
-  p.median = median_of(p.object.view.images);
 
   if (cacheable) {
     // Written in the background (the Mats are shared, not copied, and
