@@ -13,6 +13,7 @@
 #include <tbb/parallel_for.h>
 
 #include "file_util.hpp"
+#include "veneer/io/big_buffers.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/util/log.hpp"
 
@@ -338,12 +339,12 @@ Expected<cv::Mat> read_mat_file(const fs::path& file) {
     return make_error(name + ": size does not match its header");
   const int rows = static_cast<int>(head[1]), cols = static_cast<int>(head[2]);
   if (depth != CV_16F) {
-    cv::Mat m(rows, cols, type);
+    cv::Mat m = big_mat(rows, cols, type);
     if (!m.empty() && !read_all(f.fd, m.data, pixels)) return make_error(name + ": truncated");
     return m;
   }
   // Half floats: read a chunk, widen it into its rows of the result.
-  cv::Mat m(rows, cols, CV_MAKETYPE(CV_32F, channels));
+  cv::Mat m = big_mat(rows, cols, CV_MAKETYPE(CV_32F, channels));
   const int step = std::max(1, static_cast<int>((8u << 20) / std::max<size_t>(1, size_t(cols) * CV_ELEM_SIZE(type))));
   cv::Mat chunk(std::min(rows, step), cols, type);
   for (int y = 0; y < rows; y += step) {

@@ -1,6 +1,9 @@
 // Set folders -> prepared objects through the result cache (prepare.hpp).
 #include "veneer/pipeline/prepare.hpp"
 
+#include <sys/resource.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -10,6 +13,7 @@
 #include <future>
 #include <map>
 #include <mutex>
+#include <optional>
 
 #include <opencv2/imgproc.hpp>
 #include <tbb/parallel_for.h>
@@ -326,30 +330,41 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
   if (!mask) return mask.error();
   p.object.view.mask = std::move(mask).value();
   p.object.segment_seconds = since(t0);
+  std::optional<ps::PsResult> solved;
   if (truth_normals) {
     p.object.view.normals = p.set.truth.normals.clone();
   } else {
     t0 = Clock::now();
-    auto solved = ps::photometric_stereo(p.set, p.object.view.mask, {}, sub_progress(progress, 0.6, 0.9));
-    if (!solved) return make_error("set " + p.set.id + ": photometric stereo: " + solved.message());
-    if (p.set.mask.empty()) {  // a base the object stands on is not the object (a supplied mask is the user's word)
-      ps::drop_supports(*solved);
-      p.object.view.mask = solved->mask;
-    }
+    auto result = ps::photometric_stereo(p.set, p.object.view.mask, {}, sub_progress(progress, 0.6, 0.9));
+    if (!result) return make_error("set " + p.set.id + ": photometric stereo: " + result.message());
+    solved = std::move(result).value();
     p.object.normals_seconds = since(t0);
-    p.object.view.normals = solved->normals;
-    p.albedo = solved->albedo;
-    p.residual = solved->residual;
   }
-  p.report.normals_s = p.object.segment_seconds + p.object.normals_seconds;
   // The photos as the matcher and the repaint use them: ambient removed, in
-  // place, in the median's pass (read_set made every frame the set's size).
+  // place, in the median's pass (read_set made every frame the set's size);
+  // beside it, on another core, a base the object stands on is dropped from
+  // the solved mask (a supplied mask is the user's word): the base removal
+  // is a serial flood fill, and the median leaves no core idle meanwhile.
   progress.report(0.9, "median " + p.set.id);
   const bool ambient = !p.set.ambient.empty() && !p.set.images.empty() &&
                        std::all_of(p.set.images.begin(), p.set.images.end(), [&](const cv::Mat& im) {
                          return im.size() == p.set.ambient.size() && im.type() == p.set.ambient.type();
                        });
-  p.median = median_minus_ambient(p.set.images, ambient ? &p.set.ambient : nullptr);
+  tbb::parallel_invoke(
+      [&] {
+        if (!solved || !p.set.mask.empty()) return;
+        const auto t = Clock::now();
+        ps::drop_supports(*solved);
+        p.object.normals_seconds += since(t);
+      },
+      [&] { p.median = median_minus_ambient(p.set.images, ambient ? &p.set.ambient : nullptr); });
+  if (solved) {
+    if (p.set.mask.empty()) p.object.view.mask = solved->mask;
+    p.object.view.normals = solved->normals;
+    p.albedo = solved->albedo;
+    p.residual = solved->residual;
+  }
+  p.report.normals_s = p.object.segment_seconds + p.object.normals_seconds;
   p.set.ambient.release();
   p.object.view.images = p.set.images;
   for (const auto& light : p.set.lights) p.object.view.lamps.push_back(light.lamp_id);
@@ -362,6 +377,10 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
     auto entry = std::make_shared<std::pair<CacheEntry, CacheMats>>(to_entry(p));
     const std::string id = p.set.id;
     auto write = std::async(std::launch::async, [cache, key, entry, id]() mutable -> Status {
+      // At the lowest priority (Linux: this thread only): on a small
+      // machine both cores go to the map meanwhile, and the entry is
+      // written in what time they leave.
+      ::setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), 19);
       const auto t = Clock::now();
       Status s = cache.store(key, entry->first, entry->second);
       // The future keeps this lambda (and its captures) until it is
