@@ -5,15 +5,18 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
 
-#include <nlohmann/json.hpp>
 #include <future>
 #include <map>
 #include <mutex>
 #include <optional>
+#include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include <opencv2/imgproc.hpp>
 #include <tbb/parallel_for.h>
@@ -124,39 +127,119 @@ bool from_entry(const CacheEntry& e, std::map<std::string, cv::Mat>& mats, Prepa
   return true;
 }
 
-// Cache entries being written in the background, by key: a later
-// preparation of the same set waits for its entry, finish_cache_writes for all.
+// A cache entry being written: its matrices are taken one at a time by the
+// background writer (at nice 19, so that on a small machine the map keeps
+// both cores) and by whoever waits for the entry (at its own priority), so
+// that waiting is never waiting on a starved thread for more than the one
+// matrix it holds. Whoever writes the last matrix commits the entry.
+struct WriteJob {
+  ResultCache cache;
+  std::string key, id;
+  CacheEntry entry;
+  std::vector<std::pair<std::string, CachedMat>> mats;
+  fs::path folder;
+  std::atomic<size_t> next{0}, done{0};
+  std::mutex lock;
+  Status error = Status::success();
+  std::promise<Status> finished;
+  std::shared_future<Status> result = finished.get_future().share();
+  Clock::time_point t0 = Clock::now();
+
+  WriteJob(ResultCache c, std::string k, std::string i) : cache(std::move(c)), key(std::move(k)), id(std::move(i)) {}
+
+  void help() {
+    for (size_t i; (i = next++) < mats.size();) {
+      Status s = write_mat_file(folder / mats[i].first, mats[i].second.mat, mats[i].second.half);
+      mats[i].second.mat.release();  // a photo the caller lets go of is freed
+      if (!s) {
+        std::lock_guard<std::mutex> hold(lock);
+        if (error) error = s;
+      }
+      if (++done == mats.size()) commit();
+    }
+  }
+  void commit() {
+    Status s = Status::success();
+    {
+      std::lock_guard<std::mutex> hold(lock);
+      s = error;
+    }
+    Status c = cache.commit_store(key, folder, entry, !s);
+    if (s) s = c;
+    if (!s) VLOG_WARN("Cache", "{}", s.message());
+    VLOG_DEBUG("Cache", "{}: entry {} written in {:.2f} s", id, key, since(t0));
+    finished.set_value(s);
+  }
+};
+
+// Cache entries being written, by key (with the background writer's
+// future, which the process's exit waits for): a later preparation of the
+// same set waits for its entry, finish_cache_writes for all.
+struct Pending {
+  std::shared_ptr<WriteJob> job;
+  std::shared_future<void> writer;
+};
 struct PendingWrites {
   std::mutex lock;
-  std::map<std::string, std::shared_future<Status>> by_key;
+  std::map<std::string, Pending> by_key;
 };
 PendingWrites& pending_writes() {
   static PendingWrites p;
   return p;
 }
 
+Status help_and_wait(const Pending& p) {
+  if (!p.job) return Status::success();
+  p.job->help();
+  return p.job->result.get();
+}
+
 void wait_for_write(const std::string& key) {
-  std::shared_future<Status> f;
+  Pending p;
   {
     std::lock_guard<std::mutex> hold(pending_writes().lock);
     auto it = pending_writes().by_key.find(key);
     if (it == pending_writes().by_key.end()) return;
-    f = it->second;
+    p = it->second;
   }
-  f.wait();
+  (void)help_and_wait(p);
+}
+
+// Starts writing `p`'s cache entry under `key` in the background.
+void start_write(const ResultCache& cache, const std::string& key, const PreparedSet& p) {
+  auto job = std::make_shared<WriteJob>(cache, key, p.set.id);
+  auto [entry, mats] = to_entry(p);
+  job->entry = std::move(entry);
+  for (auto& m : mats) job->mats.emplace_back(m.first, std::move(m.second));
+  auto folder = cache.begin_store(key);
+  if (!folder) {
+    VLOG_WARN("Cache", "{}", folder.message());
+    job->finished.set_value(folder.error());
+    job->next = job->mats.size();
+    job->mats.clear();  // nothing to write: the photos are not held
+  } else {
+    job->folder = *folder;
+    if (job->mats.empty()) job->commit();
+  }
+  auto writer = std::async(std::launch::async, [job] {
+    ::setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), 19);  // Linux: this thread only
+    job->help();
+  });
+  std::lock_guard<std::mutex> hold(pending_writes().lock);
+  pending_writes().by_key[key] = Pending{std::move(job), writer.share()};
 }
 
 }  // namespace
 
 Status finish_cache_writes() {
-  std::map<std::string, std::shared_future<Status>> all;
+  std::map<std::string, Pending> all;
   {
     std::lock_guard<std::mutex> hold(pending_writes().lock);
     all.swap(pending_writes().by_key);
   }
   Status first = Status::success();
-  for (auto& [key, f] : all) {
-    Status s = f.get();
+  for (auto& [key, p] : all) {
+    Status s = help_and_wait(p);
     if (!s && first) first = s;
   }
   return first;
@@ -373,26 +456,8 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
   if (cacheable) {
     // Written in the background (the Mats are shared, not copied, and
     // nothing writes into them after this): the map and the pictures are
-    // made meanwhile. finish_cache_writes() waits for it.
-    auto entry = std::make_shared<std::pair<CacheEntry, CacheMats>>(to_entry(p));
-    const std::string id = p.set.id;
-    auto write = std::async(std::launch::async, [cache, key, entry, id]() mutable -> Status {
-      // At the lowest priority (Linux: this thread only): on a small
-      // machine both cores go to the map meanwhile, and the entry is
-      // written in what time they leave.
-      ::setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), 19);
-      const auto t = Clock::now();
-      Status s = cache.store(key, entry->first, entry->second);
-      // The future keeps this lambda (and its captures) until it is
-      // collected: let go of the matrices now, so that a photo the caller
-      // releases is freed.
-      entry.reset();
-      if (!s) VLOG_WARN("Cache", "{}", s.message());
-      VLOG_DEBUG("Cache", "{}: entry {} written in {:.2f} s", id, key, since(t));
-      return s;
-    });
-    std::lock_guard<std::mutex> hold(pending_writes().lock);
-    pending_writes().by_key[key] = write.share();
+    // made meanwhile. finish_cache_writes() waits for it (and helps).
+    start_write(cache, key, p);
     p.report.cache_write_s = -1;  // in the background
   }
   p.report.total_s = since(t_all);
