@@ -13,6 +13,7 @@
 #include <tbb/parallel_for.h>
 
 #include "file_util.hpp"
+#include "veneer/io/big_buffers.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/util/log.hpp"
 
@@ -189,15 +190,25 @@ std::optional<CacheEntry> ResultCache::load(const std::string& key, std::map<std
   return entry;
 }
 
-Status ResultCache::store(const std::string& key, const CacheEntry& entry, const CacheMats& mats) const {
-  if (!options_.enabled) return Status::success();
+Expected<fs::path> ResultCache::begin_store(const std::string& key) const {
+  if (!options_.enabled) return fs::path();
   if (!safe_key(key)) return make_error("cache: bad key \"" + key.substr(0, 80) + "\"");
   std::error_code ec;
   fs::create_directories(dir_, ec);
   if (ec) return make_error(dir_.string() + ": cannot create cache folder: " + ec.message());
-  const fs::path target = dir_ / key;
-  const fs::path tmp = io_detail::temp_sibling(target);
+  const fs::path tmp = io_detail::temp_sibling(dir_ / key);
   if (!fs::create_directory(tmp, ec)) return make_error(tmp.string() + ": cannot create: " + ec.message());
+  return tmp;
+}
+
+Status ResultCache::commit_store(const std::string& key, const fs::path& tmp, const CacheEntry& entry,
+                                 bool failed) const {
+  if (tmp.empty()) return Status::success();
+  std::error_code ec;
+  if (failed || !safe_key(key)) {
+    fs::remove_all(tmp, ec);
+    return failed ? Status::success() : make_error("cache: bad key \"" + key.substr(0, 80) + "\"");
+  }
   for (const auto& [name, bytes] : entry) {
     if (name.find('/') != std::string::npos || name.empty() || name[0] == '.') {
       fs::remove_all(tmp, ec);
@@ -214,16 +225,7 @@ Status ResultCache::store(const std::string& key, const CacheEntry& entry, const
       return make_error(file + ": cannot write cache file");
     }
   }
-  for (const auto& [name, m] : mats) {
-    if (name.find('/') != std::string::npos || name.empty() || name[0] == '.' || entry.count(name)) {
-      fs::remove_all(tmp, ec);
-      return make_error("cache: bad matrix name \"" + name + "\"");
-    }
-    if (Status s = write_mat_file(tmp / name, m.mat, m.half); !s) {
-      fs::remove_all(tmp, ec);
-      return s;
-    }
-  }
+  const fs::path target = dir_ / key;
   fs::remove_all(target, ec);  // an older entry under the same key
   if (std::rename(tmp.c_str(), target.c_str()) != 0) {
     fs::remove_all(tmp, ec);
@@ -231,6 +233,23 @@ Status ResultCache::store(const std::string& key, const CacheEntry& entry, const
   }
   evict();
   return Status::success();
+}
+
+Status ResultCache::store(const std::string& key, const CacheEntry& entry, const CacheMats& mats) const {
+  if (!options_.enabled) return Status::success();
+  auto tmp = begin_store(key);
+  if (!tmp) return tmp.error();
+  for (const auto& [name, m] : mats) {
+    if (name.find('/') != std::string::npos || name.empty() || name[0] == '.' || entry.count(name)) {
+      (void)commit_store(key, *tmp, entry, true);
+      return make_error("cache: bad matrix name \"" + name + "\"");
+    }
+    if (Status s = write_mat_file(*tmp / name, m.mat, m.half); !s) {
+      (void)commit_store(key, *tmp, entry, true);
+      return s;
+    }
+  }
+  return commit_store(key, *tmp, entry);
 }
 
 uint64_t ResultCache::size_bytes() const {
@@ -338,12 +357,12 @@ Expected<cv::Mat> read_mat_file(const fs::path& file) {
     return make_error(name + ": size does not match its header");
   const int rows = static_cast<int>(head[1]), cols = static_cast<int>(head[2]);
   if (depth != CV_16F) {
-    cv::Mat m(rows, cols, type);
+    cv::Mat m = big_mat(rows, cols, type);
     if (!m.empty() && !read_all(f.fd, m.data, pixels)) return make_error(name + ": truncated");
     return m;
   }
   // Half floats: read a chunk, widen it into its rows of the result.
-  cv::Mat m(rows, cols, CV_MAKETYPE(CV_32F, channels));
+  cv::Mat m = big_mat(rows, cols, CV_MAKETYPE(CV_32F, channels));
   const int step = std::max(1, static_cast<int>((8u << 20) / std::max<size_t>(1, size_t(cols) * CV_ELEM_SIZE(type))));
   cv::Mat chunk(std::min(rows, step), cols, type);
   for (int y = 0; y < rows; y += step) {

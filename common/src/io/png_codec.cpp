@@ -14,6 +14,8 @@
 #include <libdeflate.h>
 #include <opencv2/core/utility.hpp>
 
+#include "veneer/io/big_buffers.hpp"
+
 namespace veneer::io_detail {
 
 namespace {
@@ -36,30 +38,33 @@ struct CompressorFree {
   void operator()(libdeflate_compressor* c) const { libdeflate_free_compressor(c); }
 };
 
-// The PNG row filters undone in place; `prev` is the previous unfiltered row
-// (zeros above the first). False for an unknown filter type.
-bool unfilter(unsigned type, unsigned char* row, const unsigned char* prev, size_t n, size_t bpp) {
+// The PNG row filters undone from `in` into `row` (distinct buffers); `prev`
+// is the previous unfiltered row (zeros above the first). False for an
+// unknown filter type.
+bool unfilter(unsigned type, const unsigned char* in, unsigned char* row, const unsigned char* prev, size_t n,
+              size_t bpp) {
   switch (type) {
-    case 0: return true;
+    case 0: std::memcpy(row, in, n); return true;
     case 1:
-      for (size_t i = bpp; i < n; ++i) row[i] = static_cast<unsigned char>(row[i] + row[i - bpp]);
+      for (size_t i = 0; i < bpp; ++i) row[i] = in[i];
+      for (size_t i = bpp; i < n; ++i) row[i] = static_cast<unsigned char>(in[i] + row[i - bpp]);
       return true;
     case 2:
-      for (size_t i = 0; i < n; ++i) row[i] = static_cast<unsigned char>(row[i] + prev[i]);
+      for (size_t i = 0; i < n; ++i) row[i] = static_cast<unsigned char>(in[i] + prev[i]);
       return true;
     case 3:
-      for (size_t i = 0; i < bpp; ++i) row[i] = static_cast<unsigned char>(row[i] + (prev[i] >> 1));
+      for (size_t i = 0; i < bpp; ++i) row[i] = static_cast<unsigned char>(in[i] + (prev[i] >> 1));
       for (size_t i = bpp; i < n; ++i)
-        row[i] = static_cast<unsigned char>(row[i] + ((unsigned(row[i - bpp]) + prev[i]) >> 1));
+        row[i] = static_cast<unsigned char>(in[i] + ((unsigned(row[i - bpp]) + prev[i]) >> 1));
       return true;
     case 4:
-      for (size_t i = 0; i < bpp; ++i) row[i] = static_cast<unsigned char>(row[i] + prev[i]);
+      for (size_t i = 0; i < bpp; ++i) row[i] = static_cast<unsigned char>(in[i] + prev[i]);
       for (size_t i = bpp; i < n; ++i) {
         const int a = row[i - bpp], b = prev[i], c = prev[i - bpp];
         const int p = b - c, q = a - c;
         const int pa = std::abs(p), pb = std::abs(q), pc = std::abs(p + q);
         const int pred = (pa <= pb && pa <= pc) ? a : (pb <= pc ? b : c);
-        row[i] = static_cast<unsigned char>(row[i] + pred);
+        row[i] = static_cast<unsigned char>(in[i] + pred);
       }
       return true;
     default: return false;
@@ -179,19 +184,20 @@ std::optional<Expected<cv::Mat>> decode_png_linear(std::string_view bytes, const
   const size_t bpp = size_t(channels) * size_t(depth) / 8;
   const size_t row_bytes = size_t(width) * bpp;
   const size_t expect = size_t(height) * (row_bytes + 1);
-  // The inflated rows go to a buffer each thread keeps for its next file (a
-  // set's frames are all of one size, so its pages are faulted in once), up
-  // to 64 MiB (a 10 Mpx 16-bit photo); a larger one is the call's own, so a
-  // full-resolution set leaves no 126 MB per thread behind.
-  constexpr size_t kKeep = size_t(64) << 20;
-  thread_local std::vector<unsigned char> kept;
+  // The inflated rows go straight into the tail of the float picture they
+  // become (a float pixel takes more bytes than a filtered one): row y is
+  // unfiltered into a small buffer, then written as floats over bytes whose
+  // filtered rows (<= y) are already consumed -- row y's floats end at
+  // 12*W*(y+1), row y+1's filtered bytes begin at 12*W*H - H*(r+1) + (y+1)*(r+1)
+  // with r = W*bpp <= 8*W, never before. No intermediate buffer: the
+  // picture's pages are the only fresh ones, faulted in at once.
   thread_local std::unique_ptr<libdeflate_decompressor, DecompressorFree> inflater;
-  std::vector<unsigned char> own;
-  if (expect <= kKeep && kept.size() < expect) kept.resize(expect);
-  if (expect > kKeep) own.resize(expect);
   if (!inflater) inflater.reset(libdeflate_alloc_decompressor());
   if (!inflater) return Expected<cv::Mat>(make_error(name + ": out of memory for the PNG decoder"));
-  unsigned char* filtered = expect <= kKeep ? kept.data() : own.data();
+  cv::Mat out = big_mat(static_cast<int>(height), static_cast<int>(width), CV_32FC3);
+  const size_t out_bytes = out.total() * out.elemSize();
+  if (!out.isContinuous() || out_bytes < expect) return std::nullopt;  // not reached for 8/16-bit PNGs
+  unsigned char* filtered = out.data + (out_bytes - expect);
   size_t got = 0;
   const auto r = libdeflate_zlib_decompress(inflater.get(), stream, idat_bytes, filtered, expect, &got);
   const std::string size_text = std::to_string(width) + "x" + std::to_string(height);
@@ -203,16 +209,16 @@ std::optional<Expected<cv::Mat>> decode_png_linear(std::string_view bytes, const
     return Expected<cv::Mat>(make_error(name + ": truncated PNG (image data holds " + std::to_string(got) +
                                         " of the " + std::to_string(expect) + " bytes " + size_text + " needs)"));
 
-  cv::Mat out(static_cast<int>(height), static_cast<int>(width), CV_32FC3);
-  std::vector<unsigned char> zeros(row_bytes, 0);
-  const unsigned char* prev = zeros.data();
+  std::vector<unsigned char> rows(2 * row_bytes, 0);  // the row being unfiltered and the one above it
+  unsigned char* cur = rows.data();
+  unsigned char* prev = rows.data() + row_bytes;  // zeros above the first row
   for (uint32_t y = 0; y < height; ++y) {
-    unsigned char* row = filtered + size_t(y) * (row_bytes + 1);
-    if (!unfilter(row[0], row + 1, prev, row_bytes, bpp))
-      return Expected<cv::Mat>(make_error(name + ": corrupt PNG (unknown row filter " + std::to_string(row[0]) +
+    const unsigned char* in = filtered + size_t(y) * (row_bytes + 1);
+    if (!unfilter(in[0], in + 1, cur, prev, row_bytes, bpp))
+      return Expected<cv::Mat>(make_error(name + ": corrupt PNG (unknown row filter " + std::to_string(in[0]) +
                                           " in row " + std::to_string(y) + ")"));
-    row_to_bgr(row + 1, out.ptr<float>(static_cast<int>(y)), static_cast<int>(width), channels, depth);
-    prev = row + 1;
+    row_to_bgr(cur, out.ptr<float>(static_cast<int>(y)), static_cast<int>(width), channels, depth);
+    std::swap(cur, prev);
   }
   return Expected<cv::Mat>(std::move(out));
 }

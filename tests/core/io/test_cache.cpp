@@ -113,6 +113,41 @@ TEST(Cache, AHandDrawnMaskIsKeyedByItsContent) {
   (void)pipeline::finish_cache_writes();
 }
 
+// The photos a preparation hands on are the frames as read minus the
+// ambient frame, clamped at 0 (done in the median's pass), and the median is
+// the median of those.
+TEST(Pipeline, PhotosAreTheFramesLessAmbientAndTheMedianIsTheirs) {
+  Scratch dir;
+  sim::RenderOptions o;
+  o.size = {256, 170};
+  o.noise_sigma = 0.005;
+  o.scale = 2.5;
+  o.ambient = 0.05;  // enough that the subtraction (and its clamp) shows
+  auto sim_set = sim::simulate_set("bull", o, Role::destination);
+  ASSERT_TRUE(sim_set) << sim_set.message();
+  ASSERT_TRUE(write_set(*sim_set, dir / "bull"));
+  auto raw = read_set(dir / "bull");
+  ASSERT_TRUE(raw) << raw.message();
+  ASSERT_FALSE(raw->ambient.empty());
+  pipeline::PrepareOptions options;
+  options.cache.enabled = false;
+  auto prepared = pipeline::prepare_set(dir / "bull", 1.0, false, options);
+  ASSERT_TRUE(prepared) << prepared.message();
+  const auto& photos = prepared->object.view.images;
+  ASSERT_EQ(photos.size(), raw->images.size());
+  bool clamped = false;
+  for (size_t i = 0; i < photos.size(); ++i) {
+    cv::Mat expect;
+    cv::subtract(raw->images[i], raw->ambient, expect);
+    clamped = clamped || cv::countNonZero(expect.reshape(1) < 0) > 0;
+    expect = cv::max(expect, 0.0);
+    EXPECT_EQ(cv::norm(photos[i], expect, cv::NORM_INF), 0.0) << i;
+  }
+  EXPECT_TRUE(clamped);  // the noise takes some samples below the ambient level
+  EXPECT_TRUE(prepared->set.ambient.empty());
+  EXPECT_EQ(cv::norm(prepared->median, match::median_photo(photos), cv::NORM_INF), 0.0);
+}
+
 TEST(Cache, SizeCapEvictsTheLeastRecentlyUsed) {
   Scratch dir;
   CacheOptions o;

@@ -58,6 +58,14 @@ class ResultCache {
   // lost entry is recomputed), then evicts least recently used entries until
   // the cache is within max_bytes.
   Status store(const std::string& key, const CacheEntry& entry, const CacheMats& mats = {}) const;
+  // store() in steps, for a write that several threads share: begin_store
+  // makes the entry's temporary folder (empty path when the cache is off),
+  // the matrices go into it with write_mat_file(folder / name, ...), any
+  // thread each, and commit_store writes the blobs and renames the folder
+  // into place (or removes it when `failed`), then evicts.
+  Expected<std::filesystem::path> begin_store(const std::string& key) const;
+  Status commit_store(const std::string& key, const std::filesystem::path& folder, const CacheEntry& entry,
+                      bool failed = false) const;
   uint64_t size_bytes() const;
 
  private:

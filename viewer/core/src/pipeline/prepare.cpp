@@ -1,20 +1,28 @@
 // Set folders -> prepared objects through the result cache (prepare.hpp).
 #include "veneer/pipeline/prepare.hpp"
 
+#include <sys/resource.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
 
-#include <nlohmann/json.hpp>
 #include <future>
 #include <map>
 #include <mutex>
+#include <optional>
+#include <vector>
+
+#include <nlohmann/json.hpp>
 
 #include <opencv2/imgproc.hpp>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 
+#include "veneer/io/big_buffers.hpp"
 #include "veneer/ps/photometric_stereo.hpp"
 #include "veneer/ps/segmentation.hpp"
 #include "veneer/util/log.hpp"
@@ -119,48 +127,141 @@ bool from_entry(const CacheEntry& e, std::map<std::string, cv::Mat>& mats, Prepa
   return true;
 }
 
-// Cache entries being written in the background, by key: a later
-// preparation of the same set waits for its entry, finish_cache_writes for all.
+// A cache entry being written: its matrices are taken one at a time by the
+// background writer (at nice 19, so that on a small machine the map keeps
+// both cores) and by whoever waits for the entry (at its own priority), so
+// that waiting is never waiting on a starved thread for more than the one
+// matrix it holds. Whoever writes the last matrix commits the entry.
+struct WriteJob {
+  ResultCache cache;
+  std::string key, id;
+  CacheEntry entry;
+  std::vector<std::pair<std::string, CachedMat>> mats;
+  fs::path folder;
+  std::atomic<size_t> next{0}, done{0};
+  std::mutex lock;
+  Status error = Status::success();
+  std::promise<Status> finished;
+  std::shared_future<Status> result = finished.get_future().share();
+  Clock::time_point t0 = Clock::now();
+
+  WriteJob(ResultCache c, std::string k, std::string i) : cache(std::move(c)), key(std::move(k)), id(std::move(i)) {}
+
+  void help() {
+    for (size_t i; (i = next++) < mats.size();) {
+      Status s = write_mat_file(folder / mats[i].first, mats[i].second.mat, mats[i].second.half);
+      mats[i].second.mat.release();  // a photo the caller lets go of is freed
+      if (!s) {
+        std::lock_guard<std::mutex> hold(lock);
+        if (error) error = s;
+      }
+      if (++done == mats.size()) commit();
+    }
+  }
+  void commit() {
+    Status s = Status::success();
+    {
+      std::lock_guard<std::mutex> hold(lock);
+      s = error;
+    }
+    Status c = cache.commit_store(key, folder, entry, !s);
+    if (s) s = c;
+    if (!s) VLOG_WARN("Cache", "{}", s.message());
+    VLOG_DEBUG("Cache", "{}: entry {} written in {:.2f} s", id, key, since(t0));
+    finished.set_value(s);
+  }
+};
+
+// Cache entries being written, by key (with the background writer's
+// future, which the process's exit waits for): a later preparation of the
+// same set waits for its entry, finish_cache_writes for all.
+struct Pending {
+  std::shared_ptr<WriteJob> job;
+  std::shared_future<void> writer;
+};
 struct PendingWrites {
   std::mutex lock;
-  std::map<std::string, std::shared_future<Status>> by_key;
+  std::map<std::string, Pending> by_key;
 };
 PendingWrites& pending_writes() {
   static PendingWrites p;
   return p;
 }
 
+Status help_and_wait(const Pending& p) {
+  if (!p.job) return Status::success();
+  p.job->help();
+  return p.job->result.get();
+}
+
 void wait_for_write(const std::string& key) {
-  std::shared_future<Status> f;
+  Pending p;
   {
     std::lock_guard<std::mutex> hold(pending_writes().lock);
     auto it = pending_writes().by_key.find(key);
     if (it == pending_writes().by_key.end()) return;
-    f = it->second;
+    p = it->second;
   }
-  f.wait();
+  (void)help_and_wait(p);
+}
+
+// Starts writing `p`'s cache entry under `key` in the background.
+void start_write(const ResultCache& cache, const std::string& key, const PreparedSet& p) {
+  auto job = std::make_shared<WriteJob>(cache, key, p.set.id);
+  auto [entry, mats] = to_entry(p);
+  job->entry = std::move(entry);
+  for (auto& m : mats) job->mats.emplace_back(m.first, std::move(m.second));
+  auto folder = cache.begin_store(key);
+  if (!folder) {
+    VLOG_WARN("Cache", "{}", folder.message());
+    job->finished.set_value(folder.error());
+    job->next = job->mats.size();
+    job->mats.clear();  // nothing to write: the photos are not held
+  } else {
+    job->folder = *folder;
+    if (job->mats.empty()) job->commit();
+  }
+  auto writer = std::async(std::launch::async, [job] {
+    ::setpriority(PRIO_PROCESS, static_cast<id_t>(::gettid()), 19);  // Linux: this thread only
+    job->help();
+  });
+  std::lock_guard<std::mutex> hold(pending_writes().lock);
+  pending_writes().by_key[key] = Pending{std::move(job), writer.share()};
 }
 
 }  // namespace
 
 Status finish_cache_writes() {
-  std::map<std::string, std::shared_future<Status>> all;
+  std::map<std::string, Pending> all;
   {
     std::lock_guard<std::mutex> hold(pending_writes().lock);
     all.swap(pending_writes().by_key);
   }
   Status first = Status::success();
-  for (auto& [key, f] : all) {
-    Status s = f.get();
+  for (auto& [key, p] : all) {
+    Status s = help_and_wait(p);
     if (!s && first) first = s;
   }
   return first;
 }
 
-cv::Mat median_of(const std::vector<cv::Mat>& photos) {
+namespace {
+// The median of `photos` per sample; with `ambient`, first each photo minus
+// the ambient frame, clamped at 0, written back in place, in the same pass
+// (one read of every photo instead of three: subtract, clamp, median).
+cv::Mat median_minus_ambient(const std::vector<cv::Mat>& photos, const cv::Mat* ambient) {
   if (photos.empty()) return {};
   const int n = static_cast<int>(photos.size());
-  if (n > 32) return match::median_photo(photos);
+  if (n > 32) {
+    if (ambient) {
+      for (const cv::Mat& im : photos) {
+        cv::Mat m = im;  // shares the pixels: in place
+        cv::subtract(m, *ambient, m);
+        cv::max(m, 0.0, m);
+      }
+    }
+    return match::median_photo(photos);
+  }
   // An odd-even transposition network (n rounds of compare-exchanges of
   // neighbours) sorts each sample's n values; run on 256 samples at once,
   // every compare-exchange is a min and a max over two short arrays, which
@@ -168,7 +269,7 @@ cv::Mat median_of(const std::vector<cv::Mat>& photos) {
   std::vector<std::pair<int, int>> network;
   for (int round = 0; round < n; ++round)
     for (int i = round % 2; i + 1 < n; i += 2) network.emplace_back(i, i + 1);
-  cv::Mat out(photos[0].size(), CV_32FC3);
+  cv::Mat out = big_mat(photos[0].size(), CV_32FC3);
   const int width = out.cols * 3;
   constexpr int kLanes = 256;
   cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& rows) {
@@ -177,7 +278,17 @@ cv::Mat median_of(const std::vector<cv::Mat>& photos) {
       float* o = out.ptr<float>(y);
       for (int x0 = 0; x0 < width; x0 += kLanes) {
         const int lanes = std::min(kLanes, width - x0);
-        for (int i = 0; i < n; ++i) std::memcpy(&v[size_t(i) * kLanes], photos[i].ptr<float>(y) + x0, lanes * sizeof(float));
+        if (ambient) {
+          const float* a = ambient->ptr<float>(y) + x0;
+          for (int i = 0; i < n; ++i) {
+            float* p = const_cast<float*>(photos[i].ptr<float>(y)) + x0;
+            float* d = &v[size_t(i) * kLanes];
+            for (int k = 0; k < lanes; ++k) d[k] = p[k] = std::max(p[k] - a[k], 0.0f);
+          }
+        } else {
+          for (int i = 0; i < n; ++i)
+            std::memcpy(&v[size_t(i) * kLanes], photos[i].ptr<float>(y) + x0, lanes * sizeof(float));
+        }
         for (const auto& [a, b] : network) {
           float* pa = &v[size_t(a) * kLanes];
           float* pb = &v[size_t(b) * kLanes];
@@ -199,6 +310,9 @@ cv::Mat median_of(const std::vector<cv::Mat>& photos) {
   });
   return out;
 }
+}  // namespace
+
+cv::Mat median_of(const std::vector<cv::Mat>& photos) { return median_minus_ambient(photos, nullptr); }
 
 Status PrepareOptions::check() const {
   if (auto s = read.check(); !s) return s;
@@ -299,57 +413,51 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
   if (!mask) return mask.error();
   p.object.view.mask = std::move(mask).value();
   p.object.segment_seconds = since(t0);
+  std::optional<ps::PsResult> solved;
   if (truth_normals) {
     p.object.view.normals = p.set.truth.normals.clone();
   } else {
     t0 = Clock::now();
-    auto solved = ps::photometric_stereo(p.set, p.object.view.mask, {}, sub_progress(progress, 0.6, 0.9));
-    if (!solved) return make_error("set " + p.set.id + ": photometric stereo: " + solved.message());
-    if (p.set.mask.empty()) {  // a base the object stands on is not the object (a supplied mask is the user's word)
-      ps::drop_supports(*solved);
-      p.object.view.mask = solved->mask;
-    }
+    auto result = ps::photometric_stereo(p.set, p.object.view.mask, {}, sub_progress(progress, 0.6, 0.9));
+    if (!result) return make_error("set " + p.set.id + ": photometric stereo: " + result.message());
+    solved = std::move(result).value();
     p.object.normals_seconds = since(t0);
+  }
+  // The photos as the matcher and the repaint use them: ambient removed, in
+  // place, in the median's pass (read_set made every frame the set's size);
+  // beside it, on another core, a base the object stands on is dropped from
+  // the solved mask (a supplied mask is the user's word): the base removal
+  // is a serial flood fill, and the median leaves no core idle meanwhile.
+  progress.report(0.9, "median " + p.set.id);
+  const bool ambient = !p.set.ambient.empty() && !p.set.images.empty() &&
+                       std::all_of(p.set.images.begin(), p.set.images.end(), [&](const cv::Mat& im) {
+                         return im.size() == p.set.ambient.size() && im.type() == p.set.ambient.type();
+                       });
+  tbb::parallel_invoke(
+      [&] {
+        if (!solved || !p.set.mask.empty()) return;
+        const auto t = Clock::now();
+        ps::drop_supports(*solved);
+        p.object.normals_seconds += since(t);
+      },
+      [&] { p.median = median_minus_ambient(p.set.images, ambient ? &p.set.ambient : nullptr); });
+  if (solved) {
+    if (p.set.mask.empty()) p.object.view.mask = solved->mask;
     p.object.view.normals = solved->normals;
     p.albedo = solved->albedo;
     p.residual = solved->residual;
   }
   p.report.normals_s = p.object.segment_seconds + p.object.normals_seconds;
-  // The photos as the matcher and the repaint use them: ambient removed, in place.
-  if (!p.set.ambient.empty()) {
-    tbb::parallel_for(size_t(0), p.set.images.size(), [&](size_t i) {
-      cv::Mat& im = p.set.images[i];
-      if (im.size() != p.set.ambient.size()) return;
-      cv::subtract(im, p.set.ambient, im);
-      im = cv::max(im, 0.0);
-    });
-    p.set.ambient.release();
-  }
+  p.set.ambient.release();
   p.object.view.images = p.set.images;
   for (const auto& light : p.set.lights) p.object.view.lamps.push_back(light.lamp_id);
   if (p.object.view.lamps.size() != p.object.view.images.size()) p.object.view.lamps.clear();
-  progress.report(0.9, "median " + p.set.id);
-  p.median = median_of(p.object.view.images);
 
   if (cacheable) {
     // Written in the background (the Mats are shared, not copied, and
     // nothing writes into them after this): the map and the pictures are
-    // made meanwhile. finish_cache_writes() waits for it.
-    auto entry = std::make_shared<std::pair<CacheEntry, CacheMats>>(to_entry(p));
-    const std::string id = p.set.id;
-    auto write = std::async(std::launch::async, [cache, key, entry, id]() mutable -> Status {
-      const auto t = Clock::now();
-      Status s = cache.store(key, entry->first, entry->second);
-      // The future keeps this lambda (and its captures) until it is
-      // collected: let go of the matrices now, so that a photo the caller
-      // releases is freed.
-      entry.reset();
-      if (!s) VLOG_WARN("Cache", "{}", s.message());
-      VLOG_DEBUG("Cache", "{}: entry {} written in {:.2f} s", id, key, since(t));
-      return s;
-    });
-    std::lock_guard<std::mutex> hold(pending_writes().lock);
-    pending_writes().by_key[key] = write.share();
+    // made meanwhile. finish_cache_writes() waits for it (and helps).
+    start_write(cache, key, p);
     p.report.cache_write_s = -1;  // in the background
   }
   p.report.total_s = since(t_all);

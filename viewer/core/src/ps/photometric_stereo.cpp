@@ -23,6 +23,7 @@
 #include <tbb/task_arena.h>
 
 #include "depth.hpp"
+#include "veneer/io/big_buffers.hpp"
 #include "veneer/util/log.hpp"
 
 // "No dependence between the iterations": GCC vectorises the per-pixel lane
@@ -1143,7 +1144,10 @@ Status solve_once(const ImageSet& set, const cv::Mat& mask_in, const PsOptions& 
   result.model_used = model;
   if (result.mask.data != mask.data) mask.copyTo(result.mask);
   result.solved_pixels = solved;
-  // Every pixel is written by solve_rows (zeros outside the mask).
+  // Every pixel is written by solve_rows (zeros outside the mask). Fresh
+  // full-resolution results are prefaulted in one call (big_buffers.hpp).
+  for (cv::Mat* m : {&result.normals, &result.albedo, &result.residual})
+    if (m->empty()) m->allocator = prefault_allocator();
   result.normals.create(size, CV_32FC3);
   result.albedo.create(size, CV_32FC3);
   result.residual.create(size, CV_32FC1);
