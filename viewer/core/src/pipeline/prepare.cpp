@@ -180,6 +180,10 @@ struct Pending {
   std::shared_future<void> writer;
 };
 struct PendingWrites {
+  // The log's registry is made first, so that it is destroyed after this at
+  // exit: the writers this joins then still log (they crashed on a
+  // destroyed logger when a process ended while an entry was being written).
+  PendingWrites() { (void)veneer::log::get("Cache"); }
   std::mutex lock;
   std::map<std::string, Pending> by_key;
 };
