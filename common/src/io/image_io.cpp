@@ -83,12 +83,17 @@ bool has_pnm_magic(std::string_view b) {
   return b.size() >= 2 && b[0] == 'P' && (b[1] >= '1' && b[1] <= '6') && (b.size() == 2 || is_space(b[2]) || b[2] == '#');
 }
 
+// The header's size against the bytes that follow, before OpenCV allocates
+// the picture: binary variants (P4-P6) need every sample's bytes, ASCII ones
+// (P1-P3) at least a digit per sample (and a separator for P2/P3), so an
+// 18-byte file declaring 266666x3534 is refused, not a 2.8 GB buffer asked for.
 Status check_pnm(std::string_view b, const std::string& name) {
-  char kind = b[1];
-  if (kind != '5' && kind != '6') return Status::success();  // ASCII variants: OpenCV checks them
+  const char kind = b[1];
+  const bool bitmap = kind == '1' || kind == '4';
   size_t pos = 2;
   long fields[3] = {0, 0, 0};
-  for (long& field : fields) {
+  for (int f = 0; f < (bitmap ? 2 : 3); ++f) {
+    long& field = fields[f];
     while (pos < b.size() && (is_space(b[pos]) || b[pos] == '#')) {
       if (b[pos] == '#') {
         while (pos < b.size() && b[pos] != '\n') ++pos;
@@ -98,18 +103,28 @@ Status check_pnm(std::string_view b, const std::string& name) {
     }
     size_t start = pos;
     while (pos < b.size() && b[pos] >= '0' && b[pos] <= '9' && pos - start < 9) field = field * 10 + (b[pos++] - '0');
-    if (pos == start) return make_error(name + ": corrupt PNM header (expected width, height and maxval)");
+    if (pos == start)
+      return make_error(name + (bitmap ? ": corrupt PBM header (expected width and height)"
+                                       : ": corrupt PNM header (expected width, height and maxval)"));
   }
   if (pos >= b.size() || !is_space(b[pos])) return make_error(name + ": corrupt PNM header");
   ++pos;
-  long w = fields[0], h = fields[1], maxval = fields[2];
+  long w = fields[0], h = fields[1], maxval = bitmap ? 1 : fields[2];
   if (w <= 0 || h <= 0 || w > kMaxSide || h > kMaxSide)
     return make_error(name + ": bad PNM size " + std::to_string(w) + "x" + std::to_string(h));
   if (maxval <= 0 || maxval > 65535) return make_error(name + ": bad PNM maxval " + std::to_string(maxval));
-  size_t need = static_cast<size_t>(w) * h * (kind == '6' ? 3 : 1) * (maxval > 255 ? 2 : 1);
+  const size_t samples = static_cast<size_t>(w) * h * (kind == '3' || kind == '6' ? 3 : 1);
+  size_t need = 0;
+  switch (kind) {
+    case '4': need = static_cast<size_t>((w + 7) / 8) * h; break;
+    case '5':
+    case '6': need = samples * (maxval > 255 ? 2 : 1); break;
+    case '1': need = samples; break;      // a digit per pixel, separators optional
+    default: need = 2 * samples - 1; break;  // P2/P3: a digit and a separator per sample
+  }
   if (b.size() - pos < need)
     return make_error(name + ": truncated PNM (" + std::to_string(b.size() - pos) + " bytes of pixels, expected " +
-                      std::to_string(need) + ")");
+                      (kind >= '1' && kind <= '3' ? "at least " : "") + std::to_string(need) + ")");
   return Status::success();
 }
 

@@ -180,6 +180,12 @@ TEST(LinearImage, Reads8BitPngGreyAndPpm) {
   EXPECT_NEAR(p->at<cv::Vec3f>(0, 0)[2], 1.0f, 1e-6);  // red
   EXPECT_NEAR(p->at<cv::Vec3f>(0, 0)[1], 0.0f, 1e-6);
   EXPECT_NEAR(p->at<cv::Vec3f>(0, 0)[0], 32768.0f / 65535, 1e-6);  // blue
+  // An ASCII PPM whose samples are all there still reads.
+  spit(dir / "a.ppm", "P3\n2 1\n255\n255 0 0 0 0 255\n");
+  auto a = read_linear_image(dir / "a.ppm");
+  ASSERT_TRUE(a) << a.message();
+  EXPECT_NEAR(a->at<cv::Vec3f>(0, 0)[2], 1.0f, 1e-6);  // red
+  EXPECT_NEAR(a->at<cv::Vec3f>(0, 1)[0], 1.0f, 1e-6);  // blue
 }
 
 TEST(LinearImage, DamagedFilesAreRefusedNamingTheFile) {
@@ -194,7 +200,11 @@ TEST(LinearImage, DamagedFilesAreRefusedNamingTheFile) {
   for (const Case& c : {Case{good.substr(0, good.size() / 2), "truncated"},
                         Case{good.substr(0, good.size() - 12), "truncated"},  // IEND missing
                         Case{good.substr(0, 20), "truncated"}, Case{"GIF89a....", "not a PNG"},
-                        Case{"", "empty"}, Case{"P6\n4 4\n255\nabc", "truncated"}, Case{"P6\n0 4\n255\n", "size"}}) {
+                        Case{"", "empty"}, Case{"P6\n4 4\n255\nabc", "truncated"}, Case{"P6\n0 4\n255\n", "size"},
+                        // ASCII variants declaring more samples than their bytes can hold
+                        // (fuzz_png: 18 bytes declaring 266666x3534 asked OpenCV for 2.8 GB)
+                        Case{"P3\n266666\n3534\r3\r3", "size"}, Case{"P3\n26666\n3534\r3\r3", "truncated"}, Case{"P2\n3 3\n255\n1 2 3", "truncated"},
+                        Case{"P1\n4000 4000\n0101", "truncated"}, Case{"P4\n64 64\nab", "truncated"}}) {
     spit(dir / "damaged.png", c.bytes);
     auto r = read_linear_image(dir / "damaged.png");
     ASSERT_FALSE(r) << c.expect;
