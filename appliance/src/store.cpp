@@ -268,55 +268,9 @@ veneer::Status Store::save(const veneer::ImageSet& set) {
 
 namespace {
 
-// Writes `bytes` to `file` (created) and fsyncs it: as write_set does.
-veneer::Status write_synced(const fs::path& file, std::string_view bytes) {
-  int fd = ::open(file.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) return make_error(file.string() + ": cannot create: " + std::strerror(errno));
-  size_t done = 0;
-  while (done < bytes.size()) {
-    ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      const int err = errno;
-      ::close(fd);
-      return make_error(file.string() + ": write failed after " + std::to_string(done) +
-                        " bytes: " + std::strerror(err));
-    }
-    done += static_cast<size_t>(n);
-  }
-  if (::fsync(fd) != 0) {
-    const int err = errno;
-    ::close(fd);
-    return make_error(file.string() + ": fsync failed: " + std::strerror(err));
-  }
-  if (::close(fd) != 0) return make_error(file.string() + ": close failed: " + std::strerror(errno));
-  return {};
-}
-
 veneer::Status write_encoded(const fs::path& file, const veneer::Expected<std::string>& bytes) {
   if (!bytes) return make_error(file.string() + ": " + bytes.message());
-  return write_synced(file, *bytes);
-}
-
-veneer::Status fsync_folder(const fs::path& folder) {
-  int fd = ::open(folder.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (fd < 0) return make_error(folder.string() + ": cannot open folder: " + std::strerror(errno));
-  const int rc = ::fsync(fd);
-  const int err = errno;
-  ::close(fd);
-  if (rc != 0 && err != EINVAL) return make_error(folder.string() + ": fsync failed: " + std::strerror(err));
-  return {};
-}
-
-// The 8-bit mask PNG write_set writes (mask.png, truth/mask.png).
-veneer::Expected<std::string> encode_mask(const cv::Mat& mask) {
-  std::vector<uchar> buffer;
-  try {
-    if (!cv::imencode(".png", mask, buffer)) return make_error("PNG encoder failed");
-  } catch (const cv::Exception& e) {
-    return make_error(std::string("PNG encoder failed: ") + e.what());
-  }
-  return std::string(buffer.begin(), buffer.end());
+  return veneer::write_file_synced(file, *bytes);
 }
 
 std::string light_png(int index) {
@@ -369,7 +323,7 @@ veneer::Status SetWriter::add_frame(int k, const cv::Mat& photo, const veneer::I
   veneer::ImageSet::RawFile name;
   if (!raw.bytes.empty()) {
     const std::string file = k == 0 ? "ambient." + raw.extension : light_png(index).substr(0, 9) + raw.extension;
-    if (auto s = write_synced(tmp_ / file, raw.bytes); !s) return fail(s);
+    if (auto s = veneer::write_file_synced(tmp_ / file, raw.bytes); !s) return fail(s);
     name.extension = raw.extension;
     name.bytes = "1";  // manifest_json names a RAW file where its bytes are not empty
   }
@@ -398,7 +352,7 @@ veneer::Status SetWriter::commit(veneer::ImageSet& set) {
     return make_error("set " + id_ + ": " + std::to_string(set.lights.size()) +
                       " lights but not every frame was taken; no set stored");
   if (!set.mask.empty()) {
-    if (auto s = write_encoded(tmp_ / "mask.png", encode_mask(set.mask)); !s) return fail(s);
+    if (auto s = write_encoded(tmp_ / "mask.png", veneer::encode_png8(set.mask)); !s) return fail(s);
   }
   veneer::Truth& t = set.truth;
   if (!t.normals.empty() || !t.mask.empty() || !t.albedo.empty() || !t.depth.empty()) {
@@ -408,11 +362,11 @@ veneer::Status SetWriter::commit(veneer::ImageSet& set) {
     if (!fs::create_directory(truth, ec))
       return fail(make_error(truth.string() + ": cannot create folder: " + ec.message()));
     if (!t.normals.empty()) {
-      if (auto s = write_synced(truth / "normals.pfm", veneer::encode_pfm(t.normals, true)); !s) return fail(s);
+      if (auto s = veneer::write_file_synced(truth / "normals.pfm", veneer::encode_pfm(t.normals, true)); !s) return fail(s);
     }
     t.normals.release();
     if (!t.mask.empty()) {
-      if (auto s = write_encoded(truth / "mask.png", encode_mask(t.mask)); !s) return fail(s);
+      if (auto s = write_encoded(truth / "mask.png", veneer::encode_png8(t.mask)); !s) return fail(s);
     }
     t.mask.release();
     if (!t.albedo.empty()) {
@@ -420,10 +374,10 @@ veneer::Status SetWriter::commit(veneer::ImageSet& set) {
     }
     t.albedo.release();
     if (!t.depth.empty()) {
-      if (auto s = write_synced(truth / "depth.pfm", veneer::encode_pfm(t.depth, true)); !s) return fail(s);
+      if (auto s = veneer::write_file_synced(truth / "depth.pfm", veneer::encode_pfm(t.depth, true)); !s) return fail(s);
     }
     t.depth.release();
-    if (auto s = fsync_folder(truth); !s) return fail(s);
+    if (auto s = veneer::sync_folder(truth); !s) return fail(s);
   }
   // set.json last, from what was written: manifest_json asks only whether a
   // photo or RAW file is there (images are named after the lights).
@@ -443,15 +397,15 @@ veneer::Status SetWriter::commit(veneer::ImageSet& set) {
     named.ambient = cv::Mat(1, 1, CV_32FC3, cv::Scalar::all(0));  // a marker: ambient.png is written
     named.ambient_raw = ambient_raw_;
   }
-  if (auto s = write_synced(tmp_ / "set.json", veneer::manifest_json(named)); !s) return fail(s);
-  if (auto s = fsync_folder(tmp_); !s) return fail(s);
+  if (auto s = veneer::write_file_synced(tmp_ / "set.json", veneer::manifest_json(named)); !s) return fail(s);
+  if (auto s = veneer::sync_folder(tmp_); !s) return fail(s);
   const fs::path folder = store_.root() / id_;
   if (::renameat2(AT_FDCWD, tmp_.c_str(), AT_FDCWD, folder.c_str(), RENAME_NOREPLACE) != 0) {
     const int err = errno;
     return fail(make_error("cannot rename it into place: " + std::string(std::strerror(err))));
   }
   tmp_.clear();
-  if (auto s = fsync_folder(store_.root()); !s) return fail(s);
+  if (auto s = veneer::sync_folder(store_.root()); !s) return fail(s);
   auto scanned = store_.scan_one(id_);
   if (!scanned) {
     std::error_code ec;

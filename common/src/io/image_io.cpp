@@ -268,6 +268,20 @@ Status write_file_atomic(const fs::path& file, const std::string& bytes, Sync sy
 
 Status sync_folder(const fs::path& folder) { return io_detail::fsync_dir(folder); }
 
+Status write_file_synced(const fs::path& file, std::string_view bytes) {
+  return io_detail::write_file_synced(file, bytes);
+}
+
+Expected<std::string> encode_png8(const cv::Mat& image) {
+  std::vector<uchar> buffer;
+  try {
+    if (!cv::imencode(".png", image, buffer)) return make_error("PNG encoder failed");
+  } catch (const cv::Exception& e) {
+    return make_error(std::string("PNG encoder failed: ") + e.what());
+  }
+  return std::string(buffer.begin(), buffer.end());
+}
+
 // --- PFM -----------------------------------------------------------------
 
 std::string encode_pfm(const cv::Mat& image, bool xyz_order) {

@@ -754,16 +754,6 @@ Status write_bytes(const fs::path& file, const Expected<std::string>& bytes) {
   return io_detail::write_file_synced(file, *bytes);
 }
 
-Expected<std::string> encode_png8(const cv::Mat& mask) {
-  std::vector<uchar> buffer;
-  try {
-    if (!cv::imencode(".png", mask, buffer)) return make_error("PNG encoder failed");
-  } catch (const cv::Exception& e) {
-    return make_error(std::string("PNG encoder failed: ") + e.what());
-  }
-  return std::string(buffer.begin(), buffer.end());
-}
-
 Status write_contents(const ImageSet& set, const fs::path& dir) {
   // Encode the photos in parallel (the slow part), each written as soon as
   // it is encoded and its bytes dropped: a full-resolution PNG is ~100 MB,

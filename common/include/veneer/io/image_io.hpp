@@ -31,6 +31,8 @@ std::string encode_pfm(const cv::Mat& image, bool xyz_order);  // the file's byt
 Status write_png16(const std::filesystem::path& file, const cv::Mat& image, Sync sync = Sync::each);
 // The PNG bytes write_png16 writes (1- or 3-channel float input).
 Expected<std::string> encode_png16(const cv::Mat& image);
+// An 8-bit image's PNG bytes, as OpenCV encodes them (the sets' mask.png).
+Expected<std::string> encode_png8(const cv::Mat& image);
 // Reads an 8- or 16-bit PNG (or PPM/PGM, or a JPEG: see below) as CV_32FC3 BGR scaled to [0,1];
 // grey images are expanded to 3 channels. A PFM photo is read as it is
 // (file RGB -> Mat BGR). Truncated or corrupt files are refused.
@@ -54,6 +56,9 @@ Status write_picture(const std::filesystem::path& file, const cv::Mat& bgr8, Syn
 
 // Writes bytes to `file` via a temporary and rename (fsynced with Sync::each).
 Status write_file_atomic(const std::filesystem::path& file, const std::string& bytes, Sync sync = Sync::each);
+// Creates `file` with `bytes` and fsyncs it, in place (for a file inside a
+// temporary folder that is renamed into place as a whole).
+Status write_file_synced(const std::filesystem::path& file, std::string_view bytes);
 // fsyncs a folder: the names written into it with Sync::later are durable.
 Status sync_folder(const std::filesystem::path& folder);
 
