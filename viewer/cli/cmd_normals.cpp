@@ -16,6 +16,7 @@
 #include "output.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
+#include "veneer/ps/calibration.hpp"
 #include "veneer/ps/photometric_stereo.hpp"
 #include "veneer/ps/segmentation.hpp"
 
@@ -24,7 +25,7 @@ namespace fs = std::filesystem;
 namespace {
 
 struct NormalsArgs {
-  std::string set, out, rect, model = "automatic";
+  std::string set, out, rect, model = "automatic", lights;
   bool robust = false, plain = false, near_light = false, distant = false, otsu = false;
   double threshold = -1;
   bool supplied_mask = false, no_clean = false, keep_base = false, recorded_lights = false;
@@ -109,6 +110,13 @@ int run_normals(const NormalsArgs& a) {
   veneer::cli::ProgressBar bar("normals");
   bar.update(0.0, "reading " + a.set);
   auto set = veneer::read_set(a.set);
+  if (set && !a.lights.empty()) {
+    // Lamps calibrated from a chrome sphere (`veneer calibrate`) replace the set's.
+    auto cal = veneer::ps::read_light_calibration(a.lights);
+    if (!cal) return report.fail(cal.message());
+    if (auto st = veneer::ps::apply_calibration(*set, *cal); !st)
+      return report.fail("--lights " + a.lights + ": " + st.message());
+  }
   if (set && a.near_light) {
     // Near light needs where each lamp is and the camera's focal length.
     int without = 0;
@@ -153,6 +161,7 @@ int run_normals(const NormalsArgs& a) {
   m["size"] = {res->normals.cols, res->normals.rows};
   m["lights"] = set->images.size();
   m["light_model"] = veneer::ps::light_model_name(res->model_used);
+  if (!a.lights.empty()) m["lights_file"] = a.lights;
   m["robust"] = po.robust;
   m["segmentation"] = veneer::ps::segment_method_name(seg->method_used);
   m["threshold"] = seg->threshold;
@@ -221,6 +230,8 @@ VENEER_COMMAND(normals) {
   cmd->add_flag("--supplied-mask", args->supplied_mask, "use the set's own mask (fail when it has none)");
   cmd->add_option("--rect", args->rect, "limit the object to the rectangle x,y,w,h (pixels)");
   cmd->add_flag("--no-clean", args->no_clean, "keep specks and holes in a thresholded mask");
+  cmd->add_option("--lights", args->lights,
+                  "lamp directions (and positions) from `veneer calibrate` instead of the set's");
   cmd->add_flag("--recorded-lights", args->recorded_lights,
                 "use the set's lamp directions and intensities as recorded (by default, with distant lights, they are refined from the photos)");
   cmd->add_flag("--keep-base", args->keep_base, "keep a plinth, stand or table top the object stands on in the mask (left out by default)");
