@@ -265,6 +265,7 @@ void MainWindow::buildMenus() {
     const QString dir = QFileDialog::getExistingDirectory(this, tr("Write the masks into"));
     if (!dir.isEmpty()) exportMasksTo(dir);
   });
+  addCalibrationMenu(file);
   file->addSeparator();
   file->addAction(tr("Quit"), qApp, &QApplication::quit);
 }

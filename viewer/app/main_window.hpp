@@ -30,6 +30,8 @@
 
 class QCheckBox;
 class QComboBox;
+class QDialog;
+class QMenu;
 class QDoubleSpinBox;
 class QHBoxLayout;
 class QLabel;
@@ -136,8 +138,14 @@ class MainWindow : public QMainWindow {
   // is missing, when its map file or one of its sets is gone; a set found
   // replaced (another id in its folder) is said once both are loaded.
   bool openLibraryMap(const QString& map_folder);
+  // Lamp calibration (calibration.cpp): finds the sphere and each lamp's
+  // highlight in a chrome-sphere set, writes the lights file (what `veneer
+  // normals --lights` reads) and shows the circle and highlights found.
+  bool calibrateLamps(const QString& sphere_folder, const QString& lights_file);
+  QImage calibrationImage() const { return calibration_image_; }
 
  private:
+  void addCalibrationMenu(QMenu* menu);
   void buildUi();
   QWidget* buildConnectPanel();
   QWidget* buildCapturePanel();
@@ -324,6 +332,9 @@ class MainWindow : public QMainWindow {
   QString exposure_text_;
   bool applying_preset_ = false;
   QLabel* step_label_ = nullptr;
+  QDialog* calibration_dialog_ = nullptr;
+  QLabel *calibration_label_ = nullptr, *calibration_text_ = nullptr;
+  QImage calibration_image_;
   QProgressBar* step_bar_ = nullptr;
 };
 

@@ -471,6 +471,21 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
     j["quality"]["measured_against"] = "segmentation masks and photometric-stereo normals (no truth)";
     timings["quality_s"] = since(t0);
   }
+  if (result.map.motion.searched) {
+    // Whether the destination was found to be the source moved (combined):
+    // one motion of the whole object, or why not.
+    const ObjectMotion& mo = result.map.motion;
+    nlohmann::json mj = {{"found", mo.found}};
+    if (mo.found) {
+      const cv::Matx23d& a = mo.affine;
+      mj["affine"] = {{a(0, 0), a(0, 1), a(0, 2)}, {a(1, 0), a(1, 1), a(1, 2)}};
+      mj["affine_means"] = "source pixel = affine x (destination x, y, 1), at the scale the map was computed";
+      mj["share_of_pixels"] = mo.share;
+    } else {
+      mj["why_not"] = mo.note;
+    }
+    j["motion"] = mj;
+  }
   timings["total_s"] = since(t_all);
   j["timings"] = timings;
   result.metrics_json = j.dump(2);

@@ -29,9 +29,21 @@ struct ObjectView {
 
 // The correspondence map (DESIGN.md): xy = source x, y in pixels (CV_32FC2),
 // -1,-1 where a destination pixel is not mapped; distance = match distance (CV_32F).
+// What `combined` made of one motion of the whole object (the destination
+// the source moved, scaled, turned or cropped): whether it looked (the other
+// methods do not), whether it found and took one, and if not, why.
+struct ObjectMotion {
+  bool searched = false;
+  bool found = false;
+  cv::Matx23d affine{1, 0, 0, 0, 1, 0};  // source pixel = affine * destination pixel (when found)
+  double share = 0;                       // destination object pixels the motion maps (when found), 0..1
+  std::string note;                       // why no motion was taken ("" when found)
+};
+
 struct Map {
   cv::Mat xy;
   cv::Mat distance;
+  ObjectMotion motion;
   bool valid(int x, int y) const { return xy.at<cv::Vec2f>(y, x)[0] >= 0; }
 };
 

@@ -258,8 +258,9 @@ void fill_unmapped(Map& map, const cv::Mat& mask) {
 }
 
 // The affine motion (2x3, CV_64F) that most matches follow, or empty when
-// fewer than 60 % of a sample of them lie within 1.5 px of the best one.
-cv::Mat global_motion(const Level& d, const std::vector<cv::Point2i>& match, unsigned seed) {
+// fewer than `min_share` of a sample of them lie within 1.5 px of the best one.
+cv::Mat global_motion(const Level& d, const std::vector<cv::Point2i>& match, unsigned seed, double* share_out = nullptr,
+                      double min_share = 0.6) {
   std::vector<cv::Point2f> from, to;
   const size_t step = std::max<size_t>(1, d.pixels.size() / 1500);
   for (size_t i = 0; i < d.pixels.size(); i += step) {
@@ -276,7 +277,8 @@ cv::Mat global_motion(const Level& d, const std::vector<cv::Point2i>& match, uns
   cv::Mat A = cv::estimateAffine2D(from, to, inliers, cv::RANSAC, 1.5, 400, 0.995, 10);
   if (A.empty()) return {};
   const double share = static_cast<double>(std::count(inliers.begin(), inliers.end(), 1)) / from.size();
-  return share >= 0.6 ? A : cv::Mat();
+  if (share_out) *share_out = share;
+  return share >= min_share ? A : cv::Mat();
 }
 
 // `coarse` (2x3 at 1/scale) at full size, refitted by least squares to the
@@ -309,7 +311,8 @@ cv::Mat refit_motion(const Level& d, const std::vector<cv::Point2i>& match, cons
 // Median angle [deg] between each destination pixel's normal and the source
 // normal the motion (or, for comparison, the nearest-normal seed) gives it;
 // the motion passes when its median is within max(4 deg, 3x the seed's).
-bool motion_keeps_normals(const Level& d, const Level& s, const cv::Mat& motion, const std::vector<cv::Point2i>& seed) {
+bool motion_keeps_normals(const Level& d, const Level& s, const cv::Mat& motion, const std::vector<cv::Point2i>& seed,
+                          std::string* why) {
   const double* A = motion.ptr<double>(0);
   const double* B = motion.ptr<double>(1);
   std::vector<double> by_motion, by_seed;
@@ -336,6 +339,9 @@ bool motion_keeps_normals(const Level& d, const Level& s, const cv::Mat& motion,
     return *mid;
   };
   const double m = median(by_motion), n = median(by_seed);
+  if (why)
+    *why = "the motion keeps the normals to " + std::to_string(m) + " deg (median), the nearest normal to " +
+           std::to_string(n);
   return m <= std::max(4.0, 3.0 * n);
 }
 
@@ -343,7 +349,7 @@ bool motion_keeps_normals(const Level& d, const Level& s, const cv::Mat& motion,
 // the nearest normal, seams refined), whose normal agreement stays near the
 // exact nearest's while the texture stays in chunks.
 Expected<Map> different_objects(const ObjectView& destination, const ObjectView& source, const MatchOptions& options,
-                                const Progress& progress) {
+                                const Progress& progress, const std::string& why) {
   MatchOptions o = options;
   o.method = Method::coherent;
   o.feature = Feature::normals;
@@ -353,6 +359,8 @@ Expected<Map> different_objects(const ObjectView& destination, const ObjectView&
   // Every destination object pixel mapped: a pixel without a normal takes its
   // nearest mapped neighbour's match (the chunk it sits in).
   fill_unmapped(*map, destination.mask);
+  map->motion.searched = true;
+  map->motion.note = why;
   return map;
 }
 
@@ -374,7 +382,12 @@ Expected<Map> run_combined(const ObjectView& destination, const ObjectView& sour
   const int iterations = std::max(1, options.iterations);
   std::vector<cv::Point2i> previous;
   cv::Size previous_size;
-  cv::Mat coarse_motion;  // 2x3, at the coarsest level's scale
+  // The object's motion (2x3), at the scale of the level last matched: found
+  // on the coarsest level, refitted on each finer one to the matches that
+  // follow it, so that at full size it is within a pixel or so (scaled up
+  // from the coarsest alone it is off by up to half a coarse pixel, 4 px at
+  // 1/8, and the full-size matches no longer seem to follow it).
+  cv::Mat level_motion;
   for (int lv = levels - 1; lv >= 0; --lv) {
     Level d, s;
     auto make = [&](const ObjectView& v, Level& out) {
@@ -408,13 +421,12 @@ Expected<Map> run_combined(const ObjectView& destination, const ObjectView& sour
             }
           }
         }
-        if (!coarse_motion.empty()) {
+        if (!level_motion.empty()) {
           // The object's motion found on the coarser level, at this level's scale.
-          const double* A = coarse_motion.ptr<double>(0);
-          const double* B = coarse_motion.ptr<double>(1);
-          const double scale = std::ldexp(1.0, levels - 1 - lv);
-          const int qx = static_cast<int>(std::lround(A[0] * p.x + A[1] * p.y + A[2] * scale));
-          const int qy = static_cast<int>(std::lround(B[0] * p.x + B[1] * p.y + B[2] * scale));
+          const double* A = level_motion.ptr<double>(0);
+          const double* B = level_motion.ptr<double>(1);
+          const int qx = static_cast<int>(std::lround(A[0] * p.x + A[1] * p.y + A[2] * 2.0));
+          const int qy = static_cast<int>(std::lround(B[0] * p.x + B[1] * p.y + B[2] * 2.0));
           if (s.valid(qx, qy)) {
             const float pc = m.patch_cost(p.x, p.y, qx, qy);
             if (pc <= 1.5f * best_cost + 1e-3f) {
@@ -473,8 +485,21 @@ Expected<Map> run_combined(const ObjectView& destination, const ObjectView& sour
       // the finer levels follow that motion; else the objects differ, and
       // coherent chunks of the nearest normals serve better than patches
       // (whose shapes differ between objects).
-      coarse_motion = global_motion(d, m.match, options.seed);
-      if (coarse_motion.empty()) return different_objects(destination, source, options, progress);
+      // At this size a scaled and turned copy's integer matches are coarse:
+      // a motion a third of them follow is taken as a guess here; the full
+      // size decides (a majority follows it there, and it keeps the normals).
+      double share = 0;
+      level_motion = global_motion(d, m.match, options.seed, &share, 0.35);
+      if (level_motion.empty())
+        return different_objects(destination, source, options, progress,
+                                 "no motion at 1/" + std::to_string(1 << lv) + " size: the best follows " +
+                                     std::to_string(static_cast<int>(100 * share)) + " % of the matches (35 % needed)");
+    } else if (lv > 0 && !level_motion.empty()) {
+      cv::Mat up = level_motion.clone();
+      up.at<double>(0, 2) *= 2.0;
+      up.at<double>(1, 2) *= 2.0;
+      cv::Mat refit = refit_motion(d, m.match, up, 1.0);
+      level_motion = refit.empty() ? up : refit;
     }
     if (lv == 0) {
       // One motion for the whole object (the destination is the source moved,
@@ -487,13 +512,18 @@ Expected<Map> run_combined(const ObjectView& destination, const ObjectView& sour
       // Fine matches are noisier than coarse ones (a resampled copy's patches
       // differ pixel by pixel): without a majority at full size, the coarse
       // motion, scaled up, is refitted to the matches that follow it.
-      if (motion.empty()) motion = refit_motion(d, m.match, coarse_motion, std::ldexp(1.0, levels - 1));
+      if (motion.empty()) motion = refit_motion(d, m.match, level_motion, levels > 1 ? 2.0 : 1.0);
       // Two similar blobs can follow one affine motion too: it is the same
       // object only when the motion also keeps the normals about as well as
       // the nearest normal does for each pixel.
       // (No motion at full size either: not one object moved after all.)
-      if (motion.empty() || !motion_keeps_normals(d, s, motion, seed))
-        return different_objects(destination, source, options, progress);
+      if (motion.empty())
+        return different_objects(destination, source, options, progress,
+                                 "the motion found at 1/" + std::to_string(1 << (levels - 1)) +
+                                     " size is not followed at full size");
+      std::string why;
+      if (!motion_keeps_normals(d, s, motion, seed, &why))
+        return different_objects(destination, source, options, progress, why + ": not one object moved");
       if (!motion.empty()) {
         const double a = motion.at<double>(0, 0), b = motion.at<double>(0, 1), c = motion.at<double>(0, 2);
         const double e = motion.at<double>(1, 0), f = motion.at<double>(1, 1), g = motion.at<double>(1, 2);
@@ -519,6 +549,12 @@ Expected<Map> run_combined(const ObjectView& destination, const ObjectView& sour
       Map map;
       map.xy = cv::Mat(d.size, CV_32FC2, cv::Scalar(-1, -1));
       map.distance = cv::Mat(d.size, CV_32F, cv::Scalar(0));
+      map.motion.searched = true;
+      map.motion.found = true;
+      map.motion.affine = cv::Matx23d(motion);
+      map.motion.share = d.pixels.empty() ? 0.0
+                                          : static_cast<double>(std::count(on_motion.begin(), on_motion.end(), 1)) /
+                                                d.pixels.size();
       tbb::parallel_for(tbb::blocked_range<size_t>(0, d.pixels.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
         for (size_t i = r.begin(); i != r.end(); ++i) {
           const cv::Point p = d.pixels[i];
