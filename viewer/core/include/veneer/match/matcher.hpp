@@ -2,6 +2,7 @@
 // Correspondence: for every destination pixel, the source pixel whose
 // appearance should be shown there (DESIGN.md "correspondence map").
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -41,6 +42,9 @@ struct ObjectMotion {
 };
 
 struct Map {
+  Map() = default;
+  Map(cv::Mat xy_, cv::Mat distance_, ObjectMotion motion_ = {})
+      : xy(std::move(xy_)), distance(std::move(distance_)), motion(std::move(motion_)) {}
   cv::Mat xy;
   cv::Mat distance;
   ObjectMotion motion;
