@@ -14,10 +14,10 @@
 #include "rig_test_util.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
-#include "veneer/match/live.hpp"
-#include "veneer/match/transfer.hpp"
-#include "veneer/rig/client.hpp"
+#include "veneer/pipeline/transfer.hpp"
 #include "veneer/ps/photometric_stereo.hpp"
+#include "veneer/repaint/live.hpp"
+#include "veneer/rig/client.hpp"
 #include "veneer/sim/simulator.hpp"
 
 namespace fs = std::filesystem;
@@ -219,21 +219,21 @@ TEST(Daemon, LiveFramesThroughAMapAreBlendedAsTheStills) {
   // the same frame repainted here through the core: with the stills' plan, and without
   auto dset = veneer::read_set(dst), sset = veneer::read_set(src);
   ASSERT_TRUE(dset && sset);
-  auto options = veneer::match::read_transfer_options(tr / "metrics.json");
+  auto options = veneer::pipeline::read_transfer_options(tr / "metrics.json");
   ASSERT_TRUE(options) << options.message();
   EXPECT_EQ(options->blend, 3);
-  auto pair = veneer::match::prepare_pair(*dset, *sset, *options);
+  auto pair = veneer::pipeline::prepare_pair(*dset, *sset, *options);
   ASSERT_TRUE(pair) << pair.message();
   auto map = veneer::match::read_map(tr / "map.pfm");
   ASSERT_TRUE(map) << map.message();
-  auto plan = veneer::match::blend_plan_for(*pair, *options, *map);
+  auto plan = veneer::pipeline::blend_plan_for(*pair, *options, *map);
   ASSERT_TRUE(plan && *plan) << (plan ? "no plan" : plan.message());
-  const cv::Mat backdrop = veneer::tonemap_picture(veneer::match::median_photo(dset->images));
+  const cv::Mat backdrop = veneer::tonemap_picture(veneer::repaint::median_photo(dset->images));
   for (const char* which : {"blended", "plain"}) {
     const cv::Mat frame = cv::imread((dir / which / "frame_0000.jpg").string(), cv::IMREAD_COLOR);
     const cv::Mat got = cv::imread((dir / which / "repainted_0000.png").string(), cv::IMREAD_COLOR);
     ASSERT_FALSE(frame.empty() || got.empty()) << which;
-    veneer::match::LiveRepainter with(*map, pair->source.size, backdrop, *plan), without(*map, pair->source.size, backdrop);
+    veneer::repaint::LiveRepainter with(*map, pair->source.size, backdrop, *plan), without(*map, pair->source.size, backdrop);
     const cv::Mat want_blended = with.apply(frame), want_plain = without.apply(frame);
     const bool is_blended = std::string(which) == "blended";
     EXPECT_EQ(cv::norm(got, is_blended ? want_blended : want_plain, cv::NORM_INF), 0.0) << which;
@@ -251,7 +251,7 @@ TEST(Daemon, LiveFramesThroughAMapAreBlendedAsTheStills) {
     const cv::Mat frame = cv::imread((dir / "no-dst" / "frame_0000.jpg").string(), cv::IMREAD_COLOR);
     const cv::Mat got = cv::imread((dir / "no-dst" / "repainted_0000.png").string(), cv::IMREAD_COLOR);
     ASSERT_FALSE(frame.empty() || got.empty());
-    veneer::match::LiveRepainter on_black(*map, pair->source.size, {},
+    veneer::repaint::LiveRepainter on_black(*map, pair->source.size, {},
                                           std::make_shared<const veneer::match::fast::BlendPlan>(*plain_plan));
     EXPECT_EQ(cv::norm(got, on_black.apply(frame), cv::NORM_INF), 0.0);
   }
@@ -267,18 +267,18 @@ TEST(Daemon, LiveFramesThroughAMapAreBlendedAsTheStills) {
   auto scaled = run(rig + " live --no-track --frames 1 --fps 5 --map " + (bare / "map.pfm").string() + " --src " + src.string() +
                     " --dst " + dst.string() + " --out " + (dir / "scaled").string());
   ASSERT_EQ(scaled.code, 0) << scaled.out;
-  veneer::match::TransferOptions defaults;
+  veneer::pipeline::TransferOptions defaults;
   defaults.scale = 0.5;
-  auto half_pair = veneer::match::prepare_pair(*dset, *sset, defaults);
+  auto half_pair = veneer::pipeline::prepare_pair(*dset, *sset, defaults);
   auto half_map = veneer::match::read_map(bare / "map.pfm");
   ASSERT_TRUE(half_pair && half_map);
-  auto half_plan = veneer::match::blend_plan_for(*half_pair, defaults, *half_map);
+  auto half_plan = veneer::pipeline::blend_plan_for(*half_pair, defaults, *half_map);
   ASSERT_TRUE(half_plan && *half_plan) << (half_plan ? "no plan" : half_plan.message());
   const cv::Mat frame = cv::imread((dir / "scaled" / "frame_0000.jpg").string(), cv::IMREAD_COLOR);
   const cv::Mat got = cv::imread((dir / "scaled" / "repainted_0000.png").string(), cv::IMREAD_COLOR);
   ASSERT_FALSE(frame.empty() || got.empty());
   EXPECT_EQ(got.size(), half_map->xy.size());
-  veneer::match::LiveRepainter at_half(*half_map, half_pair->source.size, backdrop, *half_plan);
+  veneer::repaint::LiveRepainter at_half(*half_map, half_pair->source.size, backdrop, *half_plan);
   EXPECT_EQ(cv::norm(got, at_half.apply(frame), cv::NORM_INF), 0.0);
   fs::remove_all(dir);
 }

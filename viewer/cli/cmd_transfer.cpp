@@ -11,8 +11,8 @@
 #include "output.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
-#include "veneer/match/transfer.hpp"
 #include "veneer/pipeline/prepare.hpp"
+#include "veneer/pipeline/transfer.hpp"
 
 namespace veneer::cli {
 namespace {
@@ -22,11 +22,11 @@ struct TransferArgs {
   std::string dst_mask, src_mask;  // object masks drawn elsewhere (e.g. the viewer's hand segmentation)
   // the matching defaults are the library's (MatchOptions)
   int patch = 1, candidates = match::MatchOptions{}.candidates, iterations = match::MatchOptions{}.iterations,
-      threads = 0, blend = match::TransferOptions{}.blend;
+      threads = 0, blend = pipeline::TransferOptions{}.blend;
   double threshold = match::MatchOptions{}.threshold, scale = 1.0,
          coherent_threshold = match::MatchOptions{}.coherent_threshold,
          uniformity = match::MatchOptions{}.uniformity, coherent_smooth = match::MatchOptions{}.coherent_smooth,
-         coherent_guide = match::MatchOptions{}.coherent_guide, blend_guide = match::TransferOptions{}.blend_guide;
+         coherent_guide = match::MatchOptions{}.coherent_guide, blend_guide = pipeline::TransferOptions{}.blend_guide;
   bool no_grow = false;
   unsigned seed = match::MatchOptions{}.seed;
   bool faithful = false, truth_normals = false;
@@ -57,7 +57,7 @@ Status read_mask(const std::string& option, const std::string& file, const std::
 }
 
 int run(const TransferArgs& a) {
-  match::TransferOptions options;
+  pipeline::TransferOptions options;
   auto method = match::parse_method(a.method);
   if (!method) return report.usage(method.message());
   if (*method == match::Method::combined && (a.feature != "normals" || a.patch != 1))
@@ -109,7 +109,7 @@ int run(const TransferArgs& a) {
   Progress matching;
   matching.on_progress = [&bar](double f, const std::string& stage) { bar.update(0.4 + 0.55 * f, stage); };
   std::vector<pipeline::SetReport> reports;
-  Expected<match::PreparedPair> pair = make_error("not prepared");
+  Expected<pipeline::PreparedPair> pair = make_error("not prepared");
   // hand-drawn masks replace the segmentation and are part of the cache key
   if (!a.dst_mask.empty())
     if (auto st = read_mask("--dst-mask", a.dst_mask, a.dst, prep.read, prep.destination_mask); !st)
@@ -119,11 +119,11 @@ int run(const TransferArgs& a) {
       return report.usage(st.message());
   pair = pipeline::prepare_pair(a.dst, a.src, options, prep, &reports, reading);
   if (!pair) return report.fail(pair.message());
-  auto result = match::transfer(*pair, options, matching);
+  auto result = pipeline::transfer(*pair, options, matching);
   if (!result) return report.fail(result.message());
   Progress writing;
   writing.on_progress = [&bar](double f, const std::string& stage) { bar.update(0.95 + 0.04 * f, stage); };
-  if (auto s = match::write_transfer(*result, std::move(*pair), a.out, writing); !s) return report.fail(s.message());
+  if (auto s = pipeline::write_transfer(*result, std::move(*pair), a.out, writing); !s) return report.fail(s.message());
   bar.update(0.99, "storing the sets' results in the cache");
   const Status cached = pipeline::finish_cache_writes();  // not fatal: the next run recomputes
   bar.done();
