@@ -46,6 +46,7 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   tcp::acceptor acceptor{io};
   std::thread thread;
   uint16_t bound_port = 0;
+  bool dual_stack = false;  // bound to "::" and taking IPv4 too
 
   // I/O thread only:
   std::set<std::shared_ptr<Session>> sessions;
@@ -748,6 +749,13 @@ veneer::Status Server::start() {
   auto& acc = impl_->acceptor;
   acc.open(ep.protocol(), ec);
   if (!ec) acc.set_option(tcp::acceptor::reuse_address(true), ec);
+  if (!ec && address.is_v6() && address.is_unspecified()) {
+    // "::" is every address: take IPv4 too, whatever net.ipv6.bindv6only says.
+    std::error_code v6ec;
+    acc.set_option(asio::ip::v6_only(false), v6ec);
+    impl_->dual_stack = !v6ec;
+    if (v6ec) VLOG_WARN("Server", "listening on [::] for IPv6 only: {}", v6ec.message());
+  }
   if (!ec) acc.bind(ep, ec);
   if (!ec) acc.listen(asio::socket_base::max_listen_connections, ec);
   if (ec) {
@@ -786,6 +794,7 @@ void Server::stop() {
 }
 
 uint16_t Server::port() const { return impl_->bound_port; }
+bool Server::dual_stack() const { return impl_->dual_stack; }
 
 ServerStats Server::stats() const {
   std::lock_guard lock(impl_->stats_mutex);
