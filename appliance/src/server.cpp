@@ -233,6 +233,10 @@ class Session : public std::enable_shared_from_this<Session> {
         close_after_flush(0, "bad message stream: " + in_.error());
         return;
       }
+      if (r == veneer::wire::ReadResult::invalid) {
+        refuse_invalid_utf8(in_.invalid());
+        continue;
+      }
       handle(msg);
     }
     if (!closing_ && !closed_ && !hello_waiting_) read();
@@ -263,6 +267,21 @@ class Session : public std::enable_shared_from_this<Session> {
   }
 
   // ---- requests
+
+  // A request whose string field is not UTF-8 (proto3 cannot parse it): refused
+  // like any bad field; before hello it is a refused hello.
+  void refuse_invalid_utf8(const veneer::wire::InvalidUtf8& bad) {
+    const std::string why = bad.field + ": not valid UTF-8 (every string field is UTF-8)";
+    if (!authed_) {
+      close_after_flush(bad.id, bad.field.rfind("hello.", 0) == 0
+                                    ? "hello refused: " + why
+                                    : "the first request must be a hello with the protocol version and token");
+      return;
+    }
+    srv_.count(&ServerStats::protocol_errors);
+    VLOG_INFO("Server", "{}: refused request {}: {}", peer_, bad.id, why);
+    respond(bad.id, veneer::make_error(why));
+  }
 
   void handle(const pb::ClientMessage& msg) {
     auto req = api::decode(msg);
@@ -403,6 +422,9 @@ class Session : public std::enable_shared_from_this<Session> {
     s.set_next_role(st.next_role == veneer::Role::source ? pb::ROLE_SOURCE : pb::ROLE_DESTINATION);
     s.set_free_bytes(srv_.rig.store().free_bytes());
     s.set_clients(static_cast<uint32_t>(srv_.sessions.size()));
+    // Events are numbered and sent on this thread: every event up to this seq
+    // was sent before this status, every later one comes after it.
+    s.set_event_seq(srv_.event_seq);
   }
 
   void on(uint64_t id, api::StatusReq&) {
