@@ -15,8 +15,8 @@
 #include "veneer/util/log.hpp"
 #include "veneer/util/token_file.hpp"
 #include "veneerd/devices/registry.hpp"
-#include "veneerd/devices/simulated_camera.hpp"
-#include "veneerd/devices/simulated_rig.hpp"
+#include "veneerd/sim/simulated_camera.hpp"
+#include "veneerd/sim/simulated_rig.hpp"
 
 namespace veneerd {
 
