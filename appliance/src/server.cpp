@@ -14,6 +14,8 @@
 #include <malloc.h>
 #endif
 
+#include <google/protobuf/stubs/logging.h>
+
 #include "veneer/proto/framing.hpp"
 #include "veneer/util/log.hpp"
 #include "veneer/v1/rig.pb.h"
@@ -27,6 +29,24 @@ using asio::ip::tcp;
 using Clock = std::chrono::steady_clock;
 
 namespace {
+
+// protobuf logs an ERROR line for every string field that is not UTF-8 it
+// refuses to parse; a peer could fill the log with them. The server answers
+// such a request itself (refuse_invalid_utf8), so protobuf's lines go to the
+// debug level.
+void quiet_protobuf_log() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    google::protobuf::SetLogHandler([](google::protobuf::LogLevel level, const char* file, int line,
+                                       const std::string& message) {
+      if (level >= google::protobuf::LOGLEVEL_FATAL) {
+        VLOG_ERROR("Server", "protobuf {}:{}: {}", file, line, message);
+      } else {
+        VLOG_DEBUG("Server", "protobuf {}:{}: {}", file, line, message);
+      }
+    });
+  });
+}
 
 bool same_token(const std::string& a, const std::string& b) {
   // Constant time in the token's length: no early exit on the first mismatch.
@@ -764,6 +784,7 @@ Server::Server(Rig& rig, ServerOptions options) : impl_(std::make_shared<Impl>(r
 Server::~Server() { stop(); }
 
 veneer::Status Server::start() {
+  quiet_protobuf_log();
   std::error_code ec;
   auto address = asio::ip::make_address(impl_->opt.host, ec);
   if (ec) return veneer::make_error("listen address '" + impl_->opt.host + "': " + ec.message());
