@@ -4,6 +4,7 @@
 
 #include <google/protobuf/io/coded_stream.h>
 
+#include "veneer/proto/utf8.hpp"
 #include "veneer/v1/rig.pb.h"
 
 namespace veneerd::api {
@@ -18,6 +19,20 @@ bool printable(const std::string& s) {
     if (ch < 0x20 || ch == 0x7f) return false;
   }
   return true;
+}
+
+// A name limit counts characters (Unicode code points), as the contract says;
+// bytes that are not UTF-8 are refused (proto3 parsing refuses them first,
+// this holds wherever a name comes from).
+veneer::Status check_name(const std::string& field, const std::string& value, size_t max_chars) {
+  const auto chars = veneer::wire::utf8_length(value);
+  if (!chars) return make_error(field + ": not valid UTF-8 (every string field is UTF-8)");
+  if (*chars > max_chars) {
+    return make_error(field + ": " + std::to_string(*chars) + " characters is longer than the limit of " +
+                      std::to_string(max_chars));
+  }
+  if (veneer::wire::has_control_character(value)) return make_error(field + ": must be printable (no control characters)");
+  return {};
 }
 
 veneer::Expected<veneer::Role> decode_role(int role) {
@@ -80,13 +95,7 @@ veneer::Expected<Request> decode(const pb::ClientMessage& m) {
         return make_error("hello.token: " + std::to_string(h.token().size()) + " bytes is longer than the limit of " +
                           std::to_string(kMaxTokenBytes));
       }
-      if (h.client_name().size() > kMaxClientNameChars) {
-        return make_error("hello.client_name: " + std::to_string(h.client_name().size()) +
-                          " characters is longer than the limit of " + std::to_string(kMaxClientNameChars));
-      }
-      if (!printable(h.client_name())) {
-        return make_error("hello.client_name: must be printable (no control characters)");
-      }
+      if (auto s = check_name("hello.client_name", h.client_name(), kMaxClientNameChars); !s) return s.error();
       r.body = Hello{h.protocol_version(), h.token(), h.client_name()};
       return r;
     }
@@ -116,9 +125,7 @@ veneer::Expected<Request> decode(const pb::ClientMessage& m) {
       auto role = decode_role(c.role());
       if (!role) return role.error();
       req.capture.role = *role;
-      if (c.object().size() > kMaxObjectChars || !printable(c.object())) {
-        return make_error("capture.object: must be up to 64 printable characters");
-      }
+      if (auto s = check_name("capture.object", c.object(), kMaxObjectChars); !s) return s.error();
       req.capture.object = c.object();
       const auto& e = c.exposure();
       if (!std::isfinite(e.shutter_s()) || e.shutter_s() < 0 || e.shutter_s() > kMaxShutterS) {

@@ -478,6 +478,10 @@ void Rig::set_lamps(std::vector<bool> on, int brightness, std::function<void(ven
     owner_by_capture_ = false;  // the client's lamps stay until exit
     veneer::Status s = dev_.lamps->set(on, brightness);
     refresh_lamps();
+    if (!s) VLOG_WARN("Lamps", "set lamps failed: {}", s.message());
+    // The answer first, then the event it causes (the contract's order; both
+    // reach the server's thread in the order they are handed over).
+    if (done) done(s);
     if (s) {
       pending_restore_.needed = false;  // the controller's own setting wins
       RigEvent e;
@@ -485,10 +489,7 @@ void Rig::set_lamps(std::vector<bool> on, int brightness, std::function<void(ven
       e.lamps_on = on;
       e.brightness = brightness;
       emit(e);
-    } else {
-      VLOG_WARN("Lamps", "set lamps failed: {}", s.message());
     }
-    if (done) done(s);
   });
 }
 

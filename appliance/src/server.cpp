@@ -14,6 +14,8 @@
 #include <malloc.h>
 #endif
 
+#include <google/protobuf/stubs/logging.h>
+
 #include "veneer/proto/framing.hpp"
 #include "veneer/util/log.hpp"
 #include "veneer/v1/rig.pb.h"
@@ -27,6 +29,24 @@ using asio::ip::tcp;
 using Clock = std::chrono::steady_clock;
 
 namespace {
+
+// protobuf logs an ERROR line for every string field that is not UTF-8 it
+// refuses to parse; a peer could fill the log with them. The server answers
+// such a request itself (refuse_invalid_utf8), so protobuf's lines go to the
+// debug level.
+void quiet_protobuf_log() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    google::protobuf::SetLogHandler([](google::protobuf::LogLevel level, const char* file, int line,
+                                       const std::string& message) {
+      if (level >= google::protobuf::LOGLEVEL_FATAL) {
+        VLOG_ERROR("Server", "protobuf {}:{}: {}", file, line, message);
+      } else {
+        VLOG_DEBUG("Server", "protobuf {}:{}: {}", file, line, message);
+      }
+    });
+  });
+}
 
 bool same_token(const std::string& a, const std::string& b) {
   // Constant time in the token's length: no early exit on the first mismatch.
@@ -46,6 +66,7 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   tcp::acceptor acceptor{io};
   std::thread thread;
   uint16_t bound_port = 0;
+  bool dual_stack = false;  // bound to "::" and taking IPv4 too
 
   // I/O thread only:
   std::set<std::shared_ptr<Session>> sessions;
@@ -232,6 +253,10 @@ class Session : public std::enable_shared_from_this<Session> {
         close_after_flush(0, "bad message stream: " + in_.error());
         return;
       }
+      if (r == veneer::wire::ReadResult::invalid) {
+        refuse_invalid_utf8(in_.invalid());
+        continue;
+      }
       handle(msg);
     }
     if (!closing_ && !closed_ && !hello_waiting_) read();
@@ -262,6 +287,21 @@ class Session : public std::enable_shared_from_this<Session> {
   }
 
   // ---- requests
+
+  // A request whose string field is not UTF-8 (proto3 cannot parse it): refused
+  // like any bad field; before hello it is a refused hello.
+  void refuse_invalid_utf8(const veneer::wire::InvalidUtf8& bad) {
+    const std::string why = bad.field + ": not valid UTF-8 (every string field is UTF-8)";
+    if (!authed_) {
+      close_after_flush(bad.id, bad.field.rfind("hello.", 0) == 0
+                                    ? "hello refused: " + why
+                                    : "the first request must be a hello with the protocol version and token");
+      return;
+    }
+    srv_.count(&ServerStats::protocol_errors);
+    VLOG_INFO("Server", "{}: refused request {}: {}", peer_, bad.id, why);
+    respond(bad.id, veneer::make_error(why));
+  }
 
   void handle(const pb::ClientMessage& msg) {
     auto req = api::decode(msg);
@@ -402,6 +442,9 @@ class Session : public std::enable_shared_from_this<Session> {
     s.set_next_role(st.next_role == veneer::Role::source ? pb::ROLE_SOURCE : pb::ROLE_DESTINATION);
     s.set_free_bytes(srv_.rig.store().free_bytes());
     s.set_clients(static_cast<uint32_t>(srv_.sessions.size()));
+    // Events are numbered and sent on this thread: every event up to this seq
+    // was sent before this status, every later one comes after it.
+    s.set_event_seq(srv_.event_seq);
   }
 
   void on(uint64_t id, api::StatusReq&) {
@@ -741,6 +784,7 @@ Server::Server(Rig& rig, ServerOptions options) : impl_(std::make_shared<Impl>(r
 Server::~Server() { stop(); }
 
 veneer::Status Server::start() {
+  quiet_protobuf_log();
   std::error_code ec;
   auto address = asio::ip::make_address(impl_->opt.host, ec);
   if (ec) return veneer::make_error("listen address '" + impl_->opt.host + "': " + ec.message());
@@ -748,6 +792,13 @@ veneer::Status Server::start() {
   auto& acc = impl_->acceptor;
   acc.open(ep.protocol(), ec);
   if (!ec) acc.set_option(tcp::acceptor::reuse_address(true), ec);
+  if (!ec && address.is_v6() && address.is_unspecified()) {
+    // "::" is every address: take IPv4 too, whatever net.ipv6.bindv6only says.
+    std::error_code v6ec;
+    acc.set_option(asio::ip::v6_only(false), v6ec);
+    impl_->dual_stack = !v6ec;
+    if (v6ec) VLOG_WARN("Server", "listening on [::] for IPv6 only: {}", v6ec.message());
+  }
   if (!ec) acc.bind(ep, ec);
   if (!ec) acc.listen(asio::socket_base::max_listen_connections, ec);
   if (ec) {
@@ -786,6 +837,7 @@ void Server::stop() {
 }
 
 uint16_t Server::port() const { return impl_->bound_port; }
+bool Server::dual_stack() const { return impl_->dual_stack; }
 
 ServerStats Server::stats() const {
   std::lock_guard lock(impl_->stats_mutex);

@@ -31,7 +31,7 @@
 #include "veneer/sim/simulator.hpp"
 #include "veneer/util/log.hpp"
 #include "veneerd/daemon.hpp"
-#include "veneerd/devices/simulated_rig.hpp"
+#include "veneerd/sim/simulated_rig.hpp"
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;

@@ -10,8 +10,8 @@
 #include "veneer/io/imageset.hpp"
 #include "veneer/rig/client.hpp"
 #include "veneerd/daemon.hpp"
-#include "veneerd/devices/simulated_camera.hpp"
-#include "veneerd/devices/simulated_rig.hpp"
+#include "veneerd/sim/simulated_camera.hpp"
+#include "veneerd/sim/simulated_rig.hpp"
 
 namespace fs = std::filesystem;
 using Kind = veneer::rig::Event::Kind;

@@ -135,6 +135,7 @@ RigStatus convert(const pb::RigStatus& s) {
   r.lamps_problem = s.lamps_problem();
   r.holds_lamps = s.holds_lamps();
   r.ready = s.ready();
+  r.event_seq = s.event_seq();
   r.capturing = s.capturing();
   r.you_control = s.you_control();
   r.controller_taken = s.controller_taken();
@@ -327,6 +328,11 @@ struct Client::Impl {
         pb::RigMessage m;
         auto r = in.next(m);
         if (r == veneer::wire::ReadResult::need_more) break;
+        if (r == veneer::wire::ReadResult::invalid) {
+          why = "bad data from the rig: " + in.invalid().field + " is not valid UTF-8";
+          broken = true;
+          break;
+        }
         if (r == veneer::wire::ReadResult::error) {
           why = "bad data from the rig: " + in.error();
           broken = true;

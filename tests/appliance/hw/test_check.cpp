@@ -4,7 +4,7 @@
 
 #include <sstream>
 
-#include "veneerd/devices/hue_emulator.hpp"
+#include "veneerd/sim/hue_emulator.hpp"
 #include "veneerd/devices/registry.hpp"
 #include "veneerd/hw/check.hpp"
 #include "veneerd/hw/hue_setup.hpp"

@@ -24,8 +24,8 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "veneerd/config.hpp"
-#include "veneerd/devices/ptpip_twin.hpp"
-#include "veneerd/devices/simulated_rig.hpp"
+#include "veneerd/sim/ptpip_twin.hpp"
+#include "veneerd/sim/simulated_rig.hpp"
 #include "veneerd/hw/gphoto2.hpp"
 #include "veneerd/rig.hpp"
 #include "veneerd/store.hpp"

@@ -6,7 +6,7 @@
 #include <sstream>
 #include <thread>
 
-#include "veneerd/devices/hue_emulator.hpp"
+#include "veneerd/sim/hue_emulator.hpp"
 #include "veneerd/hw/hue_setup.hpp"
 
 namespace veneerd::hw {

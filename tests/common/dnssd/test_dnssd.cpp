@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <string>
 
+#include <net/if.h>
 #include <sys/wait.h>
 
 #include <gtest/gtest.h>
@@ -88,6 +89,56 @@ TEST(RigTxt, TheRigsRecordReadsBackThroughTheWireFormat) {
   EXPECT_TRUE(dnssd::check_service_type(wire::kServiceType));
 }
 
+// Where a listening address is reached (the advertisement follows it; the
+// whole path against a real avahi-daemon is appliance/Advertise.*).
+TEST(DnssdReach, WildcardsAreEveryInterfaceInTheirFamilies) {
+  auto v4 = dnssd::reach_of("0.0.0.0");
+  ASSERT_TRUE(v4) << v4.message();
+  EXPECT_EQ(v4->interface, 0u);
+  EXPECT_EQ(v4->family, dnssd::Family::ipv4);
+  EXPECT_EQ(v4->describe(), "every interface, IPv4");
+  auto both = dnssd::reach_of("::", true);
+  ASSERT_TRUE(both) << both.message();
+  EXPECT_EQ(both->interface, 0u);
+  EXPECT_EQ(both->family, dnssd::Family::any);
+  auto v6only = dnssd::reach_of("::", false);
+  ASSERT_TRUE(v6only) << v6only.message();
+  EXPECT_EQ(v6only->family, dnssd::Family::ipv6);
+  auto mapped_any = dnssd::reach_of("::ffff:0.0.0.0");
+  ASSERT_TRUE(mapped_any) << mapped_any.message();
+  EXPECT_EQ(mapped_any->family, dnssd::Family::ipv4);
+}
+
+TEST(DnssdReach, OneAddressIsItsInterfaceAndFamily) {
+  const unsigned lo = if_nametoindex("lo");
+  ASSERT_NE(lo, 0u);
+  auto v4 = dnssd::reach_of("127.0.0.1");
+  ASSERT_TRUE(v4) << v4.message();
+  EXPECT_EQ(v4->interface, lo);
+  EXPECT_EQ(v4->interface_name, "lo");
+  EXPECT_EQ(v4->family, dnssd::Family::ipv4);
+  EXPECT_EQ(v4->describe(), "lo, IPv4");
+  // An IPv4-mapped address takes IPv4 connections.
+  auto mapped = dnssd::reach_of("::ffff:127.0.0.1");
+  ASSERT_TRUE(mapped) << mapped.message();
+  EXPECT_EQ(mapped->interface, lo);
+  EXPECT_EQ(mapped->family, dnssd::Family::ipv4);
+  auto v6 = dnssd::reach_of("::1");
+  if (v6) {  // absent where IPv6 is switched off
+    EXPECT_EQ(v6->interface, lo);
+    EXPECT_EQ(v6->family, dnssd::Family::ipv6);
+  }
+}
+
+TEST(DnssdReach, AddressesNoInterfaceHoldsAndNonAddressesAreNamed) {
+  auto absent = dnssd::reach_of("192.0.2.254");  // documentation range: on no interface here
+  ASSERT_FALSE(absent);
+  EXPECT_NE(absent.message().find("192.0.2.254 is on no network interface"), std::string::npos) << absent.message();
+  auto name = dnssd::reach_of("rig.local");
+  ASSERT_FALSE(name);
+  EXPECT_NE(name.message().find("'rig.local' is not an IP address"), std::string::npos) << name.message();
+}
+
 TEST(FoundRig, EndpointsParseBackAsTheRigsAddress) {
   rig::FoundRig r;
   r.name = "bench rig";
@@ -127,18 +178,18 @@ TEST_F(NoDaemon, BadTypesAreRefusedBeforeAskingAvahi) {
 }
 
 TEST_F(NoDaemon, AdvertisingFailsWithOneMessageAndBadInputIsNamed) {
-  dnssd::Advertisement ad{"bench rig", "_veneer._tcp", 7878, wire::rig_txt("bench rig", "0.1.0")};
+  dnssd::Advertisement ad{"bench rig", "_veneer._tcp", 7878, wire::rig_txt("bench rig", "0.1.0"), {}};
   auto a = dnssd::Advertiser::start(ad);
   ASSERT_FALSE(a);
   EXPECT_EQ(a.message().rfind("DNS-SD unavailable: ", 0), 0u) << a.message();
 
-  auto port0 = dnssd::Advertiser::start({"bench rig", "_veneer._tcp", 0, {}});
+  auto port0 = dnssd::Advertiser::start({"bench rig", "_veneer._tcp", 0, {}, {}});
   ASSERT_FALSE(port0);
   EXPECT_NE(port0.message().find("port 0"), std::string::npos) << port0.message();
-  auto badkey = dnssd::Advertiser::start({"bench rig", "_veneer._tcp", 7878, {{"a=b", "c"}}});
+  auto badkey = dnssd::Advertiser::start({"bench rig", "_veneer._tcp", 7878, {{"a=b", "c"}}, {}});
   ASSERT_FALSE(badkey);
   EXPECT_NE(badkey.message().find("'a=b'"), std::string::npos) << badkey.message();
-  auto noname = dnssd::Advertiser::start({"", "_veneer._tcp", 7878, {}});
+  auto noname = dnssd::Advertiser::start({"", "_veneer._tcp", 7878, {}, {}});
   ASSERT_FALSE(noname);
   EXPECT_NE(noname.message().find("name is empty"), std::string::npos) << noname.message();
 }

@@ -91,6 +91,7 @@ struct RigStatus {
   Role next_role = Role::destination;
   uint64_t free_bytes = 0;
   int clients = 0;
+  uint64_t event_seq = 0;            // seq of the last event before this status; the next one is event_seq + 1
 };
 
 struct SetSummary {

@@ -25,12 +25,12 @@
 #include "veneer/sim/simulator.hpp"
 #include "veneer/util/expected.hpp"
 #include "veneerd/devices/camera.hpp"
-#include "veneerd/devices/hue_lamps.hpp"
+#include "veneerd/hw/hue_lamps.hpp"
 
 namespace veneerd {
 
 struct SimulatedCameraOptions {
-  HueLampsOptions bridge;            // where to read the lamps from (settle/pacing unused)
+  hw::HueLampsOptions bridge;            // where to read the lamps from (settle/pacing unused)
   std::string scene = "bull";        // what capture() sees
   std::string preview_scene = "stone";  // what preview() sees (the source object)
   cv::Size size{1024, 680};          // still size [px]

@@ -1,5 +1,7 @@
 #pragma once
-// Lamps backend "hue": a Philips Hue bridge over its v1 REST API (libcurl).
+// Lamps backend "hue" (real hardware): a Philips Hue bridge over its v1 REST API
+// (libcurl, through hw/http_client.hpp). The simulated rig points it at the
+// bridge emulator (sim/hue_emulator.hpp), so the real client runs in every test.
 //
 // What the bridge is like, and what this class does about it:
 //  - ~10 light commands/s and 1 group command/s, 429/503 beyond that or with
@@ -37,7 +39,7 @@
 #include "veneer/util/expected.hpp"
 #include "veneerd/devices/lamps.hpp"
 
-namespace veneerd {
+namespace veneerd::hw {
 
 struct HueLampsOptions {
   std::string bridge;               // "host:port" or "host" (port 80)
@@ -97,4 +99,4 @@ class HueLamps : public Lamps {
   std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace veneerd
+}  // namespace veneerd::hw

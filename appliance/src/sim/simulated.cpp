@@ -1,4 +1,4 @@
-#include "veneerd/devices/simulated.hpp"
+#include "veneerd/sim/simulated.hpp"
 
 #include "veneer/util/log.hpp"
 

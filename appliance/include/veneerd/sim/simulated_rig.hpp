@@ -10,7 +10,8 @@
 //   // devices["lamps"]   = {"backend": "hue", "bridge": "127.0.0.1:<port>", "key": .., "lamps": ["1".."7"], ..}
 //   // devices["camera"]  = {"backend": "simulated", <hue section>, "scene": "bull", "preview_scene": "stone", ..}
 //   // devices["trigger"] = {"backend": "simulated"},  devices["led"] = {"backend": "simulated"}
-//   // then build each through DeviceRegistry (register_simulated_devices() first),
+//   // then build each through DeviceRegistry (register_simulated_devices() and
+//   // register_hardware_devices() first: the lamps are the real "hue" back-end),
 //   // e.g. DeviceRegistry::make(reg.lamps, "lamps", "hue", devices["lamps"]).
 //   // Before a capture of role R: as_simulated(camera)->set_scene((*rig)->scene_for(R)).
 //
@@ -25,11 +26,11 @@
 
 #include "veneer/io/imageset.hpp"
 #include "veneer/util/expected.hpp"
-#include "veneerd/devices/hue_emulator.hpp"
-#include "veneerd/devices/hue_lamps.hpp"
+#include "veneerd/sim/hue_emulator.hpp"
+#include "veneerd/hw/hue_lamps.hpp"
 #include "veneerd/devices/registry.hpp"
-#include "veneerd/devices/simulated.hpp"
-#include "veneerd/devices/simulated_camera.hpp"
+#include "veneerd/sim/simulated.hpp"
+#include "veneerd/sim/simulated_camera.hpp"
 
 namespace veneerd {
 
@@ -83,7 +84,7 @@ class SimulatedRig {
   nlohmann::json devices_config() const;
 
   // Conveniences that build the devices directly (same code as the registry).
-  veneer::Expected<std::unique_ptr<HueLamps>> make_lamps() const;
+  veneer::Expected<std::unique_ptr<hw::HueLamps>> make_lamps() const;
   veneer::Expected<std::unique_ptr<SimulatedCamera>> make_camera() const;
 
  private:

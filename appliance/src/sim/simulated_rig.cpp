@@ -1,4 +1,4 @@
-#include "veneerd/devices/simulated_rig.hpp"
+#include "veneerd/sim/simulated_rig.hpp"
 
 #include <algorithm>
 
@@ -60,7 +60,7 @@ std::string SimulatedRig::scene_for(veneer::Role role) const {
 }
 
 json SimulatedRig::lamps_config() const {
-  HueLampsOptions o;
+  hw::HueLampsOptions o;
   o.bridge = context_.bridge;
   o.key = context_.key;
   o.lamps = context_.lamp_ids;
@@ -72,7 +72,7 @@ json SimulatedRig::lamps_config() const {
 
 json SimulatedRig::camera_config() const {
   SimulatedCameraOptions c;
-  auto lamps = HueLampsOptions::from_json(lamps_config());
+  auto lamps = hw::HueLampsOptions::from_json(lamps_config());
   if (lamps) c.bridge = *lamps;
   c.scene = destination_scene();
   c.preview_scene = source_scene();
@@ -96,10 +96,10 @@ json SimulatedRig::devices_config() const {
               {"led", {{"backend", "simulated"}}}};
 }
 
-veneer::Expected<std::unique_ptr<HueLamps>> SimulatedRig::make_lamps() const {
-  auto o = HueLampsOptions::from_json(lamps_config());
+veneer::Expected<std::unique_ptr<hw::HueLamps>> SimulatedRig::make_lamps() const {
+  auto o = hw::HueLampsOptions::from_json(lamps_config());
   if (!o) return o.error();
-  return HueLamps::create(*o);
+  return hw::HueLamps::create(*o);
 }
 
 veneer::Expected<std::unique_ptr<SimulatedCamera>> SimulatedRig::make_camera() const {

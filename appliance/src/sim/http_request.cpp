@@ -1,4 +1,4 @@
-#include "veneerd/devices/http_request.hpp"
+#include "veneerd/sim/http_request.hpp"
 
 #include <algorithm>
 #include <cctype>

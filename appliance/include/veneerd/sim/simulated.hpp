@@ -1,7 +1,6 @@
 #pragma once
 // Trigger and status LED backends "simulated": the button is pressed through
 // press() (from the API or a test hook); the LED remembers what it showed.
-// LED backend "none" shows nothing.
 #include <mutex>
 #include <string>
 #include <vector>
@@ -32,12 +31,6 @@ class SimulatedLed : public StatusLed {
   mutable std::mutex mutex_;
   LedState state_ = LedState::idle;
   std::vector<LedState> history_;
-};
-
-class NoLed : public StatusLed {
- public:
-  std::string name() const override { return "none"; }
-  void show(LedState) override {}
 };
 
 const char* led_state_name(LedState state);

@@ -20,7 +20,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "veneerd/config.hpp"
-#include "veneerd/devices/simulated_rig.hpp"
+#include "veneerd/sim/simulated_rig.hpp"
 #include "veneerd/sequencer.hpp"
 
 using Clock = std::chrono::steady_clock;
@@ -100,10 +100,10 @@ int main(int argc, char** argv) {
   // --- 1. lamp steps -------------------------------------------------------
   // Peer: one light command with nothing to pace (lamp 1 toggled every 400 ms,
   // settle 0, no group) = the bridge's round trip as the backend sees it.
-  veneerd::HueLampsOptions raw_opts = (*lamps)->options();
+  veneerd::hw::HueLampsOptions raw_opts = (*lamps)->options();
   raw_opts.settle_ms = 0;
   raw_opts.group.clear();
-  auto raw = veneerd::HueLamps::create(raw_opts);
+  auto raw = veneerd::hw::HueLamps::create(raw_opts);
   std::vector<double> round_trip;
   (void)(*raw)->all_off();
   for (int i = 0; i < 8; ++i) {

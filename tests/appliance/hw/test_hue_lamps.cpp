@@ -5,14 +5,14 @@
 #include <chrono>
 #include <thread>
 
-#include "veneerd/devices/hue_emulator.hpp"
-#include "veneerd/devices/hue_lamps.hpp"
+#include "veneerd/sim/hue_emulator.hpp"
+#include "veneerd/hw/hue_lamps.hpp"
 #include "veneerd/devices/registry.hpp"
 
 using namespace std::chrono_literals;
 using veneerd::HueBridgeEmulator;
-using veneerd::HueLamps;
-using veneerd::HueLampsOptions;
+using veneerd::hw::HueLamps;
+using veneerd::hw::HueLampsOptions;
 using veneerd::LampState;
 
 namespace {
@@ -371,7 +371,7 @@ TEST(HueLampsOptions, ConfigErrorsNameTheField) {
 }
 
 TEST(HueResults, ParsesSuccessAndErrorArrays) {
-  auto r = veneerd::parse_hue_results(
+  auto r = veneerd::hw::parse_hue_results(
       R"([{"success":{"/lights/1/state/on":true}},{"error":{"type":201,"address":"/lights/1/state/bri","description":"parameter, bri, is not modifiable. Device is set to off."}}])");
   ASSERT_TRUE(r.ok());
   ASSERT_EQ(r->size(), 2u);
@@ -380,25 +380,33 @@ TEST(HueResults, ParsesSuccessAndErrorArrays) {
   EXPECT_FALSE((*r)[1].success);
   EXPECT_EQ((*r)[1].error_type, 201);
   EXPECT_EQ((*r)[1].address, "/lights/1/state/bri");
-  EXPECT_FALSE(veneerd::parse_hue_results("{}").ok());
-  EXPECT_FALSE(veneerd::parse_hue_results("[1]").ok());
-  EXPECT_FALSE(veneerd::parse_hue_results("nope").ok());
+  EXPECT_FALSE(veneerd::hw::parse_hue_results("{}").ok());
+  EXPECT_FALSE(veneerd::hw::parse_hue_results("[1]").ok());
+  EXPECT_FALSE(veneerd::hw::parse_hue_results("nope").ok());
 }
 
-TEST(DeviceRegistry, SimulatedBackendsAreRegistered) {
-  veneerd::register_simulated_devices();
-  veneerd::register_simulated_devices();  // idempotent
+// The real back-ends register under hw/, the simulated ones under sim/:
+// neither list holds the other's.
+TEST(DeviceRegistry, RealAndSimulatedBackendsRegisterApart) {
   auto& reg = veneerd::DeviceRegistry::instance();
   auto count = [](const auto& list, const std::string& name) {
     int n = 0;
     for (const auto& [k, f] : list) n += k == name;
     return n;
   };
+  veneerd::register_hardware_devices();
+  veneerd::register_hardware_devices();  // idempotent
+  EXPECT_EQ(count(reg.lamps, "hue"), 1);
+  EXPECT_EQ(count(reg.cameras, "gphoto2"), 1);
+  EXPECT_EQ(count(reg.leds, "none"), 1);
+  EXPECT_EQ(count(reg.cameras, "simulated"), 0) << "registered by register_hardware_devices()";
+  EXPECT_EQ(count(reg.triggers, "simulated"), 0);
+  veneerd::register_simulated_devices();
+  veneerd::register_simulated_devices();
   EXPECT_EQ(count(reg.lamps, "hue"), 1);
   EXPECT_EQ(count(reg.cameras, "simulated"), 1);
   EXPECT_EQ(count(reg.triggers, "simulated"), 1);
   EXPECT_EQ(count(reg.leds, "simulated"), 1);
-  EXPECT_EQ(count(reg.leds, "none"), 1);
   auto bad = veneerd::DeviceRegistry::make(reg.lamps, "lamps", "hue", nlohmann::json{{"bridge", "x"}});
   ASSERT_FALSE(bad.ok());
   EXPECT_NE(bad.message().find("'key'"), std::string::npos) << bad.message();

@@ -1,7 +1,7 @@
 // The Hue bridge emulator: plain POSIX sockets, one thread per connection
 // (a bridge has a handful of clients), the HTTP parser from http_request.cpp,
 // and the v1 REST semantics the lamps backend relies on.
-#include "veneerd/devices/hue_emulator.hpp"
+#include "veneerd/sim/hue_emulator.hpp"
 
 #include <arpa/inet.h>
 #include <netinet/in.h>

@@ -1,13 +1,15 @@
 #pragma once
-// The one place that knows about libcurl (http_client.cpp): a small pool of
-// concurrent HTTP requests over kept-alive connections. Not thread-safe; one
-// owner drives it.
+// The one place that knows about libcurl (http_client.cpp), used by the Hue
+// client (hue_lamps.cpp) and the Hue setup commands (hue_setup.cpp): a small
+// pool of concurrent HTTP requests over kept-alive connections, or one
+// blocking request (perform). Answers over 4 MiB are refused. Not
+// thread-safe; one owner drives it.
 #include <chrono>
 #include <memory>
 #include <string>
 #include <vector>
 
-namespace veneerd::detail {
+namespace veneerd::hw::detail {
 
 struct HttpCall {
   std::string method;   // GET, PUT, POST
@@ -45,4 +47,4 @@ class HttpClient {
   std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace veneerd::detail
+}  // namespace veneerd::hw::detail

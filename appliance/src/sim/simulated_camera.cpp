@@ -1,5 +1,5 @@
 // Camera backend "simulated" (see simulated_camera.hpp).
-#include "veneerd/devices/simulated_camera.hpp"
+#include "veneerd/sim/simulated_camera.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -93,7 +93,7 @@ veneer::Status SimulatedCameraOptions::check() const {
 veneer::Expected<SimulatedCameraOptions> SimulatedCameraOptions::from_json(const json& s) {
   if (!s.is_object()) return veneer::make_error("simulated camera: config section must be a JSON object");
   SimulatedCameraOptions o;
-  auto bridge = HueLampsOptions::from_json(s);
+  auto bridge = hw::HueLampsOptions::from_json(s);
   if (!bridge) return veneer::make_error("simulated camera: " + bridge.message());
   o.bridge = *bridge;
   auto get_size = [&](const char* key, cv::Size& out) -> veneer::Status {
@@ -240,7 +240,7 @@ const std::array<uint8_t, 4096>& gamma_lut() {
 
 struct SimulatedCamera::Impl {
   SimulatedCameraOptions options;
-  std::unique_ptr<HueLamps> bridge;  // reads lamp states only
+  std::unique_ptr<hw::HueLamps> bridge;  // reads lamp states only
   mutable std::mutex mutex;          // everything below
   std::mutex bridge_mutex;           // HueLamps is used by one thread at a time
   std::string scene, preview_scene;
@@ -299,9 +299,9 @@ veneer::Expected<std::unique_ptr<SimulatedCamera>> SimulatedCamera::create(const
   if (auto st = options.check(); !st) return st.error();
   auto impl = std::make_unique<Impl>();
   impl->options = options;
-  HueLampsOptions reader = options.bridge;
+  hw::HueLampsOptions reader = options.bridge;
   reader.settle_ms = 0;
-  auto lamps = HueLamps::create(reader);
+  auto lamps = hw::HueLamps::create(reader);
   if (!lamps) return lamps.error();
   impl->bridge = std::move(*lamps);
   impl->scene = options.scene;

@@ -6,14 +6,18 @@
 #include <map>
 #include <mutex>
 
-namespace veneerd::detail {
+namespace veneerd::hw::detail {
 
 namespace {
 
 std::once_flag curl_once;
 
+constexpr size_t kMaxAnswerBytes = 4u << 20;  // a Hue bridge's answers are small; refuse floods
+
 size_t collect(char* data, size_t size, size_t count, void* user) {
-  static_cast<std::string*>(user)->append(data, size * count);
+  auto* out = static_cast<std::string*>(user);
+  if (out->size() + size * count > kMaxAnswerBytes) return 0;  // aborts the transfer (write error)
+  out->append(data, size * count);
   return size * count;
 }
 
@@ -23,11 +27,16 @@ struct EasyDeleter {
 struct SlistDeleter {
   void operator()(curl_slist* s) const { curl_slist_free_all(s); }
 };
+struct MultiDeleter {
+  void operator()(CURLM* m) const { curl_multi_cleanup(m); }
+};
 
 }  // namespace
 
 struct HttpClient::Impl {
-  CURLM* multi = nullptr;
+  // Owned handles. Easy handles are taken out of the multi handle (cancel_all,
+  // in the destructor) before either is freed.
+  std::unique_ptr<CURLM, MultiDeleter> multi;
   struct Transfer {
     int ticket = 0;
     std::unique_ptr<CURL, EasyDeleter> easy;
@@ -37,22 +46,22 @@ struct HttpClient::Impl {
   };
   std::map<CURL*, Transfer> running;
   std::vector<std::unique_ptr<CURL, EasyDeleter>> idle;  // reused handles keep their connection cache small
+  std::vector<std::pair<int, HttpResult>> failed;  // requests libcurl could not even start
   int next_ticket = 1;
 
   Impl() {
     std::call_once(curl_once, [] { curl_global_init(CURL_GLOBAL_DEFAULT); });
-    multi = curl_multi_init();
-    curl_multi_setopt(multi, CURLMOPT_MAX_HOST_CONNECTIONS, 3L);
-    curl_multi_setopt(multi, CURLMOPT_MAXCONNECTS, 8L);
+    multi.reset(curl_multi_init());
+    if (!multi) return;
+    curl_multi_setopt(multi.get(), CURLMOPT_MAX_HOST_CONNECTIONS, 3L);
+    curl_multi_setopt(multi.get(), CURLMOPT_MAXCONNECTS, 8L);
   }
-  ~Impl() {
-    cancel_all();
-    curl_multi_cleanup(multi);
-  }
+  ~Impl() { cancel_all(); }
 
   void cancel_all() {
-    for (auto& [easy, t] : running) curl_multi_remove_handle(multi, easy);
+    for (auto& [easy, t] : running) curl_multi_remove_handle(multi.get(), easy);
     running.clear();
+    failed.clear();
   }
 
   std::unique_ptr<CURL, EasyDeleter> take_easy() {
@@ -68,7 +77,13 @@ struct HttpClient::Impl {
   int start(const HttpCall& call) {
     Transfer t;
     t.ticket = next_ticket++;
-    t.easy = take_easy();
+    t.easy = multi ? take_easy() : nullptr;
+    if (!t.easy) {
+      HttpResult r;
+      r.error = "libcurl could not create a handle";
+      failed.emplace_back(t.ticket, std::move(r));
+      return t.ticket;
+    }
     t.request_body = call.body;
     CURL* e = t.easy.get();
     curl_easy_setopt(e, CURLOPT_URL, call.url.c_str());
@@ -78,7 +93,7 @@ struct HttpClient::Impl {
     curl_easy_setopt(e, CURLOPT_TCP_NODELAY, 1L);
     curl_easy_setopt(e, CURLOPT_PROTOCOLS_STR, "http,https");
     curl_easy_setopt(e, CURLOPT_WRITEFUNCTION, collect);
-    curl_easy_setopt(e, CURLOPT_MAXFILESIZE, 4L * 1024 * 1024);
+    curl_easy_setopt(e, CURLOPT_MAXFILESIZE, static_cast<long>(kMaxAnswerBytes));
     curl_slist* h = curl_slist_append(nullptr, "Content-Type: application/json");
     h = curl_slist_append(h, "Expect:");  // no 100-continue round trip
     t.headers.reset(h);
@@ -94,26 +109,31 @@ struct HttpClient::Impl {
     auto [it, inserted] = running.emplace(e, std::move(t));
     // The map node is stable: the write target is its own response_body.
     curl_easy_setopt(e, CURLOPT_WRITEDATA, &it->second.response_body);
-    curl_multi_add_handle(multi, e);
+    curl_multi_add_handle(multi.get(), e);
     return ticket;
   }
 
   std::vector<std::pair<int, HttpResult>> poll(std::chrono::milliseconds timeout) {
     std::vector<std::pair<int, HttpResult>> done;
+    if (!failed.empty()) {
+      done.swap(failed);
+      return done;
+    }
+    if (!multi) return done;
     int still = 0;
-    curl_multi_perform(multi, &still);
+    curl_multi_perform(multi.get(), &still);
     done = collect_done();
     if (!done.empty() || running.empty()) return done;
     int numfds = 0;
-    curl_multi_poll(multi, nullptr, 0, static_cast<int>(std::max<long long>(0, timeout.count())), &numfds);
-    curl_multi_perform(multi, &still);
+    curl_multi_poll(multi.get(), nullptr, 0, static_cast<int>(std::max<long long>(0, timeout.count())), &numfds);
+    curl_multi_perform(multi.get(), &still);
     return collect_done();
   }
 
   std::vector<std::pair<int, HttpResult>> collect_done() {
     std::vector<std::pair<int, HttpResult>> done;
     int left = 0;
-    while (CURLMsg* msg = curl_multi_info_read(multi, &left)) {
+    while (CURLMsg* msg = curl_multi_info_read(multi.get(), &left)) {
       if (msg->msg != CURLMSG_DONE) continue;
       CURL* e = msg->easy_handle;
       CURLcode code = msg->data.result;
@@ -128,7 +148,7 @@ struct HttpClient::Impl {
         r.error = curl_easy_strerror(code);
       }
       int ticket = it->second.ticket;
-      curl_multi_remove_handle(multi, e);
+      curl_multi_remove_handle(multi.get(), e);
       idle.push_back(std::move(it->second.easy));
       running.erase(it);
       done.emplace_back(ticket, std::move(r));
@@ -144,7 +164,7 @@ int HttpClient::start(const HttpCall& call) { return impl_->start(call); }
 std::vector<std::pair<int, HttpResult>> HttpClient::poll(std::chrono::milliseconds timeout) {
   return impl_->poll(timeout);
 }
-int HttpClient::active() const { return static_cast<int>(impl_->running.size()); }
+int HttpClient::active() const { return static_cast<int>(impl_->running.size() + impl_->failed.size()); }
 void HttpClient::cancel_all() { impl_->cancel_all(); }
 
 HttpResult HttpClient::perform(const HttpCall& call) {
@@ -155,4 +175,4 @@ HttpResult HttpClient::perform(const HttpCall& call) {
   }
 }
 
-}  // namespace veneerd::detail
+}  // namespace veneerd::hw::detail

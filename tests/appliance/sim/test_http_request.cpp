@@ -1,7 +1,7 @@
 // The emulator's HTTP/1.1 request parser: framing, limits, malformed input.
 #include <gtest/gtest.h>
 
-#include "veneerd/devices/http_request.hpp"
+#include "veneerd/sim/http_request.hpp"
 
 using veneerd::HttpRequestParser;
 using State = HttpRequestParser::State;

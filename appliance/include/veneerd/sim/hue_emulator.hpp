@@ -28,7 +28,7 @@
 #include <vector>
 
 #include "veneer/util/expected.hpp"
-#include "veneerd/devices/http_request.hpp"
+#include "veneerd/sim/http_request.hpp"
 #include "veneerd/devices/lamps.hpp"
 
 namespace veneerd {

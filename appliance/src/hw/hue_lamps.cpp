@@ -1,5 +1,5 @@
 // Lamps backend "hue" (see hue_lamps.hpp for the bridge facts it is built around).
-#include "veneerd/devices/hue_lamps.hpp"
+#include "veneerd/hw/hue_lamps.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -11,7 +11,7 @@
 #include "http_client.hpp"
 #include "veneer/util/log.hpp"
 
-namespace veneerd {
+namespace veneerd::hw {
 
 using Clock = std::chrono::steady_clock;
 using json = nlohmann::json;
@@ -532,4 +532,4 @@ HueLampsStats HueLamps::stats() const {
   return impl_->stats;
 }
 
-}  // namespace veneerd
+}  // namespace veneerd::hw

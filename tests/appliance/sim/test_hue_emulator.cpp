@@ -12,7 +12,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "veneerd/devices/hue_emulator.hpp"
+#include "veneerd/sim/hue_emulator.hpp"
 
 using json = nlohmann::json;
 using namespace std::chrono_literals;

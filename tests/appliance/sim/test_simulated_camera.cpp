@@ -6,7 +6,7 @@
 
 #include "veneer/io/raw.hpp"
 #include "veneer/sim/simulator.hpp"
-#include "veneerd/devices/simulated_rig.hpp"
+#include "veneerd/sim/simulated_rig.hpp"
 
 using veneerd::SimulatedRig;
 using veneerd::SimulatedRigOptions;
@@ -63,7 +63,7 @@ class Camera : public ::testing::Test {
   }
 
   std::unique_ptr<SimulatedRig> rig;
-  std::unique_ptr<veneerd::HueLamps> lamps;
+  std::unique_ptr<veneerd::hw::HueLamps> lamps;
   std::unique_ptr<veneerd::SimulatedCamera> camera;
 };
 
@@ -270,6 +270,7 @@ TEST_F(Camera, BridgeDownIsAClearCaptureError) {
 
 TEST(SimulatedRig, DevicesThroughTheRegistry) {
   veneerd::register_simulated_devices();
+  veneerd::register_hardware_devices();  // the lamps: the real "hue" back-end on the emulator
   auto r = SimulatedRig::start(small_rig());
   ASSERT_TRUE(r.ok()) << r.message();
   auto devices = (*r)->devices_config();
