@@ -206,9 +206,27 @@ TEST(Faults, ClientVanishingDuringADownloadHarmsNobody) {
     if (closer.joinable()) closer.join();
     EXPECT_FALSE(s);
     EXPECT_FALSE(fs::exists(out)) << "no half set at the destination";
-    for (const auto& entry : fs::directory_iterator(rig.dir)) {
-      EXPECT_EQ(entry.path().filename().string().find(".half.pull-"), std::string::npos) << "temporary left";
-    }
+    // What arrived whole waits in the pull's staging folder for a resumed
+    // pull; nothing half-written is kept there.
+    const fs::path staging = rig.dir / (".half.pull-" + id);
+    ASSERT_TRUE(fs::is_directory(staging)) << "the files that arrived are kept for resuming";
+    for (const auto& entry : fs::recursive_directory_iterator(staging))
+      EXPECT_NE(entry.path().extension(), ".part") << entry.path() << ": a partial file kept";
+  }
+  {  // the same pull again resumes: the files already there are not sent again
+    std::vector<std::string> stages;
+    veneer::Progress progress;
+    progress.on_progress = [&](double, const std::string& stage) { stages.push_back(stage); };
+    const fs::path out = rig.dir / "half";
+    ASSERT_TRUE(rig.client->pull(id, out, true, false, progress));
+    bool resumed = false;
+    for (const auto& st : stages) resumed = resumed || st.rfind("resuming: ", 0) == 0;
+    EXPECT_TRUE(resumed) << "the second pull did not resume";
+    EXPECT_FALSE(fs::exists(rig.dir / (".half.pull-" + id))) << "the staging folder is left after the pull";
+    auto set = veneer::read_set(out);
+    ASSERT_TRUE(set) << set.message();
+    EXPECT_EQ(set->images.size(), 7u);
+    EXPECT_TRUE(set->truth.present());
   }
   // The rig keeps serving: a full download by the first client works.
   fs::path out = rig.dir / "whole";

@@ -559,11 +559,15 @@ Expected<Client::Fetched> Client::fetch_into(const std::string& set_id, bool pre
   auto dl = std::make_shared<Impl::Download>();
   dl->temp = dir;
   dl->progress = &progress;
-  auto abandon = [&] {
+  auto abandon = [&] {  // the file being written goes; those written whole stay (a pull resumes from them)
     std::lock_guard lock(d.mutex);
     dl->abandoned = true;
     if (dl->fd >= 0) ::close(dl->fd);
     dl->fd = -1;
+    if (!dl->current.empty()) {
+      std::error_code ec;
+      fs::remove(dl->temp / (dl->current + ".part"), ec);
+    }
   };
 
   const uint64_t id = d.next_id++;
