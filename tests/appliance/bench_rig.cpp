@@ -15,13 +15,17 @@
 //  4. the real veneerd binary's peak resident memory over a pair of captures
 //     (destination, source) at the camera's full resolution (5600x3750), next
 //     to the frames' own bytes.
-//     `bench_rig --capture-peak` runs this section alone.
+//     `bench_rig --capture-peak` runs this section alone. Then the first
+//     set's bytes by kind (the camera twin's JPEG + lossless DNG per frame)
+//     and the time to pull it on loopback: live first (the preview set in
+//     place, then the whole) against a plain pull.
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <map>
 #include <mutex>
 #include <thread>
 #include <vector>
@@ -270,6 +274,55 @@ static int bench_capture_peak(const fs::path& dir) {
   std::printf("| peer: one set's %d frames as the camera delivers them (16-bit) | %.0f |\n", frames, frames * frame16);
   std::printf("| peer: one set's %d frames as float (what holding them all costs) | %.0f |\n", frames, frames * frame16 * 2);
   std::printf("| budget of the issue (a 4 GiB board) | 4096 |\n");
+
+  // The first set's bytes by kind, and pulling it on loopback: live first
+  // (the preview set in place, then the whole) against a plain pull, both
+  // without truth/ (the simulator's ground truth, not a camera's files).
+  auto sets = c.list_sets();
+  if (!sets || sets->empty()) return 1;
+  const std::string first = sets->front().id;
+  std::map<std::string, uint64_t> bytes;
+  for (const auto& e : fs::recursive_directory_iterator(store / first)) {
+    if (!e.is_regular_file()) continue;
+    const std::string rel = fs::relative(e.path(), store / first).generic_string();
+    const std::string kind = rel.rfind("truth/", 0) == 0 ? "truth/ (simulator only)" : e.path().extension().string();
+    bytes[kind] += e.file_size();
+  }
+  std::printf("\n### One stored %s set (%s), bytes by kind\n\n| files | MB |\n|---|---|\n", size.c_str(), first.c_str());
+  uint64_t camera = 0;
+  for (const auto& [kind, b] : bytes) {
+    std::printf("| %s | %.1f |\n", kind.c_str(), b / 1e6);
+    if (kind != "truth/ (simulator only)") camera += b;
+  }
+  std::printf("| **the camera's files and set.json (what a pull without truth moves)** | **%.1f** |\n", camera / 1e6);
+
+  double preview_s = -1, live_whole_s = -1, plain_s = -1;
+  uint64_t preview_bytes = 0;
+  {
+    veneer::rig::PullOptions o;
+    o.include_truth = false;
+    o.live_first = true;
+    const fs::path out = dir / "pulled-live";
+    const auto t0 = Clock::now();
+    o.on_preview = [&](const fs::path& f) {
+      preview_s = secs(Clock::now() - t0);
+      for (const auto& e : fs::directory_iterator(f)) preview_bytes += e.file_size();
+    };
+    if (auto s = c.pull_set(first, out, o); !s) {
+      std::fprintf(stderr, "bench_rig: live-first pull: %s\n", s.message().c_str());
+      return 1;
+    }
+    live_whole_s = secs(Clock::now() - t0);
+  }
+  {
+    const auto t0 = Clock::now();
+    if (auto s = c.pull(first, dir / "pulled-plain", false); !s) return 1;
+    plain_s = secs(Clock::now() - t0);
+  }
+  std::printf("\n### Pulling it on loopback (no truth/)\n\n| step | s | MB |\n|---|---|---|\n");
+  std::printf("| **live first: the preview set in place (on_preview)** | **%.2f** | %.2f |\n", preview_s, preview_bytes / 1e6);
+  std::printf("| live first: the whole set in place (exchanged with the preview) | %.2f | %.1f |\n", live_whole_s, camera / 1e6);
+  std::printf("| peer: a plain pull of the whole set | %.2f | %.1f |\n", plain_s, camera / 1e6);
   client->reset();
   d->stop(SIGTERM);
   return 0;

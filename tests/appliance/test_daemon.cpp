@@ -129,7 +129,7 @@ TEST(Daemon, TwoPressesStoreTwoSetsThatPullWithTheRenderedPixelsAndTrueNormals) 
     auto ring = veneer::sim::thesis_rig();
     for (int i = 0; i < 7; ++i) {
       cv::Mat expect = veneer::sim::render(**scene, {ring[i]}, o);
-      // The photos are the camera's developed JPEGs (8-bit sRGB, quality 92),
+      // The photos are the camera's developed JPEGs (8-bit sRGB, quality 95),
       // read back linear: the render within JPEG's loss; the exact pixels
       // are in the RAW files (below, and CameraFiles tests).
       const double rel = cv::norm(set->images[i], expect, cv::NORM_L1) / cv::norm(expect, cv::NORM_L1);

@@ -1,7 +1,7 @@
 #pragma once
 // The files a camera set to RAW+JPEG delivers per shot, made from a linear
 // photo: the developed JPEG (what the camera's own processing would write:
-// white balanced as shot, the sRGB transfer curve, 8-bit, quality ~92) and
+// white balanced as shot, the sRGB transfer curve, 8-bit, quality 95, a "fine" JPEG) and
 // the DNG (dng.hpp: a losslessly compressed mosaic with an embedded reduced
 // JPEG preview). The rig's camera twin stores these per frame and `veneer
 // simulate --dng` writes the same, so sets look like a real camera's: at
@@ -24,10 +24,10 @@ namespace veneer {
 cv::Mat develop_srgb8(const cv::Mat& linear_bgr);
 // develop_srgb8 encoded as a baseline JPEG (libjpeg through OpenCV's
 // imencode, 4:2:0), quality 1..100.
-Expected<std::string> encode_developed_jpeg(const cv::Mat& linear_bgr, int quality = 92);
+Expected<std::string> encode_developed_jpeg(const cv::Mat& linear_bgr, int quality = 95);
 
 struct CameraFileOptions {
-  int jpeg_quality = 92;  // the developed JPEG's quality, 1..100
+  int jpeg_quality = 95;  // the developed JPEG's quality, 1..100 (a camera's "fine")
   bool raw = true;        // also the DNG
   DngOptions dng;         // its levels, compression and preview
   Status check() const;
