@@ -2,9 +2,11 @@
 // layouts that are only read: DiLiGenT and the thesis's PPM/PFM folders.
 //
 // veneer-set/1 (DESIGN.md, "Image set"):
-//   set.json, light_NN.png (16-bit linear RGB, NN = 0-based light index),
-//   ambient.png (optional), mask.png (optional, 8-bit), truth/ (simulated sets:
-//   normals.pfm xyz, mask.png 8-bit, albedo.png 16-bit, depth.pfm).
+//   set.json, light_NN.png (16-bit linear RGB, NN = 0-based light index) or
+//   the camera's light_NN.jpg (8-bit sRGB) with its RAW file light_NN.dng,
+//   ambient.* (optional), mask.png (optional, 8-bit), truth/ (simulated sets:
+//   normals.pfm xyz, mask.png 8-bit, albedo.png 16-bit, depth.pfm). A preview
+//   set (a reduced copy pulled first for a live view) says "preview_of".
 //
 // DiLiGenT (detected by filenames.txt):
 //   filenames.txt          one image file per line, in light order
