@@ -43,7 +43,7 @@ int main() {
   }
   std::printf("\n### One frame of the camera twin: files now (JPEG + lossless DNG) against before (16-bit PNG + "
               "uncompressed DNG)\n\n");
-  std::printf("| size | file | MB | encode s | LibRaw decode s (DCB, 1 thread of the pool) |\n|---|---|---|---|---|\n");
+  std::printf("| size | file | MB | encode s | LibRaw decode s (DCB) |\n|---|---|---|---|---|\n");
   for (cv::Size size : sizes) {
     sim::RenderOptions o;
     o.size = size;
