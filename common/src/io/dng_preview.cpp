@@ -59,9 +59,9 @@ class Tiff {
       const char* e = table.data() + 12 * i;
       const unsigned tag = u16(e), type = u16(e + 2);
       const uint32_t count = u32(e + 4);
-      auto value = [&](uint32_t k) -> uint32_t {  // SHORT or LONG value k (inline or out of line)
+      auto value = [&](uint32_t k) -> uint32_t {  // SHORT, LONG or IFD (13) value k, inline or out of line
         const unsigned width = type == 3 ? 2 : 4;
-        if (type != 3 && type != 4) return 0;
+        if (type != 3 && type != 4 && type != 13) return 0;
         if (static_cast<uint64_t>(count) * width <= 4) return width == 2 ? u16(e + 8 + 2 * k) : u32(e + 8);
         std::string v;
         if (!read_(static_cast<uint64_t>(u32(e + 8)) + static_cast<uint64_t>(k) * width, width, v)) return 0;
