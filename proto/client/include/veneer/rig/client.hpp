@@ -205,7 +205,10 @@ class Client {
   // the missing ones (a rig that predates resuming sends all). A rig that
   // does not serve previews (an older veneerd) gets a plain full pull
   // (on_preview is not called). `folder` may hold this set's preview (it is
-  // completed); anything else there is refused unless overwrite.
+  // announced at once and completed) or the set itself (announced, nothing
+  // fetched); anything else there is refused unless overwrite. read_set reads
+  // the preview set like any set (photos_from "jpeg", set.preview_of says
+  // what it previews; the intrinsics are scaled to its size).
   Status pull_set(const std::string& set_id, const std::filesystem::path& folder, const PullOptions& options = {},
                   const Progress& progress = {});
   // Only the preview set, atomically into `folder` (an error when the rig
