@@ -309,7 +309,12 @@ veneer::Status SetWriter::add_frame(int k, const cv::Mat& photo, const veneer::I
   if (size_.area() == 0) {
     size_ = photo.size();
     // The space for the whole set, checked before its first file (the trash gives way first).
-    uint64_t need = Store::estimate_bytes(size_, photos, truth_) + raw.bytes.size() * static_cast<uint64_t>(photos);
+    // With the camera's files the first frame's bytes tell (half as much
+    // again for frames that compress worse); else the PNGs' bound.
+    uint64_t need = developed.bytes.empty()
+                        ? Store::estimate_bytes(size_, photos, truth_) + raw.bytes.size() * static_cast<uint64_t>(photos)
+                        : Store::estimate_bytes(size_, 0, truth_) +
+                              (developed.bytes.size() + raw.bytes.size()) * 3 / 2 * static_cast<uint64_t>(photos);
     if (store_.free_bytes() < need) store_.purge_trash(need);
     const uint64_t free = store_.free_bytes();
     if (free < need) {
