@@ -81,7 +81,7 @@ bool needs_control(const Body& body) {
 const char* request_name(const Body& body) {
   static const char* names[] = {"hello", "status", "list_sets", "get_manifest", "fetch_images", "delete_set", "capture",
                                 "cancel_capture", "set_lamps", "start_live_view", "stop_live_view", "press_button",
-                                "move_hand_lamp", "restore_set"};
+                                "move_hand_lamp", "restore_set", "fetch_preview"};
   return names[body.index()];
 }
 
@@ -112,7 +112,29 @@ veneer::Expected<Request> decode(const pb::ClientMessage& m) {
       if (chunk < kMinChunkBytes || chunk > kMaxChunkBytes) {
         return make_error("fetch_images.chunk_size: " + std::to_string(f.chunk_size()) + " is outside 1 KiB..4 MiB");
       }
-      r.body = FetchImagesReq{f.set_id(), f.include_truth(), chunk};
+      if (static_cast<size_t>(f.skip_files_size()) > kMaxSkipFiles) {
+        return make_error("fetch_images.skip_files: " + std::to_string(f.skip_files_size()) +
+                          " files is more than the limit of " + std::to_string(kMaxSkipFiles));
+      }
+      FetchImagesReq req{f.set_id(), f.include_truth(), chunk, {}};
+      for (const auto& name : f.skip_files()) {
+        if (name.empty() || name.size() > kMaxSkipFileChars || !printable(name)) {
+          return make_error("fetch_images.skip_files: each must be a file name of 1.." +
+                            std::to_string(kMaxSkipFileChars) + " printable characters");
+        }
+        req.skip_files.push_back(name);
+      }
+      r.body = std::move(req);
+      return r;
+    }
+    case pb::ClientMessage::kFetchPreview: {
+      const auto& f = m.fetch_preview();
+      if (auto s = check_set_id("fetch_preview.set_id", f.set_id()); !s) return s.error();
+      size_t chunk = f.chunk_size() == 0 ? kDefaultChunkBytes : f.chunk_size();
+      if (chunk < kMinChunkBytes || chunk > kMaxChunkBytes) {
+        return make_error("fetch_preview.chunk_size: " + std::to_string(f.chunk_size()) + " is outside 1 KiB..4 MiB");
+      }
+      r.body = FetchPreviewReq{f.set_id(), chunk};
       return r;
     }
     case pb::ClientMessage::kDeleteSet:

@@ -393,8 +393,9 @@ void Rig::run_capture_job(const std::string& id, CaptureRequest req) {
   std::unique_ptr<SetWriter> writer;
   if (auto w = store_.begin(id, options_.simulated); w) {
     writer = std::move(*w);
-    hooks.on_frame = [&writer](int k, int shots, const cv::Mat& photo, const veneer::ImageSet::RawFile& raw) {
-      return writer->add_frame(k, photo, raw, shots);
+    hooks.on_frame = [&writer](int k, int shots, const cv::Mat& photo, const veneer::ImageSet::RawFile& raw,
+                               const veneer::ImageSet::RawFile& developed) {
+      return writer->add_frame(k, photo, raw, shots, developed);
     };
   } else {
     result = w.error();

@@ -1,6 +1,7 @@
 #include "veneerd/server.hpp"
 
 #include <array>
+#include <cstring>
 #include <chrono>
 #include <deque>
 #include <fstream>
@@ -20,6 +21,7 @@
 #include "veneer/util/log.hpp"
 #include "veneer/v1/rig.pb.h"
 #include "veneerd/api.hpp"
+#include "veneerd/preview.hpp"
 
 namespace veneerd {
 
@@ -487,40 +489,61 @@ class Session : public std::enable_shared_from_this<Session> {
       respond(id, veneer::make_error("fetch_images: a download is already running on this connection"));
       return;
     }
-    auto files = srv_.rig.store().files(f.set_id, f.include_truth);
+    std::vector<std::string> skipped;
+    auto files = set_files(srv_.rig.store(), f.set_id, f.include_truth, f.skip_files, &skipped);
     if (!files) {
       respond(id, files.error());
       return;
     }
+    start_download("fetch_images", id, f.set_id, f.chunk_size, std::move(*files), skipped);
+  }
+
+  void on(uint64_t id, api::FetchPreviewReq& f) {
+    if (fetch_) {
+      respond(id, veneer::make_error("fetch_preview: a download is already running on this connection"));
+      return;
+    }
+    auto files = preview_files(srv_.rig.store(), f.set_id);
+    if (!files) {
+      respond(id, files.error());
+      return;
+    }
+    start_download("fetch_preview", id, f.set_id, f.chunk_size, std::move(*files), {});
+  }
+
+  void start_download(const char* what, uint64_t id, const std::string& set_id, size_t chunk,
+                      std::vector<ServedFile> files, const std::vector<std::string>& skipped) {
     // Open every file now: a set deleted mid-download still downloads whole.
     auto fetch = std::make_unique<Fetch>();
     fetch->request_id = id;
-    fetch->set_id = f.set_id;
-    fetch->chunk = f.chunk_size;
-    fs::path folder = srv_.rig.store().folder(f.set_id);
+    fetch->set_id = set_id;
+    fetch->chunk = chunk;
     uint64_t total = 0;
-    for (const auto& rel : *files) {
-      auto in = std::make_unique<std::ifstream>(folder / rel, std::ios::binary);
-      std::error_code ec;
-      uint64_t size = fs::file_size(folder / rel, ec);
-      if (!*in || ec) {
-        respond(id, veneer::make_error("fetch_images: cannot read " + f.set_id + "/" + rel));
-        return;
+    for (auto& file : files) {
+      FetchFile f{file.rel, nullptr, file.size, std::make_shared<std::string>(std::move(file.bytes))};
+      if (!file.source.empty()) {
+        f.in = std::make_unique<std::ifstream>(file.source, std::ios::binary);
+        if (*f.in) f.in->seekg(static_cast<std::streamoff>(file.offset));
+        if (!*f.in) {
+          respond(id, veneer::make_error(std::string(what) + ": cannot read " + set_id + "/" + file.rel));
+          return;
+        }
       }
-      fetch->files.push_back({rel, std::move(in), size});
-      total += size;
+      total += file.size;
+      fetch->files.push_back(std::move(f));
     }
     pb::RigMessage m;
     auto* r = m.mutable_response();
     r->set_id(id);
     r->set_ok(true);
     auto* started = r->mutable_fetch();
-    started->set_set_id(f.set_id);
-    for (const auto& rel : *files) started->add_files(rel);
+    started->set_set_id(set_id);
+    for (const auto& f : fetch->files) started->add_files(f.rel);
+    for (const auto& s : skipped) started->add_skipped_files(s);
     started->set_total_bytes(total);
     send(m);
+    VLOG_INFO("Server", "{}: {} of {} ({} files, {} bytes) started", peer_, what, set_id, fetch->files.size(), total);
     fetch_ = std::move(fetch);
-    VLOG_INFO("Server", "{}: download of {} ({} files, {} bytes) started", peer_, f.set_id, files->size(), total);
     pump_fetch();
   }
 
@@ -538,10 +561,15 @@ class Session : public std::enable_shared_from_this<Session> {
       h.last = f.offset + want >= file.size;
       h.end_of_set = h.last && f.index + 1 == f.files.size();
       auto bytes = std::make_shared<std::string>();
-      std::ifstream& in = *file.in;
-      bool read_ok = api::encode_chunk(h, want, [&in](char* dst, size_t n) {
-        in.read(dst, static_cast<std::streamsize>(n));
-        return static_cast<size_t>(in.gcount()) == n;
+      const uint64_t at = f.offset;
+      bool read_ok = api::encode_chunk(h, want, [&file, at](char* dst, size_t n) {
+        if (!file.in) {  // made for the download
+          if (at + n > file.made->size()) return false;
+          std::memcpy(dst, file.made->data() + at, n);
+          return true;
+        }
+        file.in->read(dst, static_cast<std::streamsize>(n));
+        return static_cast<size_t>(file.in->gcount()) == n;
       }, *bytes);
       if (!read_ok) {
         VLOG_ERROR("Server", "{}: reading {}/{} failed mid-download", peer_, f.set_id, file.rel);
@@ -618,8 +646,9 @@ class Session : public std::enable_shared_from_this<Session> {
 
   struct FetchFile {
     std::string rel;
-    std::unique_ptr<std::ifstream> in;
+    std::unique_ptr<std::ifstream> in;  // positioned at the range's start; null: `made` is the content
     uint64_t size = 0;
+    std::shared_ptr<std::string> made;
   };
   struct Fetch {
     uint64_t request_id = 0;

@@ -71,6 +71,8 @@ TEST(ApiContract, LimitsTableMatchesTheCode) {
       {"veneerd::api::kMinChunkBytes", static_cast<double>(api::kMinChunkBytes)},
       {"veneerd::api::kMaxChunkBytes", static_cast<double>(api::kMaxChunkBytes)},
       {"veneerd::api::kDefaultChunkBytes", static_cast<double>(api::kDefaultChunkBytes)},
+      {"veneerd::api::kMaxSkipFiles", static_cast<double>(api::kMaxSkipFiles)},
+      {"veneerd::api::kMaxSkipFileChars", static_cast<double>(api::kMaxSkipFileChars)},
       {"veneerd::api::kMinLiveFps", api::kMinLiveFps},
       {"veneerd::api::kMaxLiveFps", api::kMaxLiveFps},
       {"veneerd::api::kDefaultLiveFps", api::kDefaultLiveFps},

@@ -129,30 +129,26 @@ TEST(Daemon, TwoPressesStoreTwoSetsThatPullWithTheRenderedPixelsAndTrueNormals) 
     auto ring = veneer::sim::thesis_rig();
     for (int i = 0; i < 7; ++i) {
       cv::Mat expect = veneer::sim::render(**scene, {ring[i]}, o);
-      // Through the same 16-bit quantisation as the set's PNGs.
-      cv::Mat e16, g16;
-      expect.convertTo(e16, CV_16UC3, 65535.0);
-      set->images[i].convertTo(g16, CV_16UC3, 65535.0);
-      cv::Mat diff;
-      cv::absdiff(e16, g16, diff);
-      double worst = 0;
-      cv::minMaxLoc(diff.reshape(1), nullptr, &worst);
-      EXPECT_LE(worst, 1.0) << scenes[s] << " lamp " << i << ": pixels differ from the render by " << worst << " LSB";
+      // The photos are the camera's developed JPEGs (8-bit sRGB, quality 95),
+      // read back linear: the render within JPEG's loss; the exact pixels
+      // are in the RAW files (below, and CameraFiles tests).
+      const double rel = cv::norm(set->images[i], expect, cv::NORM_L1) / cv::norm(expect, cv::NORM_L1);
+      EXPECT_LT(rel, 0.03) << scenes[s] << " lamp " << i << ": the photo differs from the render by " << rel;
     }
   }
 
   // Photometric stereo (the ps module behind `veneer normals`) on the pulled
-  // destination, from its photos (within 3 degrees of the truth) and read as
-  // the viewer reads it by default, from the camera's RAW files (within 5:
-  // the 256x170 mosaic's demosaicing blurs the small bull's edges, so its
-  // median error measured 4.0 degrees over the bull alone -- 3.0 while the
-  // truth still counted its flat plinth -- against the photos' 0.4).
+  // destination, from its photos and read as the viewer reads it by default,
+  // from the camera's RAW files, each within 6 degrees: the 256x170 mosaic's
+  // demosaicing blurs the small bull's edges (median 4.0 degrees over the
+  // bull alone), and so do the camera's JPEGs (8-bit, chroma at half
+  // resolution: median 4.8; the 16-bit PNGs the rig stored before gave 0.4).
   for (bool raw : {false, true}) {
     veneer::ReadOptions read;
     read.photos = raw ? veneer::PhotoSource::automatic : veneer::PhotoSource::developed;
     auto pulled = veneer::read_set(dir / "pulled-0", read);
     ASSERT_TRUE(pulled) << pulled.message();
-    EXPECT_EQ(pulled->photos_from, raw ? "raw" : "png");
+    EXPECT_EQ(pulled->photos_from, raw ? "raw" : "jpeg");
     auto ps = veneer::ps::photometric_stereo(*pulled, pulled->truth.mask);
     ASSERT_TRUE(ps) << ps.message();
     const cv::Mat* n = &ps->normals;
@@ -166,7 +162,7 @@ TEST(Daemon, TwoPressesStoreTwoSetsThatPullWithTheRenderedPixelsAndTrueNormals) 
     }
     ASSERT_GT(err.size(), 500u);
     std::nth_element(err.begin(), err.begin() + err.size() / 2, err.end());
-    EXPECT_LT(err[err.size() / 2], raw ? 5.0 : 3.0) << "median angular error of the recovered normals, "
+    EXPECT_LT(err[err.size() / 2], raw ? 5.0 : 6.0) << "median angular error of the recovered normals, "
                                                     << (raw ? "RAW" : "photos");
   }
   fs::remove_all(dir);

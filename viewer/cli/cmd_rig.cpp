@@ -150,6 +150,13 @@ VENEER_COMMAND(rig) {
   pull->add_option("--out", *out, "folder to create")->required();
   pull->add_flag("--no-truth", *no_truth, "leave out truth/ of simulated sets");
   pull->add_flag("--force", *force, "replace --out if it exists");
+  auto live_first = std::make_shared<bool>(false);
+  auto preview_only = std::make_shared<bool>(false);
+  pull->add_flag("--live-first", *live_first,
+                 "first the preview set (a reduced JPEG per lamp, set.json marked preview_of; its folder is printed "
+                 "as \"preview: <folder>\" once in place), then the full files, which replace it in place "
+                 "atomically");
+  pull->add_flag("--preview", *preview_only, "only the preview set (see --live-first)");
 
   auto* del = rig_cmd->add_subcommand("delete", "delete a stored set");
   auto del_id = std::make_shared<std::string>();
@@ -304,7 +311,18 @@ VENEER_COMMAND(rig) {
       ProgressBar bar("pull " + *set_id);
       Progress progress;
       progress.on_progress = [&bar](double f, const std::string& stage) { bar.update(f, stage); };
-      if (auto s = client.pull(*set_id, *out, !*no_truth, *force, progress); !s) return fail("pull", s.message());
+      if (*preview_only) {
+        if (auto s = client.pull_preview(*set_id, *out, *force, progress); !s) return fail("pull", s.message());
+        bar.done();
+        std::cout << *out << "\n";
+        return 0;
+      }
+      rig::PullOptions o;
+      o.include_truth = !*no_truth;
+      o.overwrite = *force;
+      o.live_first = *live_first;
+      o.on_preview = [](const std::filesystem::path& f) { std::cout << "preview: " << f.string() << std::endl; };
+      if (auto s = client.pull_set(*set_id, *out, o, progress); !s) return fail("pull", s.message());
       bar.done();
       std::cout << *out << "\n";
       return 0;

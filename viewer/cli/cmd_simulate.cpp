@@ -12,7 +12,7 @@
 
 #include "command.hpp"
 #include "output.hpp"
-#include "veneer/io/dng.hpp"
+#include "veneer/io/camera_files.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
 #include "veneer/sim/motion.hpp"
@@ -111,8 +111,10 @@ int run_simulate(const SimulateArgs& a) {
   auto set = veneer::sim::simulate_set(a.scene, o, *role, progress);
   if (!set) return set.message().rfind("unknown scene", 0) == 0 ? report.usage(set.message()) : report.fail(set.message());
   if (a.dng) {
-    bar.update(0.82, "DNG files");
-    if (auto st = veneer::add_dng_raw_files(*set); !st) return report.fail(st.message());
+    // The rig's camera twin's files: the developed JPEG as the photo and the
+    // lossless DNG (with its embedded preview) beside it.
+    bar.update(0.82, "camera files (JPEG + DNG)");
+    if (auto st = veneer::add_camera_files(*set); !st) return report.fail(st.message());
   }
   bar.update(0.85, "writing " + a.out);
   if (auto st = veneer::write_set(*set, a.out, a.overwrite); !st) return report.fail(st.message());
@@ -164,8 +166,10 @@ VENEER_COMMAND(simulate) {
                 "creases, a 1 px optical low-pass filter, truth over the same footprint (what a RAW file's "
                 "demosaicing needs; default: point-sampled)");
   cmd->add_flag("--dng", args->dng,
-                "also write each photo as a camera RAW file (light_NN.dng: RGGB mosaic, 14-bit, as-shot white "
-                "balance), named in set.json, so the set is read through the RAW path");
+                "write each photo as a camera set to RAW+JPEG delivers it, as the simulated rig does: the developed "
+                "photo light_NN.jpg (sRGB, 8-bit) and the RAW file light_NN.dng (RGGB mosaic, 14-bit, as-shot white "
+                "balance, lossless JPEG compressed, a 1/4-size preview embedded), both named in set.json; the set "
+                "is read through the RAW path");
   cmd->add_option("--motion", args->motion,
                   "render the source moving instead of a set: the total motion over the frames, comma-separated, "
                   "e.g. shift=30:0,rotate=5,scale=1.05,turn=3,lamp=sweep (shift in image pixels, rotate and turn "

@@ -12,6 +12,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "veneer/sim/motion.hpp"
+#include "veneer/io/camera_files.hpp"
 #include "veneer/io/dng.hpp"
 
 #include "veneer/util/log.hpp"
@@ -137,6 +138,10 @@ veneer::Expected<SimulatedCameraOptions> SimulatedCameraOptions::from_json(const
       return veneer::make_error("simulated camera: 'preview_render' must be \"fast\" or \"full\"");
     o.preview_full_render = v.get<std::string>() == "full";
   }
+  if (s.contains("jpeg")) {
+    if (!s["jpeg"].is_boolean()) return veneer::make_error("simulated camera: 'jpeg' must be true or false");
+    o.jpeg = s["jpeg"].get<bool>();
+  }
   if (s.contains("raw")) {
     if (!s["raw"].is_boolean()) return veneer::make_error("simulated camera: 'raw' must be true or false");
     o.raw = s["raw"].get<bool>();
@@ -159,6 +164,7 @@ json SimulatedCameraOptions::to_json() const {
     j["preview_motion_frames"] = preview_motion_frames;
   }
   j["raw"] = raw;
+  j["jpeg"] = jpeg;
   return j;
 }
 
@@ -385,27 +391,33 @@ veneer::Expected<Still> SimulatedCamera::capture() {
   Still still;
   still.linear = veneer::sim::render(**scene, lit, r);
   if (still.linear.empty()) return veneer::make_error("simulated camera: the simulator rendered nothing for shot " + std::to_string(shot));
-  bool raw = false;
+  bool raw = false, jpeg = false;
   {
     std::lock_guard lock(impl_->mutex);
     impl_->last_lamps = all;
     raw = impl_->options.raw;
+    jpeg = impl_->options.jpeg;
   }
-  if (raw) {
-    // The RAW file a RAW+JPEG body would deliver beside its photo.
-    if (still.linear.cols % 2 || still.linear.rows % 2) {
-      VLOG_WARN(kLog, "simulated shot {}: {}x{} is not whole Bayer cells; no RAW file", shot, still.linear.cols,
-                still.linear.rows);
-    } else {
-      veneer::DngOptions dng;
-      dng.camera_model = "Veneer simulated camera";
-      auto bytes = veneer::encode_dng(still.linear, dng);
-      if (!bytes) return veneer::make_error("simulated camera: shot " + std::to_string(shot) + ": DNG: " + bytes.message());
+  if (raw && (still.linear.cols % 2 || still.linear.rows % 2)) {
+    VLOG_WARN(kLog, "simulated shot {}: {}x{} is not whole Bayer cells; no RAW file", shot, still.linear.cols,
+              still.linear.rows);
+    raw = false;
+  }
+  if (raw || jpeg) {
+    // What a RAW+JPEG body delivers: its developed JPEG and the DNG (a
+    // lossless mosaic with a reduced preview), encoded side by side.
+    veneer::CameraFileOptions files;
+    files.raw = raw;
+    files.dng.camera_model = "Veneer simulated camera";
+    auto encoded = veneer::encode_camera_files(still.linear, files);
+    if (!encoded) return veneer::make_error("simulated camera: shot " + std::to_string(shot) + ": " + encoded.message());
+    if (raw) {
       char name[32];
       std::snprintf(name, sizeof name, "SIM_%04llu.DNG", static_cast<unsigned long long>(shot % 10000));
       still.original_name = name;
-      still.original.assign(bytes->begin(), bytes->end());
+      still.original.assign(encoded->raw.bytes.begin(), encoded->raw.bytes.end());
     }
+    if (jpeg) still.developed_jpeg.assign(encoded->developed.bytes.begin(), encoded->developed.bytes.end());
   }
   VLOG_DEBUG(kLog, "simulated shot {}: scene {}, {} lamp(s) on, gain {:.3f}", shot, scene_name, lit.size(), r.exposure);
   return still;

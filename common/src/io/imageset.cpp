@@ -2,9 +2,11 @@
 // layouts that are only read: DiLiGenT and the thesis's PPM/PFM folders.
 //
 // veneer-set/1 (DESIGN.md, "Image set"):
-//   set.json, light_NN.png (16-bit linear RGB, NN = 0-based light index),
-//   ambient.png (optional), mask.png (optional, 8-bit), truth/ (simulated sets:
-//   normals.pfm xyz, mask.png 8-bit, albedo.png 16-bit, depth.pfm).
+//   set.json, light_NN.png (16-bit linear RGB, NN = 0-based light index) or
+//   the camera's light_NN.jpg (8-bit sRGB) with its RAW file light_NN.dng,
+//   ambient.* (optional), mask.png (optional, 8-bit), truth/ (simulated sets:
+//   normals.pfm xyz, mask.png 8-bit, albedo.png 16-bit, depth.pfm). A preview
+//   set (a reduced copy pulled first for a live view) says "preview_of".
 //
 // DiLiGenT (detected by filenames.txt):
 //   filenames.txt          one image file per line, in light order
@@ -114,10 +116,15 @@ std::string utc_now() {
   return buf;
 }
 
-std::string light_file_name(int index) {
+std::string light_file_name(int index, const std::string& extension = "png") {
   char buf[32];
-  std::snprintf(buf, sizeof buf, "light_%02d.png", index);
-  return buf;
+  std::snprintf(buf, sizeof buf, "light_%02d.", index);
+  return buf + extension;
+}
+
+// The developed file of photo k when the set carries the camera's (else empty).
+const ImageSet::RawFile* developed_file(const ImageSet& set, size_t k) {
+  return k < set.developed.size() && !set.developed[k].bytes.empty() ? &set.developed[k] : nullptr;
 }
 
 std::string raw_file_name(int index, const std::string& extension) {
@@ -296,6 +303,18 @@ Expected<Manifest> parse_manifest_json(const json& root, const fs::path& folder)
     if (file.empty()) continue;
     if (auto e = file_name_problem(file); !e.empty()) return make_error(std::string(key) + ": " + e);
     *dst = file;
+  }
+
+  if (auto p = root.find("preview_of"); p != root.end() && !p->is_null()) {
+    ImageSet::PreviewOf of;
+    auto ps = p->is_object() ? p->find("size") : p->end();
+    if (!p->is_object() || !get_string(*p, "id", of.id, true).empty() || ps == p->end() || !ps->is_array() ||
+        ps->size() != 2 || !(*ps)[0].is_number_integer() || !(*ps)[1].is_number_integer() ||
+        (*ps)[0].get<long long>() <= 0 || (*ps)[1].get<long long>() <= 0 || (*ps)[0].get<long long>() > kMaxSide ||
+        (*ps)[1].get<long long>() > kMaxSide)
+      return make_error("field \"preview_of\" must be {\"id\": the full set's id, \"size\": [width, height]}");
+    of.size = cv::Size(static_cast<int>((*ps)[0].get<long long>()), static_cast<int>((*ps)[1].get<long long>()));
+    set.preview_of = std::move(of);
   }
 
   if (auto warn = root.find("warnings"); warn != root.end() && !warn->is_null()) {
@@ -762,7 +781,10 @@ Status write_contents(const ImageSet& set, const fs::path& dir) {
   cv::parallel_for_(cv::Range(0, static_cast<int>(set.images.size())), [&](const cv::Range& r) {
     for (int i = r.start; i < r.end; ++i) {
       const size_t k = static_cast<size_t>(i);
-      written[k] = write_bytes(dir / light_file_name(set.lights[k].index), encode_png16(set.images[k]));
+      const ImageSet::RawFile* camera = developed_file(set, k);
+      written[k] = camera ? io_detail::write_file_synced(dir / light_file_name(set.lights[k].index, camera->extension),
+                                                         camera->bytes)
+                          : write_bytes(dir / light_file_name(set.lights[k].index), encode_png16(set.images[k]));
     }
   });
   for (const Status& s : written) {
@@ -774,7 +796,11 @@ Status write_contents(const ImageSet& set, const fs::path& dir) {
     if (Status s = io_detail::write_file_synced(f, set.raw[i].bytes); !s) return s;
   }
   if (!set.ambient.empty()) {
-    if (Status s = write_bytes(dir / "ambient.png", encode_png16(set.ambient)); !s) return s;
+    const ImageSet::RawFile& camera = set.ambient_developed;
+    if (Status s = camera.bytes.empty() ? write_bytes(dir / "ambient.png", encode_png16(set.ambient))
+                                        : io_detail::write_file_synced(dir / ("ambient." + camera.extension), camera.bytes);
+        !s)
+      return s;
     if (!set.ambient_raw.bytes.empty()) {
       const fs::path f = dir / ("ambient." + set.ambient_raw.extension);
       if (Status s = io_detail::write_file_synced(f, set.ambient_raw.bytes); !s) return s;
@@ -934,7 +960,8 @@ std::string manifest_json(const ImageSet& set) {
     lights.push_back(jl);
     nlohmann::ordered_json image;
     image["light"] = l.index;
-    image["file"] = light_file_name(l.index);
+    const ImageSet::RawFile* camera = developed_file(set, static_cast<size_t>(l.index));
+    image["file"] = camera ? light_file_name(l.index, camera->extension) : light_file_name(l.index);
     if (static_cast<size_t>(l.index) < set.raw.size() && !set.raw[static_cast<size_t>(l.index)].bytes.empty())
       image["raw"] = raw_file_name(l.index, set.raw[static_cast<size_t>(l.index)].extension);
     images.push_back(image);
@@ -944,13 +971,15 @@ std::string manifest_json(const ImageSet& set) {
   if (set.ambient.empty()) {
     root["ambient"] = nullptr;
   } else {
-    root["ambient"] = "ambient.png";
+    root["ambient"] = "ambient." + (set.ambient_developed.bytes.empty() ? std::string("png") : set.ambient_developed.extension);
   }
   if (!set.ambient.empty() && !set.ambient_raw.bytes.empty())
     root["ambient_raw"] = "ambient." + set.ambient_raw.extension;
   if (!set.mask.empty()) root["mask"] = "mask.png";
   if (!set.warnings.empty()) root["warnings"] = set.warnings;
   if (!set.scene.empty()) root["scene"] = set.scene;
+  if (set.preview_of)
+    root["preview_of"] = {{"id", set.preview_of->id}, {"size", {set.preview_of->size.width, set.preview_of->size.height}}};
   // Non-finite numbers cannot be written as JSON; validate() keeps them out.
   return compact_arrays(root.dump(2, ' ', false, nlohmann::ordered_json::error_handler_t::replace)) + "\n";
 }

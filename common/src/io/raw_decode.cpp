@@ -136,6 +136,21 @@ Expected<cv::Mat> read_raw_linear(const std::filesystem::path& file, const RawOp
   return decode_raw_linear(*bytes, options, file.string());
 }
 
+Expected<std::string> raw_preview_jpeg(std::string_view bytes, const std::string& name) {
+  if (bytes.empty()) return make_error(name + ": empty file");
+  auto raw = std::make_unique<LibRaw>(LIBRAW_OPTIONS_NONE);
+  int r = raw->open_buffer(const_cast<char*>(bytes.data()), bytes.size());
+  if (r != LIBRAW_SUCCESS) return make_error(name + ": not a RAW file LibRaw can read (" + libraw_error(r) + ")");
+  r = raw->unpack_thumb();
+  if (r != LIBRAW_SUCCESS) return make_error(name + ": no preview LibRaw can take (" + libraw_error(r) + ")");
+  int err = 0;
+  std::unique_ptr<libraw_processed_image_t, void (*)(libraw_processed_image_t*)> thumb(
+      raw->dcraw_make_mem_thumb(&err), [](libraw_processed_image_t* i) { LibRaw::dcraw_clear_mem(i); });
+  if (!thumb || err != LIBRAW_SUCCESS) return make_error(name + ": cannot take its preview (" + libraw_error(err) + ")");
+  if (thumb->type != LIBRAW_IMAGE_JPEG) return make_error(name + ": its preview is not a JPEG");
+  return std::string(reinterpret_cast<const char*>(thumb->data), thumb->data_size);
+}
+
 std::string raw_decoder_version() { return LibRaw::version(); }
 
 }  // namespace veneer

@@ -54,6 +54,10 @@ struct SimulatedCameraOptions {
   // white levels, as-shot white balance; veneer/io/dng.hpp), which the set
   // keeps beside its photo and the viewer decodes by default. Config "raw".
   bool raw = true;
+  // Each still also as the camera's developed JPEG (sRGB, 8-bit, quality 95;
+  // veneer/io/camera_files.hpp), which the set stores as the photo instead of
+  // a 16-bit PNG of the render, as a RAW+JPEG body's. Config "jpeg".
+  bool jpeg = true;
   veneer::Status check() const;
   static veneer::Expected<SimulatedCameraOptions> from_json(const nlohmann::json& section);
   nlohmann::json to_json() const;

@@ -88,6 +88,20 @@ struct ImageSet {
   };
   std::vector<RawFile> raw;
   RawFile ambient_raw;
+  // The camera's developed photos (its JPEGs, as a RAW+JPEG body delivers
+  // them) to store instead of encoding images[i] as a 16-bit PNG: write_set
+  // writes developed[i] as light_NN.<extension> and names it in
+  // images[i].file (the ambient's as ambient.<extension>). Empty = PNG.
+  std::vector<RawFile> developed;
+  RawFile ambient_developed;
+  // A preview set (a reduced copy a live view starts from while the full
+  // files are still coming, proto/README.md "Live first"): the set it is a
+  // preview of and that set's size. set.json "preview_of": {"id", "size"}.
+  struct PreviewOf {
+    std::string id;
+    cv::Size size;
+  };
+  std::optional<PreviewOf> preview_of;
 };
 
 // veneer:   set.json + light_NN.png (+ ambient.png, mask.png, truth/)

@@ -37,6 +37,11 @@ bool is_raw_file_name(const std::string& file_name);
 Expected<cv::Mat> decode_raw_linear(std::string_view bytes, const RawOptions& options, const std::string& name);
 Expected<cv::Mat> read_raw_linear(const std::filesystem::path& file, const RawOptions& options = {});
 
+// The JPEG thumbnail/preview LibRaw finds in a RAW file (unpack_thumb, the
+// mosaic left undecoded): its bytes as stored. An error when the file has
+// none or it is not a JPEG.
+Expected<std::string> raw_preview_jpeg(std::string_view bytes, const std::string& name);
+
 // The LibRaw version this build decodes with, e.g. "0.20.2".
 std::string raw_decoder_version();
 
