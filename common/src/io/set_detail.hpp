@@ -1,0 +1,75 @@
+#pragma once
+// What the set readers and the writer share (not part of the public API):
+// limits, checks of directions and file names, the parallel photo decoder
+// and the text-list parser of the DiLiGenT, thesis and RTI layouts.
+#include <filesystem>
+#include <initializer_list>
+#include <string>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "veneer/io/imageset.hpp"
+#include "veneer/io/raw.hpp"
+#include "veneer/util/expected.hpp"
+#include "veneer/util/progress.hpp"
+
+namespace veneer::io_detail {
+
+inline constexpr int kMaxSide = 1 << 16;
+inline constexpr size_t kMaxLights = 1024;
+inline constexpr uintmax_t kMaxManifestBytes = 16u << 20;
+
+std::string fmt_vec(const cv::Vec3d& v);
+std::string size_text(cv::Size s);
+bool finite3(const cv::Vec3d& v);
+// A direction that is finite and of unit length within kUnitTolerance; else why not.
+std::string direction_problem(const cv::Vec3d& d);
+std::string intensity_problem(const cv::Vec3d& v);
+// A file named by a manifest or list must stay inside the set folder.
+std::string file_name_problem(const std::string& name);
+std::string light_file_name(int index);                                   // light_NN.png
+std::string raw_file_name(int index, const std::string& extension);       // light_NN.<extension>
+std::string folder_name(const std::filesystem::path& folder);             // "a/b/" -> "b"
+
+// --- loading pixels ---
+
+// One file to decode into a photo: through LibRaw when `raw`, else by its magic
+// (PNG, JPEG, PFM, PNM).
+struct Frame {
+  std::filesystem::path file;
+  bool raw = false;
+};
+
+// Decodes `frames` in parallel (one task per file, each file read and decoded
+// once) into CV_32FC3; `kinds` gets each file's kind ("raw", "png", ...). The
+// first error wins by list order, so the message does not depend on thread
+// timing. Progress is reported from the worker threads under a lock.
+Status decode_frames(const std::vector<Frame>& frames, const RawOptions& raw_options, const Progress& progress,
+                     const std::string& stage, std::vector<cv::Mat>& out, std::vector<std::string>* kinds = nullptr);
+Status check_size(const std::filesystem::path& file, const cv::Mat& image, cv::Size expected, const std::string& why);
+Status check_same_sizes(const std::vector<std::filesystem::path>& files, const std::vector<cv::Mat>& images);
+// The first existing file among folder/<stem>.<ext> for the given extensions.
+std::filesystem::path find_with_ext(const std::filesystem::path& folder, const std::string& stem,
+                                    std::initializer_list<const char*> exts);
+
+// --- text lists (DiLiGenT, thesis) ---
+
+struct Line {
+  int number;  // 1-based
+  std::string text;
+};
+// Non-empty lines with '#' comments and surrounding blanks removed.
+Expected<std::vector<Line>> read_lines(const std::filesystem::path& file);
+// Parses whitespace-separated numbers (strict: every token must be a number).
+bool parse_numbers(const std::string& text, std::vector<double>& out);
+// "x y z" (and optionally "r g b" when allow_rgb) per line.
+Status parse_light_lines(const std::filesystem::path& file, const std::vector<Line>& lines, bool allow_rgb,
+                         std::vector<Light>& lights);
+
+// --- the readers read_set dispatches to ---
+Expected<ImageSet> read_veneer(const std::filesystem::path& folder, const ReadOptions& options, const Progress& progress);
+Expected<ImageSet> read_diligent(const std::filesystem::path& folder, const ReadOptions& options, const Progress& progress);
+Expected<ImageSet> read_thesis(const std::filesystem::path& folder, const ReadOptions& options, const Progress& progress);
+
+}  // namespace veneer::io_detail
