@@ -123,6 +123,17 @@ Status validate(const ImageSet& set) {
   return Status::success();
 }
 
+const char* format_name(SetFormat format) {
+  switch (format) {
+    case SetFormat::veneer: return kSetFormat;
+    case SetFormat::diligent: return "DiLiGenT";
+    case SetFormat::thesis: return "thesis";
+    case SetFormat::rti: return "RTI .lp";
+    case SetFormat::automatic: break;
+  }
+  return "automatic";
+}
+
 Expected<ImageSet> read_set(const fs::path& folder, const ReadOptions& options, const Progress& progress) {
   if (Status s = options.check(); !s) return make_error(folder.string() + ": " + s.message());
   std::error_code ec;
@@ -134,8 +145,12 @@ Expected<ImageSet> read_set(const fs::path& folder, const ReadOptions& options, 
       format = SetFormat::veneer;
     } else if (fs::exists(folder / "filenames.txt", ec)) {
       format = SetFormat::diligent;
-    } else {
+    } else if (fs::exists(folder / "lights.txt", ec)) {
       format = SetFormat::thesis;
+    } else {
+      auto lp = find_lp_file(folder);
+      if (!lp) return lp.error();
+      format = lp->empty() ? SetFormat::thesis : SetFormat::rti;  // thesis: its reader names what is missing
     }
   }
   Expected<ImageSet> set = make_error("unknown set format");
@@ -143,9 +158,11 @@ Expected<ImageSet> read_set(const fs::path& folder, const ReadOptions& options, 
     case SetFormat::veneer: set = read_veneer(folder, options, progress); break;
     case SetFormat::diligent: set = read_diligent(folder, options, progress); break;
     case SetFormat::thesis: set = read_thesis(folder, options, progress); break;
+    case SetFormat::rti: set = read_rti(folder, options, progress); break;
     case SetFormat::automatic: break;
   }
   if (!set) return set;
+  set->layout = format_name(format);
   if (!options.load_photos && format == SetFormat::veneer) return set;  // no pixels to check
   // A last check of the invariants every reader promises.
   if (Status s = validate(*set); !s) return make_error(folder.string() + ": " + s.message());

@@ -1,5 +1,6 @@
 // The layouts other tools write, read (never written): DiLiGenT and the
-// thesis's PPM/PFM folders (imageset.hpp, SetFormat).
+// thesis's PPM/PFM folders (imageset.hpp, SetFormat). Their photos may be
+// of any kind decode_photo reads; 8-bit PNG/PPM/TIFF are linear here.
 #include <algorithm>
 #include <map>
 
@@ -11,14 +12,29 @@ namespace fs = std::filesystem;
 
 namespace {
 
-Status load_images(const std::vector<fs::path>& files, std::vector<cv::Mat>& out, const Progress& progress,
-                   const std::string& stage) {
-  std::vector<Frame> frames;
-  for (const auto& f : files) frames.push_back({f, false});
-  return decode_frames(frames, RawOptions{}, progress, stage, out);
+const char* kPhotoExtensions[] = {".ppm", ".pgm", ".pfm", ".png", ".jpg", ".jpeg", ".tif", ".tiff"};
+
+bool is_photo_extension(std::string ext) {
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  return std::any_of(std::begin(kPhotoExtensions), std::end(kPhotoExtensions), [&](const char* e) { return ext == e; }) ||
+         is_raw_file_name("x" + ext);
 }
 
 }  // namespace
+
+Status load_photos(const std::vector<fs::path>& files, bool srgb8, const ReadOptions& options, const Progress& progress,
+                   ImageSet& set) {
+  auto raw = all_raw_by_name(files);
+  if (!raw) return make_error(set.origin.string() + ": " + raw.message());
+  std::vector<Frame> frames;
+  for (const auto& f : files) frames.push_back({f, *raw, srgb8});
+  std::vector<PhotoKind> kinds;
+  if (Status s = decode_frames(frames, options.raw, progress, "reading " + set.id, set.images, &kinds); !s) return s;
+  if (Status s = check_same_sizes(files, set.images); !s) return s;
+  set.size = set.images[0].size();
+  note_photo_kinds(set, kinds, srgb8, options.raw);
+  return Status::success();
+}
 
 Expected<ImageSet> read_diligent(const fs::path& folder, const ReadOptions& options, const Progress& progress) {
   ImageSet set;
@@ -62,9 +78,7 @@ Expected<ImageSet> read_diligent(const fs::path& folder, const ReadOptions& opti
     files.push_back(folder / line.text);
     set.lights[files.size() - 1].lamp_id = fs::path(line.text).stem().string();
   }
-  if (Status s = load_images(files, set.images, progress, "reading " + set.id); !s) return s.error();
-  if (Status s = check_same_sizes(files, set.images); !s) return s.error();
-  set.size = set.images[0].size();
+  if (Status s = load_photos(files, false, options, progress, set); !s) return s.error();
   if (fs::path f = folder / "mask.png"; fs::exists(f, ec)) {
     auto m = read_mask(f);
     if (!m) return m.error();
@@ -80,7 +94,7 @@ Expected<ImageSet> read_thesis(const fs::path& folder, const ReadOptions& option
   if (!fs::is_directory(folder, ec)) return make_error(folder.string() + ": not a folder");
   const fs::path lights_file = folder / "lights.txt";
   if (!fs::exists(lights_file, ec))
-    return make_error(folder.string() + ": not an image set (no set.json, filenames.txt or lights.txt)");
+    return make_error(folder.string() + ": not an image set (no set.json, filenames.txt, lights.txt or RTI .lp file)");
   ImageSet set;
   set.origin = folder;
   set.id = set.object = folder_name(folder);
@@ -96,7 +110,7 @@ Expected<ImageSet> read_thesis(const fs::path& folder, const ReadOptions& option
     const fs::path& p = entry.path();
     std::string ext = p.extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
-    if (ext != ".ppm" && ext != ".pgm" && ext != ".pfm" && ext != ".png") continue;
+    if (!is_photo_extension(ext)) continue;
     std::string stem = p.stem().string();
     if (stem.empty() || stem.size() > 6 || !std::all_of(stem.begin(), stem.end(), [](char c) { return c >= '0' && c <= '9'; }))
       continue;
@@ -108,15 +122,13 @@ Expected<ImageSet> read_thesis(const fs::path& folder, const ReadOptions& option
   if (ec) return make_error(folder.string() + ": cannot list folder: " + ec.message());
   if (numbered.size() != set.lights.size())
     return make_error(lights_file.string() + ": lists " + std::to_string(set.lights.size()) + " lights but the folder has " +
-                      std::to_string(numbered.size()) + " numbered images (<N>.ppm, .pgm, .pfm or .png)");
+                      std::to_string(numbered.size()) + " numbered images (<N>.ppm, .pgm, .pfm, .png, .jpg, .tif or a RAW file)");
   std::vector<fs::path> files;
   for (auto& [n, p] : numbered) {
     set.lights[files.size()].lamp_id = p.stem().string();
     files.push_back(p);
   }
-  if (Status s = load_images(files, set.images, progress, "reading " + set.id); !s) return s.error();
-  if (Status s = check_same_sizes(files, set.images); !s) return s.error();
-  set.size = set.images[0].size();
+  if (Status s = load_photos(files, false, options, progress, set); !s) return s.error();
   const std::string why = "the images' size";
   if (fs::path f = find_with_ext(folder, "ambient", {".ppm", ".pgm", ".pfm", ".png"}); !f.empty()) {
     auto a = read_linear_image(f);

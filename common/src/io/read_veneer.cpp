@@ -105,6 +105,8 @@ Expected<ImageSet> read_veneer(const fs::path& folder, const ReadOptions& option
   if (!options.load_photos) {
     if (Status s = load_mask_and_truth(); !s) return s.error();
     set.photos_from = use_raw ? (options.raw.half_size ? "raw-half" : "raw") : "developed";
+    set.photos_read = use_raw ? "the RAW files named by set.json (not decoded: manifest only)"
+                              : "the developed photos named by set.json (not decoded: manifest only)";
     return set;
   }
   std::vector<Frame> frames;
@@ -113,7 +115,7 @@ Expected<ImageSet> read_veneer(const fs::path& folder, const ReadOptions& option
   if (!manifest->ambient_file.empty())
     frames.push_back(use_raw ? Frame{folder / manifest->ambient_raw_file, true} : Frame{folder / manifest->ambient_file, false});
   std::vector<cv::Mat> decoded;
-  std::vector<std::string> kinds;
+  std::vector<PhotoKind> kinds;
   const std::string stage = "reading " + (set.id.empty() ? folder.filename().string() : set.id);
   if (Status s = decode_frames(frames, options.raw, progress, stage, decoded, &kinds); !s) return s.error();
   if (!manifest->ambient_file.empty()) {
@@ -121,13 +123,7 @@ Expected<ImageSet> read_veneer(const fs::path& folder, const ReadOptions& option
     decoded.pop_back();
   }
   set.images = std::move(decoded);
-  set.photos_from = kinds.empty() ? std::string() : kinds.front();
-  for (const auto& k : kinds) {
-    if (k != set.photos_from) {
-      set.photos_from = "mixed";
-      break;
-    }
-  }
+  note_photo_kinds(set, kinds, false, options.raw);
 
   // Developed photos must have set.json's size; RAW photos define it.
   const cv::Size photo_size = set.images.front().size();

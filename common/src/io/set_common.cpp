@@ -79,9 +79,9 @@ std::string folder_name(const fs::path& folder) {
 // --- loading pixels ------------------------------------------------------------
 
 Status decode_frames(const std::vector<Frame>& frames, const RawOptions& raw_options, const Progress& progress,
-                     const std::string& stage, std::vector<cv::Mat>& out, std::vector<std::string>* kinds) {
+                     const std::string& stage, std::vector<cv::Mat>& out, std::vector<PhotoKind>* kinds) {
   out.assign(frames.size(), cv::Mat());
-  if (kinds) kinds->assign(frames.size(), std::string());
+  if (kinds) kinds->assign(frames.size(), PhotoKind{});
   std::vector<std::string> errors(frames.size());
   std::atomic<size_t> done{0};
   std::mutex report_lock;
@@ -97,15 +97,14 @@ Status decode_frames(const std::vector<Frame>& frames, const RawOptions& raw_opt
       errors[i] = mapped.message();
       return;
     }
-    const std::string_view bytes = mapped->bytes();
-    Expected<cv::Mat> image = f.raw ? decode_raw_linear(bytes, raw_options, f.file.string())
-                                    : decode_linear_image(bytes, f.file.string());
+    PhotoKind kind;
+    Expected<cv::Mat> image = decode_photo(mapped->bytes(), f, raw_options, kind);
     if (!image) {
       errors[i] = image.message();
       return;
     }
     out[i] = std::move(image).value();
-    if (kinds) (*kinds)[i] = f.raw ? (raw_options.half_size ? "raw-half" : "raw") : image_file_kind(bytes);
+    if (kinds) (*kinds)[i] = kind;
     const size_t n = ++done;
     if (progress.on_progress) {
       std::lock_guard<std::mutex> lock(report_lock);
@@ -116,6 +115,26 @@ Status decode_frames(const std::vector<Frame>& frames, const RawOptions& raw_opt
     if (!e.empty()) return make_error(e);
   }
   return Status::success();
+}
+
+void note_photo_kinds(ImageSet& set, const std::vector<PhotoKind>& kinds, bool srgb8, const RawOptions& raw_options) {
+  if (kinds.empty()) return;
+  PhotoKind first = kinds.front();
+  set.photos_from = first.kind;
+  for (const auto& k : kinds) {
+    if (k.kind != first.kind) set.photos_from = "mixed";
+    if (k.kind != first.kind || k.bits != first.bits) first = {"mixed", 0};
+  }
+  set.photos_read = std::to_string(kinds.size()) + " files: " + describe_photos(first, srgb8, raw_options);
+}
+
+Expected<bool> all_raw_by_name(const std::vector<fs::path>& files) {
+  size_t raw = 0;
+  for (const auto& f : files) raw += is_raw_file_name(f.filename().string()) ? 1 : 0;
+  if (raw != 0 && raw != files.size())
+    return make_error(std::to_string(raw) + " of the " + std::to_string(files.size()) +
+                      " photos are camera RAW files and the others are not; a set's photos must be of one kind");
+  return raw != 0;
 }
 
 Status check_size(const fs::path& file, const cv::Mat& image, cv::Size expected, const std::string& why) {
