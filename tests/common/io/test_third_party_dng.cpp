@@ -95,7 +95,7 @@ void write_diligent(const ImageSet& set, const fs::path& dir, const std::string&
   }
 }
 
-TEST(ThirdPartyDng, RaspberryPiDngsGiveNormalsAsTheRigsDngsDo) {
+TEST(ThirdPartyDng, RaspberryPiDngsGiveNormalsAsACorrectDecodeDoes) {
   // The Pi's layouts: the HQ camera's BGGR at 12 bits, and an upside-down
   // mounted sensor with per-cell black levels at 10 bits.
   test::PiDngOptions hq;
