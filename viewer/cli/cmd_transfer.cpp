@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cstdio>
 #include <iostream>
+#include <optional>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -13,6 +14,7 @@
 #include "veneer/io/imageset.hpp"
 #include "veneer/pipeline/prepare.hpp"
 #include "veneer/pipeline/transfer.hpp"
+#include "veneer/repaint/rti_export.hpp"
 
 namespace veneer::cli {
 namespace {
@@ -34,9 +36,26 @@ struct TransferArgs {
   std::string photos = "auto", demosaic = demosaic_name(RawOptions{}.demosaic), cache_dir;
   bool raw_half = false, no_cache = false;
   double cache_size_gb = 4.0;
+  // the repainted destination as a relightable file (repaint/rti_export.hpp)
+  std::string rti, rti_format = "lrgb";
 };
 
 ::veneer::cli::Output report{"transfer"};
+
+// The repainted photos a transfer folder holds (result_light_NN.png, linear
+// 16-bit) fitted into a PTM under the destination's lamp directions.
+Expected<repaint::RtiFit> export_rti(const std::string& folder, const std::vector<cv::Vec3d>& directions,
+                                     const std::string& file, const repaint::RtiExportOptions& options) {
+  std::vector<cv::Mat> photos;
+  for (size_t i = 0; i < directions.size(); ++i) {
+    char name[48];
+    std::snprintf(name, sizeof name, "result_light_%02zu.png", i);
+    auto photo = read_linear_image(std::filesystem::path(folder) / name);
+    if (!photo) return photo.error();
+    photos.push_back(std::move(photo).value());
+  }
+  return repaint::export_ptm(photos, directions, file, options);
+}
 
 // A mask PNG for a set: pixels above 127 are the object. One clear error
 // for a file that does not read, has another size than the set, or marks nothing.
@@ -85,6 +104,12 @@ int run(const TransferArgs& a) {
   options.scale = a.scale;
   options.keep_pictures = false;  // painted and written one at a time (write_transfer with the pair)
   if (auto s = options.check(); !s) return report.usage(s.message());
+  repaint::RtiExportOptions rti_options;
+  if (a.rti_format == "rgb") {
+    rti_options.format = repaint::PtmFormat::rgb;
+  } else if (a.rti_format != "lrgb") {
+    return report.usage("--rti-format must be lrgb or rgb, got \"" + a.rti_format + "\"");
+  }
 
   const auto t_wall = std::chrono::steady_clock::now();
   pipeline::PrepareOptions prep;
@@ -121,9 +146,18 @@ int run(const TransferArgs& a) {
   if (!pair) return report.fail(pair.message());
   auto result = pipeline::transfer(*pair, options, matching);
   if (!result) return report.fail(result.message());
+  std::vector<cv::Vec3d> lamp_directions;
+  for (const Light& l : pair->destination.lights) lamp_directions.push_back(l.direction);
   Progress writing;
   writing.on_progress = [&bar](double f, const std::string& stage) { bar.update(0.95 + 0.04 * f, stage); };
   if (auto s = pipeline::write_transfer(*result, std::move(*pair), a.out, writing); !s) return report.fail(s.message());
+  std::optional<repaint::RtiFit> rti;
+  if (!a.rti.empty()) {
+    bar.update(0.99, "fitting the relightable file");
+    auto fit = export_rti(a.out, lamp_directions, a.rti, rti_options);
+    if (!fit) return report.fail(fit.message());
+    rti = *fit;
+  }
   bar.update(0.99, "storing the sets' results in the cache");
   const Status cached = pipeline::finish_cache_writes();  // not fatal: the next run recomputes
   bar.done();
@@ -136,6 +170,10 @@ int run(const TransferArgs& a) {
     if (!a.src_mask.empty()) metrics["io"]["src_mask"] = a.src_mask;
     metrics["io"]["raw_half_size"] = a.raw_half;
     metrics["io"]["demosaic"] = a.demosaic;
+    if (rti) {
+      metrics["rti"] = nlohmann::json::parse(rti->json());
+      metrics["rti"]["file"] = a.rti;
+    }
     metrics["timings"]["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_wall).count();
     if (auto s = report.folder(a.out); !s) return report.fail(s.message());  // made by write_transfer
     if (auto s = report.json("metrics.json", metrics); !s) return report.fail(s.message());
@@ -147,6 +185,10 @@ int run(const TransferArgs& a) {
 
   std::printf("transfer %s -> %s: %s %s %dx%d, map written to %s\n", a.src.c_str(), a.dst.c_str(), a.method.c_str(),
               a.feature.c_str(), a.patch, a.patch, a.out.c_str());
+  if (rti)
+    std::printf("  relightable file %s (%s, exposure %.3g): residual %.2f levels RMS, p99 %.2f (the photos spread %.2f)\n",
+                a.rti.c_str(), repaint::ptm_format_name(rti->format), rti->exposure, rti->rms, rti->p99,
+                rti->photo_spread);
   if (a.scale < 1)
     std::printf("  computed at %.2fx (--scale): the map and the pictures are %dx%d, smaller than the sets\n", a.scale,
                 result->map.xy.cols, result->map.xy.rows);
@@ -218,6 +260,10 @@ VENEER_COMMAND(transfer) {
                   "auto = RAW where every photo has one)");
   cmd->add_flag("--raw-half", args->raw_half, "decode RAW files at half size (one pixel per 2x2 Bayer cell, ~4x faster)");
   cmd->add_option("--demosaic", args->demosaic, "RAW interpolation (LibRaw): dcb | ahd | ppg | vng | dht | aahd | bilinear");
+  cmd->add_option("--rti", args->rti,
+                  "also write the repainted destination as a relightable PTM file (RTIViewer, Relight), fitted to "
+                  "the repainted photos under the destination's lamps; its residual goes to stdout and metrics.json");
+  cmd->add_option("--rti-format", args->rti_format, "PTM layout: lrgb (luminance polynomial + colour, default) | rgb");
   cmd->add_flag("--no-cache", args->no_cache, "neither read nor write the per-set result cache");
   cmd->add_option("--cache-dir", args->cache_dir, "result cache folder (default $XDG_CACHE_HOME/veneer or ~/.cache/veneer)");
   cmd->add_option("--cache-size-gb", args->cache_size_gb, "result cache size cap, GiB (default 4; least recently used go first)");
