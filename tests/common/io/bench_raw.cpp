@@ -71,7 +71,7 @@ int main() {
   const Optics optics[] = {{"camera optics (the twin's)", camera.edge_samples, camera.olpf_spread_px},
                            {"point-sampled", 1, 0.0}};
   const std::vector<Demosaic> methods = {Demosaic::bilinear, Demosaic::vng, Demosaic::ppg, Demosaic::ahd,
-                                         Demosaic::dcb,      Demosaic::dht, Demosaic::aahd};
+                                         Demosaic::dcb,      Demosaic::dht, Demosaic::aahd, Demosaic::mhc};
   for (const auto& op : optics) {
     for (const std::string scene : {"orange", "bull"}) {
       sim::RenderOptions o;

@@ -143,6 +143,42 @@ TEST(PngCodec, EncodedPhotosDecodeExactlyThroughOpenCV) {
   EXPECT_EQ(gb.at<uint16_t>(4, 5), 16384);
 }
 
+// Both ways of deflating (stored, as results are written; fast, as sets are)
+// give the samples cv::Mat::convertTo gives after cv::patchNaNs, through
+// OpenCV's libpng and through our decoder; NaN, negative and > 1 values
+// included. Stored is not compressed: its file is larger than the samples.
+TEST(PngCodec, StoredAndFastEncodingsKeepEverySample) {
+  cv::Mat photo(97, 131, CV_32FC3);
+  cv::RNG(11).fill(photo, cv::RNG::UNIFORM, cv::Scalar::all(-0.2), cv::Scalar::all(1.2));
+  photo.at<cv::Vec3f>(5, 7) = cv::Vec3f(std::nanf(""), 0.5f, std::nanf(""));
+  cv::Mat clean = photo.clone();
+  cv::patchNaNs(clean, 0.0);
+  cv::Mat u16;
+  clean.convertTo(u16, CV_16UC3, 65535.0);
+  for (PngDeflate mode : {PngDeflate::stored, PngDeflate::fast}) {
+    const char* name = mode == PngDeflate::stored ? "stored" : "fast";
+    auto png = encode_png16(photo, mode);
+    ASSERT_TRUE(png) << png.message();
+    if (mode == PngDeflate::stored) {
+      EXPECT_GT(png->size(), u16.total() * u16.elemSize()) << name;
+    }
+    cv::Mat back = cv::imdecode(cv::Mat(1, static_cast<int>(png->size()), CV_8UC1, png->data()), cv::IMREAD_UNCHANGED);
+    ASSERT_EQ(back.type(), CV_16UC3) << name;
+    EXPECT_EQ(cv::norm(back, u16, cv::NORM_INF), 0) << name;
+    auto ours = decode_linear_image(*png, "x.png");
+    ASSERT_TRUE(ours) << ours.message();
+    cv::Mat expect;
+    u16.convertTo(expect, CV_32FC3, 1.0 / 65535.0);
+    EXPECT_LT(cv::norm(*ours, expect, cv::NORM_INF), 1e-6) << name;
+  }
+  cv::Mat grey(9, 11, CV_32FC1, cv::Scalar(0.25));
+  auto g = encode_png16(grey, PngDeflate::stored);
+  ASSERT_TRUE(g);
+  cv::Mat gb = cv::imdecode(cv::Mat(1, static_cast<int>(g->size()), CV_8UC1, g->data()), cv::IMREAD_UNCHANGED);
+  ASSERT_EQ(gb.type(), CV_16UC1);
+  EXPECT_EQ(gb.at<uint16_t>(4, 5), 16384);
+}
+
 TEST(PngCodec, DamagedImageDataIsRefusedNamingTheProblem) {
   const std::string good = make_png(40, 30, 3, 16, 9);
   ASSERT_TRUE(decode_linear_image(good, "good.png"));

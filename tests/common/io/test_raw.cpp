@@ -31,7 +31,7 @@ TEST(Raw, DngOfARampDecodesBack) {
   auto dng = encode_dng(photo);
   ASSERT_TRUE(dng) << dng.message();
   for (Demosaic d : {Demosaic::ahd, Demosaic::ppg, Demosaic::bilinear, Demosaic::vng, Demosaic::dcb, Demosaic::dht,
-                     Demosaic::aahd}) {
+                     Demosaic::aahd, Demosaic::mhc}) {
     RawOptions o;
     o.demosaic = d;
     auto back = decode_raw_linear(*dng, o, "ramp.dng");

@@ -15,9 +15,12 @@
 
 namespace veneer {
 
-// LibRaw's interpolations (user_qual 0, 1, 2, 3, 4, 11, 12).
-enum class Demosaic { bilinear, vng, ppg, ahd, dcb, dht, aahd };
-const char* demosaic_name(Demosaic);                    // "bilinear" | "vng" | "ppg" | "ahd" | "dcb" | "dht" | "aahd"
+// LibRaw's interpolations (user_qual 0, 1, 2, 3, 4, 11, 12), and mhc: Veneer's
+// own (Malvar-He-Cutler's gradient-corrected linear filters, rows in
+// parallel, on the mosaic LibRaw unpacks; LibRaw's develop skipped; a Bayer
+// layout LibRaw's pipeline alone takes goes through its AHD instead).
+enum class Demosaic { bilinear, vng, ppg, ahd, dcb, dht, aahd, mhc };
+const char* demosaic_name(Demosaic);  // "bilinear" | "vng" | "ppg" | "ahd" | "dcb" | "dht" | "aahd" | "mhc"
 Expected<Demosaic> parse_demosaic(const std::string&);
 
 struct RawOptions {
