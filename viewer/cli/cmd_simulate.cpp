@@ -41,7 +41,7 @@ bool parse_vec3(const std::string& text, cv::Vec3d* v) {
 ::veneer::cli::Output report{"simulate"};
 
 struct SimulateArgs {
-  std::string scene, out, size = "1024x680", offset = "0,0,0", role = "destination", preview, motion;
+  std::string scene, material, out, size = "1024x680", offset = "0,0,0", role = "destination", preview, motion;
   int frames = 30;
   uint64_t seed = 1;
   double noise = 0.005, scale = 1.0, ambient = 0.0, exposure = 1.0, focal = 0.0;
@@ -103,12 +103,16 @@ int run_simulate(const SimulateArgs& a) {
   o.threads = a.threads;
   if (a.optics) o.camera_optics();
   if (auto st = o.check(); !st) return report.usage(st.message());
-  if (!a.motion.empty()) return run_motion(a, o);
+  if (!a.motion.empty()) {
+    if (!a.material.empty()) return report.usage("--material renders a set, not a --motion sequence");
+    return run_motion(a, o);
+  }
 
   veneer::cli::ProgressBar bar("simulate " + a.scene);
   veneer::Progress progress;
   progress.on_progress = [&bar](double f, const std::string& stage) { bar.update(f * 0.8, stage); };
-  auto set = veneer::sim::simulate_set(a.scene, o, *role, progress);
+  auto set = a.material.empty() ? veneer::sim::simulate_set(a.scene, o, *role, progress)
+                                : veneer::sim::simulate_set_with_material(a.scene, a.material, o, *role, progress);
   if (!set) return set.message().rfind("unknown scene", 0) == 0 ? report.usage(set.message()) : report.fail(set.message());
   if (a.dng) {
     // The rig's camera twin's files: the developed JPEG as the photo and the
@@ -127,7 +131,7 @@ int run_simulate(const SimulateArgs& a) {
   bar.update(1.0, "done");
   bar.done();
   int pixels = cv::countNonZero(set->truth.mask);
-  report.line("wrote " + a.out + ": scene " + a.scene + ", " + std::to_string(set->images.size()) + " lamps + ambient, " +
+  report.line("wrote " + a.out + ": scene " + a.scene + (a.material.empty() ? "" : " in " + a.material + "'s material") + ", " + std::to_string(set->images.size()) + " lamps + ambient, " +
               std::to_string(o.size.width) + "x" + std::to_string(o.size.height) + ", " + std::to_string(pixels) +
               " object pixels");
   return 0;
@@ -142,6 +146,10 @@ VENEER_COMMAND(simulate) {
       "render a scene under the simulated thesis rig (7 lamps on a 0.47 m ring, object at 1 m) "
       "and write a veneer-set/1 folder with truth/");
   cmd->add_option("--scene", args->scene, "scene name (see --list)");
+  cmd->add_option("--material", args->material,
+                  "render the scene's shape in this scene's material (albedo texture and gloss), same lamps and "
+                  "pose: the look a perfect transfer of that source onto this destination gives (e.g. --scene bull "
+                  "--material orange)");
   cmd->add_option("--out", args->out, "output set folder (written atomically)");
   cmd->add_flag("--list", args->list, "list the scene names and exit");
   cmd->add_option("--size", args->size, "image size WIDTHxHEIGHT")->capture_default_str();

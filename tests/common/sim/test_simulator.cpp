@@ -499,6 +499,35 @@ TEST(Simulator, ShapeInAnotherMaterialKeepsItsNormals) {
   EXPECT_FALSE(make_scene_with_material("teapot", "bull", o).ok());
 }
 
+TEST(Simulator, ASetInAnotherMaterialIsTheShapeInThatMaterialUnderTheSameLamps) {
+  RenderOptions o = small_options();
+  auto bull = simulate_set("bull", o);
+  auto red_bull = simulate_set_with_material("bull", "sphere-red-gloss", o);
+  ASSERT_TRUE(bull.ok() && red_bull.ok());
+  // the shape's outline, normals, lamps and pose
+  EXPECT_EQ(cv::countNonZero(bull->truth.mask != red_bull->truth.mask), 0);
+  EXPECT_EQ(cv::norm(bull->truth.normals, red_bull->truth.normals, cv::NORM_INF), 0.0);
+  ASSERT_EQ(red_bull->lights.size(), bull->lights.size());
+  for (size_t i = 0; i < bull->lights.size(); ++i)
+    EXPECT_EQ(red_bull->lights[i].position_m, bull->lights[i].position_m);
+  EXPECT_EQ(red_bull->scene, "bull");
+  EXPECT_EQ(red_bull->object, "bull-in-sphere-red-gloss");
+  // the material's albedo, in the truth and in the photos: red, where the bull's hide is brown
+  const cv::Scalar albedo = cv::mean(red_bull->truth.albedo, red_bull->truth.mask);
+  EXPECT_NEAR(albedo[2], 0.70, 1e-6);
+  EXPECT_NEAR(albedo[0], 0.05, 1e-6);
+  const cv::Scalar lit = cv::mean(red_bull->images[0], red_bull->truth.mask);
+  const cv::Scalar own = cv::mean(bull->images[0], bull->truth.mask);
+  EXPECT_GT(lit[2], 4 * lit[0]);
+  EXPECT_LT(own[2], 4 * own[0]);
+  // rendered as the material scene's own set is, same bytes for the same options
+  auto again = simulate_set_with_material("bull", "sphere-red-gloss", o);
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(cv::norm(again->images[3], red_bull->images[3], cv::NORM_INF), 0.0);
+  EXPECT_FALSE(simulate_set_with_material("bull", "teapot", o).ok());
+  EXPECT_FALSE(simulate_set_with_material("teapot", "orange", o).ok());
+}
+
 TEST(Simulator, ProgressIsReportedAndCancelStops) {
   RenderOptions o = small_options();
   std::vector<double> fractions;
