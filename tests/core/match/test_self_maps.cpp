@@ -14,8 +14,9 @@
 #include <opencv2/imgproc.hpp>
 
 #include "veneer/io/imageset.hpp"
-#include "veneer/match/metrics.hpp"
-#include "veneer/match/transfer.hpp"
+#include "veneer/eval/metrics.hpp"
+#include "veneer/match/object.hpp"
+#include "veneer/pipeline/transfer.hpp"
 #include "veneer/sim/simulator.hpp"
 
 namespace veneer::match {
@@ -82,7 +83,7 @@ Score score(const Map& map, const cv::Mat& dst_mask, const cv::Mat& src_mask,
     s.median_px = errors[errors.size() / 2];
   }
   s.within = n ? static_cast<double>(ok) / n : 0.0;
-  s.coverage = evaluate(map, dst_mask, src_mask).coverage;
+  s.coverage = eval::evaluate(map, dst_mask, src_mask).coverage;
   return s;
 }
 
@@ -224,10 +225,10 @@ TEST(SelfMapsMetrics, TransferSaysWhetherTheMotionWasFound) {
   auto cat = read_set(kReal / "cat");
   auto buddha = read_set(kReal / "buddha");
   ASSERT_TRUE(cat.ok() && buddha.ok());
-  TransferOptions o;
+  pipeline::TransferOptions o;
   o.match.method = Method::combined;
   const cv::Matx23d a(1, 0, 4, 0, 1, 3);
-  auto moved = transfer(warped_copy(*cat, a, cat->size, 1.0 / 255, 1), *cat, o);
+  auto moved = pipeline::transfer(warped_copy(*cat, a, cat->size, 1.0 / 255, 1), *cat, o);
   ASSERT_TRUE(moved.ok()) << moved.message();
   auto m = nlohmann::json::parse(moved->metrics_json);
   ASSERT_TRUE(m.contains("motion"));
@@ -237,7 +238,7 @@ TEST(SelfMapsMetrics, TransferSaysWhetherTheMotionWasFound) {
   EXPECT_NEAR(m["motion"]["affine"][1][2].get<double>(), -3.0, 0.5);
   EXPECT_GT(m["motion"]["share_of_pixels"].get<double>(), 0.5);
 
-  auto other = transfer(*cat, *buddha, o);
+  auto other = pipeline::transfer(*cat, *buddha, o);
   ASSERT_TRUE(other.ok()) << other.message();
   m = nlohmann::json::parse(other->metrics_json);
   ASSERT_TRUE(m.contains("motion"));
