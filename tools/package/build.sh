@@ -35,6 +35,18 @@ fi
 cmake_common=(-G Ninja -DCMAKE_BUILD_TYPE=Release -DCMAKE_INSTALL_PREFIX=/usr
   -DVENEER_SYSTEMD_UNITDIR=/lib/systemd/system -DVENEER_UDEV_RULESDIR=/lib/udev/rules.d
   -DVENEER_BUILD_TESTS=OFF "${launcher[@]}")
+# Debian's hardening flags for ARCH (dpkg-buildflags, hardening=+all: stack
+# protector, _FORTIFY_SOURCE, format checks, RELRO and BIND_NOW, and on arm64
+# branch protection), less its -g and -O2: the tree's Release flags (-O3) stay.
+buildflags() {
+  local arch="$1" get
+  get() { (cd "$src" && DEB_HOST_ARCH="$arch" DEB_BUILD_MAINT_OPTIONS=hardening=+all dpkg-buildflags --get "$1"); }
+  local cflags; cflags="$(get CPPFLAGS) $(get CXXFLAGS | sed -e 's/\(^\| \)-g\( \|$\)/ /' -e 's/\(^\| \)-O2\( \|$\)/ /')"
+  printf '%s\n' "-DCMAKE_C_FLAGS=$cflags" "-DCMAKE_CXX_FLAGS=$cflags" \
+    "-DCMAKE_EXE_LINKER_FLAGS=$(get LDFLAGS)" "-DCMAKE_SHARED_LINKER_FLAGS=$(get LDFLAGS)"
+}
+mapfile -t flags_arm64 < <(buildflags arm64)
+mapfile -t flags_amd64 < <(buildflags amd64)
 
 # The arm64 libraries veneerd builds against: an arm64 Debian 12 root (the
 # compiler's sysroot). Installing them multiarch on this machine is not
@@ -49,17 +61,17 @@ step "arm64 root for cross-building ($sysroot)"
 ensure_root arm64 "$sysroot" "$sysroot_packages"
 
 step "building veneerd for arm64 (cross, daemon only)"
-cmake -S "$src" -B "$out/build-arm64" "${cmake_common[@]}" -DVENEER_BUILD_VIEWER=OFF \
+cmake -S "$src" -B "$out/build-arm64" "${cmake_common[@]}" "${flags_arm64[@]}" -DVENEER_BUILD_VIEWER=OFF \
   -DCMAKE_TOOLCHAIN_FILE="$here/toolchain-arm64.cmake" -DVENEER_ARM64_SYSROOT="$sysroot" > "$out/build-arm64.cmake.log"
 nice cmake --build "$out/build-arm64" -j "$jobs" --target veneerd
 
 step "building veneerd for amd64 (daemon only, any x86-64)"
-cmake -S "$src" -B "$out/build-amd64-daemon" "${cmake_common[@]}" -DVENEER_BUILD_VIEWER=OFF \
+cmake -S "$src" -B "$out/build-amd64-daemon" "${cmake_common[@]}" "${flags_amd64[@]}" -DVENEER_BUILD_VIEWER=OFF \
   -DVENEER_AVX2=OFF > "$out/build-amd64-daemon.cmake.log"
 nice cmake --build "$out/build-amd64-daemon" -j "$jobs" --target veneerd
 
 step "building veneer and veneer-viewer for amd64"
-cmake -S "$src" -B "$out/build-amd64" "${cmake_common[@]}" > "$out/build-amd64.cmake.log"
+cmake -S "$src" -B "$out/build-amd64" "${cmake_common[@]}" "${flags_amd64[@]}" > "$out/build-amd64.cmake.log"
 nice cmake --build "$out/build-amd64" -j "$jobs" --target veneer veneer-viewer
 
 # stage PACKAGE ARCH BUILD COMPONENT: the installed tree of one package.
