@@ -122,9 +122,9 @@ shlibs() {
   if [ "$arch" = arm64 ]; then
     # inside the arm64 root: its dpkg knows which package holds each library
     local inroot="$sysroot/tmp/veneer-shlibdeps"
-    rm -rf "$inroot"; mkdir -p "$inroot/debian"
+    rm -rf "$inroot"; mkdir -p "$inroot/debian" "$inroot/pkg/DEBIAN"
     cp "$work/debian/control" "$inroot/debian/"
-    for rel in "$@"; do install -D "$dir/$rel" "$inroot/$rel"; args+=("-e$rel"); done
+    for rel in "$@"; do install -D "$dir/$rel" "$inroot/pkg/$rel"; args+=("-epkg/$rel"); done
     line=$(chroot "$sysroot" sh -c "cd /tmp/veneer-shlibdeps && dpkg-shlibdeps -O ${args[*]}")
     rm -rf "$inroot"
   else
@@ -140,8 +140,8 @@ deb() {
   local strip=strip rel s
   [ "$arch" = arm64 ] && strip=aarch64-linux-gnu-strip
   for rel in "$@"; do $strip --strip-unneeded --remove-section=.comment --remove-section=.note "$dir/$rel"; done
+  mkdir -p "$dir/DEBIAN"  # (dpkg-shlibdeps finds the package's root by it)
   local depends; depends=$(shlibs "$arch" "$dir" "$@")
-  mkdir -p "$dir/DEBIAN"
   local size; size=$(du -k -s --apparent-size --exclude=DEBIAN "$dir" | cut -f1)
   sed -e "s|@VERSION@|$version|" -e "s|@ARCH@|$arch|" -e "s|@MAINTAINER@|$maintainer|" \
       -e "s|@SIZE@|$size|" -e "s|@SHLIBS@|$depends|" "$here/debian/$pkg.control" > "$dir/DEBIAN/control"
