@@ -64,15 +64,17 @@ apt_install() {
   in_root "$dir" sh -c 'apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "$@"' sh "$@"
 }
 free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
-wait_file() { local f="$1" i; for i in $(seq 600); do [ -s "$f" ] && return 0; sleep 0.1; done; return 1; }
+wait_file() { local f="$1" i; for i in $(seq 1800); do [ -s "$f" ] && return 0; sleep 0.1; done; return 1; }
 
 step "amd64: fresh Debian 12 root ($amd64)"
 fresh amd64 "$amd64"
 cp "$out"/veneerd_${version}_amd64.deb "$out"/veneer_${version}_amd64.deb \
    "$out"/veneer-viewer_${version}_amd64.deb "$amd64/tmp/"
-echo "installing: apt-get install ./veneerd_${version}_amd64.deb ./veneer_${version}_amd64.deb ./veneer-viewer_${version}_amd64.deb"
+# Without Recommends (no services pulled in), but with qt6-qpa-plugins, which
+# libqt6gui6 recommends and a plain `apt install` brings: Qt's platform plugins.
+echo "installing: apt-get install ./veneerd_${version}_amd64.deb ./veneer_${version}_amd64.deb ./veneer-viewer_${version}_amd64.deb qt6-qpa-plugins"
 if apt_install "$amd64" /tmp/veneerd_${version}_amd64.deb /tmp/veneer_${version}_amd64.deb \
-     /tmp/veneer-viewer_${version}_amd64.deb > "$out/test-amd64-install.log" 2>&1; then
+     /tmp/veneer-viewer_${version}_amd64.deb qt6-qpa-plugins > "$out/test-amd64-install.log" 2>&1; then
   ok "amd64: the three packages install with their dependencies ($(grep -c '^Setting up' "$out/test-amd64-install.log") packages set up)"
 else
   bad "amd64: install (see $out/test-amd64-install.log)"; tail -20 "$out/test-amd64-install.log"; exit 1
@@ -107,7 +109,8 @@ rig_capture() {
   local root="$1" who="$2" port="$3" token="$1/var/lib/veneer/sets/token"
   if ! wait_file "$token"; then bad "$who: veneerd --simulate did not start (no $token)"; return 1; fi
   cp "$token" "$amd64/tmp/token-$who"
-  local rig=(--rig "127.0.0.1:$port" --token-file "/tmp/token-$who") status
+  # (a capture under qemu-user takes minutes: --timeout)
+  local rig=(--rig "127.0.0.1:$port" --token-file "/tmp/token-$who" --timeout 900) status
   status=$(in_root "$amd64" veneer rig status "${rig[@]}" 2>&1) && ok "$who: veneer rig status: $(echo "$status" | head -1)" \
     || { bad "$who: veneer rig status: $status"; return 1; }
   in_root "$amd64" veneer rig press "${rig[@]}" --wait > "$out/test-$who-press.log" 2>&1 \
