@@ -59,6 +59,14 @@ libcurl4-openssl-dev,libgphoto2-dev,libusb-1.0-0-dev,libgpiod-dev,libsystemd-dev
 libraw-dev,libdeflate-dev,nlohmann-json3-dev,libcli11-dev,libasio-dev"
 step "arm64 root for cross-building ($sysroot)"
 ensure_root arm64 "$sysroot" "$sysroot_packages"
+# Its absolute symlinks (libm.so -> /lib/aarch64-linux-gnu/libm.so.6, the
+# alternatives of BLAS and LAPACK) would point at this machine's files: made
+# relative, so they resolve inside the root (else CMake picks libm.a, and the
+# linker misses liblapack.so.3).
+find "$sysroot/usr/lib" "$sysroot/etc/alternatives" -type l -lname '/*' -print0 |
+  while IFS= read -r -d '' link; do
+    ln -sfn "$(realpath -m -s --relative-to="$(dirname "$link")" "$sysroot$(readlink "$link")")" "$link"
+  done
 
 step "building veneerd for arm64 (cross, daemon only)"
 cmake -S "$src" -B "$out/build-arm64" "${cmake_common[@]}" "${flags_arm64[@]}" -DVENEER_BUILD_VIEWER=OFF \
@@ -125,7 +133,7 @@ shlibs() {
     rm -rf "$inroot"; mkdir -p "$inroot/debian" "$inroot/pkg/DEBIAN"
     cp "$work/debian/control" "$inroot/debian/"
     for rel in "$@"; do install -D "$dir/$rel" "$inroot/pkg/$rel"; args+=("-epkg/$rel"); done
-    line=$(chroot "$sysroot" sh -c "cd /tmp/veneer-shlibdeps && dpkg-shlibdeps -O ${args[*]}")
+    line=$(chroot "$sysroot" env DEB_BUILD_ARCH=arm64 DEB_HOST_ARCH=arm64 sh -c "cd /tmp/veneer-shlibdeps && dpkg-shlibdeps -O ${args[*]}")
     rm -rf "$inroot"
   else
     for rel in "$@"; do args+=("-e$dir/$rel"); done
