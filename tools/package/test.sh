@@ -66,6 +66,16 @@ apt_install() {
 free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
 wait_file() { local f="$1" i; for i in $(seq 1800); do [ -s "$f" ] && return 0; sleep 0.1; done; return 1; }
 
+# The arm64 install runs under emulation (minutes): started first, in the
+# background, while the amd64 packages are checked.
+step "arm64: fresh Debian 12 arm64 root ($arm64), programs under qemu-user"
+ensure_binfmt_arm64
+fresh arm64 "$arm64"
+cp "$out/veneerd_${version}_arm64.deb" "$arm64/tmp/"
+echo "installing in the background (under qemu-user): apt-get install ./veneerd_${version}_arm64.deb"
+apt_install "$arm64" /tmp/veneerd_${version}_arm64.deb > "$out/test-arm64-install.log" 2>&1 &
+arm64_install=$!; pids+=("$arm64_install")
+
 step "amd64: fresh Debian 12 root ($amd64)"
 fresh amd64 "$amd64"
 cp "$out"/veneerd_${version}_amd64.deb "$out"/veneer_${version}_amd64.deb \
@@ -151,13 +161,9 @@ else
   ok "arm64: veneerd links no Qt, no engine library ($(readelf -d "$dir/usr/bin/veneerd" | grep -c NEEDED) libraries)"
 fi
 
-step "arm64: fresh Debian 12 arm64 root ($arm64), programs under qemu-user"
-ensure_binfmt_arm64
-fresh arm64 "$arm64"
-cp "$out/veneerd_${version}_arm64.deb" "$arm64/tmp/"
-echo "installing (under qemu-user): apt-get install ./veneerd_${version}_arm64.deb"
-if apt_install "$arm64" /tmp/veneerd_${version}_arm64.deb > "$out/test-arm64-install.log" 2>&1; then
-  ok "arm64: veneerd installs with its dependencies ($(grep -c '^Setting up' "$out/test-arm64-install.log") packages set up)"
+step "arm64: waiting for the install under qemu-user (started first)"
+if wait "$arm64_install"; then
+  ok "arm64: veneerd installs with its dependencies under qemu-user ($(grep -c '^Setting up' "$out/test-arm64-install.log") packages set up)"
 else
   bad "arm64: install (see $out/test-arm64-install.log)"; tail -20 "$out/test-arm64-install.log"
 fi
