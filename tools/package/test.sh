@@ -59,6 +59,8 @@ fresh() {
   mount --bind "$out/roots/apt-cache-$arch" "$dir/var/cache/apt/archives"
 }
 in_root() { local dir="$1"; shift; chroot "$dir" /usr/bin/env -i PATH=/usr/sbin:/usr/bin:/sbin:/bin HOME=/root LANG=C.UTF-8 "$@"; }
+# (for a background daemon: the process itself, so that $! is what to kill)
+exec_in_root() { local dir="$1"; shift; exec chroot "$dir" /usr/bin/env -i PATH=/usr/sbin:/usr/bin:/sbin:/bin HOME=/root LANG=C.UTF-8 "$@"; }
 apt_install() {
   local dir="$1"; shift
   in_root "$dir" sh -c 'apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "$@"' sh "$@"
@@ -142,7 +144,7 @@ rig_capture() {
 
 step "amd64: /usr/bin/veneerd --simulate as user veneer on /var/lib/veneer/sets, driven by /usr/bin/veneer"
 port=$(free_port)
-in_root "$amd64" runuser -u veneer -- veneerd --simulate --listen "127.0.0.1:$port" \
+exec_in_root "$amd64" runuser -u veneer -- veneerd --simulate --listen "127.0.0.1:$port" \
   --store /var/lib/veneer/sets --size 320x212 > "$out/test-amd64-veneerd.log" 2>&1 &
 pids+=($!)
 rig_capture "$amd64" amd64 "$port" || true
@@ -174,7 +176,7 @@ v=$(in_root "$arm64" veneerd --version 2>&1 || true)
 
 step "arm64: /usr/bin/veneerd --simulate (under qemu-user) as user veneer, driven by the amd64 root's veneer"
 port=$(free_port)
-in_root "$arm64" runuser -u veneer -- veneerd --simulate --listen "127.0.0.1:$port" \
+exec_in_root "$arm64" runuser -u veneer -- veneerd --simulate --listen "127.0.0.1:$port" \
   --store /var/lib/veneer/sets --size 160x106 > "$out/test-arm64-veneerd.log" 2>&1 &
 pids+=($!)
 rig_capture "$arm64" arm64 "$port" || true
