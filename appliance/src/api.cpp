@@ -4,6 +4,7 @@
 
 #include <google/protobuf/io/coded_stream.h>
 
+#include "veneer/proto/utf8.hpp"
 #include "veneer/v1/rig.pb.h"
 
 namespace veneerd::api {
@@ -18,6 +19,20 @@ bool printable(const std::string& s) {
     if (ch < 0x20 || ch == 0x7f) return false;
   }
   return true;
+}
+
+// A name limit counts characters (Unicode code points), as the contract says;
+// bytes that are not UTF-8 are refused (proto3 parsing refuses them first,
+// this holds wherever a name comes from).
+veneer::Status check_name(const std::string& field, const std::string& value, size_t max_chars) {
+  const auto chars = veneer::wire::utf8_length(value);
+  if (!chars) return make_error(field + ": not valid UTF-8 (every string field is UTF-8)");
+  if (*chars > max_chars) {
+    return make_error(field + ": " + std::to_string(*chars) + " characters is longer than the limit of " +
+                      std::to_string(max_chars));
+  }
+  if (veneer::wire::has_control_character(value)) return make_error(field + ": must be printable (no control characters)");
+  return {};
 }
 
 veneer::Expected<veneer::Role> decode_role(int role) {
@@ -66,7 +81,7 @@ bool needs_control(const Body& body) {
 const char* request_name(const Body& body) {
   static const char* names[] = {"hello", "status", "list_sets", "get_manifest", "fetch_images", "delete_set", "capture",
                                 "cancel_capture", "set_lamps", "start_live_view", "stop_live_view", "press_button",
-                                "move_hand_lamp", "restore_set"};
+                                "move_hand_lamp", "restore_set", "fetch_preview"};
   return names[body.index()];
 }
 
@@ -80,13 +95,7 @@ veneer::Expected<Request> decode(const pb::ClientMessage& m) {
         return make_error("hello.token: " + std::to_string(h.token().size()) + " bytes is longer than the limit of " +
                           std::to_string(kMaxTokenBytes));
       }
-      if (h.client_name().size() > kMaxClientNameChars) {
-        return make_error("hello.client_name: " + std::to_string(h.client_name().size()) +
-                          " characters is longer than the limit of " + std::to_string(kMaxClientNameChars));
-      }
-      if (!printable(h.client_name())) {
-        return make_error("hello.client_name: must be printable (no control characters)");
-      }
+      if (auto s = check_name("hello.client_name", h.client_name(), kMaxClientNameChars); !s) return s.error();
       r.body = Hello{h.protocol_version(), h.token(), h.client_name()};
       return r;
     }
@@ -103,7 +112,29 @@ veneer::Expected<Request> decode(const pb::ClientMessage& m) {
       if (chunk < kMinChunkBytes || chunk > kMaxChunkBytes) {
         return make_error("fetch_images.chunk_size: " + std::to_string(f.chunk_size()) + " is outside 1 KiB..4 MiB");
       }
-      r.body = FetchImagesReq{f.set_id(), f.include_truth(), chunk};
+      if (static_cast<size_t>(f.skip_files_size()) > kMaxSkipFiles) {
+        return make_error("fetch_images.skip_files: " + std::to_string(f.skip_files_size()) +
+                          " files is more than the limit of " + std::to_string(kMaxSkipFiles));
+      }
+      FetchImagesReq req{f.set_id(), f.include_truth(), chunk, {}};
+      for (const auto& name : f.skip_files()) {
+        if (name.empty() || name.size() > kMaxSkipFileChars || !printable(name)) {
+          return make_error("fetch_images.skip_files: each must be a file name of 1.." +
+                            std::to_string(kMaxSkipFileChars) + " printable characters");
+        }
+        req.skip_files.push_back(name);
+      }
+      r.body = std::move(req);
+      return r;
+    }
+    case pb::ClientMessage::kFetchPreview: {
+      const auto& f = m.fetch_preview();
+      if (auto s = check_set_id("fetch_preview.set_id", f.set_id()); !s) return s.error();
+      size_t chunk = f.chunk_size() == 0 ? kDefaultChunkBytes : f.chunk_size();
+      if (chunk < kMinChunkBytes || chunk > kMaxChunkBytes) {
+        return make_error("fetch_preview.chunk_size: " + std::to_string(f.chunk_size()) + " is outside 1 KiB..4 MiB");
+      }
+      r.body = FetchPreviewReq{f.set_id(), chunk};
       return r;
     }
     case pb::ClientMessage::kDeleteSet:
@@ -116,9 +147,7 @@ veneer::Expected<Request> decode(const pb::ClientMessage& m) {
       auto role = decode_role(c.role());
       if (!role) return role.error();
       req.capture.role = *role;
-      if (c.object().size() > kMaxObjectChars || !printable(c.object())) {
-        return make_error("capture.object: must be up to 64 printable characters");
-      }
+      if (auto s = check_name("capture.object", c.object(), kMaxObjectChars); !s) return s.error();
       req.capture.object = c.object();
       const auto& e = c.exposure();
       if (!std::isfinite(e.shutter_s()) || e.shutter_s() < 0 || e.shutter_s() > kMaxShutterS) {

@@ -15,8 +15,8 @@
 #include "veneer/util/log.hpp"
 #include "veneer/util/token_file.hpp"
 #include "veneerd/devices/registry.hpp"
-#include "veneerd/devices/simulated_camera.hpp"
-#include "veneerd/devices/simulated_rig.hpp"
+#include "veneerd/sim/simulated_camera.hpp"
+#include "veneerd/sim/simulated_rig.hpp"
 
 namespace veneerd {
 
@@ -231,16 +231,22 @@ veneer::Status Daemon::start() {
   if (!advertise_) {
   } else if (loopback_only(config_.listen_host)) {
     VLOG_INFO("Server", "DNS-SD: not advertised (listening on {} only)", config_.listen_host);
+  } else if (auto reach = veneer::dnssd::reach_of(config_.listen_host, server_->dual_stack()); !reach) {
+    VLOG_WARN("Server", "DNS-SD: not advertising: listening on {}: {}", config_.listen_host, reach.message());
   } else {
+    // Advertised only where the API listens (issue 37): a rig bound to one
+    // address is announced on that address's interface and family alone.
     veneer::dnssd::Advertisement ad;
     ad.name = config_.name;
     ad.type = veneer::wire::kServiceType;
     ad.port = port();
     ad.txt = veneer::wire::rig_txt(config_.name, veneer::wire::software_version());
+    ad.reach = *reach;
     auto a = veneer::dnssd::Advertiser::start(ad);
     if (a) {
       advertiser_ = std::move(*a);
-      VLOG_INFO("Server", "DNS-SD: advertising '{}' as {} on port {}", ad.name, ad.type, ad.port);
+      VLOG_INFO("Server", "DNS-SD: advertising '{}' as {} on port {} ({})", ad.name, ad.type, ad.port,
+                ad.reach.describe());
     } else {
       VLOG_WARN("Server", "DNS-SD: not advertising {}: {}", ad.type, a.message());
     }

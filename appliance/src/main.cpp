@@ -17,7 +17,7 @@
 #include "veneer/util/cpu_check.hpp"
 #include "veneer/util/log.hpp"
 #include "veneerd/daemon.hpp"
-#include "veneerd/devices/ptpip_twin.hpp"
+#include "veneerd/sim/ptpip_twin.hpp"
 #include "veneerd/hw/hue_setup.hpp"
 #include "veneerd/hw/sd_notify.hpp"
 #if __has_include("veneerd/hw/check.hpp")

@@ -393,8 +393,9 @@ void Rig::run_capture_job(const std::string& id, CaptureRequest req) {
   std::unique_ptr<SetWriter> writer;
   if (auto w = store_.begin(id, options_.simulated); w) {
     writer = std::move(*w);
-    hooks.on_frame = [&writer](int k, int shots, const cv::Mat& photo, const veneer::ImageSet::RawFile& raw) {
-      return writer->add_frame(k, photo, raw, shots);
+    hooks.on_frame = [&writer](int k, int shots, const cv::Mat& photo, const veneer::ImageSet::RawFile& raw,
+                               const veneer::ImageSet::RawFile& developed) {
+      return writer->add_frame(k, photo, raw, shots, developed);
     };
   } else {
     result = w.error();
@@ -478,6 +479,10 @@ void Rig::set_lamps(std::vector<bool> on, int brightness, std::function<void(ven
     owner_by_capture_ = false;  // the client's lamps stay until exit
     veneer::Status s = dev_.lamps->set(on, brightness);
     refresh_lamps();
+    if (!s) VLOG_WARN("Lamps", "set lamps failed: {}", s.message());
+    // The answer first, then the event it causes (the contract's order; both
+    // reach the server's thread in the order they are handed over).
+    if (done) done(s);
     if (s) {
       pending_restore_.needed = false;  // the controller's own setting wins
       RigEvent e;
@@ -485,10 +490,7 @@ void Rig::set_lamps(std::vector<bool> on, int brightness, std::function<void(ven
       e.lamps_on = on;
       e.brightness = brightness;
       emit(e);
-    } else {
-      VLOG_WARN("Lamps", "set lamps failed: {}", s.message());
     }
-    if (done) done(s);
   });
 }
 

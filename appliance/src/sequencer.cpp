@@ -121,7 +121,7 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
       const std::string step_name = k == 0 ? std::string("ambient frame (all lamps off)")
                                            : "shot " + std::to_string(k + 1) + " (" + lamps.label(k - 1) + " alone)";
       cv::Mat photo;
-      veneer::ImageSet::RawFile raw;
+      veneer::ImageSet::RawFile raw, developed;
       for (int take = 1;; ++take) {
         // Proven before the exposure: commanded from the bridge's own reading, read back.
         auto proven = lamps.ensure(want, reading, plan.lamp_attempts);
@@ -149,6 +149,9 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
             for (char& ch : raw.extension) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
             raw.bytes.assign(still->original.begin(), still->original.end());
           }
+          developed = {};
+          if (!still->developed_jpeg.empty() && still->linear.size() == photo.size())
+            developed = {"jpg", std::string(still->developed_jpeg.begin(), still->developed_jpeg.end())};
           reading = std::move(*after);
           break;
         }
@@ -174,13 +177,15 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
         ++lit_frames;
       }
       if (hooks.on_frame) {
-        if (auto s = hooks.on_frame(k, shots, photo, raw); !s) return s;
+        if (auto s = hooks.on_frame(k, shots, photo, raw, developed); !s) return s;
       } else if (k == 0) {
         set.ambient = photo;
         set.ambient_raw = std::move(raw);
+        set.ambient_developed = std::move(developed);
       } else {
         set.images.push_back(photo);
         set.raw.push_back(std::move(raw));
+        set.developed.push_back(std::move(developed));
       }
       step_total += seconds_since(step_start);
       ++steps_done;

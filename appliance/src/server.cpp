@@ -1,6 +1,7 @@
 #include "veneerd/server.hpp"
 
 #include <array>
+#include <cstring>
 #include <chrono>
 #include <deque>
 #include <fstream>
@@ -14,10 +15,13 @@
 #include <malloc.h>
 #endif
 
+#include <google/protobuf/stubs/logging.h>
+
 #include "veneer/proto/framing.hpp"
 #include "veneer/util/log.hpp"
 #include "veneer/v1/rig.pb.h"
 #include "veneerd/api.hpp"
+#include "veneerd/preview.hpp"
 
 namespace veneerd {
 
@@ -27,6 +31,24 @@ using asio::ip::tcp;
 using Clock = std::chrono::steady_clock;
 
 namespace {
+
+// protobuf logs an ERROR line for every string field that is not UTF-8 it
+// refuses to parse; a peer could fill the log with them. The server answers
+// such a request itself (refuse_invalid_utf8), so protobuf's lines go to the
+// debug level.
+void quiet_protobuf_log() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    google::protobuf::SetLogHandler([](google::protobuf::LogLevel level, const char* file, int line,
+                                       const std::string& message) {
+      if (level >= google::protobuf::LOGLEVEL_FATAL) {
+        VLOG_ERROR("Server", "protobuf {}:{}: {}", file, line, message);
+      } else {
+        VLOG_DEBUG("Server", "protobuf {}:{}: {}", file, line, message);
+      }
+    });
+  });
+}
 
 bool same_token(const std::string& a, const std::string& b) {
   // Constant time in the token's length: no early exit on the first mismatch.
@@ -46,6 +68,7 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   tcp::acceptor acceptor{io};
   std::thread thread;
   uint16_t bound_port = 0;
+  bool dual_stack = false;  // bound to "::" and taking IPv4 too
 
   // I/O thread only:
   std::set<std::shared_ptr<Session>> sessions;
@@ -232,6 +255,10 @@ class Session : public std::enable_shared_from_this<Session> {
         close_after_flush(0, "bad message stream: " + in_.error());
         return;
       }
+      if (r == veneer::wire::ReadResult::invalid) {
+        refuse_invalid_utf8(in_.invalid());
+        continue;
+      }
       handle(msg);
     }
     if (!closing_ && !closed_ && !hello_waiting_) read();
@@ -262,6 +289,21 @@ class Session : public std::enable_shared_from_this<Session> {
   }
 
   // ---- requests
+
+  // A request whose string field is not UTF-8 (proto3 cannot parse it): refused
+  // like any bad field; before hello it is a refused hello.
+  void refuse_invalid_utf8(const veneer::wire::InvalidUtf8& bad) {
+    const std::string why = bad.field + ": not valid UTF-8 (every string field is UTF-8)";
+    if (!authed_) {
+      close_after_flush(bad.id, bad.field.rfind("hello.", 0) == 0
+                                    ? "hello refused: " + why
+                                    : "the first request must be a hello with the protocol version and token");
+      return;
+    }
+    srv_.count(&ServerStats::protocol_errors);
+    VLOG_INFO("Server", "{}: refused request {}: {}", peer_, bad.id, why);
+    respond(bad.id, veneer::make_error(why));
+  }
 
   void handle(const pb::ClientMessage& msg) {
     auto req = api::decode(msg);
@@ -402,6 +444,9 @@ class Session : public std::enable_shared_from_this<Session> {
     s.set_next_role(st.next_role == veneer::Role::source ? pb::ROLE_SOURCE : pb::ROLE_DESTINATION);
     s.set_free_bytes(srv_.rig.store().free_bytes());
     s.set_clients(static_cast<uint32_t>(srv_.sessions.size()));
+    // Events are numbered and sent on this thread: every event up to this seq
+    // was sent before this status, every later one comes after it.
+    s.set_event_seq(srv_.event_seq);
   }
 
   void on(uint64_t id, api::StatusReq&) {
@@ -444,40 +489,61 @@ class Session : public std::enable_shared_from_this<Session> {
       respond(id, veneer::make_error("fetch_images: a download is already running on this connection"));
       return;
     }
-    auto files = srv_.rig.store().files(f.set_id, f.include_truth);
+    std::vector<std::string> skipped;
+    auto files = set_files(srv_.rig.store(), f.set_id, f.include_truth, f.skip_files, &skipped);
     if (!files) {
       respond(id, files.error());
       return;
     }
+    start_download("fetch_images", id, f.set_id, f.chunk_size, std::move(*files), skipped);
+  }
+
+  void on(uint64_t id, api::FetchPreviewReq& f) {
+    if (fetch_) {
+      respond(id, veneer::make_error("fetch_preview: a download is already running on this connection"));
+      return;
+    }
+    auto files = preview_files(srv_.rig.store(), f.set_id);
+    if (!files) {
+      respond(id, files.error());
+      return;
+    }
+    start_download("fetch_preview", id, f.set_id, f.chunk_size, std::move(*files), {});
+  }
+
+  void start_download(const char* what, uint64_t id, const std::string& set_id, size_t chunk,
+                      std::vector<ServedFile> files, const std::vector<std::string>& skipped) {
     // Open every file now: a set deleted mid-download still downloads whole.
     auto fetch = std::make_unique<Fetch>();
     fetch->request_id = id;
-    fetch->set_id = f.set_id;
-    fetch->chunk = f.chunk_size;
-    fs::path folder = srv_.rig.store().folder(f.set_id);
+    fetch->set_id = set_id;
+    fetch->chunk = chunk;
     uint64_t total = 0;
-    for (const auto& rel : *files) {
-      auto in = std::make_unique<std::ifstream>(folder / rel, std::ios::binary);
-      std::error_code ec;
-      uint64_t size = fs::file_size(folder / rel, ec);
-      if (!*in || ec) {
-        respond(id, veneer::make_error("fetch_images: cannot read " + f.set_id + "/" + rel));
-        return;
+    for (auto& file : files) {
+      FetchFile f{file.rel, nullptr, file.size, std::make_shared<std::string>(std::move(file.bytes))};
+      if (!file.source.empty()) {
+        f.in = std::make_unique<std::ifstream>(file.source, std::ios::binary);
+        if (*f.in) f.in->seekg(static_cast<std::streamoff>(file.offset));
+        if (!*f.in) {
+          respond(id, veneer::make_error(std::string(what) + ": cannot read " + set_id + "/" + file.rel));
+          return;
+        }
       }
-      fetch->files.push_back({rel, std::move(in), size});
-      total += size;
+      total += file.size;
+      fetch->files.push_back(std::move(f));
     }
     pb::RigMessage m;
     auto* r = m.mutable_response();
     r->set_id(id);
     r->set_ok(true);
     auto* started = r->mutable_fetch();
-    started->set_set_id(f.set_id);
-    for (const auto& rel : *files) started->add_files(rel);
+    started->set_set_id(set_id);
+    for (const auto& f : fetch->files) started->add_files(f.rel);
+    for (const auto& s : skipped) started->add_skipped_files(s);
     started->set_total_bytes(total);
     send(m);
+    VLOG_INFO("Server", "{}: {} of {} ({} files, {} bytes) started", peer_, what, set_id, fetch->files.size(), total);
     fetch_ = std::move(fetch);
-    VLOG_INFO("Server", "{}: download of {} ({} files, {} bytes) started", peer_, f.set_id, files->size(), total);
     pump_fetch();
   }
 
@@ -495,10 +561,15 @@ class Session : public std::enable_shared_from_this<Session> {
       h.last = f.offset + want >= file.size;
       h.end_of_set = h.last && f.index + 1 == f.files.size();
       auto bytes = std::make_shared<std::string>();
-      std::ifstream& in = *file.in;
-      bool read_ok = api::encode_chunk(h, want, [&in](char* dst, size_t n) {
-        in.read(dst, static_cast<std::streamsize>(n));
-        return static_cast<size_t>(in.gcount()) == n;
+      const uint64_t at = f.offset;
+      bool read_ok = api::encode_chunk(h, want, [&file, at](char* dst, size_t n) {
+        if (!file.in) {  // made for the download
+          if (at + n > file.made->size()) return false;
+          std::memcpy(dst, file.made->data() + at, n);
+          return true;
+        }
+        file.in->read(dst, static_cast<std::streamsize>(n));
+        return static_cast<size_t>(file.in->gcount()) == n;
       }, *bytes);
       if (!read_ok) {
         VLOG_ERROR("Server", "{}: reading {}/{} failed mid-download", peer_, f.set_id, file.rel);
@@ -575,8 +646,9 @@ class Session : public std::enable_shared_from_this<Session> {
 
   struct FetchFile {
     std::string rel;
-    std::unique_ptr<std::ifstream> in;
+    std::unique_ptr<std::ifstream> in;  // positioned at the range's start; null: `made` is the content
     uint64_t size = 0;
+    std::shared_ptr<std::string> made;
   };
   struct Fetch {
     uint64_t request_id = 0;
@@ -741,6 +813,7 @@ Server::Server(Rig& rig, ServerOptions options) : impl_(std::make_shared<Impl>(r
 Server::~Server() { stop(); }
 
 veneer::Status Server::start() {
+  quiet_protobuf_log();
   std::error_code ec;
   auto address = asio::ip::make_address(impl_->opt.host, ec);
   if (ec) return veneer::make_error("listen address '" + impl_->opt.host + "': " + ec.message());
@@ -748,6 +821,13 @@ veneer::Status Server::start() {
   auto& acc = impl_->acceptor;
   acc.open(ep.protocol(), ec);
   if (!ec) acc.set_option(tcp::acceptor::reuse_address(true), ec);
+  if (!ec && address.is_v6() && address.is_unspecified()) {
+    // "::" is every address: take IPv4 too, whatever net.ipv6.bindv6only says.
+    std::error_code v6ec;
+    acc.set_option(asio::ip::v6_only(false), v6ec);
+    impl_->dual_stack = !v6ec;
+    if (v6ec) VLOG_WARN("Server", "listening on [::] for IPv6 only: {}", v6ec.message());
+  }
   if (!ec) acc.bind(ep, ec);
   if (!ec) acc.listen(asio::socket_base::max_listen_connections, ec);
   if (ec) {
@@ -786,6 +866,7 @@ void Server::stop() {
 }
 
 uint16_t Server::port() const { return impl_->bound_port; }
+bool Server::dual_stack() const { return impl_->dual_stack; }
 
 ServerStats Server::stats() const {
   std::lock_guard lock(impl_->stats_mutex);

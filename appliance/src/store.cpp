@@ -299,7 +299,8 @@ SetWriter::~SetWriter() {
   fs::remove_all(tmp_, ec);
 }
 
-veneer::Status SetWriter::add_frame(int k, const cv::Mat& photo, const veneer::ImageSet::RawFile& raw, int photos) {
+veneer::Status SetWriter::add_frame(int k, const cv::Mat& photo, const veneer::ImageSet::RawFile& raw, int photos,
+                                   const veneer::ImageSet::RawFile& developed) {
   if (tmp_.empty()) return make_error("set " + id_ + " is already stored");
   auto fail = [&](const veneer::Status& s) {
     return make_error("storing set " + id_ + " failed: " + s.message() + "; no set stored");
@@ -308,7 +309,12 @@ veneer::Status SetWriter::add_frame(int k, const cv::Mat& photo, const veneer::I
   if (size_.area() == 0) {
     size_ = photo.size();
     // The space for the whole set, checked before its first file (the trash gives way first).
-    uint64_t need = Store::estimate_bytes(size_, photos, truth_) + raw.bytes.size() * static_cast<uint64_t>(photos);
+    // With the camera's files the first frame's bytes tell (half as much
+    // again for frames that compress worse); else the PNGs' bound.
+    uint64_t need = developed.bytes.empty()
+                        ? Store::estimate_bytes(size_, photos, truth_) + raw.bytes.size() * static_cast<uint64_t>(photos)
+                        : Store::estimate_bytes(size_, 0, truth_) +
+                              (developed.bytes.size() + raw.bytes.size()) * 3 / 2 * static_cast<uint64_t>(photos);
     if (store_.free_bytes() < need) store_.purge_trash(need);
     const uint64_t free = store_.free_bytes();
     if (free < need) {
@@ -318,8 +324,15 @@ veneer::Status SetWriter::add_frame(int k, const cv::Mat& photo, const veneer::I
   }
   if (photo.size() != size_) return make_error("set " + id_ + ": frame " + std::to_string(k) + " changed size");
   const int index = k - 1;
-  const fs::path png = tmp_ / (k == 0 ? std::string("ambient.png") : light_png(index));
-  if (auto s = write_encoded(png, veneer::encode_png16(photo)); !s) return fail(s);
+  veneer::ImageSet::RawFile developed_name;
+  if (developed.bytes.empty()) {
+    const fs::path png = tmp_ / (k == 0 ? std::string("ambient.png") : light_png(index));
+    if (auto s = write_encoded(png, veneer::encode_png16(photo)); !s) return fail(s);
+  } else {
+    const std::string file = k == 0 ? "ambient." + developed.extension : light_png(index).substr(0, 9) + developed.extension;
+    if (auto s = veneer::write_file_synced(tmp_ / file, developed.bytes); !s) return fail(s);
+    developed_name = {developed.extension, "1"};
+  }
   veneer::ImageSet::RawFile name;
   if (!raw.bytes.empty()) {
     const std::string file = k == 0 ? "ambient." + raw.extension : light_png(index).substr(0, 9) + raw.extension;
@@ -330,13 +343,16 @@ veneer::Status SetWriter::add_frame(int k, const cv::Mat& photo, const veneer::I
   if (k == 0) {
     ambient_ = true;
     ambient_raw_ = name;
+    ambient_developed_ = developed_name;
   } else {
     if (lit_.size() <= static_cast<size_t>(index)) {
       lit_.resize(index + 1, false);
       raw_names_.resize(index + 1);
+      developed_names_.resize(index + 1);
     }
     lit_[index] = true;
     raw_names_[index] = name;
+    developed_names_[index] = developed_name;
   }
   return {};
 }
@@ -393,9 +409,11 @@ veneer::Status SetWriter::commit(veneer::ImageSet& set) {
   named.scene = set.scene;
   named.mask = set.mask;
   named.raw = raw_names_;
+  named.developed = developed_names_;
   if (ambient_) {
     named.ambient = cv::Mat(1, 1, CV_32FC3, cv::Scalar::all(0));  // a marker: ambient.png is written
     named.ambient_raw = ambient_raw_;
+    named.ambient_developed = ambient_developed_;
   }
   if (auto s = veneer::write_file_synced(tmp_ / "set.json", veneer::manifest_json(named)); !s) return fail(s);
   if (auto s = veneer::sync_folder(tmp_); !s) return fail(s);

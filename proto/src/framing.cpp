@@ -2,6 +2,7 @@
 
 #include <google/protobuf/io/coded_stream.h>
 #include <google/protobuf/io/zero_copy_stream_impl_lite.h>
+#include <google/protobuf/message.h>
 #include <google/protobuf/util/delimited_message_util.h>
 
 namespace veneer::wire {
@@ -62,15 +63,28 @@ ReadResult FrameBuffer::next(google::protobuf::MessageLite& out) {
   pbio::ArrayInputStream stream(p, static_cast<int>(total));
   bool clean_eof = false;
   if (!google::protobuf::util::ParseDelimitedFromZeroCopyStream(&out, &stream, &clean_eof)) {
+    // proto3 refuses a string field that is not UTF-8: when that is the only
+    // fault, say which field, skip the message and keep the stream.
+    const auto* full = dynamic_cast<const google::protobuf::Message*>(&out);
+    const std::string_view body(reinterpret_cast<const char*>(p) + prefix_len, static_cast<size_t>(length));
+    if (auto bad = full ? find_invalid_utf8(*full->GetDescriptor(), body) : std::nullopt) {
+      invalid_ = std::move(*bad);
+      consume(total);
+      return ReadResult::invalid;
+    }
     error_ = "unparsable message of " + std::to_string(length) + " bytes";
     return ReadResult::error;
   }
-  start_ += total;
+  consume(total);
+  return ReadResult::message;
+}
+
+void FrameBuffer::consume(size_t bytes) {
+  start_ += bytes;
   if (start_ == buf_.size()) {
     buf_.clear();
     start_ = 0;
   }
-  return ReadResult::message;
 }
 
 }  // namespace veneer::wire

@@ -24,8 +24,8 @@
 #include "main_window.hpp"
 #include "wait_for.hpp"
 #include "veneer/io/image_io.hpp"
-#include "veneer/match/live.hpp"
-#include "veneer/match/transfer.hpp"
+#include "veneer/pipeline/transfer.hpp"
+#include "veneer/repaint/live.hpp"
 #include "veneer/sim/simulator.hpp"
 
 namespace {
@@ -96,24 +96,24 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "bench_app: simulation failed\n");
     return 1;
   }
-  veneer::match::TransferOptions to;
+  veneer::pipeline::TransferOptions to;
   to.truth_normals = true;
   to.match.method = veneer::match::Method::coherent;
-  auto tr = veneer::match::transfer(*dst, *src, to);
+  auto tr = veneer::pipeline::transfer(*dst, *src, to);
   if (!tr) {
     std::fprintf(stderr, "bench_app: transfer failed: %s\n", tr.message().c_str());
     return 1;
   }
   cv::Mat frame8 = veneer::tonemap_picture(src->images[0]);
   cv::Mat backdrop8 = veneer::tonemap_picture(dst->images[0]);
-  veneer::match::LiveRepainter live(tr->map, tr->source_size, backdrop8);
+  veneer::repaint::LiveRepainter live(tr->map, tr->source_size, backdrop8);
   live.apply(frame8);  // tables built once
   const double fast = median_ms([&] { cv::Mat out = live.apply(frame8); }, 200);
   // the same with the transfer's blend (2 px, guided by normals: the pictures' default)
-  veneer::match::LiveRepainter live_blended(tr->map, tr->source_size, backdrop8, tr->blend);
+  veneer::repaint::LiveRepainter live_blended(tr->map, tr->source_size, backdrop8, tr->blend);
   const double blended = median_ms([&] { cv::Mat out = live_blended.apply(frame8); }, 100);
   cv::Mat frame_f = src->images[0];
-  const double peer = median_ms([&] { cv::Mat out = veneer::match::repaint(tr->map, frame_f, dst->images[0]); }, 30);
+  const double peer = median_ms([&] { cv::Mat out = veneer::repaint::repaint(tr->map, frame_f, dst->images[0]); }, 30);
   int mapped = 0;
   for (int y = 0; y < tr->map.xy.rows; ++y)
     for (int x = 0; x < tr->map.xy.cols; ++x) mapped += tr->map.xy.at<cv::Vec2f>(y, x)[0] >= 0;

@@ -38,7 +38,7 @@
 #include "main_window.hpp"
 #include "widgets.hpp"
 #include "wait_for.hpp"
-#include "veneer/match/transfer.hpp"
+#include "veneer/pipeline/transfer.hpp"
 #include "veneer/ps/segmentation.hpp"
 #include "veneer/sim/simulator.hpp"
 
@@ -883,7 +883,7 @@ TEST(Viewer, MatchingOptionChangesRecomputeTheMap) {
   const int map_runs = w.mapOnlyRuns();
   const auto* guided = w.result();
   const cv::Mat kept = guided->map.xy.clone(), guided_picture = guided->repainted_median.clone();
-  EXPECT_EQ(child<QSpinBox>(w, "blend")->value(), veneer::match::TransferOptions{}.blend);
+  EXPECT_EQ(child<QSpinBox>(w, "blend")->value(), veneer::pipeline::TransferOptions{}.blend);
   child<QDoubleSpinBox>(w, "blendGuide")->setValue(0);
   ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.result() != guided; }, 60000));
   const auto* plain_blend = w.result();

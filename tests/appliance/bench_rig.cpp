@@ -15,13 +15,17 @@
 //  4. the real veneerd binary's peak resident memory over a pair of captures
 //     (destination, source) at the camera's full resolution (5600x3750), next
 //     to the frames' own bytes.
-//     `bench_rig --capture-peak` runs this section alone.
+//     `bench_rig --capture-peak` runs this section alone. Then the first
+//     set's bytes by kind (the camera twin's JPEG + lossless DNG per frame)
+//     and the time to pull it on loopback: live first (the preview set in
+//     place, then the whole) against a plain pull.
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <map>
 #include <mutex>
 #include <thread>
 #include <vector>
@@ -31,7 +35,7 @@
 #include "veneer/sim/simulator.hpp"
 #include "veneer/util/log.hpp"
 #include "veneerd/daemon.hpp"
-#include "veneerd/devices/simulated_rig.hpp"
+#include "veneerd/sim/simulated_rig.hpp"
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
@@ -270,6 +274,61 @@ static int bench_capture_peak(const fs::path& dir) {
   std::printf("| peer: one set's %d frames as the camera delivers them (16-bit) | %.0f |\n", frames, frames * frame16);
   std::printf("| peer: one set's %d frames as float (what holding them all costs) | %.0f |\n", frames, frames * frame16 * 2);
   std::printf("| budget of the issue (a 4 GiB board) | 4096 |\n");
+
+  // The first set's bytes by kind, and pulling it on loopback: live first
+  // (the preview set in place, then the whole) against a plain pull, both
+  // without truth/ (the simulator's ground truth, not a camera's files).
+  auto sets = c.list_sets();
+  if (!sets || sets->empty()) return 1;
+  const std::string first = sets->front().id;
+  std::map<std::string, uint64_t> bytes;
+  for (const auto& e : fs::recursive_directory_iterator(store / first)) {
+    if (!e.is_regular_file()) continue;
+    const std::string rel = fs::relative(e.path(), store / first).generic_string();
+    const std::string kind = rel.rfind("truth/", 0) == 0 ? "truth/ (simulator only)" : e.path().extension().string();
+    bytes[kind] += e.file_size();
+  }
+  std::printf("\n### One stored %s set (%s), bytes by kind\n\n| files | MB |\n|---|---|\n", size.c_str(), first.c_str());
+  uint64_t camera = 0;
+  for (const auto& [kind, b] : bytes) {
+    std::printf("| %s | %.1f |\n", kind.c_str(), b / 1e6);
+    if (kind != "truth/ (simulator only)") camera += b;
+  }
+  std::printf("| **the camera's files and set.json (what a pull without truth moves)** | **%.1f** |\n", camera / 1e6);
+
+  // Three rounds, alternating, medians (the machine is shared).
+  std::vector<double> preview_s, live_whole_s, plain_s;
+  uint64_t preview_bytes = 0;
+  for (int round = 0; round < 3; ++round) {
+    veneer::rig::PullOptions o;
+    o.include_truth = false;
+    o.live_first = true;
+    const fs::path out = dir / ("pulled-live-" + std::to_string(round));
+    const auto t0 = Clock::now();
+    o.on_preview = [&](const fs::path& f) {
+      preview_s.push_back(secs(Clock::now() - t0));
+      preview_bytes = 0;
+      for (const auto& e : fs::directory_iterator(f)) preview_bytes += e.file_size();
+    };
+    if (auto s = c.pull_set(first, out, o); !s) {
+      std::fprintf(stderr, "bench_rig: live-first pull: %s\n", s.message().c_str());
+      return 1;
+    }
+    live_whole_s.push_back(secs(Clock::now() - t0));
+    const auto t1 = Clock::now();
+    if (auto s = c.pull(first, dir / ("pulled-plain-" + std::to_string(round)), false); !s) return 1;
+    plain_s.push_back(secs(Clock::now() - t1));
+    fs::remove_all(out);
+    fs::remove_all(dir / ("pulled-plain-" + std::to_string(round)));
+  }
+  auto median = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return v[v.size() / 2];
+  };
+  std::printf("\n### Pulling it on loopback (no truth/; median of 3, alternating)\n\n| step | s | MB |\n|---|---|---|\n");
+  std::printf("| **live first: the preview set in place (on_preview)** | **%.2f** | %.2f |\n", median(preview_s), preview_bytes / 1e6);
+  std::printf("| live first: the whole set in place (exchanged with the preview) | %.2f | %.1f |\n", median(live_whole_s), camera / 1e6);
+  std::printf("| peer: a plain pull of the whole set | %.2f | %.1f |\n", median(plain_s), camera / 1e6);
   client->reset();
   d->stop(SIGTERM);
   return 0;

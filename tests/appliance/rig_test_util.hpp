@@ -236,7 +236,7 @@ class RawConnection {
       veneer::v1::RigMessage m;
       auto r = in_.next(m);
       if (r == veneer::wire::ReadResult::message) return m;
-      if (r == veneer::wire::ReadResult::error) return std::nullopt;
+      if (r != veneer::wire::ReadResult::need_more) return std::nullopt;  // broken, or not UTF-8
       auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
       if (left.count() <= 0 || fd_ < 0) return std::nullopt;
       pollfd p{fd_, POLLIN, 0};

@@ -14,10 +14,10 @@
 #include "rig_test_util.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
-#include "veneer/match/live.hpp"
-#include "veneer/match/transfer.hpp"
-#include "veneer/rig/client.hpp"
+#include "veneer/pipeline/transfer.hpp"
 #include "veneer/ps/photometric_stereo.hpp"
+#include "veneer/repaint/live.hpp"
+#include "veneer/rig/client.hpp"
 #include "veneer/sim/simulator.hpp"
 
 namespace fs = std::filesystem;
@@ -129,30 +129,26 @@ TEST(Daemon, TwoPressesStoreTwoSetsThatPullWithTheRenderedPixelsAndTrueNormals) 
     auto ring = veneer::sim::thesis_rig();
     for (int i = 0; i < 7; ++i) {
       cv::Mat expect = veneer::sim::render(**scene, {ring[i]}, o);
-      // Through the same 16-bit quantisation as the set's PNGs.
-      cv::Mat e16, g16;
-      expect.convertTo(e16, CV_16UC3, 65535.0);
-      set->images[i].convertTo(g16, CV_16UC3, 65535.0);
-      cv::Mat diff;
-      cv::absdiff(e16, g16, diff);
-      double worst = 0;
-      cv::minMaxLoc(diff.reshape(1), nullptr, &worst);
-      EXPECT_LE(worst, 1.0) << scenes[s] << " lamp " << i << ": pixels differ from the render by " << worst << " LSB";
+      // The photos are the camera's developed JPEGs (8-bit sRGB, quality 95),
+      // read back linear: the render within JPEG's loss; the exact pixels
+      // are in the RAW files (below, and CameraFiles tests).
+      const double rel = cv::norm(set->images[i], expect, cv::NORM_L1) / cv::norm(expect, cv::NORM_L1);
+      EXPECT_LT(rel, 0.03) << scenes[s] << " lamp " << i << ": the photo differs from the render by " << rel;
     }
   }
 
   // Photometric stereo (the ps module behind `veneer normals`) on the pulled
-  // destination, from its photos (within 3 degrees of the truth) and read as
-  // the viewer reads it by default, from the camera's RAW files (within 5:
-  // the 256x170 mosaic's demosaicing blurs the small bull's edges, so its
-  // median error measured 4.0 degrees over the bull alone -- 3.0 while the
-  // truth still counted its flat plinth -- against the photos' 0.4).
+  // destination, from its photos and read as the viewer reads it by default,
+  // from the camera's RAW files, each within 6 degrees: the 256x170 mosaic's
+  // demosaicing blurs the small bull's edges (median 4.0 degrees over the
+  // bull alone), and so do the camera's JPEGs (8-bit, chroma at half
+  // resolution: median 4.8; the 16-bit PNGs the rig stored before gave 0.4).
   for (bool raw : {false, true}) {
     veneer::ReadOptions read;
     read.photos = raw ? veneer::PhotoSource::automatic : veneer::PhotoSource::developed;
     auto pulled = veneer::read_set(dir / "pulled-0", read);
     ASSERT_TRUE(pulled) << pulled.message();
-    EXPECT_EQ(pulled->photos_from, raw ? "raw" : "png");
+    EXPECT_EQ(pulled->photos_from, raw ? "raw" : "jpeg");
     auto ps = veneer::ps::photometric_stereo(*pulled, pulled->truth.mask);
     ASSERT_TRUE(ps) << ps.message();
     const cv::Mat* n = &ps->normals;
@@ -166,7 +162,7 @@ TEST(Daemon, TwoPressesStoreTwoSetsThatPullWithTheRenderedPixelsAndTrueNormals) 
     }
     ASSERT_GT(err.size(), 500u);
     std::nth_element(err.begin(), err.begin() + err.size() / 2, err.end());
-    EXPECT_LT(err[err.size() / 2], raw ? 5.0 : 3.0) << "median angular error of the recovered normals, "
+    EXPECT_LT(err[err.size() / 2], raw ? 5.0 : 6.0) << "median angular error of the recovered normals, "
                                                     << (raw ? "RAW" : "photos");
   }
   fs::remove_all(dir);
@@ -219,21 +215,21 @@ TEST(Daemon, LiveFramesThroughAMapAreBlendedAsTheStills) {
   // the same frame repainted here through the core: with the stills' plan, and without
   auto dset = veneer::read_set(dst), sset = veneer::read_set(src);
   ASSERT_TRUE(dset && sset);
-  auto options = veneer::match::read_transfer_options(tr / "metrics.json");
+  auto options = veneer::pipeline::read_transfer_options(tr / "metrics.json");
   ASSERT_TRUE(options) << options.message();
   EXPECT_EQ(options->blend, 3);
-  auto pair = veneer::match::prepare_pair(*dset, *sset, *options);
+  auto pair = veneer::pipeline::prepare_pair(*dset, *sset, *options);
   ASSERT_TRUE(pair) << pair.message();
   auto map = veneer::match::read_map(tr / "map.pfm");
   ASSERT_TRUE(map) << map.message();
-  auto plan = veneer::match::blend_plan_for(*pair, *options, *map);
+  auto plan = veneer::pipeline::blend_plan_for(*pair, *options, *map);
   ASSERT_TRUE(plan && *plan) << (plan ? "no plan" : plan.message());
-  const cv::Mat backdrop = veneer::tonemap_picture(veneer::match::median_photo(dset->images));
+  const cv::Mat backdrop = veneer::tonemap_picture(veneer::repaint::median_photo(dset->images));
   for (const char* which : {"blended", "plain"}) {
     const cv::Mat frame = cv::imread((dir / which / "frame_0000.jpg").string(), cv::IMREAD_COLOR);
     const cv::Mat got = cv::imread((dir / which / "repainted_0000.png").string(), cv::IMREAD_COLOR);
     ASSERT_FALSE(frame.empty() || got.empty()) << which;
-    veneer::match::LiveRepainter with(*map, pair->source.size, backdrop, *plan), without(*map, pair->source.size, backdrop);
+    veneer::repaint::LiveRepainter with(*map, pair->source.size, backdrop, *plan), without(*map, pair->source.size, backdrop);
     const cv::Mat want_blended = with.apply(frame), want_plain = without.apply(frame);
     const bool is_blended = std::string(which) == "blended";
     EXPECT_EQ(cv::norm(got, is_blended ? want_blended : want_plain, cv::NORM_INF), 0.0) << which;
@@ -251,7 +247,7 @@ TEST(Daemon, LiveFramesThroughAMapAreBlendedAsTheStills) {
     const cv::Mat frame = cv::imread((dir / "no-dst" / "frame_0000.jpg").string(), cv::IMREAD_COLOR);
     const cv::Mat got = cv::imread((dir / "no-dst" / "repainted_0000.png").string(), cv::IMREAD_COLOR);
     ASSERT_FALSE(frame.empty() || got.empty());
-    veneer::match::LiveRepainter on_black(*map, pair->source.size, {},
+    veneer::repaint::LiveRepainter on_black(*map, pair->source.size, {},
                                           std::make_shared<const veneer::match::fast::BlendPlan>(*plain_plan));
     EXPECT_EQ(cv::norm(got, on_black.apply(frame), cv::NORM_INF), 0.0);
   }
@@ -267,18 +263,18 @@ TEST(Daemon, LiveFramesThroughAMapAreBlendedAsTheStills) {
   auto scaled = run(rig + " live --no-track --frames 1 --fps 5 --map " + (bare / "map.pfm").string() + " --src " + src.string() +
                     " --dst " + dst.string() + " --out " + (dir / "scaled").string());
   ASSERT_EQ(scaled.code, 0) << scaled.out;
-  veneer::match::TransferOptions defaults;
+  veneer::pipeline::TransferOptions defaults;
   defaults.scale = 0.5;
-  auto half_pair = veneer::match::prepare_pair(*dset, *sset, defaults);
+  auto half_pair = veneer::pipeline::prepare_pair(*dset, *sset, defaults);
   auto half_map = veneer::match::read_map(bare / "map.pfm");
   ASSERT_TRUE(half_pair && half_map);
-  auto half_plan = veneer::match::blend_plan_for(*half_pair, defaults, *half_map);
+  auto half_plan = veneer::pipeline::blend_plan_for(*half_pair, defaults, *half_map);
   ASSERT_TRUE(half_plan && *half_plan) << (half_plan ? "no plan" : half_plan.message());
   const cv::Mat frame = cv::imread((dir / "scaled" / "frame_0000.jpg").string(), cv::IMREAD_COLOR);
   const cv::Mat got = cv::imread((dir / "scaled" / "repainted_0000.png").string(), cv::IMREAD_COLOR);
   ASSERT_FALSE(frame.empty() || got.empty());
   EXPECT_EQ(got.size(), half_map->xy.size());
-  veneer::match::LiveRepainter at_half(*half_map, half_pair->source.size, backdrop, *half_plan);
+  veneer::repaint::LiveRepainter at_half(*half_map, half_pair->source.size, backdrop, *half_plan);
   EXPECT_EQ(cv::norm(got, at_half.apply(frame), cv::NORM_INF), 0.0);
   fs::remove_all(dir);
 }

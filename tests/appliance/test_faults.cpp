@@ -10,8 +10,8 @@
 #include "veneer/io/imageset.hpp"
 #include "veneer/rig/client.hpp"
 #include "veneerd/daemon.hpp"
-#include "veneerd/devices/simulated_camera.hpp"
-#include "veneerd/devices/simulated_rig.hpp"
+#include "veneerd/sim/simulated_camera.hpp"
+#include "veneerd/sim/simulated_rig.hpp"
 
 namespace fs = std::filesystem;
 using Kind = veneer::rig::Event::Kind;
@@ -206,9 +206,65 @@ TEST(Faults, ClientVanishingDuringADownloadHarmsNobody) {
     if (closer.joinable()) closer.join();
     EXPECT_FALSE(s);
     EXPECT_FALSE(fs::exists(out)) << "no half set at the destination";
-    for (const auto& entry : fs::directory_iterator(rig.dir)) {
-      EXPECT_EQ(entry.path().filename().string().find(".half.pull-"), std::string::npos) << "temporary left";
-    }
+    // What arrived whole waits in the pull's staging folder for a resumed
+    // pull; nothing half-written is kept there.
+    const fs::path staging = rig.dir / (".half.pull-" + id);
+    ASSERT_TRUE(fs::is_directory(staging)) << "the files that arrived are kept for resuming";
+    for (const auto& entry : fs::recursive_directory_iterator(staging))
+      EXPECT_NE(entry.path().extension(), ".part") << entry.path() << ": a partial file kept";
+  }
+  {  // the same pull again resumes: the files already there are not sent again
+    std::vector<std::string> stages;
+    veneer::Progress progress;
+    progress.on_progress = [&](double, const std::string& stage) { stages.push_back(stage); };
+    const fs::path out = rig.dir / "half";
+    ASSERT_TRUE(rig.client->pull(id, out, true, false, progress));
+    bool resumed = false;
+    for (const auto& st : stages) resumed = resumed || st.rfind("resuming: ", 0) == 0;
+    EXPECT_TRUE(resumed) << "the second pull did not resume";
+    EXPECT_FALSE(fs::exists(rig.dir / (".half.pull-" + id))) << "the staging folder is left after the pull";
+    auto set = veneer::read_set(out);
+    ASSERT_TRUE(set) << set.message();
+    EXPECT_EQ(set->images.size(), 7u);
+    EXPECT_TRUE(set->truth.present());
+  }
+  {  // live first, the client gone after the preview: the preview set stays, whole; the next pull completes it
+    auto token = rig.daemon->token();
+    auto c = veneer::rig::Client::connect({"127.0.0.1", rig.daemon->port()}, token);
+    ASSERT_TRUE(c);
+    veneer::rig::Client* raw = c->get();
+    std::atomic<bool> closed{false};
+    std::thread closer;
+    veneer::Progress progress;
+    progress.on_progress = [&](double f, const std::string&) {
+      if (f > 0.3 && !closed.exchange(true)) {
+        closer = std::thread([raw] { raw->close(); });
+        const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+        while (raw->connected() && std::chrono::steady_clock::now() < until)
+          std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      }
+    };
+    veneer::rig::PullOptions o;
+    o.live_first = true;
+    int previews = 0;
+    o.on_preview = [&](const fs::path&) { ++previews; };
+    const fs::path out = rig.dir / "live";
+    EXPECT_FALSE(raw->pull_set(id, out, o, progress));
+    if (closer.joinable()) closer.join();
+    EXPECT_EQ(previews, 1);
+    auto preview = veneer::read_set(out);
+    ASSERT_TRUE(preview) << "the preview set is in place, whole: " << preview.message();
+    ASSERT_TRUE(preview->preview_of);
+    EXPECT_EQ(preview->preview_of->id, id);
+
+    previews = 0;
+    ASSERT_TRUE(rig.client->pull_set(id, out, o));
+    EXPECT_EQ(previews, 1) << "its preview, already there, is announced again";
+    auto full = veneer::read_set(out);
+    ASSERT_TRUE(full) << full.message();
+    EXPECT_FALSE(full->preview_of);
+    EXPECT_EQ(full->images.size(), 7u);
+    EXPECT_FALSE(fs::exists(rig.dir / (".live.pull-" + id)));
   }
   // The rig keeps serving: a full download by the first client works.
   fs::path out = rig.dir / "whole";

@@ -58,6 +58,29 @@ TEST(Framing, RefusesJustOverTheLimitAndOverlongPrefixes) {
   EXPECT_EQ(in.next(out), ReadResult::error);
 }
 
+// proto3 refuses a string field that is not UTF-8; the reader names the
+// field, skips that message and goes on with the next.
+TEST(Framing, AStringThatIsNotUtf8IsNamedAndSkipped) {
+  std::string stream;
+  pb::ClientMessage bad;
+  bad.set_id(41);
+  bad.mutable_capture()->set_object("caf\xC3");  // cut short: not UTF-8
+  ASSERT_TRUE(veneer::wire::append_delimited(bad, stream));
+  pb::ClientMessage good;
+  good.set_id(42);
+  good.mutable_status();
+  ASSERT_TRUE(veneer::wire::append_delimited(good, stream));
+  FrameBuffer in;
+  in.feed(stream.data(), stream.size());
+  pb::ClientMessage m;
+  ASSERT_EQ(in.next(m), ReadResult::invalid);
+  EXPECT_EQ(in.invalid().field, "capture.object");
+  EXPECT_EQ(in.invalid().id, 41u);
+  ASSERT_EQ(in.next(m), ReadResult::message) << in.error();
+  EXPECT_EQ(m.id(), 42u);
+  EXPECT_EQ(in.buffered(), 0u);
+}
+
 TEST(Framing, GarbageIsAnErrorNotACrash) {
   // A length of 5 followed by bytes that are not a ClientMessage (field 0 is invalid).
   const unsigned char garbage[] = {0x05, 0x00, 0xff, 0xff, 0xff, 0xff};

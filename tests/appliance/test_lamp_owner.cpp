@@ -11,8 +11,8 @@
 #include "rig_test_util.hpp"
 #include "veneer/io/imageset.hpp"
 #include "veneer/rig/client.hpp"
-#include "veneerd/devices/hue_emulator.hpp"
-#include "veneerd/devices/hue_lamps.hpp"
+#include "veneerd/sim/hue_emulator.hpp"
+#include "veneerd/hw/hue_lamps.hpp"
 #include "veneerd/hw/hue_setup.hpp"
 
 namespace fs = std::filesystem;
@@ -28,7 +28,7 @@ constexpr int kLamps = 6;
 struct Bridge {
   veneerd::HueBridgeEmulator emulator;
   std::string app_key;                       // a second user: the owner's Hue app
-  std::unique_ptr<veneerd::HueLamps> app;    // the app's view of the ring lamps
+  std::unique_ptr<veneerd::hw::HueLamps> app;    // the app's view of the ring lamps
 
   Bridge() : emulator([] {
       veneerd::HueEmulatorOptions o;
@@ -43,12 +43,12 @@ struct Bridge {
     auto key = veneerd::hw::pair_bridge(emulator.address(), 3000, 100, nullptr);
     if (!key) return;
     app_key = *key;
-    veneerd::HueLampsOptions o;
+    veneerd::hw::HueLampsOptions o;
     o.bridge = emulator.address();
     o.key = app_key;
     for (int i = 1; i <= kLamps; ++i) o.lamps.push_back(std::to_string(i));
     o.settle_ms = 0;
-    auto l = veneerd::HueLamps::create(o);
+    auto l = veneerd::hw::HueLamps::create(o);
     if (l) app = std::move(*l);
   }
   // The app sets lamps over HTTP, as the owner would.

@@ -104,4 +104,35 @@ TEST_F(CliOutput, ErrorsAreOneLineNamingTheCommandWithExitCodes) {
   EXPECT_EQ(std::count(blocked.err.begin(), blocked.err.end(), '\n'), 1) << blocked.err;
 }
 
+// veneer transfer --rti: the repainted destination as a PTM, its residual on
+// stdout and in metrics.json; a bad --rti-format is a usage error before any work.
+TEST_F(CliOutput, TransferWritesARelightableFileAndReportsItsResidual) {
+  ASSERT_EQ(veneer("simulate --scene cup-white --size 96x64 --out dst --role destination", dir_).code, 0);
+  ASSERT_EQ(veneer("simulate --scene orange --size 96x64 --out src --role source", dir_).code, 0);
+  auto t = veneer("transfer --dst dst --src src --out out --no-cache --rti cup.ptm", dir_);
+  ASSERT_EQ(t.code, 0) << t.err;
+  EXPECT_NE(t.out.find("relightable file cup.ptm (PTM_FORMAT_LRGB"), std::string::npos) << t.out;
+  EXPECT_NE(t.out.find("levels RMS"), std::string::npos) << t.out;
+  std::FILE* f = std::fopen((dir_ / "cup.ptm").c_str(), "rb");
+  ASSERT_NE(f, nullptr);
+  char head[160] = {};
+  const std::string text(head, std::fread(head, 1, sizeof head, f));
+  std::fclose(f);
+  EXPECT_EQ(text.rfind("PTM_1.2\nPTM_FORMAT_LRGB\n96 64\n", 0), 0u) << text.substr(0, 40);
+  size_t header = 0;
+  for (int line = 0; line < 5; ++line) header = text.find('\n', header) + 1;
+  EXPECT_EQ(fs::file_size(dir_ / "cup.ptm"), header + 96u * 64u * 9u) << "five header lines, then 6 + 3 bytes per pixel";
+  std::FILE* m = std::fopen((dir_ / "out" / "metrics.json").c_str(), "r");
+  ASSERT_NE(m, nullptr);
+  std::string metrics(1 << 20, '\0');
+  metrics.resize(std::fread(metrics.data(), 1, metrics.size(), m));
+  std::fclose(m);
+  EXPECT_NE(metrics.find("\"residual_rms_levels\""), std::string::npos);
+
+  auto bad = veneer("transfer --dst dst --src src --out out2 --rti x.ptm --rti-format xyz", dir_);
+  EXPECT_EQ(bad.code, 2);
+  EXPECT_EQ(bad.err, "veneer transfer: --rti-format must be lrgb or rgb, got \"xyz\"\n");
+  EXPECT_FALSE(fs::exists(dir_ / "out2"));
+}
+
 }  // namespace

@@ -1,1 +1,1 @@
-veneer_fuzz(hue_http SOURCES ${CMAKE_CURRENT_SOURCE_DIR}/hue_http.cpp LIBS veneerd_devices)
+veneer_fuzz(hue_http SOURCES ${CMAKE_CURRENT_SOURCE_DIR}/hue_http.cpp LIBS veneerd_sim)

@@ -5,9 +5,9 @@
 #include <cstdint>
 #include <string_view>
 
-#include "veneerd/devices/hue_emulator.hpp"
-#include "veneerd/devices/hue_lamps.hpp"
-#include "veneerd/devices/http_request.hpp"
+#include "veneerd/sim/hue_emulator.hpp"
+#include "veneerd/hw/hue_lamps.hpp"
+#include "veneerd/sim/http_request.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   static veneerd::HueBridgeEmulator* bridge = [] {
@@ -26,11 +26,11 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       veneerd::HttpRequest request = parser.take();
       veneerd::HttpResponse response = bridge->handle(request);
       (void)response.serialize(request.keep_alive());
-      (void)veneerd::parse_hue_results(response.body);
+      (void)veneerd::hw::parse_hue_results(response.body);
       state = parser.state();
     }
     if (state == veneerd::HttpRequestParser::State::error) break;
   }
-  (void)veneerd::parse_hue_results(std::string(bytes));
+  (void)veneerd::hw::parse_hue_results(std::string(bytes));
   return 0;
 }

@@ -99,7 +99,7 @@ void MainWindow::exportMapTo(const QString& dir) {
       return veneer::make_error("cancelled");
     }
     if (auto s = veneer::write_picture((dir + "/map.png").toStdString(),
-                                       veneer::match::map_picture(result->map, result->source_size));
+                                       veneer::repaint::map_picture(result->map, result->source_size));
         !s)
       return s;
     p.report(1, "done");
@@ -123,7 +123,7 @@ void MainWindow::exportResultsTo(const QString& dir) {
          [result, dir](const veneer::Progress& p) -> veneer::Status {
            const QString temp = dir + ".part";
            QDir(temp).removeRecursively();
-           if (auto s = veneer::match::write_transfer(*result, temp.toStdString(), p.part(0, 0.95)); !s) {
+           if (auto s = veneer::pipeline::write_transfer(*result, temp.toStdString(), p.part(0, 0.95)); !s) {
              QDir(temp).removeRecursively();
              return s;
            }
@@ -173,7 +173,7 @@ void MainWindow::exportRelightVideoTo(const QString& file) {
                return veneer::make_error("cancelled");
              }
              const double a = 2 * M_PI * i / frames;
-             const cv::Vec3d d = veneer::match::direction_on_sphere(0.7 * std::cos(a), 0.7 * std::sin(a));
+             const cv::Vec3d d = veneer::repaint::direction_on_sphere(0.7 * std::cos(a), 0.7 * std::sin(a));
              writer << tonemap_picture(relighter->render(result->map, d, backdrop));
              p.report((i + 1.0) / frames, "frame");
            }

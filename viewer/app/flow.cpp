@@ -101,7 +101,7 @@ void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer
       r.loaded->set = std::move(*read);
       r.thumbnail = thumbnail_of(r.loaded->set);
       if (full) {
-        r.loaded->median = veneer::match::median_photo(r.loaded->set.images);
+        r.loaded->median = veneer::repaint::median_photo(r.loaded->set.images);
         r.loaded->median_picture = tonemap_picture(r.loaded->median);
         r.loaded->median_image = to_qimage(r.loaded->median_picture);  // what the views show, made here
         r.loaded->histogram = luminance_histogram(r.loaded->median_picture);

@@ -29,7 +29,7 @@ struct LibrarySet {
 // A map kept in the library, enough to show it again after a restart
 // without matching: its folder holds map.pfm, map.png (thumbnail),
 // options.json (the transfer options it was computed and repainted with,
-// match::transfer_options_json) and, when the sets were segmented by hand,
+// pipeline::transfer_options_json) and, when the sets were segmented by hand,
 // dst-mask.png / src-mask.png.
 struct LibraryMap {
   QString folder;

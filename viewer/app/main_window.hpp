@@ -22,11 +22,11 @@
 #include "sphere_pad.hpp"
 #include "step_clock.hpp"
 #include "veneer/io/imageset.hpp"
-#include "veneer/match/live.hpp"
-#include "veneer/match/live_session.hpp"
-#include "veneer/match/relight.hpp"
-#include "veneer/match/transfer.hpp"
+#include "veneer/pipeline/transfer.hpp"
 #include "veneer/ps/photometric_stereo.hpp"
+#include "veneer/repaint/live.hpp"
+#include "veneer/repaint/live_session.hpp"
+#include "veneer/repaint/relight.hpp"
 
 class QCheckBox;
 class QComboBox;
@@ -75,7 +75,7 @@ class MainWindow : public QMainWindow {
   void startTransfer();
   void cancelTransfer();
   bool computing() const { return computing_; }
-  const veneer::match::TransferResult* result() const { return result_.get(); }
+  const veneer::pipeline::TransferResult* result() const { return result_.get(); }
   const LoadedSet* destination() const { return dst_.get(); }
   const LoadedSet* source() const { return src_.get(); }
   QString lastMessage() const { return last_message_; }
@@ -160,7 +160,7 @@ class MainWindow : public QMainWindow {
     QImage shown_image, repainted_image;
     QString state, refusal;
   };
-  void showLiveFrame(const LiveOut& out, const veneer::match::LiveSession* session);
+  void showLiveFrame(const LiveOut& out, const veneer::repaint::LiveSession* session);
   void onTransferDone();
   void matchOptionChanged();
   // transfer_panel.cpp: the presets of the Transfer panel
@@ -224,24 +224,24 @@ class MainWindow : public QMainWindow {
   QSettings settings_;
   QString workdir_, last_message_;
   std::shared_ptr<LoadedSet> dst_, src_;
-  std::shared_ptr<veneer::match::TransferResult> result_;
-  std::shared_ptr<veneer::match::Relighter> relighter_;
+  std::shared_ptr<veneer::pipeline::TransferResult> result_;
+  std::shared_ptr<veneer::repaint::Relighter> relighter_;
   // The live repaint: each frame registered to the source's stills, carried
   // through the map, with the outline, a quality figure and a lost state.
-  std::shared_ptr<veneer::match::LiveSession> live_session_;
+  std::shared_ptr<veneer::repaint::LiveSession> live_session_;
   QString live_refusal_;  // the live view's framing could not be related to the stills
   // Made by the transfer's worker, so that showing a result costs the GUI
   // thread almost nothing: the result's picture, the live repainter, the
   // relit pictures for the light direction the run started with.
   cv::Mat result_picture_, pending_result_picture_;
   QImage result_image_, pending_result_image_;  // the same as the result view shows it
-  std::shared_ptr<veneer::match::LiveSession> pending_session_;
+  std::shared_ptr<veneer::repaint::LiveSession> pending_session_;
   cv::Mat pending_relit_, pending_relit_source_;
   cv::Vec3d pending_relit_direction_;
   // What a transfer ran with (the options, the hand masks), kept with the
   // result it made so that the library stores the map with them.
   struct RunSettings {
-    veneer::match::TransferOptions options;
+    veneer::pipeline::TransferOptions options;
     cv::Mat dst_hand, src_hand;
     QString reopened;  // the library map it repainted through ("" = matched)
   };
@@ -250,7 +250,7 @@ class MainWindow : public QMainWindow {
   struct Reopen {
     LibraryMap entry;
     std::shared_ptr<const veneer::match::Map> map;
-    veneer::match::TransferOptions options;
+    veneer::pipeline::TransferOptions options;
     cv::Mat dst_hand, src_hand;
     bool dst_loaded = false, src_loaded = false;
   };
@@ -265,12 +265,12 @@ class MainWindow : public QMainWindow {
   int sets_loaded_ = 0;  // counts every set loaded as destination or source
   // The objects prepared for the last transfer and what they were made from
   // (preparationKey); reused while only matching options change.
-  std::shared_ptr<const veneer::match::PreparedPair> prepared_, pending_prepared_;
+  std::shared_ptr<const veneer::pipeline::PreparedPair> prepared_, pending_prepared_;
   QString prepared_key_, pending_key_;
   QFutureWatcher<void> transfer_watch_;
   QString transfer_error_, relight_error_;
-  std::shared_ptr<veneer::match::TransferResult> pending_result_;
-  std::shared_ptr<veneer::match::Relighter> pending_relighter_;
+  std::shared_ptr<veneer::pipeline::TransferResult> pending_result_;
+  std::shared_ptr<veneer::repaint::Relighter> pending_relighter_;
   cv::Mat live_frame_, live_repainted_;
   QThreadPool live_pool_;  // the live frames' one worker thread (not the pool computes and exports queue in)
   bool live_busy_ = false;  // a frame is being processed there

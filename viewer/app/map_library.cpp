@@ -55,13 +55,13 @@ void MainWindow::saveMapToLibrary() {
     QString error;
     if (auto s = veneer::match::write_map((m.folder + "/map.pfm").toStdString(), result->map); !s)
       error = qs(s.message());
-    cv::Mat picture = veneer::match::map_picture(result->map, result->source_size), small;
+    cv::Mat picture = veneer::repaint::map_picture(result->map, result->source_size), small;
     const double k = 96.0 / std::max(1, picture.cols);
     cv::resize(picture, small, cv::Size(), k, k, cv::INTER_AREA);
     if (error.isEmpty() && !cv::imwrite((m.folder + "/map.png").toStdString(), small)) error = tr("map.png not written");
     if (error.isEmpty()) {
       QSaveFile f(m.folder + "/options.json");
-      const std::string text = veneer::match::transfer_options_json(settings.options);
+      const std::string text = veneer::pipeline::transfer_options_json(settings.options);
       if (!f.open(QIODevice::WriteOnly) || f.write(text.data(), static_cast<qint64>(text.size())) < 0 || !f.commit())
         error = tr("%1: %2").arg(f.fileName(), f.errorString());
     }
@@ -87,7 +87,7 @@ namespace {
 // What reopening a library map reads off the GUI thread.
 struct ReadMap {
   std::shared_ptr<const veneer::match::Map> map;
-  veneer::match::TransferOptions options;
+  veneer::pipeline::TransferOptions options;
   cv::Mat dst_hand, src_hand;
   QString error;
 };
@@ -102,7 +102,7 @@ ReadMap read_library_map(const LibraryMap& m) {
   r.map = std::make_shared<const veneer::match::Map>(std::move(*map));
   const QString options = m.folder + "/options.json";
   if (QFileInfo::exists(options)) {
-    auto o = veneer::match::read_transfer_options(options.toStdString());
+    auto o = veneer::pipeline::read_transfer_options(options.toStdString());
     if (!o) {
       r.error = qs(o.message());
       return r;

@@ -264,7 +264,7 @@ bool MainWindow::loadLocalSet(const QString& folder, veneer::Role as) {
   auto loaded = std::make_shared<LoadedSet>();
   loaded->folder = folder;
   loaded->set = std::move(*read);
-  loaded->median = veneer::match::median_photo(loaded->set.images);
+  loaded->median = veneer::repaint::median_photo(loaded->set.images);
   loaded->median_picture = picture_of(loaded->median);
   addLocalItem(folder, loaded->set);
   setLoaded(loaded, as);

@@ -6,7 +6,7 @@
 #include <QMouseEvent>
 #include <QPainter>
 
-#include "veneer/match/relight.hpp"
+#include "veneer/repaint/relight.hpp"
 
 namespace veneer::app {
 
@@ -21,7 +21,7 @@ void SpherePad::setDirection(const cv::Vec3d& d) {
 void SpherePad::pick(QPointF pos) {
   const double r = std::min(width(), height()) / 2.0 - 6;
   const double u = (pos.x() - width() / 2.0) / r, v = -(pos.y() - height() / 2.0) / r;
-  setDirection(veneer::match::direction_on_sphere(u, v));
+  setDirection(veneer::repaint::direction_on_sphere(u, v));
 }
 
 void SpherePad::mousePressEvent(QMouseEvent* e) { pick(e->position()); }

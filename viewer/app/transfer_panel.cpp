@@ -84,7 +84,7 @@ QWidget* MainWindow::buildTransferPanel() {
   patch_->setObjectName("patch");
   patch_->addItems({"1", "3", "5", "7"});
   const veneer::match::MatchOptions defaults;  // every matching box starts at the library's default
-  const veneer::match::TransferOptions transfer_defaults;
+  const veneer::pipeline::TransferOptions transfer_defaults;
   candidates_ = new QSpinBox;
   candidates_->setObjectName("candidates");
   candidates_->setRange(1, 100);
@@ -202,7 +202,7 @@ QWidget* MainWindow::buildTransferPanel() {
 const std::vector<MainWindow::Preset>& MainWindow::presets() {
   static const std::vector<Preset> list = [] {
     const veneer::match::MatchOptions m;
-    const veneer::match::TransferOptions t;
+    const veneer::pipeline::TransferOptions t;
     Preset standard{tr("default (combined)"), "combined", "normals", 1, m.candidates, m.threshold, m.iterations,
                     m.coherent_threshold, m.coherent_smooth, m.coherent_guide, m.uniformity, t.blend, t.blend_guide,
                     true};
@@ -255,7 +255,7 @@ void MainWindow::startTransfer() {
     message(tr("load a destination and a source set first"), true);
     return;
   }
-  veneer::match::TransferOptions options;
+  veneer::pipeline::TransferOptions options;
   auto method = veneer::match::parse_method(method_->currentText().toStdString());
   auto feature = veneer::match::parse_feature(feature_->currentText().toStdString());
   if (!method || !feature) {
@@ -310,7 +310,7 @@ void MainWindow::startTransfer() {
   auto relighter = cached ? relighter_ : nullptr;
   // the same matching options as the map shown (only the blend changed, or
   // Compute again): repainted from that map, not matched again
-  std::shared_ptr<const veneer::match::TransferResult> previous =
+  std::shared_ptr<const veneer::pipeline::TransferResult> previous =
       !given && cached && result_ && result_->match_options == options.match ? result_ : nullptr;
   if (previous)
     ++repaint_only_runs_;
@@ -341,7 +341,7 @@ void MainWindow::startTransfer() {
           }
         });
     };
-    std::shared_ptr<const veneer::match::PreparedPair> pair = cached;
+    std::shared_ptr<const veneer::pipeline::PreparedPair> pair = cached;
     if (!pair) {
       veneer::ImageSet d = dst->set;
       if (!dst_hand.empty()) {
@@ -360,22 +360,22 @@ void MainWindow::startTransfer() {
         s = src->set;
         s.mask = src_hand;
       }
-      auto prepared = veneer::match::prepare_pair(d, src_hand.empty() ? src->set : s, options, progress);
+      auto prepared = veneer::pipeline::prepare_pair(d, src_hand.empty() ? src->set : s, options, progress);
       if (!prepared) {
         transfer_error_ = qs(prepared.message());
         return;
       }
-      pair = std::make_shared<const veneer::match::PreparedPair>(std::move(*prepared));
+      pair = std::make_shared<const veneer::pipeline::PreparedPair>(std::move(*prepared));
       pending_prepared_ = pair;
     }
-    auto result = previous ? veneer::match::transfer(*pair, options, previous->map, progress)
-                  : given  ? veneer::match::transfer(*pair, options, *given, progress)
-                           : veneer::match::transfer(*pair, options, progress);
+    auto result = previous ? veneer::pipeline::transfer(*pair, options, previous->map, progress)
+                  : given  ? veneer::pipeline::transfer(*pair, options, *given, progress)
+                           : veneer::pipeline::transfer(*pair, options, progress);
     if (!result) {
       transfer_error_ = qs(result.message());
       return;
     }
-    pending_result_ = std::make_shared<veneer::match::TransferResult>(std::move(*result));
+    pending_result_ = std::make_shared<veneer::pipeline::TransferResult>(std::move(*result));
     // what showing the result needs, made here rather than on the GUI thread
     pending_result_picture_ = picture_of(pending_result_->repainted_median);
     pending_result_image_ = to_qimage(pending_result_picture_);
@@ -383,16 +383,16 @@ void MainWindow::startTransfer() {
       cv::Mat still_mask = pair->src.view.mask;
       if (still_mask.size() != src->set.size)
         cv::resize(pair->src.view.mask, still_mask, src->set.size, 0, 0, cv::INTER_NEAREST);
-      pending_session_ = std::make_shared<veneer::match::LiveSession>(
+      pending_session_ = std::make_shared<veneer::repaint::LiveSession>(
           src->set.images, still_mask, pending_result_->map, pending_result_->source_size, dst->median_picture,
           pending_result_->blend);
     }
     if (relighter) {  // same source as last time
       pending_relighter_ = relighter;
     } else {
-      auto fitted = veneer::match::Relighter::fit(src->set);
+      auto fitted = veneer::repaint::Relighter::fit(src->set);
       if (fitted) {
-        pending_relighter_ = std::make_shared<veneer::match::Relighter>(std::move(*fitted));
+        pending_relighter_ = std::make_shared<veneer::repaint::Relighter>(std::move(*fitted));
       } else {
         relight_error_ = qs(fitted.message());
       }

@@ -37,8 +37,8 @@
 #include <opencv2/videoio.hpp>
 
 #include "veneer/io/image_io.hpp"
-#include "veneer/match/specular.hpp"
 #include "veneer/ps/segmentation.hpp"
+#include "veneer/repaint/specular.hpp"
 
 namespace veneer::app {
 
@@ -225,7 +225,7 @@ void MainWindow::refreshLookNow() {
         break;
       case 7:  // specular enhancement (core), following the relight pad's light
         if (s->normals) {
-          auto shaded = veneer::match::specular_enhancement(s->normals->normals, light);
+          auto shaded = veneer::repaint::specular_enhancement(s->normals->normals, light);
           if (shaded) picture = *shaded;
         }
         break;
@@ -239,7 +239,7 @@ void MainWindow::refreshLookNow() {
   if (result_) {
     cv::Mat r;
     if (what == 4) {
-      r = veneer::match::map_picture(result_->map, result_->source_size);
+      r = veneer::repaint::map_picture(result_->map, result_->source_size);
     } else if (what == 6) {
       const cv::Mat& d = result_->map.distance;
       cv::Mat xy[2];
@@ -250,7 +250,7 @@ void MainWindow::refreshLookNow() {
       good = 1.0 - d / std::max(1e-6, hi);
       r = confidence_picture(good, valid);
     } else if (what == 5) {
-      r = veneer::match::reuse_picture(result_->reuse, result_->source_median);
+      r = veneer::repaint::reuse_picture(result_->reuse, result_->source_median);
       src_view_->setImage(to_qimage(r));
       r = result_picture_.empty() ? picture_of(result_->repainted_median) : result_picture_;
     } else if (!result_image_.isNull()) {
@@ -356,7 +356,7 @@ void MainWindow::showOrigin(QPoint p) {
     message(tr("destination (%1, %2) is not mapped").arg(p.x()).arg(p.y()));
   }
   origin_view_->setImage(to_qimage(
-      veneer::match::origin_picture(map, dst_->median, src_->median, {cv::Point(p.x(), p.y())})));
+      veneer::repaint::origin_picture(map, dst_->median, src_->median, {cv::Point(p.x(), p.y())})));
 }
 
 void MainWindow::refreshRelight() {
@@ -470,7 +470,7 @@ void MainWindow::onLiveFrame(const veneer::rig::LiveFrame& frame) {
   });
 }
 
-void MainWindow::showLiveFrame(const LiveOut& out, const veneer::match::LiveSession* session) {
+void MainWindow::showLiveFrame(const LiveOut& out, const veneer::repaint::LiveSession* session) {
   live_busy_ = false;
   if (out.frame.empty()) {
     message(tr("live view: a frame that is not a JPEG was dropped"), true);

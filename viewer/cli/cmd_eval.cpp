@@ -6,9 +6,10 @@
 
 #include "command.hpp"
 #include "output.hpp"
+#include "veneer/eval/metrics.hpp"
+#include "veneer/eval/table.hpp"
 #include "veneer/io/imageset.hpp"
-#include "veneer/match/metrics.hpp"
-#include "veneer/match/transfer.hpp"
+#include "veneer/pipeline/transfer.hpp"
 
 namespace veneer::cli {
 namespace {
@@ -22,7 +23,7 @@ struct EvalArgs {
 ::veneer::cli::Output report{"eval"};
 
 int run_table(const EvalArgs& a) {
-  match::TableOptions options;
+  eval::TableOptions options;
   int w = 0, h = 0;
   if (std::sscanf(a.size.c_str(), "%dx%d", &w, &h) != 2 || w < 32 || h < 32 || w > 4096 || h > 4096)
     return report.usage("--size must be WxH (32..4096), got '" + a.size + "'");
@@ -33,10 +34,10 @@ int run_table(const EvalArgs& a) {
   ProgressBar bar("quality table");
   Progress progress;
   progress.on_progress = [&bar](double f, const std::string& stage) { bar.update(f, stage); };
-  auto rows = match::quality_table(options, progress);
+  auto rows = eval::quality_table(options, progress);
   bar.done();
   if (!rows) return report.fail(rows.message());
-  const std::string text = match::format_table(*rows, options);
+  const std::string text = eval::format_table(*rows, options);
   std::fputs(text.c_str(), stdout);
   if (!a.out.empty()) {
     if (auto s = report.text(a.out, text); !s) return report.fail(s.message());
@@ -54,7 +55,7 @@ int run_map(const EvalArgs& a) {
   if (std::filesystem::is_directory(file)) file /= "map.pfm";
   auto map = match::read_map(file);
   if (!map) return report.fail(map.message());
-  auto q = match::evaluate_sets(*map, *dst, *src);
+  auto q = pipeline::evaluate_sets(*map, *dst, *src);
   if (!q) return report.fail(q.message());
   std::printf("destination object pixels  %d\n", q->destination_pixels);
   std::printf("coverage                   %.2f %%\n", 100 * q->coverage);

@@ -9,15 +9,20 @@
 
 #include "command.hpp"
 #include "output.hpp"
+#include "veneer/eval/metrics.hpp"
+#include "veneer/eval/table.hpp"
 #include "veneer/io/image_io.hpp"
-#include "veneer/match/metrics.hpp"
-#include "veneer/match/transfer.hpp"
+#include "veneer/pipeline/transfer.hpp"
+#include "veneer/repaint/repaint.hpp"
 #include "veneer/sim/simulator.hpp"
 
 namespace veneer::cli {
 namespace {
 
 using namespace veneer::match;
+using namespace veneer::eval;
+using namespace veneer::pipeline;
+using namespace veneer::repaint;
 
 struct FiguresArgs {
   std::string out = "demo-out/figures";
@@ -109,7 +114,7 @@ struct Figures {
   Expected<Tile> result(const std::string& d, const std::string& s, const MatchOptions& o, const std::string& label) {
     auto m = map(d, s, o);
     if (!m) return m.error();
-    return Tile{label, tonemap_picture(repaint(*m, medians[key(s, d == s)], medians[d])), cv::Rect()};
+    return Tile{label, tonemap_picture(repaint::repaint(*m, medians[key(s, d == s)], medians[d])), cv::Rect()};
   }
 
   Status write(const std::string& name, const std::string& caption, const std::vector<Tile>& tiles,
@@ -254,7 +259,7 @@ int run(const FiguresArgs& a) {
       const auto& src = F.objects["sphere-red-gloss"].view.images;
       const auto& dst = F.objects["bull"].view.images;
       for (size_t i = 0; i < src.size(); i += 2)
-        tiles.push_back({"lamp " + std::to_string(i), tonemap_picture(repaint(*mp, src[i], dst[i])), cv::Rect()});
+        tiles.push_back({"lamp " + std::to_string(i), tonemap_picture(repaint::repaint(*mp, src[i], dst[i])), cv::Rect()});
       check(F.write("fig5_12_relight", "sphere-red-gloss -> bull: the bull relit by the source's photos, lamp by lamp",
                     tiles, "bull"));
     }

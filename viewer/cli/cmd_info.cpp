@@ -1,4 +1,5 @@
-// veneer info SET [--json]: what an image set holds (any layout read_set reads).
+// veneer info SET [--json]: what an image set holds (any layout read_set reads)
+// and how it was read (layout, photo files, linearisation or RAW decode).
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
@@ -13,13 +14,6 @@ namespace veneer::cli {
 namespace {
 namespace fs = std::filesystem;
 
-std::string layout_of(const fs::path& folder) {
-  std::error_code ec;
-  if (fs::exists(folder / "set.json", ec)) return kSetFormat;
-  if (fs::exists(folder / "filenames.txt", ec)) return "DiLiGenT";
-  return "thesis (lights.txt + numbered PPM/PFM)";
-}
-
 std::string vec3(const cv::Vec3d& v) {
   char buf[80];
   std::snprintf(buf, sizeof buf, "(%+.4f, %+.4f, %+.4f)", v[0], v[1], v[2]);
@@ -29,7 +23,8 @@ std::string vec3(const cv::Vec3d& v) {
 void print_summary(const ImageSet& set, const fs::path& folder) {
   auto row = [](const char* key, const std::string& value) { std::printf("%-10s %s\n", key, value.c_str()); };
   row("set", folder.string());
-  row("format", layout_of(folder));
+  row("format", set.layout.empty() ? "-" : set.layout);
+  row("photos", set.photos_read.empty() ? "-" : set.photos_read);
   row("id", set.id);
   row("object", set.object.empty() ? "-" : set.object);
   row("role", role_name(set.role));
@@ -105,7 +100,7 @@ int run(const std::string& folder, bool as_json) {
 }  // namespace
 
 VENEER_COMMAND(info) {
-  auto* cmd = app.add_subcommand("info", "Describe an image set (veneer-set/1, DiLiGenT or thesis folder)");
+  auto* cmd = app.add_subcommand("info", "Describe an image set (veneer-set/1, DiLiGenT, thesis or RTI .lp folder) and how its photos are read");
   auto folder = std::make_shared<std::string>();
   auto as_json = std::make_shared<bool>(false);
   cmd->add_option("SET", *folder, "the set's folder")->required();

@@ -8,7 +8,7 @@
 #include "output.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
-#include "veneer/match/transfer.hpp"
+#include "veneer/pipeline/transfer.hpp"
 
 namespace veneer::cli {
 namespace {
@@ -29,7 +29,7 @@ int run(const InspectArgs& a) {
   if (std::filesystem::is_directory(file)) file /= "map.pfm";
   auto map = match::read_map(file);
   if (!map) return report.fail(map.message());
-  const double scale = match::map_scale(*map, *dst);
+  const double scale = pipeline::map_scale(*map, *dst);
   if (!(scale > 0 && scale <= 1.0001)) return report.fail("the map is wider than the destination set");
   match::scale_set(*dst, scale);
   match::scale_set(*src, scale);
@@ -46,10 +46,10 @@ int run(const InspectArgs& a) {
       points.emplace_back(static_cast<int>(x * scale), static_cast<int>(y * scale));
     }
   } else {
-    points = match::spread_points(*map, a.count);
+    points = repaint::spread_points(*map, a.count);
   }
   const cv::Mat picture =
-      match::origin_picture(*map, match::median_photo(dst->images), match::median_photo(src->images), points);
+      repaint::origin_picture(*map, repaint::median_photo(dst->images), repaint::median_photo(src->images), points);
   if (auto s = report.picture(a.out, picture); !s) return report.fail(s.message());
   for (const cv::Point p : points) {
     if (p.x >= 0 && p.y >= 0 && p.x < map->xy.cols && p.y < map->xy.rows && map->valid(p.x, p.y)) {

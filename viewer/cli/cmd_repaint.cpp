@@ -20,10 +20,10 @@
 #include "output.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
-#include "veneer/match/live.hpp"
-#include "veneer/match/live_session.hpp"
-#include "veneer/match/track.hpp"
-#include "veneer/match/transfer.hpp"
+#include "veneer/pipeline/transfer.hpp"
+#include "veneer/repaint/live.hpp"
+#include "veneer/repaint/live_session.hpp"
+#include "veneer/repaint/track.hpp"
 #include "veneer/sim/motion.hpp"
 
 namespace {
@@ -35,7 +35,7 @@ struct RepaintArgs {
   std::string src, dst, map, video, out;
   bool no_track = false, overlay = false;
   int blend = -1;
-  double min_correlation = match::TrackOptions{}.min_correlation;
+  double min_correlation = repaint::TrackOptions{}.min_correlation;
 };
 
 ::veneer::cli::Output report{"repaint"};
@@ -93,9 +93,9 @@ int run_repaint(const RepaintArgs& a) {
   if (fs::is_directory(map_file)) map_file /= "map.pfm";
   auto map = match::read_map(map_file);
   if (!map) return report.fail(map.message());
-  match::TransferOptions options;
+  pipeline::TransferOptions options;
   if (fs::exists(map_file.parent_path() / "metrics.json")) {
-    auto read = match::read_transfer_options(map_file.parent_path() / "metrics.json");
+    auto read = pipeline::read_transfer_options(map_file.parent_path() / "metrics.json");
     if (!read) return report.fail(read.message());
     options = *read;
   }
@@ -103,8 +103,8 @@ int run_repaint(const RepaintArgs& a) {
   if (!src) return report.fail(src.message());
   auto dst = read_set(a.dst);
   if (!dst) return report.fail(dst.message());
-  if (!fs::exists(map_file.parent_path() / "metrics.json")) options.scale = match::map_scale(*map, *dst);
-  const cv::Mat backdrop = tonemap_picture(match::median_photo(dst->images));
+  if (!fs::exists(map_file.parent_path() / "metrics.json")) options.scale = pipeline::map_scale(*map, *dst);
+  const cv::Mat backdrop = tonemap_picture(repaint::median_photo(dst->images));
   auto mask = match::object_mask(*src, false);
   if (!mask) return report.fail("source: " + mask.message());
   cv::Mat still_mask = *mask;
@@ -115,17 +115,17 @@ int run_repaint(const RepaintArgs& a) {
   if (a.blend >= 0) options.blend = a.blend;
   std::shared_ptr<const match::fast::BlendPlan> plan;
   if (options.blend > 0) {
-    auto pair = match::prepare_pair(*dst, *src, options);
+    auto pair = pipeline::prepare_pair(*dst, *src, options);
     if (!pair) return report.fail(pair.message());
-    auto made = match::blend_plan_for(*pair, options, *map);
+    auto made = pipeline::blend_plan_for(*pair, options, *map);
     if (!made) return report.fail(made.message());
     plan = *made;
   }
-  match::TrackOptions track_options;
+  repaint::TrackOptions track_options;
   track_options.min_correlation = a.min_correlation;
   if (auto st = track_options.check(); !st) return report.usage("--min-correlation: " + st.message());
   // tracking, repaint, outline and the live view's framing: what the viewer's Live tab runs
-  match::LiveSession session(src->images, still_mask, *map, source_size, backdrop, plan, track_options);
+  repaint::LiveSession session(src->images, still_mask, *map, source_size, backdrop, plan, track_options);
   session.set_smooth(true);  // offline: bilinear, no frame budget
 
   cv::VideoWriter writer;
@@ -143,7 +143,7 @@ int run_repaint(const RepaintArgs& a) {
       if (auto st = report.folder(a.out); !st) return report.fail(st.message());
       if (!session.geometry()->same) std::cout << "live view: " << session.geometry()->describe() << "\n";
     }
-    match::TrackResult r;
+    repaint::TrackResult r;
     r.lost = live->lost;
     r.correlation = live->quality;
     r.still_to_frame = live->still_to_frame;
@@ -155,7 +155,7 @@ int run_repaint(const RepaintArgs& a) {
     if (auto st = report.picture(name, out); !st) return report.fail(st.message());
     if (a.overlay) {
       std::snprintf(name, sizeof name, "align_%04d.png", count);
-      if (auto st = report.picture(name, match::alignment_picture(frame, still_mask, r)); !st)
+      if (auto st = report.picture(name, repaint::alignment_picture(frame, still_mask, r)); !st)
         return report.fail(st.message());
       std::snprintf(name, sizeof name, "frame_%04d.png", count);
     }
@@ -165,7 +165,7 @@ int run_repaint(const RepaintArgs& a) {
     const auto& e = r.still_to_frame;
     f["still_to_frame"] = {{e(0, 0), e(0, 1), e(0, 2)}, {e(1, 0), e(1, 1), e(1, 2)}};
     if (truth && static_cast<size_t>(count) < truth->truth.size() && !r.lost) {
-      const double e = match::motion_error_px(r.still_to_frame, truth->truth[count].still_to_frame, still_mask);
+      const double e = repaint::motion_error_px(r.still_to_frame, truth->truth[count].still_to_frame, still_mask);
       errors.push_back(e);
       f["align_error_px"] = e;
     }

@@ -18,10 +18,10 @@
 #include "command.hpp"
 #include "output.hpp"
 #include "veneer/io/image_io.hpp"
-#include "veneer/match/live.hpp"
-#include "veneer/match/live_session.hpp"
-#include "veneer/match/track.hpp"
-#include "veneer/match/transfer.hpp"
+#include "veneer/pipeline/transfer.hpp"
+#include "veneer/repaint/live.hpp"
+#include "veneer/repaint/live_session.hpp"
+#include "veneer/repaint/track.hpp"
 #include "veneer/rig/client.hpp"
 
 namespace veneer::cli {
@@ -150,6 +150,13 @@ VENEER_COMMAND(rig) {
   pull->add_option("--out", *out, "folder to create")->required();
   pull->add_flag("--no-truth", *no_truth, "leave out truth/ of simulated sets");
   pull->add_flag("--force", *force, "replace --out if it exists");
+  auto live_first = std::make_shared<bool>(false);
+  auto preview_only = std::make_shared<bool>(false);
+  pull->add_flag("--live-first", *live_first,
+                 "first the preview set (a reduced JPEG per lamp, set.json marked preview_of; its folder is printed "
+                 "as \"preview: <folder>\" once in place), then the full files, which replace it in place "
+                 "atomically");
+  pull->add_flag("--preview", *preview_only, "only the preview set (see --live-first)");
 
   auto* del = rig_cmd->add_subcommand("delete", "delete a stored set");
   auto del_id = std::make_shared<std::string>();
@@ -304,7 +311,18 @@ VENEER_COMMAND(rig) {
       ProgressBar bar("pull " + *set_id);
       Progress progress;
       progress.on_progress = [&bar](double f, const std::string& stage) { bar.update(f, stage); };
-      if (auto s = client.pull(*set_id, *out, !*no_truth, *force, progress); !s) return fail("pull", s.message());
+      if (*preview_only) {
+        if (auto s = client.pull_preview(*set_id, *out, *force, progress); !s) return fail("pull", s.message());
+        bar.done();
+        std::cout << *out << "\n";
+        return 0;
+      }
+      rig::PullOptions o;
+      o.include_truth = !*no_truth;
+      o.overwrite = *force;
+      o.live_first = *live_first;
+      o.on_preview = [](const std::filesystem::path& f) { std::cout << "preview: " << f.string() << std::endl; };
+      if (auto s = client.pull_set(*set_id, *out, o, progress); !s) return fail("pull", s.message());
       bar.done();
       std::cout << *out << "\n";
       return 0;
@@ -321,8 +339,8 @@ VENEER_COMMAND(rig) {
     }
     if (live->parsed()) {
       // With --map, frames are repainted onto the destination as they would be in the viewer.
-      std::optional<match::LiveRepainter> repainter;
-      std::optional<match::LiveSession> session;  // with tracking (the default)
+      std::optional<repaint::LiveRepainter> repainter;
+      std::optional<repaint::LiveSession> session;  // with tracking (the default)
       cv::Mat still_mask;
       int tracked = 0, lost = 0;
       std::vector<double> frame_ms;
@@ -334,10 +352,10 @@ VENEER_COMMAND(rig) {
         if (!map) return fail("live", map.message());
         // The frames are repainted as the transfer's pictures were: its
         // options (scale, feature, blend) from the folder's metrics.json.
-        match::TransferOptions options;
+        pipeline::TransferOptions options;
         const std::filesystem::path metrics = mp.parent_path() / "metrics.json";
         if (std::filesystem::exists(metrics)) {
-          auto read = match::read_transfer_options(metrics);
+          auto read = pipeline::read_transfer_options(metrics);
           if (!read) return fail("live", read.message());
           options = *read;
         }
@@ -354,9 +372,9 @@ VENEER_COMMAND(rig) {
         if (!live_dst->empty()) {
           auto d = read_set(*live_dst);
           if (!d) return fail("live", d.message());
-          backdrop = tonemap_picture(match::median_photo(d->images));
+          backdrop = tonemap_picture(repaint::median_photo(d->images));
           // a bare map.pfm: its scale from its width against the destination's
-          if (!std::filesystem::exists(metrics)) options.scale = match::map_scale(*map, *d);
+          if (!std::filesystem::exists(metrics)) options.scale = pipeline::map_scale(*map, *d);
           dst = std::move(*d);
         }
         std::shared_ptr<const match::fast::BlendPlan> plan;
@@ -365,9 +383,9 @@ VENEER_COMMAND(rig) {
                     << (options.blend_guide > 0 ? "guided by the normals" : "plain") << ") ..." << std::endl;
           Expected<std::shared_ptr<const match::fast::BlendPlan>> made = std::shared_ptr<const match::fast::BlendPlan>();
           if (dst) {
-            auto pair = match::prepare_pair(*dst, *src, options);
+            auto pair = pipeline::prepare_pair(*dst, *src, options);
             if (!pair) return fail("live", pair.message());
-            made = match::blend_plan_for(*pair, options, *map);
+            made = pipeline::blend_plan_for(*pair, options, *map);
           } else {  // no destination normals: the plain blend, over the source's mask as the map saw it
             ImageSet source = *src;
             match::scale_set(source, options.scale);
@@ -418,7 +436,7 @@ VENEER_COMMAND(rig) {
             } else {
               if (saved == 0 && !session->geometry()->same)
                 std::cout << "live view: " << session->geometry()->describe() << "\n";
-              match::TrackResult r;
+              repaint::TrackResult r;
               r.lost = lf->lost;
               r.correlation = lf->quality;
               r.still_to_frame = lf->still_to_frame;
@@ -435,7 +453,7 @@ VENEER_COMMAND(rig) {
               std::snprintf(align, sizeof align, "align_%04d.png", saved);
               if (!cv::imwrite((std::filesystem::path(*live_out) / name).string(), lf->repainted) ||
                   !cv::imwrite((std::filesystem::path(*live_out) / align).string(),
-                               match::alignment_picture(frame, still_mask, r)))
+                               repaint::alignment_picture(frame, still_mask, r)))
                 error = std::string(name) + ": write failed";
             }
           } else if (!cv::imwrite((std::filesystem::path(*live_out) / name).string(), repainter->apply(frame))) {

@@ -12,7 +12,7 @@
 
 #include "command.hpp"
 #include "output.hpp"
-#include "veneer/io/dng.hpp"
+#include "veneer/io/camera_files.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
 #include "veneer/sim/motion.hpp"
@@ -41,7 +41,7 @@ bool parse_vec3(const std::string& text, cv::Vec3d* v) {
 ::veneer::cli::Output report{"simulate"};
 
 struct SimulateArgs {
-  std::string scene, out, size = "1024x680", offset = "0,0,0", role = "destination", preview, motion;
+  std::string scene, material, out, size = "1024x680", offset = "0,0,0", role = "destination", preview, motion;
   int frames = 30;
   uint64_t seed = 1;
   double noise = 0.005, scale = 1.0, ambient = 0.0, exposure = 1.0, focal = 0.0;
@@ -103,16 +103,22 @@ int run_simulate(const SimulateArgs& a) {
   o.threads = a.threads;
   if (a.optics) o.camera_optics();
   if (auto st = o.check(); !st) return report.usage(st.message());
-  if (!a.motion.empty()) return run_motion(a, o);
+  if (!a.motion.empty()) {
+    if (!a.material.empty()) return report.usage("--material renders a set, not a --motion sequence");
+    return run_motion(a, o);
+  }
 
   veneer::cli::ProgressBar bar("simulate " + a.scene);
   veneer::Progress progress;
   progress.on_progress = [&bar](double f, const std::string& stage) { bar.update(f * 0.8, stage); };
-  auto set = veneer::sim::simulate_set(a.scene, o, *role, progress);
+  auto set = a.material.empty() ? veneer::sim::simulate_set(a.scene, o, *role, progress)
+                                : veneer::sim::simulate_set_with_material(a.scene, a.material, o, *role, progress);
   if (!set) return set.message().rfind("unknown scene", 0) == 0 ? report.usage(set.message()) : report.fail(set.message());
   if (a.dng) {
-    bar.update(0.82, "DNG files");
-    if (auto st = veneer::add_dng_raw_files(*set); !st) return report.fail(st.message());
+    // The rig's camera twin's files: the developed JPEG as the photo and the
+    // lossless DNG (with its embedded preview) beside it.
+    bar.update(0.82, "camera files (JPEG + DNG)");
+    if (auto st = veneer::add_camera_files(*set); !st) return report.fail(st.message());
   }
   bar.update(0.85, "writing " + a.out);
   if (auto st = veneer::write_set(*set, a.out, a.overwrite); !st) return report.fail(st.message());
@@ -125,7 +131,7 @@ int run_simulate(const SimulateArgs& a) {
   bar.update(1.0, "done");
   bar.done();
   int pixels = cv::countNonZero(set->truth.mask);
-  report.line("wrote " + a.out + ": scene " + a.scene + ", " + std::to_string(set->images.size()) + " lamps + ambient, " +
+  report.line("wrote " + a.out + ": scene " + a.scene + (a.material.empty() ? "" : " in " + a.material + "'s material") + ", " + std::to_string(set->images.size()) + " lamps + ambient, " +
               std::to_string(o.size.width) + "x" + std::to_string(o.size.height) + ", " + std::to_string(pixels) +
               " object pixels");
   return 0;
@@ -140,6 +146,10 @@ VENEER_COMMAND(simulate) {
       "render a scene under the simulated thesis rig (7 lamps on a 0.47 m ring, object at 1 m) "
       "and write a veneer-set/1 folder with truth/");
   cmd->add_option("--scene", args->scene, "scene name (see --list)");
+  cmd->add_option("--material", args->material,
+                  "render the scene's shape in this scene's material (albedo texture and gloss), same lamps and "
+                  "pose: the look a perfect transfer of that source onto this destination gives (e.g. --scene bull "
+                  "--material orange)");
   cmd->add_option("--out", args->out, "output set folder (written atomically)");
   cmd->add_flag("--list", args->list, "list the scene names and exit");
   cmd->add_option("--size", args->size, "image size WIDTHxHEIGHT")->capture_default_str();
@@ -164,8 +174,10 @@ VENEER_COMMAND(simulate) {
                 "creases, a 1 px optical low-pass filter, truth over the same footprint (what a RAW file's "
                 "demosaicing needs; default: point-sampled)");
   cmd->add_flag("--dng", args->dng,
-                "also write each photo as a camera RAW file (light_NN.dng: RGGB mosaic, 14-bit, as-shot white "
-                "balance), named in set.json, so the set is read through the RAW path");
+                "write each photo as a camera set to RAW+JPEG delivers it, as the simulated rig does: the developed "
+                "photo light_NN.jpg (sRGB, 8-bit) and the RAW file light_NN.dng (RGGB mosaic, 14-bit, as-shot white "
+                "balance, lossless JPEG compressed, a 1/4-size preview embedded), both named in set.json; the set "
+                "is read through the RAW path");
   cmd->add_option("--motion", args->motion,
                   "render the source moving instead of a set: the total motion over the frames, comma-separated, "
                   "e.g. shift=30:0,rotate=5,scale=1.05,turn=3,lamp=sweep (shift in image pixels, rotate and turn "

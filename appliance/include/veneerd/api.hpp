@@ -26,7 +26,12 @@ struct Hello { uint32_t protocol_version = 0; std::string token; std::string cli
 struct StatusReq {};
 struct ListSetsReq { bool trash = false; };
 struct GetManifestReq { std::string set_id; };
-struct FetchImagesReq { std::string set_id; bool include_truth = false; size_t chunk_size = 0; };
+struct FetchImagesReq {
+  std::string set_id;
+  bool include_truth = false;
+  size_t chunk_size = 0;
+  std::vector<std::string> skip_files;  // files the client holds whole (a resumed pull)
+};
 struct DeleteSetReq { std::string set_id; };
 struct CaptureReq { CaptureRequest capture; };
 struct CancelReq {};
@@ -36,10 +41,11 @@ struct StopLiveReq {};
 struct PressReq { bool long_press = false; };
 struct MoveHandLampReq { cv::Vec3d position; };
 struct RestoreSetReq { std::string set_id; };
+struct FetchPreviewReq { std::string set_id; size_t chunk_size = 0; };  // live first: the preview set
 
 using Body = std::variant<Hello, StatusReq, ListSetsReq, GetManifestReq, FetchImagesReq, DeleteSetReq, CaptureReq,
                           CancelReq, SetLampsReq, StartLiveReq, StopLiveReq, PressReq, MoveHandLampReq,
-                          RestoreSetReq>;
+                          RestoreSetReq, FetchPreviewReq>;
 
 struct Request {
   uint64_t id = 0;
@@ -68,6 +74,8 @@ constexpr int kMaxLampsInRequest = 64;        // set_lamps.on
 constexpr uint32_t kMaxBrightness = 254;      // set_lamps.brightness (0 = this)
 constexpr double kMaxHandLampDistanceM = 5;   // move_hand_lamp.position, per coordinate
 constexpr double kMinHandLampDistanceM = 0.05;
+constexpr size_t kMaxSkipFiles = 4096;        // fetch_images.skip_files entries
+constexpr size_t kMaxSkipFileChars = 200;     // ... each a relative path of this many characters at most
 
 // The token as a client sent it, without surrounding whitespace (a client
 // that sends the token file's bytes, newline included, is accepted).

@@ -46,12 +46,14 @@ struct CaptureHooks {
   // them where a crash cannot lose them; an error stops the capture.
   std::function<veneer::Status(const std::vector<LampState>&)> save_owner_state;
   // When set, each frame goes here as soon as it is taken (k = 0 the ambient
-  // frame, k >= 1 lit by lamp k - 1; `raw` the camera's RAW file, may be
-  // empty) and is not kept: the result's set then holds no photos (images and
+  // frame, k >= 1 lit by lamp k - 1; `raw` the camera's RAW file, `developed`
+  // its JPEG, either may be empty) and is not kept: the result's set then holds no photos (images and
   // ambient empty, raw empty), only what set.json needs besides them. A
   // full-resolution set is 2 GiB as float; a rig board holds one frame at a
   // time. An error stops the capture.
-  std::function<veneer::Status(int k, int shots, const cv::Mat& photo, const veneer::ImageSet::RawFile& raw)> on_frame;
+  std::function<veneer::Status(int k, int shots, const cv::Mat& photo, const veneer::ImageSet::RawFile& raw,
+                               const veneer::ImageSet::RawFile& developed)>
+      on_frame;
 };
 
 struct CaptureResult;

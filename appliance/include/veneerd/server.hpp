@@ -51,6 +51,9 @@ class Server {
   veneer::Status start();  // binds and starts the I/O thread
   void stop();
   uint16_t port() const;
+  // Whether a socket bound to "::" also takes IPv4 connections (it is made so
+  // when it can: "::" means every address of both families).
+  bool dual_stack() const;
   ServerStats stats() const;
 
   struct Impl;  // public so the connection class in server.cpp can name it

@@ -105,9 +105,12 @@ class SetWriter {
 
   // Frame k of the capture: k = 0 the ambient frame, k >= 1 lit by light k - 1.
   // `photo` is CV_32FC3 as in veneer::ImageSet; `raw` the camera's RAW file
-  // (empty bytes = none). Written (and fsynced) before this returns; the first
-  // frame checks the free space for the whole set (`photos` frames).
-  veneer::Status add_frame(int k, const cv::Mat& photo, const veneer::ImageSet::RawFile& raw, int photos);
+  // (empty bytes = none); `developed` the camera's JPEG of the photo, stored
+  // as light_NN.jpg instead of a 16-bit PNG of `photo` (empty = the PNG).
+  // Written (and fsynced) before this returns; the first frame checks the
+  // free space for the whole set (`photos` frames).
+  veneer::Status add_frame(int k, const cv::Mat& photo, const veneer::ImageSet::RawFile& raw, int photos,
+                           const veneer::ImageSet::RawFile& developed = {});
   // Writes the supplied mask, the truth (releasing each of its images once
   // written) and set.json for `set` (metadata and lights; its photos may be
   // empty: the frames added are what set.json names), then renames the folder
@@ -127,6 +130,8 @@ class SetWriter {
   std::vector<bool> lit_;                          // lit_[i]: light i's frame is written
   std::vector<veneer::ImageSet::RawFile> raw_names_;  // extension only (bytes "1" when a RAW file was written)
   veneer::ImageSet::RawFile ambient_raw_;
+  std::vector<veneer::ImageSet::RawFile> developed_names_;  // the same for the camera's JPEGs
+  veneer::ImageSet::RawFile ambient_developed_;
 };
 
 }  // namespace veneerd

@@ -10,6 +10,8 @@
 #include <atomic>
 #include <cerrno>
 #include <cstring>
+#include <memory>
+#include <utility>
 
 #include "button.h"
 #include "led.h"
@@ -35,19 +37,37 @@ std::string chip_list_text() {
 
 std::string errno_text(int e) { return std::strerror(e); }
 
-struct LineHandle {
-  gpiod_chip* chip = nullptr;
-  gpiod_line* line = nullptr;
-  void close() {
-    if (line) gpiod_line_release(line);
+// An open GPIO chip and one of its lines, owned: the line's request is
+// released, then the chip closed (which frees the line object), when the
+// handle is destroyed or reset. Moves, never copies.
+class LineHandle {
+ public:
+  LineHandle() = default;
+  LineHandle(LineHandle&& o) noexcept : chip(std::exchange(o.chip, nullptr)), line(std::exchange(o.line, nullptr)) {}
+  LineHandle& operator=(LineHandle&& o) noexcept {
+    if (this != &o) {
+      reset();
+      chip = std::exchange(o.chip, nullptr);
+      line = std::exchange(o.line, nullptr);
+    }
+    return *this;
+  }
+  LineHandle(const LineHandle&) = delete;
+  LineHandle& operator=(const LineHandle&) = delete;
+  ~LineHandle() { reset(); }
+  void reset() {
+    if (line) gpiod_line_release(line);  // a no-op when the line was not requested
     if (chip) gpiod_chip_close(chip);
     line = nullptr;
     chip = nullptr;
   }
+
+  gpiod_chip* chip = nullptr;  // owned
+  gpiod_line* line = nullptr;  // belongs to `chip`
 };
 
 veneer::Expected<LineHandle> find_line(const GpioLineConfig& cfg) {
-  LineHandle h;
+  LineHandle h;  // every return below closes what was opened
   if (!cfg.chip.empty()) {
     h.chip = gpiod_chip_open_lookup(cfg.chip.c_str());
     if (!h.chip) {
@@ -60,7 +80,6 @@ veneer::Expected<LineHandle> find_line(const GpioLineConfig& cfg) {
       unsigned n = gpiod_chip_num_lines(h.chip);
       if (unsigned(cfg.offset) >= n) {
         std::string name = gpiod_chip_name(h.chip);
-        gpiod_chip_close(h.chip);
         return veneer::make_error("GPIO line offset " + std::to_string(cfg.offset) + " out of range: " + name + " has " +
                                   std::to_string(n) + " lines (0.." + std::to_string(n ? n - 1 : 0) + ")");
       }
@@ -69,17 +88,15 @@ veneer::Expected<LineHandle> find_line(const GpioLineConfig& cfg) {
       h.line = gpiod_chip_find_line(h.chip, cfg.line.c_str());
       if (!h.line) {
         std::string name = gpiod_chip_name(h.chip);
-        gpiod_chip_close(h.chip);
         return veneer::make_error("no GPIO line named '" + cfg.line + "' on " + name);
       }
     }
   } else {
     h.line = gpiod_line_find(cfg.line.c_str());
     if (!h.line) return veneer::make_error("no GPIO line named '" + cfg.line + "' on any chip (chips: " + chip_list_text() + ")");
-    h.chip = gpiod_line_get_chip(h.line);
+    h.chip = gpiod_line_get_chip(h.line);  // opened by gpiod_line_find: ours to close
   }
   if (!h.line) {
-    h.close();
     return veneer::make_error("cannot get GPIO line " + cfg.describe() + ": " + errno_text(errno));
   }
   return h;
@@ -93,8 +110,7 @@ veneer::Status request_error(LineHandle& h, const GpioLineConfig& cfg, int e) {
   } else {
     msg = "cannot request GPIO line " + cfg.describe() + ": " + errno_text(e);
   }
-  if (h.chip) gpiod_chip_close(h.chip);
-  h = {};
+  h.reset();
   return veneer::make_error(msg);
 }
 
@@ -165,8 +181,13 @@ veneer::Expected<GpioButtonTiming> parse_gpio_timing(const nlohmann::json& s, co
 
 std::vector<GpioChipInfo> list_gpio_chips() {
   std::vector<GpioChipInfo> out;
-  gpiod_chip_iter* it = gpiod_chip_iter_new();
-  if (!it) return out;
+  // The iterator owns the chip it is at (closed when it moves on or is freed).
+  struct IterFree {
+    void operator()(gpiod_chip_iter* i) const { gpiod_chip_iter_free(i); }
+  };
+  std::unique_ptr<gpiod_chip_iter, IterFree> iter(gpiod_chip_iter_new());
+  if (!iter) return out;
+  gpiod_chip_iter* it = iter.get();
   gpiod_chip* chip;
   gpiod_foreach_chip(it, chip) {
     GpioChipInfo info;
@@ -181,7 +202,6 @@ std::vector<GpioChipInfo> list_gpio_chips() {
     }
     out.push_back(std::move(info));
   }
-  gpiod_chip_iter_free(it);
   return out;
 }
 
@@ -198,7 +218,6 @@ struct GpioTrigger::Impl {
   vf_button button{};
   ~Impl() {
     if (own_fd && fd >= 0) ::close(fd);
-    handle.close();
   }
 };
 
@@ -219,7 +238,7 @@ veneer::Expected<std::unique_ptr<GpioTrigger>> GpioTrigger::open(const GpioLineC
   auto found = find_line(cfg);
   if (!found) return found.error();
   auto impl = std::make_unique<Impl>();
-  impl->handle = *found;
+  impl->handle = std::move(*found);
   // The line is requested active-high; the inversion for active-low buttons is
   // done here so edge directions mean the same on every kernel.
   int flags = cfg.active_low ? GPIOD_LINE_REQUEST_FLAG_BIAS_PULL_UP : GPIOD_LINE_REQUEST_FLAG_BIAS_PULL_DOWN;
@@ -383,7 +402,6 @@ struct GpioLed::Impl {
   LedState state = LedState::idle;
   uint64_t since = 0;
   int last = -1;
-  ~Impl() { handle.close(); }
 };
 
 GpioLed::GpioLed(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
@@ -395,7 +413,7 @@ veneer::Expected<std::unique_ptr<GpioLed>> GpioLed::open(const GpioLineConfig& c
   auto found = find_line(cfg);
   if (!found) return found.error();
   auto impl = std::make_unique<Impl>();
-  impl->handle = *found;
+  impl->handle = std::move(*found);
   int flags = cfg.active_low ? GPIOD_LINE_REQUEST_FLAG_ACTIVE_LOW : 0;
   if (gpiod_line_request_output_flags(impl->handle.line, kConsumer, flags, 0) < 0)
     return request_error(impl->handle, cfg, errno).error();

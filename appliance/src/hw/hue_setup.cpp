@@ -1,7 +1,6 @@
-// Hue bridge setup over libcurl: discovery, pairing, lamp list, flashing.
+// Hue bridge setup: discovery, pairing, lamp list, flashing (HTTP through
+// http_client.hpp, the daemon's one libcurl wrapper).
 #include "veneerd/hw/hue_setup.hpp"
-
-#include <curl/curl.h>
 
 #include <chrono>
 #include <cstdio>
@@ -14,7 +13,8 @@
 
 #include "veneer/dnssd/dnssd.hpp"
 #include "veneer/util/log.hpp"
-#include "veneerd/devices/hue_lamps.hpp"
+#include "http_client.hpp"
+#include "veneerd/hw/hue_lamps.hpp"
 
 namespace veneerd::hw {
 
@@ -29,50 +29,11 @@ struct HttpAnswer {
   std::string error;
 };
 
-size_t collect(char* data, size_t size, size_t n, void* user) {
-  auto* out = static_cast<std::string*>(user);
-  if (out->size() + size * n > (4u << 20)) return 0;  // a bridge answer is small; refuse floods
-  out->append(data, size * n);
-  return size * n;
-}
-
+// One blocking request through the daemon's libcurl wrapper (http_client.hpp).
 HttpAnswer http(const std::string& method, const std::string& url, const std::string& body, long timeout_ms) {
-  static const bool inited = [] { return curl_global_init(CURL_GLOBAL_DEFAULT) == CURLE_OK; }();
-  HttpAnswer a;
-  if (!inited) {
-    a.error = "libcurl could not be initialised";
-    return a;
-  }
-  std::unique_ptr<CURL, void (*)(CURL*)> curl(curl_easy_init(), curl_easy_cleanup);
-  if (!curl) {
-    a.error = "libcurl could not create a handle";
-    return a;
-  }
-  CURL* c = curl.get();
-  curl_easy_setopt(c, CURLOPT_URL, url.c_str());
-  curl_easy_setopt(c, CURLOPT_TIMEOUT_MS, timeout_ms);
-  curl_easy_setopt(c, CURLOPT_CONNECTTIMEOUT_MS, timeout_ms);
-  curl_easy_setopt(c, CURLOPT_NOSIGNAL, 1L);
-  curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, collect);
-  curl_easy_setopt(c, CURLOPT_WRITEDATA, &a.body);
-  curl_easy_setopt(c, CURLOPT_PROTOCOLS_STR, "http,https");
-  curl_slist* headers = nullptr;
-  if (method != "GET") {
-    curl_easy_setopt(c, CURLOPT_CUSTOMREQUEST, method.c_str());
-    curl_easy_setopt(c, CURLOPT_POSTFIELDS, body.c_str());
-    curl_easy_setopt(c, CURLOPT_POSTFIELDSIZE, long(body.size()));
-    headers = curl_slist_append(headers, "Content-Type: application/json");
-    curl_easy_setopt(c, CURLOPT_HTTPHEADER, headers);
-  }
-  CURLcode r = curl_easy_perform(c);
-  if (headers) curl_slist_free_all(headers);
-  if (r != CURLE_OK) {
-    a.error = curl_easy_strerror(r);
-    return a;
-  }
-  curl_easy_getinfo(c, CURLINFO_RESPONSE_CODE, &a.status);
-  a.ok = true;
-  return a;
+  detail::HttpClient client;
+  detail::HttpResult r = client.perform({method, url, body, timeout_ms});
+  return {r.transport_ok, r.status, std::move(r.body), std::move(r.error)};
 }
 
 std::string url_of(const std::string& address, const std::string& path) {

@@ -1,6 +1,7 @@
 // register_hardware_devices(): the real-hardware back-ends of appliance/src/hw/.
 #include <mutex>
 
+#include "veneerd/hw/hue_lamps.hpp"
 #include "veneerd/devices/registry.hpp"
 #include "veneerd/hw/check.hpp"
 #include "veneerd/hw/gphoto2.hpp"
@@ -13,6 +14,13 @@ void register_hardware_devices() {
   static std::mutex mutex;
   std::lock_guard lock(mutex);
   auto& reg = DeviceRegistry::instance();
+  DeviceRegistry::add<Lamps>(reg.lamps, "hue", [](const nlohmann::json& s) -> veneer::Expected<std::unique_ptr<Lamps>> {
+    auto o = hw::HueLampsOptions::from_json(s);
+    if (!o) return o.error();
+    auto lamps = hw::HueLamps::create(*o);
+    if (!lamps) return lamps.error();
+    return std::unique_ptr<Lamps>(std::move(*lamps));
+  });
   DeviceRegistry::add<Camera>(reg.cameras, "gphoto2", [](const nlohmann::json& s) -> veneer::Expected<std::unique_ptr<Camera>> {
     auto o = hw::parse_gphoto2_options(s, "camera");
     if (!o) return o.error();
@@ -46,6 +54,10 @@ void register_hardware_devices() {
     if (!led) return led.error();
     if (auto st = (*led)->start(); !st) return st.error();
     return std::unique_ptr<StatusLed>(std::move(*led));
+  });
+  // A rig without a status LED.
+  DeviceRegistry::add<StatusLed>(reg.leds, "none", [](const nlohmann::json&) -> veneer::Expected<std::unique_ptr<StatusLed>> {
+    return std::unique_ptr<StatusLed>(std::make_unique<NoLed>());
   });
 }
 

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cctype>
 #include <chrono>
+#include <map>
 #include <mutex>
 #include <set>
 #include <utility>
@@ -72,6 +73,30 @@ Status check_instance_name(const std::string& name) {
 
 namespace {
 
+// ---- owners of Avahi's C objects ------------------------------------------------
+// Each handle lives in a unique_ptr whose deleter is Avahi's free function, so
+// every path out of a function (errors included) frees what it made, in the
+// reverse order of making it.
+
+template <auto Free>
+struct AvahiDeleter {
+  template <class T>
+  void operator()(T* p) const {
+    if (p) Free(p);
+  }
+};
+using SimplePoll = std::unique_ptr<AvahiSimplePoll, AvahiDeleter<avahi_simple_poll_free>>;
+using Client = std::unique_ptr<AvahiClient, AvahiDeleter<avahi_client_free>>;
+using ServiceBrowser = std::unique_ptr<AvahiServiceBrowser, AvahiDeleter<avahi_service_browser_free>>;
+using ServiceResolver = std::unique_ptr<AvahiServiceResolver, AvahiDeleter<avahi_service_resolver_free>>;
+using EntryGroup = std::unique_ptr<AvahiEntryGroup, AvahiDeleter<avahi_entry_group_free>>;
+using StringList = std::unique_ptr<AvahiStringList, AvahiDeleter<avahi_string_list_free>>;
+using AvahiString = std::unique_ptr<char, AvahiDeleter<avahi_free>>;
+
+// The threaded poll must be stopped (its thread joined) before the client it
+// drives is freed: Advertiser::Impl's destructor does that.
+using ThreadedPoll = std::unique_ptr<AvahiThreadedPoll, AvahiDeleter<avahi_threaded_poll_free>>;
+
 std::string unavailable(int error) {
   return std::string("DNS-SD unavailable: ") + avahi_strerror(error) +
          " (avahi-daemon and the system D-Bus must run for LAN discovery)";
@@ -85,12 +110,24 @@ std::vector<std::string> strings_of(AvahiStringList* l) {
   return out;
 }
 
+AvahiIfIndex avahi_interface(const Reach& r) {
+  return r.interface == 0 ? AVAHI_IF_UNSPEC : static_cast<AvahiIfIndex>(r.interface);
+}
+
+AvahiProtocol avahi_protocol(Family f) {
+  switch (f) {
+    case Family::ipv4: return AVAHI_PROTO_INET;
+    case Family::ipv6: return AVAHI_PROTO_INET6;
+    case Family::any: break;
+  }
+  return AVAHI_PROTO_UNSPEC;
+}
+
 // ---- browse -------------------------------------------------------------------
 
 struct BrowseState {
-  AvahiClient* client = nullptr;
-  AvahiSimplePoll* poll = nullptr;
-  int pending = 0;
+  AvahiClient* client = nullptr;  // borrowed from browse()
+  std::map<AvahiServiceResolver*, ServiceResolver> resolving;
   bool all_for_now = false;
   std::string failure;
   std::vector<Service> found;
@@ -112,7 +149,7 @@ void on_resolved(AvahiServiceResolver* r, AvahiIfIndex iface, AvahiProtocol prot
       s.domain = domain;
       s.host = host ? host : "";
       s.address = a;
-      s.ipv6 = proto == AVAHI_PROTO_INET6;
+      s.ipv6 = address->proto == AVAHI_PROTO_INET6;
       s.port = port;
       char ifname[IF_NAMESIZE] = {};
       if (iface >= 0 && if_indextoname(static_cast<unsigned>(iface), ifname)) s.interface = ifname;
@@ -120,18 +157,20 @@ void on_resolved(AvahiServiceResolver* r, AvahiIfIndex iface, AvahiProtocol prot
       st->found.push_back(std::move(s));
     }
   }
-  avahi_service_resolver_free(r);
-  --st->pending;
+  st->resolving.erase(r);  // frees the resolver
 }
 
-void on_browse(AvahiServiceBrowser* b, AvahiIfIndex iface, AvahiProtocol proto, AvahiBrowserEvent event,
+void on_browse(AvahiServiceBrowser*, AvahiIfIndex iface, AvahiProtocol proto, AvahiBrowserEvent event,
                const char* name, const char* type, const char* domain, AvahiLookupResultFlags, void* user) {
   auto* st = static_cast<BrowseState*>(user);
   switch (event) {
     case AVAHI_BROWSER_NEW:
-      if (avahi_service_resolver_new(st->client, iface, proto, name, type, domain, AVAHI_PROTO_UNSPEC,
-                                     static_cast<AvahiLookupFlags>(0), on_resolved, st))
-        ++st->pending;
+      // Resolved to an address of the family it was announced in: a service
+      // announced over IPv4 only (a server listening on IPv4) must not be
+      // resolved to the host's IPv6 address, where nothing listens for it.
+      if (auto* r = avahi_service_resolver_new(st->client, iface, proto, name, type, domain, proto,
+                                               static_cast<AvahiLookupFlags>(0), on_resolved, st))
+        st->resolving.emplace(r, ServiceResolver(r));
       break;
     case AVAHI_BROWSER_ALL_FOR_NOW:
       st->all_for_now = true;
@@ -148,33 +187,26 @@ void on_browse(AvahiServiceBrowser* b, AvahiIfIndex iface, AvahiProtocol proto, 
 
 Expected<std::vector<Service>> browse(const std::string& type, int timeout_ms) {
   if (auto s = check_service_type(type); !s) return s.error();
-  BrowseState st;
-  st.poll = avahi_simple_poll_new();
-  if (!st.poll) return make_error("DNS-SD: out of memory");
+  // Declared in the order they depend on each other, so they are freed in
+  // reverse on every return: browser, resolvers (st), client, poll.
+  SimplePoll poll(avahi_simple_poll_new());
+  if (!poll) return make_error("DNS-SD: out of memory");
   int error = 0;
-  st.client = avahi_client_new(avahi_simple_poll_get(st.poll), static_cast<AvahiClientFlags>(0), nullptr, nullptr, &error);
-  if (!st.client) {
-    avahi_simple_poll_free(st.poll);
-    return make_error(unavailable(error));
-  }
-  AvahiServiceBrowser* b = avahi_service_browser_new(st.client, AVAHI_IF_UNSPEC, AVAHI_PROTO_UNSPEC, type.c_str(),
-                                                     nullptr, static_cast<AvahiLookupFlags>(0), on_browse, &st);
-  if (!b) {
-    std::string why = avahi_strerror(avahi_client_errno(st.client));
-    avahi_client_free(st.client);
-    avahi_simple_poll_free(st.poll);
-    return make_error("DNS-SD: cannot browse " + type + ": " + why);
-  }
+  Client client(avahi_client_new(avahi_simple_poll_get(poll.get()), static_cast<AvahiClientFlags>(0), nullptr,
+                                 nullptr, &error));
+  if (!client) return make_error(unavailable(error));
+  BrowseState st;
+  st.client = client.get();
+  ServiceBrowser browser(avahi_service_browser_new(client.get(), AVAHI_IF_UNSPEC, AVAHI_PROTO_UNSPEC, type.c_str(),
+                                                   nullptr, static_cast<AvahiLookupFlags>(0), on_browse, &st));
+  if (!browser) return make_error("DNS-SD: cannot browse " + type + ": " + avahi_strerror(avahi_client_errno(client.get())));
   using clock = std::chrono::steady_clock;
   const auto deadline = clock::now() + std::chrono::milliseconds(std::max(timeout_ms, 0));
-  while (st.failure.empty() && !(st.all_for_now && st.pending == 0)) {
+  while (st.failure.empty() && !(st.all_for_now && st.resolving.empty())) {
     const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - clock::now()).count();
     if (left <= 0) break;
-    if (avahi_simple_poll_iterate(st.poll, static_cast<int>(std::min<long long>(left, 100))) != 0) break;
+    if (avahi_simple_poll_iterate(poll.get(), static_cast<int>(std::min<long long>(left, 100))) != 0) break;
   }
-  avahi_service_browser_free(b);
-  avahi_client_free(st.client);  // frees resolvers still pending
-  avahi_simple_poll_free(st.poll);
   if (!st.failure.empty() && st.found.empty()) return make_error("DNS-SD: browsing " + type + " failed: " + st.failure);
   std::sort(st.found.begin(), st.found.end(),
             [](const Service& a, const Service& b) { return std::tie(a.name, a.ipv6, a.address) < std::tie(b.name, b.ipv6, b.address); });
@@ -184,9 +216,11 @@ Expected<std::vector<Service>> browse(const std::string& type, int timeout_ms) {
 // ---- advertise ----------------------------------------------------------------
 
 struct Advertiser::Impl {
-  AvahiThreadedPoll* poll = nullptr;
-  AvahiClient* client = nullptr;
-  AvahiEntryGroup* group = nullptr;
+  // Declared in the order they are made; destroyed in reverse after the
+  // destructor has stopped the poll's thread: group, client, poll.
+  ThreadedPoll poll;
+  Client client;
+  EntryGroup group;
   Advertisement ad;
   std::vector<std::string> txt;
   mutable std::mutex mutex;  // guards ad.name against name()
@@ -194,9 +228,7 @@ struct Advertiser::Impl {
 
   void publish(AvahiClient* c);
   ~Impl() {
-    if (poll) avahi_threaded_poll_stop(poll);
-    if (client) avahi_client_free(client);  // frees the group too
-    if (poll) avahi_threaded_poll_free(poll);
+    if (poll) avahi_threaded_poll_stop(poll.get());
   }
 };
 
@@ -205,12 +237,11 @@ namespace {
 void on_group(AvahiEntryGroup* g, AvahiEntryGroupState state, void* user) {
   auto* impl = static_cast<Advertiser::Impl*>(user);
   if (state == AVAHI_ENTRY_GROUP_COLLISION) {
-    char* alt = avahi_alternative_service_name(impl->ad.name.c_str());
+    AvahiString alt(avahi_alternative_service_name(impl->ad.name.c_str()));
     {
       std::lock_guard lock(impl->mutex);
-      impl->ad.name = alt;
+      impl->ad.name = alt.get();
     }
-    avahi_free(alt);
     avahi_entry_group_reset(g);
     impl->publish(avahi_entry_group_get_client(g));
   }
@@ -220,34 +251,35 @@ void on_client(AvahiClient* c, AvahiClientState state, void* user) {
   auto* impl = static_cast<Advertiser::Impl*>(user);
   if (state == AVAHI_CLIENT_S_RUNNING) impl->publish(c);
   else if (state == AVAHI_CLIENT_S_COLLISION || state == AVAHI_CLIENT_S_REGISTERING) {
-    if (impl->group) avahi_entry_group_reset(impl->group);
+    if (impl->group) avahi_entry_group_reset(impl->group.get());
   }
 }
 
 }  // namespace
 
 void Advertiser::Impl::publish(AvahiClient* c) {
-  if (!group) group = avahi_entry_group_new(c, on_group, this);
+  if (!group) group.reset(avahi_entry_group_new(c, on_group, this));
   if (!group) {
     failure = avahi_strerror(avahi_client_errno(c));
     return;
   }
-  AvahiStringList* l = nullptr;
-  for (const auto& s : txt) l = avahi_string_list_add(l, s.c_str());
+  StringList l;
+  for (const auto& s : txt) l.reset(avahi_string_list_add(l.release(), s.c_str()));
   std::string name;
   {
     std::lock_guard lock(mutex);
     name = ad.name;
   }
-  int rc = avahi_entry_group_add_service_strlst(group, AVAHI_IF_UNSPEC, AVAHI_PROTO_UNSPEC,
+  // Only where the server listens: an interface it is not bound to, or a
+  // family it does not take, would hand browsers an address that answers nothing.
+  int rc = avahi_entry_group_add_service_strlst(group.get(), avahi_interface(ad.reach), avahi_protocol(ad.reach.family),
                                                 static_cast<AvahiPublishFlags>(0), name.c_str(), ad.type.c_str(),
-                                                nullptr, nullptr, ad.port, l);
-  avahi_string_list_free(l);
+                                                nullptr, nullptr, ad.port, l.get());
   if (rc == AVAHI_ERR_COLLISION) {
-    on_group(group, AVAHI_ENTRY_GROUP_COLLISION, this);
+    on_group(group.get(), AVAHI_ENTRY_GROUP_COLLISION, this);
     return;
   }
-  if (rc < 0 || (rc = avahi_entry_group_commit(group)) < 0) failure = avahi_strerror(rc);
+  if (rc < 0 || (rc = avahi_entry_group_commit(group.get())) < 0) failure = avahi_strerror(rc);
 }
 
 Expected<std::unique_ptr<Advertiser>> Advertiser::start(const Advertisement& ad) {
@@ -259,16 +291,16 @@ Expected<std::unique_ptr<Advertiser>> Advertiser::start(const Advertisement& ad)
   auto impl = std::make_unique<Impl>();
   impl->ad = ad;
   impl->txt = std::move(*txt);
-  impl->poll = avahi_threaded_poll_new();
+  impl->poll.reset(avahi_threaded_poll_new());
   if (!impl->poll) return make_error("DNS-SD: out of memory");
   int error = 0;
   // The callback runs inside avahi_client_new for the first state (publishing
   // at once when the daemon is up), later on the poll's thread.
-  impl->client = avahi_client_new(avahi_threaded_poll_get(impl->poll), static_cast<AvahiClientFlags>(0), on_client,
-                                  impl.get(), &error);
+  impl->client.reset(avahi_client_new(avahi_threaded_poll_get(impl->poll.get()), static_cast<AvahiClientFlags>(0),
+                                      on_client, impl.get(), &error));
   if (!impl->client) return make_error(unavailable(error));
   if (!impl->failure.empty()) return make_error("DNS-SD: cannot advertise " + ad.type + ": " + impl->failure);
-  if (avahi_threaded_poll_start(impl->poll) < 0) return make_error("DNS-SD: cannot start Avahi's poll thread");
+  if (avahi_threaded_poll_start(impl->poll.get()) < 0) return make_error("DNS-SD: cannot start Avahi's poll thread");
   return std::unique_ptr<Advertiser>(new Advertiser(std::move(impl)));
 }
 

@@ -373,21 +373,18 @@ Expected<cv::Mat> read_pfm(const fs::path& file, bool xyz_order) {
 
 // --- PNG / PNM -------------------------------------------------------------
 
-Expected<std::string> encode_png16(const cv::Mat& image) {
+Expected<std::string> encode_png16(const cv::Mat& image, PngDeflate deflate) {
   if (image.empty()) return make_error("cannot encode an empty image");
   if (image.depth() != CV_32F || (image.channels() != 1 && image.channels() != 3))
     return make_error("16-bit PNG needs a CV_32FC1 or CV_32FC3 image");
-  cv::Mat clean = image.clone();
-  cv::patchNaNs(clean, 0.0);
-  cv::Mat u16;
-  clean.convertTo(u16, CV_MAKETYPE(CV_16U, image.channels()), 65535.0);  // saturating, rounded
-  // libdeflate at its fastest level, rows Sub-filtered (png_codec.hpp):
-  // faster than OpenCV's zlib level 1 with the RLE strategy, and smaller.
-  return io_detail::encode_png(u16, 1);
+  // libdeflate, rows Sub-filtered (png_codec.hpp) at its fastest level:
+  // faster than OpenCV's zlib level 1 with the RLE strategy, and smaller; or
+  // stored. The float -> 16-bit conversion is part of the row pass.
+  return io_detail::encode_png(image, deflate == PngDeflate::stored ? 0 : 1);
 }
 
-Status write_png16(const fs::path& file, const cv::Mat& image, Sync sync) {
-  auto bytes = encode_png16(image);
+Status write_png16(const fs::path& file, const cv::Mat& image, Sync sync, PngDeflate deflate) {
+  auto bytes = encode_png16(image, deflate);
   if (!bytes) return make_error(file.string() + ": " + bytes.message());
   return write_file_atomic(file, *bytes, sync);
 }

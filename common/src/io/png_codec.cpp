@@ -9,6 +9,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <memory>
+#include <type_traits>
 #include <vector>
 
 #include <libdeflate.h>
@@ -223,41 +224,60 @@ std::optional<Expected<cv::Mat>> decode_png_linear(std::string_view bytes, const
   return Expected<cv::Mat>(std::move(out));
 }
 
+namespace {
+
+// One sample as the 16 bits a PNG stores: 8-bit and 16-bit values as they
+// are, a float in [0, 1] scaled to 0..65535 (rounded, saturated, NaN -> 0,
+// as cv::Mat::convertTo after cv::patchNaNs).
+inline uint16_t sample16(uint16_t v) { return v; }
+inline uint16_t sample16(float v) { return v == v ? cv::saturate_cast<uint16_t>(v * 65535.0f) : uint16_t(0); }
+
+// One image row in PNG order (R, G, B; big-endian samples) into `p`.
+template <class T>
+void png_row(const T* s, int width, int channels, unsigned char* p) {
+  const int swap = channels == 3 ? 2 : 0;  // BGR -> RGB
+  if constexpr (!std::is_same_v<T, unsigned char>) {
+    for (int x = 0; x < width; ++x, s += channels)
+      for (int c = 0; c < channels; ++c) {
+        const uint16_t v = sample16(s[swap ? swap - c : c]);
+        *p++ = static_cast<unsigned char>(v >> 8);
+        *p++ = static_cast<unsigned char>(v);
+      }
+  } else {
+    for (int x = 0; x < width; ++x, s += channels)
+      for (int c = 0; c < channels; ++c) *p++ = static_cast<unsigned char>(s[swap ? swap - c : c]);
+  }
+}
+
+}  // namespace
+
 std::string encode_png(const cv::Mat& image, int level) {
   const int channels = image.channels();
-  const int depth = image.depth() == CV_16U ? 16 : 8;
+  const int depth = image.depth() == CV_8U ? 8 : 16;
   const int width = image.cols, height = image.rows;
   const size_t bpp = size_t(channels) * size_t(depth) / 8;
   const size_t row_bytes = size_t(width) * bpp;
+  // Stored (level 0) rows go unfiltered: a filter only helps a compressor.
+  const bool sub = level > 0;
   std::vector<unsigned char> filtered(size_t(height) * (row_bytes + 1));
   cv::parallel_for_(cv::Range(0, height), [&](const cv::Range& rows) {
-    std::vector<unsigned char> plain(row_bytes);
+    std::vector<unsigned char> plain(sub ? row_bytes : 0);
     for (int y = rows.start; y < rows.end; ++y) {
-      // PNG order (R, G, B; big-endian samples), then Sub: each byte minus
-      // the same byte of the pixel to its left.
-      unsigned char* p = plain.data();
-      if (depth == 16) {
-        const uint16_t* s = image.ptr<uint16_t>(y);
-        for (int x = 0; x < width; ++x)
-          for (int c = 0; c < channels; ++c) {
-            const uint16_t v = s[x * channels + (channels == 3 ? 2 - c : c)];
-            *p++ = static_cast<unsigned char>(v >> 8);
-            *p++ = static_cast<unsigned char>(v);
-          }
-      } else {
-        const unsigned char* s = image.ptr<unsigned char>(y);
-        for (int x = 0; x < width; ++x)
-          for (int c = 0; c < channels; ++c) *p++ = s[x * channels + (channels == 3 ? 2 - c : c)];
-      }
       unsigned char* row = filtered.data() + size_t(y) * (row_bytes + 1);
-      row[0] = 1;
-      for (size_t i = 0; i < row_bytes; ++i)
-        row[1 + i] = static_cast<unsigned char>(plain[i] - (i >= bpp ? plain[i - bpp] : 0));
+      row[0] = sub ? 1 : 0;
+      unsigned char* p = sub ? plain.data() : row + 1;
+      switch (image.depth()) {
+        case CV_8U: png_row(image.ptr<unsigned char>(y), width, channels, p); break;
+        case CV_16U: png_row(image.ptr<uint16_t>(y), width, channels, p); break;
+        default: png_row(image.ptr<float>(y), width, channels, p); break;
+      }
+      if (!sub) continue;
+      // Sub: each byte minus the same byte of the pixel to its left.
+      for (size_t i = 0; i < bpp; ++i) row[1 + i] = plain[i];
+      for (size_t i = bpp; i < row_bytes; ++i) row[1 + i] = static_cast<unsigned char>(plain[i] - plain[i - bpp]);
     }
   });
   std::unique_ptr<libdeflate_compressor, CompressorFree> deflater(libdeflate_alloc_compressor(level));
-  std::string z(libdeflate_zlib_compress_bound(deflater.get(), filtered.size()), '\0');
-  z.resize(libdeflate_zlib_compress(deflater.get(), filtered.data(), filtered.size(), z.data(), z.size()));
 
   std::string out(reinterpret_cast<const char*>(kMagic), 8);
   auto chunk = [&out](const char* type, const char* data, size_t n) {
@@ -273,10 +293,27 @@ std::string encode_png(const cv::Mat& image, int level) {
   const char colour_type = channels == 3 ? 2 : 0;
   const char tail[5] = {static_cast<char>(depth), colour_type, 0, 0, 0};
   ihdr.append(tail, 5);
-  out.reserve(z.size() + 128);
   chunk("IHDR", ihdr.data(), ihdr.size());
+  const size_t bound = libdeflate_zlib_compress_bound(deflater.get(), filtered.size());
   constexpr size_t kMaxChunk = size_t(1) << 30;
-  for (size_t at = 0; at < z.size(); at += kMaxChunk) chunk("IDAT", z.data() + at, std::min(kMaxChunk, z.size() - at));
+  if (bound <= kMaxChunk) {
+    // One IDAT, compressed in place into the file's bytes (no second copy).
+    const size_t at = out.size();
+    out.resize(at + 8 + bound + 4 + 12);
+    const size_t n = libdeflate_zlib_compress(deflater.get(), filtered.data(), filtered.size(), out.data() + at + 8,
+                                              bound);
+    const unsigned char head[8] = {static_cast<unsigned char>(n >> 24), static_cast<unsigned char>(n >> 16),
+                                   static_cast<unsigned char>(n >> 8), static_cast<unsigned char>(n),
+                                   'I', 'D', 'A', 'T'};
+    std::memcpy(out.data() + at, head, 8);
+    out.resize(at + 8 + n);  // shrinks: the compressed bytes stay
+    put_be32(out, static_cast<uint32_t>(libdeflate_crc32(0, out.data() + at + 4, n + 4)));
+  } else {
+    std::string z(bound, '\0');
+    z.resize(libdeflate_zlib_compress(deflater.get(), filtered.data(), filtered.size(), z.data(), z.size()));
+    out.reserve(out.size() + z.size() + 128);
+    for (size_t at = 0; at < z.size(); at += kMaxChunk) chunk("IDAT", z.data() + at, std::min(kMaxChunk, z.size() - at));
+  }
   chunk("IEND", "", 0);
   return out;
 }

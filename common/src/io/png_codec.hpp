@@ -21,8 +21,11 @@ namespace veneer::io_detail {
 // truncated, corrupt or short image data, unknown filter).
 std::optional<Expected<cv::Mat>> decode_png_linear(std::string_view bytes, const std::string& name);
 
-// A CV_16UC1/CV_16UC3 (BGR) or CV_8UC1/CV_8UC3 image as PNG bytes: every row
-// Sub-filtered, deflated by libdeflate at `level` (1 = fastest .. 12).
+// A CV_16UC1/CV_16UC3 (BGR), CV_8UC1/CV_8UC3 or CV_32FC1/CV_32FC3 image as
+// PNG bytes (a float image as 16-bit: [0, 1] to 0..65535, rounded, clamped,
+// NaN as 0, in the same pass as the rows' byte order): deflated by libdeflate
+// at `level` (0 = stored, 1 = fastest .. 12), every row Sub-filtered when
+// compressed, unfiltered when stored.
 std::string encode_png(const cv::Mat& image, int level = 1);
 
 }  // namespace veneer::io_detail

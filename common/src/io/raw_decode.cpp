@@ -2,9 +2,11 @@
 #include <algorithm>
 #include <cctype>
 #include <memory>
+#include <optional>
 
 #include <libraw/libraw.h>
 
+#include "demosaic.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/raw.hpp"
 
@@ -30,7 +32,7 @@ struct DemosaicInfo {
 constexpr DemosaicInfo kDemosaics[] = {
     {Demosaic::bilinear, "bilinear", 0}, {Demosaic::vng, "vng", 1},  {Demosaic::ppg, "ppg", 2},
     {Demosaic::ahd, "ahd", 3},           {Demosaic::dcb, "dcb", 4},  {Demosaic::dht, "dht", 11},
-    {Demosaic::aahd, "aahd", 12},
+    {Demosaic::aahd, "aahd", 12},        {Demosaic::mhc, "mhc", -1},  // ours (demosaic.hpp)
 };
 
 const DemosaicInfo* find_demosaic(Demosaic d) {
@@ -46,6 +48,56 @@ const char* demosaic_name(Demosaic d) {
   const DemosaicInfo* i = find_demosaic(d);
   return i ? i->name : "unknown";
 }
+
+namespace {
+
+// The unpacked mosaic handed to demosaic_mhc: LibRaw's black levels, white
+// level, as-shot white balance and colour matrix, applied as its
+// dcraw_process applies them with the options decode_raw_linear sets
+// (highlight 0: the smallest multiplier is 1, values clip at the white
+// level). nullopt when the file is of a kind only LibRaw's own pipeline takes
+// (not a plain 2x2 Bayer layout, a black-level pattern over 2x2, odd size).
+std::optional<io_detail::Mosaic> mosaic_of(LibRaw& raw) {
+  const auto& sz = raw.imgdata.sizes;
+  const auto& col = raw.imgdata.color;
+  const uint16_t* data = raw.imgdata.rawdata.raw_image;
+  if (!data || sz.width < 4 || sz.height < 4 || sz.width % 2 || sz.height % 2 || sz.raw_pitch < 2) return std::nullopt;
+  if (sz.flip != 0 || sz.pixel_aspect != 1.0) return std::nullopt;
+  io_detail::Mosaic m;
+  m.data = data;
+  m.pitch = static_cast<int>(sz.raw_pitch / 2);
+  m.top = sz.top_margin;
+  m.left = sz.left_margin;
+  m.width = sz.width;
+  m.height = sz.height;
+  if (m.top + m.height > sz.raw_height || m.left + m.width > m.pitch) return std::nullopt;
+  const unsigned ph = col.cblack[4], pw = col.cblack[5];
+  if ((ph && 2 % ph) || (pw && 2 % pw)) return std::nullopt;
+  float mul[4];
+  for (int c = 0; c < 4; ++c) mul[c] = col.cam_mul[c] > 0 ? col.cam_mul[c] : col.pre_mul[c];
+  if (!(mul[3] > 0)) mul[3] = mul[1];
+  for (int c = 0; c < 4; ++c)
+    if (!(mul[c] > 0)) return std::nullopt;
+  const float least = *std::min_element(mul, mul + 4);
+  const float range = static_cast<float>(col.maximum) - static_cast<float>(col.black);
+  if (!(range > 0)) return std::nullopt;
+  for (int p = 0; p < 4; ++p) {
+    const int y = p / 2, x = p % 2;
+    const int raw_colour = raw.COLOR(y, x);  // 0 R, 1 G, 2 B, 3 the second G
+    if (raw_colour < 0 || raw_colour > 3) return std::nullopt;
+    m.cfa[p] = raw_colour == 3 ? 1 : raw_colour;
+    float black = static_cast<float>(col.black + col.cblack[raw_colour]);
+    if (ph && pw) black += static_cast<float>(col.cblack[6 + (y % ph) * pw + (x % pw)]);
+    m.black[p] = black;
+    m.scale[p] = mul[raw_colour] / least / range;
+  }
+  if (!io_detail::is_bayer(m.cfa)) return std::nullopt;
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c) m.rgb_cam[r][c] = col.rgb_cam[r][c];
+  return m;
+}
+
+}  // namespace
 
 Expected<Demosaic> parse_demosaic(const std::string& name) {
   std::string known;
@@ -106,6 +158,10 @@ Expected<cv::Mat> decode_raw_linear(std::string_view bytes, const RawOptions& op
     return make_error(name + ": only Bayer (RGB colour filter array) RAW files are supported");
   r = raw->unpack();
   if (r != LIBRAW_SUCCESS) return make_error(name + ": cannot unpack RAW data (" + libraw_error(r) + ")");
+  if (options.demosaic == Demosaic::mhc && !options.half_size) {
+    if (auto mosaic = mosaic_of(*raw)) return io_detail::demosaic_mhc(*mosaic);
+    p.user_qual = find_demosaic(Demosaic::ahd)->user_qual;  // a layout only LibRaw's pipeline takes
+  }
   r = raw->dcraw_process();
   if (r != LIBRAW_SUCCESS) return make_error(name + ": cannot develop RAW data (" + libraw_error(r) + ")");
   int err = 0;
@@ -134,6 +190,21 @@ Expected<cv::Mat> read_raw_linear(const std::filesystem::path& file, const RawOp
   auto bytes = read_file_bytes(file);
   if (!bytes) return bytes.error();
   return decode_raw_linear(*bytes, options, file.string());
+}
+
+Expected<std::string> raw_preview_jpeg(std::string_view bytes, const std::string& name) {
+  if (bytes.empty()) return make_error(name + ": empty file");
+  auto raw = std::make_unique<LibRaw>(LIBRAW_OPTIONS_NONE);
+  int r = raw->open_buffer(const_cast<char*>(bytes.data()), bytes.size());
+  if (r != LIBRAW_SUCCESS) return make_error(name + ": not a RAW file LibRaw can read (" + libraw_error(r) + ")");
+  r = raw->unpack_thumb();
+  if (r != LIBRAW_SUCCESS) return make_error(name + ": no preview LibRaw can take (" + libraw_error(r) + ")");
+  int err = 0;
+  std::unique_ptr<libraw_processed_image_t, void (*)(libraw_processed_image_t*)> thumb(
+      raw->dcraw_make_mem_thumb(&err), [](libraw_processed_image_t* i) { LibRaw::dcraw_clear_mem(i); });
+  if (!thumb || err != LIBRAW_SUCCESS) return make_error(name + ": cannot take its preview (" + libraw_error(err) + ")");
+  if (thumb->type != LIBRAW_IMAGE_JPEG) return make_error(name + ": its preview is not a JPEG");
+  return std::string(reinterpret_cast<const char*>(thumb->data), thumb->data_size);
 }
 
 std::string raw_decoder_version() { return LibRaw::version(); }

@@ -448,19 +448,20 @@ Truth render_truth(const Scene& scene, const RenderOptions& options) {
   return t;
 }
 
-Expected<ImageSet> simulate_set(const std::string& scene_name, const RenderOptions& options, Role role,
-                                const Progress& progress) {
-  auto scene_or = make_scene(scene_name, options);
-  if (!scene_or) return scene_or.error();
-  const Scene& scene = **scene_or;
+namespace {
+
+// simulate_set of a scene made already; `object` names it in the set (its
+// object name and id), `scene_name` is the shape's scene.
+Expected<ImageSet> simulate_scene_set(const Scene& scene, const std::string& scene_name, const std::string& object,
+                                      const RenderOptions& options, Role role, const Progress& progress) {
   const auto lamps = thesis_rig();
   const double focal = focal_for(options);
 
   ImageSet set;
   set.role = role;
-  set.object = scene_name;
+  set.object = object;
   set.scene = scene_name;
-  set.id = "sim-" + scene_name + "-" + std::to_string(options.seed);
+  set.id = "sim-" + object + "-" + std::to_string(options.seed);
   set.created = utc_now();
   set.size = options.size;
   set.camera.model = "veneer simulated camera";
@@ -475,7 +476,7 @@ Expected<ImageSet> simulate_set(const std::string& scene_name, const RenderOptio
   progress.report(0.0, "casting camera rays");
   auto gb = scene.gbuffer(options.size, focal, options.edge_samples, options.threads);
   for (size_t i = 0; i < lamps.size(); ++i) {
-    if (progress.cancelled()) return make_error("simulate " + scene_name + ": cancelled");
+    if (progress.cancelled()) return make_error("simulate " + object + ": cancelled");
     progress.report((0.3 + i) / shots, "lamp " + std::to_string(i + 1));
     RenderOptions o = options;
     o.shot = static_cast<uint32_t>(i);
@@ -493,7 +494,7 @@ Expected<ImageSet> simulate_set(const std::string& scene_name, const RenderOptio
                                 static_cast<float>(lamps[i].color[2] * e));
     set.lights.push_back(light);
   }
-  if (progress.cancelled()) return make_error("simulate " + scene_name + ": cancelled");
+  if (progress.cancelled()) return make_error("simulate " + object + ": cancelled");
   progress.report((shots - 0.7) / shots, "ambient frame");
   RenderOptions o = options;
   o.shot = 255;
@@ -501,6 +502,22 @@ Expected<ImageSet> simulate_set(const std::string& scene_name, const RenderOptio
   set.truth = render_truth(scene, options);
   progress.report(1.0, "done");
   return set;
+}
+
+}  // namespace
+
+Expected<ImageSet> simulate_set(const std::string& scene_name, const RenderOptions& options, Role role,
+                                const Progress& progress) {
+  auto scene = make_scene(scene_name, options);
+  if (!scene) return scene.error();
+  return simulate_scene_set(**scene, scene_name, scene_name, options, role, progress);
+}
+
+Expected<ImageSet> simulate_set_with_material(const std::string& shape_scene, const std::string& material_scene,
+                                              const RenderOptions& options, Role role, const Progress& progress) {
+  auto scene = make_scene_with_material(shape_scene, material_scene, options);
+  if (!scene) return scene.error();
+  return simulate_scene_set(**scene, shape_scene, shape_scene + "-in-" + material_scene, options, role, progress);
 }
 
 }  // namespace veneer::sim

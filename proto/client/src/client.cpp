@@ -135,6 +135,7 @@ RigStatus convert(const pb::RigStatus& s) {
   r.lamps_problem = s.lamps_problem();
   r.holds_lamps = s.holds_lamps();
   r.ready = s.ready();
+  r.event_seq = s.event_seq();
   r.capturing = s.capturing();
   r.you_control = s.you_control();
   r.controller_taken = s.controller_taken();
@@ -327,6 +328,11 @@ struct Client::Impl {
         pb::RigMessage m;
         auto r = in.next(m);
         if (r == veneer::wire::ReadResult::need_more) break;
+        if (r == veneer::wire::ReadResult::invalid) {
+          why = "bad data from the rig: " + in.invalid().field + " is not valid UTF-8";
+          broken = true;
+          break;
+        }
         if (r == veneer::wire::ReadResult::error) {
           why = "bad data from the rig: " + in.error();
           broken = true;
@@ -416,7 +422,9 @@ struct Client::Impl {
       if (d->fd >= 0) return fail("the rig switched files before finishing " + d->current);
       if (d->received.count(rel)) return fail("the rig sent " + rel + " twice");
       if (c.offset() != 0) return fail(rel + ": first chunk at offset " + std::to_string(c.offset()));
-      fs::path target = d->temp / rel;
+      // Into <rel>.part, renamed to <rel> once whole: a resumed pull takes
+      // every file without the suffix as complete.
+      fs::path target = d->temp / (rel + ".part");
       std::error_code ec;
       fs::create_directories(target.parent_path(), ec);
       d->fd = ::open(target.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
@@ -446,6 +454,9 @@ struct Client::Impl {
       d->fd = -1;
       d->current.clear();
       if (c.file_size() != d->received[rel]) return fail(rel + ": received " + std::to_string(d->received[rel]) + " of " + std::to_string(c.file_size()) + " bytes");
+      const fs::path whole = d->temp / rel;
+      if (::rename((whole.string() + ".part").c_str(), whole.c_str()) != 0)
+        return fail(whole.string() + ": cannot rename into place: " + std::strerror(errno));
     }
     if (c.end_of_set()) {
       std::lock_guard lock(mutex);
@@ -547,31 +558,22 @@ Expected<std::string> Client::manifest(const std::string& set_id) {
   return r->manifest().json();
 }
 
-Status Client::pull(const std::string& set_id, const fs::path& folder, bool include_truth, bool overwrite,
-                    const Progress& progress) {
+Expected<Client::Fetched> Client::fetch_into(const std::string& set_id, bool preview, bool include_truth,
+                                             const std::vector<std::string>& skip, const fs::path& dir,
+                                             const Progress& progress) {
   Impl& d = *impl_;
-  std::error_code ec;
-  fs::path target = folder.has_filename() ? folder : folder.parent_path();
-  if (fs::exists(target, ec) && !overwrite) return make_error(target.string() + " exists (pull into a new folder)");
-  fs::path parent = target.parent_path().empty() ? fs::path(".") : target.parent_path();
-  fs::create_directories(parent, ec);
-  if (ec) return make_error(parent.string() + ": cannot create: " + ec.message());
-  static std::atomic<unsigned> counter{0};
   auto dl = std::make_shared<Impl::Download>();
-  dl->temp = parent / ("." + target.filename().string() + ".pull-" + std::to_string(::getpid()) + "-" +
-                       std::to_string(counter++));
-  fs::create_directories(dl->temp, ec);
-  if (ec) return make_error(dl->temp.string() + ": cannot create: " + ec.message());
+  dl->temp = dir;
   dl->progress = &progress;
-  auto cleanup = [&] {
-    {
-      std::lock_guard lock(d.mutex);
-      dl->abandoned = true;
-      if (dl->fd >= 0) ::close(dl->fd);
-      dl->fd = -1;
+  auto abandon = [&] {  // the file being written goes; those written whole stay (a pull resumes from them)
+    std::lock_guard lock(d.mutex);
+    dl->abandoned = true;
+    if (dl->fd >= 0) ::close(dl->fd);
+    dl->fd = -1;
+    if (!dl->current.empty()) {
+      std::error_code ec;
+      fs::remove(dl->temp / (dl->current + ".part"), ec);
     }
-    std::error_code e;
-    fs::remove_all(dl->temp, e);
   };
 
   const uint64_t id = d.next_id++;
@@ -589,17 +591,27 @@ Status Client::pull(const std::string& set_id, const fs::path& folder, bool incl
   } unregister{d, id};
 
   pb::ClientMessage m;
-  auto* f = m.mutable_fetch_images();
-  f->set_set_id(set_id);
-  f->set_include_truth(include_truth);
+  if (preview) {
+    m.mutable_fetch_preview()->set_set_id(set_id);
+  } else {
+    auto* f = m.mutable_fetch_images();
+    f->set_set_id(set_id);
+    f->set_include_truth(include_truth);
+    for (const auto& s : skip) f->add_skip_files(s);
+  }
   auto r = d.request(m, id);
   if (!r) {
-    cleanup();
-    return make_error("pull " + set_id + ": " + r.message());
+    abandon();
+    return r.error();
   }
+  Fetched out;
   {
     std::lock_guard lock(d.mutex);
-    for (const auto& file : r->fetch().files()) dl->expected[file] = 0;
+    for (const auto& file : r->fetch().files()) {
+      dl->expected[file] = 0;
+      out.files.push_back(file);
+    }
+    out.skipped.assign(r->fetch().skipped_files().begin(), r->fetch().skipped_files().end());
     dl->total = r->fetch().total_bytes();
   }
 
@@ -609,8 +621,8 @@ Status Client::pull(const std::string& set_id, const fs::path& folder, bool incl
     if (dl->done || !dl->error.empty()) break;
     if (progress.cancelled()) {
       lock.unlock();
-      cleanup();
-      return make_error("pull " + set_id + ": cancelled");
+      abandon();
+      return make_error("cancelled");
     }
     if (Clock::now() - dl->last_activity > stall) {
       dl->error = "the rig sent nothing for " + std::to_string(d.options.request_timeout_s) + " s";
@@ -630,30 +642,10 @@ Status Client::pull(const std::string& set_id, const fs::path& folder, bool incl
     }
   }
   if (!error.empty()) {
-    cleanup();
-    return make_error("pull " + set_id + ": " + error);
+    abandon();
+    return make_error(error);
   }
-  // Sync the folder tree, then move it into place in one rename.
-  for (auto& dir : {dl->temp / "truth", dl->temp}) {
-    int fd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-    if (fd >= 0) {
-      (void)::fsync(fd);
-      ::close(fd);
-    }
-  }
-  if (overwrite && fs::exists(target, ec)) fs::remove_all(target, ec);
-  if (::rename(dl->temp.c_str(), target.c_str()) != 0) {
-    std::string why = std::strerror(errno);
-    cleanup();
-    return make_error("pull " + set_id + ": cannot move the set to " + target.string() + ": " + why);
-  }
-  int pfd = ::open(parent.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (pfd >= 0) {
-    (void)::fsync(pfd);
-    ::close(pfd);
-  }
-  progress.report(1.0, "done");
-  return {};
+  return out;
 }
 
 Status Client::delete_set(const std::string& set_id) {

@@ -17,7 +17,7 @@
 
 #include "veneer/sim/simulator.hpp"
 #include "veneer/util/log.hpp"
-#include "veneerd/devices/ptpip_twin.hpp"
+#include "veneerd/sim/ptpip_twin.hpp"
 #include "veneerd/hw/gphoto2.hpp"
 
 namespace fs = std::filesystem;

@@ -13,13 +13,16 @@
 #include <nlohmann/json.hpp>
 #include <unistd.h>
 
+#include "veneer/eval/metrics.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
-#include "veneer/match/metrics.hpp"
-#include "veneer/match/transfer.hpp"
+#include "veneer/pipeline/transfer.hpp"
 
 namespace veneer::match {
 namespace {
+
+using namespace veneer::eval;
+using namespace veneer::pipeline;
 
 const std::filesystem::path kReal = std::filesystem::path(VENEER_SHARED_DATA) / "real";
 

@@ -5,10 +5,10 @@
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
 
-#include "veneer/match/live.hpp"
-#include "veneer/match/metrics.hpp"
-#include "veneer/match/relight.hpp"
-#include "veneer/match/transfer.hpp"
+#include "veneer/eval/metrics.hpp"
+#include "veneer/pipeline/transfer.hpp"
+#include "veneer/repaint/live.hpp"
+#include "veneer/repaint/relight.hpp"
 #include "veneer/sim/simulator.hpp"
 
 using namespace veneer;
@@ -38,7 +38,7 @@ TEST(LiveRepaint, EqualsTheMapAppliedByHandAtSourceSize) {
   cv::Mat frame(src, CV_8UC3);
   cv::randu(frame, 0, 255);
   cv::Mat backdrop(dst, CV_8UC3, cv::Scalar(1, 2, 3));
-  match::LiveRepainter live(map, src, backdrop);
+  repaint::LiveRepainter live(map, src, backdrop);
   const cv::Mat out = live.apply(frame);
   ASSERT_EQ(out.size(), dst);
   for (int y = 0; y < dst.height; ++y)
@@ -57,7 +57,7 @@ TEST(LiveRepaint, ScalesCoordinatesToTheFrameSize) {
   cv::randu(small, 0, 255);
   cv::Mat big;
   cv::resize(small, big, src * 2, 0, 0, cv::INTER_NEAREST);
-  match::LiveRepainter live(map, src);
+  repaint::LiveRepainter live(map, src);
   const cv::Mat a = live.apply(small), b = live.apply(big);
   EXPECT_EQ(cv::norm(a, b, cv::NORM_INF), 0.0);
 }
@@ -78,7 +78,7 @@ TEST(LiveRepaint, BlendsFramesAsTheStillsWere) {
   cv::Mat frame(src, CV_8UC3);
   cv::randu(frame, 0, 255);
   const cv::Mat backdrop(dst, CV_8UC3, cv::Scalar(1, 2, 3));
-  match::LiveRepainter nearest(map, src, backdrop), blended(map, src, backdrop, shared);
+  repaint::LiveRepainter nearest(map, src, backdrop), blended(map, src, backdrop, shared);
   const cv::Mat a = nearest.apply(frame), b = blended.apply(frame);
   cv::Mat f;
   frame.convertTo(f, CV_32FC3, 1.0 / 255.0);
@@ -98,7 +98,7 @@ TEST(LiveRepaint, BlendsFramesAsTheStillsWere) {
     }
   EXPECT_GT(differ, cv::countNonZero(mapped) / 2);
   // a plan for another map size is not used: the nearest gather then
-  match::LiveRepainter misfit(map, cv::Size(20, 20), backdrop, shared);
+  repaint::LiveRepainter misfit(map, cv::Size(20, 20), backdrop, shared);
   cv::Mat small(20, 20, CV_8UC3);
   cv::randu(small, 0, 255);
   EXPECT_EQ(misfit.apply(small).size(), dst);
@@ -110,14 +110,14 @@ TEST(Relight, FitsTheThesisRingAndPredictsAnUnseenLamp) {
   o.noise_sigma = 0;
   auto set = sim::simulate_set("sphere-gray", o, Role::source);
   ASSERT_TRUE(set.ok()) << set.message();
-  auto relit = match::Relighter::fit(*set);
+  auto relit = repaint::Relighter::fit(*set);
   ASSERT_TRUE(relit.ok()) << relit.message();
   // The thesis's lamps sit on one ring, so the fit falls back to the ring basis.
   EXPECT_STREQ(relit->basis_name(), "ring (lx, ly, lz, lx ly, lx^2-ly^2)");
   // Under a rig lamp it reproduces that lamp's photo closely.
   const cv::Mat mask = set->truth.mask;
   const cv::Mat again = relit->render_source(set->lights[2].direction);
-  EXPECT_GT(match::psnr(again, set->images[2], mask), 30.0);
+  EXPECT_GT(eval::psnr(again, set->images[2], mask), 30.0);
   // Under a lamp between two ring lamps (not in the set) it beats the nearest
   // lamp's photo as a prediction.
   auto scene = sim::make_scene("sphere-gray", o);
@@ -128,8 +128,8 @@ TEST(Relight, FitsTheThesisRingAndPredictsAnUnseenLamp) {
   const cv::Vec3d dir = cv::normalize(between.position_m);
   between.position_m = dir * cv::norm(rig[1].position_m);
   const cv::Mat truth = sim::render(**scene, {between}, o);
-  const double predicted = match::psnr(relit->render_source(dir), truth, mask);
-  const double nearest = match::psnr(set->images[1], truth, mask);
+  const double predicted = eval::psnr(relit->render_source(dir), truth, mask);
+  const double nearest = eval::psnr(set->images[1], truth, mask);
   EXPECT_GT(predicted, nearest);
   EXPECT_GT(predicted, 25.0);
 }
@@ -147,7 +147,7 @@ TEST(Relight, NoGhostRingsOrSpeckleAndTheBackgroundAsCaptured) {
   o.noise_sigma = 0.002;
   auto set = sim::simulate_set("orange", o, Role::source);
   ASSERT_TRUE(set.ok()) << set.message();
-  auto relit = match::Relighter::fit(*set);
+  auto relit = repaint::Relighter::fit(*set);
   ASSERT_TRUE(relit.ok()) << relit.message();
   auto scene = sim::make_scene("orange", o);
   ASSERT_TRUE(scene.ok());
@@ -157,7 +157,7 @@ TEST(Relight, NoGhostRingsOrSpeckleAndTheBackgroundAsCaptured) {
   cv::erode(mask, inner, cv::Mat(), cv::Point(-1, -1), 2);
   std::vector<cv::Mat> ambient_free;  // what the fit sees (the set's lamps are white, intensity 1)
   for (const auto& p : set->images) ambient_free.push_back(set->ambient.empty() ? p : p - set->ambient);
-  const cv::Mat median = match::median_photo(ambient_free);
+  const cv::Mat median = repaint::median_photo(ambient_free);
   // two lamps between ring lamps (within the ring's reach) and one lower, farther out (beyond it)
   for (int i : {1, 4, 7}) {
     sim::Lamp between = rig[i % 7];
@@ -184,14 +184,14 @@ TEST(Relight, NoGhostRingsOrSpeckleAndTheBackgroundAsCaptured) {
     const double outlier_fraction = static_cast<double>(outliers) / cv::countNonZero(inner);
     // (measured: 0.02 / 0.06 / 3.0 %, 39.4 / 38.0 / 29.3 dB; the plain fit had 3.6 % and 28.0 dB beyond the ring)
     EXPECT_LT(outlier_fraction, i < 7 ? 0.005 : 0.033) << "lamp " << i;
-    EXPECT_GT(match::psnr(got, truth, inner), i < 7 ? 36.0 : 29.0) << "lamp " << i;
+    EXPECT_GT(eval::psnr(got, truth, inner), i < 7 ? 36.0 : 29.0) << "lamp " << i;
     // the background (clear of the object's segmented outline): as captured, exactly
     cv::Mat outside;
     cv::dilate(mask, outside, cv::Mat(), cv::Point(-1, -1), 4);
     cv::bitwise_not(outside, outside);
     EXPECT_EQ(cv::norm(got, median, cv::NORM_INF, outside), 0.0) << i;
   }
-  EXPECT_STREQ(match::Relighter::background_note(), "object relit; background as captured (not relit)");
+  EXPECT_STREQ(repaint::Relighter::background_note(), "object relit; background as captured (not relit)");
 }
 
 TEST(Relight, RefusesTooFewOrAlikeLamps) {
@@ -202,12 +202,12 @@ TEST(Relight, RefusesTooFewOrAlikeLamps) {
     set.lights.push_back(Light{});
     set.images.push_back(cv::Mat(4, 4, CV_32FC3, cv::Scalar::all(0.5)));
   }
-  auto r = match::Relighter::fit(set);
+  auto r = repaint::Relighter::fit(set);
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.message().find("at least 5"), std::string::npos);
   set.lights.push_back(Light{});
   set.images.push_back(set.images[0]);
-  auto same = match::Relighter::fit(set);  // five identical directions
+  auto same = repaint::Relighter::fit(set);  // five identical directions
   ASSERT_FALSE(same.ok());
   EXPECT_NE(same.message().find("too alike"), std::string::npos);
 }
@@ -225,7 +225,7 @@ TEST(Relight, FittingLeavesTheCallersPhotosAsTheyWere) {
   std::vector<cv::Mat> before;
   for (auto& l : set->lights) l.intensity = cv::Vec3f(2, 2, 2);
   for (const cv::Mat& m : set->images) before.push_back(m.clone());
-  auto relit = match::Relighter::fit(*set);
+  auto relit = repaint::Relighter::fit(*set);
   ASSERT_TRUE(relit.ok()) << relit.message();
   for (size_t i = 0; i < before.size(); ++i) EXPECT_EQ(cv::norm(set->images[i], before[i], cv::NORM_INF), 0.0) << i;
   // And the fit saw unit lamps: lamp 2's photo is predicted at half its level.

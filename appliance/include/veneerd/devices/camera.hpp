@@ -28,6 +28,10 @@ struct Still {
   cv::Mat linear;              // CV_32FC3 BGR, linear, [0,1] — what goes into the set
   std::string original_name;   // e.g. "IMG_0001.CR2"; empty for simulated
   std::vector<unsigned char> original;  // full-resolution file as delivered (may be empty)
+  // The camera's own developed JPEG of the shot when it delivered one at the
+  // size of `linear` (a RAW+JPEG body; the simulated camera): the set stores
+  // it as the photo instead of a 16-bit PNG of `linear`. May be empty.
+  std::vector<unsigned char> developed_jpeg;
 };
 
 class Camera {

@@ -58,7 +58,7 @@ struct DeviceRegistry {
 };
 
 // Explicit registration (static archives drop self-registering objects).
-void register_simulated_devices();  // appliance/src/devices/
-void register_hardware_devices();   // appliance/src/hw/ (gphoto2, uvc, gpio)
+void register_simulated_devices();  // appliance/src/sim/ (simulated camera, trigger, LED)
+void register_hardware_devices();   // appliance/src/hw/ (hue, gphoto2, uvc, gpio, LED "none")
 
 }  // namespace veneerd

@@ -1,6 +1,7 @@
 #pragma once
-// The capture button and the status LED. Implementations: "gpio" (libgpiod,
-// logic from firmware/), "simulated" (pressed through the API / a test hook).
+// The capture button and the status LED (interfaces). Implementations: "gpio"
+// (hw/, libgpiod, logic from firmware/), "simulated" (sim/, pressed through
+// the API / a test hook); LED "none" (below) for a rig without one.
 #include <functional>
 #include <string>
 
@@ -24,6 +25,13 @@ class StatusLed {
   virtual ~StatusLed() = default;
   virtual std::string name() const = 0;
   virtual void show(LedState state) = 0;
+};
+
+// LED back-end "none": a rig without a status LED.
+class NoLed : public StatusLed {
+ public:
+  std::string name() const override { return "none"; }
+  void show(LedState) override {}
 };
 
 }  // namespace veneerd

@@ -10,7 +10,8 @@
 //   auto found = veneer::dnssd::browse("_veneer._tcp", 2000);
 //   if (!found) VLOG_INFO("Rig", "DNS-SD: {}", found.message());
 //
-//   auto ad = veneer::dnssd::Advertiser::start({"my-rig", "_veneer._tcp", 7878, txt});
+//   auto reach = veneer::dnssd::reach_of("192.168.1.20");   // where the server listens
+//   auto ad = veneer::dnssd::Advertiser::start({"my-rig", "_veneer._tcp", 7878, txt, *reach});
 #include <cstdint>
 #include <map>
 #include <memory>
@@ -50,16 +51,41 @@ Status check_service_type(const std::string& type);
 Status check_instance_name(const std::string& name);
 
 // Browse `type` for about `timeout_ms` (less when Avahi says it has listed all
-// it knows) and resolve each instance. Services seen on several interfaces or
-// address families come back once per (name, address). Error: no daemon or
+// it knows) and resolve each instance, to an address of the family it was
+// announced in (an IPv4 announcement gives an IPv4 address). Services seen on
+// several interfaces or address families come back once per (name, address). Error: no daemon or
 // D-Bus ("DNS-SD unavailable: ..."), or a bad type.
 Expected<std::vector<Service>> browse(const std::string& type, int timeout_ms = 2000);
+
+enum class Family { any, ipv4, ipv6 };
+const char* family_name(Family family);  // "IPv4 and IPv6", "IPv4", "IPv6"
+
+// Where a service is advertised: on every interface or on one, over both
+// address families or one. A browser resolves the service to the addresses
+// its host has on that interface in that family, so this must match where
+// the server listens, or some advertised addresses answer nothing.
+struct Reach {
+  unsigned interface = 0;      // interface index (if_nametoindex); 0 = every interface
+  std::string interface_name;  // its name, for messages ("" for every interface)
+  Family family = Family::any;
+  std::string describe() const;  // "every interface, IPv4" / "eth0, IPv6"
+};
+
+// Where a server bound to `address` (an IP literal, as given to bind()) can
+// be reached: "0.0.0.0" every interface over IPv4; "::" every interface over
+// both families when the socket also takes IPv4 (`dual_stack`, Linux's
+// default), else IPv6 only; any other address the one interface that holds
+// it, in that address's family (an IPv4-mapped IPv6 address is IPv4). An
+// IPv6 link-local address may carry its scope ("fe80::1%eth0").
+// Error: not an IP address, or no interface holds it.
+Expected<Reach> reach_of(const std::string& address, bool dual_stack = true);
 
 struct Advertisement {
   std::string name;  // instance name; Avahi picks "name #2" on a collision
   std::string type;  // "_veneer._tcp"
   uint16_t port = 0;
   Txt txt;
+  Reach reach;       // default: every interface, both families
 };
 
 // Keeps one service advertised until destroyed (Avahi's threaded poll).

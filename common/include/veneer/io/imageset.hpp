@@ -78,6 +78,12 @@ struct ImageSet {
   // linear), "jpeg" (8-bit sRGB through the inverse sRGB curve), "pfm", "pnm";
   // empty for a set made in memory.
   std::string photos_from;
+  // How the set was read, for people (`veneer info`): the layout
+  // ("veneer-set/1", "DiLiGenT", "thesis", "RTI .lp"), and how its photos were
+  // decoded (file kind, bit depth, linearisation or RAW decode). Empty for a
+  // set made in memory; not written to set.json.
+  std::string layout;
+  std::string photos_read;
   // Camera RAW files to keep beside the photos (write_set writes raw[i] as
   // light_NN.<extension> and names it in set.json's images[i].raw; the
   // ambient's as ambient.<extension>). Empty = none. read_set does not fill
@@ -88,13 +94,37 @@ struct ImageSet {
   };
   std::vector<RawFile> raw;
   RawFile ambient_raw;
+  // The camera's developed photos (its JPEGs, as a RAW+JPEG body delivers
+  // them) to store instead of encoding images[i] as a 16-bit PNG: write_set
+  // writes developed[i] as light_NN.<extension> and names it in
+  // images[i].file (the ambient's as ambient.<extension>). Empty = PNG.
+  std::vector<RawFile> developed;
+  RawFile ambient_developed;
+  // A preview set (a reduced copy a live view starts from while the full
+  // files are still coming, proto/README.md "Live first"): the set it is a
+  // preview of and that set's size. set.json "preview_of": {"id", "size"}.
+  struct PreviewOf {
+    std::string id;
+    cv::Size size;
+  };
+  std::optional<PreviewOf> preview_of;
 };
 
 // veneer:   set.json + light_NN.png (+ ambient.png, mask.png, truth/)
 // diligent: filenames.txt, light_directions.txt, optional light_intensities.txt and mask.png
-// thesis:   lights.txt ("x y z [r g b]" per lamp) + images <N>.ppm|.pgm|.pfm|.png taken in
-//           increasing N, optional ambient.*, mask.pgm|.png, normals.pfm (kept as truth)
-enum class SetFormat { automatic, veneer, diligent, thesis };
+// thesis:   lights.txt ("x y z [r g b]" per lamp) + images <N>.<ext> taken in increasing N,
+//           optional ambient.*, mask.pgm|.png, normals.pfm (kept as truth)
+// rti:      the RTI community's capture folder (RTIBuilder, Relight): one *.lp light file
+//           (in the folder or its assembly-files/) naming each photo and its light direction
+//
+// The DiLiGenT, thesis and RTI photos may be PNG, PPM/PGM, PFM, JPEG, TIFF or camera
+// RAW files (DNG, CR2, NEF, ARW, ... by their names, through LibRaw with
+// ReadOptions::raw). JPEGs are sRGB and always linearised; 8-bit PNG and TIFF
+// photos are linearised in RTI folders (developed photos) and taken as linear in
+// the DiLiGenT and thesis layouts (whose 8-bit files are linear by convention);
+// 16-bit and float files are linear.
+enum class SetFormat { automatic, veneer, diligent, thesis, rti };
+const char* format_name(SetFormat);  // "veneer-set/1" | "DiLiGenT" | "thesis" | "RTI .lp" | "automatic"
 
 // Which files a veneer set's photos come from when it has both.
 enum class PhotoSource {
@@ -106,13 +136,14 @@ const char* photo_source_name(PhotoSource);  // "auto" | "raw" | "developed"
 Expected<PhotoSource> parse_photo_source(const std::string&);
 
 struct ReadOptions {
-  SetFormat format = SetFormat::automatic;  // automatic: set.json -> veneer, filenames.txt -> DiLiGenT, else thesis
+  SetFormat format = SetFormat::automatic;  // automatic: set.json -> veneer, filenames.txt -> DiLiGenT,
+                                            // lights.txt -> thesis, one *.lp -> RTI
   bool load_truth = true;                   // read <set>/truth/ when present
   bool load_truth_appearance = true;        // with load_truth: also truth/albedo.png and depth.pfm (a
                                             // transfer measures with normals and mask only; at 5600x3750
                                             // they are 340 MB to decode per set)
   PhotoSource photos = PhotoSource::automatic;  // veneer sets: RAW or developed photos (default: RAW where present)
-  RawOptions raw;                           // how RAW files are decoded (half size, demosaic)
+  RawOptions raw;                           // how RAW files are decoded (half size, demosaic), in every layout
   bool load_photos = true;                  // veneer sets: false reads the manifest, mask and truth only
                                             // (images left empty; for results taken from a cache)
   Status check() const;

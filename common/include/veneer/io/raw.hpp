@@ -15,9 +15,12 @@
 
 namespace veneer {
 
-// LibRaw's interpolations (user_qual 0, 1, 2, 3, 4, 11, 12).
-enum class Demosaic { bilinear, vng, ppg, ahd, dcb, dht, aahd };
-const char* demosaic_name(Demosaic);                    // "bilinear" | "vng" | "ppg" | "ahd" | "dcb" | "dht" | "aahd"
+// LibRaw's interpolations (user_qual 0, 1, 2, 3, 4, 11, 12), and mhc: Veneer's
+// own (Malvar-He-Cutler's gradient-corrected linear filters, rows in
+// parallel, on the mosaic LibRaw unpacks; LibRaw's develop skipped; a Bayer
+// layout LibRaw's pipeline alone takes goes through its AHD instead).
+enum class Demosaic { bilinear, vng, ppg, ahd, dcb, dht, aahd, mhc };
+const char* demosaic_name(Demosaic);  // "bilinear" | "vng" | "ppg" | "ahd" | "dcb" | "dht" | "aahd" | "mhc"
 Expected<Demosaic> parse_demosaic(const std::string&);
 
 struct RawOptions {
@@ -36,6 +39,11 @@ bool is_raw_file_name(const std::string& file_name);
 // LibRaw cannot open or unpack (damaged, unsupported, not RAW at all).
 Expected<cv::Mat> decode_raw_linear(std::string_view bytes, const RawOptions& options, const std::string& name);
 Expected<cv::Mat> read_raw_linear(const std::filesystem::path& file, const RawOptions& options = {});
+
+// The JPEG thumbnail/preview LibRaw finds in a RAW file (unpack_thumb, the
+// mosaic left undecoded): its bytes as stored. An error when the file has
+// none or it is not a JPEG.
+Expected<std::string> raw_preview_jpeg(std::string_view bytes, const std::string& name);
 
 // The LibRaw version this build decodes with, e.g. "0.20.2".
 std::string raw_decoder_version();

@@ -113,4 +113,13 @@ Truth render_truth(const Scene& scene, const RenderOptions& options);
 Expected<ImageSet> simulate_set(const std::string& scene_name, const RenderOptions& options,
                                 Role role = Role::unknown, const Progress& progress = {});
 
+// The same for `shape_scene`'s shape in `material_scene`'s material
+// (make_scene_with_material), under the same lamps and pose: the look a
+// perfect transfer of material_scene onto shape_scene gives. The set's scene
+// is the shape's; its object and id say "<shape>-in-<material>"; its truth
+// albedo is the material's on the shape.
+Expected<ImageSet> simulate_set_with_material(const std::string& shape_scene, const std::string& material_scene,
+                                              const RenderOptions& options, Role role = Role::unknown,
+                                              const Progress& progress = {});
+
 }  // namespace veneer::sim

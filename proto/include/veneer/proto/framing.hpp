@@ -9,6 +9,8 @@
 
 #include <google/protobuf/message_lite.h>
 
+#include "veneer/proto/utf8.hpp"
+
 namespace veneer::wire {
 
 constexpr uint32_t kProtocolVersion = 1;
@@ -25,6 +27,9 @@ std::string encode_delimited(const google::protobuf::MessageLite& message);
 enum class ReadResult {
   message,    // one message parsed
   need_more,  // the buffer holds only part of a message
+  invalid,    // a whole message whose only fault is a string field that is not
+              // UTF-8 (proto3 refuses it): skipped, `invalid()` names the field;
+              // the stream goes on with the next message
   error,      // the stream is broken (bad prefix, too large, unparsable): close it
 };
 
@@ -38,13 +43,17 @@ class FrameBuffer {
   // wrong; the buffer is then unusable.
   ReadResult next(google::protobuf::MessageLite& out);
   const std::string& error() const { return error_; }
+  // After ReadResult::invalid: the field that is not UTF-8, and the message's id.
+  const InvalidUtf8& invalid() const { return invalid_; }
   size_t buffered() const { return buf_.size() - start_; }
 
  private:
+  void consume(size_t bytes);
   std::string buf_;
   size_t start_ = 0;
   size_t max_;
   std::string error_;
+  InvalidUtf8 invalid_;
 };
 
 }  // namespace veneer::wire

@@ -25,6 +25,7 @@
 #include "veneer/io/big_buffers.hpp"
 #include "veneer/ps/photometric_stereo.hpp"
 #include "veneer/ps/segmentation.hpp"
+#include "veneer/repaint/repaint.hpp"
 #include "veneer/util/log.hpp"
 
 namespace veneer::pipeline {
@@ -264,7 +265,7 @@ cv::Mat median_minus_ambient(const std::vector<cv::Mat>& photos, const cv::Mat* 
         cv::max(m, 0.0, m);
       }
     }
-    return match::median_photo(photos);
+    return repaint::median_photo(photos);
   }
   // An odd-even transposition network (n rounds of compare-exchanges of
   // neighbours) sorts each sample's n values; run on 256 samples at once,
@@ -469,8 +470,8 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
   return p;
 }
 
-Expected<match::PreparedPair> prepare_pair(const fs::path& destination, const fs::path& source,
-                                           const match::TransferOptions& transfer, const PrepareOptions& options,
+Expected<pipeline::PreparedPair> prepare_pair(const fs::path& destination, const fs::path& source,
+                                           const pipeline::TransferOptions& transfer, const PrepareOptions& options,
                                            std::vector<SetReport>* reports, const Progress& progress) {
   if (auto s = transfer.check(); !s) return s.error();
   // Both sets at once: their frames share the workers, so no core idles
@@ -497,7 +498,7 @@ Expected<match::PreparedPair> prepare_pair(const fs::path& destination, const fs
       [&] { src = prepare_set(source, transfer.scale, transfer.truth_normals, for_src, half(1)); });
   if (!dst) return make_error("destination: " + dst.message());
   if (!src) return make_error("source: " + src.message());
-  match::PreparedPair pair;
+  pipeline::PreparedPair pair;
   pair.scale = transfer.scale;
   pair.truth_normals = transfer.truth_normals;
   pair.destination = std::move(dst->set);

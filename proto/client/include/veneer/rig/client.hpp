@@ -91,6 +91,7 @@ struct RigStatus {
   Role next_role = Role::destination;
   uint64_t free_bytes = 0;
   int clients = 0;
+  uint64_t event_seq = 0;            // seq of the last event before this status; the next one is event_seq + 1
 };
 
 struct SetSummary {
@@ -145,6 +146,16 @@ struct CaptureOptions {
   int iso = 0;
 };
 
+// How pull_set fetches a set (see Client::pull_set).
+struct PullOptions {
+  bool include_truth = true;  // truth/ of simulated sets, when present
+  bool overwrite = false;     // replace whatever `folder` holds (this set's own preview is always completed)
+  bool live_first = false;    // the preview set first (put in place, then on_preview), then the full files
+  // live_first: called on the pulling thread once the preview set is in place
+  // at the folder (return quickly: the full files wait for it).
+  std::function<void(const std::filesystem::path& folder)> on_preview;
+};
+
 struct ConnectOptions {
   std::string client_name = "veneer";
   double connect_timeout_s = 5;
@@ -172,9 +183,40 @@ class Client {
   Expected<std::vector<SetSummary>> list_sets();
   Expected<std::string> manifest(const std::string& set_id);  // set.json text
   // Downloads a set into `folder` as a veneer-set/1 folder (with truth/ when
-  // asked and present), atomically: a temporary sibling renamed into place.
+  // asked and present): pull_set with {include_truth, overwrite}.
   Status pull(const std::string& set_id, const std::filesystem::path& folder, bool include_truth = true,
               bool overwrite = false, const Progress& progress = {});
+
+  // --- live first (proto/README.md, "Live first") ---------------------------
+  //
+  //   veneer::rig::PullOptions o;
+  //   o.live_first = true;
+  //   o.on_preview = [&](const std::filesystem::path& f) { start_live(f); };  // a valid, reduced set
+  //   client->pull_set(id, "sets/dest", o, progress);  // returns when the full set is in place
+  //
+  // Downloads set `set_id` into `folder`. With live_first, first the preview
+  // set (pull_preview: set.json at ~1/4 size marked "preview_of": {"id",
+  // "size"}, one reduced JPEG per lamp, a few MB) is put in place and
+  // on_preview is called; then the full files are fetched and replace it in
+  // place in one atomic exchange, so a reader finds either the preview set or
+  // the full set, never a mix or half of one. Without live_first only the
+  // full set. Resumable: the full files go to ".<name>.pull-<set id>" beside
+  // `folder`, each renamed there when whole; an interrupted pull leaves them,
+  // and the next pull_set of the same set into the same folder fetches only
+  // the missing ones (a rig that predates resuming sends all). A rig that
+  // does not serve previews (an older veneerd) gets a plain full pull
+  // (on_preview is not called). `folder` may hold this set's preview (it is
+  // announced at once and completed) or the set itself (announced, nothing
+  // fetched); anything else there is refused unless overwrite. read_set reads
+  // the preview set like any set (photos_from "jpeg", set.preview_of says
+  // what it previews; the intrinsics are scaled to its size).
+  Status pull_set(const std::string& set_id, const std::filesystem::path& folder, const PullOptions& options = {},
+                  const Progress& progress = {});
+  // Only the preview set, atomically into `folder` (an error when the rig
+  // does not serve previews; nothing to do when `folder` already holds this
+  // set or its preview).
+  Status pull_preview(const std::string& set_id, const std::filesystem::path& folder, bool overwrite = false,
+                      const Progress& progress = {});
   Status delete_set(const std::string& set_id);  // into the rig's trash
   Expected<std::vector<SetSummary>> list_trash();  // newest deletion first
   Status restore_set(const std::string& set_id);
@@ -200,6 +242,15 @@ class Client {
  private:
   Client();
   Expected<std::vector<SetSummary>> list(bool trash);
+  struct Fetched {
+    std::vector<std::string> files;    // sent, in order
+    std::vector<std::string> skipped;  // left out (the client had them)
+  };
+  // One fetch_images (preview = false) or fetch_preview download into `dir`,
+  // each file written as <rel>.part and renamed to <rel> when whole.
+  Expected<Fetched> fetch_into(const std::string& set_id, bool preview, bool include_truth,
+                               const std::vector<std::string>& skip, const std::filesystem::path& dir,
+                               const Progress& progress);
   std::unique_ptr<Impl> impl_;
 };
 

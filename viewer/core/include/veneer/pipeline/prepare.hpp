@@ -10,7 +10,7 @@
 
 #include "veneer/io/cache.hpp"
 #include "veneer/io/imageset.hpp"
-#include "veneer/match/transfer.hpp"
+#include "veneer/pipeline/transfer.hpp"
 #include "veneer/util/expected.hpp"
 #include "veneer/util/progress.hpp"
 
@@ -50,14 +50,14 @@ struct PreparedSet {
   SetReport report;
 };
 
-// `scale` and `truth_normals` as match::TransferOptions.
+// `scale` and `truth_normals` as pipeline::TransferOptions.
 Expected<PreparedSet> prepare_set(const std::filesystem::path& folder, double scale, bool truth_normals,
                                   const PrepareOptions& options, const Progress& progress = {});
 
-// Both sets of a pair, as match::prepare_pair makes them, via prepare_set.
-Expected<match::PreparedPair> prepare_pair(const std::filesystem::path& destination,
+// Both sets of a pair, as pipeline::prepare_pair makes them, via prepare_set.
+Expected<pipeline::PreparedPair> prepare_pair(const std::filesystem::path& destination,
                                            const std::filesystem::path& source,
-                                           const match::TransferOptions& transfer, const PrepareOptions& options,
+                                           const pipeline::TransferOptions& transfer, const PrepareOptions& options,
                                            std::vector<SetReport>* reports = nullptr, const Progress& progress = {});
 
 // Waits for the cache entries prepare_set writes in the background (a
@@ -65,7 +65,7 @@ Expected<match::PreparedPair> prepare_pair(const std::filesystem::path& destinat
 Status finish_cache_writes();
 
 // The per-pixel, per-channel median of same-sized CV_32FC3 photos, equal to
-// match::median_photo's (the mean of the two middle values for an even count).
+// repaint::median_photo's (the mean of the two middle values for an even count).
 cv::Mat median_of(const std::vector<cv::Mat>& photos);
 
 // The reports as JSON ({"destination": {...}, "source": {...}} when two).

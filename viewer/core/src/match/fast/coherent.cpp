@@ -59,7 +59,7 @@ namespace {
 // (shifted by their offset, and by one pixel more each way, so a chunk may
 // stretch or shrink with the curvatures), the one that minimises
 //     error + w * threshold * (4-neighbours it breaks with),
-// "broken" meaning matched more than 1.5 px apart, as match::evaluate counts
+// "broken" meaning matched more than 1.5 px apart, as eval::evaluate counts
 // coherence. Iterated conditional modes on a checkerboard: the pixels of one
 // colour change together, in parallel, reading the other colour's matches
 // (fixed meanwhile, so the map does not depend on threads); then the other

@@ -1,0 +1,152 @@
+// A layout's photo file, whatever it is: a camera RAW file (by its name,
+// through LibRaw), a TIFF (8- or 16-bit, through OpenCV), or what
+// decode_linear_image reads (PNG, JPEG, PFM, PNM). 8-bit samples are taken
+// as sRGB code values where the layout says so (set_detail.hpp, Frame).
+#include <array>
+#include <cmath>
+#include <cstring>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "set_detail.hpp"
+#include "veneer/io/image_io.hpp"
+
+namespace veneer::io_detail {
+
+namespace {
+
+bool has_tiff_magic(std::string_view b) {
+  return b.size() >= 8 && ((std::memcmp(b.data(), "II*\0", 4) == 0) || (std::memcmp(b.data(), "MM\0*", 4) == 0));
+}
+
+// A PNG's bit depth from its IHDR (the first chunk), 0 when not a PNG.
+int png_bit_depth(std::string_view b) {
+  static const unsigned char kMagic[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  if (b.size() < 8 + 8 + 13 || std::memcmp(b.data(), kMagic, 8) != 0) return 0;
+  if (std::memcmp(b.data() + 12, "IHDR", 4) != 0) return 0;
+  return static_cast<unsigned char>(b[24]);
+}
+
+// Most pixels a TIFF photo may declare (as the PNG path: a 100 Mpx sensor).
+constexpr long long kMaxTiffPixels = 100'000'000;
+
+// Reads the first IFD's width and height (tags 256, 257) before OpenCV
+// allocates anything: a damaged header can claim anything.
+Status check_tiff_size(std::string_view b, const std::string& name) {
+  const bool le = b[0] == 'I';
+  auto u16 = [&](size_t at) -> uint32_t {
+    const auto* p = reinterpret_cast<const unsigned char*>(b.data()) + at;
+    return le ? (p[0] | (p[1] << 8)) : ((p[0] << 8) | p[1]);
+  };
+  auto u32 = [&](size_t at) -> uint32_t {
+    return le ? (u16(at) | (u16(at + 2) << 16)) : ((u16(at) << 16) | u16(at + 2));
+  };
+  const uint32_t ifd = u32(4);
+  if (ifd < 8 || ifd > b.size() - 2) return make_error(name + ": damaged TIFF (first directory outside the file)");
+  const uint32_t n = u16(ifd);
+  if (n == 0 || size_t(ifd) + 2 + size_t(n) * 12 > b.size()) return make_error(name + ": damaged TIFF (truncated directory)");
+  long long w = 0, h = 0;
+  for (uint32_t i = 0; i < n; ++i) {
+    const size_t e = ifd + 2 + size_t(i) * 12;
+    const uint32_t tag = u16(e), type = u16(e + 2);
+    const uint32_t value = type == 3 ? u16(e + 8) : u32(e + 8);
+    if (tag == 256) w = value;
+    if (tag == 257) h = value;
+  }
+  if (w <= 0 || h <= 0 || w > kMaxSide || h > kMaxSide || w * h > kMaxTiffPixels)
+    return make_error(name + ": TIFF size " + std::to_string(w) + "x" + std::to_string(h) + " is missing or too large");
+  return Status::success();
+}
+
+Expected<cv::Mat> decode_tiff(std::string_view bytes, const std::string& name, bool srgb8, PhotoKind& kind) {
+  if (Status s = check_tiff_size(bytes, name); !s) return s.error();
+  cv::Mat raw;
+  try {
+    cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8UC1, const_cast<char*>(bytes.data()));
+    raw = cv::imdecode(buffer, cv::IMREAD_UNCHANGED);
+  } catch (const cv::Exception& e) {
+    return make_error(name + ": cannot decode TIFF: " + e.what());
+  }
+  if (raw.empty()) return make_error(name + ": corrupt, truncated or unsupported TIFF (decoder failed)");
+  double scale = 0;
+  switch (raw.depth()) {
+    case CV_8U: scale = 1.0 / 255.0; break;
+    case CV_16U: scale = 1.0 / 65535.0; break;
+    case CV_32F: scale = 1.0; break;
+    default: return make_error(name + ": TIFF sample type not supported (8-, 16-bit or float only)");
+  }
+  cv::Mat bgr;
+  switch (raw.channels()) {
+    case 1: cv::cvtColor(raw, bgr, cv::COLOR_GRAY2BGR); break;
+    case 3: bgr = raw; break;
+    case 4: cv::cvtColor(raw, bgr, cv::COLOR_BGRA2BGR); break;
+    default: return make_error(name + ": TIFF with " + std::to_string(raw.channels()) + " channels is not a photo");
+  }
+  const bool eight = raw.depth() == CV_8U;
+  kind = {"tiff", eight ? 8 : 16};
+  cv::Mat out;
+  bgr.convertTo(out, CV_32FC3, scale);
+  if (eight && srgb8) srgb_to_linear_inplace(out);
+  return out;
+}
+
+}  // namespace
+
+void srgb_to_linear_inplace(cv::Mat& image) {
+  static const std::array<float, 256> lut = [] {
+    std::array<float, 256> t{};
+    for (int i = 0; i < 256; ++i) {
+      const double c = i / 255.0;
+      t[static_cast<size_t>(i)] = static_cast<float>(c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4));
+    }
+    return t;
+  }();
+  CV_Assert(image.depth() == CV_32F);
+  for (int y = 0; y < image.rows; ++y) {
+    float* p = image.ptr<float>(y);
+    for (int x = 0; x < image.cols * image.channels(); ++x) {
+      const long code = std::lround(std::min(1.0f, std::max(0.0f, p[x])) * 255.0f);
+      p[x] = lut[static_cast<size_t>(code)];
+    }
+  }
+}
+
+Expected<cv::Mat> decode_photo(std::string_view bytes, const Frame& frame, const RawOptions& raw_options,
+                               PhotoKind& kind) {
+  const std::string name = frame.file.string();
+  if (frame.raw) {
+    kind = {raw_options.half_size ? "raw-half" : "raw", 16};
+    return decode_raw_linear(bytes, raw_options, name);
+  }
+  if (has_tiff_magic(bytes)) return decode_tiff(bytes, name, frame.srgb8, kind);
+  auto image = decode_linear_image(bytes, name);
+  if (!image) return image;
+  kind = {image_file_kind(bytes), 8};
+  if (kind.kind == "png") kind.bits = png_bit_depth(bytes);
+  if (kind.kind == "pfm") kind.bits = 32;
+  if (kind.kind == "png" && kind.bits <= 8 && frame.srgb8) srgb_to_linear_inplace(*image);
+  return image;
+}
+
+std::string describe_photos(const PhotoKind& photo, bool srgb8, const RawOptions& raw_options) {
+  const std::string& kind = photo.kind;
+  if (kind == "raw" || kind == "raw-half")
+    return "camera RAW through LibRaw " + raw_decoder_version() + " (" + (raw_options.half_size ? "half size" : "full size, ") +
+           (raw_options.half_size ? "" : demosaic_name(raw_options.demosaic) + std::string(" demosaic")) +
+           "; black level subtracted, as-shot white balance, linear sRGB primaries, gamma 1)";
+  if (kind == "jpeg") return "8-bit JPEG, sRGB: linearised through the inverse sRGB curve";
+  if ((kind == "png" || kind == "tiff") && photo.bits <= 8) {
+    const std::string what = kind == "png" ? "8-bit PNG" : "8-bit TIFF";
+    return srgb8 ? what + ", sRGB: linearised through the inverse sRGB curve"
+                 : what + ", taken as linear (the layout's convention; no curve applied)";
+  }
+  if (kind == "png") return "16-bit PNG, linear";
+  if (kind == "tiff") return "16-bit or float TIFF, linear";
+  if (kind == "pfm") return "PFM, linear float";
+  if (kind == "pnm") return "PPM/PGM, taken as linear";
+  if (kind == "mixed") return "mixed file kinds (each read by its own kind)";
+  return kind;
+}
+
+}  // namespace veneer::io_detail

@@ -1,0 +1,335 @@
+// Registration of live frames (match/track.hpp), the simulated motion with
+// truth it is measured on (sim/motion.hpp), and `veneer simulate --motion` /
+// `veneer repaint --video` end to end (issue 27).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "veneer/match/matcher.hpp"
+#include "veneer/repaint/live.hpp"
+#include "veneer/repaint/live_session.hpp"
+#include "veneer/repaint/track.hpp"
+#include "veneer/sim/motion.hpp"
+#include "veneer/sim/simulator.hpp"
+
+namespace veneer {
+namespace {
+
+namespace fs = std::filesystem;
+
+double percentile(std::vector<double> v, double p) {
+  std::sort(v.begin(), v.end());
+  return v[static_cast<size_t>(p * (v.size() - 1) + 0.5)];
+}
+
+TEST(Motion, ParsesTheSpecAndNamesTheBadPart) {
+  auto m = sim::parse_motion("shift=30:-2,rotate=5,scale=1.05,turn=3,lamp=sweep");
+  ASSERT_TRUE(m) << m.message();
+  EXPECT_DOUBLE_EQ(m->shift_px[0], 30);
+  EXPECT_DOUBLE_EQ(m->shift_px[1], -2);
+  EXPECT_DOUBLE_EQ(m->rotate_deg, 5);
+  EXPECT_DOUBLE_EQ(m->scale, 1.05);
+  EXPECT_DOUBLE_EQ(m->turn_deg, 3);
+  EXPECT_TRUE(m->lamp_sweep);
+  EXPECT_TRUE(sim::parse_motion(""));
+  for (const char* bad : {"shift=30", "rotate=five", "scale=0", "turn=45", "lamp=disco", "wobble=2", "rotate"}) {
+    auto e = sim::parse_motion(std::string("shift=1:1,") + bad);
+    ASSERT_FALSE(e) << bad;
+    EXPECT_NE(e.message().find(bad), std::string::npos) << e.message();
+  }
+}
+
+TEST(Motion, TruthMovesTheCentreAsSpecified) {
+  sim::MotionSpec spec;
+  spec.shift_px = {30, 0};
+  spec.rotate_deg = 5;
+  const cv::Point2d c(100, 50);
+  const auto first = sim::motion_at(spec, 0, 11, c), last = sim::motion_at(spec, 10, 11, c);
+  EXPECT_LT(cv::norm(cv::Mat(first.still_to_frame), cv::Mat(cv::Matx23d(1, 0, 0, 0, 1, 0))), 1e-12);
+  const cv::Vec3d centre(c.x, c.y, 1);
+  const cv::Vec2d moved = last.still_to_frame * centre;
+  EXPECT_NEAR(moved[0], 130, 1e-9);
+  EXPECT_NEAR(moved[1], 50, 1e-9);
+  EXPECT_NEAR(std::atan2(-last.still_to_frame(1, 0), last.still_to_frame(0, 0)) * 180 / CV_PI, 5, 1e-9);
+}
+
+// The source set's photos and a moving sequence of the same scene.
+struct Sequence {
+  ImageSet source;
+  sim::MotionSequence seq;
+};
+
+Sequence make_sequence(const std::string& spec_text, int frames) {
+  sim::RenderOptions o;
+  o.size = {256, 170};
+  o.scale = 2.5;
+  o.ambient = 0.05;
+  o.noise_sigma = 0.005;
+  o.seed = 7;
+  auto source = sim::simulate_set("orange", o, Role::source);
+  EXPECT_TRUE(source) << source.message();
+  auto spec = sim::parse_motion(spec_text);
+  EXPECT_TRUE(spec) << spec.message();
+  auto seq = sim::simulate_motion("orange", o, *spec, frames);
+  EXPECT_TRUE(seq) << seq.message();
+  return {std::move(*source), std::move(*seq)};
+}
+
+TEST(Track, FollowsShiftRotateScaleTurnUnderASweepingLamp) {
+  Sequence s = make_sequence("shift=30:0,rotate=5,scale=1.05,turn=3,lamp=sweep", 12);
+  repaint::Tracker tracker(s.source.images, s.source.truth.mask);
+  ASSERT_TRUE(tracker.ready());
+  std::vector<double> errors, untracked;
+  for (size_t i = 0; i < s.seq.frames.size(); ++i) {
+    const auto r = tracker.track(s.seq.frames[i]);
+    EXPECT_FALSE(r.lost) << "frame " << i << " correlation " << r.correlation;
+    errors.push_back(repaint::motion_error_px(r.still_to_frame, s.seq.truth[i].still_to_frame, s.source.truth.mask));
+    untracked.push_back(
+        repaint::motion_error_px(cv::Matx23d(1, 0, 0, 0, 1, 0), s.seq.truth[i].still_to_frame, s.source.truth.mask));
+  }
+  EXPECT_LT(percentile(errors, 0.5), 1.0);
+  EXPECT_LT(percentile(errors, 0.95), 2.0);
+  EXPECT_GT(percentile(untracked, 0.95), 10.0);  // the motion matters
+}
+
+TEST(Track, AFrameWithoutTheObjectIsLost) {
+  Sequence s = make_sequence("shift=4:0", 2);
+  repaint::Tracker tracker(s.source.images, s.source.truth.mask);
+  cv::Mat noise(s.seq.frames[0].size(), CV_8UC3);
+  cv::randu(noise, cv::Scalar::all(0), cv::Scalar::all(255));
+  EXPECT_TRUE(tracker.track(noise).lost);
+  EXPECT_FALSE(tracker.track(s.seq.frames[1]).lost);  // and found again from the last good estimate
+}
+
+TEST(LiveRepainter, AMovedFrameIsReadWhereTheObjectWent) {
+  // map: every destination pixel reads source pixel (x, y); frame: the source moved by (5, 3)
+  const cv::Size size(40, 30);
+  match::Map map;
+  map.xy.create(size, CV_32FC2);
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x) map.xy.at<cv::Vec2f>(y, x) = {float(x), float(y)};
+  map.distance = cv::Mat::zeros(size, CV_32F);
+  cv::Mat still(size, CV_8UC3), frame(size, CV_8UC3, cv::Scalar::all(0));
+  cv::randu(still, cv::Scalar::all(0), cv::Scalar::all(255));
+  still(cv::Rect(0, 0, 35, 27)).copyTo(frame(cv::Rect(5, 3, 35, 27)));
+  repaint::LiveRepainter repainter(map, size);
+  const cv::Mat out = repainter.apply(frame, cv::Matx23d(1, 0, 5, 0, 1, 3));
+  // (the last column and row read past the frame's edge bilinearly and keep the backdrop)
+  EXPECT_EQ(cv::norm(out(cv::Rect(0, 0, 34, 26)), still(cv::Rect(0, 0, 34, 26)), cv::NORM_INF), 0);
+  // the same at the nearest pixel
+  repaint::LiveRepainter nearest(map, size);
+  nearest.set_bilinear(false);
+  const cv::Mat near = nearest.apply(frame, cv::Matx23d(1, 0, 5.2, 0, 1, 2.9));
+  EXPECT_EQ(cv::norm(near(cv::Rect(0, 0, 34, 26)), still(cv::Rect(0, 0, 34, 26)), cv::NORM_INF), 0);
+  // a map covering only part of the destination: the rest keeps the backdrop
+  match::Map part = map;
+  part.xy(cv::Rect(0, 0, size.width, 10)).setTo(cv::Scalar(-1, -1));
+  part.xy(cv::Rect(30, 0, 10, size.height)).setTo(cv::Scalar(-1, -1));
+  const cv::Mat backdrop(size, CV_8UC3, cv::Scalar(1, 2, 3));
+  repaint::LiveRepainter partial(part, size, backdrop);
+  const cv::Mat out2 = partial.apply(frame, cv::Matx23d(1, 0, 5, 0, 1, 3));
+  EXPECT_EQ(cv::norm(out2(cv::Rect(0, 10, 30, 16)), still(cv::Rect(0, 10, 30, 16)), cv::NORM_INF), 0);
+  EXPECT_EQ(cv::norm(out2(cv::Rect(0, 0, size.width, 10)), backdrop(cv::Rect(0, 0, size.width, 10)), cv::NORM_INF), 0);
+  EXPECT_EQ(cv::norm(out2(cv::Rect(30, 0, 10, size.height)), backdrop(cv::Rect(30, 0, 10, size.height)), cv::NORM_INF), 0);
+}
+
+match::Map identity_map(cv::Size size) {
+  match::Map map;
+  map.xy.create(size, CV_32FC2);
+  for (int y = 0; y < size.height; ++y)
+    for (int x = 0; x < size.width; ++x) map.xy.at<cv::Vec2f>(y, x) = {float(x), float(y)};
+  map.distance = cv::Mat::zeros(size, CV_32F);
+  return map;
+}
+
+TEST(Motion, ViewIsACentredCropAtOneScale) {
+  // 16:9 from 3:2: the full width, top and bottom cropped
+  const cv::Matx23d v = sim::view_transform({300, 200}, {480, 270});
+  EXPECT_DOUBLE_EQ(v(0, 0), 1.6);
+  EXPECT_DOUBLE_EQ(v(1, 1), 1.6);
+  const cv::Vec2d centre = v * cv::Vec3d(149.5, 99.5, 1);
+  EXPECT_NEAR(centre[0], 239.5, 1e-9);
+  EXPECT_NEAR(centre[1], 134.5, 1e-9);
+  // 4:3 from 3:2: the full height
+  EXPECT_DOUBLE_EQ(sim::view_transform({300, 200}, {200, 150})(1, 1), 0.75);
+  EXPECT_FALSE(sim::parse_motion("view=320"));
+  EXPECT_FALSE(sim::parse_motion("view=320x9"));
+  EXPECT_EQ(sim::parse_motion("view=320x180")->view, cv::Size(320, 180));
+}
+
+// Issue 27's live-to-still geometry: a 16:9 live view (another size, its
+// top and bottom cropped) of the 3:2 stills, the object moving under a
+// sweeping lamp, is related once and followed within 1 px.
+TEST(LiveSession, ALiveViewOfAnotherAspectAndSizeIsFollowedWithin1px) {
+  for (const char* view : {"320x180", "192x108"}) {
+    Sequence s = make_sequence(std::string("shift=30:0,rotate=5,lamp=sweep,view=") + view, 12);
+    ASSERT_NE(s.seq.frames[0].size(), s.source.size) << view;
+    repaint::LiveSession session(s.source.images, s.source.truth.mask, identity_map(s.source.size), s.source.size);
+    ASSERT_TRUE(session.ready());
+    std::vector<double> errors;
+    for (size_t i = 0; i < s.seq.frames.size(); ++i) {
+      auto f = session.process(s.seq.frames[i]);
+      ASSERT_TRUE(f) << view << ": " << f.message();
+      EXPECT_FALSE(f->lost) << view << " frame " << i << " quality " << f->quality;
+      EXPECT_EQ(f->repainted.size(), s.source.size);
+      EXPECT_FALSE(f->outline.empty());
+      errors.push_back(repaint::motion_error_px(f->still_to_frame, s.seq.truth[i].still_to_frame, s.source.truth.mask));
+    }
+    const auto& g = *session.geometry();
+    EXPECT_FALSE(g.same);
+    const double truth_scale = s.seq.truth[0].still_to_frame(0, 0);
+    EXPECT_NEAR(g.scale, truth_scale, 0.01 * truth_scale) << g.describe();
+    EXPECT_NE(g.describe().find("16:9"), std::string::npos) << g.describe();
+    EXPECT_LT(percentile(errors, 0.5), 1.0) << view;
+    EXPECT_LT(percentile(errors, 0.95), 2.0) << view;
+  }
+}
+
+// The old bug: a live view stretched to another aspect (x and y scaled
+// separately) is refused, naming both geometries, not followed wrongly.
+TEST(LiveSession, AStretchedLiveViewIsRefusedNamingBothGeometries) {
+  Sequence s = make_sequence("shift=2:0", 2);
+  cv::Mat stretched;
+  cv::resize(s.seq.frames[0], stretched, cv::Size(320, 180), 0, 0, cv::INTER_AREA);  // 256x170 -> 16:9 anyhow
+  repaint::LiveSession session(s.source.images, s.source.truth.mask, identity_map(s.source.size), s.source.size);
+  auto f = session.process(stretched);
+  ASSERT_FALSE(f);
+  EXPECT_NE(f.message().find("320x180 (16:9)"), std::string::npos) << f.message();
+  EXPECT_NE(f.message().find("256x170 (3:2)"), std::string::npos) << f.message();
+  EXPECT_FALSE(session.geometry());
+  // the stills' own framing is taken as it is, and a later frame of another size is refused
+  auto same = session.process(s.seq.frames[0]);
+  ASSERT_TRUE(same) << same.message();
+  EXPECT_TRUE(session.geometry()->same);
+  EXPECT_FALSE(session.process(stretched));
+}
+
+// `veneer` end to end (skipped when it is not built).
+struct Scratch {
+  fs::path path;
+  Scratch() {
+    path = fs::temp_directory_path() / ("veneer-track-" + std::to_string(::getpid()));
+    fs::remove_all(path);
+    fs::create_directories(path);
+  }
+  ~Scratch() { fs::remove_all(path); }
+};
+
+std::pair<std::string, int> run_veneer(const std::string& args) {
+  const std::string cmd = std::string(VENEER_BIN_DIR) + "/veneer " + args + " 2>&1";
+  std::string out;
+  FILE* pipe = ::popen(cmd.c_str(), "r");
+  if (!pipe) return {"", -1};
+  char buf[4096];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, pipe)) > 0) out.append(buf, n);
+  const int status = ::pclose(pipe);
+  return {out, WIFEXITED(status) ? WEXITSTATUS(status) : -1};
+}
+
+TEST(RepaintCommand, SimulatedMotionRepaintedWithReport) {
+  if (!fs::exists(fs::path(VENEER_BIN_DIR) / "veneer")) GTEST_SKIP() << "veneer is not built in " << VENEER_BIN_DIR;
+  Scratch dir;
+  const std::string d = dir.path.string();
+  const std::string common = " --size 256x170 --ambient 0.05";
+  for (const std::string& args :
+       {"simulate --scene orange --scale 2.5 --role source --out " + d + "/src" + common,
+        "simulate --scene bull --role destination --out " + d + "/dst" + common,
+        "transfer --dst " + d + "/dst --src " + d + "/src --out " + d + "/map",
+        "simulate --scene orange --scale 2.5 --motion shift=30:0,rotate=5,scale=1.05,lamp=sweep --frames 12 --out " + d +
+            "/video" + common}) {
+    auto [out, rc] = run_veneer(args);
+    ASSERT_EQ(rc, 0) << args << "\n" << out;
+  }
+  EXPECT_TRUE(fs::exists(dir.path / "video/frame_0011.png"));
+  EXPECT_TRUE(fs::exists(dir.path / "video/motion.json"));
+  auto [out, rc] = run_veneer("repaint --src " + d + "/src --dst " + d + "/dst --map " + d + "/map --video " + d +
+                              "/video --out " + d + "/out --overlay");
+  ASSERT_EQ(rc, 0) << out;
+  for (int i : {0, 11}) {
+    char name[32];
+    std::snprintf(name, sizeof name, "out/frame_%04d.png", i);
+    EXPECT_TRUE(fs::exists(dir.path / name)) << name;
+    std::snprintf(name, sizeof name, "out/align_%04d.png", i);
+    EXPECT_TRUE(fs::exists(dir.path / name)) << name;
+  }
+  std::ifstream in(dir.path / "out/report.json");
+  const auto report = nlohmann::json::parse(in);
+  EXPECT_EQ(report.at("frames"), 12);
+  EXPECT_EQ(report.at("lost"), 0);
+  EXPECT_GT(report.at("ms_per_frame").at("median").get<double>(), 0);
+  EXPECT_LT(report.at("align_error_px").at("median").get<double>(), 1.0);
+  EXPECT_LT(report.at("align_error_px").at("p95").get<double>(), 2.0);
+  EXPECT_EQ(report.at("per_frame").size(), 12u);
+  EXPECT_EQ(report.at("blend_px"), 2);  // as the transfer blended (its metrics.json)
+
+  // issue 27's own check: 30 px and 5 deg over 60 frames under a sweeping lamp,
+  // with and without tracking
+  {
+    auto [sim_out, sim_rc] = run_veneer(
+        "simulate --scene orange --scale 2.5 --motion shift=30:0,rotate=5,lamp=sweep --frames 60 --out " + d + "/v60" +
+        common);
+    ASSERT_EQ(sim_rc, 0) << sim_out;
+    nlohmann::json reports[2];
+    for (int track = 0; track < 2; ++track) {
+      const std::string o = d + (track ? "/r60" : "/r60-untracked");
+      auto [r_out, r_rc] = run_veneer("repaint --src " + d + "/src --dst " + d + "/dst --map " + d + "/map --video " +
+                                      d + "/v60 --out " + o + (track ? "" : " --no-track"));
+      ASSERT_EQ(r_rc, 0) << r_out;
+      std::ifstream r_in(o + "/report.json");
+      reports[track] = nlohmann::json::parse(r_in);
+    }
+    EXPECT_LE(reports[1].at("align_error_px").at("median").get<double>(), 1.0);
+    EXPECT_LE(reports[1].at("align_error_px").at("p95").get<double>(), 2.0);
+    EXPECT_EQ(reports[1].at("lost"), 0);
+    EXPECT_GT(reports[0].at("align_error_px").at("median").get<double>(), 10.0);  // the motion matters
+  }
+
+  // a live view framed otherwise than the stills: refused, both geometries named
+  fs::create_directories(dir.path / "wide");
+  ASSERT_TRUE(cv::imwrite((dir.path / "wide/frame_0000.png").string(), cv::Mat(180, 320, CV_8UC3, cv::Scalar::all(60))));
+  auto [wide, wide_rc] = run_veneer("repaint --src " + d + "/src --dst " + d + "/dst --map " + d + "/map --video " + d +
+                                    "/wide --out " + d + "/out3");
+  EXPECT_EQ(wide_rc, 1);
+  EXPECT_NE(wide.find("320x180"), std::string::npos) << wide;
+  EXPECT_NE(wide.find("256x170"), std::string::npos) << wide;
+  EXPECT_FALSE(fs::exists(dir.path / "out3"));  // nothing half-written
+  // ... and a 16:9 live view of the object at another size: related once, then followed
+  {
+    auto [sim_out, sim_rc] = run_veneer(
+        "simulate --scene orange --scale 2.5 --motion shift=20:0,rotate=3,lamp=sweep,view=320x180 --frames 8 --out " +
+        d + "/v169" + common);
+    ASSERT_EQ(sim_rc, 0) << sim_out;
+    auto [r_out, r_rc] = run_veneer("repaint --src " + d + "/src --dst " + d + "/dst --map " + d + "/map --video " + d +
+                                    "/v169 --out " + d + "/r169");
+    ASSERT_EQ(r_rc, 0) << r_out;
+    EXPECT_NE(r_out.find("320x180 (16:9) shows the stills' 256x170 (3:2) at x1.2"), std::string::npos) << r_out;
+    std::ifstream r_in(d + "/r169/report.json");
+    const auto r = nlohmann::json::parse(r_in);
+    EXPECT_EQ(r.at("lost"), 0);
+    EXPECT_LE(r.at("align_error_px").at("median").get<double>(), 1.0);
+    EXPECT_NEAR(r.at("live_view").at("scale").get<double>(), 1.25, 0.0125);
+  }
+
+  auto [bad, bad_rc] = run_veneer("simulate --scene orange --motion shift=30:0,rotate=lots --frames 3 --out " + d + "/x");
+  EXPECT_EQ(bad_rc, 2);
+  EXPECT_NE(bad.find("'rotate=lots'"), std::string::npos) << bad;
+  auto [missing, missing_rc] = run_veneer("repaint --src " + d + "/src --dst " + d + "/dst --map " + d + "/map --video " +
+                                          d + "/no-such-video.mp4 --out " + d + "/out2");
+  EXPECT_EQ(missing_rc, 2);
+  EXPECT_NE(missing.find("no-such-video.mp4: no such file or folder"), std::string::npos) << missing;
+}
+
+}  // namespace
+}  // namespace veneer

@@ -1,0 +1,134 @@
+#pragma once
+// Appearance transfer as the thesis shows it, end to end (matching, repaint,
+// quality): two image sets in, the map and
+// the destination repainted with the source's photos out (DESIGN.md: map.pfm,
+// map.png), plus the reuse heat map and metrics.json.
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include <opencv2/core.hpp>
+
+#include "veneer/eval/metrics.hpp"
+#include "veneer/io/image_io.hpp"
+#include "veneer/io/imageset.hpp"
+#include "veneer/match/fast.hpp"
+#include "veneer/match/map_file.hpp"
+#include "veneer/match/matcher.hpp"
+#include "veneer/match/object.hpp"
+#include "veneer/repaint/repaint.hpp"
+#include "veneer/util/expected.hpp"
+#include "veneer/util/progress.hpp"
+
+namespace veneer::pipeline {
+
+using match::Map;
+using match::MatchOptions;
+using match::PreparedObject;
+namespace fast = match::fast;
+
+struct TransferOptions {
+  MatchOptions match;          // method, feature, patch, ...
+  bool truth_normals = false;  // use truth/normals.pfm and truth/mask.png (simulated sets) instead of
+                               // photometric stereo and segmentation
+  double scale = 1.0;          // resize both sets first (0 < scale <= 1; 0.5 = half size)
+  int blend = 2;               // repaint: blend the chunks meeting at a seam over this radius, px
+                               // (0..16; 0 = each pixel its own source pixel; see repaint_blended)
+  double blend_guide = 0.1;    // blend: weigh each proposal by its normal's fit, fall-off |dn| (0 = off,
+                               // plain Gaussian; [0, 2]; see fast::BlendGuide); maps matched on
+                               // normals only (an intensities map is blended plain)
+  bool keep_pictures = true;   // transfer(): every photo repainted into result.repainted (~250 MB
+                               // each at full resolution); false leaves them out, for
+                               // write_transfer(result, pair, ...) to paint and write one at a time
+  Status check() const;
+};
+
+
+struct TransferResult {
+  Map map;
+  cv::Size source_size;
+  std::vector<cv::Mat> repainted;  // per lamp: the destination photo with the source's pasted through the map
+  cv::Mat repainted_median;        // the same from the per-pixel median of all lamps
+  cv::Mat reuse;                   // CV_32SC1 counts per source pixel
+  cv::Mat source_median;           // the source photos' per-pixel median (backdrop of the reuse picture)
+  std::optional<eval::Quality> quality;  // when both sets carry truth
+  std::optional<eval::Relit> relit;      // the relighting measure's pictures, when measured
+  std::string metrics_json;        // timings, options, sizes, quality
+  double match_seconds = 0;        // the map's computation alone (wall; 0 when the map was given)
+  MatchOptions match_options;      // what the map was computed with
+  bool map_given = false;          // made from a map computed earlier (transfer(pair, options, map))
+  std::shared_ptr<const fast::BlendPlan> blend;  // the pictures' blend weights (blend > 0), for
+                                                 // repainting more photos the same way (live video)
+};
+
+Expected<TransferResult> transfer(const ImageSet& destination, const ImageSet& source,
+                                  const TransferOptions& options, const Progress& progress = {});
+
+// The same in two steps: the objects prepared once (sets scaled, segmented,
+// normals), then the map and the rest. A caller that keeps the pair
+// recomputes only the map when a matching option changes -- the viewer does,
+// while the user drags a slider. `options` must have the pair's scale and
+// truth_normals (else an error names the difference).
+struct PreparedPair {
+  ImageSet destination, source;  // as scaled
+  PreparedObject dst, src;
+  cv::Mat destination_median, source_median;  // per-pixel medians of the photos
+  double scale = 1.0;
+  bool truth_normals = false;
+};
+Expected<PreparedPair> prepare_pair(const ImageSet& destination, const ImageSet& source,
+                                    const TransferOptions& options, const Progress& progress = {});
+Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOptions& options,
+                                  const Progress& progress = {});
+// The rest (repaint, reuse, quality, metrics) from a map already computed
+// for this pair with options.match: what an option that does not change the
+// map (the blend radius) needs, in milliseconds. A map of another size than
+// the pair's destination is an error.
+Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOptions& options, const Map& map,
+                                  const Progress& progress = {});
+// The blend weights of the pictures transfer() paints through `map` with
+// `options` (null when options.blend is 0): guided by the pair's normals when
+// the map was matched on them and blend_guide > 0, else plain. The live view
+// repaints every frame with the same plan, so frames look like the stills.
+// Fails for a map of another size than the pair's destination.
+Expected<std::shared_ptr<const fast::BlendPlan>> blend_plan_for(const PreparedPair& pair,
+                                                                const TransferOptions& options, const Map& map);
+// The options a transfer folder's metrics.json records (write_transfer), for
+// redoing its pictures the same way -- TransferOptions' defaults for any it
+// leaves out. Fails, naming the file and the key, when the file cannot be
+// read, is not JSON, or a value has the wrong type or is out of range.
+Expected<TransferOptions> read_transfer_options(const std::filesystem::path& metrics_json);
+// The same from the file's text (`name` for the errors), and the options as
+// such a file's text ({"options": {...}}; parse_transfer_options reads it back equal).
+Expected<TransferOptions> parse_transfer_options(std::string_view text, const std::string& name);
+std::string transfer_options_json(const TransferOptions& options);
+// Writes map.pfm, map.png, confidence.png, result_light_NN.png, result_median.png, reuse.png,
+// metrics.json (and relight_transferred.png / relight_reference.png when the
+// relighting was measured) into `folder` (created when missing).
+// `progress` hears the fraction of the files written (they are encoded in
+// parallel, each written through a temporary and renamed, one folder fsync).
+// Its cancel stops the files not yet begun (those being encoded finish) and
+// the call fails saying "cancelled", without metrics.json: each file there is
+// whole, and a folder without metrics.json is not a whole result.
+Status write_transfer(const TransferResult& result, const std::filesystem::path& folder,
+                      const Progress& progress = {});
+// The same for a result made with keep_pictures = false: each of the pair's
+// photos is repainted through the result's map (and blend plan) in place of
+// its destination photo, written and released before the next, so the
+// pictures never all exist at once. Consumes the pair: what the pictures do
+// not need (normals, truth) goes first, and each photo once painted.
+Status write_transfer(const TransferResult& result, PreparedPair&& pair, const std::filesystem::path& folder,
+                      const Progress& progress = {});
+
+// Quality of a map between two sets: truth masks and normals when both sets
+// carry truth (else segmentation masks and no normal agreement), relighting
+// PSNR when measurable. Sets are resized to the map's size first when the map
+// was computed at a reduced scale (same factor for the source).
+Expected<eval::Quality> evaluate_sets(const Map& map, const ImageSet& destination, const ImageSet& source);
+// The scale factor a map was computed at relative to `destination` (map width / set width).
+double map_scale(const Map& map, const ImageSet& destination);
+
+
+}  // namespace veneer::pipeline

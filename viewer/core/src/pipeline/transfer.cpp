@@ -1,0 +1,499 @@
+// Appearance transfer end to end (transfer.hpp).
+#include "veneer/pipeline/transfer.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <functional>
+#include <mutex>
+#include <optional>
+#include <limits>
+#include <type_traits>
+#include <utility>
+
+#include <nlohmann/json.hpp>
+#include <opencv2/imgproc.hpp>
+#include <tbb/parallel_for.h>
+
+#include "veneer/eval/metrics.hpp"
+#include "veneer/io/image_io.hpp"
+#include "veneer/match/fast.hpp"
+#include "veneer/match/map_file.hpp"
+#include "veneer/ps/photometric_stereo.hpp"
+#include "veneer/ps/segmentation.hpp"
+#include "veneer/repaint/repaint.hpp"
+#include "veneer/util/log.hpp"
+
+namespace veneer::pipeline {
+
+using eval::evaluate;
+using eval::Quality;
+using eval::relight;
+using eval::relight_measurable;
+using eval::reuse_counts;
+using match::object_mask;
+using match::prepare_object;
+using match::scale_set;
+using match::write_map;
+using repaint::confidence_picture;
+using repaint::map_picture;
+using repaint::median_photo;
+using repaint::repaint_blended;
+using repaint::repaint_planned;
+using match::Feature;
+using match::parse_feature;
+using match::parse_method;
+using repaint::reuse_picture;
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+Progress sub_progress(const Progress& p, double from, double to) { return p.part(from, to); }
+
+nlohmann::json quality_json(const Quality& q) {
+  nlohmann::json j;
+  j["destination_pixels"] = q.destination_pixels;
+  j["mapped_pixels"] = q.mapped_pixels;
+  j["coverage"] = q.coverage;
+  j["background_hits"] = q.background_hits;
+  if (q.normal_mean_deg) j["normal_mean_deg"] = *q.normal_mean_deg;
+  if (q.normal_p95_deg) j["normal_p95_deg"] = *q.normal_p95_deg;
+  j["coherence"] = q.coherence;
+  j["reuse_max"] = q.reuse_max;
+  j["source_used"] = q.source_used;
+  if (q.psnr_db) j["relight_psnr_db"] = *q.psnr_db;
+  if (q.psnr_lit_db) j["relight_psnr_lit_db"] = *q.psnr_lit_db;
+  return j;
+}
+
+}  // namespace
+
+Status TransferOptions::check() const {
+  if (auto s = match.check(); !s) return s;
+  if (!(scale > 0 && scale <= 1)) return make_error("scale must be in (0, 1], got " + std::to_string(scale));
+  if (blend < 0 || blend > 16) return make_error("blend radius must be in 0..16 px, got " + std::to_string(blend));
+  if (!(blend_guide >= 0 && blend_guide <= 2))
+    return make_error("blend_guide must be in [0, 2] (|dn|; 0 = off), got " + std::to_string(blend_guide));
+  return {};
+}
+
+
+
+Expected<PreparedPair> prepare_pair(const ImageSet& destination_in, const ImageSet& source_in,
+                                    const TransferOptions& options, const Progress& progress) {
+  if (auto s = options.check(); !s) return s.error();
+  PreparedPair pair;
+  pair.destination = destination_in;
+  pair.source = source_in;
+  pair.scale = options.scale;
+  pair.truth_normals = options.truth_normals;
+  scale_set(pair.destination, options.scale);
+  scale_set(pair.source, options.scale);
+  auto dst = prepare_object(pair.destination, options.truth_normals, sub_progress(progress, 0.0, 0.5));
+  if (!dst) return make_error("destination: " + dst.message());
+  auto src = prepare_object(pair.source, options.truth_normals, sub_progress(progress, 0.5, 1.0));
+  if (!src) return make_error("source: " + src.message());
+  pair.dst = std::move(*dst);
+  pair.src = std::move(*src);
+  pair.destination_median = median_photo(pair.dst.view.images);
+  pair.source_median = median_photo(pair.src.view.images);
+  return pair;
+}
+
+namespace {
+
+// metrics.json's "options" besides method and feature, one list for the
+// writer and the reader: f(key, member) for each.
+template <class Options, class F>
+void for_each_option(Options& t, F&& f) {
+  auto& m = t.match;
+  f("patch", m.patch), f("candidates", m.candidates), f("threshold", m.threshold), f("iterations", m.iterations);
+  f("coherent_threshold", m.coherent_threshold), f("uniformity", m.uniformity), f("coherent_grow", m.coherent_grow);
+  f("coherent_smooth", m.coherent_smooth), f("coherent_sweeps", m.coherent_sweeps);
+  f("coherent_guide", m.coherent_guide), f("fast", m.fast), f("seed", m.seed), f("truth_normals", t.truth_normals);
+  f("scale", t.scale), f("blend", t.blend), f("blend_guide", t.blend_guide);
+}
+
+// metrics.json's "options" (blend_guide as the pictures were blended: 0 plain)
+nlohmann::json options_json(const TransferOptions& options, double blend_guide) {
+  nlohmann::json j = {{"method", method_name(options.match.method)}, {"feature", feature_name(options.match.feature)}};
+  TransferOptions written = options;
+  written.blend_guide = blend_guide;
+  for_each_option(std::as_const(written), [&](const char* key, const auto& value) { j[key] = value; });
+  return j;
+}
+
+// The blend weighs each proposal by its fit to the normals, when the map was
+// matched on them. (A map matched on intensities is not guided by normals:
+// on bull <- sphere-red-gloss that re-matched it by normals, 17.4 dB of
+// relighting PSNR against 18.3 blended plain and 17.9 not blended.) Empty
+// normals when the blend is plain.
+fast::BlendGuide blend_guide_of(const PreparedPair& pair, const TransferOptions& options) {
+  const bool guided = options.blend > 0 && options.blend_guide > 0 && options.match.feature == Feature::normals &&
+                      !pair.dst.view.normals.empty() && !pair.src.view.normals.empty();
+  if (!guided) return {{}, {}, options.blend_guide};
+  return {pair.dst.view.normals, pair.src.view.normals, options.blend_guide};
+}
+
+}  // namespace
+
+Expected<std::shared_ptr<const fast::BlendPlan>> blend_plan_for(const PreparedPair& pair,
+                                                                const TransferOptions& options, const Map& map) {
+  if (auto s = options.check(); !s) return s.error();
+  if (options.blend == 0) return std::shared_ptr<const fast::BlendPlan>();
+  const cv::Size want = pair.dst.view.mask.size();
+  if (map.xy.size() != want || map.xy.type() != CV_32FC2)
+    return make_error("the map is " + std::to_string(map.xy.cols) + "x" + std::to_string(map.xy.rows) +
+                      ", the prepared destination " + std::to_string(want.width) + "x" + std::to_string(want.height));
+  const fast::BlendGuide guide = blend_guide_of(pair, options);
+  auto made = fast::blend_plan(map, {}, pair.src.view.mask, options.blend, 0,
+                               guide.destination.empty() ? nullptr : &guide);
+  if (!made) return made.error();
+  return std::shared_ptr<const fast::BlendPlan>(std::make_shared<const fast::BlendPlan>(std::move(*made)));
+}
+
+namespace {
+
+// transfer() of a prepared pair, from `given` when not null (else the map is
+// computed); timings' total_s counts from t_all.
+Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferOptions& options, const Map* given,
+                                       const Progress& progress, Clock::time_point t_all) {
+  if (auto s = options.check(); !s) return s.error();
+  if (options.scale != pair.scale || options.truth_normals != pair.truth_normals)
+    return make_error("the prepared pair was made with scale " + std::to_string(pair.scale) + " and truth normals " +
+                      (pair.truth_normals ? "on" : "off") + ", the options ask for scale " +
+                      std::to_string(options.scale) + " and truth normals " + (options.truth_normals ? "on" : "off"));
+  const ImageSet& destination = pair.destination;
+  const ImageSet& source = pair.source;
+  const PreparedObject* dst = &pair.dst;
+  const PreparedObject* src = &pair.src;
+  nlohmann::json timings;
+  timings["segment_destination_s"] = dst->segment_seconds;
+  timings["normals_destination_s"] = dst->normals_seconds;
+  timings["segment_source_s"] = src->segment_seconds;
+  timings["normals_source_s"] = src->normals_seconds;
+
+  auto t0 = Clock::now();
+  TransferResult result;
+  if (given) {
+    const cv::Size want = dst->view.mask.size();
+    if (given->xy.size() != want || given->xy.type() != CV_32FC2 || given->distance.size() != want)
+      return make_error("the map given is " + std::to_string(given->xy.cols) + "x" + std::to_string(given->xy.rows) +
+                        ", the prepared destination " + std::to_string(want.width) + "x" +
+                        std::to_string(want.height));
+    result.map = *given;
+    result.map_given = true;
+    timings["match_s"] = 0.0;
+    timings["map_given"] = true;
+  } else {
+    auto map = compute_map(dst->view, src->view, options.match, sub_progress(progress, 0.0, 0.85));
+    if (!map) return map.error();
+    timings["match_s"] = since(t0);
+    result.map = std::move(*map);
+  }
+  result.match_seconds = timings["match_s"].get<double>();
+  result.match_options = options.match;
+  result.source_size = source.size;
+  t0 = Clock::now();
+  progress.report(0.9, "repaint");
+  const fast::BlendGuide guide = blend_guide_of(pair, options);
+  const bool guided = !guide.destination.empty();
+  const fast::BlendGuide* g = guided ? &guide : nullptr;
+  // every photo through the same map: the blend's weights worked out once
+  auto planned = blend_plan_for(pair, options, result.map);
+  if (!planned) return make_error("repaint: " + planned.message());
+  const std::shared_ptr<const fast::BlendPlan> plan = *planned;
+  result.blend = plan;
+  auto paint = [&](const cv::Mat& photo, const cv::Mat& backdrop) -> Expected<cv::Mat> {
+    if (!plan) return repaint::repaint(result.map, photo, backdrop);
+    return repaint_planned(*plan, photo, backdrop);
+  };
+  for (size_t i = 0; options.keep_pictures && i < src->view.images.size() && i < dst->view.images.size(); ++i) {
+    auto painted = paint(src->view.images[i], dst->view.images[i]);
+    if (!painted) return make_error("repaint: " + painted.message());
+    result.repainted.push_back(std::move(*painted));
+  }
+  result.source_median = pair.source_median;
+  auto median = paint(pair.source_median, pair.destination_median);
+  if (!median) return make_error("repaint: " + median.message());
+  result.repainted_median = std::move(*median);
+  result.reuse = reuse_counts(result.map, source.size);
+  timings["repaint_s"] = since(t0);
+
+  nlohmann::json j;
+  j["destination"] = {{"id", destination.id}, {"scene", destination.scene}, {"size", {destination.size.width, destination.size.height}},
+                      {"object_pixels", cv::countNonZero(dst->view.mask)}};
+  j["source"] = {{"id", source.id}, {"scene", source.scene}, {"size", {source.size.width, source.size.height}},
+                 {"object_pixels", cv::countNonZero(src->view.mask)}};
+  j["options"] = options_json(options, guided ? options.blend_guide : 0.0);
+  j["pictures"] = {{"result_light_NN.png, result_median.png",
+                    "linear 16-bit RGB at the sets' photometric scale, as the sets' light_NN.png (no exposure or "
+                    "gamma change)"},
+                   {"map.png, reuse.png, relight_*.png", "8-bit sRGB pictures for viewing"},
+                   {"confidence.png", "white = the match fits exactly, black = 4x the median match distance or "
+                                      "more, or not mapped"}};
+  if (destination.truth.present() && source.truth.present()) {
+    t0 = Clock::now();
+    Quality q = evaluate(result.map, destination.truth.mask, source.truth.mask, destination.truth.normals,
+                         source.truth.normals);
+    if (relight_measurable(source.scene)) {
+      auto relit = relight(result.map, destination, source, destination.truth.mask, options.blend, g);
+      if (relit) {
+        q.psnr_db = relit->psnr_db;
+        q.psnr_lit_db = relit->psnr_lit_db;
+        result.relit = std::move(*relit);
+      } else {
+        j["relight_error"] = relit.message();
+      }
+    }
+    result.quality = q;
+    j["quality"] = quality_json(q);
+    j["quality"]["measured_against"] = "truth (simulated sets)";
+    timings["quality_s"] = since(t0);
+  } else {
+    // Real sets: what can be measured without truth -- coverage of the
+    // segmented object, coherence, and the agreement of the photometric
+    // stereo normals at the matches.
+    t0 = Clock::now();
+    Quality q = evaluate(result.map, dst->view.mask, src->view.mask, dst->view.normals, src->view.normals);
+    j["quality"] = quality_json(q);
+    j["quality"]["measured_against"] = "segmentation masks and photometric-stereo normals (no truth)";
+    timings["quality_s"] = since(t0);
+  }
+  timings["total_s"] = since(t_all);
+  j["timings"] = timings;
+  result.metrics_json = j.dump(2);
+  progress.report(1.0, "done");
+  return result;
+}
+
+}  // namespace
+
+Expected<TransferResult> transfer(const ImageSet& destination_in, const ImageSet& source_in,
+                                  const TransferOptions& options, const Progress& progress) {
+  const auto t_all = Clock::now();  // the total includes the preparation
+  auto pair = prepare_pair(destination_in, source_in, options, sub_progress(progress, 0.0, 0.3));
+  if (!pair) return pair.error();
+  return transfer_from(*pair, options, nullptr, sub_progress(progress, 0.3, 1.0), t_all);
+}
+
+Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOptions& options, const Progress& progress) {
+  return transfer_from(pair, options, nullptr, progress, Clock::now());
+}
+
+Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOptions& options, const Map& map,
+                                  const Progress& progress) {
+  return transfer_from(pair, options, &map, progress, Clock::now());
+}
+
+std::string transfer_options_json(const TransferOptions& options) {
+  return nlohmann::json{{"options", options_json(options, options.blend_guide)}}.dump(2);
+}
+
+Expected<TransferOptions> read_transfer_options(const std::filesystem::path& file) {
+  auto bytes = read_file_bytes(file);
+  if (!bytes) return bytes.error();
+  return parse_transfer_options(*bytes, file.string());
+}
+
+Expected<TransferOptions> parse_transfer_options(std::string_view text, const std::string& name) {
+  const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
+  if (j.is_discarded() || !j.is_object()) return make_error(name + ": not a JSON object");
+  TransferOptions t;
+  if (!j.contains("options")) return t;
+  const nlohmann::json& o = j["options"];
+  if (!o.is_object()) return make_error(name + ": \"options\" is not an object");
+  std::string bad;  // the first key of the wrong type
+  auto get = [&](const char* key, auto& into) {  // into: a member of t
+    if (!o.contains(key) || !bad.empty()) return;
+    using T = std::decay_t<decltype(into)>;
+    const nlohmann::json& v = o[key];
+    const bool fits = std::is_same_v<T, bool>          ? v.is_boolean()
+                      : std::is_same_v<T, std::string> ? v.is_string()
+                      : std::is_unsigned_v<T>          ? v.is_number_unsigned()
+                      : std::is_integral_v<T>          ? v.is_number_integer()
+                                                       : v.is_number();
+    bool in_range = fits;
+    if constexpr (std::is_integral_v<T> && !std::is_same_v<T, bool>) {
+      if (fits && v.is_number_unsigned())
+        in_range = v.get<uint64_t>() <= static_cast<uint64_t>(std::numeric_limits<T>::max());
+      else if (fits)
+        in_range = v.get<int64_t>() >= static_cast<int64_t>(std::numeric_limits<T>::min()) &&
+                   v.get<int64_t>() <= static_cast<int64_t>(std::numeric_limits<T>::max());
+    }
+    if (!in_range) {
+      bad = key;
+      return;
+    }
+    into = v.get<T>();
+  };
+  std::string method = method_name(t.match.method), feature = feature_name(t.match.feature);
+  get("method", method), get("feature", feature);
+  for_each_option(t, get);
+  if (!bad.empty()) return make_error(name + ": options." + bad + " has the wrong type or is out of range");
+  auto me = parse_method(method);
+  if (!me) return make_error(name + ": options.method: " + me.message());
+  auto fe = parse_feature(feature);
+  if (!fe) return make_error(name + ": options.feature: " + fe.message());
+  t.match.method = *me, t.match.feature = *fe;
+  if (auto s = t.check(); !s) return make_error(name + ": options: " + s.message());
+  return t;
+}
+
+double map_scale(const Map& map, const ImageSet& destination) {
+  return destination.size.width > 0 ? static_cast<double>(map.xy.cols) / destination.size.width : 1.0;
+}
+
+Expected<Quality> evaluate_sets(const Map& map, const ImageSet& destination_in, const ImageSet& source_in) {
+  const double scale = map_scale(map, destination_in);
+  if (!(scale > 0 && scale <= 1.0001))
+    return make_error("the map is " + std::to_string(map.xy.cols) + " px wide but the destination set " +
+                      std::to_string(destination_in.size.width));
+  ImageSet destination = destination_in, source = source_in;
+  if (std::abs(scale - 1.0) > 1e-9) {
+    scale_set(destination, scale);
+    scale_set(source, scale);
+  }
+  if (map.xy.size() != destination.size)
+    return make_error("the map's size does not match the destination set's (scaled) size");
+  if (destination.truth.present() && source.truth.present()) {
+    Quality q = evaluate(map, destination.truth.mask, source.truth.mask, destination.truth.normals,
+                         source.truth.normals);
+    if (relight_measurable(source.scene)) {
+      auto relit = relight(map, destination, source, destination.truth.mask);
+      if (!relit) return make_error("relighting: " + relit.message());
+      q.psnr_db = relit->psnr_db;
+      q.psnr_lit_db = relit->psnr_lit_db;
+    }
+    return q;
+  }
+  auto dm = ps::segment(destination);
+  if (!dm) return make_error("destination: segmentation: " + dm.message());
+  auto sm = ps::segment(source);
+  if (!sm) return make_error("source: segmentation: " + sm.message());
+  return evaluate(map, dm->mask, sm->mask);
+}
+
+
+namespace {
+
+// write_transfer's files; with `pair`, the per-lamp pictures are painted from
+// its photos one at a time (each into its destination photo, then released).
+Status write_files(const TransferResult& r, PreparedPair* pair, const std::filesystem::path& folder,
+                   const Progress& progress) {
+  std::error_code ec;
+  std::filesystem::create_directories(folder, ec);
+  if (ec) return make_error("cannot create " + folder.string() + ": " + ec.message());
+  // Every file is made and written at once (one task each, encoders on all
+  // cores), each through a temporary and a rename but without an fsync of
+  // its own; one fsync of the folder at the end, then metrics.json, synced,
+  // last: a folder with a metrics.json holds the whole result.
+  std::vector<std::function<Status()>> files;
+  files.push_back([&] { return write_map(folder / "map.pfm", r.map, Sync::later); });
+  files.push_back([&] { return write_picture(folder / "map.png", map_picture(r.map, r.source_size), Sync::later); });
+  for (size_t i = 0; i < r.repainted.size(); ++i) {
+    files.push_back([&, i] {
+      char name[64];
+      std::snprintf(name, sizeof name, "result_light_%02zu.png", i);
+      // Linear 16-bit at the sets' own scale, as their light_NN.png: a
+      // repainted photo and the photos it came from look alike side by side.
+      return write_png16(folder / name, r.repainted[i], Sync::later);
+    });
+  }
+  files.push_back([&] { return write_png16(folder / "result_median.png", r.repainted_median, Sync::later); });
+  files.push_back(
+      [&] { return write_picture(folder / "reuse.png", reuse_picture(r.reuse, r.source_median), Sync::later); });
+  files.push_back([&] { return write_picture(folder / "confidence.png", confidence_picture(r.map), Sync::later); });
+  if (r.relit) {
+    files.push_back([&] {
+      // one exposure for both, so that they compare
+      cv::Mat both;
+      cv::hconcat(r.relit->transferred, r.relit->reference, both);
+      const cv::Mat pic = tonemap_picture(both);
+      const int w = r.relit->transferred.cols;
+      if (auto s = write_picture(folder / "relight_transferred.png", pic(cv::Rect(0, 0, w, pic.rows)).clone(),
+                                 Sync::later);
+          !s)
+        return s;
+      return write_picture(folder / "relight_reference.png", pic(cv::Rect(w, 0, w, pic.rows)).clone(), Sync::later);
+    });
+  }
+  // The pictures painted from the pair's photos: one after another (each
+  // painting and encoding is parallel within), so one is in memory at a time.
+  std::vector<std::function<Status()>> painted;
+  if (pair) {
+    const size_t lamps = std::min(pair->src.view.images.size(), pair->dst.view.images.size());
+    for (size_t i = 0; i < lamps; ++i) {
+      painted.push_back([&r, pair, &folder, i]() -> Status {
+        cv::Mat& backdrop = pair->dst.view.images[i];
+        const cv::Mat& photo = pair->src.view.images[i];
+        cv::Mat out;
+        if (r.blend) {
+          out = backdrop;  // painted in place: the photo is released next
+          if (auto s = fast::apply_blend(*r.blend, photo, out); !s) return make_error("repaint: " + s.message());
+        } else {
+          out = repaint::repaint(r.map, photo, backdrop);
+        }
+        // this lamp's photos are done with: every copy of them goes
+        pair->dst.view.images[i].release();
+        pair->src.view.images[i].release();
+        if (i < pair->destination.images.size()) pair->destination.images[i].release();
+        if (i < pair->source.images.size()) pair->source.images[i].release();
+        char name[64];
+        std::snprintf(name, sizeof name, "result_light_%02zu.png", i);
+        return write_png16(folder / name, out, Sync::later);
+      });
+    }
+  }
+  std::vector<Status> written(files.size() + painted.size(), Status::success());
+  std::mutex report_lock;
+  size_t done = 0;
+  const double total = static_cast<double>(written.size() + 1);
+  auto one_done = [&] {
+    std::lock_guard<std::mutex> hold(report_lock);
+    progress.report(static_cast<double>(++done) / total, "writing " + folder.string());
+  };
+  progress.report(0.0, "writing " + folder.string());
+  const Status cancelled = make_error("writing " + folder.string() + " cancelled");
+  // the painted ones first: they release the pair's photos, the largest
+  // part of what is held, before the other files are made all at once
+  for (size_t i = 0; i < painted.size(); ++i) {
+    written[files.size() + i] = progress.cancelled() ? cancelled : painted[i]();
+    one_done();
+  }
+  tbb::parallel_for(size_t(0), files.size(), [&](size_t i) {
+    // a cancel stops the files not yet begun; those being encoded finish
+    // (each is whole under its own name or absent, never half-written)
+    written[i] = progress.cancelled() ? cancelled : files[i]();
+    one_done();
+  });
+  if (progress.cancelled()) return cancelled;  // and no metrics.json: the folder is not a whole result
+  for (const Status& s : written) {
+    if (!s) return s;  // the first by file order, whatever finished first
+  }
+  if (auto s = sync_folder(folder); !s) return s;
+  return write_file_atomic(folder / "metrics.json", r.metrics_json + "\n");
+}
+
+}  // namespace
+
+Status write_transfer(const TransferResult& r, const std::filesystem::path& folder, const Progress& progress) {
+  return write_files(r, nullptr, folder, progress);
+}
+
+Status write_transfer(const TransferResult& r, PreparedPair&& pair_in, const std::filesystem::path& folder,
+                      const Progress& progress) {
+  if (!r.repainted.empty()) return make_error("write_transfer: the result already holds its pictures");
+  if (r.map.xy.size() != pair_in.dst.view.mask.size())
+    return make_error("write_transfer: the map is not the pair's (another size)");
+  PreparedPair pair = std::move(pair_in);
+  // the pictures need the photos (and the plan made from the rest): the
+  // normals and the truth, a photo's bytes each, go before painting starts
+  for (ImageSet* set : {&pair.destination, &pair.source}) set->truth = Truth{};
+  for (PreparedObject* object : {&pair.dst, &pair.src}) object->view.normals.release();
+  return write_files(r, &pair, folder, progress);
+}
+
+}  // namespace veneer::pipeline

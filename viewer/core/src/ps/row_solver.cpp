@@ -1,0 +1,578 @@
+// Photometric stereo's row solver (see row_solver.hpp).
+//
+// Speed: every full-resolution pass works on one image row at a time with
+// structure-of-arrays buffers (per lamp: B, G, R, grey), so the inner loops run
+// over pixels and vectorise. The distant model multiplies by one
+// pseudo-inverse per "lamps kept" pattern (computed once, at most 2^n); the
+// near model forms the 3x3 normal equations per pixel from its own light
+// vectors.
+#include "row_solver.hpp"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstdio>
+#include <cstdint>
+#include <vector>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+// "No dependence between the iterations": GCC vectorises the per-pixel lane
+// loops below without a runtime alias check. (Clang -- the fuzz build -- has
+// no such hint that it does not turn into an error when a sanitizer keeps it
+// from vectorising; it relies on the __restrict pointers.)
+#if defined(__clang__)
+#define VENEER_IVDEP
+#else
+#define VENEER_IVDEP _Pragma("GCC ivdep")
+#endif
+
+namespace veneer::ps::detail {
+
+bool pattern_pinv(const std::vector<float>& dir, int n, uint32_t pattern, float* out) {
+  double a[3][3] = {};
+  for (int i = 0; i < n; ++i) {
+    if (!(pattern >> i & 1u)) continue;
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) a[r][c] += double(dir[i * 3 + r]) * dir[i * 3 + c];
+  }
+  cv::Matx33d A(&a[0][0]);
+  cv::Matx31d w;
+  cv::Matx33d u, vt;
+  cv::SVD::compute(A, w, u, vt);
+  if (w(0) <= 0 || w(2) < 1e-6 * w(0)) return false;
+  cv::Matx33d inv = A.inv(cv::DECOMP_CHOLESKY);
+  for (int i = 0; i < n; ++i) {
+    bool kept = pattern >> i & 1u;
+    for (int r = 0; r < 3; ++r) {
+      double v = 0;
+      if (kept)
+        for (int c = 0; c < 3; ++c) v += inv(r, c) * dir[i * 3 + c];
+      out[r * n + i] = static_cast<float>(v);
+    }
+  }
+  return true;
+}
+
+namespace {
+
+struct LoadArgs {
+  const float* src;
+  const float* amb;
+  int step, count;
+  float e0, e1, e2, satv;
+  float *cb, *cg, *cr, *yy, *st, *M;
+};
+
+// One lamp's row into structure-of-arrays form: ambient removed, divided by the
+// lamp colour, grey, saturation flag; running maximum of grey.
+template <int kStep, bool kAmb>
+inline void load_light(const LoadArgs& a) {
+  const float* __restrict src = a.src;
+  const float* __restrict amb = a.amb;
+  float* __restrict cb = a.cb;
+  float* __restrict cg = a.cg;
+  float* __restrict cr = a.cr;
+  float* __restrict yy = a.yy;
+  float* __restrict st = a.st;
+  float* __restrict M = a.M;
+  const int st3 = kStep > 0 ? kStep * 3 : a.step * 3;
+  const float e0 = a.e0, e1 = a.e1, e2 = a.e2, satv = a.satv;
+VENEER_IVDEP
+  for (int k = 0; k < a.count; ++k) {
+    const float v0 = src[k * st3], v1 = src[k * st3 + 1], v2 = src[k * st3 + 2];
+    st[k] = float((v0 >= satv) | (v1 >= satv) | (v2 >= satv));
+    float c0 = v0, c1 = v1, c2 = v2;
+    if constexpr (kAmb) {
+      c0 -= amb[k * st3];
+      c1 -= amb[k * st3 + 1];
+      c2 -= amb[k * st3 + 2];
+    }
+    c0 *= e0;
+    c1 *= e1;
+    c2 *= e2;
+    cb[k] = c0;
+    cg[k] = c1;
+    cr[k] = c2;
+    const float g = (c0 + c1 + c2) * (1.f / 3.f);
+    yy[k] = g;
+    M[k] = std::max(M[k], g);
+  }
+}
+}  // namespace
+
+void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, const float* z,
+               const uint8_t* mask, const RowOut& out) {
+  const int n = s.n;
+  const size_t cap = size_t(b.cap);
+  const size_t row_off = size_t(y) * s.width * 3;
+  // 1. load, normalise by lamp colour, grey, saturation.
+  float* __restrict M = b.M.data();
+  std::fill(M, M + count, 0.f);
+  for (int i = 0; i < n; ++i) {
+    const float* src = s.images[i] + row_off + size_t(x0) * 3;
+    const float* amb = s.ambient ? s.ambient + row_off + size_t(x0) * 3 : nullptr;
+    LoadArgs a{src, amb, step, count, s.inv_e[i * 3], s.inv_e[i * 3 + 1], s.inv_e[i * 3 + 2], s.saturation,
+               b.C.data() + (size_t(i) * 3 + 0) * cap, b.C.data() + (size_t(i) * 3 + 1) * cap,
+               b.C.data() + (size_t(i) * 3 + 2) * cap, b.Y.data() + size_t(i) * cap, b.sat.data() + size_t(i) * cap, M};
+    if (step == 1) {
+      amb ? load_light<1, true>(a) : load_light<1, false>(a);
+    } else {
+      amb ? load_light<0, true>(a) : load_light<0, false>(a);
+    }
+  }
+  // 1b. Coloured pixels are solved on their colour's part off the lamps'
+  // white: c - grey(c) per sample (the colours are divided by the lamp's,
+  // so the lamps are white here), measured along the pixel's colour. A dielectric's highlight is the lamp's
+  // colour, so it adds only to grey and this part is its diffuse shading
+  // times a constant: Lambertian, highlight-free (the SUV space of Mallick et
+  // al., CVPR 2005). Grey pixels (white, stone) have no such part: they keep
+  // the grey samples.
+  if (s.diffuse_chroma > 0.f) {
+    float* __restrict sy = b.den.data();  // per pixel: the sum of grey over the samples,
+    float* __restrict c0 = b.nx.data();   // the summed off-grey colour, then its direction
+    float* __restrict c1 = b.ny.data();   // (these buffers are written again before
+    float* __restrict c2 = b.nz.data();   // their own use below)
+    float* __restrict use = b.ok.data();
+    std::fill(sy, sy + count, 0.f);
+    std::fill(c0, c0 + count, 0.f);
+    std::fill(c1, c1 + count, 0.f);
+    std::fill(c2, c2 + count, 0.f);
+    for (int i = 0; i < n; ++i) {
+      const float* __restrict cb = b.C.data() + (size_t(i) * 3 + 0) * cap;
+      const float* __restrict cg = b.C.data() + (size_t(i) * 3 + 1) * cap;
+      const float* __restrict cr = b.C.data() + (size_t(i) * 3 + 2) * cap;
+      const float* __restrict yy = b.Y.data() + size_t(i) * cap;
+VENEER_IVDEP
+      for (int k = 0; k < count; ++k) {
+        c0[k] += cb[k] - yy[k];
+        c1[k] += cg[k] - yy[k];
+        c2[k] += cr[k] - yy[k];
+        sy[k] += std::max(yy[k], 0.f);
+      }
+    }
+    const float dc = s.diffuse_chroma;
+VENEER_IVDEP
+    for (int k = 0; k < count; ++k) {
+      const float len = std::sqrt(c0[k] * c0[k] + c1[k] * c1[k] + c2[k] * c2[k]);
+      const bool coloured = (len >= dc * sy[k]) & (sy[k] > 0.f);
+      use[k] = coloured ? 1.f : 0.f;
+      const float il = (coloured ? 1.f : 0.f) / (coloured ? len : 1.f);
+      c0[k] *= il;
+      c1[k] *= il;
+      c2[k] *= il;
+      M[k] = coloured ? 0.f : M[k];
+    }
+    // Each sample's off-grey part measured along the pixel's own colour
+    // direction: linear in the shading, so dark samples carry no bias.
+    for (int i = 0; i < n; ++i) {
+      const float* __restrict cb = b.C.data() + (size_t(i) * 3 + 0) * cap;
+      const float* __restrict cg = b.C.data() + (size_t(i) * 3 + 1) * cap;
+      const float* __restrict cr = b.C.data() + (size_t(i) * 3 + 2) * cap;
+      float* __restrict yy = b.Y.data() + size_t(i) * cap;
+VENEER_IVDEP
+      for (int k = 0; k < count; ++k) {
+        const float g = yy[k], u = (cb[k] - g) * c0[k] + (cg[k] - g) * c1[k] + (cr[k] - g) * c2[k];
+        yy[k] = use[k] != 0.f ? u : g;
+        M[k] = use[k] != 0.f ? std::max(M[k], u) : M[k];
+      }
+    }
+  }
+  // 2. weights: robust drops shadowed and saturated samples; < 3 kept falls back to all.
+  uint32_t* __restrict pat = b.pat.data();
+  float* __restrict K = b.K.data();
+  float* __restrict okv = b.ok.data();
+  if (s.robust) {
+    for (int i = 0; i < n; ++i) {
+      const float* __restrict yy = b.Y.data() + size_t(i) * cap;
+      const float* __restrict st = b.sat.data() + size_t(i) * cap;
+      float* __restrict w = b.W.data() + size_t(i) * cap;
+      const float sf = s.shadow_fraction;
+VENEER_IVDEP
+      for (int k = 0; k < count; ++k) w[k] = float((yy[k] >= sf * M[k]) & (st[k] == 0.f) & (yy[k] > 0.f));
+    }
+    std::fill(K, K + count, 0.f);
+    for (int i = 0; i < n; ++i) {
+      const float* __restrict w = b.W.data() + size_t(i) * cap;
+VENEER_IVDEP
+      for (int k = 0; k < count; ++k) K[k] += w[k];
+    }
+VENEER_IVDEP
+    for (int k = 0; k < count; ++k) okv[k] = K[k] >= 3.f ? 1.f : 0.f;
+    if (s.use_cache) {
+      std::fill(pat, pat + count, 0u);
+      for (int i = 0; i < n; ++i) {
+        const float* __restrict w = b.W.data() + size_t(i) * cap;
+VENEER_IVDEP
+        for (int k = 0; k < count; ++k) pat[k] |= uint32_t(w[k] != 0.f) << i;
+      }
+    }
+    // Fallback to every sample where fewer than 3 are kept.
+VENEER_IVDEP
+    for (int k = 0; k < count; ++k) {
+      if (okv[k] == 0.f) {
+        for (int i = 0; i < n; ++i) b.W[size_t(i) * cap + k] = 1.f;
+        K[k] = float(n);
+        pat[k] = s.full;
+      }
+    }
+  } else {
+    for (int i = 0; i < n; ++i) std::fill(b.W.begin() + size_t(i) * cap, b.W.begin() + size_t(i) * cap + count, 1.f);
+    std::fill(pat, pat + count, s.full);
+    std::fill(K, K + count, float(n));
+    std::fill(okv, okv + count, 1.f);
+  }
+  float* __restrict gx = b.acc.data() + 9 * cap;
+  float* __restrict gy = b.acc.data() + 10 * cap;
+  float* __restrict gz = b.acc.data() + 11 * cap;
+  float* __restrict nx = b.nx.data();
+  float* __restrict ny = b.ny.data();
+  float* __restrict nz = b.nz.data();
+  float* __restrict ga = b.a.data();
+  const float ms = s.min_signal;
+  // 3-4 run once, or twice when outliers were dropped after the first fit.
+  for (int pass = 0; pass < 2; ++pass) {
+    // 3. solve g = albedo * n.
+    if (!s.near) {
+      if (s.use_cache || !s.robust) {
+        // Full pattern for everybody (vectorised), then the other patterns pixel by pixel.
+        // The second pass only re-solves the pixels that dropped an outlier.
+        const float* P = s.pinv.data() + size_t(s.use_cache ? s.full : 0) * 3 * n;
+        if (pass == 0) {
+          std::fill(gx, gx + count, 0.f);
+          std::fill(gy, gy + count, 0.f);
+          std::fill(gz, gz + count, 0.f);
+          for (int i = 0; i < n; ++i) {
+            const float* __restrict yy = b.Y.data() + size_t(i) * cap;
+            const float p0 = P[i], p1 = P[n + i], p2 = P[2 * n + i];
+VENEER_IVDEP
+            for (int k = 0; k < count; ++k) {
+              gx[k] += p0 * yy[k];
+              gy[k] += p1 * yy[k];
+              gz[k] += p2 * yy[k];
+            }
+          }
+        }
+        if (s.robust) {
+          const float* dropped = b.acc.data();  // best_i of the outlier step: -1 = kept all
+VENEER_IVDEP
+          for (int k = 0; k < count; ++k) {
+            const uint32_t p = pat[k];
+            if (p == s.full) continue;
+            if (pass == 1 && dropped[k] < 0.f) continue;
+            if (!s.pinv_ok[p]) {
+              okv[k] = 0.f;
+              continue;
+            }
+            const float* Q = s.pinv.data() + size_t(p) * 3 * n;
+            float x = 0, yv = 0, zv = 0;
+            for (int i = 0; i < n; ++i) {
+              const float v = b.Y[size_t(i) * cap + k];
+              x += Q[i] * v;
+              yv += Q[n + i] * v;
+              zv += Q[2 * n + i] * v;
+            }
+            gx[k] = x;
+            gy[k] = yv;
+            gz[k] = zv;
+          }
+        }
+      } else {
+        // Many lamps: per-pixel weighted normal equations with the constant directions.
+        std::fill(b.acc.begin(), b.acc.begin() + 9 * cap, 0.f);
+        float* __restrict a00 = b.acc.data();
+        float* __restrict a01 = a00 + cap;
+        float* __restrict a02 = a00 + 2 * cap;
+        float* __restrict a11 = a00 + 3 * cap;
+        float* __restrict a12 = a00 + 4 * cap;
+        float* __restrict a22 = a00 + 5 * cap;
+        float* __restrict b0 = a00 + 6 * cap;
+        float* __restrict b1 = a00 + 7 * cap;
+        float* __restrict b2 = a00 + 8 * cap;
+        for (int i = 0; i < n; ++i) {
+          const float* __restrict yy = b.Y.data() + size_t(i) * cap;
+          const float* __restrict w = b.W.data() + size_t(i) * cap;
+          const float lx = s.dir[i * 3], ly = s.dir[i * 3 + 1], lz = s.dir[i * 3 + 2];
+VENEER_IVDEP
+          for (int k = 0; k < count; ++k) {
+            const float wk = w[k], wy = wk * yy[k];
+            a00[k] += wk * lx * lx;
+            a01[k] += wk * lx * ly;
+            a02[k] += wk * lx * lz;
+            a11[k] += wk * ly * ly;
+            a12[k] += wk * ly * lz;
+            a22[k] += wk * lz * lz;
+            b0[k] += wy * lx;
+            b1[k] += wy * ly;
+            b2[k] += wy * lz;
+          }
+        }
+      }
+    } else {
+      // Near model: per-pixel light vectors V_i = f_i * l_i from the back-projected point.
+      float* __restrict px = b.px.data();
+      float* __restrict py = b.py.data();
+      float* __restrict pz = b.pz.data();
+      const float invf = 1.f / s.f;
+      const float v = (float(y) - s.cy) * invf;
+VENEER_IVDEP
+      for (int k = 0; k < count; ++k) pz[k] = z ? z[k] : 0.f;
+VENEER_IVDEP
+      for (int k = 0; k < count; ++k) {
+        const float zz = pz[k];
+        const float t = 1.f - zz;
+        px[k] = t * (float(x0 + k * step) - s.cx) * invf;
+        py[k] = -t * v;
+        pz[k] = zz;
+      }
+      std::fill(b.acc.begin(), b.acc.begin() + 9 * cap, 0.f);
+      float* __restrict a00 = b.acc.data();
+      float* __restrict a01 = a00 + cap;
+      float* __restrict a02 = a00 + 2 * cap;
+      float* __restrict a11 = a00 + 3 * cap;
+      float* __restrict a12 = a00 + 4 * cap;
+      float* __restrict a22 = a00 + 5 * cap;
+      float* __restrict b0 = a00 + 6 * cap;
+      float* __restrict b1 = a00 + 7 * cap;
+      float* __restrict b2 = a00 + 8 * cap;
+      for (int i = 0; i < n; ++i) {
+        const float* __restrict yy = b.Y.data() + size_t(i) * cap;
+        const float* __restrict w = b.W.data() + size_t(i) * cap;
+        float* __restrict vx = b.V.data() + (size_t(i) * 3 + 0) * cap;
+        float* __restrict vy = b.V.data() + (size_t(i) * 3 + 1) * cap;
+        float* __restrict vz = b.V.data() + (size_t(i) * 3 + 2) * cap;
+        const float lx = s.pos[i * 3], ly = s.pos[i * 3 + 1], lz = s.pos[i * 3 + 2], r2 = s.pos_norm2[i];
+VENEER_IVDEP
+        for (int k = 0; k < count; ++k) {
+          const float dx = lx - px[k], dy = ly - py[k], dz = lz - pz[k];
+          const float d2 = dx * dx + dy * dy + dz * dz;
+          const float inv = 1.f / std::sqrt(d2);
+          const float sc = r2 * inv * inv * inv;  // falloff |L|^2/d^2 times 1/d normalisation
+          const float ex = dx * sc, ey = dy * sc, ez = dz * sc;
+          vx[k] = ex;
+          vy[k] = ey;
+          vz[k] = ez;
+          const float wk = w[k], wy = wk * yy[k];
+          a00[k] += wk * ex * ex;
+          a01[k] += wk * ex * ey;
+          a02[k] += wk * ex * ez;
+          a11[k] += wk * ey * ey;
+          a12[k] += wk * ey * ez;
+          a22[k] += wk * ez * ez;
+          b0[k] += wy * ex;
+          b1[k] += wy * ey;
+          b2[k] += wy * ez;
+        }
+      }
+    }
+    if (s.near || (s.robust && !s.use_cache)) {
+      // 3x3 symmetric solve by cofactors, vectorised.
+      const float* __restrict A = b.acc.data();
+      const float* __restrict A1 = A + cap;
+      const float* __restrict A2 = A + 2 * cap;
+      const float* __restrict A3 = A + 3 * cap;
+      const float* __restrict A4 = A + 4 * cap;
+      const float* __restrict A5 = A + 5 * cap;
+      const float* __restrict B0 = A + 6 * cap;
+      const float* __restrict B1 = A + 7 * cap;
+      const float* __restrict B2 = A + 8 * cap;
+VENEER_IVDEP
+      for (int k = 0; k < count; ++k) {
+        const float a00 = A[k], a01 = A1[k], a02 = A2[k], a11 = A3[k], a12 = A4[k], a22 = A5[k];
+        const float b0 = B0[k], b1 = B1[k], b2 = B2[k];
+        const float c00 = a11 * a22 - a12 * a12, c01 = a02 * a12 - a01 * a22, c02 = a01 * a12 - a02 * a11;
+        const float c11 = a00 * a22 - a02 * a02, c12 = a01 * a02 - a00 * a12, c22 = a00 * a11 - a01 * a01;
+        const float det = a00 * c00 + a01 * c01 + a02 * c02;
+        const float tr = (a00 + a11 + a22) * (1.f / 3.f);
+        const bool good = (det > 1e-5f * tr * tr * tr) & (tr > 0.f);
+        const float id = (good ? 1.f : 0.f) / (good ? det : 1.f);
+        gx[k] = (c00 * b0 + c01 * b1 + c02 * b2) * id;
+        gy[k] = (c01 * b0 + c11 * b1 + c12 * b2) * id;
+        gz[k] = (c02 * b0 + c12 * b1 + c22 * b2) * id;
+        okv[k] = good ? okv[k] : 0.f;
+      }
+    }
+    // 4. normal and grey albedo.
+VENEER_IVDEP
+    for (int k = 0; k < count; ++k) {
+      const float len = std::sqrt(gx[k] * gx[k] + gy[k] * gy[k] + gz[k] * gz[k]);
+      const bool sig = (len > 0.f) & (M[k] > ms);
+      const float il = (sig ? 1.f : 0.f) / (sig ? len : 1.f);
+      nx[k] = gx[k] * il;
+      ny[k] = gy[k] * il;
+      nz[k] = gz[k] * il;
+      ga[k] = sig ? len : 0.f;
+      okv[k] = sig ? okv[k] : 0.f;
+    }
+    if (pass == 1 || !s.robust || !(s.outlier_fraction > 0.f)) break;
+    // Outliers: the sample farthest from the first fit (a specular highlight,
+    // a cast shadow) is dropped when it is off by more than outlier_fraction of
+    // the pixel's brightest sample and 4+ samples remain; then solve again.
+    float* __restrict best = b.den.data();
+    float* __restrict best_i = b.acc.data();  // the normal equations are rebuilt in the next pass
+    std::fill(best, best + count, 0.f);
+    std::fill(best_i, best_i + count, -1.f);
+    for (int i = 0; i < n; ++i) {
+      const float* __restrict yy = b.Y.data() + size_t(i) * cap;
+      const float* __restrict w = b.W.data() + size_t(i) * cap;
+      const float* __restrict vx = b.V.data() + (size_t(i) * 3 + 0) * cap;
+      const float* __restrict vy = b.V.data() + (size_t(i) * 3 + 1) * cap;
+      const float* __restrict vz = b.V.data() + (size_t(i) * 3 + 2) * cap;
+      const float lx = s.dir[i * 3], ly = s.dir[i * 3 + 1], lz = s.dir[i * 3 + 2];
+      const bool near = s.near;
+VENEER_IVDEP
+      for (int k = 0; k < count; ++k) {
+        const float sh = near ? nx[k] * vx[k] + ny[k] * vy[k] + nz[k] * vz[k] : nx[k] * lx + ny[k] * ly + nz[k] * lz;
+        const float r = std::abs(yy[k] - ga[k] * sh) * w[k];
+        const bool sel = r > best[k];
+        best[k] = sel ? r : best[k];
+        best_i[k] = sel ? float(i) : best_i[k];
+      }
+    }
+    int drops = 0;
+    const float of = s.outlier_fraction;
+    for (int k = 0; k < count; ++k) {
+      // Dark pixels (brightest sample < 0.2) need an absolute 0.02 of full scale: sensor noise.
+      const bool drop = (best[k] > of * std::max(M[k], 0.2f)) & (K[k] >= 4.f) & (ga[k] > 0.f);
+      best_i[k] = drop ? best_i[k] : -1.f;
+      K[k] -= drop ? 1.f : 0.f;
+      drops += drop;
+    }
+    if (drops == 0) break;
+    for (int i = 0; i < n; ++i) {
+      float* __restrict w = b.W.data() + size_t(i) * cap;
+VENEER_IVDEP
+      for (int k = 0; k < count; ++k) w[k] = best_i[k] == float(i) ? 0.f : w[k];
+    }
+    if (s.use_cache) {
+      std::fill(pat, pat + count, 0u);
+      for (int i = 0; i < n; ++i) {
+        const float* __restrict w = b.W.data() + size_t(i) * cap;
+        for (int k = 0; k < count; ++k) pat[k] |= uint32_t(w[k] != 0.f) << i;
+      }
+    }
+  }
+  // 5. per-channel albedo and residual over the kept samples, with shading S_i = n . V_i.
+  float* __restrict den = b.den.data();
+  float* __restrict numb = b.acc.data();  // reuse: 3 numerators + residual sum
+  float* __restrict numg = b.acc.data() + cap;
+  float* __restrict numr = b.acc.data() + 2 * cap;
+  float* __restrict res = b.acc.data() + 3 * cap;
+  std::fill(numb, numb + 4 * cap, 0.f);
+  std::fill(den, den + count, 0.f);
+  for (int i = 0; i < n; ++i) {
+    const float* __restrict yy = b.Y.data() + size_t(i) * cap;
+    const float* __restrict w = b.W.data() + size_t(i) * cap;
+    const float* __restrict cb = b.C.data() + (size_t(i) * 3 + 0) * cap;
+    const float* __restrict cg = b.C.data() + (size_t(i) * 3 + 1) * cap;
+    const float* __restrict cr = b.C.data() + (size_t(i) * 3 + 2) * cap;
+    if (s.near) {
+      const float* __restrict vx = b.V.data() + (size_t(i) * 3 + 0) * cap;
+      const float* __restrict vy = b.V.data() + (size_t(i) * 3 + 1) * cap;
+      const float* __restrict vz = b.V.data() + (size_t(i) * 3 + 2) * cap;
+VENEER_IVDEP
+      for (int k = 0; k < count; ++k) {
+        const float sh = nx[k] * vx[k] + ny[k] * vy[k] + nz[k] * vz[k];
+        const float ws = w[k] * sh;
+        numb[k] += ws * cb[k];
+        numg[k] += ws * cg[k];
+        numr[k] += ws * cr[k];
+        den[k] += ws * sh;
+        const float d = yy[k] - ga[k] * sh;
+        res[k] += w[k] * d * d;
+      }
+    } else {
+      const float lx = s.dir[i * 3], ly = s.dir[i * 3 + 1], lz = s.dir[i * 3 + 2];
+VENEER_IVDEP
+      for (int k = 0; k < count; ++k) {
+        const float sh = nx[k] * lx + ny[k] * ly + nz[k] * lz;
+        const float ws = w[k] * sh;
+        numb[k] += ws * cb[k];
+        numg[k] += ws * cg[k];
+        numr[k] += ws * cr[k];
+        den[k] += ws * sh;
+        const float d = yy[k] - ga[k] * sh;
+        res[k] += w[k] * d * d;
+      }
+    }
+  }
+  // 6. write.
+  float* __restrict on = out.normals;
+  const uint8_t* __restrict mk = mask;
+  float* __restrict inside = b.px.data();  // reuse: 1 where the pixel is in the mask
+  for (int k = 0; k < count; ++k) inside[k] = mk[size_t(k) * step] != 0 ? 1.f : 0.f;
+VENEER_IVDEP
+  for (int k = 0; k < count; ++k) {
+    on[k * 3] = nx[k] * inside[k];
+    on[k * 3 + 1] = ny[k] * inside[k];
+    on[k * 3 + 2] = nz[k] * inside[k];
+  }
+  if (out.albedo) {
+    float* __restrict al = out.albedo;
+VENEER_IVDEP
+    for (int k = 0; k < count; ++k) {
+      const bool use = (inside[k] != 0.f) & (ga[k] > 0.f) & (den[k] > 0.f);
+      const float id = (use ? 1.f : 0.f) / (use ? den[k] : 1.f);
+      al[k * 3] = std::max(0.f, numb[k] * id);
+      al[k * 3 + 1] = std::max(0.f, numg[k] * id);
+      al[k * 3 + 2] = std::max(0.f, numr[k] * id);
+    }
+  }
+  if (out.residual) {
+    float* __restrict ro = out.residual;
+VENEER_IVDEP
+    for (int k = 0; k < count; ++k) {
+      const bool use = (inside[k] != 0.f) & (ga[k] > 0.f);
+      ro[k] = use ? std::sqrt(res[k] / std::max(K[k], 1.f)) / (use ? M[k] : 1.f) : 0.f;
+    }
+  }
+  if (out.reliable) {
+    uint8_t* __restrict rl = out.reliable;
+    for (int k = 0; k < count; ++k) rl[k] = ((inside[k] != 0.f) & (okv[k] != 0.f)) ? 255 : 0;
+  }
+}
+
+Status check_directions(const std::vector<float>& dir, int n, const std::string& what) {
+  cv::Mat L(n, 3, CV_64F);
+  for (int i = 0; i < n; ++i)
+    for (int c = 0; c < 3; ++c) L.at<double>(i, c) = dir[i * 3 + c];
+  cv::Mat w;
+  cv::SVD::compute(L, w, cv::SVD::NO_UV);
+  const double s0 = w.at<double>(0), s2 = w.at<double>(2);
+  if (!(s0 > 0) || s2 < 1e-3 * s0) {
+    char buf[160];
+    std::snprintf(buf, sizeof buf, "degenerate %s: they do not span 3-D (coplanar or identical; singular values %.3g %.3g %.3g)",
+                  what.c_str(), s0, w.at<double>(1), s2);
+    return make_error(buf);
+  }
+  return Status::success();
+}
+void solve_rows(const Setup& s, const cv::Mat& mask, const cv::Mat* zmap, int y0, int y1, PsResult& result) {
+  constexpr int kChunk = 256;  // pixels per pass: the scratch rows stay in L1/L2
+  tbb::parallel_for(tbb::blocked_range<int>(y0, y1, 4), [&](const tbb::blocked_range<int>& r) {
+    Scratch sc;
+    sc.resize(s.n, std::min(kChunk, s.width));
+    for (int y = r.begin(); y < r.end(); ++y) {
+      const uint8_t* mrow = mask.ptr<uint8_t>(y);
+      for (int x0 = 0; x0 < s.width; x0 += kChunk) {
+        const int count = std::min(kChunk, s.width - x0);
+        RowOut out;
+        out.normals = result.normals.ptr<float>(y) + size_t(x0) * 3;
+        out.albedo = result.albedo.ptr<float>(y) + size_t(x0) * 3;
+        out.residual = result.residual.ptr<float>(y) + x0;
+        out.reliable = result.reliable.ptr<uint8_t>(y) + x0;
+        // Stretches without object pixels are only cleared.
+        if (std::find_if(mrow + x0, mrow + x0 + count, [](uint8_t v) { return v != 0; }) == mrow + x0 + count) {
+          std::fill(out.normals, out.normals + size_t(count) * 3, 0.f);
+          std::fill(out.albedo, out.albedo + size_t(count) * 3, 0.f);
+          std::fill(out.residual, out.residual + count, 0.f);
+          std::fill(out.reliable, out.reliable + count, uint8_t(0));
+          continue;
+        }
+        solve_row(s, sc, y, x0, 1, count, zmap ? zmap->ptr<float>(y) + x0 : nullptr, mrow + x0, out);
+      }
+    }
+  });
+}
+}  // namespace veneer::ps::detail

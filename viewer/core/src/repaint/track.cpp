@@ -1,0 +1,449 @@
+#include "veneer/repaint/track.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+
+#include <opencv2/imgproc.hpp>
+
+namespace veneer::repaint {
+
+namespace {
+
+// The linear grey of an 8-bit sRGB frame in one pass: each channel through
+// the inverse sRGB curve, weighted as cv::cvtColor's BGR2GRAY weights them.
+cv::Mat linear_gray(const cv::Mat& frame, bool srgb) {
+  if (frame.depth() != CV_8U || !srgb || (frame.channels() != 1 && frame.channels() != 3)) return cv::Mat();
+  static const std::array<std::array<float, 256>, 4> lut = [] {
+    std::array<std::array<float, 256>, 4> t{};
+    const float weight[4] = {0.114f, 0.587f, 0.299f, 1.0f};  // B, G, R, grey
+    for (int i = 0; i < 256; ++i) {
+      const float c = i / 255.0f;
+      const float l = c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
+      for (int k = 0; k < 4; ++k) t[k][i] = weight[k] * l;
+    }
+    return t;
+  }();
+  cv::Mat out(frame.size(), CV_32F);
+  for (int y = 0; y < frame.rows; ++y) {
+    const uint8_t* in = frame.ptr<uint8_t>(y);
+    float* o = out.ptr<float>(y);
+    if (frame.channels() == 1) {
+      for (int x = 0; x < frame.cols; ++x) o[x] = lut[3][in[x]];
+    } else {
+      for (int x = 0; x < frame.cols; ++x, in += 3) o[x] = lut[0][in[0]] + lut[1][in[1]] + lut[2][in[2]];
+    }
+  }
+  return out;
+}
+
+cv::Mat to_gray32(const cv::Mat& image) {
+  cv::Mat gray = image;
+  if (image.channels() == 3) cv::cvtColor(image, gray, cv::COLOR_BGR2GRAY);
+  cv::Mat out;
+  gray.convertTo(out, CV_32F, gray.depth() == CV_8U ? 1.0 / 255.0 : 1.0);
+  return out;
+}
+
+// The pictures ECC compares: a slight blur (as ECC's own 3x3 Gaussian) minus
+// the shading the relit template still misses, which is smooth (a difference
+// of Gaussians); texture and outline stay.
+cv::Mat high_pass(const cv::Mat& image, double sigma) {
+  cv::Mat fine, coarse;
+  cv::GaussianBlur(image, fine, cv::Size(3, 3), 0, 0, cv::BORDER_REPLICATE);
+  if (sigma <= 0) return fine;
+  cv::GaussianBlur(image, coarse, cv::Size(), sigma, sigma, cv::BORDER_REPLICATE);
+  return fine - coarse;
+}
+
+// Bilinear sample with the border replicated (the picture at least 2x2).
+inline float sample(const cv::Mat& image, float x, float y) {
+  x = std::min(std::max(x, 0.0f), static_cast<float>(image.cols) - 1.001f);
+  y = std::min(std::max(y, 0.0f), static_cast<float>(image.rows) - 1.001f);
+  const int x0 = static_cast<int>(x), y0 = static_cast<int>(y);
+  const float fx = x - static_cast<float>(x0), fy = y - static_cast<float>(y0);
+  const float* r0 = image.ptr<float>(y0);
+  const float* r1 = image.ptr<float>(y0 + 1);
+  return (r0[x0] * (1 - fx) + r0[x0 + 1] * fx) * (1 - fy) + (r1[x0] * (1 - fx) + r1[x0 + 1] * fx) * fy;
+}
+
+cv::Matx33d to33(const cv::Matx23d& a) { return {a(0, 0), a(0, 1), a(0, 2), a(1, 0), a(1, 1), a(1, 2), 0, 0, 1}; }
+cv::Matx23d to23(const cv::Matx33d& a) { return {a(0, 0), a(0, 1), a(0, 2), a(1, 0), a(1, 1), a(1, 2)}; }
+
+// A warp between full-size pixels as one between the pixels of a level
+// `factor` times smaller (level pixel i covers full pixels [i f, (i+1) f)).
+cv::Matx23d to_level(const cv::Matx23d& w, int factor) {
+  const double f = factor, c = (f - 1) / 2;
+  const cv::Matx33d up(f, 0, c, 0, f, c, 0, 0, 1), down(1 / f, 0, -c / f, 0, 1 / f, -c / f, 0, 0, 1);
+  return to23(down * to33(w) * up);
+}
+cv::Matx23d to_full(const cv::Matx23d& w, int factor) {
+  const double f = factor, c = (f - 1) / 2;
+  const cv::Matx33d up(f, 0, c, 0, f, c, 0, 0, 1), down(1 / f, 0, -c / f, 0, 1 / f, -c / f, 0, 0, 1);
+  return to23(up * to33(w) * down);
+}
+
+// Gathers picture values at points: row i of the result holds `images[i]` there.
+cv::Mat gather(const std::vector<cv::Mat>& images, const std::vector<cv::Point2f>& points) {
+  cv::Mat out(static_cast<int>(images.size()), static_cast<int>(points.size()), CV_32F);
+  for (int i = 0; i < out.rows; ++i) {
+    float* o = out.ptr<float>(i);
+    for (size_t j = 0; j < points.size(); ++j) o[j] = images[i].at<float>(cvRound(points[j].y), cvRound(points[j].x));
+  }
+  return out;
+}
+
+// sum_i w[i] rows.row(i) into `out`
+void combine(const cv::Mat& rows, const std::vector<double>& w, std::vector<float>& out) {
+  out.assign(static_cast<size_t>(rows.cols), 0.0f);
+  for (int i = 0; i < rows.rows; ++i) {
+    const float wi = static_cast<float>(w[static_cast<size_t>(i)]);
+    const float* r = rows.ptr<float>(i);
+    for (int j = 0; j < rows.cols; ++j) out[static_cast<size_t>(j)] += wi * r[j];
+  }
+}
+
+}  // namespace
+
+Status TrackOptions::check() const {
+  if (!(min_correlation >= 0 && min_correlation <= 1)) return make_error("min_correlation: expected 0..1");
+  if (!(seed_correlation >= 0 && seed_correlation <= 1)) return make_error("seed_correlation: expected 0..1");
+  if (iterations < 1 || iterations > 1000) return make_error("iterations: expected 1..1000");
+  if (!(epsilon > 0)) return make_error("epsilon: expected > 0");
+  if (margin_px < 0) return make_error("margin_px: expected >= 0");
+  if (max_region_px < 16) return make_error("max_region_px: expected >= 16");
+  if (search_px < 0) return make_error("search_px: expected >= 0");
+  if (max_levels < 1 || max_levels > 6) return make_error("max_levels: expected 1..6");
+  if (!(highpass_sigma_px >= 0 && highpass_sigma_px <= 64)) return make_error("highpass_sigma_px: expected 0..64");
+  if (relight_rounds < 1 || relight_rounds > 4) return make_error("relight_rounds: expected 1..4");
+  if (ecc_points < 64) return make_error("ecc_points: expected >= 64");
+  if (relight_points < 64) return make_error("relight_points: expected >= 64");
+  return {};
+}
+
+Tracker::Tracker(const std::vector<cv::Mat>& photos, const cv::Mat& mask, const TrackOptions& options)
+    : options_(options) {
+  if (photos.empty() || photos[0].empty() || !options_.check()) return;
+  const cv::Mat& still = photos[0];
+  cv::Rect box = mask.empty() ? cv::Rect() : cv::boundingRect(mask);
+  if (box.area() == 0) box = cv::Rect(0, 0, still.cols, still.rows);
+  box.x -= options_.margin_px;
+  box.y -= options_.margin_px;
+  box.width += 2 * options_.margin_px;
+  box.height += 2 * options_.margin_px;
+  crop_ = box & cv::Rect(0, 0, still.cols, still.rows);
+  // the finest level: the object's region at most max_region_px across
+  int finest = 1;
+  while (std::max(crop_.width, crop_.height) / finest > options_.max_region_px) finest *= 2;
+  // Sides a multiple of the coarsest factor, so that each level is exactly
+  // the full-size crop reduced (an uneven resize would shift it by a pixel).
+  const int coarsest = finest << (options_.max_levels - 1);
+  crop_.width = std::min(still.cols - crop_.x, (crop_.width + coarsest - 1) / coarsest * coarsest) / finest * finest;
+  crop_.height = std::min(still.rows - crop_.y, (crop_.height + coarsest - 1) / coarsest * coarsest) / finest * finest;
+  if (crop_.width < 8 * finest || crop_.height < 8 * finest) return;
+  crop_mask_ = mask.empty() ? cv::Mat(crop_.size(), CV_8U, cv::Scalar(255)) : mask(crop_).clone();
+  std::vector<cv::Mat> basis_full;  // CV_32F grey crops of the photos at full size
+  for (const auto& p : photos) {
+    if (p.size() != still.size()) return;
+    basis_full.push_back(to_gray32(p(crop_)));
+  }
+  cv::Mat grown_full = crop_mask_;
+  if (options_.mask_dilate_px > 0)
+    cv::dilate(crop_mask_, grown_full,
+               cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(2 * options_.mask_dilate_px + 1,
+                                                                     2 * options_.mask_dilate_px + 1)));
+  for (int level = 0, factor = finest; level < options_.max_levels; ++level, factor *= 2) {
+    if (level > 0 && (crop_.width / factor < options_.coarse_min_width || crop_.width % factor || crop_.height % factor))
+      break;
+    const double shrink = 1.0 / factor;
+    cv::Mat object, grown;
+    std::vector<cv::Mat> basis, hp, gx, gy;
+    if (factor == 1) object = crop_mask_, grown = grown_full;
+    else {
+      cv::resize(crop_mask_, object, cv::Size(), shrink, shrink, cv::INTER_NEAREST);
+      cv::resize(grown_full, grown, cv::Size(), shrink, shrink, cv::INTER_NEAREST);
+    }
+    cv::Mat strength = cv::Mat::zeros(grown.size(), CV_32F);
+    for (const auto& b : basis_full) {
+      cv::Mat r = b;
+      if (factor > 1) cv::resize(b, r, cv::Size(), shrink, shrink, cv::INTER_AREA);
+      basis.push_back(r);
+      hp.push_back(high_pass(r, std::max(2.0, options_.highpass_sigma_px / factor) * (options_.highpass_sigma_px > 0)));
+      cv::Mat dx, dy;
+      cv::Sobel(hp.back(), dx, CV_32F, 1, 0, 3, 1.0 / 8, 0, cv::BORDER_REPLICATE);
+      cv::Sobel(hp.back(), dy, CV_32F, 0, 1, 3, 1.0 / 8, 0, cv::BORDER_REPLICATE);
+      gx.push_back(dx);
+      gy.push_back(dy);
+      strength += cv::abs(dx) + cv::abs(dy);
+    }
+    // ECC's pixels: the region's strongest gradients (a picture's flat parts
+    // add nothing to the normal equations but their cost)
+    std::vector<std::pair<float, cv::Point2f>> candidates;
+    for (int y = 1; y + 1 < grown.rows; ++y)
+      for (int x = 1; x + 1 < grown.cols; ++x)
+        if (grown.at<uint8_t>(y, x)) candidates.push_back({strength.at<float>(y, x), cv::Point2f(float(x), float(y))});
+    const size_t keep = std::min(candidates.size(), static_cast<size_t>(options_.ecc_points));
+    std::nth_element(candidates.begin(), candidates.begin() + static_cast<long>(keep), candidates.end(),
+                     [](const auto& a, const auto& b) { return a.first > b.first; });
+    Level l;
+    l.factor = factor;
+    for (size_t i = 0; i < keep; ++i) l.points.push_back(candidates[i].second);
+    if (l.points.size() < 16) {
+      if (level == 0) return;
+      break;
+    }
+    l.hp = gather(hp, l.points);
+    l.gx = gather(gx, l.points);
+    l.gy = gather(gy, l.points);
+    if (level == 0) {
+      // the relight's pixels: a grid over the object; the correlation's: every pixel of the region
+      const int n = cv::countNonZero(object);
+      const int step = std::max(1, static_cast<int>(std::sqrt(double(n) / options_.relight_points)));
+      for (int y = 0; y < object.rows; y += step)
+        for (int x = 0; x < object.cols; x += step)
+          if (object.at<uint8_t>(y, x)) relight_points_.emplace_back(float(x), float(y));
+      relight_basis_ = gather(basis, relight_points_).t();
+      for (int y = 0; y < grown.rows; ++y)
+        for (int x = 0; x < grown.cols; ++x)
+          if (grown.at<uint8_t>(y, x)) region_points_.emplace_back(float(x), float(y));
+      region_hp_ = gather(hp, region_points_);
+    }
+    levels_.push_back(std::move(l));
+  }
+  weights_.assign(photos.size() + 1, 1.0);  // the photos' sum until the first frame relights it
+  weights_.back() = 0.0;
+}
+
+void Tracker::relight(const cv::Mat& frame_linear, const cv::Matx23d& w) {
+  const int k = relight_basis_.cols;
+  const int n = relight_basis_.rows;
+  if (n < 4 * (k + 1)) return;
+  // normal equations of [photos 1] x = frame, (k+1) x (k+1)
+  cv::Mat ata = cv::Mat::zeros(k + 1, k + 1, CV_64F), atb = cv::Mat::zeros(k + 1, 1, CV_64F);
+  std::vector<double> row(static_cast<size_t>(k + 1));
+  for (int j = 0; j < n; ++j) {
+    const cv::Point2f p = relight_points_[static_cast<size_t>(j)];
+    const float v = sample(frame_linear, static_cast<float>(w(0, 0) * p.x + w(0, 1) * p.y + w(0, 2)),
+                           static_cast<float>(w(1, 0) * p.x + w(1, 1) * p.y + w(1, 2)));
+    const float* a = relight_basis_.ptr<float>(j);
+    for (int i = 0; i < k; ++i) row[static_cast<size_t>(i)] = a[i];
+    row[static_cast<size_t>(k)] = 1.0;
+    for (int r = 0; r <= k; ++r) {
+      double* m = ata.ptr<double>(r);
+      const double ar = row[static_cast<size_t>(r)];
+      for (int c = r; c <= k; ++c) m[c] += ar * row[static_cast<size_t>(c)];
+      atb.at<double>(r) += ar * v;
+    }
+  }
+  for (int r = 0; r <= k; ++r)
+    for (int c = 0; c < r; ++c) ata.at<double>(r, c) = ata.at<double>(c, r);
+  cv::Mat x;
+  if (!cv::solve(ata, atb, x, cv::DECOMP_SVD)) return;
+  for (int i = 0; i <= k; ++i) weights_[static_cast<size_t>(i)] = x.at<double>(i);
+}
+
+bool Tracker::align(const Level& level, const cv::Mat& frame_hp, int iterations, cv::Matx23d& w) const {
+  const size_t n = level.points.size();
+  std::vector<float> t, gx, gy, value(n);
+  combine(level.hp, weights_, t);
+  combine(level.gx, weights_, gx);
+  combine(level.gy, weights_, gy);
+  double mean = 0;
+  for (float v : t) mean += v;
+  mean /= static_cast<double>(n);
+  double t_norm = 0;
+  for (float& v : t) {
+    v -= static_cast<float>(mean);
+    t_norm += double(v) * v;
+  }
+  t_norm = std::sqrt(t_norm);
+  if (!(t_norm > 0)) return false;
+  // steepest descent images of the affine warp [1+p0 p2 p4; p1 1+p3 p5] and the Hessian
+  cv::Matx66d h = cv::Matx66d::zeros();
+  std::vector<cv::Vec6f> sd(n);
+  for (size_t j = 0; j < n; ++j) {
+    const float x = level.points[j].x, y = level.points[j].y;
+    sd[j] = cv::Vec6f(gx[j] * x, gy[j] * x, gx[j] * y, gy[j] * y, gx[j], gy[j]);
+    for (int r = 0; r < 6; ++r)
+      for (int c = r; c < 6; ++c) h(r, c) += double(sd[j][r]) * sd[j][c];
+  }
+  for (int r = 0; r < 6; ++r)
+    for (int c = 0; c < r; ++c) h(r, c) = h(c, r);
+  cv::Matx66d h_inv;
+  if (cv::invert(h, h_inv, cv::DECOMP_CHOLESKY) == 0) return false;
+  // the farthest the update can move a pixel of the level's crop
+  float extent_x = 0, extent_y = 0;
+  for (const auto& p : level.points) extent_x = std::max(extent_x, p.x), extent_y = std::max(extent_y, p.y);
+  for (int it = 0; it < iterations; ++it) {
+    const float a00 = float(w(0, 0)), a01 = float(w(0, 1)), a02 = float(w(0, 2)), a10 = float(w(1, 0)),
+                a11 = float(w(1, 1)), a12 = float(w(1, 2));
+    double sum = 0;
+    for (size_t j = 0; j < n; ++j) {
+      const float x = level.points[j].x, y = level.points[j].y;
+      value[j] = sample(frame_hp, a00 * x + a01 * y + a02, a10 * x + a11 * y + a12);
+      sum += value[j];
+    }
+    const float m = static_cast<float>(sum / static_cast<double>(n));
+    double i_norm = 0;
+    for (float& v : value) {
+      v -= m;
+      i_norm += double(v) * v;
+    }
+    i_norm = std::sqrt(i_norm);
+    if (!(i_norm > 0)) return false;
+    const float gain = static_cast<float>(t_norm / i_norm);
+    cv::Vec6d b(0, 0, 0, 0, 0, 0);
+    for (size_t j = 0; j < n; ++j) {
+      const double e = double(gain * value[j] - t[j]);
+      for (int r = 0; r < 6; ++r) b[r] += sd[j][r] * e;
+    }
+    const cv::Vec6d d = h_inv * b;
+    if (!std::isfinite(d[0] + d[1] + d[2] + d[3] + d[4] + d[5])) return false;
+    const cv::Matx33d step(1 + d[0], d[2], d[4], d[1], 1 + d[3], d[5], 0, 0, 1);
+    w = to23(to33(w) * step.inv());
+    const double moved = std::max({std::hypot(d[4], d[5]), std::hypot(d[0] * extent_x + d[4], d[1] * extent_x + d[5]),
+                                   std::hypot(d[2] * extent_y + d[4], d[3] * extent_y + d[5]),
+                                   std::hypot(d[0] * extent_x + d[2] * extent_y + d[4],
+                                              d[1] * extent_x + d[3] * extent_y + d[5])});
+    if (moved < options_.epsilon) break;
+  }
+  return std::isfinite(w(0, 0) + w(0, 1) + w(0, 2) + w(1, 0) + w(1, 1) + w(1, 2));
+}
+
+double Tracker::correlation(const cv::Mat& frame_hp, const cv::Matx23d& w) const {
+  std::vector<float> t;
+  combine(region_hp_, weights_, t);
+  const size_t n = t.size();
+  if (n < 2) return 0;
+  double st = 0, si = 0, stt = 0, sii = 0, sti = 0;
+  for (size_t j = 0; j < n; ++j) {
+    const float x = region_points_[j].x, y = region_points_[j].y;
+    const double v = sample(frame_hp, float(w(0, 0) * x + w(0, 1) * y + w(0, 2)), float(w(1, 0) * x + w(1, 1) * y + w(1, 2)));
+    st += t[j];
+    si += v;
+    stt += double(t[j]) * t[j];
+    sii += v * v;
+    sti += t[j] * v;
+  }
+  const double nn = static_cast<double>(n);
+  const double cov = sti - st * si / nn, vt = stt - st * st / nn, vi = sii - si * si / nn;
+  return vt > 0 && vi > 0 ? cov / std::sqrt(vt * vi) : 0.0;
+}
+
+TrackResult Tracker::track(const cv::Mat& frame) {
+  TrackResult r;
+  r.still_to_frame = last_;
+  if (!ready() || frame.empty()) {
+    r.lost = true;
+    return r;
+  }
+  // The warp estimated maps the crop's pixels to the frame's:
+  // W_crop = [L | L o + t] for the crop's offset o.
+  const cv::Matx22d l0(last_(0, 0), last_(0, 1), last_(1, 0), last_(1, 1));
+  const cv::Vec2d o(crop_.x, crop_.y);
+  const cv::Vec2d t0 = l0 * o + cv::Vec2d(last_(0, 2), last_(1, 2));
+  // Only the part of the frame where the object can be is read: the crop
+  // carried by the last estimate, grown by the motion allowed per frame.
+  // Its corner and sides are multiples of the coarsest factor, so the levels
+  // reduce it exactly.
+  const int coarsest = levels_.back().factor;
+  cv::Rect roi;
+  {
+    std::vector<cv::Point2f> corners;
+    for (cv::Point2d c : {cv::Point2d(0, 0), cv::Point2d(crop_.width, 0), cv::Point2d(0, crop_.height),
+                          cv::Point2d(crop_.width, crop_.height)})
+      corners.emplace_back(float(l0(0, 0) * c.x + l0(0, 1) * c.y + t0[0]), float(l0(1, 0) * c.x + l0(1, 1) * c.y + t0[1]));
+    cv::Rect box = cv::boundingRect(corners);
+    const int grow = options_.search_px + coarsest;
+    int x0 = std::max(0, box.x - grow) / coarsest * coarsest, y0 = std::max(0, box.y - grow) / coarsest * coarsest;
+    int x1 = std::min(frame.cols, box.x + box.width + grow), y1 = std::min(frame.rows, box.y + box.height + grow);
+    roi = cv::Rect(x0, y0, std::max(0, (x1 - x0) / coarsest * coarsest), std::max(0, (y1 - y0) / coarsest * coarsest));
+  }
+  if (roi.width < 8 * coarsest || roi.height < 8 * coarsest) {
+    r.lost = true;  // the object has left the frame
+    return r;
+  }
+  cv::Mat gray = linear_gray(frame(roi), options_.frames_srgb);
+  if (gray.empty()) gray = to_gray32(frame(roi));
+  // crop -> ROI at full size
+  cv::Matx23d w(l0(0, 0), l0(0, 1), t0[0] - roi.x, l0(1, 0), l0(1, 1), t0[1] - roi.y);
+  std::vector<cv::Mat> frame_levels(levels_.size()), frame_hp(levels_.size());
+  for (size_t i = 0; i < levels_.size(); ++i) {
+    const int f = levels_[i].factor;
+    if (f == 1) frame_levels[i] = gray;
+    else  // an exact reduction: the sides are multiples of f
+      cv::resize(gray, frame_levels[i], cv::Size(gray.cols / f, gray.rows / f), 0, 0, cv::INTER_AREA);
+    frame_hp[i] = high_pass(frame_levels[i],
+                            std::max(2.0, options_.highpass_sigma_px / f) * (options_.highpass_sigma_px > 0));
+  }
+  bool ok = true;
+  for (int round = 0; round < options_.relight_rounds && ok; ++round) {
+    relight(frame_levels[0], to_level(w, levels_[0].factor));
+    for (int i = static_cast<int>(levels_.size()) - 1; i >= 0 && ok; --i) {
+      const int f = levels_[static_cast<size_t>(i)].factor;
+      cv::Matx23d wl = to_level(w, f);
+      ok = align(levels_[static_cast<size_t>(i)], frame_hp[static_cast<size_t>(i)],
+                 options_.iterations * (i > 0 ? 2 : 1), wl);
+      if (ok) w = to_full(wl, f);
+    }
+  }
+  const double rho = ok ? correlation(frame_hp[0], to_level(w, levels_[0].factor)) : 0.0;
+  r.correlation = rho;
+  if (!ok || !(rho >= options_.seed_correlation)) {
+    r.lost = true;
+    return r;
+  }
+  const cv::Matx22d l(w(0, 0), w(0, 1), w(1, 0), w(1, 1));
+  const cv::Vec2d t = cv::Vec2d(w(0, 2) + roi.x, w(1, 2) + roi.y) - l * o;
+  // A doubtful estimate is not shown, but it still seeds the next frame:
+  // kept at the old place, the object only gets further away.
+  last_ = cv::Matx23d(l(0, 0), l(0, 1), t[0], l(1, 0), l(1, 1), t[1]);
+  r.lost = !(rho >= options_.min_correlation);
+  if (!r.lost) r.still_to_frame = last_;
+  return r;
+}
+
+cv::Mat alignment_picture(const cv::Mat& frame, const cv::Mat& mask, const TrackResult& result) {
+  cv::Mat out = frame.clone();
+  if (out.type() != CV_8UC3) return out;
+  std::vector<std::vector<cv::Point>> contours;
+  cv::findContours(mask.clone(), contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
+  const cv::Scalar colour = result.lost ? cv::Scalar(0, 0, 255) : cv::Scalar(0, 255, 0);
+  const int shift = 4;  // sub-pixel drawing: coordinates in 1/16 px
+  for (const auto& contour : contours) {
+    std::vector<cv::Point> moved;
+    for (const auto& p : contour) {
+      const cv::Vec2d q = result.still_to_frame * cv::Vec3d(p.x, p.y, 1);
+      moved.emplace_back(cvRound(q[0] * (1 << shift)), cvRound(q[1] * (1 << shift)));
+    }
+    cv::polylines(out, std::vector<std::vector<cv::Point>>{moved}, true, colour, 1, cv::LINE_AA, shift);
+  }
+  char text[64];
+  if (!result.lost && result.correlation <= 0)  // no registration ran (--no-track)
+    std::snprintf(text, sizeof text, "stills' pose, not registered");
+  else
+    std::snprintf(text, sizeof text, "%s  ECC %.2f", result.lost ? "LOST - hold still / recapture" : "tracked",
+                  result.correlation);
+  const double font = std::max(0.35, out.cols / 1400.0);
+  cv::putText(out, text, {6, std::max(14, out.rows / 14)}, cv::FONT_HERSHEY_SIMPLEX, font, colour, 1, cv::LINE_AA);
+  return out;
+}
+
+double motion_error_px(const cv::Matx23d& a, const cv::Matx23d& b, const cv::Mat& mask) {
+  const cv::Matx23d d = a - b;
+  double sum = 0;
+  long n = 0;
+  for (int y = 0; y < mask.rows; ++y) {
+    const uint8_t* m = mask.ptr<uint8_t>(y);
+    for (int x = 0; x < mask.cols; ++x) {
+      if (!m[x]) continue;
+      const double dx = d(0, 0) * x + d(0, 1) * y + d(0, 2), dy = d(1, 0) * x + d(1, 1) * y + d(1, 2);
+      sum += std::sqrt(dx * dx + dy * dy);
+      ++n;
+    }
+  }
+  return n ? sum / n : 0.0;
+}
+
+}  // namespace veneer::repaint
