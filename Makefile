@@ -1,7 +1,7 @@
 # Veneer — the front door.
 #   make          install what is missing (tools/install-deps), build into build/ (programs in build/bin/)
-#   make demo     install what is missing, build the programs the demo runs (veneerd, veneer;
-#                 veneer-viewer with a display), run the main job on the simulated rig
+#   make demo     install what is missing, build the programs the demo runs (veneerd, veneer),
+#                 run the main job on the simulated rig (and veneer-viewer, if built, with a display)
 #   make test     install what is missing, build everything (tests, benchmarks), run every test (CTest)
 #   make bench    run the benchmarks and print their tables
 #   make asan     address/undefined-sanitizer build + tests in build-asan/
@@ -38,10 +38,8 @@ build: configure
 # What tools/demo.sh runs, and the libraries they link: nothing else.
 demo: deps
 	@$(MAKE) --no-print-directory configure
-	@targets="veneerd veneer"; \
-	if [ -n "$$DISPLAY" ] && ninja -C $(BUILD) -t targets all | grep -q '^veneer-viewer:'; then targets="$$targets veneer-viewer"; fi; \
-	echo "make demo: building $$targets (make test builds the rest: tests, benchmarks)"; \
-	cmake --build $(BUILD) -j $(JOBS) --target $$targets
+	@echo "make demo: building veneerd and veneer (make builds veneer-viewer, make test the tests and benchmarks)"
+	cmake --build $(BUILD) -j $(JOBS) --target veneerd veneer
 	tools/demo.sh $(BUILD)
 
 test: deps

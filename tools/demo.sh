@@ -9,8 +9,8 @@
 #  7. the thesis's figures 5.2-5.13 re-made on the simulated pairs
 #  8. with a display: veneer-viewer connected to the simulated rig
 # Everything it writes lands in demo-out/. It runs build/bin/veneerd and
-# build/bin/veneer (and veneer-viewer with a display): `make demo` builds only
-# those (Makefile DEMO_TARGETS), not the tests and benchmarks.
+# build/bin/veneer: `make demo` builds only those, not the tests and benchmarks;
+# with a display it also opens veneer-viewer when `make` has built it.
 set -euo pipefail
 build="${1:-build}"
 root="$(cd "$(dirname "$0")/.." && pwd)"
@@ -59,6 +59,9 @@ step "live view: the source under a moving hand-held lamp, repainted onto the de
 step "the thesis's figures on the simulated pairs"
 "$bin/veneer" figures --out "$out/figures"
 
+if [ -n "${DISPLAY:-}" ] && [ ! -x "$bin/veneer-viewer" ]; then
+  step "veneer-viewer is not built (make demo builds veneerd and veneer only): 'make' builds it"
+fi
 if [ -n "${DISPLAY:-}" ] && [ -x "$bin/veneer-viewer" ]; then
   step "opening veneer-viewer on the simulated rig (close the window to end the demo)"
   "$bin/veneer-viewer" --rig "127.0.0.1:$port" --token-file "$store/token" \
