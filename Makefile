@@ -1,10 +1,14 @@
 # Veneer — the front door.
 #   make          install what is missing (tools/install-deps), build into build/ (programs in build/bin/)
-#   make demo     install what is missing, build, run the main job on the simulated rig
-#   make test     install what is missing, build, run every test (CTest)
+#   make demo     install what is missing, build the programs the demo runs (veneerd, veneer),
+#                 run the main job on the simulated rig (and veneer-viewer, if built, with a display)
+#   make test     install what is missing, build everything (tests, benchmarks), run every test (CTest)
 #   make bench    run the benchmarks and print their tables
 #   make asan     address/undefined-sanitizer build + tests in build-asan/
 #   make fuzz     build the libFuzzer targets with clang and run each briefly
+#   make package  Debian packages into build-package/: veneerd (arm64, cross-built, and amd64),
+#                 veneer and veneer-viewer (amd64); lintian; then package-test
+#   make package-test  install them into fresh Debian 12 roots (amd64, arm64 under qemu-user) and run them
 
 BUILD      ?= build
 BUILD_TYPE ?= Release
@@ -12,7 +16,9 @@ JOBS       ?= $(shell nproc)
 CMAKE_ARGS ?=
 FUZZ_SECONDS ?= 30
 
-.PHONY: all deps configure build demo test bench asan fuzz clean
+PACKAGE_OUT ?= build-package
+
+.PHONY: all deps configure build demo test bench asan fuzz package package-deps package-test clean
 
 all: deps
 	@$(MAKE) --no-print-directory build
@@ -29,8 +35,11 @@ configure: $(BUILD)/build.ninja
 build: configure
 	cmake --build $(BUILD) -j $(JOBS)
 
+# What tools/demo.sh runs, and the libraries they link: nothing else.
 demo: deps
-	@$(MAKE) --no-print-directory build
+	@$(MAKE) --no-print-directory configure
+	@echo "make demo: building veneerd and veneer (make builds veneer-viewer, make test the tests and benchmarks)"
+	cmake --build $(BUILD) -j $(JOBS) --target veneerd veneer
 	tools/demo.sh $(BUILD)
 
 test: deps
@@ -51,5 +60,18 @@ fuzz: deps
 	cmake --build build-fuzz -j $(JOBS) --target fuzz-all
 	tools/fuzz.sh build-fuzz $(FUZZ_SECONDS)
 
+# Debian packages (tools/package/build.sh) and their install test
+# (tools/package/test.sh); the cross toolchain, lintian, debootstrap and
+# qemu-user-static come from tools/debian-packages-package.txt, installed here only.
+package-deps:
+	@tools/install-package-deps
+
+package: deps package-deps
+	JOBS=$(JOBS) tools/package/build.sh $(PACKAGE_OUT)
+	tools/package/test.sh $(PACKAGE_OUT)
+
+package-test: package-deps
+	tools/package/test.sh $(PACKAGE_OUT)
+
 clean:
-	rm -rf $(BUILD) build-asan build-fuzz demo-out
+	rm -rf $(BUILD) build-asan build-fuzz demo-out $(PACKAGE_OUT)

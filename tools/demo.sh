@@ -4,11 +4,13 @@
 #  2. press the rig's button twice: destination (bull), then source (orange)
 #  3. pull both sets over the rig API
 #  4. photometric stereo on each (normal maps, albedo, masks)
-#  5. correspondence map + the destination repainted in the source's look
+#  5. correspondence map (method combined) + the destination repainted in the source's look
 #  6. a few live-view frames of the source, repainted onto the destination
 #  7. the thesis's figures 5.2-5.13 re-made on the simulated pairs
 #  8. with a display: veneer-viewer connected to the simulated rig
-# Everything it writes lands in demo-out/.
+# Everything it writes lands in demo-out/. It runs build/bin/veneerd and
+# build/bin/veneer: `make demo` builds only those, not the tests and benchmarks;
+# with a display it also opens veneer-viewer when `make` has built it.
 set -euo pipefail
 build="${1:-build}"
 root="$(cd "$(dirname "$0")/.." && pwd)"
@@ -46,8 +48,8 @@ step "photometric stereo"
 "$bin/veneer" normals "$out/destination" --out "$out/destination-normals"
 "$bin/veneer" normals "$out/source" --out "$out/source-normals"
 
-step "correspondence + repaint (coherent, the default for textured sources)"
-"$bin/veneer" transfer --dst "$out/destination" --src "$out/source" --out "$out/transfer"
+step "correspondence map + repaint: veneer transfer --method combined (the default: the motion when the destination is the source moved, else coherent chunks of the nearest normals)"
+"$bin/veneer" transfer --method combined --dst "$out/destination" --src "$out/source" --out "$out/transfer"
 "$bin/veneer" inspect --dst "$out/destination" --src "$out/source" --map "$out/transfer" --out "$out/transfer/inspect.png"
 
 step "live view: the source under a moving hand-held lamp, repainted onto the destination"
@@ -57,6 +59,9 @@ step "live view: the source under a moving hand-held lamp, repainted onto the de
 step "the thesis's figures on the simulated pairs"
 "$bin/veneer" figures --out "$out/figures"
 
+if [ -n "${DISPLAY:-}" ] && [ ! -x "$bin/veneer-viewer" ]; then
+  step "veneer-viewer is not built (make demo builds veneerd and veneer only): 'make' builds it"
+fi
 if [ -n "${DISPLAY:-}" ] && [ -x "$bin/veneer-viewer" ]; then
   step "opening veneer-viewer on the simulated rig (close the window to end the demo)"
   "$bin/veneer-viewer" --rig "127.0.0.1:$port" --token-file "$store/token" \

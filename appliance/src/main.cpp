@@ -60,6 +60,7 @@ int main(int argc, char** argv) {
     return veneerd::ptpip_twin_command({argv + 1, argv + argc}, std::cout, std::cerr);
   }
   CLI::App app{"veneerd — the Veneer capture rig daemon (camera, ring of lamps, button; protobuf API on TCP)"};
+  app.set_version_flag("--version", std::string("veneerd ") + VENEER_VERSION);
   veneerd::DaemonOptions o;
   bool check_hardware = false;
   std::string config, scenes = "bull,stone", size = "1024x680", preview_size, listen, store, token_file, log_spec;

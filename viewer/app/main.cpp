@@ -9,9 +9,11 @@ int main(int argc, char** argv) {
   QApplication app(argc, argv);
   QApplication::setApplicationName("veneer-viewer");
   QApplication::setOrganizationName("veneer");
+  QApplication::setApplicationVersion(VENEER_VERSION);
   QCommandLineParser parser;
   parser.setApplicationDescription("Veneer: transfer the look of one object onto another, live.");
   parser.addHelpOption();
+  parser.addVersionOption();
   QCommandLineOption rig("rig", "rig to connect to at start (host:port)", "host:port");
   QCommandLineOption token("token-file", "the rig's access token file", "file");
   QCommandLineOption dst("dst", "destination image set to load", "folder");

@@ -37,6 +37,7 @@ void ProgressBar::done() {
 
 int main(int argc, char** argv) {
   CLI::App app{"veneer — appearance transfer between physical objects (simulate, normals, transfer, rig)"};
+  app.set_version_flag("--version", std::string("veneer ") + VENEER_VERSION);
   app.require_subcommand(1);
   std::string log_spec;
   app.add_option("--log", log_spec, "log levels, e.g. 'debug' or 'Camera=debug,Lamps=warn'");
