@@ -12,6 +12,7 @@
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
 #include "veneer/match/transfer.hpp"
+#include "veneer/pipeline/live.hpp"
 #include "veneer/pipeline/prepare.hpp"
 
 namespace veneer::cli {
@@ -34,6 +35,10 @@ struct TransferArgs {
   std::string photos = "auto", demosaic = demosaic_name(RawOptions{}.demosaic), cache_dir;
   bool raw_half = false, no_cache = false;
   double cache_size_gb = 4.0;
+  // live first (pipeline/live.hpp): only the map at the live view's size
+  bool live = false;
+  int live_width = ReducedOptions{}.width;
+  std::string live_decode = reduced_decode_name(ReducedOptions{}.decode);
 };
 
 ::veneer::cli::Output report{"transfer"};
@@ -117,7 +122,19 @@ int run(const TransferArgs& a) {
   if (!a.src_mask.empty())
     if (auto st = read_mask("--src-mask", a.src_mask, a.src, prep.read, prep.source_mask); !st)
       return report.usage(st.message());
-  pair = pipeline::prepare_pair(a.dst, a.src, options, prep, &reports, reading);
+  pipeline::LiveOptions live;
+  if (a.live) {
+    live.read.width = a.live_width;
+    auto decode = parse_reduced_decode(a.live_decode);
+    if (!decode) return report.usage(decode.message());
+    live.read.decode = *decode;
+    live.destination_mask = prep.destination_mask;
+    live.source_mask = prep.source_mask;
+    if (auto s = live.check(); !s) return report.usage("--live-width / --live-decode: " + s.message());
+    pair = pipeline::prepare_live_pair(a.dst, a.src, options, live, &reports, reading);
+  } else {
+    pair = pipeline::prepare_pair(a.dst, a.src, options, prep, &reports, reading);
+  }
   if (!pair) return report.fail(pair.message());
   auto result = match::transfer(*pair, options, matching);
   if (!result) return report.fail(result.message());
@@ -134,8 +151,17 @@ int run(const TransferArgs& a) {
     metrics["io"] = nlohmann::json::parse(pipeline::reports_json(reports));
     if (!a.dst_mask.empty()) metrics["io"]["dst_mask"] = a.dst_mask;
     if (!a.src_mask.empty()) metrics["io"]["src_mask"] = a.src_mask;
-    metrics["io"]["raw_half_size"] = a.raw_half;
-    metrics["io"]["demosaic"] = a.demosaic;
+    if (a.live) {
+      // what the live map was made from: its width and each set's reduced decode
+      metrics["live"] = {{"live", true},
+                         {"width", a.live_width},
+                         {"decode_asked", a.live_decode},
+                         {"destination_decode", reports.size() > 0 ? reports[0].photos_from : ""},
+                         {"source_decode", reports.size() > 1 ? reports[1].photos_from : ""}};
+    } else {
+      metrics["io"]["raw_half_size"] = a.raw_half;
+      metrics["io"]["demosaic"] = a.demosaic;
+    }
     metrics["timings"]["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_wall).count();
     if (auto s = report.folder(a.out); !s) return report.fail(s.message());  // made by write_transfer
     if (auto s = report.json("metrics.json", metrics); !s) return report.fail(s.message());
@@ -221,5 +247,14 @@ VENEER_COMMAND(transfer) {
   cmd->add_flag("--no-cache", args->no_cache, "neither read nor write the per-set result cache");
   cmd->add_option("--cache-dir", args->cache_dir, "result cache folder (default $XDG_CACHE_HOME/veneer or ~/.cache/veneer)");
   cmd->add_option("--cache-size-gb", args->cache_size_gb, "result cache size cap, GiB (default 4; least recently used go first)");
+  cmd->add_flag("--live", args->live,
+                "live first: only the map at the live view's size (--live-width), from reduced decodes (RAW "
+                "mosaics binned, JPEGs decoded small, RAW previews), with normals and masks at that size, its "
+                "own metrics.json; no result cache");
+  cmd->add_option("--live-width", args->live_width,
+                  "--live: the map's width, px, 64..8192 (default 1280, the live view's; a narrower set keeps its size)");
+  cmd->add_option("--live-decode", args->live_decode,
+                  "--live: auto | raw-binned | jpeg-reduced | raw-preview | developed (default auto: per set, the "
+                  "JPEG at 1/2-1/8 when the photos are JPEGs, else the RAW mosaic binned, else the photos resized)");
   return [args] { return veneer::cli::run(*args); };
 }
