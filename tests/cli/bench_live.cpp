@@ -1,6 +1,6 @@
 // bench_live: live first against LibRaw, whole processes, in one run, at
 // 1024x680 (the demo pair) and 5600x3750 (VENEER_BENCH_FULL=WxH to change,
-// =0 to skip). Per size: the pair simulated as `veneer simulate --optics
+// =0 to skip; VENEER_BENCH_SETS=<folder> keeps and reuses the simulated pairs). Per size: the pair simulated as `veneer simulate --optics
 // --dng` writes it (bull <- orange, 7 lamps + ambient, a DNG beside each
 // PNG), then
 //  - LibRaw decoding the pair's 16 RAW files, linear, AHD, one thread (a
@@ -111,8 +111,13 @@ Row run_size(const std::string& exe, int w, int h, const fs::path& dir) {
   Row r;
   r.size = std::to_string(w) + "x" + std::to_string(h);
   const std::string size = r.size;
-  const fs::path dst = dir / "dst", src = dir / "src";
+  // VENEER_BENCH_SETS=<folder>: the pairs are kept in <folder>/<WxH>/{dst,src} and reused
+  // (simulating 5600x3750 takes minutes)
+  const char* keep = std::getenv("VENEER_BENCH_SETS");
+  const fs::path sets = keep ? fs::path(keep) / size : dir;
+  const fs::path dst = sets / "dst", src = sets / "src";
   for (const auto& [scene, role, folder] : {std::tuple{"bull", "destination", dst}, std::tuple{"orange", "source", src}}) {
+    if (fs::exists(folder / "set.json")) continue;
     if (run(kVeneer, {"simulate", "--scene", scene, "--role", role, "--size", size, "--scale", "2.5", "--optics",
                       "--dng", "--out", folder.string()})
             .seconds < 0)
