@@ -70,7 +70,9 @@ Child run(const std::string& bin, const std::vector<std::string>& args, const st
   return c;
 }
 
-const std::string kVeneer = std::string(VENEER_BIN_DIR) + "/veneer";
+// VENEER_BENCH_BIN=<folder>: the `veneer` to run (default: this build's)
+const std::string kVeneer =
+    std::string(std::getenv("VENEER_BENCH_BIN") ? std::getenv("VENEER_BENCH_BIN") : VENEER_BIN_DIR) + "/veneer";
 
 std::vector<std::string> raw_files(const fs::path& set) {
   std::vector<std::string> out;
