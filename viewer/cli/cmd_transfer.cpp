@@ -36,7 +36,7 @@ struct TransferArgs {
   bool raw_half = false, no_cache = false;
   double cache_size_gb = 4.0;
   // live first (pipeline/live.hpp): only the map at the live view's size
-  bool live = false;
+  bool live = false, live_no_truth = false;
   int live_width = ReducedOptions{}.width;
   std::string live_decode = reduced_decode_name(ReducedOptions{}.decode);
 };
@@ -125,6 +125,8 @@ int run(const TransferArgs& a) {
   pipeline::LiveOptions live;
   if (a.live) {
     live.read.width = a.live_width;
+    if (a.live_no_truth && a.truth_normals) return report.usage("--live-no-truth and --truth-normals: the one leaves out what the other needs");
+    live.read.load_truth = !a.live_no_truth;
     auto decode = parse_reduced_decode(a.live_decode);
     if (!decode) return report.usage(decode.message());
     live.read.decode = *decode;
@@ -253,6 +255,9 @@ VENEER_COMMAND(transfer) {
                 "own metrics.json; no result cache");
   cmd->add_option("--live-width", args->live_width,
                   "--live: the map's width, px, 64..8192 (default 1280, the live view's; a narrower set keeps its size)");
+  cmd->add_flag("--live-no-truth", args->live_no_truth,
+                "--live: leave the sets' truth/ unread (simulated sets: quality then measured against the "
+                "segmentation, no normal agreement); reading it at 5600x3750 costs about as much as the photos");
   cmd->add_option("--live-decode", args->live_decode,
                   "--live: auto | raw-binned | jpeg-reduced | raw-preview | developed (default auto: per set, the "
                   "JPEG at 1/2-1/8 when the photos are JPEGs, else the RAW mosaic binned, else the photos resized)");

@@ -53,10 +53,33 @@ bool jpeg_magic(std::string_view b) {
          static_cast<unsigned char>(b[2]) == 0xFF;
 }
 
+// LibRaw with a look at what its parser found about the mosaic's layout.
+class RawPeek : public LibRaw {
+ public:
+  RawPeek() : LibRaw(LIBRAW_OPTIONS_NONE) {}
+  // The mosaic in `bytes` itself when the file stores it plainly -- one
+  // uncompressed strip of little-endian 16-bit samples, no linearisation
+  // curve (the simulated rig's DNGs) -- so unpack(), which copies it sample
+  // by sample through the curve into a buffer of its own, is not needed.
+  const uint16_t* mosaic_in_place(std::string_view bytes) const {
+    const auto& u = libraw_internal_data.unpacker_data;
+    const auto& s = imgdata.sizes;
+    const auto& curve = imgdata.color.curve;
+    const uint64_t need = static_cast<uint64_t>(s.raw_width) * s.raw_height * 2;
+    const bool plain = imgdata.idata.dng_version != 0 && u.tiff_compress == 1 && u.tiff_bps == 16 &&
+                       u.tiff_samples == 1 && u.order == 0x4949 && u.data_offset > 0 && u.data_offset % 2 == 0 &&
+                       static_cast<uint64_t>(u.data_offset) + need <= bytes.size() &&
+                       (u.tile_width == 0 || u.tile_width >= s.raw_width) && curve[1] == 1 && curve[4095] == 4095 &&
+                       curve[65535] == 65535;
+    if (!plain) return nullptr;
+    return reinterpret_cast<const uint16_t*>(bytes.data() + u.data_offset);
+  }
+};
+
 // A LibRaw instance opened on `bytes` (LibRaw's state is large: on the heap).
-Expected<std::unique_ptr<LibRaw>> open_raw(std::string_view bytes, const std::string& name) {
+Expected<std::unique_ptr<RawPeek>> open_raw(std::string_view bytes, const std::string& name) {
   if (bytes.empty()) return make_error(name + ": empty file");
-  auto raw = std::make_unique<LibRaw>(LIBRAW_OPTIONS_NONE);
+  auto raw = std::make_unique<RawPeek>();
   int r = raw->open_buffer(const_cast<char*>(bytes.data()), bytes.size());
   if (r != LIBRAW_SUCCESS)
     return make_error(name + ": not a RAW file LibRaw can read (" + std::string(libraw_strerror(r)) + ")");
@@ -93,18 +116,25 @@ Expected<cv::Mat> decode_raw_binned(std::string_view bytes, int factor, const st
     return make_error(name + ": binning factor " + std::to_string(factor) + " is not even in 2..32");
   auto opened = open_raw(bytes, name);
   if (!opened) return opened.error();
-  LibRaw& raw = **opened;
+  RawPeek& raw = **opened;
   if (raw.imgdata.idata.colors != 3 || raw.imgdata.idata.filters < 1000)
     return make_error(name + ": only Bayer (RGB colour filter array) RAW files can be binned");
-  int r = raw.unpack();
-  if (r != LIBRAW_SUCCESS) return make_error(name + ": cannot unpack RAW data (" + std::string(libraw_strerror(r)) + ")");
-  const auto& rd = raw.imgdata.rawdata;
-  if (!rd.raw_image) return make_error(name + ": the RAW file has no single-channel Bayer mosaic to bin");
   const auto& s = raw.imgdata.sizes;
+  const uint16_t* mosaic = raw.mosaic_in_place(bytes);
+  size_t pitch = s.raw_width;
+  if (!mosaic) {
+    int r = raw.unpack();
+    if (r != LIBRAW_SUCCESS)
+      return make_error(name + ": cannot unpack RAW data (" + std::string(libraw_strerror(r)) + ")");
+    mosaic = raw.imgdata.rawdata.raw_image;
+    if (!mosaic) return make_error(name + ": the RAW file has no single-channel Bayer mosaic to bin");
+    if (s.raw_pitch < 2u * s.raw_width) return make_error(name + ": the RAW file's mosaic rows are too short");
+    pitch = s.raw_pitch / 2;
+  }
   const int w = s.width, h = s.height;
   const int ow = w / factor, oh = h / factor;
   if (ow < 1 || oh < 1) return make_error(name + ": " + std::to_string(w) + "x" + std::to_string(h) + " is too small to bin by " + std::to_string(factor));
-  if (s.top_margin + h > s.raw_height || s.left_margin + w > s.raw_width || s.raw_pitch < 2u * s.raw_width)
+  if (s.top_margin + h > s.raw_height || s.left_margin + w > s.raw_width)
     return make_error(name + ": the RAW file's visible area lies outside its mosaic");
   const auto& C = raw.imgdata.color;
 
@@ -164,7 +194,6 @@ Expected<cv::Mat> decode_raw_binned(std::string_view bytes, int factor, const st
   weight[1] = weight[static_cast<size_t>(factor)] = 0.75f;
 
   cv::Mat out(oh, ow, CV_32FC3);
-  const size_t pitch = s.raw_pitch / 2;
   cv::parallel_for_(cv::Range(0, oh), [&](const cv::Range& range_rows) {
     std::vector<float> sums(static_cast<size_t>(ow) * 3);
     for (int oy = range_rows.start; oy < range_rows.end; ++oy) {
@@ -172,7 +201,7 @@ Expected<cv::Mat> decode_raw_binned(std::string_view bytes, int factor, const st
       for (int dy = 0; dy < factor + 2; ++dy) {
         const int y = mirror(oy * factor - 1 + dy, h);
         const float wy = weight[static_cast<size_t>(dy)];
-        const uint16_t* row = rd.raw_image + (static_cast<size_t>(s.top_margin) + y) * pitch + s.left_margin;
+        const uint16_t* row = mosaic + (static_cast<size_t>(s.top_margin) + y) * pitch + s.left_margin;
         const int ce = color[y & 1][0], co = color[y & 1][1];
         float* sum = sums.data();
         for (int ox = 0; ox < ow; ++ox, sum += 3) {
@@ -250,7 +279,7 @@ Expected<cv::Mat> decode_jpeg_reduced(std::string_view bytes, int factor, const 
 Expected<cv::Mat> decode_raw_preview(std::string_view bytes, const std::string& name) {
   auto opened = open_raw(bytes, name);
   if (!opened) return opened.error();
-  LibRaw& raw = **opened;
+  RawPeek& raw = **opened;
   int r = raw.unpack_thumb();
   if (r != LIBRAW_SUCCESS)
     return make_error(name + ": no embedded preview LibRaw can read (" + std::string(libraw_strerror(r)) + ")");
