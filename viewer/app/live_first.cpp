@@ -17,6 +17,9 @@
 #include "qt_convert.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/pipeline/prepare.hpp"
+#include "image_view.hpp"
+#include "sphere_pad.hpp"
+#include "veneer/ps/photometric_stereo.hpp"
 #include "widgets.hpp"
 
 namespace veneer::app {
@@ -32,6 +35,7 @@ struct FullResolution {
   QImage result_image;
   std::shared_ptr<veneer::match::LiveSession> session;
   std::shared_ptr<veneer::match::Relighter> relighter;
+  QImage relit, relit_source;  // the relight views for `light`, made by the job
   QString error;
 };
 
@@ -72,9 +76,10 @@ void MainWindow::flowMaybeFullResolution() {
   const QString dst_folder = dst_->folder, src_folder = src_->folder;
   const auto options = shown_.options;
   const int generation = sets_loaded_;
+  const cv::Vec3d light = relight_pad_->direction();
   auto cancel = full_cancel_;
   QPointer<MainWindow> self(this);
-  (void)QtConcurrent::run(job_pool(), [self, dst_folder, src_folder, options, generation, cancel] {
+  (void)QtConcurrent::run(job_pool(), [self, dst_folder, src_folder, options, generation, cancel, light] {
     auto report = [self](double f, const std::string& stage) {
       const QString s = qs(stage);
       if (self)
@@ -113,14 +118,25 @@ void MainWindow::flowMaybeFullResolution() {
         out.session = std::make_shared<veneer::match::LiveSession>(out.src->set.images, pair->src.view.mask,
                                                                    out.result->map, out.result->source_size,
                                                                    out.dst->median_picture, out.result->blend);
+        // the Look tab's normals, albedo and mask views: the pair's
+        for (auto [l, o] : {std::pair{out.dst.get(), &pair->dst}, std::pair{out.src.get(), &pair->src}}) {
+          veneer::ps::PsResult ps;
+          ps.normals = o->view.normals;
+          ps.mask = o->view.mask;
+          l->normals.emplace(std::move(ps));
+        }
         auto fitted = veneer::match::Relighter::fit(out.src->set);
-        if (fitted) out.relighter = std::make_shared<veneer::match::Relighter>(std::move(*fitted));
+        if (fitted) {
+          out.relighter = std::make_shared<veneer::match::Relighter>(std::move(*fitted));
+          out.relit = to_qimage(picture_of(out.relighter->render(out.result->map, light, out.dst->median * 0.25)));
+          out.relit_source = to_qimage(picture_of(out.relighter->render_source(light)));
+        }
         out.pair = std::make_shared<const veneer::match::PreparedPair>(std::move(*pair));
       }
     }
     (void)veneer::pipeline::finish_cache_writes();
     if (!self) return;
-    QMetaObject::invokeMethod(self.data(), [self, out, generation, cancel] {
+    QMetaObject::invokeMethod(self.data(), [self, out, generation, cancel, light] {
       if (!self) return;
       self->full_running_ = false;
       self->full_step_.finish();
@@ -152,7 +168,13 @@ void MainWindow::flowMaybeFullResolution() {
                                      .arg(out.result->map.xy.rows));
       self->message(tr("full-resolution map swapped in (%1x%2)").arg(out.result->map.xy.cols).arg(out.result->map.xy.rows));
       self->refreshLook();
-      self->refreshRelight();
+      if (out.relighter && light == self->relight_pad_->direction()) {
+        self->relight_view_->setImage(out.relit);
+        self->relight_src_view_->setImage(out.relit_source);
+        self->updateRelightLabel(light);
+      } else {
+        self->refreshRelight();
+      }
     });
   });
 }
