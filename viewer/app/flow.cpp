@@ -13,6 +13,7 @@
 #include "main_window.hpp"
 #include "qt_convert.hpp"
 #include "veneer/io/image_io.hpp"
+#include "veneer/io/reduced.hpp"
 #include "widgets.hpp"
 
 namespace veneer::app {
@@ -78,6 +79,23 @@ cv::Mat thumbnail_of(const veneer::ImageSet& set) {
 }
 }  // namespace
 
+namespace {
+// A set at the live view's width; `smaller` says whether that is smaller than the set.
+// A set no wider is read whole, as before (the map is then the full-resolution one).
+veneer::Expected<veneer::ImageSet> read_live_size(const std::string& folder, int width, bool* smaller) {
+  veneer::ReadOptions manifest;
+  manifest.load_photos = false;
+  manifest.load_truth = false;
+  auto whole = veneer::read_set(folder, manifest);
+  if (!whole || whole->size.width <= width) return veneer::read_set(folder);
+  veneer::ReducedOptions o;
+  o.width = width;
+  auto set = veneer::read_set_reduced(folder, o);
+  *smaller = set && set->size.width < whole->size.width;
+  return set;
+}
+}  // namespace
+
 void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer::Role> as) {
   ++loads_running_;
   const QString name = QFileInfo(folder).fileName();
@@ -88,17 +106,22 @@ void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer
     showStep();
   }
   const bool full = as.has_value();
+  // live first: the flow's sets at the live view's width (live_first.cpp)
+  const int live_width = full && autoFlow() ? live_width_ : 0;
   QPointer<MainWindow> self(this);
   auto cancel = load_cancel_;
-  (void)QtConcurrent::run(job_pool(), [self, folder, as, full, cancel] {
+  (void)QtConcurrent::run(job_pool(), [self, folder, as, full, cancel, live_width] {
     ReadSet r;
-    auto read = veneer::read_set(folder.toStdString());
+    bool live_size = false;
+    auto read = live_width > 0 ? read_live_size(folder.toStdString(), live_width, &live_size)
+                               : veneer::read_set(folder.toStdString());
     if (!read) {
       r.error = qs(read.message());
     } else {
       r.loaded = std::make_shared<LoadedSet>();
       r.loaded->folder = folder;
       r.loaded->set = std::move(*read);
+      r.loaded->live_size = live_size;
       r.thumbnail = thumbnail_of(r.loaded->set);
       if (full) {
         r.loaded->median = veneer::repaint::median_photo(r.loaded->set.images);
@@ -151,6 +174,7 @@ void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer
 void MainWindow::cancelStep() {
   if (computing_) cancelTransfer();
   if (job_running_) job_cancel_ = true;
+  if (full_running_) full_cancel_->store(true);
   if (rig_.pulling()) {
     rig_.cancelPulls();
     auto_pulls_.clear();

@@ -56,6 +56,7 @@ struct LoadedSet {
   cv::Mat histogram;                            // ... its 64-bin luminance histogram (CV_32F)
   cv::Mat hand_mask;  // segmentation by hand (CV_8UC1, 255 = object); empty = automatic
   int hand_version = 0;
+  bool live_size = false;  // read at the live view's width (reduced decode), smaller than the set
 };
 
 class MainWindow : public QMainWindow {
@@ -143,6 +144,17 @@ class MainWindow : public QMainWindow {
   // normals --lights` reads) and shows the circle and highlights found.
   bool calibrateLamps(const QString& sphere_folder, const QString& lights_file);
   QImage calibrationImage() const { return calibration_image_; }
+
+  // Live first (live_first.cpp): the automatic flow loads the pulled sets at
+  // the live view's width through reduced decodes (io/reduced.hpp), goes live
+  // on that map, then makes the full-resolution map in the background (the
+  // pipeline's, as `veneer transfer` makes it) with progress and time left in
+  // the status bar, and swaps it in when done. 0 = off: full resolution first.
+  void setLiveWidth(int px) { live_width_ = px; }
+  int liveWidth() const { return live_width_; }
+  bool fullResolutionRunning() const { return full_running_; }
+  int fullResolutionSwaps() const { return full_swaps_; }  // full-resolution maps swapped in
+  QString fullResolutionLine() const;
 
  private:
   void addCalibrationMenu(QMenu* menu);
@@ -289,6 +301,15 @@ class MainWindow : public QMainWindow {
   QRect seg_rect_;
   QString pending_role_;  // "destination"/"source" while a UI capture runs
   std::function<void(veneer::Role)> capture_;  // the Capture panel's settings, used by both capture rows
+  // live first (live_first.cpp)
+  void flowMaybeFullResolution();
+  int live_width_ = 1280;
+  bool full_running_ = false;
+  int full_swaps_ = 0;
+  std::shared_ptr<std::atomic<bool>> full_cancel_ = std::make_shared<std::atomic<bool>>(false);
+  StepClock full_step_;
+  QLabel* full_label_ = nullptr;
+  QProgressBar* full_bar_ = nullptr;
   StepClock step_;
   QTimer step_timer_;  // redraws the status line so the time left counts down
   std::map<QString, veneer::Role> auto_pulls_;  // rig set id -> role, pulled by the flow

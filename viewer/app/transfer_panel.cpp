@@ -513,6 +513,7 @@ void MainWindow::onTransferDone() {
   }
   if (!result_->map_given) saveMapToLibrary();
   flowMaybeGoLive();
+  flowMaybeFullResolution();  // live on a live-size map: the full resolution behind it
 }
 
 }  // namespace veneer::app

@@ -12,6 +12,7 @@
 #include "output.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
+#include "veneer/pipeline/live.hpp"
 #include "veneer/pipeline/prepare.hpp"
 #include "veneer/pipeline/transfer.hpp"
 #include "veneer/repaint/rti_export.hpp"
@@ -41,6 +42,10 @@ struct TransferArgs {
   double cache_size_gb = 4.0;
   // the repainted destination as a relightable file (repaint/rti_export.hpp)
   std::string rti, rti_format = "lrgb";
+  // live first (pipeline/live.hpp): only the map at the live view's size
+  bool live = false, live_no_truth = false;
+  int live_width = ReducedOptions{}.width;
+  std::string live_decode = reduced_decode_name(ReducedOptions{}.decode);
 };
 
 ::veneer::cli::Output report{"transfer"};
@@ -145,7 +150,21 @@ int run(const TransferArgs& a) {
   if (!a.src_mask.empty())
     if (auto st = read_mask("--src-mask", a.src_mask, a.src, prep.read, prep.source_mask); !st)
       return report.usage(st.message());
-  pair = pipeline::prepare_pair(a.dst, a.src, options, prep, &reports, reading);
+  pipeline::LiveOptions live;
+  if (a.live) {
+    live.read.width = a.live_width;
+    if (a.live_no_truth && a.truth_normals) return report.usage("--live-no-truth and --truth-normals: the one leaves out what the other needs");
+    live.read.load_truth = !a.live_no_truth;
+    auto decode = parse_reduced_decode(a.live_decode);
+    if (!decode) return report.usage(decode.message());
+    live.read.decode = *decode;
+    live.destination_mask = prep.destination_mask;
+    live.source_mask = prep.source_mask;
+    if (auto s = live.check(); !s) return report.usage("--live-width / --live-decode: " + s.message());
+    pair = pipeline::prepare_live_pair(a.dst, a.src, options, live, &reports, reading);
+  } else {
+    pair = pipeline::prepare_pair(a.dst, a.src, options, prep, &reports, reading);
+  }
   if (!pair) return report.fail(pair.message());
   auto result = pipeline::transfer(*pair, options, matching);
   if (!result) return report.fail(result.message());
@@ -171,8 +190,17 @@ int run(const TransferArgs& a) {
     metrics["io"] = nlohmann::json::parse(pipeline::reports_json(reports));
     if (!a.dst_mask.empty()) metrics["io"]["dst_mask"] = a.dst_mask;
     if (!a.src_mask.empty()) metrics["io"]["src_mask"] = a.src_mask;
-    metrics["io"]["raw_half_size"] = a.raw_half;
-    metrics["io"]["demosaic"] = a.demosaic;
+    if (a.live) {
+      // what the live map was made from: its width and each set's reduced decode
+      metrics["live"] = {{"live", true},
+                         {"width", a.live_width},
+                         {"decode_asked", a.live_decode},
+                         {"destination_decode", reports.size() > 0 ? reports[0].photos_from : ""},
+                         {"source_decode", reports.size() > 1 ? reports[1].photos_from : ""}};
+    } else {
+      metrics["io"]["raw_half_size"] = a.raw_half;
+      metrics["io"]["demosaic"] = a.demosaic;
+    }
     if (rti) {
       metrics["rti"] = nlohmann::json::parse(rti->json());
       metrics["rti"]["file"] = a.rti;
@@ -271,5 +299,17 @@ VENEER_COMMAND(transfer) {
   cmd->add_flag("--no-cache", args->no_cache, "neither read nor write the per-set result cache");
   cmd->add_option("--cache-dir", args->cache_dir, "result cache folder (default $XDG_CACHE_HOME/veneer or ~/.cache/veneer)");
   cmd->add_option("--cache-size-gb", args->cache_size_gb, "result cache size cap, GiB (default 4; least recently used go first)");
+  cmd->add_flag("--live", args->live,
+                "live first: only the map at the live view's size (--live-width), from reduced decodes (RAW "
+                "mosaics binned, JPEGs decoded small, RAW previews), with normals and masks at that size, its "
+                "own metrics.json; no result cache");
+  cmd->add_option("--live-width", args->live_width,
+                  "--live: the map's width, px, 64..8192 (default 1280, the live view's; a narrower set keeps its size)");
+  cmd->add_flag("--live-no-truth", args->live_no_truth,
+                "--live: leave the sets' truth/ unread (simulated sets: quality then measured against the "
+                "segmentation, no normal agreement); reading it at 5600x3750 costs about as much as the photos");
+  cmd->add_option("--live-decode", args->live_decode,
+                  "--live: auto | raw-binned | jpeg-reduced | raw-preview | developed (default auto: per set, the "
+                  "JPEG at 1/2-1/8 when the photos are JPEGs, else the RAW mosaic binned, else the photos resized)");
   return [args] { return veneer::cli::run(*args); };
 }
