@@ -100,8 +100,10 @@ void MainWindow::flowMaybeFullResolution() {
     veneer::pipeline::TransferOptions o = options;
     o.keep_pictures = true;
     std::vector<veneer::pipeline::SetReport> reports;
-    auto pair = veneer::pipeline::prepare_pair(dst_folder.toStdString(), src_folder.toStdString(), o,
-                                               veneer::pipeline::PrepareOptions{}, &reports, progress.part(0, 0.6));
+    veneer::pipeline::PrepareOptions prep;
+    prep.read.raw.demosaic = veneer::Demosaic::mhc;  // as `veneer transfer` reads RAW files (its default)
+    auto pair = veneer::pipeline::prepare_pair(dst_folder.toStdString(), src_folder.toStdString(), o, prep, &reports,
+                                               progress.part(0, 0.6));
     if (!pair) {
       out.error = qs(pair.message());
     } else {

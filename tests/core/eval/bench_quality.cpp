@@ -8,6 +8,7 @@
 
 #include "veneer/eval/metrics.hpp"
 #include "veneer/eval/table.hpp"
+#include "veneer/pipeline/transfer.hpp"
 
 namespace {
 

@@ -27,6 +27,7 @@
 
 #include "veneer/eval/metrics.hpp"
 #include "veneer/match/fast.hpp"
+#include "veneer/pipeline/transfer.hpp"
 #include "veneer/sim/simulator.hpp"
 
 using namespace veneer;

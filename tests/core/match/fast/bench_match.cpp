@@ -37,6 +37,8 @@
 #include "veneer/sim/simulator.hpp"
 
 using namespace veneer::match;
+using veneer::eval::evaluate;
+using veneer::eval::Quality;
 
 namespace {
 
