@@ -292,7 +292,10 @@ Expected<RtiFit> export_ptm(const std::vector<cv::Mat>& photos, const std::vecto
     out += buf;
   }
   out += "\n";
-  for (int k = 0; k < kTerms; ++k) out += (k ? " " : "") + std::to_string(q[static_cast<size_t>(k)].bias);
+  for (int k = 0; k < kTerms; ++k) {  // appended piece by piece: GCC 12's -Wrestrict misreads "..." + string&& (ASan build)
+    if (k) out += ' ';
+    out += std::to_string(q[static_cast<size_t>(k)].bias);
+  }
   out += "\n";
   const size_t header = out.size();
   out.resize(header + bytes.size() + colour.size());
