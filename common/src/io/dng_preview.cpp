@@ -114,21 +114,21 @@ class Tiff {
 Expected<DngPreview> find_preview(Tiff& tiff, const std::string& name) {
   uint32_t first = 0;
   if (!tiff.header(first)) return make_error(name + ": " + tiff.error);
-  std::vector<uint32_t> todo;  // IFD0's chain, then SubIFDs one level down
+  std::vector<uint32_t> pending_ifds;  // IFD0's chain, then SubIFDs one level down
   std::set<uint32_t> seen;
-  for (uint32_t at = first; at != 0 && todo.size() < 8 && seen.insert(at).second;) {
-    todo.push_back(at);
+  for (uint32_t at = first; at != 0 && pending_ifds.size() < 8 && seen.insert(at).second;) {
+    pending_ifds.push_back(at);
     Tiff::Ifd d;
     if (!tiff.ifd(at, d)) return make_error(name + ": " + tiff.error);
     at = d.next;
   }
   DngPreview best;
-  for (size_t i = 0; i < todo.size() && i < 64; ++i) {
+  for (size_t i = 0; i < pending_ifds.size() && i < 64; ++i) {
     Tiff::Ifd d;
-    if (!tiff.ifd(todo[i], d)) return make_error(name + ": " + tiff.error);
+    if (!tiff.ifd(pending_ifds[i], d)) return make_error(name + ": " + tiff.error);
     if (i < 8) {
       for (uint32_t s : d.sub_ifds) {
-        if (s != 0 && seen.insert(s).second) todo.push_back(s);
+        if (s != 0 && seen.insert(s).second) pending_ifds.push_back(s);
       }
     }
     const bool reduced = (d.subfile & 1) != 0;

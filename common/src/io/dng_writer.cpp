@@ -74,7 +74,7 @@ Entry long_array(uint16_t tag, const std::vector<uint32_t>& v) {
 
 // One IFD at file offset `at`: the entry table, then the values that do not
 // fit in an entry. Its length does not depend on the values, so a layout can
-// be measured with placeholders and written again with the real offsets.
+// be measured with zero offsets first and written again with the real ones.
 std::string serialize_ifd(const std::vector<Entry>& entries, uint32_t at) {
   const uint32_t table = 2 + 12 * static_cast<uint32_t>(entries.size()) + 4;
   std::string extra;
