@@ -338,6 +338,13 @@ struct Client::Impl {
           broken = true;
           break;
         }
+        {  // once closed (close() from another thread), nothing more is delivered, even what is already read
+          std::lock_guard lock(mutex);
+          if (closed) {
+            broken = true;
+            break;
+          }
+        }
         dispatch(m, why);
       }
       if (broken) break;
@@ -460,7 +467,11 @@ struct Client::Impl {
     }
     if (c.end_of_set()) {
       std::lock_guard lock(mutex);
-      d->done = true;
+      if (!closed) {
+        d->done = true;
+      } else if (d->error.empty()) {  // closed while this chunk was handled: the set is not taken as whole
+        d->error = "rig connection closed during the download: " + close_reason;
+      }
       cv.notify_all();
     }
   }
