@@ -35,19 +35,19 @@ veneer::Status check_name(const std::string& field, const std::string& value, si
   return {};
 }
 
-veneer::Expected<veneer::Role> decode_role(int role) {
+veneer::Expected<veneer::io::Role> decode_role(int role) {
   switch (role) {
-    case pb::ROLE_UNSPECIFIED: return veneer::Role::unknown;
-    case pb::ROLE_DESTINATION: return veneer::Role::destination;
-    case pb::ROLE_SOURCE: return veneer::Role::source;
+    case pb::ROLE_UNSPECIFIED: return veneer::io::Role::unknown;
+    case pb::ROLE_DESTINATION: return veneer::io::Role::destination;
+    case pb::ROLE_SOURCE: return veneer::io::Role::source;
     default: return make_error("capture.role: unknown role " + std::to_string(role));
   }
 }
 
-pb::Role encode_role(veneer::Role role) {
+pb::Role encode_role(veneer::io::Role role) {
   switch (role) {
-    case veneer::Role::destination: return pb::ROLE_DESTINATION;
-    case veneer::Role::source: return pb::ROLE_SOURCE;
+    case veneer::io::Role::destination: return pb::ROLE_DESTINATION;
+    case veneer::io::Role::source: return pb::ROLE_SOURCE;
     default: return pb::ROLE_UNSPECIFIED;
   }
 }

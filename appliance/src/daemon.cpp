@@ -184,7 +184,7 @@ veneer::Expected<std::unique_ptr<Daemon>> Daemon::create(const DaemonOptions& o)
     SimulatedRig* sim = d->sim_.get();
     Camera* cam = d->camera_;
     ro.sim.scenes = {sim->destination_scene(), sim->source_scene()};
-    ro.sim.select_scene = [sim, cam](veneer::Role role, const std::string&) {
+    ro.sim.select_scene = [sim, cam](veneer::io::Role role, const std::string&) {
       if (auto* sc = as_simulated(cam)) {
         if (auto s = sc->set_scene(sim->scene_for(role)); !s) VLOG_WARN("Camera", "{}", s.message());
       }
@@ -192,10 +192,10 @@ veneer::Expected<std::unique_ptr<Daemon>> Daemon::create(const DaemonOptions& o)
     ro.sim.move_hand_lamp = [cam](const cv::Vec3d& p) {
       if (auto* sc = as_simulated(cam)) sc->set_hand_lamp(p);
     };
-    ro.sim.finish_set = [cam](veneer::ImageSet& set) {
+    ro.sim.finish_set = [cam](veneer::io::ImageSet& set) {
       auto* sc = as_simulated(cam);
       if (!sc) return;
-      veneer::CameraInfo info = sc->camera_info();
+      veneer::io::CameraInfo info = sc->camera_info();
       set.camera.model = info.model.empty() ? set.camera.model : info.model;
       set.camera.focal_px = info.focal_px;
       set.camera.cx = info.cx;

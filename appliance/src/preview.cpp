@@ -37,9 +37,9 @@ veneer::Expected<std::vector<ServedFile>> preview_files(const Store& store, cons
   auto text = store.manifest(id);
   if (!text) return text.error();
   const fs::path folder = store.folder(id);
-  auto manifest = veneer::parse_manifest(*text, folder);
+  auto manifest = veneer::io::parse_manifest(*text, folder);
   if (!manifest) return manifest.error();
-  veneer::ImageSet set = std::move(manifest->set);
+  veneer::io::ImageSet set = std::move(manifest->set);
   const size_t n = manifest->image_files.size();
   const bool ambient = !manifest->ambient_file.empty();
 
@@ -53,10 +53,10 @@ veneer::Expected<std::vector<ServedFile>> preview_files(const Store& store, cons
     raws.push_back(manifest->ambient_raw_file);
     photos.push_back(manifest->ambient_file);
   }
-  std::vector<veneer::DngPreview> previews;
+  std::vector<veneer::io::DngPreview> previews;
   for (const auto& raw : raws) {
     if (raw.empty()) break;
-    auto p = veneer::find_dng_preview(folder / raw);
+    auto p = veneer::io::find_dng_preview(folder / raw);
     if (!p || (!previews.empty() && p->size != previews.front().size)) break;
     previews.push_back(*p);
   }
@@ -101,8 +101,8 @@ veneer::Expected<std::vector<ServedFile>> preview_files(const Store& store, cons
   set.ambient_raw = {};
   set.mask.release();
   if (ambient) set.ambient = cv::Mat(1, 1, CV_32FC3, cv::Scalar::all(0));  // a marker: the ambient frame is there
-  set.preview_of = veneer::ImageSet::PreviewOf{set.id, full};
-  out.front().bytes = veneer::manifest_json(set);
+  set.preview_of = veneer::io::ImageSet::PreviewOf{set.id, full};
+  out.front().bytes = veneer::io::manifest_json(set);
   out.front().size = out.front().bytes.size();
   return out;
 }

@@ -211,7 +211,7 @@ veneer::Status Rig::save_owner(const std::vector<LampState>& states) {
     doc["lamps"].push_back(l);
   }
   const auto& file = options_.owner_state_file;
-  if (auto s = veneer::write_file_atomic(file, doc.dump(1) + "\n"); !s)
+  if (auto s = veneer::io::write_file_atomic(file, doc.dump(1) + "\n"); !s)
     return make_error("cannot write " + file.string() + " (disk full?): " + s.message());
   owner_saved_ = true;
   return {};
@@ -279,9 +279,9 @@ veneer::Expected<std::string> Rig::capture(const CaptureRequest& request) {
   {
     std::lock_guard lock(mutex_);
     if (capturing_) return make_error("a capture is already running (" + capture_id_ + ")");
-    if (req.role == veneer::Role::unknown) req.role = next_role_;
+    if (req.role == veneer::io::Role::unknown) req.role = next_role_;
     if (req.object.empty() && options_.simulated && options_.sim.scenes.size() >= 2) {
-      req.object = options_.sim.scenes[req.role == veneer::Role::source ? 1 : 0];
+      req.object = options_.sim.scenes[req.role == veneer::io::Role::source ? 1 : 0];
     }
     id = store_.new_id(req.role, req.object);
     capturing_ = true;
@@ -328,7 +328,7 @@ void Rig::run_capture_job(const std::string& id, CaptureRequest req) {
   CapturePlan plan;
   plan.set_id = id;
   plan.role = req.role;
-  plan.object = req.object.empty() ? veneer::role_name(req.role) : req.object;
+  plan.object = req.object.empty() ? veneer::io::role_name(req.role) : req.object;
   plan.exposure = req.exposure;
   if (plan.exposure.shutter_s <= 0) plan.exposure.shutter_s = options_.exposure.shutter_s;
   if (plan.exposure.aperture <= 0) plan.exposure.aperture = options_.exposure.aperture;
@@ -341,7 +341,7 @@ void Rig::run_capture_job(const std::string& id, CaptureRequest req) {
     plan.expected_shot_s = mean_step_s_ > 0 ? mean_step_s_ : options_.settle_ms / 1000.0 + plan.exposure.shutter_s + 0.2;
   }
   if (options_.simulated && options_.sim.scenes.size() >= 2) {
-    plan.scene = options_.sim.scenes[req.role == veneer::Role::source ? 1 : 0];
+    plan.scene = options_.sim.scenes[req.role == veneer::io::Role::source ? 1 : 0];
     if (options_.sim.select_scene) options_.sim.select_scene(req.role, plan.scene);
   }
 
@@ -352,7 +352,7 @@ void Rig::run_capture_job(const std::string& id, CaptureRequest req) {
   started.object = plan.object;
   started.n = n;
   emit(started);
-  log->info("capture {} started: {} '{}', {} shots", id, veneer::role_name(req.role), plan.object, n);
+  log->info("capture {} started: {} '{}', {} shots", id, veneer::io::role_name(req.role), plan.object, n);
 
   CaptureHooks hooks;
   hooks.cancel = &cancel_;
@@ -393,8 +393,8 @@ void Rig::run_capture_job(const std::string& id, CaptureRequest req) {
   std::unique_ptr<SetWriter> writer;
   if (auto w = store_.begin(id, options_.simulated); w) {
     writer = std::move(*w);
-    hooks.on_frame = [&writer](int k, int shots, const cv::Mat& photo, const veneer::ImageSet::RawFile& raw,
-                               const veneer::ImageSet::RawFile& developed) {
+    hooks.on_frame = [&writer](int k, int shots, const cv::Mat& photo, const veneer::io::ImageSet::RawFile& raw,
+                               const veneer::io::ImageSet::RawFile& developed) {
       return writer->add_frame(k, photo, raw, shots, developed);
     };
   } else {
@@ -408,7 +408,7 @@ void Rig::run_capture_job(const std::string& id, CaptureRequest req) {
   refresh_lamps();
   veneer::Status stored;
   if (result) {
-    veneer::ImageSet& set = result->set;
+    veneer::io::ImageSet& set = result->set;
     if (options_.simulated && options_.sim.finish_set) options_.sim.finish_set(set);
     if (cancel_) {
       stored = make_error("cancelled");
@@ -427,7 +427,7 @@ void Rig::run_capture_job(const std::string& id, CaptureRequest req) {
     capturing_ = false;
     capture_id_.clear();
     if (stored) {
-      next_role_ = req.role == veneer::Role::destination ? veneer::Role::source : veneer::Role::destination;
+      next_role_ = req.role == veneer::io::Role::destination ? veneer::io::Role::source : veneer::io::Role::destination;
       mean_step_s_ = result->mean_step_s;
     }
   }

@@ -74,7 +74,7 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
   }
 
   CaptureResult result;
-  veneer::ImageSet& set = result.set;
+  veneer::io::ImageSet& set = result.set;
   double ambient_level = 0, lit_level = 0;  // mean levels, for the ambient check
   int lit_frames = 0;
   set.id = plan.set_id;
@@ -121,7 +121,7 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
       const std::string step_name = k == 0 ? std::string("ambient frame (all lamps off)")
                                            : "shot " + std::to_string(k + 1) + " (" + lamps.label(k - 1) + " alone)";
       cv::Mat photo;
-      veneer::ImageSet::RawFile raw, developed;
+      veneer::io::ImageSet::RawFile raw, developed;
       for (int take = 1;; ++take) {
         // Proven before the exposure: commanded from the bridge's own reading, read back.
         auto proven = lamps.ensure(want, reading, plan.lamp_attempts);
@@ -143,7 +143,7 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
           // photo (set.json's images[].raw / ambient_raw): the viewer reads
           // the set from it, linear, by default.
           raw = {};
-          if (!still->original.empty() && veneer::is_raw_file_name(still->original_name)) {
+          if (!still->original.empty() && veneer::io::is_raw_file_name(still->original_name)) {
             const std::string& n = still->original_name;
             raw.extension = n.substr(n.rfind('.') + 1);
             for (char& ch : raw.extension) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
@@ -213,7 +213,7 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
 
   // Lights of the set: ring geometry, direction toward the object centre.
   for (int i = 0; i < count; ++i) {
-    veneer::Light light;
+    veneer::io::Light light;
     light.index = i;
     light.lamp_id = static_cast<size_t>(i) < plan.lamp_ids.size() ? plan.lamp_ids[i] : "lamp-" + std::to_string(i + 1);
     light.position_m = plan.lamp_positions[i];

@@ -441,7 +441,7 @@ class Session : public std::enable_shared_from_this<Session> {
     s.set_you_control(holder.get() == this);
     s.set_controller_taken(holder != nullptr);
     s.set_sets_stored(static_cast<uint32_t>(srv_.rig.store().list().size()));
-    s.set_next_role(st.next_role == veneer::Role::source ? pb::ROLE_SOURCE : pb::ROLE_DESTINATION);
+    s.set_next_role(st.next_role == veneer::io::Role::source ? pb::ROLE_SOURCE : pb::ROLE_DESTINATION);
     s.set_free_bytes(srv_.rig.store().free_bytes());
     s.set_clients(static_cast<uint32_t>(srv_.sessions.size()));
     // Events are numbered and sent on this thread: every event up to this seq

@@ -123,9 +123,9 @@ Store::~Store() {
 
 veneer::Expected<StoredSet> Store::scan_one(const std::string& id) const {
   fs::path folder = root_ / id;
-  auto text = veneer::read_file_bytes(folder / "set.json");
+  auto text = veneer::io::read_file_bytes(folder / "set.json");
   if (!text) return text.error();
-  auto manifest = veneer::parse_manifest(*text, folder);
+  auto manifest = veneer::io::parse_manifest(*text, folder);
   if (!manifest) return manifest.error();
   std::error_code ec;
   for (const auto& f : manifest->image_files) {
@@ -134,7 +134,7 @@ veneer::Expected<StoredSet> Store::scan_one(const std::string& id) const {
   for (const auto& f : manifest->raw_files) {
     if (!f.empty() && !fs::is_regular_file(folder / f, ec)) return make_error((folder / f).string() + ": missing");
   }
-  const veneer::ImageSet& s = manifest->set;
+  const veneer::io::ImageSet& s = manifest->set;
   StoredSet out;
   out.id = id;
   out.role = s.role;
@@ -166,16 +166,16 @@ veneer::Expected<StoredSet> Store::find(const std::string& id) const {
 veneer::Expected<std::string> Store::manifest(const std::string& id) const {
   auto set = find(id);
   if (!set) return set.error();
-  return veneer::read_file_bytes(root_ / id / "set.json");
+  return veneer::io::read_file_bytes(root_ / id / "set.json");
 }
 
 veneer::Expected<std::vector<std::string>> Store::files(const std::string& id, bool include_truth) const {
   auto set = find(id);
   if (!set) return set.error();
   fs::path folder = root_ / id;
-  auto text = veneer::read_file_bytes(folder / "set.json");
+  auto text = veneer::io::read_file_bytes(folder / "set.json");
   if (!text) return text.error();
-  auto manifest = veneer::parse_manifest(*text, folder);
+  auto manifest = veneer::io::parse_manifest(*text, folder);
   if (!manifest) return manifest.error();
   std::vector<std::string> out{"set.json"};
   for (const auto& f : manifest->image_files) out.push_back(f.generic_string());
@@ -198,13 +198,13 @@ veneer::Expected<std::vector<std::string>> Store::files(const std::string& id, b
   return out;
 }
 
-std::string Store::new_id(veneer::Role role, const std::string& object) const {
+std::string Store::new_id(veneer::io::Role role, const std::string& object) const {
   std::time_t now = std::time(nullptr);
   std::tm tm{};
   gmtime_r(&now, &tm);
   char stamp[32];
   std::strftime(stamp, sizeof stamp, "%Y%m%d-%H%M%S", &tm);
-  std::string base = std::string(stamp) + "-" + veneer::role_name(role);
+  std::string base = std::string(stamp) + "-" + veneer::io::role_name(role);
   std::string clean;
   for (char ch : object) {
     if (clean.size() >= 32) break;
@@ -236,7 +236,7 @@ uint64_t Store::free_bytes() const {
   return static_cast<uint64_t>(st.f_bavail) * st.f_frsize;
 }
 
-veneer::Status Store::save(const veneer::ImageSet& set) {
+veneer::Status Store::save(const veneer::io::ImageSet& set) {
   if (!valid_set_id(set.id)) return make_error("cannot store a set under the id '" + set.id + "'");
   uint64_t need = estimate_bytes(set.size, static_cast<int>(set.images.size()) + (set.ambient.empty() ? 0 : 1),
                                  set.truth.present());
@@ -249,7 +249,7 @@ veneer::Status Store::save(const veneer::ImageSet& set) {
                       " MiB free, the set needs about " + std::to_string((need >> 20) + 1) + " MiB; no set stored");
   }
   fs::path folder = root_ / set.id;
-  if (auto s = veneer::write_set(set, folder); !s) {
+  if (auto s = veneer::io::write_set(set, folder); !s) {
     return make_error("storing set " + set.id + " failed: " + s.message() + "; no set stored");
   }
   auto scanned = scan_one(set.id);
@@ -270,7 +270,7 @@ namespace {
 
 veneer::Status write_encoded(const fs::path& file, const veneer::Expected<std::string>& bytes) {
   if (!bytes) return make_error(file.string() + ": " + bytes.message());
-  return veneer::write_file_synced(file, *bytes);
+  return veneer::io::write_file_synced(file, *bytes);
 }
 
 std::string light_png(int index) {
@@ -299,8 +299,8 @@ SetWriter::~SetWriter() {
   fs::remove_all(tmp_, ec);
 }
 
-veneer::Status SetWriter::add_frame(int k, const cv::Mat& photo, const veneer::ImageSet::RawFile& raw, int photos,
-                                   const veneer::ImageSet::RawFile& developed) {
+veneer::Status SetWriter::add_frame(int k, const cv::Mat& photo, const veneer::io::ImageSet::RawFile& raw, int photos,
+                                   const veneer::io::ImageSet::RawFile& developed) {
   if (tmp_.empty()) return make_error("set " + id_ + " is already stored");
   auto fail = [&](const veneer::Status& s) {
     return make_error("storing set " + id_ + " failed: " + s.message() + "; no set stored");
@@ -324,19 +324,19 @@ veneer::Status SetWriter::add_frame(int k, const cv::Mat& photo, const veneer::I
   }
   if (photo.size() != size_) return make_error("set " + id_ + ": frame " + std::to_string(k) + " changed size");
   const int index = k - 1;
-  veneer::ImageSet::RawFile developed_name;
+  veneer::io::ImageSet::RawFile developed_name;
   if (developed.bytes.empty()) {
     const fs::path png = tmp_ / (k == 0 ? std::string("ambient.png") : light_png(index));
-    if (auto s = write_encoded(png, veneer::encode_png16(photo)); !s) return fail(s);
+    if (auto s = write_encoded(png, veneer::io::encode_png16(photo)); !s) return fail(s);
   } else {
     const std::string file = k == 0 ? "ambient." + developed.extension : light_png(index).substr(0, 9) + developed.extension;
-    if (auto s = veneer::write_file_synced(tmp_ / file, developed.bytes); !s) return fail(s);
+    if (auto s = veneer::io::write_file_synced(tmp_ / file, developed.bytes); !s) return fail(s);
     developed_name = {developed.extension, "1"};
   }
-  veneer::ImageSet::RawFile name;
+  veneer::io::ImageSet::RawFile name;
   if (!raw.bytes.empty()) {
     const std::string file = k == 0 ? "ambient." + raw.extension : light_png(index).substr(0, 9) + raw.extension;
-    if (auto s = veneer::write_file_synced(tmp_ / file, raw.bytes); !s) return fail(s);
+    if (auto s = veneer::io::write_file_synced(tmp_ / file, raw.bytes); !s) return fail(s);
     name.extension = raw.extension;
     name.bytes = "1";  // manifest_json names a RAW file where its bytes are not empty
   }
@@ -357,7 +357,7 @@ veneer::Status SetWriter::add_frame(int k, const cv::Mat& photo, const veneer::I
   return {};
 }
 
-veneer::Status SetWriter::commit(veneer::ImageSet& set) {
+veneer::Status SetWriter::commit(veneer::io::ImageSet& set) {
   if (tmp_.empty()) return make_error("set " + id_ + " is already stored");
   auto fail = [&](const veneer::Status& s) {
     return make_error("storing set " + id_ + " failed: " + s.message() + "; no set stored");
@@ -368,9 +368,9 @@ veneer::Status SetWriter::commit(veneer::ImageSet& set) {
     return make_error("set " + id_ + ": " + std::to_string(set.lights.size()) +
                       " lights but not every frame was taken; no set stored");
   if (!set.mask.empty()) {
-    if (auto s = write_encoded(tmp_ / "mask.png", veneer::encode_png8(set.mask)); !s) return fail(s);
+    if (auto s = write_encoded(tmp_ / "mask.png", veneer::io::encode_png8(set.mask)); !s) return fail(s);
   }
-  veneer::Truth& t = set.truth;
+  veneer::io::Truth& t = set.truth;
   if (!t.normals.empty() || !t.mask.empty() || !t.albedo.empty() || !t.depth.empty()) {
     // One image at a time, each let go once written (at 5600x3750 they are 0.6 GB together).
     const fs::path truth = tmp_ / "truth";
@@ -378,26 +378,26 @@ veneer::Status SetWriter::commit(veneer::ImageSet& set) {
     if (!fs::create_directory(truth, ec))
       return fail(make_error(truth.string() + ": cannot create folder: " + ec.message()));
     if (!t.normals.empty()) {
-      if (auto s = veneer::write_file_synced(truth / "normals.pfm", veneer::encode_pfm(t.normals, true)); !s) return fail(s);
+      if (auto s = veneer::io::write_file_synced(truth / "normals.pfm", veneer::io::encode_pfm(t.normals, true)); !s) return fail(s);
     }
     t.normals.release();
     if (!t.mask.empty()) {
-      if (auto s = write_encoded(truth / "mask.png", veneer::encode_png8(t.mask)); !s) return fail(s);
+      if (auto s = write_encoded(truth / "mask.png", veneer::io::encode_png8(t.mask)); !s) return fail(s);
     }
     t.mask.release();
     if (!t.albedo.empty()) {
-      if (auto s = write_encoded(truth / "albedo.png", veneer::encode_png16(t.albedo)); !s) return fail(s);
+      if (auto s = write_encoded(truth / "albedo.png", veneer::io::encode_png16(t.albedo)); !s) return fail(s);
     }
     t.albedo.release();
     if (!t.depth.empty()) {
-      if (auto s = veneer::write_file_synced(truth / "depth.pfm", veneer::encode_pfm(t.depth, true)); !s) return fail(s);
+      if (auto s = veneer::io::write_file_synced(truth / "depth.pfm", veneer::io::encode_pfm(t.depth, true)); !s) return fail(s);
     }
     t.depth.release();
-    if (auto s = veneer::sync_folder(truth); !s) return fail(s);
+    if (auto s = veneer::io::sync_folder(truth); !s) return fail(s);
   }
   // set.json last, from what was written: manifest_json asks only whether a
   // photo or RAW file is there (images are named after the lights).
-  veneer::ImageSet named;
+  veneer::io::ImageSet named;
   named.id = set.id;
   named.role = set.role;
   named.object = set.object;
@@ -415,15 +415,15 @@ veneer::Status SetWriter::commit(veneer::ImageSet& set) {
     named.ambient_raw = ambient_raw_;
     named.ambient_developed = ambient_developed_;
   }
-  if (auto s = veneer::write_file_synced(tmp_ / "set.json", veneer::manifest_json(named)); !s) return fail(s);
-  if (auto s = veneer::sync_folder(tmp_); !s) return fail(s);
+  if (auto s = veneer::io::write_file_synced(tmp_ / "set.json", veneer::io::manifest_json(named)); !s) return fail(s);
+  if (auto s = veneer::io::sync_folder(tmp_); !s) return fail(s);
   const fs::path folder = store_.root() / id_;
   if (::renameat2(AT_FDCWD, tmp_.c_str(), AT_FDCWD, folder.c_str(), RENAME_NOREPLACE) != 0) {
     const int err = errno;
     return fail(make_error("cannot rename it into place: " + std::string(std::strerror(err))));
   }
   tmp_.clear();
-  if (auto s = veneer::sync_folder(store_.root()); !s) return fail(s);
+  if (auto s = veneer::io::sync_folder(store_.root()); !s) return fail(s);
   auto scanned = store_.scan_one(id_);
   if (!scanned) {
     std::error_code ec;
@@ -485,9 +485,9 @@ std::vector<StoredSet> Store::trash() const {
   for (const auto& entry : fs::directory_iterator(trash_folder(), ec)) {
     const std::string id = entry.path().filename().string();
     if (!entry.is_directory() || !valid_set_id(id)) continue;
-    auto text = veneer::read_file_bytes(entry.path() / "set.json");
+    auto text = veneer::io::read_file_bytes(entry.path() / "set.json");
     if (!text) continue;
-    auto manifest = veneer::parse_manifest(*text, entry.path());
+    auto manifest = veneer::io::parse_manifest(*text, entry.path());
     if (!manifest) continue;
     StoredSet out;
     out.id = id;

@@ -92,8 +92,8 @@ int main(int argc, char** argv) {
   // 1. Repaint through a map: a real map (destination bull, source orange, truth normals).
   veneer::sim::RenderOptions ro;
   ro.size = size;
-  auto dst = veneer::sim::simulate_set("bull", ro, veneer::Role::destination);
-  auto src = veneer::sim::simulate_set("orange", ro, veneer::Role::source);
+  auto dst = veneer::sim::simulate_set("bull", ro, veneer::io::Role::destination);
+  auto src = veneer::sim::simulate_set("orange", ro, veneer::io::Role::source);
   if (!dst || !src) {
     std::fprintf(stderr, "bench_app: simulation failed\n");
     return 1;
@@ -106,8 +106,8 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "bench_app: transfer failed: %s\n", tr.message().c_str());
     return 1;
   }
-  cv::Mat frame8 = veneer::tonemap_picture(src->images[0]);
-  cv::Mat backdrop8 = veneer::tonemap_picture(dst->images[0]);
+  cv::Mat frame8 = veneer::io::tonemap_picture(src->images[0]);
+  cv::Mat backdrop8 = veneer::io::tonemap_picture(dst->images[0]);
   veneer::repaint::LiveRepainter live(tr->map, tr->source_size, backdrop8);
   live.apply(frame8);  // tables built once
   const double fast = median_ms([&] { cv::Mat out = live.apply(frame8); }, 200);
@@ -143,8 +143,8 @@ int main(int argc, char** argv) {
     return 1;
   }
   QString dpath = dir.path() + "/bull", spath = dir.path() + "/orange";
-  (void)veneer::write_set(*dst, dpath.toStdString());
-  (void)veneer::write_set(*src, spath.toStdString());
+  (void)veneer::io::write_set(*dst, dpath.toStdString());
+  (void)veneer::io::write_set(*src, spath.toStdString());
   veneer::app::MainWindow w({QString("127.0.0.1:%1").arg(port), store + "/token", dpath, spath, dir.path()});
   w.show();
   if (!wait_for([&] { return w.rig().isConnected(); }, 10000)) {
@@ -225,22 +225,22 @@ int main(int argc, char** argv) {
   const auto video_export = stall_during("export video", [&] { w.exportRelightVideoTo(dir.path() + "/relight.avi"); },
                                          [&] { return !w.exporting(); });
   const cv::Size big(3872, 2592);  // 10.0 Mpx
-  veneer::ImageSet large = *dst;
+  veneer::io::ImageSet large = *dst;
   for (auto& im : large.images) cv::resize(im, im, big, 0, 0, cv::INTER_LINEAR);
   if (!large.ambient.empty()) cv::resize(large.ambient, large.ambient, big, 0, 0, cv::INTER_LINEAR);
   if (!large.mask.empty()) cv::resize(large.mask, large.mask, big, 0, 0, cv::INTER_NEAREST);
   large.truth = {};
   large.size = big;
   const QString lpath = dir.path() + "/large";
-  if (auto ws = veneer::write_set(large, lpath.toStdString()); !ws) {
+  if (auto ws = veneer::io::write_set(large, lpath.toStdString()); !ws) {
     std::fprintf(stderr, "bench_app: cannot write the 10 Mpx set: %s\n", ws.message().c_str());
     return 1;
   }
   large = {};
-  const auto load = stall_during("load 10 Mpx", [&] { w.loadSetInBackground(lpath, veneer::Role::destination); },
+  const auto load = stall_during("load 10 Mpx", [&] { w.loadSetInBackground(lpath, veneer::io::Role::destination); },
                                  [&] { return w.loadsRunning() == 0; });
   const double sync_t = now_ms();
-  w.loadLocalSet(lpath, veneer::Role::destination);  // the old way: all on the GUI thread
+  w.loadLocalSet(lpath, veneer::io::Role::destination);  // the old way: all on the GUI thread
   const double sync_load = now_ms() - sync_t;
   std::printf("\n## Longest GUI-thread stall (10 ms heartbeat) while the window works off the GUI thread\n\n");
   std::printf("| job | longest stall ms | job took s | target |\n|---|---|---|---|\n");

@@ -106,13 +106,13 @@ void write_pair(const QString& dir, QString& dst, QString& src) {
   veneer::sim::RenderOptions o;
   o.size = cv::Size(256, 170);
   o.noise_sigma = 0.002;
-  auto d = veneer::sim::simulate_set("bull", o, veneer::Role::destination);
-  auto s = veneer::sim::simulate_set("orange", o, veneer::Role::source);
+  auto d = veneer::sim::simulate_set("bull", o, veneer::io::Role::destination);
+  auto s = veneer::sim::simulate_set("orange", o, veneer::io::Role::source);
   ASSERT_TRUE(d.ok() && s.ok());
   dst = dir + "/bull";
   src = dir + "/orange";
-  ASSERT_TRUE(veneer::write_set(*d, dst.toStdString()).ok());
-  ASSERT_TRUE(veneer::write_set(*s, src.toStdString()).ok());
+  ASSERT_TRUE(veneer::io::write_set(*d, dst.toStdString()).ok());
+  ASSERT_TRUE(veneer::io::write_set(*s, src.toStdString()).ok());
 }
 
 // A window with a small simulated pair loaded from local sets in `dir`
@@ -180,8 +180,8 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
       << w.lastMessage().toStdString();
   ASSERT_NE(w.destination(), nullptr) << local->child(0)->text(1).toStdString() << " " << local->child(1)->text(1).toStdString();
   ASSERT_NE(w.source(), nullptr) << local->child(0)->text(1).toStdString() << " " << local->child(1)->text(1).toStdString();
-  EXPECT_EQ(w.destination()->set.role, veneer::Role::destination);
-  EXPECT_EQ(w.source()->set.role, veneer::Role::source);
+  EXPECT_EQ(w.destination()->set.role, veneer::io::Role::destination);
+  EXPECT_EQ(w.source()->set.role, veneer::io::Role::source);
 
   // Transfer in the background.
   QTest::mouseClick(child<QPushButton>(w, "compute"), Qt::LeftButton);
@@ -299,8 +299,8 @@ TEST(workflow, ConnectCaptureSourceCaptureDestinationRepaintsLive) {
   // the map, computed by itself with the default method
   ASSERT_TRUE(wait_for([&] { seen(); return w.result() != nullptr && !w.computing(); }, 120000))
       << w.lastMessage().toStdString();
-  EXPECT_EQ(w.source()->set.role, veneer::Role::source);
-  EXPECT_EQ(w.destination()->set.role, veneer::Role::destination);
+  EXPECT_EQ(w.source()->set.role, veneer::io::Role::source);
+  EXPECT_EQ(w.destination()->set.role, veneer::io::Role::destination);
   EXPECT_EQ(w.result()->match_options.method, veneer::match::Method::combined);
   cv::Mat xy[2];
   cv::split(w.result()->map.xy, xy);
@@ -566,12 +566,12 @@ TEST(Viewer, AdvancedFoldPresetsWheelFocusAndLampsFromTheManifest) {
 
   // one lamp box per light of the set's manifest
   EXPECT_EQ(lamp_boxes(w), static_cast<int>(w.destination()->set.lights.size()));
-  veneer::ImageSet three = w.destination()->set;
+  veneer::io::ImageSet three = w.destination()->set;
   three.images.resize(3);
   three.lights.resize(3);
   const QString folder = dir.path() + "/bull3";
-  ASSERT_TRUE(veneer::write_set(three, folder.toStdString()).ok());
-  ASSERT_TRUE(w.loadLocalSet(folder, veneer::Role::destination)) << w.lastMessage().toStdString();
+  ASSERT_TRUE(veneer::io::write_set(three, folder.toStdString()).ok());
+  ASSERT_TRUE(w.loadLocalSet(folder, veneer::io::Role::destination)) << w.lastMessage().toStdString();
   EXPECT_EQ(lamp_boxes(w), 3);
 }
 
@@ -630,7 +630,7 @@ TEST(Viewer, HandRectangleAndBrushMasksChangeTheMap) {
 
   // the rectangle: the right half of the destination only
   const auto* first = w.result();
-  w.setHandRect(veneer::Role::destination, QRect(right.x, right.y, right.width, right.height));
+  w.setHandRect(veneer::io::Role::destination, QRect(right.x, right.y, right.width, right.height));
   ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.result() != first; }, 60000))
       << w.lastMessage().toStdString();
   ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
@@ -653,14 +653,14 @@ TEST(Viewer, HandRectangleAndBrushMasksChangeTheMap) {
   };
   ASSERT_GT(from_disc(), 0) << "the map takes from the centre before";
   const auto* second = w.result();
-  w.brushHandMask(veneer::Role::source, centre, false, 10);
+  w.brushHandMask(veneer::io::Role::source, centre, false, 10);
   ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.result() != second; }, 60000))
       << w.lastMessage().toStdString();
   ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
   EXPECT_EQ(from_disc(), 0) << "nothing comes from the brushed-out disc";
   EXPECT_FALSE(w.source()->hand_mask.empty());
   // and a brush adds back
-  w.brushHandMask(veneer::Role::source, centre, true, 10);
+  w.brushHandMask(veneer::io::Role::source, centre, true, 10);
   EXPECT_EQ(w.source()->hand_mask.at<uchar>(centre.y(), centre.x()), 255);
   ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
   // exported for the CLI, as drawn
@@ -676,7 +676,7 @@ TEST(Viewer, CliTransferTakesMaskFiles) {
   QTemporaryDir dir;
   QString dst, src;
   write_pair(dir.path(), dst, src);
-  auto d = veneer::read_set(dst.toStdString());
+  auto d = veneer::io::read_set(dst.toStdString());
   ASSERT_TRUE(d);
   auto seg = veneer::ps::segment(*d);
   ASSERT_TRUE(seg);
@@ -795,7 +795,7 @@ TEST(Viewer, ALoadedSetsPictureIsMadeByTheLoader) {
   MainWindow w({QString(), QString(), QString(), QString(), dir.path()});
   w.show();
   w.setAutoFlow(false);
-  w.loadSetInBackground(dst, veneer::Role::destination);
+  w.loadSetInBackground(dst, veneer::io::Role::destination);
   ASSERT_TRUE(wait_for([&] { return w.destination() != nullptr && w.loadsRunning() == 0; }, 20000))
       << w.lastMessage().toStdString();
   const veneer::app::LoadedSet* d = w.destination();
@@ -841,7 +841,7 @@ TEST(Viewer, BadInputGivesClearMessages) {
 
   // A folder that is not a set.
   QDir(dir.path()).mkpath("not-a-set");
-  EXPECT_FALSE(w.loadLocalSet(dir.path() + "/not-a-set", veneer::Role::destination));
+  EXPECT_FALSE(w.loadLocalSet(dir.path() + "/not-a-set", veneer::io::Role::destination));
   EXPECT_TRUE(w.lastMessage().contains("not-a-set")) << w.lastMessage().toStdString();
   EXPECT_EQ(w.destination(), nullptr);
 

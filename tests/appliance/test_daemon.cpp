@@ -111,11 +111,11 @@ TEST(Daemon, TwoPressesStoreTwoSetsThatPullWithTheRenderedPixelsAndTrueNormals) 
     // The camera's RAW files came with the photos; the photos are compared here.
     EXPECT_TRUE(fs::exists(out / "light_06.dng")) << "no RAW file pulled";
     EXPECT_TRUE(fs::exists(out / "ambient.dng")) << "no RAW file of the ambient frame pulled";
-    veneer::ReadOptions developed;
-    developed.photos = veneer::PhotoSource::developed;
-    auto set = veneer::read_set(out, developed);
+    veneer::io::ReadOptions developed;
+    developed.photos = veneer::io::PhotoSource::developed;
+    auto set = veneer::io::read_set(out, developed);
     ASSERT_TRUE(set) << set.message();
-    EXPECT_EQ(set->role, s == 0 ? veneer::Role::destination : veneer::Role::source);
+    EXPECT_EQ(set->role, s == 0 ? veneer::io::Role::destination : veneer::io::Role::source);
     ASSERT_EQ(set->images.size(), 7u);
     ASSERT_TRUE(set->truth.present());
     ASSERT_FALSE(set->ambient.empty());
@@ -144,9 +144,9 @@ TEST(Daemon, TwoPressesStoreTwoSetsThatPullWithTheRenderedPixelsAndTrueNormals) 
   // bull alone), and so do the camera's JPEGs (8-bit, chroma at half
   // resolution: median 4.8; the 16-bit PNGs the rig stored before gave 0.4).
   for (bool raw : {false, true}) {
-    veneer::ReadOptions read;
-    read.photos = raw ? veneer::PhotoSource::automatic : veneer::PhotoSource::developed;
-    auto pulled = veneer::read_set(dir / "pulled-0", read);
+    veneer::io::ReadOptions read;
+    read.photos = raw ? veneer::io::PhotoSource::automatic : veneer::io::PhotoSource::developed;
+    auto pulled = veneer::io::read_set(dir / "pulled-0", read);
     ASSERT_TRUE(pulled) << pulled.message();
     EXPECT_EQ(pulled->photos_from, raw ? "raw" : "jpeg");
     auto ps = veneer::ps::photometric_stereo(*pulled, pulled->truth.mask);
@@ -213,7 +213,7 @@ TEST(Daemon, LiveFramesThroughAMapAreBlendedAsTheStills) {
   EXPECT_NE(refused.out.find("--blend-guide needs --dst"), std::string::npos) << refused.out;
 
   // the same frame repainted here through the core: with the stills' plan, and without
-  auto dset = veneer::read_set(dst), sset = veneer::read_set(src);
+  auto dset = veneer::io::read_set(dst), sset = veneer::io::read_set(src);
   ASSERT_TRUE(dset && sset);
   auto options = veneer::pipeline::read_transfer_options(tr / "metrics.json");
   ASSERT_TRUE(options) << options.message();
@@ -224,7 +224,7 @@ TEST(Daemon, LiveFramesThroughAMapAreBlendedAsTheStills) {
   ASSERT_TRUE(map) << map.message();
   auto plan = veneer::pipeline::blend_plan_for(*pair, *options, *map);
   ASSERT_TRUE(plan && *plan) << (plan ? "no plan" : plan.message());
-  const cv::Mat backdrop = veneer::tonemap_picture(veneer::repaint::median_photo(dset->images));
+  const cv::Mat backdrop = veneer::io::tonemap_picture(veneer::repaint::median_photo(dset->images));
   for (const char* which : {"blended", "plain"}) {
     const cv::Mat frame = cv::imread((dir / which / "frame_0000.jpg").string(), cv::IMREAD_COLOR);
     const cv::Mat got = cv::imread((dir / which / "repainted_0000.png").string(), cv::IMREAD_COLOR);
@@ -399,7 +399,7 @@ TEST(Daemon, KillDuringACaptureLeavesNoPartialSetAndEarlierSetsIntact) {
     std::string name = entry.path().filename().string();
     EXPECT_TRUE(name == "token" || name == ".lock" || name == first_id) << "left behind: " << name;
   }
-  auto set = veneer::read_set(store / first_id);
+  auto set = veneer::io::read_set(store / first_id);
   EXPECT_TRUE(set) << set.message();
   fs::remove_all(dir);
 }
@@ -688,9 +688,9 @@ TEST(Daemon, ACapturesPeakMemoryIsAFewFramesNotTheWholeSetAsFloat) {
   }
   // ... and the sets are whole: every photo, RAW file and the truth.
   for (size_t i = 0; i < ids.size(); ++i) {
-    auto set = veneer::read_set(store / ids[i], {});
+    auto set = veneer::io::read_set(store / ids[i], {});
     ASSERT_TRUE(set) << set.message();
-    EXPECT_EQ(set->role, i == 0 ? veneer::Role::destination : veneer::Role::source);
+    EXPECT_EQ(set->role, i == 0 ? veneer::io::Role::destination : veneer::io::Role::source);
     EXPECT_EQ(set->size, cv::Size(w, h));
     EXPECT_EQ(set->images.size(), 7u);
     EXPECT_FALSE(set->ambient.empty());

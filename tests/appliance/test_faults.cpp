@@ -223,7 +223,7 @@ TEST(Faults, ClientVanishingDuringADownloadHarmsNobody) {
     for (const auto& st : stages) resumed = resumed || st.rfind("resuming: ", 0) == 0;
     EXPECT_TRUE(resumed) << "the second pull did not resume";
     EXPECT_FALSE(fs::exists(rig.dir / (".half.pull-" + id))) << "the staging folder is left after the pull";
-    auto set = veneer::read_set(out);
+    auto set = veneer::io::read_set(out);
     ASSERT_TRUE(set) << set.message();
     EXPECT_EQ(set->images.size(), 7u);
     EXPECT_TRUE(set->truth.present());
@@ -252,7 +252,7 @@ TEST(Faults, ClientVanishingDuringADownloadHarmsNobody) {
     EXPECT_FALSE(raw->pull_set(id, out, o, progress));
     if (closer.joinable()) closer.join();
     EXPECT_EQ(previews, 1);
-    auto preview = veneer::read_set(out);
+    auto preview = veneer::io::read_set(out);
     ASSERT_TRUE(preview) << "the preview set is in place, whole: " << preview.message();
     ASSERT_TRUE(preview->preview_of);
     EXPECT_EQ(preview->preview_of->id, id);
@@ -260,7 +260,7 @@ TEST(Faults, ClientVanishingDuringADownloadHarmsNobody) {
     previews = 0;
     ASSERT_TRUE(rig.client->pull_set(id, out, o));
     EXPECT_EQ(previews, 1) << "its preview, already there, is announced again";
-    auto full = veneer::read_set(out);
+    auto full = veneer::io::read_set(out);
     ASSERT_TRUE(full) << full.message();
     EXPECT_FALSE(full->preview_of);
     EXPECT_EQ(full->images.size(), 7u);
@@ -269,7 +269,7 @@ TEST(Faults, ClientVanishingDuringADownloadHarmsNobody) {
   // The rig keeps serving: a full download by the first client works.
   fs::path out = rig.dir / "whole";
   ASSERT_TRUE(rig.client->pull(id, out));
-  auto set = veneer::read_set(out);
+  auto set = veneer::io::read_set(out);
   ASSERT_TRUE(set) << set.message();
   EXPECT_EQ(set->images.size(), 7u);
   EXPECT_TRUE(set->truth.present());

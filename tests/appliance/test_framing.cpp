@@ -102,7 +102,7 @@ TEST(Api, DecodesEveryRequestKind) {
   EXPECT_EQ(r->id, 7u);
   auto* c = std::get_if<veneerd::api::CaptureReq>(&r->body);
   ASSERT_NE(c, nullptr);
-  EXPECT_EQ(c->capture.role, veneer::Role::source);
+  EXPECT_EQ(c->capture.role, veneer::io::Role::source);
   EXPECT_EQ(c->capture.object, "stone");
   EXPECT_DOUBLE_EQ(c->capture.exposure.shutter_s, 0.25);
   EXPECT_TRUE(veneerd::api::needs_control(r->body));

@@ -110,7 +110,7 @@ void expect_owner_states(Bridge& b, const std::vector<LampState>& owner) {
 }
 
 // Captures a set and pulls it; the stored set's id through `id`.
-veneer::Expected<veneer::ImageSet> capture_and_pull(veneer::rig::Client& c, const fs::path& into,
+veneer::Expected<veneer::io::ImageSet> capture_and_pull(veneer::rig::Client& c, const fs::path& into,
                                                     const std::function<void(const veneer::rig::Event&)>& on_event,
                                                     std::string* id = nullptr) {
   auto started = c.capture();
@@ -125,7 +125,7 @@ veneer::Expected<veneer::ImageSet> capture_and_pull(veneer::rig::Client& c, cons
   if (done->kind != Kind::set_stored) return veneer::make_error("capture failed: " + done->reason);
   if (id) *id = *started;
   if (auto s = c.pull(*started, into / *started); !s) return s.error();
-  return veneer::read_set(into / *started);
+  return veneer::io::read_set(into / *started);
 }
 
 double max_abs_diff(const cv::Mat& a, const cv::Mat& b) {

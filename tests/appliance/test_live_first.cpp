@@ -51,25 +51,25 @@ TEST(LiveFirst, TheTwinStoresAJpegAndACompressedDngWithAPreviewPerFrame) {
   for (const std::string frame : {"light_00", "light_06", "ambient"}) {
     SCOPED_TRACE(frame);
     EXPECT_FALSE(fs::exists(set / (frame + ".png"))) << "a 16-bit PNG where the camera's JPEG belongs";
-    auto jpeg = veneer::read_file_bytes(set / (frame + ".jpg"));
-    auto dng = veneer::read_file_bytes(set / (frame + ".dng"));
+    auto jpeg = veneer::io::read_file_bytes(set / (frame + ".jpg"));
+    auto dng = veneer::io::read_file_bytes(set / (frame + ".dng"));
     ASSERT_TRUE(jpeg && dng);
-    EXPECT_EQ(veneer::image_file_kind(*jpeg), "jpeg");
+    EXPECT_EQ(veneer::io::image_file_kind(*jpeg), "jpeg");
     // Lossless compression: below the 2 bytes a sample of the uncompressed mosaic.
     EXPECT_LT(dng->size(), 512u * 340u * 2u * 8u / 10u);
-    auto preview = veneer::raw_preview_jpeg(*dng, frame + ".dng");  // LibRaw finds it
+    auto preview = veneer::io::raw_preview_jpeg(*dng, frame + ".dng");  // LibRaw finds it
     ASSERT_TRUE(preview) << preview.message();
-    auto found = veneer::find_dng_preview(set / (frame + ".dng"));
+    auto found = veneer::io::find_dng_preview(set / (frame + ".dng"));
     ASSERT_TRUE(found) << found.message();
     EXPECT_EQ(found->size, cv::Size(128, 85));
   }
   // The set reads from the RAW files by default, from the JPEGs when asked.
-  auto raw = veneer::read_set(set);
+  auto raw = veneer::io::read_set(set);
   ASSERT_TRUE(raw) << raw.message();
   EXPECT_EQ(raw->photos_from, "raw");
-  veneer::ReadOptions developed;
-  developed.photos = veneer::PhotoSource::developed;
-  auto jpeg = veneer::read_set(set, developed);
+  veneer::io::ReadOptions developed;
+  developed.photos = veneer::io::PhotoSource::developed;
+  auto jpeg = veneer::io::read_set(set, developed);
   ASSERT_TRUE(jpeg) << jpeg.message();
   EXPECT_EQ(jpeg->photos_from, "jpeg");
   for (size_t i = 0; i < raw->images.size(); ++i) {
@@ -93,12 +93,12 @@ TEST(LiveFirst, ThePreviewSetIsInPlaceAndReadableBeforeTheFullFilesWhichReplaceI
   veneer::rig::PullOptions o;
   o.live_first = true;
   int previews = 0;
-  std::optional<veneer::ImageSet> preview;
+  std::optional<veneer::io::ImageSet> preview;
   std::vector<std::string> in_folder;  // what the folder held when the preview was announced
   o.on_preview = [&](const fs::path& folder) {
     ++previews;
     for (const auto& e : fs::directory_iterator(folder)) in_folder.push_back(e.path().filename().string());
-    auto s = veneer::read_set(folder);
+    auto s = veneer::io::read_set(folder);
     EXPECT_TRUE(s) << s.message();
     if (s) preview = std::move(*s);
   };
@@ -119,7 +119,7 @@ TEST(LiveFirst, ThePreviewSetIsInPlaceAndReadableBeforeTheFullFilesWhichReplaceI
   for (const auto& f : in_folder) EXPECT_EQ(f.find(".dng"), std::string::npos) << f << " arrived before the preview was announced";
 
   // Then the full set in the same place: read from its RAW files, not a preview.
-  auto full = veneer::read_set(out);
+  auto full = veneer::io::read_set(out);
   ASSERT_TRUE(full) << full.message();
   EXPECT_FALSE(full->preview_of);
   EXPECT_EQ(full->size, cv::Size(512, 340));
@@ -142,11 +142,11 @@ TEST(LiveFirst, ThePreviewSetIsInPlaceAndReadableBeforeTheFullFilesWhichReplaceI
   // A preview-only pull elsewhere, and a plain pull completing it in place.
   const fs::path only = dir / "pulled" / "only";
   ASSERT_TRUE(c->pull_preview(id, only));
-  auto small = veneer::read_set(only);
+  auto small = veneer::io::read_set(only);
   ASSERT_TRUE(small) << small.message();
   EXPECT_TRUE(small->preview_of);
   ASSERT_TRUE(c->pull(id, only, false));
-  auto completed = veneer::read_set(only);
+  auto completed = veneer::io::read_set(only);
   ASSERT_TRUE(completed) << completed.message();
   EXPECT_FALSE(completed->preview_of);
   // Another set's folder is not replaced without asking.

@@ -21,10 +21,10 @@ namespace pb = veneer::v1;
 
 namespace {
 
-veneer::ImageSet noisy_set(const std::string& id, cv::Size size) {
-  veneer::ImageSet s;
+veneer::io::ImageSet noisy_set(const std::string& id, cv::Size size) {
+  veneer::io::ImageSet s;
   s.id = id;
-  s.role = veneer::Role::destination;
+  s.role = veneer::io::Role::destination;
   s.object = "cube";
   s.created = "2026-11-27T03:00:00Z";
   s.size = size;
@@ -33,7 +33,7 @@ veneer::ImageSet noisy_set(const std::string& id, cv::Size size) {
   s.camera.cy = (size.height - 1) / 2.0;
   cv::RNG rng(11);
   for (int i = 0; i < 3; ++i) {
-    veneer::Light l;
+    veneer::io::Light l;
     l.index = i;
     l.lamp_id = std::to_string(i + 1);
     l.direction = cv::Vec3d(0.1 * i, 0, 1) / cv::norm(cv::Vec3d(0.1 * i, 0, 1));
@@ -58,7 +58,7 @@ std::string bytes_of(const veneerd::ServedFile& f) {
 // Writes what a download serves into `dir`, as a client would.
 void receive(const std::vector<veneerd::ServedFile>& files, const fs::path& dir) {
   fs::create_directories(dir);
-  for (const auto& f : files) ASSERT_TRUE(veneer::write_file_synced(dir / f.rel, bytes_of(f)));
+  for (const auto& f : files) ASSERT_TRUE(veneer::io::write_file_synced(dir / f.rel, bytes_of(f)));
 }
 
 }  // namespace
@@ -67,8 +67,8 @@ TEST(Preview, ASetOfCameraFilesServesEachFramesEmbeddedPreviewAsAReducedSet) {
   fs::path root = rigtest::temp_dir("preview");
   auto store = veneerd::Store::open(root / "store");
   ASSERT_TRUE(store) << store.message();
-  veneer::ImageSet set = noisy_set("p1", {96, 64});
-  ASSERT_TRUE(veneer::add_camera_files(set));
+  veneer::io::ImageSet set = noisy_set("p1", {96, 64});
+  ASSERT_TRUE(veneer::io::add_camera_files(set));
   ASSERT_TRUE((*store)->save(set));
   auto files = veneerd::preview_files(**store, "p1");
   ASSERT_TRUE(files) << files.message();
@@ -76,13 +76,13 @@ TEST(Preview, ASetOfCameraFilesServesEachFramesEmbeddedPreviewAsAReducedSet) {
   for (const auto& f : *files) names.push_back(f.rel);
   EXPECT_EQ(names, (std::vector<std::string>{"set.json", "light_00.jpg", "light_01.jpg", "light_02.jpg", "ambient.jpg"}));
   // Each frame's JPEG is the stored DNG's preview, byte for byte, read in place.
-  auto embedded = veneer::read_dng_preview(root / "store" / "p1" / "light_01.dng");
+  auto embedded = veneer::io::read_dng_preview(root / "store" / "p1" / "light_01.dng");
   ASSERT_TRUE(embedded) << embedded.message();
   EXPECT_EQ(bytes_of((*files)[2]), *embedded);
   EXPECT_EQ((*files)[2].source, root / "store" / "p1" / "light_01.dng");
 
   receive(*files, root / "got");
-  auto preview = veneer::read_set(root / "got");
+  auto preview = veneer::io::read_set(root / "got");
   ASSERT_TRUE(preview) << preview.message();
   EXPECT_EQ(preview->size, cv::Size(24, 16));
   ASSERT_TRUE(preview->preview_of);
@@ -99,7 +99,7 @@ TEST(Preview, AnOlderSetWithoutPreviewsServesItsPhotosAtFullSize) {
   fs::path root = rigtest::temp_dir("preview-old");
   auto store = veneerd::Store::open(root / "store");
   ASSERT_TRUE(store) << store.message();
-  veneer::ImageSet set = noisy_set("old", {32, 24});  // 16-bit PNGs and no RAW files
+  veneer::io::ImageSet set = noisy_set("old", {32, 24});  // 16-bit PNGs and no RAW files
   ASSERT_TRUE((*store)->save(set));
   auto files = veneerd::preview_files(**store, "old");
   ASSERT_TRUE(files) << files.message();
@@ -108,7 +108,7 @@ TEST(Preview, AnOlderSetWithoutPreviewsServesItsPhotosAtFullSize) {
   EXPECT_EQ((*files)[1].offset, 0u);
   EXPECT_EQ((*files)[1].size, fs::file_size(root / "store" / "old" / "light_00.png"));
   receive(*files, root / "got");
-  auto preview = veneer::read_set(root / "got");
+  auto preview = veneer::io::read_set(root / "got");
   ASSERT_TRUE(preview) << preview.message();
   EXPECT_EQ(preview->size, cv::Size(32, 24));
   ASSERT_TRUE(preview->preview_of);
@@ -137,15 +137,15 @@ TEST(Preview, ASetWrittenFrameByFrameKeepsTheCamerasJpegs) {
   fs::path root = rigtest::temp_dir("writer-jpeg");
   auto store = veneerd::Store::open(root / "store");
   ASSERT_TRUE(store) << store.message();
-  veneer::ImageSet whole = noisy_set("whole", {64, 48});
-  ASSERT_TRUE(veneer::add_camera_files(whole));
+  veneer::io::ImageSet whole = noisy_set("whole", {64, 48});
+  ASSERT_TRUE(veneer::io::add_camera_files(whole));
   ASSERT_TRUE((*store)->save(whole));
   auto writer = (*store)->begin("framed");
   ASSERT_TRUE(writer) << writer.message();
   ASSERT_TRUE((*writer)->add_frame(0, whole.ambient, whole.ambient_raw, 4, whole.ambient_developed));
   for (size_t i = 0; i < 3; ++i)
     ASSERT_TRUE((*writer)->add_frame(static_cast<int>(i) + 1, whole.images[i], whole.raw[i], 4, whole.developed[i]));
-  veneer::ImageSet meta = whole;
+  veneer::io::ImageSet meta = whole;
   meta.id = "framed";
   ASSERT_TRUE((*writer)->commit(meta));
   auto a = (*store)->files("whole", false), b = (*store)->files("framed", false);

@@ -19,7 +19,7 @@ void expect_owner_states(const FakeLamps& lamps, const std::vector<LampState>& o
 }
 
 // Each frame shows exactly its lamp: FakeCamera's level is 0.1 * (i + 1) per lamp on.
-void expect_one_lamp_per_frame(const veneer::ImageSet& set, int n) {
+void expect_one_lamp_per_frame(const veneer::io::ImageSet& set, int n) {
   EXPECT_NEAR(set.ambient.at<cv::Vec3f>(0, 0)[0], 0.0f, 1e-6) << "ambient frame with a lamp on";
   ASSERT_EQ(set.images.size(), static_cast<size_t>(n));
   for (int i = 0; i < n; ++i)
@@ -29,7 +29,7 @@ void expect_one_lamp_per_frame(const veneer::ImageSet& set, int n) {
 veneerd::CapturePlan plan(int n) {
   veneerd::CapturePlan p;
   p.set_id = "t1";
-  p.role = veneer::Role::destination;
+  p.role = veneer::io::Role::destination;
   p.object = "thing";
   auto ring = veneerd::thesis_ring_positions();
   p.lamp_positions.assign(ring.begin(), ring.begin() + n);

@@ -10,15 +10,15 @@
 namespace fs = std::filesystem;
 
 namespace {
-veneer::ImageSet tiny_set(const std::string& id, veneer::Role role) {
-  veneer::ImageSet s;
+veneer::io::ImageSet tiny_set(const std::string& id, veneer::io::Role role) {
+  veneer::io::ImageSet s;
   s.id = id;
   s.role = role;
   s.object = "cube";
   s.created = "2026-11-22T08:00:00Z";
   s.size = {8, 6};
   for (int i = 0; i < 3; ++i) {
-    veneer::Light l;
+    veneer::io::Light l;
     l.index = i;
     l.lamp_id = std::to_string(i + 1);
     l.direction = cv::Vec3d(0.1 * i, 0, 1) / cv::norm(cv::Vec3d(0.1 * i, 0, 1));
@@ -35,12 +35,12 @@ TEST(Store, SavesListsAndFindsSetsAfterReopening) {
   {
     auto store = veneerd::Store::open(root);
     ASSERT_TRUE(store) << store.message();
-    std::string id = (*store)->new_id(veneer::Role::destination, "my cube!");
+    std::string id = (*store)->new_id(veneer::io::Role::destination, "my cube!");
     EXPECT_TRUE(veneerd::valid_set_id(id)) << id;
     EXPECT_NE(id.find("destination-my_cube_"), std::string::npos) << id;
-    ASSERT_TRUE((*store)->save(tiny_set("a1", veneer::Role::destination)));
-    ASSERT_TRUE((*store)->save(tiny_set("b2", veneer::Role::source)));
-    EXPECT_FALSE((*store)->save(tiny_set("a1", veneer::Role::destination))) << "ids are unique";
+    ASSERT_TRUE((*store)->save(tiny_set("a1", veneer::io::Role::destination)));
+    ASSERT_TRUE((*store)->save(tiny_set("b2", veneer::io::Role::source)));
+    EXPECT_FALSE((*store)->save(tiny_set("a1", veneer::io::Role::destination))) << "ids are unique";
     // A second daemon on the same store is refused.
     auto second = veneerd::Store::open(root);
     EXPECT_FALSE(second);
@@ -54,7 +54,7 @@ TEST(Store, SavesListsAndFindsSetsAfterReopening) {
   ASSERT_EQ(sets.size(), 2u);
   EXPECT_EQ(sets[0].id, "a1");
   EXPECT_EQ(sets[0].lights, 3);
-  EXPECT_EQ(sets[1].role, veneer::Role::source);
+  EXPECT_EQ(sets[1].role, veneer::io::Role::source);
   EXPECT_FALSE(fs::exists(root / ".c3.tmp-999999-0"));
   EXPECT_FALSE(fs::exists(root / ".a0.deleted-999998-0"));
   auto files = (*store)->files("a1", true);
@@ -75,15 +75,15 @@ TEST(Store, DeleteMovesIntoTheTrashWhereTheSetCanBeRestoredUntilPurged) {
   auto store = veneerd::Store::open(root);
   ASSERT_TRUE(store) << store.message();
   veneerd::Store& st = **store;
-  ASSERT_TRUE(st.save(tiny_set("a1", veneer::Role::destination)));
-  ASSERT_TRUE(st.save(tiny_set("b2", veneer::Role::source)));
+  ASSERT_TRUE(st.save(tiny_set("a1", veneer::io::Role::destination)));
+  ASSERT_TRUE(st.save(tiny_set("b2", veneer::io::Role::source)));
   EXPECT_TRUE(st.trash().empty());
   ASSERT_TRUE(st.remove("a1"));
   EXPECT_FALSE(st.find("a1"));
   auto trash = st.trash();
   ASSERT_EQ(trash.size(), 1u);
   EXPECT_EQ(trash[0].id, "a1");
-  EXPECT_EQ(trash[0].role, veneer::Role::destination);
+  EXPECT_EQ(trash[0].role, veneer::io::Role::destination);
   EXPECT_EQ(trash[0].created, "2026-11-22T08:00:00Z");
   EXPECT_EQ(trash[0].deleted.size(), 20u) << trash[0].deleted;  // 2026-11-25T20:00:00Z
   EXPECT_FALSE(st.restore("no-such-set"));
@@ -96,7 +96,7 @@ TEST(Store, DeleteMovesIntoTheTrashWhereTheSetCanBeRestoredUntilPurged) {
   EXPECT_EQ(files->size(), 5u) << "every photo came back";
   // restoring over a stored set of the same id is refused
   ASSERT_TRUE(st.remove("b2"));
-  ASSERT_TRUE(st.save(tiny_set("b2", veneer::Role::source)));
+  ASSERT_TRUE(st.save(tiny_set("b2", veneer::io::Role::source)));
   auto clash = st.restore("b2");
   ASSERT_FALSE(clash);
   EXPECT_NE(clash.message().find("a set of that id is stored"), std::string::npos) << clash.message();
@@ -128,7 +128,7 @@ TEST(Store, LeftoverTemporariesGoAtTheFirstOpenWhateverPidTheyName) {
   {
     auto store = veneerd::Store::open(root);
     ASSERT_TRUE(store) << store.message();
-    ASSERT_TRUE((*store)->save(tiny_set("kept", veneer::Role::destination)));
+    ASSERT_TRUE((*store)->save(tiny_set("kept", veneer::io::Role::destination)));
   }
   pid_t zombie = ::fork();  // exits at once and stays unreaped until the end of the test
   if (zombie == 0) ::_exit(0);
@@ -167,7 +167,7 @@ TEST(Store, TheCamerasRawFilesAreStoredAndListedForTransfer) {
   fs::path root = rigtest::temp_dir("store-raw");
   auto store = veneerd::Store::open(root);
   ASSERT_TRUE(store) << store.message();
-  veneer::ImageSet set = tiny_set("r1", veneer::Role::destination);
+  veneer::io::ImageSet set = tiny_set("r1", veneer::io::Role::destination);
   for (int i = 0; i < 3; ++i) set.raw.push_back({"dng", "RAW bytes of shot " + std::to_string(i)});
   set.ambient_raw = {"dng", "RAW bytes of the ambient frame"};
   ASSERT_TRUE((*store)->save(set));
@@ -190,8 +190,8 @@ std::string file_bytes(const fs::path& f) {
 
 // A set with what a simulated capture brings: noisy photos, RAW files, a
 // mask and the truth.
-veneer::ImageSet full_set(const std::string& id) {
-  veneer::ImageSet s = tiny_set(id, veneer::Role::source);
+veneer::io::ImageSet full_set(const std::string& id) {
+  veneer::io::ImageSet s = tiny_set(id, veneer::io::Role::source);
   cv::RNG rng(29);
   for (auto& img : s.images) {
     img = cv::Mat(s.size, CV_32FC3);
@@ -218,10 +218,10 @@ TEST(Store, ASetWrittenFrameByFrameIsTheSetSaveWrites) {
   fs::path root = rigtest::temp_dir("writer");
   auto store = veneerd::Store::open(root);
   ASSERT_TRUE(store) << store.message();
-  veneer::ImageSet whole = full_set("whole");
+  veneer::io::ImageSet whole = full_set("whole");
   ASSERT_TRUE((*store)->save(whole));
 
-  veneer::ImageSet framed = full_set("framed");
+  veneer::io::ImageSet framed = full_set("framed");
   auto writer = (*store)->begin("framed");
   ASSERT_TRUE(writer) << writer.message();
   const int photos = static_cast<int>(framed.images.size()) + 1;
@@ -229,7 +229,7 @@ TEST(Store, ASetWrittenFrameByFrameIsTheSetSaveWrites) {
   for (size_t i = 0; i < framed.images.size(); ++i)
     ASSERT_TRUE((*writer)->add_frame(static_cast<int>(i) + 1, framed.images[i], framed.raw[i], photos));
   EXPECT_FALSE((*store)->find("framed")) << "not listed before commit";
-  veneer::ImageSet meta = framed;  // what the rig has at the end: no photos
+  veneer::io::ImageSet meta = framed;  // what the rig has at the end: no photos
   meta.images.clear();
   meta.ambient.release();
   meta.raw.clear();
@@ -263,7 +263,7 @@ TEST(Store, AFrameByFrameSetNotCommittedOrShortOfAFrameLeavesNothing) {
   fs::path root = rigtest::temp_dir("writer-drop");
   auto store = veneerd::Store::open(root);
   ASSERT_TRUE(store) << store.message();
-  veneer::ImageSet s = full_set("dropped");
+  veneer::io::ImageSet s = full_set("dropped");
   {
     auto writer = (*store)->begin("dropped");
     ASSERT_TRUE(writer) << writer.message();
@@ -276,7 +276,7 @@ TEST(Store, AFrameByFrameSetNotCommittedOrShortOfAFrameLeavesNothing) {
     ASSERT_TRUE((*writer)->add_frame(0, s.ambient, s.ambient_raw, 4));
     ASSERT_TRUE((*writer)->add_frame(1, s.images[0], s.raw[0], 4));
     EXPECT_FALSE((*writer)->add_frame(2, cv::Mat(3, 3, CV_32FC3, cv::Scalar::all(0)), {}, 4)) << "size changed";
-    veneer::ImageSet meta = s;
+    veneer::io::ImageSet meta = s;
     meta.id = "short";
     auto committed = (*writer)->commit(meta);
     ASSERT_FALSE(committed);

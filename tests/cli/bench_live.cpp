@@ -77,7 +77,7 @@ const std::string kVeneer =
 std::vector<std::string> raw_files(const fs::path& set) {
   std::vector<std::string> out;
   for (const auto& e : fs::directory_iterator(set))
-    if (veneer::is_raw_file_name(e.path().filename().string())) out.push_back(e.path().string());
+    if (veneer::io::is_raw_file_name(e.path().filename().string())) out.push_back(e.path().string());
   std::sort(out.begin(), out.end());
   return out;
 }
@@ -163,10 +163,10 @@ Row run_size(const std::string& exe, int w, int h, const fs::path& dir) {
 
 // The child: decode each RAW file (linear, AHD) in turn.
 int decode_raw(int argc, char** argv) {
-  veneer::RawOptions o;
-  o.demosaic = veneer::Demosaic::ahd;
+  veneer::io::RawOptions o;
+  o.demosaic = veneer::io::Demosaic::ahd;
   for (int i = 2; i < argc; ++i) {
-    auto m = veneer::read_raw_linear(argv[i], o);
+    auto m = veneer::io::read_raw_linear(argv[i], o);
     if (!m) {
       std::fprintf(stderr, "%s\n", m.message().c_str());
       return 1;

@@ -9,7 +9,7 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const std::string_view bytes(reinterpret_cast<const char*>(data), size);
-  auto found = veneer::find_dng_preview(bytes, size, "fuzz.dng");
+  auto found = veneer::io::find_dng_preview(bytes, size, "fuzz.dng");
   if (found && (found->offset + found->length > size || found->length < 4)) __builtin_trap();
   return 0;
 }

@@ -13,7 +13,7 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const std::string_view bytes(reinterpret_cast<const char*>(data), size);
-  auto image = veneer::decode_linear_image(bytes, "fuzz.png");
+  auto image = veneer::io::decode_linear_image(bytes, "fuzz.png");
   if (!image) return 0;
   if (image->empty() || image->type() != CV_32FC3) std::abort();
   if (size < 8 || std::memcmp(data, "\x89PNG\r\n\x1a\n", 8) != 0) return 0;

@@ -42,7 +42,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   chunk(png, "IHDR", ihdr);
   chunk(png, "IDAT", std::string(reinterpret_cast<const char*>(deflated.data()), out_len));
   chunk(png, "IEND", "");
-  auto image = veneer::decode_linear_image(png, "fuzz.png");
+  auto image = veneer::io::decode_linear_image(png, "fuzz.png");
   if (!image) return 0;
   if (image->empty() || image->type() != CV_32FC3) std::abort();
   for (auto it = image->begin<cv::Vec3f>(); it != image->end<cv::Vec3f>(); ++it)

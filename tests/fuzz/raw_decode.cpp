@@ -11,10 +11,10 @@
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   const std::string_view bytes(reinterpret_cast<const char*>(data), size);
   for (bool half : {true, false}) {
-    veneer::RawOptions options;
+    veneer::io::RawOptions options;
     options.half_size = half;
-    options.demosaic = veneer::Demosaic::bilinear;
-    auto image = veneer::decode_raw_linear(bytes, options, "fuzz.dng");
+    options.demosaic = veneer::io::Demosaic::bilinear;
+    auto image = veneer::io::decode_raw_linear(bytes, options, "fuzz.dng");
     if (!image) continue;
     if (image->type() != CV_32FC3 || image->empty()) std::abort();
     if (!cv::checkRange(*image)) std::abort();

@@ -17,7 +17,7 @@ namespace veneer::app {
 bool MainWindow::calibrateLamps(const QString& sphere_folder, const QString& lights_file) {
   // Reading 12 photos and finding their highlights takes well under a second:
   // done here rather than as a cancellable step.
-  auto set = veneer::read_set(sphere_folder.toStdString());
+  auto set = veneer::io::read_set(sphere_folder.toStdString());
   if (!set) {
     message(tr("calibration: %1").arg(qs(set.message())), true);
     return false;

@@ -98,7 +98,7 @@ void MainWindow::exportMapTo(const QString& dir) {
       QFile::remove(dir + "/map.pfm");
       return veneer::make_error("cancelled");
     }
-    if (auto s = veneer::write_picture((dir + "/map.png").toStdString(),
+    if (auto s = veneer::io::write_picture((dir + "/map.png").toStdString(),
                                        veneer::repaint::map_picture(result->map, result->source_size));
         !s)
       return s;
@@ -174,7 +174,7 @@ void MainWindow::exportRelightVideoTo(const QString& file) {
              }
              const double a = 2 * M_PI * i / frames;
              const cv::Vec3d d = veneer::repaint::direction_on_sphere(0.7 * std::cos(a), 0.7 * std::sin(a));
-             writer << tonemap_picture(relighter->render(result->map, d, backdrop));
+             writer << io::tonemap_picture(relighter->render(result->map, d, backdrop));
              p.report((i + 1.0) / frames, "frame");
            }
            writer.release();

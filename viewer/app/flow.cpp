@@ -40,11 +40,11 @@ void MainWindow::showStep() {
 }
 
 // A set was stored on the rig, by whatever pressed the trigger: pull it.
-void MainWindow::flowSetStored(const QString& id, veneer::Role role) {
+void MainWindow::flowSetStored(const QString& id, veneer::io::Role role) {
   if (!autoFlow()) return;
   auto_pulls_[id] = role;
-  step_.start("pull", role == veneer::Role::unknown ? tr("pulling %1").arg(id)
-                                                     : tr("pulling %1 (%2)").arg(id, qs(veneer::role_name(role))));
+  step_.start("pull", role == veneer::io::Role::unknown ? tr("pulling %1").arg(id)
+                                                     : tr("pulling %1 (%2)").arg(id, qs(veneer::io::role_name(role))));
   showStep();
   pull_bar_->setVisible(true);
   pull_bar_->setValue(0);
@@ -53,7 +53,7 @@ void MainWindow::flowSetStored(const QString& id, veneer::Role role) {
 
 void MainWindow::flowPulled(const QString& id, const QString& folder) {
   auto it = auto_pulls_.find(id);
-  std::optional<veneer::Role> role;
+  std::optional<veneer::io::Role> role;
   if (it != auto_pulls_.end()) {
     role = it->second;
     auto_pulls_.erase(it);
@@ -70,7 +70,7 @@ struct ReadSet {
   QString error;
 };
 
-cv::Mat thumbnail_of(const veneer::ImageSet& set) {
+cv::Mat thumbnail_of(const veneer::io::ImageSet& set) {
   if (set.images.empty()) return {};
   cv::Mat small;
   cv::resize(set.images.front(), small,
@@ -82,27 +82,27 @@ cv::Mat thumbnail_of(const veneer::ImageSet& set) {
 namespace {
 // A set at the live view's width; `smaller` says whether that is smaller than the set.
 // A set no wider is read whole, as before (the map is then the full-resolution one).
-veneer::Expected<veneer::ImageSet> read_live_size(const std::string& folder, int width, bool* smaller) {
-  veneer::ReadOptions manifest;
+veneer::Expected<veneer::io::ImageSet> read_live_size(const std::string& folder, int width, bool* smaller) {
+  veneer::io::ReadOptions manifest;
   manifest.load_photos = false;
   manifest.load_truth = false;
-  auto whole = veneer::read_set(folder, manifest);
-  if (!whole || whole->size.width <= width) return veneer::read_set(folder);
-  veneer::ReducedOptions o;
+  auto whole = veneer::io::read_set(folder, manifest);
+  if (!whole || whole->size.width <= width) return veneer::io::read_set(folder);
+  veneer::io::ReducedOptions o;
   o.width = width;
-  auto set = veneer::read_set_reduced(folder, o);
+  auto set = veneer::io::read_set_reduced(folder, o);
   *smaller = set && set->size.width < whole->size.width;
   return set;
 }
 }  // namespace
 
-void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer::Role> as) {
+void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer::io::Role> as) {
   ++loads_running_;
   const QString name = QFileInfo(folder).fileName();
   if (as) {
-    step_.start("load", *as == veneer::Role::unknown
+    step_.start("load", *as == veneer::io::Role::unknown
                             ? tr("loading %1").arg(name)
-                            : tr("loading %1 as the %2").arg(name, qs(veneer::role_name(*as))));
+                            : tr("loading %1 as the %2").arg(name, qs(veneer::io::role_name(*as))));
     showStep();
   }
   const bool full = as.has_value();
@@ -114,7 +114,7 @@ void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer
     ReadSet r;
     bool live_size = false;
     auto read = live_width > 0 ? read_live_size(folder.toStdString(), live_width, &live_size)
-                               : veneer::read_set(folder.toStdString());
+                               : veneer::io::read_set(folder.toStdString());
     if (!read) {
       r.error = qs(read.message());
     } else {
@@ -125,7 +125,7 @@ void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer
       r.thumbnail = thumbnail_of(r.loaded->set);
       if (full) {
         r.loaded->median = veneer::repaint::median_photo(r.loaded->set.images);
-        r.loaded->median_picture = tonemap_picture(r.loaded->median);
+        r.loaded->median_picture = io::tonemap_picture(r.loaded->median);
         r.loaded->median_image = to_qimage(r.loaded->median_picture);  // what the views show, made here
         r.loaded->histogram = luminance_histogram(r.loaded->median_picture);
       }
@@ -156,15 +156,15 @@ void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer
         return;
       }
       // unknown: the role the set's manifest gives it
-      const veneer::Role role = *as != veneer::Role::unknown ? *as : r.loaded->set.role;
-      if (role == veneer::Role::unknown) {
+      const veneer::io::Role role = *as != veneer::io::Role::unknown ? *as : r.loaded->set.role;
+      if (role == veneer::io::Role::unknown) {
         self->message(tr("%1 has no role in its manifest: choose → Destination or → Source").arg(folder), true);
         self->showStep();
         return;
       }
       self->setLoaded(r.loaded, role);
       self->computeNormals(r.loaded);
-      self->message(tr("loaded %1 as the %2").arg(folder, qs(veneer::role_name(role))));
+      self->message(tr("loaded %1 as the %2").arg(folder, qs(veneer::io::role_name(role))));
       self->showStep();
       if (!self->reopenWhenLoaded(folder, role)) self->flowMaybeCompute();
     });

@@ -49,8 +49,8 @@ Library::Library(const QString& workdir) : workdir_(workdir) {
   }
 }
 
-void Library::addSet(const QString& folder, const veneer::ImageSet& set, const cv::Mat& thumbnail) {
-  LibrarySet s{folder, qs(veneer::role_name(set.role)), qs(set.object), qs(set.created), {}};
+void Library::addSet(const QString& folder, const veneer::io::ImageSet& set, const cv::Mat& thumbnail) {
+  LibrarySet s{folder, qs(veneer::io::role_name(set.role)), qs(set.object), qs(set.created), {}};
   if (!thumbnail.empty()) {
     QDir().mkpath(workdir_ + "/thumbnails");
     const QString name = QCryptographicHash::hash(folder.toUtf8(), QCryptographicHash::Sha1).toHex().left(16);

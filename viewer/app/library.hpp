@@ -49,7 +49,7 @@ class Library {
   const std::vector<LibrarySet>& sets() const { return sets_; }
   const std::vector<LibraryMap>& maps() const { return maps_; }
   // Adds or updates the set at `folder` (thumbnail: 8-bit BGR, may be empty).
-  void addSet(const QString& folder, const veneer::ImageSet& set, const cv::Mat& thumbnail);
+  void addSet(const QString& folder, const veneer::io::ImageSet& set, const cv::Mat& thumbnail);
   void forgetSet(const QString& folder);
   void addMap(const LibraryMap& map);
   const LibraryMap* findMap(const QString& folder) const;

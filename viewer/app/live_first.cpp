@@ -39,12 +39,12 @@ struct FullResolution {
   QString error;
 };
 
-std::shared_ptr<LoadedSet> loaded_from(const QString& folder, const veneer::ImageSet& set) {
+std::shared_ptr<LoadedSet> loaded_from(const QString& folder, const veneer::io::ImageSet& set) {
   auto l = std::make_shared<LoadedSet>();
   l->folder = folder;
   l->set = set;
   l->median = veneer::repaint::median_photo(l->set.images);
-  l->median_picture = tonemap_picture(l->median);
+  l->median_picture = io::tonemap_picture(l->median);
   l->median_image = to_qimage(l->median_picture);
   l->histogram = luminance_histogram(l->median_picture);
   return l;
@@ -101,7 +101,7 @@ void MainWindow::flowMaybeFullResolution() {
     o.keep_pictures = true;
     std::vector<veneer::pipeline::SetReport> reports;
     veneer::pipeline::PrepareOptions prep;
-    prep.read.raw.demosaic = veneer::Demosaic::mhc;  // as `veneer transfer` reads RAW files (its default)
+    prep.read.raw.demosaic = veneer::io::Demosaic::mhc;  // as `veneer transfer` reads RAW files (its default)
     auto pair = veneer::pipeline::prepare_pair(dst_folder.toStdString(), src_folder.toStdString(), o, prep, &reports,
                                                progress.part(0, 0.6));
     if (!pair) {

@@ -37,7 +37,7 @@
 
 namespace veneer::app {
 
-cv::Mat picture_of(const cv::Mat& linear) { return linear.empty() ? cv::Mat() : tonemap_picture(linear); }
+cv::Mat picture_of(const cv::Mat& linear) { return linear.empty() ? cv::Mat() : io::tonemap_picture(linear); }
 
 MainWindow::MainWindow(const Options& options, QWidget* parent)
     : QMainWindow(parent), settings_("veneer", "veneer-viewer") {
@@ -86,8 +86,8 @@ MainWindow::MainWindow(const Options& options, QWidget* parent)
   connect(&step_timer_, &QTimer::timeout, this, &MainWindow::showStep);
   connect(&transfer_watch_, &QFutureWatcher<void>::finished, this, &MainWindow::onTransferDone);
 
-  if (!options.destination.isEmpty()) loadLocalSet(options.destination, veneer::Role::destination);
-  if (!options.source.isEmpty()) loadLocalSet(options.source, veneer::Role::source);
+  if (!options.destination.isEmpty()) loadLocalSet(options.destination, veneer::io::Role::destination);
+  if (!options.source.isEmpty()) loadLocalSet(options.source, veneer::io::Role::source);
   if (!options.rig.isEmpty()) connectToRig(options.rig, options.token_file);
 }
 
@@ -213,20 +213,20 @@ QWidget* MainWindow::buildCapturePanel() {
   form->addRow(tr("Shutter [s]"), shutter_);
   form->addRow(tr("Aperture f/"), aperture_);
   form->addRow(tr("ISO"), iso_);
-  auto capture = capture_ = [this](veneer::Role role) {
+  auto capture = capture_ = [this](veneer::io::Role role) {
     veneer::rig::CaptureOptions o;
     o.role = role;
     o.object = object_edit_->text().toStdString();
     o.shutter_s = shutter_->value();
     o.aperture = aperture_->value();
     o.iso = iso_->value();
-    pending_role_ = veneer::role_name(role);
+    pending_role_ = veneer::io::role_name(role);
     rig_.capture(o);
   };
   auto* cap_dst = button(tr("Capture destination"), "captureDestination", box);
   auto* cap_src = button(tr("Capture source"), "captureSource", box);
-  connect(cap_dst, &QPushButton::clicked, this, [capture] { capture(veneer::Role::destination); });
-  connect(cap_src, &QPushButton::clicked, this, [capture] { capture(veneer::Role::source); });
+  connect(cap_dst, &QPushButton::clicked, this, [capture] { capture(veneer::io::Role::destination); });
+  connect(cap_src, &QPushButton::clicked, this, [capture] { capture(veneer::io::Role::source); });
   auto* press = button(tr("Press rig button"), "pressButton", box);
   connect(press, &QPushButton::clicked, this, [this] { rig_.pressButton(false); });
   auto* cancel = button(tr("Cancel capture"), "cancelCapture", box);
@@ -255,7 +255,7 @@ void MainWindow::buildMenus() {
   QMenu* file = menuBar()->addMenu(tr("&File"));
   file->addAction(tr("Open set folder…"), this, [this] {
     QString dir = QFileDialog::getExistingDirectory(this, tr("Image set folder"));
-    if (!dir.isEmpty()) loadSetInBackground(dir, veneer::Role::destination);
+    if (!dir.isEmpty()) loadSetInBackground(dir, veneer::io::Role::destination);
   });
   QMenu* exp = menuBar()->addMenu(tr("&Export"));
   exp->addAction(tr("Map (map.pfm, map.png)…"), this, &MainWindow::exportMap);
@@ -334,8 +334,8 @@ void MainWindow::onRigEvent(const veneer::rig::Event& e) {
     case K::capture_started:
       shot_bar_->setRange(0, std::max(1, e.n));
       shot_bar_->setValue(0);
-      capture_label_->setText(tr("capturing %1 (%2)…").arg(qs(veneer::role_name(e.role)), qs(e.object)));
-      step_.start("capture", tr("capturing the %1").arg(qs(veneer::role_name(e.role))));
+      capture_label_->setText(tr("capturing %1 (%2)…").arg(qs(veneer::io::role_name(e.role)), qs(e.object)));
+      step_.start("capture", tr("capturing the %1").arg(qs(veneer::io::role_name(e.role))));
       step_.update(0);
       showStep();
       break;
@@ -344,10 +344,10 @@ void MainWindow::onRigEvent(const veneer::rig::Event& e) {
       shot_bar_->setValue(e.k);
       if (e.k < e.n) {
         step_.update(static_cast<double>(e.k) / std::max(1, e.n),
-                     tr("capturing the %1: shot %2 of %3").arg(qs(veneer::role_name(e.role))).arg(e.k).arg(e.n));
+                     tr("capturing the %1: shot %2 of %3").arg(qs(veneer::io::role_name(e.role))).arg(e.k).arg(e.n));
       } else {  // the shots are done, the rig now writes the set: a step of its own
         step_.finish();
-        step_.start("store", tr("storing the %1 on the rig").arg(qs(veneer::role_name(e.role))));
+        step_.start("store", tr("storing the %1 on the rig").arg(qs(veneer::io::role_name(e.role))));
       }
       capture_label_->setText(step_.line());
       showStep();
@@ -355,9 +355,9 @@ void MainWindow::onRigEvent(const veneer::rig::Event& e) {
     case K::set_stored: {
       step_.finish();
       shot_bar_->setValue(shot_bar_->maximum());
-      QString text = e.role == veneer::Role::unknown
+      QString text = e.role == veneer::io::Role::unknown
                          ? tr("stored %1").arg(qs(e.set_id))
-                         : tr("stored %1 (%2)").arg(qs(e.set_id), qs(veneer::role_name(e.role)));
+                         : tr("stored %1 (%2)").arg(qs(e.set_id), qs(veneer::io::role_name(e.role)));
       for (const auto& w : e.warnings) text += "\n⚠ " + qs(w);
       capture_label_->setText(text);
       pending_role_.clear();

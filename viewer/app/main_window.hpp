@@ -48,7 +48,7 @@ namespace veneer::app {
 // One object the window has loaded: the set and what photometric stereo says of it.
 struct LoadedSet {
   QString folder;
-  veneer::ImageSet set;
+  veneer::io::ImageSet set;
   std::optional<veneer::ps::PsResult> normals;  // filled in the background after loading
   cv::Mat median;                               // per-pixel median photo (linear BGR)
   cv::Mat median_picture;                       // the same, tonemapped (8-bit), for the views
@@ -74,7 +74,7 @@ class MainWindow : public QMainWindow {
   // What the tests and scripts drive (the buttons call the same).
   RigLink& rig() { return rig_; }
   void connectToRig(const QString& endpoint, const QString& token_file);
-  bool loadLocalSet(const QString& folder, veneer::Role as);
+  bool loadLocalSet(const QString& folder, veneer::io::Role as);
   void startTransfer();
   void cancelTransfer();
   bool computing() const { return computing_; }
@@ -103,9 +103,9 @@ class MainWindow : public QMainWindow {
   // Segmentation by hand (segmentation.cpp), what the views' shift+drag
   // (rectangle) and ctrl/alt+drag (brush in/out) do: the object mask the
   // transfer then uses for that set, shown as an outline.
-  void setHandRect(veneer::Role set, const QRect& rect);
-  void brushHandMask(veneer::Role set, QPoint pixel, bool add, int radius = 0);
-  void clearHandMask(veneer::Role set);
+  void setHandRect(veneer::io::Role set, const QRect& rect);
+  void brushHandMask(veneer::io::Role set, QPoint pixel, bool add, int radius = 0);
+  void clearHandMask(veneer::io::Role set);
   // Writes the hand masks as <dir>/dst-mask.png and src-mask.png, what
   // `veneer transfer --dst-mask/--src-mask` reads; returns the files written.
   QStringList exportMasksTo(const QString& dir);
@@ -130,7 +130,7 @@ class MainWindow : public QMainWindow {
   // Loads a set off the GUI thread (read, median, thumbnail), then shows it.
   // Without a role the set is only listed (a pull in manual mode); with
   // Role::unknown it is used as the role its manifest gives.
-  void loadSetInBackground(const QString& folder, std::optional<veneer::Role> as);
+  void loadSetInBackground(const QString& folder, std::optional<veneer::io::Role> as);
   int loadsRunning() const { return loads_running_; }
   // Shows a map kept in the library again (the Sets panel's "Open map" and a
   // double click on a map row): loads its destination and source in their
@@ -202,14 +202,14 @@ class MainWindow : public QMainWindow {
   void refreshLookNow();
   void updateLampBoxes();
   void updateHistogram();
-  std::shared_ptr<LoadedSet> setFor(veneer::Role role) const { return role == veneer::Role::source ? src_ : dst_; }
+  std::shared_ptr<LoadedSet> setFor(veneer::io::Role role) const { return role == veneer::io::Role::source ? src_ : dst_; }
   bool startHandMask(LoadedSet& s);
-  void handMaskChanged(veneer::Role role);
+  void handMaskChanged(veneer::io::Role role);
   void showOrigin(QPoint destination_pixel);
   void refreshRelight();
-  void setLoaded(std::shared_ptr<LoadedSet> loaded, veneer::Role as);
+  void setLoaded(std::shared_ptr<LoadedSet> loaded, veneer::io::Role as);
   void computeNormals(std::shared_ptr<LoadedSet> loaded);
-  void addLocalItem(const QString& folder, const veneer::ImageSet& set, const cv::Mat& thumbnail = {});
+  void addLocalItem(const QString& folder, const veneer::io::ImageSet& set, const cv::Mat& thumbnail = {});
   // sets_panel.cpp
   QTreeWidgetItem* localItem(const QString& folder, bool create);
   void showLibrary();
@@ -217,20 +217,20 @@ class MainWindow : public QMainWindow {
   void saveMapToLibrary();
   // A set finished loading as `role`: true while a library map being reopened
   // waits for its sets (and when it then starts), so the flow does not compute.
-  bool reopenWhenLoaded(const QString& folder, veneer::Role role);
+  bool reopenWhenLoaded(const QString& folder, veneer::io::Role role);
   void askDelete(QTreeWidgetItem* item);
   void onTrashListed(const std::vector<veneer::rig::SetSummary>& sets);
   void restoreFromTrash(const QString& id);
   QTreeWidgetItem* selectedItem() const;
   void pullSelected();
-  void useSelected(veneer::Role as);
+  void useSelected(veneer::io::Role as);
   void exportMap();
   void exportResults();
   void exportRelightVideo();
   void rememberRig(const QString& endpoint);
 
   // flow.cpp
-  void flowSetStored(const QString& id, veneer::Role role);
+  void flowSetStored(const QString& id, veneer::io::Role role);
   void flowPulled(const QString& id, const QString& folder);
   void flowMaybeCompute();
   void flowMaybeGoLive();
@@ -300,7 +300,7 @@ class MainWindow : public QMainWindow {
   QElapsedTimer live_clock_;
   QRect seg_rect_;
   QString pending_role_;  // "destination"/"source" while a UI capture runs
-  std::function<void(veneer::Role)> capture_;  // the Capture panel's settings, used by both capture rows
+  std::function<void(veneer::io::Role)> capture_;  // the Capture panel's settings, used by both capture rows
   // live first (live_first.cpp)
   void flowMaybeFullResolution();
   int live_width_ = 1280;
@@ -312,7 +312,7 @@ class MainWindow : public QMainWindow {
   QProgressBar* full_bar_ = nullptr;
   StepClock step_;
   QTimer step_timer_;  // redraws the status line so the time left counts down
-  std::map<QString, veneer::Role> auto_pulls_;  // rig set id -> role, pulled by the flow
+  std::map<QString, veneer::io::Role> auto_pulls_;  // rig set id -> role, pulled by the flow
   int loads_running_ = 0;
   std::shared_ptr<std::atomic<bool>> load_cancel_ = std::make_shared<std::atomic<bool>>(false);
   std::atomic<bool> job_cancel_{false};

@@ -168,8 +168,8 @@ bool MainWindow::openLibraryMap(const QString& map_folder) {
       }
       self->reopen_ = Reopen{m, r.map, r.options, r.dst_hand, r.src_hand, false, false};
       self->step_.finish();
-      self->loadSetInBackground(m.destination, veneer::Role::destination);
-      self->loadSetInBackground(m.source, veneer::Role::source);
+      self->loadSetInBackground(m.destination, veneer::io::Role::destination);
+      self->loadSetInBackground(m.source, veneer::io::Role::source);
     });
   });
   return true;
@@ -178,10 +178,10 @@ bool MainWindow::openLibraryMap(const QString& map_folder) {
 // Called as each set finishes loading: once both of a reopened map's sets
 // are there, its options and hand masks are put back and the transfer
 // repaints through the stored map.
-bool MainWindow::reopenWhenLoaded(const QString& folder, veneer::Role role) {
+bool MainWindow::reopenWhenLoaded(const QString& folder, veneer::io::Role role) {
   if (!reopen_) return false;
-  if (role == veneer::Role::destination && folder == reopen_->entry.destination) reopen_->dst_loaded = true;
-  if (role == veneer::Role::source && folder == reopen_->entry.source) reopen_->src_loaded = true;
+  if (role == veneer::io::Role::destination && folder == reopen_->entry.destination) reopen_->dst_loaded = true;
+  if (role == veneer::io::Role::source && folder == reopen_->entry.source) reopen_->src_loaded = true;
   if (!reopen_->dst_loaded || !reopen_->src_loaded) return true;  // the other set is still loading
   if (!dst_ || !src_ || dst_->folder != reopen_->entry.destination || src_->folder != reopen_->entry.source) {
     reopen_.reset();  // another set was chosen meanwhile
@@ -227,7 +227,7 @@ bool MainWindow::reopenWhenLoaded(const QString& folder, veneer::Role role) {
            o.match.fast};
   applyPreset(p);
   truth_normals_->setChecked(o.truth_normals);
-  for (auto [role, mask] : {std::pair{veneer::Role::destination, r.dst_hand}, std::pair{veneer::Role::source, r.src_hand}}) {
+  for (auto [role, mask] : {std::pair{veneer::io::Role::destination, r.dst_hand}, std::pair{veneer::io::Role::source, r.src_hand}}) {
     auto s = setFor(role);
     if (mask.empty() || mask.size() != s->set.size) continue;
     s->hand_mask = mask;

@@ -10,7 +10,7 @@ QImage to_qimage(const cv::Mat& picture) {
   if (picture.empty()) return {};
   cv::Mat bgr;
   if (picture.depth() == CV_32F) {
-    bgr = picture.channels() == 3 ? tonemap_picture(picture) : cv::Mat();
+    bgr = picture.channels() == 3 ? io::tonemap_picture(picture) : cv::Mat();
     if (bgr.empty()) {
       cv::Mat g;
       picture.convertTo(g, CV_8U, 255.0);

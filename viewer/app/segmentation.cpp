@@ -28,7 +28,7 @@ bool MainWindow::startHandMask(LoadedSet& s) {
   return true;
 }
 
-void MainWindow::setHandRect(veneer::Role role, const QRect& rect) {
+void MainWindow::setHandRect(veneer::io::Role role, const QRect& rect) {
   auto s = setFor(role);
   if (!s || rect.isEmpty()) return;
   const cv::Rect r = cv::Rect(rect.x(), rect.y(), rect.width(), rect.height()) & cv::Rect(cv::Point(), s->set.size);
@@ -40,7 +40,7 @@ void MainWindow::setHandRect(veneer::Role role, const QRect& rect) {
   handMaskChanged(role);
 }
 
-void MainWindow::brushHandMask(veneer::Role role, QPoint pixel, bool add, int radius) {
+void MainWindow::brushHandMask(veneer::io::Role role, QPoint pixel, bool add, int radius) {
   auto s = setFor(role);
   if (!s) return;
   if (!startHandMask(*s)) return;
@@ -49,7 +49,7 @@ void MainWindow::brushHandMask(veneer::Role role, QPoint pixel, bool add, int ra
   handMaskChanged(role);
 }
 
-void MainWindow::clearHandMask(veneer::Role role) {
+void MainWindow::clearHandMask(veneer::io::Role role) {
   auto s = setFor(role);
   if (!s || s->hand_mask.empty()) return;
   s->hand_mask.release();
@@ -73,7 +73,7 @@ QStringList MainWindow::exportMasksTo(const QString& dir) {
   return written;
 }
 
-void MainWindow::handMaskChanged(veneer::Role role) {
+void MainWindow::handMaskChanged(veneer::io::Role role) {
   auto s = setFor(role);
   ++s->hand_version;
   std::vector<QPolygonF> outline;
@@ -86,7 +86,7 @@ void MainWindow::handMaskChanged(veneer::Role role) {
       outline.push_back(p);
     }
   }
-  (role == veneer::Role::source ? src_view_ : dst_view_)->setOutline(outline);
+  (role == veneer::io::Role::source ? src_view_ : dst_view_)->setOutline(outline);
   rect_label_->setText(tr("by hand: destination %1, source %2 (shift+drag: rectangle; ctrl+drag: add; alt+drag: "
                           "remove)")
                            .arg(dst_ && !dst_->hand_mask.empty() ? tr("yes") : tr("no"))

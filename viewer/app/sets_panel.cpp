@@ -124,11 +124,11 @@ QWidget* MainWindow::buildSetsPanel() {
     if (!item || item->parent() != maps_root_) return message(tr("choose a map under \"Maps on this computer\""), true);
     openLibraryMap(item->data(0, Qt::UserRole).toString());
   });
-  connect(use_dst, &QPushButton::clicked, this, [this] { useSelected(veneer::Role::destination); });
-  connect(use_src, &QPushButton::clicked, this, [this] { useSelected(veneer::Role::source); });
+  connect(use_dst, &QPushButton::clicked, this, [this] { useSelected(veneer::io::Role::destination); });
+  connect(use_src, &QPushButton::clicked, this, [this] { useSelected(veneer::io::Role::source); });
   connect(sets_tree_, &QTreeWidget::itemDoubleClicked, this, [this](QTreeWidgetItem* item) {
     if (item->parent() == local_root_) {
-      useSelected(item->text(1) == "source" ? veneer::Role::source : veneer::Role::destination);
+      useSelected(item->text(1) == "source" ? veneer::io::Role::source : veneer::io::Role::destination);
     } else if (item->parent() == rig_root_) {
       pullSelected();
     } else if (item->parent() == trash_root_) {
@@ -144,7 +144,7 @@ QWidget* MainWindow::buildSetsPanel() {
 void MainWindow::onSetsListed(const std::vector<veneer::rig::SetSummary>& sets) {
   qDeleteAll(rig_root_->takeChildren());
   for (const auto& s : sets) {
-    auto* item = new QTreeWidgetItem(rig_root_, {qs(s.id), qs(veneer::role_name(s.role)), qs(s.object),
+    auto* item = new QTreeWidgetItem(rig_root_, {qs(s.id), qs(veneer::io::role_name(s.role)), qs(s.object),
                                                  short_date(s.created)});
     QString tip = tr("%1x%2, %3 lamps, %4").arg(s.size.width).arg(s.size.height).arg(s.lights).arg(qs(s.created));
     for (const auto& w : s.warnings) tip += "\n⚠ " + qs(w);
@@ -158,7 +158,7 @@ void MainWindow::onSetsListed(const std::vector<veneer::rig::SetSummary>& sets) 
 void MainWindow::onTrashListed(const std::vector<veneer::rig::SetSummary>& sets) {
   qDeleteAll(trash_root_->takeChildren());
   for (const auto& s : sets) {
-    auto* item = new QTreeWidgetItem(trash_root_, {qs(s.id), qs(veneer::role_name(s.role)), qs(s.object),
+    auto* item = new QTreeWidgetItem(trash_root_, {qs(s.id), qs(veneer::io::role_name(s.role)), qs(s.object),
                                                    short_date(s.created)});
     item->setToolTip(0, tr("deleted %1; Restore (or a double click) brings it back").arg(short_date(s.deleted)));
   }
@@ -215,20 +215,20 @@ QTreeWidgetItem* MainWindow::localItem(const QString& folder, bool create) {
   return item;
 }
 
-void MainWindow::addLocalItem(const QString& folder, const veneer::ImageSet& set, const cv::Mat& thumbnail) {
+void MainWindow::addLocalItem(const QString& folder, const veneer::io::ImageSet& set, const cv::Mat& thumbnail) {
   QTreeWidgetItem* item = localItem(folder, true);
-  item->setText(1, qs(veneer::role_name(set.role)));
+  item->setText(1, qs(veneer::io::role_name(set.role)));
   item->setText(2, qs(set.object));
   item->setText(3, short_date(set.created));
   cv::Mat small = thumbnail;
   if (small.empty() && !set.images.empty()) {
     cv::resize(set.images.front(), small, cv::Size(96, std::max(1, 96 * set.size.height / std::max(1, set.size.width))),
                0, 0, cv::INTER_AREA);
-    small = tonemap_picture(small);
+    small = io::tonemap_picture(small);
   }
   if (!small.empty()) item->setIcon(0, QIcon(QPixmap::fromImage(to_qimage(small))));
   local_root_->setExpanded(true);
-  library_->addSet(folder, set, small.depth() == CV_8U ? small : tonemap_picture(small));
+  library_->addSet(folder, set, small.depth() == CV_8U ? small : io::tonemap_picture(small));
   library_->save();
 }
 
@@ -246,7 +246,7 @@ void MainWindow::showLibrary() {
   for (const auto& m : library_->maps()) addMapItem(m);
 }
 
-void MainWindow::useSelected(veneer::Role as) {
+void MainWindow::useSelected(veneer::io::Role as) {
   QTreeWidgetItem* item = selectedItem();
   if (!item || item->parent() != local_root_) {
     message(tr("choose a set on this computer (pull rig sets first)"), true);
@@ -255,8 +255,8 @@ void MainWindow::useSelected(veneer::Role as) {
   loadSetInBackground(item->data(0, Qt::UserRole).toString(), as);
 }
 
-bool MainWindow::loadLocalSet(const QString& folder, veneer::Role as) {
-  auto read = veneer::read_set(folder.toStdString());
+bool MainWindow::loadLocalSet(const QString& folder, veneer::io::Role as) {
+  auto read = veneer::io::read_set(folder.toStdString());
   if (!read) {
     message(qs(read.message()), true);
     return false;
@@ -269,12 +269,12 @@ bool MainWindow::loadLocalSet(const QString& folder, veneer::Role as) {
   addLocalItem(folder, loaded->set);
   setLoaded(loaded, as);
   computeNormals(loaded);
-  message(tr("loaded %1 as the %2").arg(folder, qs(veneer::role_name(as))));
+  message(tr("loaded %1 as the %2").arg(folder, qs(veneer::io::role_name(as))));
   return true;
 }
 
-void MainWindow::setLoaded(std::shared_ptr<LoadedSet> loaded, veneer::Role as) {
-  if (as == veneer::Role::source) {
+void MainWindow::setLoaded(std::shared_ptr<LoadedSet> loaded, veneer::io::Role as) {
+  if (as == veneer::io::Role::source) {
     src_ = loaded;
   } else {
     dst_ = loaded;

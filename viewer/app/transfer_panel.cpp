@@ -343,7 +343,7 @@ void MainWindow::startTransfer() {
     };
     std::shared_ptr<const veneer::pipeline::PreparedPair> pair = cached;
     if (!pair) {
-      veneer::ImageSet d = dst->set;
+      veneer::io::ImageSet d = dst->set;
       if (!dst_hand.empty()) {
         d.mask = dst_hand;  // by hand: the supplied mask
       } else if (custom_segmentation) {
@@ -355,7 +355,7 @@ void MainWindow::startTransfer() {
         }
         d.mask = m->mask;
       }
-      veneer::ImageSet s;
+      veneer::io::ImageSet s;
       if (!src_hand.empty()) {
         s = src->set;
         s.mask = src_hand;

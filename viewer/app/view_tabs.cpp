@@ -90,16 +90,16 @@ QWidget* MainWindow::buildLookTab() {
   connect(result_view_, &ImageView::pixelClicked, this, &MainWindow::showOrigin);
   connect(dst_view_, &ImageView::rectDrawn, this, [this](QRect r) {
     dst_view_->setRect({});
-    setHandRect(veneer::Role::destination, r);
+    setHandRect(veneer::io::Role::destination, r);
   });
   connect(src_view_, &ImageView::rectDrawn, this, [this](QRect r) {
     src_view_->setRect({});
-    setHandRect(veneer::Role::source, r);
+    setHandRect(veneer::io::Role::source, r);
   });
   connect(dst_view_, &ImageView::brushed, this,
-          [this](QPoint p, bool add) { brushHandMask(veneer::Role::destination, p, add); });
+          [this](QPoint p, bool add) { brushHandMask(veneer::io::Role::destination, p, add); });
   connect(src_view_, &ImageView::brushed, this,
-          [this](QPoint p, bool add) { brushHandMask(veneer::Role::source, p, add); });
+          [this](QPoint p, bool add) { brushHandMask(veneer::io::Role::source, p, add); });
   return w;
 }
 
@@ -126,8 +126,8 @@ QWidget* MainWindow::buildLiveTab() {
   top->addWidget(live_btn_);
   auto* live_cap_src = button(tr("Capture source"), "liveCaptureSource", w);
   auto* live_cap_dst = button(tr("Capture destination"), "liveCaptureDestination", w);
-  connect(live_cap_src, &QPushButton::clicked, this, [this] { capture_(veneer::Role::source); });
-  connect(live_cap_dst, &QPushButton::clicked, this, [this] { capture_(veneer::Role::destination); });
+  connect(live_cap_src, &QPushButton::clicked, this, [this] { capture_(veneer::io::Role::source); });
+  connect(live_cap_dst, &QPushButton::clicked, this, [this] { capture_(veneer::io::Role::destination); });
   top->addWidget(live_cap_src);
   top->addWidget(live_cap_dst);
   top->addWidget(new QLabel(tr("fps")));
@@ -214,7 +214,7 @@ void MainWindow::refreshLookNow() {
     if (what == 0 && !s->median_image.isNull()) return s->median_image;
     cv::Mat picture;
     switch (what) {
-      case 1: picture = s->normals ? normals_picture(s->normals->normals) : cv::Mat(); break;
+      case 1: picture = s->normals ? io::normals_picture(s->normals->normals) : cv::Mat(); break;
       case 2: picture = s->normals ? picture_of(s->normals->albedo) : cv::Mat(); break;
       case 3: picture = s->normals ? s->normals->mask : cv::Mat(); break;
       case 6:

@@ -29,7 +29,7 @@ struct CalibrateArgs {
 // The rig's config with the lamps' positions put in as lamps.positions_m,
 // everything else in it kept; the count must match lamps.lamps.
 veneer::Expected<std::string> rig_config_with_positions(const fs::path& file, const veneer::ps::LightCalibration& cal) {
-  auto bytes = veneer::read_file_bytes(file);
+  auto bytes = veneer::io::read_file_bytes(file);
   if (!bytes) return veneer::make_error(file.string() + ": " + bytes.message());
   nlohmann::json doc;
   try {
@@ -61,7 +61,7 @@ int run_calibrate(const CalibrateArgs& a) {
   o.lamp_distance_m = a.distance;
   if (auto st = o.check(); !st) return report.usage(st.message());
 
-  auto set = veneer::read_set(a.set);
+  auto set = veneer::io::read_set(a.set);
   if (!set) return report.fail(set.message());
   auto cal = veneer::ps::calibrate_mirror_sphere(*set, {}, o);
   if (!cal) return report.fail(a.set + ": " + cal.message());
@@ -75,10 +75,10 @@ int run_calibrate(const CalibrateArgs& a) {
   }
   if (auto st = veneer::ps::write_light_calibration(*cal, a.out); !st) return report.fail(st.message());
   const std::string picture = a.picture.empty() ? fs::path(a.out).replace_extension(".png").string() : a.picture;
-  if (auto st = veneer::write_picture(picture, veneer::ps::calibration_picture(*set, *cal)); !st)
+  if (auto st = veneer::io::write_picture(picture, veneer::ps::calibration_picture(*set, *cal)); !st)
     return report.fail(st.message());
   if (!a.rig_config.empty()) {
-    if (auto st = veneer::write_file_atomic(a.rig_config, rig_config); !st) return report.fail(st.message());
+    if (auto st = veneer::io::write_file_atomic(a.rig_config, rig_config); !st) return report.fail(st.message());
   }
 
   std::printf("sphere: centre (%.2f, %.2f) px, radius %.2f px (outline %.2f px RMS off the circle)\n", cal->center.x,

@@ -47,9 +47,9 @@ int run_table(const EvalArgs& a) {
 
 int run_map(const EvalArgs& a) {
   if (a.dst.empty() || a.src.empty() || a.map.empty()) return report.usage("--dst, --src and --map are needed (or --table)");
-  auto dst = read_set(a.dst);
+  auto dst = io::read_set(a.dst);
   if (!dst) return report.fail(dst.message());
-  auto src = read_set(a.src);
+  auto src = io::read_set(a.src);
   if (!src) return report.fail(src.message());
   std::filesystem::path file = a.map;
   if (std::filesystem::is_directory(file)) file /= "map.pfm";

@@ -71,7 +71,7 @@ cv::Rect object_crop(const cv::Mat& mask, int margin) {
 struct Figures {
   FiguresArgs args;
   cv::Size size;
-  std::map<std::string, ImageSet> sets;
+  std::map<std::string, io::ImageSet> sets;
   std::map<std::string, PreparedObject> objects;
   std::map<std::string, cv::Mat> medians;
   std::ofstream index;
@@ -107,14 +107,14 @@ struct Figures {
   // The source's photo, cropped to its own object, with the destination's crop's aspect.
   Tile source_tile(const std::string& s, bool second = false) {
     const std::string k = key(s, second);
-    return Tile{"source " + s, tonemap_picture(medians[k]), object_crop(objects[k].view.mask, 12)};
+    return Tile{"source " + s, io::tonemap_picture(medians[k]), object_crop(objects[k].view.mask, 12)};
   }
 
   // The destination repainted with the source's median photo.
   Expected<Tile> result(const std::string& d, const std::string& s, const MatchOptions& o, const std::string& label) {
     auto m = map(d, s, o);
     if (!m) return m.error();
-    return Tile{label, tonemap_picture(repaint::repaint(*m, medians[key(s, d == s)], medians[d])), cv::Rect()};
+    return Tile{label, io::tonemap_picture(repaint::repaint(*m, medians[key(s, d == s)], medians[d])), cv::Rect()};
   }
 
   Status write(const std::string& name, const std::string& caption, const std::vector<Tile>& tiles,
@@ -160,8 +160,8 @@ int run(const FiguresArgs& a) {
       for (const char* s : {"orange", "bull", "stone", "two-spheres", "blocks"}) {
         check(F.load(s));
         const cv::Rect crop = object_crop(F.objects[s].view.mask, 12);
-        tiles.push_back({std::string(s) + " photo", tonemap_picture(F.medians[s]), crop});
-        tiles.push_back({std::string(s) + " normals", normals_picture(F.objects[s].view.normals), crop});
+        tiles.push_back({std::string(s) + " photo", io::tonemap_picture(F.medians[s]), crop});
+        tiles.push_back({std::string(s) + " normals", io::normals_picture(F.objects[s].view.normals), crop});
       }
       check(F.write("fig5_02_objects", "objects of the simulated rig: median photo and photometric-stereo normals",
                     tiles, "bull"));
@@ -259,7 +259,7 @@ int run(const FiguresArgs& a) {
       const auto& src = F.objects["sphere-red-gloss"].view.images;
       const auto& dst = F.objects["bull"].view.images;
       for (size_t i = 0; i < src.size(); i += 2)
-        tiles.push_back({"lamp " + std::to_string(i), tonemap_picture(repaint::repaint(*mp, src[i], dst[i])), cv::Rect()});
+        tiles.push_back({"lamp " + std::to_string(i), io::tonemap_picture(repaint::repaint(*mp, src[i], dst[i])), cv::Rect()});
       check(F.write("fig5_12_relight", "sphere-red-gloss -> bull: the bull relit by the source's photos, lamp by lamp",
                     tiles, "bull"));
     }

@@ -20,18 +20,18 @@ std::string vec3(const cv::Vec3d& v) {
   return buf;
 }
 
-void print_summary(const ImageSet& set, const fs::path& folder) {
+void print_summary(const io::ImageSet& set, const fs::path& folder) {
   auto row = [](const char* key, const std::string& value) { std::printf("%-10s %s\n", key, value.c_str()); };
   row("set", folder.string());
   row("format", set.layout.empty() ? "-" : set.layout);
   row("photos", set.photos_read.empty() ? "-" : set.photos_read);
   row("id", set.id);
   row("object", set.object.empty() ? "-" : set.object);
-  row("role", role_name(set.role));
+  row("role", io::role_name(set.role));
   if (!set.created.empty()) row("created", set.created);
   if (!set.scene.empty()) row("scene", set.scene);
   row("size", std::to_string(set.size.width) + "x" + std::to_string(set.size.height));
-  const CameraInfo& c = set.camera;
+  const io::CameraInfo& c = set.camera;
   if (!c.model.empty() || c.exposure_s > 0 || c.focal_px > 0) {
     char buf[256];
     std::snprintf(buf, sizeof buf, "%s, exposure %g s, f/%g, ISO %d", c.model.empty() ? "?" : c.model.c_str(),
@@ -55,7 +55,7 @@ void print_summary(const ImageSet& set, const fs::path& folder) {
   std::printf("  %-3s %-10s %-33s %-16s %s\n", "#", "lamp", "direction (x right, y up, z out)", "intensity r,g,b",
               "mean level");
   for (size_t i = 0; i < set.lights.size(); ++i) {
-    const Light& l = set.lights[i];
+    const io::Light& l = set.lights[i];
     cv::Scalar mean = cv::mean(set.images[i]);
     char in[64];
     std::snprintf(in, sizeof in, "%.3g, %.3g, %.3g", l.intensity[0], l.intensity[1], l.intensity[2]);
@@ -74,7 +74,7 @@ void print_summary(const ImageSet& set, const fs::path& folder) {
 ::veneer::cli::Output report{"info"};
 
 int run(const std::string& folder, bool as_json) {
-  auto set = read_set(folder);
+  auto set = io::read_set(folder);
   if (!set) {
     return report.fail(set.message());
   }
@@ -82,14 +82,14 @@ int run(const std::string& folder, bool as_json) {
     // A veneer set's own manifest as stored; other layouts as the manifest
     // they would get if written as a veneer set.
     if (fs::exists(fs::path(folder) / "set.json")) {
-      auto text = read_file_bytes(fs::path(folder) / "set.json");
+      auto text = io::read_file_bytes(fs::path(folder) / "set.json");
       if (!text) {
         return report.fail(text.message());
       }
       std::cout << *text;
       if (!text->empty() && text->back() != '\n') std::cout << "\n";
     } else {
-      std::cout << manifest_json(*set);
+      std::cout << io::manifest_json(*set);
     }
     return 0;
   }

@@ -21,9 +21,9 @@ struct InspectArgs {
 ::veneer::cli::Output report{"inspect"};
 
 int run(const InspectArgs& a) {
-  auto dst = read_set(a.dst);
+  auto dst = io::read_set(a.dst);
   if (!dst) return report.fail(dst.message());
-  auto src = read_set(a.src);
+  auto src = io::read_set(a.src);
   if (!src) return report.fail(src.message());
   std::filesystem::path file = a.map;
   if (std::filesystem::is_directory(file)) file /= "map.pfm";

@@ -109,7 +109,7 @@ int run_normals(const NormalsArgs& a) {
 
   veneer::cli::ProgressBar bar("normals");
   bar.update(0.0, "reading " + a.set);
-  auto set = veneer::read_set(a.set);
+  auto set = veneer::io::read_set(a.set);
   if (set && !a.lights.empty()) {
     // Lamps calibrated from a chrome sphere (`veneer calibrate`) replace the set's.
     auto cal = veneer::ps::read_light_calibration(a.lights);
@@ -143,7 +143,7 @@ int run_normals(const NormalsArgs& a) {
   bar.update(0.85, "writing " + a.out);
   if (auto st = report.folder(a.out); !st) return report.fail(st.message());
   if (auto st = report.pfm("normals.pfm", res->normals, true); !st) return report.fail(st.message());
-  if (auto st = report.picture("normals.png", veneer::normals_picture(res->normals)); !st)
+  if (auto st = report.picture("normals.png", veneer::io::normals_picture(res->normals)); !st)
     return report.fail(st.message());
   if (auto st = report.pfm("albedo.pfm", res->albedo, false); !st) return report.fail(st.message());
   if (auto st = report.picture("albedo.png", albedo_picture(res->albedo)); !st) return report.fail(st.message());

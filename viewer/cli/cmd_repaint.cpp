@@ -99,12 +99,12 @@ int run_repaint(const RepaintArgs& a) {
     if (!read) return report.fail(read.message());
     options = *read;
   }
-  auto src = read_set(a.src);
+  auto src = io::read_set(a.src);
   if (!src) return report.fail(src.message());
-  auto dst = read_set(a.dst);
+  auto dst = io::read_set(a.dst);
   if (!dst) return report.fail(dst.message());
   if (!fs::exists(map_file.parent_path() / "metrics.json")) options.scale = pipeline::map_scale(*map, *dst);
-  const cv::Mat backdrop = tonemap_picture(repaint::median_photo(dst->images));
+  const cv::Mat backdrop = io::tonemap_picture(repaint::median_photo(dst->images));
   auto mask = match::object_mask(*src, false);
   if (!mask) return report.fail("source: " + mask.message());
   cv::Mat still_mask = *mask;

@@ -259,7 +259,7 @@ VENEER_COMMAND(rig) {
       }
       std::cout
                 << "capturing:  " << (s->capturing ? "yes" : "no") << "\n"
-                << "next press: " << role_name(s->next_role) << "\n"
+                << "next press: " << io::role_name(s->next_role) << "\n"
                 << "sets:       " << s->sets_stored << " stored, " << human_bytes(s->free_bytes) << " free\n"
                 << "clients:    " << s->clients << (s->controller_taken ? ", one controls the rig" : "") << "\n";
       return 0;
@@ -268,7 +268,7 @@ VENEER_COMMAND(rig) {
       auto sets = client.list_sets();
       if (!sets) return fail("list", sets.message());
       for (const auto& s : *sets) {
-        std::cout << s.id << "  " << role_name(s.role) << "  " << s.object << "  " << s.created << "  " << s.size.width
+        std::cout << s.id << "  " << io::role_name(s.role) << "  " << s.object << "  " << s.created << "  " << s.size.width
                   << "x" << s.size.height << "  " << s.lights << " lights  " << human_bytes(s.bytes)
                   << (s.has_truth ? "  truth" : "") << (s.warnings.empty() ? "" : "  WARNING: " + s.warnings.front())
                   << "\n";
@@ -278,8 +278,8 @@ VENEER_COMMAND(rig) {
     if (capture->parsed()) {
       rig::CaptureOptions o = *copts;
       if (!role->empty()) {
-        auto r = parse_role(*role);
-        if (!r || *r == Role::unknown) return fail("capture", "--role '" + *role + "': expected destination or source", 2);
+        auto r = io::parse_role(*role);
+        if (!r || *r == io::Role::unknown) return fail("capture", "--role '" + *role + "': expected destination or source", 2);
         o.role = *r;
       }
       auto id = client.capture(o);
@@ -365,14 +365,14 @@ VENEER_COMMAND(rig) {
           if (guide_opt->count()) return fail("live", "--blend-guide needs --dst (the destination's normals)", 2);
           options.blend_guide = 0;  // no destination normals: the plain blend
         }
-        auto src = read_set(*live_src);
+        auto src = io::read_set(*live_src);
         if (!src) return fail("live", src.message());
-        std::optional<ImageSet> dst;
+        std::optional<io::ImageSet> dst;
         cv::Mat backdrop;
         if (!live_dst->empty()) {
-          auto d = read_set(*live_dst);
+          auto d = io::read_set(*live_dst);
           if (!d) return fail("live", d.message());
-          backdrop = tonemap_picture(repaint::median_photo(d->images));
+          backdrop = io::tonemap_picture(repaint::median_photo(d->images));
           // a bare map.pfm: its scale from its width against the destination's
           if (!std::filesystem::exists(metrics)) options.scale = pipeline::map_scale(*map, *d);
           dst = std::move(*d);
@@ -387,7 +387,7 @@ VENEER_COMMAND(rig) {
             if (!pair) return fail("live", pair.message());
             made = pipeline::blend_plan_for(*pair, options, *map);
           } else {  // no destination normals: the plain blend, over the source's mask as the map saw it
-            ImageSet source = *src;
+            io::ImageSet source = *src;
             match::scale_set(source, options.scale);
             auto mask = match::object_mask(source, options.truth_normals);
             if (!mask) return fail("live", "source: " + mask.message());

@@ -92,8 +92,8 @@ int run_simulate(const SimulateArgs& a) {
   veneer::sim::RenderOptions o;
   if (!parse_size(a.size, &o.size)) return report.usage("--size '" + a.size + "': expected WIDTHxHEIGHT, e.g. 1024x680");
   if (!parse_vec3(a.offset, &o.offset_m)) return report.usage("--offset '" + a.offset + "': expected x,y,z in metres");
-  auto role = veneer::parse_role(a.role);
-  if (!role || *role == veneer::Role::unknown) return report.usage("--role '" + a.role + "': expected destination or source");
+  auto role = veneer::io::parse_role(a.role);
+  if (!role || *role == veneer::io::Role::unknown) return report.usage("--role '" + a.role + "': expected destination or source");
   o.seed = a.seed;
   o.noise_sigma = a.noise;
   o.scale = a.scale;
@@ -118,15 +118,15 @@ int run_simulate(const SimulateArgs& a) {
     // The rig's camera twin's files: the developed JPEG as the photo and the
     // lossless DNG (with its embedded preview) beside it.
     bar.update(0.82, "camera files (JPEG + DNG)");
-    if (auto st = veneer::add_camera_files(*set); !st) return report.fail(st.message());
+    if (auto st = veneer::io::add_camera_files(*set); !st) return report.fail(st.message());
   }
   bar.update(0.85, "writing " + a.out);
-  if (auto st = veneer::write_set(*set, a.out, a.overwrite); !st) return report.fail(st.message());
+  if (auto st = veneer::io::write_set(*set, a.out, a.overwrite); !st) return report.fail(st.message());
   if (!a.preview.empty()) {
     // what a person would want to see first: every lamp on at once
     cv::Mat sum = cv::Mat::zeros(set->size, CV_32FC3);
     for (const auto& im : set->images) sum += im;
-    if (auto st = report.picture(a.preview, veneer::tonemap_picture(sum)); !st) return report.fail(st.message());
+    if (auto st = report.picture(a.preview, veneer::io::tonemap_picture(sum)); !st) return report.fail(st.message());
   }
   bar.update(1.0, "done");
   bar.done();

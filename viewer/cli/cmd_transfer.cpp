@@ -37,15 +37,15 @@ struct TransferArgs {
   // RAW interpolation: our own (Demosaic::mhc), ~20x faster than LibRaw's DCB,
   // the library's default, at normals as good on the simulator's 5600x3750
   // pair (issue 34: normal agreement 4.18 vs 4.51 deg mean).
-  std::string photos = "auto", demosaic = demosaic_name(Demosaic::mhc), cache_dir;
+  std::string photos = "auto", demosaic = io::demosaic_name(io::Demosaic::mhc), cache_dir;
   bool raw_half = false, no_cache = false;
   double cache_size_gb = 4.0;
   // the repainted destination as a relightable file (repaint/rti_export.hpp)
   std::string rti, rti_format = "lrgb";
   // live first (pipeline/live.hpp): only the map at the live view's size
   bool live = false, live_no_truth = false;
-  int live_width = ReducedOptions{}.width;
-  std::string live_decode = reduced_decode_name(ReducedOptions{}.decode);
+  int live_width = io::ReducedOptions{}.width;
+  std::string live_decode = io::reduced_decode_name(io::ReducedOptions{}.decode);
 };
 
 ::veneer::cli::Output report{"transfer"};
@@ -58,7 +58,7 @@ Expected<repaint::RtiFit> export_rti(const std::string& folder, const std::vecto
   for (size_t i = 0; i < directions.size(); ++i) {
     char name[48];
     std::snprintf(name, sizeof name, "result_light_%02zu.png", i);
-    auto photo = read_linear_image(std::filesystem::path(folder) / name);
+    auto photo = io::read_linear_image(std::filesystem::path(folder) / name);
     if (!photo) return photo.error();
     photos.push_back(std::move(photo).value());
   }
@@ -68,13 +68,13 @@ Expected<repaint::RtiFit> export_rti(const std::string& folder, const std::vecto
 // A mask PNG for a set: pixels above 127 are the object. One clear error
 // for a file that does not read, has another size than the set, or marks nothing.
 Status read_mask(const std::string& option, const std::string& file, const std::string& folder,
-                 const ReadOptions& read, cv::Mat& mask) {
+                 const io::ReadOptions& read, cv::Mat& mask) {
   mask = cv::imread(file, cv::IMREAD_GRAYSCALE);
   if (mask.empty()) return make_error(option + " " + file + ": cannot read it as an image");
-  ReadOptions manifest = read;
+  io::ReadOptions manifest = read;
   manifest.load_photos = false;
   manifest.load_truth = false;
-  auto set = read_set(folder, manifest);
+  auto set = io::read_set(folder, manifest);
   if (!set) return set.error();
   if (mask.size() != set->size)
     return make_error(option + " " + file + " is " + std::to_string(mask.cols) + "x" + std::to_string(mask.rows) +
@@ -121,9 +121,9 @@ int run(const TransferArgs& a) {
 
   const auto t_wall = std::chrono::steady_clock::now();
   pipeline::PrepareOptions prep;
-  auto photos = parse_photo_source(a.photos);
+  auto photos = io::parse_photo_source(a.photos);
   if (!photos) return report.usage(photos.message());
-  auto demosaic = parse_demosaic(a.demosaic);
+  auto demosaic = io::parse_demosaic(a.demosaic);
   if (!demosaic) return report.usage(demosaic.message());
   prep.read.photos = *photos;
   prep.read.raw.demosaic = *demosaic;
@@ -155,7 +155,7 @@ int run(const TransferArgs& a) {
     live.read.width = a.live_width;
     if (a.live_no_truth && a.truth_normals) return report.usage("--live-no-truth and --truth-normals: the one leaves out what the other needs");
     live.read.load_truth = !a.live_no_truth;
-    auto decode = parse_reduced_decode(a.live_decode);
+    auto decode = io::parse_reduced_decode(a.live_decode);
     if (!decode) return report.usage(decode.message());
     live.read.decode = *decode;
     live.destination_mask = prep.destination_mask;
@@ -169,7 +169,7 @@ int run(const TransferArgs& a) {
   auto result = pipeline::transfer(*pair, options, matching);
   if (!result) return report.fail(result.message());
   std::vector<cv::Vec3d> lamp_directions;
-  for (const Light& l : pair->destination.lights) lamp_directions.push_back(l.direction);
+  for (const io::Light& l : pair->destination.lights) lamp_directions.push_back(l.direction);
   Progress writing;
   writing.on_progress = [&bar](double f, const std::string& stage) { bar.update(0.95 + 0.04 * f, stage); };
   if (auto s = pipeline::write_transfer(*result, std::move(*pair), a.out, writing); !s) return report.fail(s.message());

@@ -36,19 +36,19 @@ Status Output::remember(const std::filesystem::path& name, Status s) {
 }
 
 Status Output::picture(const std::filesystem::path& name, const cv::Mat& bgr8) {
-  return remember(name, write_picture(path(name), bgr8));
+  return remember(name, io::write_picture(path(name), bgr8));
 }
 
 Status Output::pfm(const std::filesystem::path& name, const cv::Mat& image, bool xyz_order) {
-  return remember(name, write_pfm(path(name), image, xyz_order));
+  return remember(name, io::write_pfm(path(name), image, xyz_order));
 }
 
 Status Output::json(const std::filesystem::path& name, const nlohmann::json& doc, int indent) {
-  return remember(name, write_file_atomic(path(name), doc.dump(indent) + "\n"));
+  return remember(name, io::write_file_atomic(path(name), doc.dump(indent) + "\n"));
 }
 
 Status Output::text(const std::filesystem::path& name, const std::string& text) {
-  return remember(name, write_file_atomic(path(name), text));
+  return remember(name, io::write_file_atomic(path(name), text));
 }
 
 void Output::line(const std::string& text) const { std::cout << text << "\n" << std::flush; }

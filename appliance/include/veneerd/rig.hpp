@@ -44,7 +44,7 @@ struct RigEvent {
   };
   Kind kind = Kind::button_pressed;
   std::string set_id;
-  veneer::Role role = veneer::Role::unknown;
+  veneer::io::Role role = veneer::io::Role::unknown;
   std::string object;
   int k = 0, n = 0;                   // shot_taken; n also in capture_started
   double eta_s = 0;
@@ -75,10 +75,10 @@ struct RigDevices {
 // hand-held lamp of the live view.
 struct SimulatedHooks {
   std::vector<std::string> scenes;  // [destination scene, source scene]
-  std::function<void(veneer::Role role, const std::string& scene)> select_scene;
+  std::function<void(veneer::io::Role role, const std::string& scene)> select_scene;
   // Completes a captured set before it is stored: ground truth, camera
   // intrinsics, the lamps' irradiance in image units.
-  std::function<void(veneer::ImageSet& set)> finish_set;
+  std::function<void(veneer::io::ImageSet& set)> finish_set;
   std::function<void(const cv::Vec3d& position)> move_hand_lamp;
 };
 
@@ -96,7 +96,7 @@ struct RigOptions {
 };
 
 struct CaptureRequest {
-  veneer::Role role = veneer::Role::unknown;  // unknown = the next role
+  veneer::io::Role role = veneer::io::Role::unknown;  // unknown = the next role
   std::string object;                         // empty = scene or role name
   Exposure exposure;                          // zeros = the configured exposure
 };
@@ -114,7 +114,7 @@ struct RigState {
   std::string lamps_problem;           // why the lamps can't be used now (key refused, bridge down...); empty = fine
   bool holds_lamps = false;            // veneerd changed lamps that go back to their owner at exit
   bool capturing = false;
-  veneer::Role next_role = veneer::Role::destination;
+  veneer::io::Role next_role = veneer::io::Role::destination;
 };
 
 class Rig {
@@ -175,7 +175,7 @@ class Rig {
   mutable std::mutex mutex_;  // guards the fields below
   bool capturing_ = false;
   std::string capture_id_;
-  veneer::Role next_role_ = veneer::Role::destination;
+  veneer::io::Role next_role_ = veneer::io::Role::destination;
   std::vector<LampState> lamps_now_;
   std::chrono::steady_clock::time_point lamps_read_at_{};
   std::string lamps_problem_;

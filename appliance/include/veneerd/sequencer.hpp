@@ -26,7 +26,7 @@ namespace veneerd {
 
 struct CapturePlan {
   std::string set_id;
-  veneer::Role role = veneer::Role::unknown;
+  veneer::io::Role role = veneer::io::Role::unknown;
   std::string object;
   std::string scene;                      // simulator scene (simulated rig), else empty
   Exposure exposure;
@@ -51,8 +51,8 @@ struct CaptureHooks {
   // ambient empty, raw empty), only what set.json needs besides them. A
   // full-resolution set is 2 GiB as float; a rig board holds one frame at a
   // time. An error stops the capture.
-  std::function<veneer::Status(int k, int shots, const cv::Mat& photo, const veneer::ImageSet::RawFile& raw,
-                               const veneer::ImageSet::RawFile& developed)>
+  std::function<veneer::Status(int k, int shots, const cv::Mat& photo, const veneer::io::ImageSet::RawFile& raw,
+                               const veneer::io::ImageSet::RawFile& developed)>
       on_frame;
 };
 
@@ -66,7 +66,7 @@ struct PendingRestore {
 };
 
 struct CaptureResult {
-  veneer::ImageSet set;      // lights, images, ambient, camera info, warnings; no truth
+  veneer::io::ImageSet set;      // lights, images, ambient, camera info, warnings; no truth
   double seconds = 0;        // wall time of the whole sequence
   double mean_step_s = 0;    // mean time of one lamp step (switch + settle + shot)
   int retakes = 0;           // frames taken again because another client changed a lamp

@@ -21,7 +21,7 @@ namespace veneerd {
 
 struct StoredSet {
   std::string id;
-  veneer::Role role = veneer::Role::unknown;
+  veneer::io::Role role = veneer::io::Role::unknown;
   std::string object;
   std::string created;
   std::string scene;
@@ -54,14 +54,14 @@ class Store {
   std::filesystem::path folder(const std::string& id) const { return root_ / id; }
 
   // A fresh id for a new set, e.g. "20261122-081530-destination-bull".
-  std::string new_id(veneer::Role role, const std::string& object) const;
+  std::string new_id(veneer::io::Role role, const std::string& object) const;
   // Bytes a set of this size will take (16-bit PNGs, upper bound) and the free space.
   static uint64_t estimate_bytes(cv::Size size, int photos, bool truth);
   uint64_t free_bytes() const;
 
   // Stores the set under set.id. Fails with a clear error (disk full, ...)
   // and leaves nothing behind.
-  veneer::Status save(const veneer::ImageSet& set);
+  veneer::Status save(const veneer::io::ImageSet& set);
 
   // Starts writing set `id` frame by frame (a capture at the camera's full
   // resolution holds one frame at a time, not the whole set): see SetWriter.
@@ -109,13 +109,13 @@ class SetWriter {
   // as light_NN.jpg instead of a 16-bit PNG of `photo` (empty = the PNG).
   // Written (and fsynced) before this returns; the first frame checks the
   // free space for the whole set (`photos` frames).
-  veneer::Status add_frame(int k, const cv::Mat& photo, const veneer::ImageSet::RawFile& raw, int photos,
-                           const veneer::ImageSet::RawFile& developed = {});
+  veneer::Status add_frame(int k, const cv::Mat& photo, const veneer::io::ImageSet::RawFile& raw, int photos,
+                           const veneer::io::ImageSet::RawFile& developed = {});
   // Writes the supplied mask, the truth (releasing each of its images once
   // written) and set.json for `set` (metadata and lights; its photos may be
   // empty: the frames added are what set.json names), then renames the folder
   // into place and lists the set. Every light needs its frame.
-  veneer::Status commit(veneer::ImageSet& set);
+  veneer::Status commit(veneer::io::ImageSet& set);
 
  private:
   friend class Store;
@@ -128,10 +128,10 @@ class SetWriter {
   cv::Size size_;
   bool ambient_ = false;
   std::vector<bool> lit_;                          // lit_[i]: light i's frame is written
-  std::vector<veneer::ImageSet::RawFile> raw_names_;  // extension only (bytes "1" when a RAW file was written)
-  veneer::ImageSet::RawFile ambient_raw_;
-  std::vector<veneer::ImageSet::RawFile> developed_names_;  // the same for the camera's JPEGs
-  veneer::ImageSet::RawFile ambient_developed_;
+  std::vector<veneer::io::ImageSet::RawFile> raw_names_;  // extension only (bytes "1" when a RAW file was written)
+  veneer::io::ImageSet::RawFile ambient_raw_;
+  std::vector<veneer::io::ImageSet::RawFile> developed_names_;  // the same for the camera's JPEGs
+  veneer::io::ImageSet::RawFile ambient_developed_;
 };
 
 }  // namespace veneerd

@@ -183,7 +183,7 @@ struct PreviewBuffer {
 
 std::shared_ptr<const PreviewBuffer> make_preview_buffer(const veneer::sim::Scene& scene, const std::string& name,
                                                          const veneer::sim::RenderOptions& r) {
-  veneer::Truth t = veneer::sim::render_truth(scene, r);
+  veneer::io::Truth t = veneer::sim::render_truth(scene, r);
   auto b = std::make_shared<PreviewBuffer>();
   b->scene = name;
   b->size = r.size;
@@ -406,10 +406,10 @@ veneer::Expected<Still> SimulatedCamera::capture() {
   if (raw || jpeg) {
     // What a RAW+JPEG body delivers: its developed JPEG and the DNG (a
     // lossless mosaic with a reduced preview), encoded side by side.
-    veneer::CameraFileOptions files;
+    veneer::io::CameraFileOptions files;
     files.raw = raw;
     files.dng.camera_model = "Veneer simulated camera";
-    auto encoded = veneer::encode_camera_files(still.linear, files);
+    auto encoded = veneer::io::encode_camera_files(still.linear, files);
     if (!encoded) return veneer::make_error("simulated camera: shot " + std::to_string(shot) + ": " + encoded.message());
     if (raw) {
       char name[32];
@@ -596,7 +596,7 @@ std::vector<veneer::sim::Lamp> SimulatedCamera::last_lamps() const {
   return impl_->last_lamps;
 }
 
-veneer::Expected<veneer::Truth> SimulatedCamera::truth() {
+veneer::Expected<veneer::io::Truth> SimulatedCamera::truth() {
   veneer::sim::RenderOptions r;
   std::string name;
   {
@@ -606,14 +606,14 @@ veneer::Expected<veneer::Truth> SimulatedCamera::truth() {
   }
   auto scene = impl_->scene_for(impl_->still_scenes, name, r);
   if (!scene) return veneer::make_error("simulated camera: " + scene.message());
-  veneer::Truth t = veneer::sim::render_truth(**scene, r);
+  veneer::io::Truth t = veneer::sim::render_truth(**scene, r);
   if (!t.present()) return veneer::make_error("simulated camera: the simulator produced no truth for scene " + name);
   return t;
 }
 
-veneer::CameraInfo SimulatedCamera::camera_info() const {
+veneer::io::CameraInfo SimulatedCamera::camera_info() const {
   std::lock_guard lock(impl_->mutex);
-  veneer::CameraInfo c;
+  veneer::io::CameraInfo c;
   c.model = "Veneer simulated camera";
   c.exposure_s = impl_->exposure.shutter_s;
   c.aperture = impl_->exposure.aperture;

@@ -55,8 +55,8 @@ std::string SimulatedRig::destination_scene() const { return context_.scenes.fro
 std::string SimulatedRig::source_scene() const {
   return context_.scenes.size() > 1 ? context_.scenes[1] : context_.scenes.front();
 }
-std::string SimulatedRig::scene_for(veneer::Role role) const {
-  return role == veneer::Role::source ? source_scene() : destination_scene();
+std::string SimulatedRig::scene_for(veneer::io::Role role) const {
+  return role == veneer::io::Role::source ? source_scene() : destination_scene();
 }
 
 json SimulatedRig::lamps_config() const {

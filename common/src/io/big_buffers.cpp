@@ -6,7 +6,7 @@
 
 #include <cstddef>
 
-namespace veneer {
+namespace veneer::io {
 
 namespace {
 
@@ -80,4 +80,4 @@ cv::Mat big_mat(int rows, int cols, int type) {
   return m;
 }
 
-}  // namespace veneer
+}  // namespace veneer::io

@@ -17,7 +17,7 @@
 #include "veneer/io/image_io.hpp"
 #include "veneer/util/log.hpp"
 
-namespace veneer {
+namespace veneer::io {
 namespace fs = std::filesystem;
 
 namespace {
@@ -196,7 +196,7 @@ Expected<fs::path> ResultCache::begin_store(const std::string& key) const {
   std::error_code ec;
   fs::create_directories(dir_, ec);
   if (ec) return make_error(dir_.string() + ": cannot create cache folder: " + ec.message());
-  const fs::path tmp = io_detail::temp_sibling(dir_ / key);
+  const fs::path tmp = detail::temp_sibling(dir_ / key);
   if (!fs::create_directory(tmp, ec)) return make_error(tmp.string() + ": cannot create: " + ec.message());
   return tmp;
 }
@@ -314,9 +314,9 @@ Expected<cv::Mat> decode_mat(const std::string& blob, const std::string& name) {
   return m;
 }
 
-}  // namespace veneer
+}  // namespace veneer::io
 
-namespace veneer {
+namespace veneer::io {
 
 Status write_mat_file(const fs::path& file, const cv::Mat& m, bool half) {
   const bool to_half = half && m.depth() == CV_32F;
@@ -375,4 +375,4 @@ Expected<cv::Mat> read_mat_file(const fs::path& file) {
   return m;
 }
 
-}  // namespace veneer
+}  // namespace veneer::io

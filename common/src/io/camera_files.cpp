@@ -10,7 +10,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 
-namespace veneer {
+namespace veneer::io {
 
 namespace {
 
@@ -105,4 +105,4 @@ Status add_camera_files(ImageSet& set, const CameraFileOptions& options) {
   return Status::success();
 }
 
-}  // namespace veneer
+}  // namespace veneer::io

@@ -8,7 +8,7 @@
 
 #include "veneer/io/big_buffers.hpp"
 
-namespace veneer::io_detail {
+namespace veneer::io::detail {
 
 bool is_bayer(const std::array<int, 4>& cfa) {
   int count[3] = {};
@@ -106,4 +106,4 @@ cv::Mat demosaic_mhc(const Mosaic& m) {
   return out;
 }
 
-}  // namespace veneer::io_detail
+}  // namespace veneer::io::detail

@@ -7,7 +7,7 @@
 
 #include <opencv2/core.hpp>
 
-namespace veneer::io_detail {
+namespace veneer::io::detail {
 
 // A Bayer mosaic as the sensor stored it, and how to make it linear.
 struct Mosaic {
@@ -33,4 +33,4 @@ bool is_bayer(const std::array<int, 4>& cfa);
 // camera-to-sRGB matrix, clipped to [0, 1]. Rows run in parallel.
 cv::Mat demosaic_mhc(const Mosaic& mosaic);
 
-}  // namespace veneer::io_detail
+}  // namespace veneer::io::detail

@@ -12,7 +12,7 @@
 
 #include "veneer/io/dng.hpp"
 
-namespace veneer {
+namespace veneer::io {
 
 namespace {
 
@@ -210,4 +210,4 @@ Expected<std::string> read_dng_preview(const std::filesystem::path& file) {
   return out;
 }
 
-}  // namespace veneer
+}  // namespace veneer::io

@@ -15,7 +15,7 @@
 #include "veneer/io/camera_files.hpp"
 #include "veneer/io/dng.hpp"
 
-namespace veneer {
+namespace veneer::io {
 
 namespace {
 
@@ -178,7 +178,7 @@ Expected<std::string> encode_dng(const cv::Mat& photo, const DngOptions& o) {
     counts(x0, y0, tile_w, tile_h, tile.data());
     if (o.compress) {
       blocks[i].reserve(tile.size() * 2);
-      io_detail::encode_lossless_jpeg(tile.data(), tile_w, tile_h, tile_w, 2, blocks[i]);
+      detail::encode_lossless_jpeg(tile.data(), tile_w, tile_h, tile_w, 2, blocks[i]);
     } else {
       blocks[i].resize(tile.size() * 2);
       for (size_t k = 0; k < tile.size(); ++k) {
@@ -324,4 +324,4 @@ Status add_dng_raw_files(ImageSet& set, const DngOptions& options) {
   return Status::success();
 }
 
-}  // namespace veneer
+}  // namespace veneer::io

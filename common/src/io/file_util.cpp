@@ -9,7 +9,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-namespace veneer::io_detail {
+namespace veneer::io::detail {
 namespace fs = std::filesystem;
 
 namespace {
@@ -110,4 +110,4 @@ long temp_sibling_pid(const fs::path& target, const std::string& candidate, cons
   return pid;
 }
 
-}  // namespace veneer::io_detail
+}  // namespace veneer::io::detail

@@ -6,7 +6,7 @@
 
 #include "veneer/util/expected.hpp"
 
-namespace veneer::io_detail {
+namespace veneer::io::detail {
 
 // A file's bytes mapped read-only (prefaulted from the page cache in one
 // call), for decoders that read a whole file once: no copy into a buffer of
@@ -38,4 +38,4 @@ std::filesystem::path temp_sibling(const std::filesystem::path& target, const ch
 long temp_sibling_pid(const std::filesystem::path& target, const std::string& candidate_name,
                       const char* kind = "tmp");
 
-}  // namespace veneer::io_detail
+}  // namespace veneer::io::detail

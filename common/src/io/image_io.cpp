@@ -20,7 +20,7 @@
 #include "file_util.hpp"
 #include "png_codec.hpp"
 
-namespace veneer {
+namespace veneer::io {
 namespace fs = std::filesystem;
 
 namespace {
@@ -252,8 +252,8 @@ Expected<std::string> read_file_bytes(const fs::path& file) {
 }
 
 Status write_file_atomic(const fs::path& file, const std::string& bytes, Sync sync) {
-  fs::path tmp = io_detail::temp_sibling(file);
-  if (Status s = io_detail::write_file_synced(tmp, bytes, sync == Sync::each); !s) {
+  fs::path tmp = detail::temp_sibling(file);
+  if (Status s = detail::write_file_synced(tmp, bytes, sync == Sync::each); !s) {
     ::unlink(tmp.c_str());
     return make_error(file.string() + ": " + s.message());
   }
@@ -263,13 +263,13 @@ Status write_file_atomic(const fs::path& file, const std::string& bytes, Sync sy
     return make_error(file.string() + ": cannot rename temporary file into place: " + std::strerror(err));
   }
   if (sync == Sync::later) return Status::success();
-  return io_detail::fsync_dir(file.parent_path());
+  return detail::fsync_dir(file.parent_path());
 }
 
-Status sync_folder(const fs::path& folder) { return io_detail::fsync_dir(folder); }
+Status sync_folder(const fs::path& folder) { return detail::fsync_dir(folder); }
 
 Status write_file_synced(const fs::path& file, std::string_view bytes) {
-  return io_detail::write_file_synced(file, bytes);
+  return detail::write_file_synced(file, bytes);
 }
 
 Expected<std::string> encode_png8(const cv::Mat& image) {
@@ -380,7 +380,7 @@ Expected<std::string> encode_png16(const cv::Mat& image, PngDeflate deflate) {
   // libdeflate, rows Sub-filtered (png_codec.hpp) at its fastest level:
   // faster than OpenCV's zlib level 1 with the RLE strategy, and smaller; or
   // stored. The float -> 16-bit conversion is part of the row pass.
-  return io_detail::encode_png(image, deflate == PngDeflate::stored ? 0 : 1);
+  return detail::encode_png(image, deflate == PngDeflate::stored ? 0 : 1);
 }
 
 Status write_png16(const fs::path& file, const cv::Mat& image, Sync sync, PngDeflate deflate) {
@@ -401,7 +401,7 @@ Expected<cv::Mat> decode_linear_image(std::string_view bytes, const std::string&
   if (has_jpeg_magic(bytes)) return decode_jpeg_linear(bytes, name);
   if (has_png_magic(bytes)) {
     if (Status s = check_png_chunks(bytes, name); !s) return s.error();
-    if (auto fast = io_detail::decode_png_linear(bytes, name)) return std::move(*fast);
+    if (auto fast = detail::decode_png_linear(bytes, name)) return std::move(*fast);
   }
   auto raw = decode_raw(bytes, name);
   if (!raw) return raw.error();
@@ -516,4 +516,4 @@ Status write_picture(const fs::path& file, const cv::Mat& bgr8, Sync sync) {
   return write_file_atomic(file, std::string(buffer.begin(), buffer.end()), sync);
 }
 
-}  // namespace veneer
+}  // namespace veneer::io

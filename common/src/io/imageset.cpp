@@ -30,9 +30,9 @@
 
 #include "set_detail.hpp"
 
-namespace veneer {
+namespace veneer::io {
 namespace fs = std::filesystem;
-using namespace io_detail;
+using namespace detail;
 
 // --- public ----------------------------------------------------------------------
 
@@ -169,4 +169,4 @@ Expected<ImageSet> read_set(const fs::path& folder, const ReadOptions& options, 
   return set;
 }
 
-}  // namespace veneer
+}  // namespace veneer::io

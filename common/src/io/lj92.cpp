@@ -11,7 +11,7 @@
 #include <array>
 #include <vector>
 
-namespace veneer::io_detail {
+namespace veneer::io::detail {
 
 namespace {
 
@@ -201,4 +201,4 @@ void encode_lossless_jpeg(const uint16_t* samples, int columns, int rows, int st
   marker(out, 0xd9);  // EOI
 }
 
-}  // namespace veneer::io_detail
+}  // namespace veneer::io::detail

@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <string>
 
-namespace veneer::io_detail {
+namespace veneer::io::detail {
 
 // Encodes `rows` rows of `columns` 16-bit samples (row stride `stride`
 // samples) as one lossless JPEG of `components` interleaved components:
@@ -19,4 +19,4 @@ namespace veneer::io_detail {
 void encode_lossless_jpeg(const uint16_t* samples, int columns, int rows, int stride, int components,
                           std::string& out);
 
-}  // namespace veneer::io_detail
+}  // namespace veneer::io::detail

@@ -10,10 +10,10 @@
 #include "set_detail.hpp"
 #include "veneer/io/imageset.hpp"
 
-namespace veneer {
+namespace veneer::io {
 namespace fs = std::filesystem;
 using nlohmann::json;
-using namespace io_detail;
+using namespace detail;
 
 namespace {
 
@@ -326,4 +326,4 @@ std::string manifest_json(const ImageSet& set) {
   return compact_arrays(root.dump(2, ' ', false, nlohmann::ordered_json::error_handler_t::replace)) + "\n";
 }
 
-}  // namespace veneer
+}  // namespace veneer::io

@@ -12,7 +12,7 @@
 #include "set_detail.hpp"
 #include "veneer/io/image_io.hpp"
 
-namespace veneer::io_detail {
+namespace veneer::io::detail {
 
 namespace {
 
@@ -149,4 +149,4 @@ std::string describe_photos(const PhotoKind& photo, bool srgb8, const RawOptions
   return kind;
 }
 
-}  // namespace veneer::io_detail
+}  // namespace veneer::io::detail

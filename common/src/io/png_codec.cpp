@@ -17,7 +17,7 @@
 
 #include "veneer/io/big_buffers.hpp"
 
-namespace veneer::io_detail {
+namespace veneer::io::detail {
 
 namespace {
 
@@ -318,4 +318,4 @@ std::string encode_png(const cv::Mat& image, int level) {
   return out;
 }
 
-}  // namespace veneer::io_detail
+}  // namespace veneer::io::detail

@@ -13,7 +13,7 @@
 
 #include "veneer/util/expected.hpp"
 
-namespace veneer::io_detail {
+namespace veneer::io::detail {
 
 // A PNG's bytes as CV_32FC3 BGR in [0, 1] (grey spread over the three
 // channels, alpha dropped). nullopt when the file is of a kind this decoder
@@ -28,4 +28,4 @@ std::optional<Expected<cv::Mat>> decode_png_linear(std::string_view bytes, const
 // compressed, unfiltered when stored.
 std::string encode_png(const cv::Mat& image, int level = 1);
 
-}  // namespace veneer::io_detail
+}  // namespace veneer::io::detail

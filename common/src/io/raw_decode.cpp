@@ -10,7 +10,7 @@
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/raw.hpp"
 
-namespace veneer {
+namespace veneer::io {
 
 namespace {
 
@@ -57,13 +57,13 @@ namespace {
 // (highlight 0: the smallest multiplier is 1, values clip at the white
 // level). nullopt when the file is of a kind only LibRaw's own pipeline takes
 // (not a plain 2x2 Bayer layout, a black-level pattern over 2x2, odd size).
-std::optional<io_detail::Mosaic> mosaic_of(LibRaw& raw) {
+std::optional<detail::Mosaic> mosaic_of(LibRaw& raw) {
   const auto& sz = raw.imgdata.sizes;
   const auto& col = raw.imgdata.color;
   const uint16_t* data = raw.imgdata.rawdata.raw_image;
   if (!data || sz.width < 4 || sz.height < 4 || sz.width % 2 || sz.height % 2 || sz.raw_pitch < 2) return std::nullopt;
   if (sz.flip != 0 || sz.pixel_aspect != 1.0) return std::nullopt;
-  io_detail::Mosaic m;
+  detail::Mosaic m;
   m.data = data;
   m.pitch = static_cast<int>(sz.raw_pitch / 2);
   m.top = sz.top_margin;
@@ -91,7 +91,7 @@ std::optional<io_detail::Mosaic> mosaic_of(LibRaw& raw) {
     m.black[p] = black;
     m.scale[p] = mul[raw_colour] / least / range;
   }
-  if (!io_detail::is_bayer(m.cfa)) return std::nullopt;
+  if (!detail::is_bayer(m.cfa)) return std::nullopt;
   for (int r = 0; r < 3; ++r)
     for (int c = 0; c < 3; ++c) m.rgb_cam[r][c] = col.rgb_cam[r][c];
   return m;
@@ -159,7 +159,7 @@ Expected<cv::Mat> decode_raw_linear(std::string_view bytes, const RawOptions& op
   r = raw->unpack();
   if (r != LIBRAW_SUCCESS) return make_error(name + ": cannot unpack RAW data (" + libraw_error(r) + ")");
   if (options.demosaic == Demosaic::mhc && !options.half_size) {
-    if (auto mosaic = mosaic_of(*raw)) return io_detail::demosaic_mhc(*mosaic);
+    if (auto mosaic = mosaic_of(*raw)) return detail::demosaic_mhc(*mosaic);
     p.user_qual = find_demosaic(Demosaic::ahd)->user_qual;  // a layout only LibRaw's pipeline takes
   }
   r = raw->dcraw_process();
@@ -209,4 +209,4 @@ Expected<std::string> raw_preview_jpeg(std::string_view bytes, const std::string
 
 std::string raw_decoder_version() { return LibRaw::version(); }
 
-}  // namespace veneer
+}  // namespace veneer::io

@@ -7,7 +7,7 @@
 #include "set_detail.hpp"
 #include "veneer/io/image_io.hpp"
 
-namespace veneer::io_detail {
+namespace veneer::io::detail {
 namespace fs = std::filesystem;
 
 namespace {
@@ -152,4 +152,4 @@ Expected<ImageSet> read_thesis(const fs::path& folder, const ReadOptions& option
   return set;
 }
 
-}  // namespace veneer::io_detail
+}  // namespace veneer::io::detail

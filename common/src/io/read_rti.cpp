@@ -26,7 +26,7 @@
 #include "set_detail.hpp"
 #include "veneer/io/image_io.hpp"
 
-namespace veneer::io_detail {
+namespace veneer::io::detail {
 namespace fs = std::filesystem;
 
 namespace {
@@ -169,4 +169,4 @@ Expected<ImageSet> read_rti(const fs::path& folder, const ReadOptions& options, 
   return set;
 }
 
-}  // namespace veneer::io_detail
+}  // namespace veneer::io::detail

@@ -8,7 +8,7 @@
 #include "veneer/io/image_io.hpp"
 #include "veneer/util/log.hpp"
 
-namespace veneer::io_detail {
+namespace veneer::io::detail {
 namespace fs = std::filesystem;
 
 namespace {
@@ -141,4 +141,4 @@ Expected<ImageSet> read_veneer(const fs::path& folder, const ReadOptions& option
   }
   return set;
 }
-}  // namespace veneer::io_detail
+}  // namespace veneer::io::detail

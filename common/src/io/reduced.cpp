@@ -17,7 +17,7 @@
 #include "veneer/io/raw.hpp"
 #include "veneer/io/reduced.hpp"
 
-namespace veneer {
+namespace veneer::io {
 namespace fs = std::filesystem;
 
 namespace {
@@ -339,7 +339,7 @@ struct Decoded {
 
 // One frame through `decode`; `width` is the target.
 Expected<Decoded> decode_one(ReducedDecode decode, const fs::path& file, int width) {
-  auto mapped = io_detail::MappedFile::open(file);
+  auto mapped = detail::MappedFile::open(file);
   if (!mapped) return mapped.error();
   const std::string_view bytes = mapped->bytes();
   const std::string name = file.string();
@@ -455,7 +455,7 @@ Expected<ImageSet> read_set_reduced(const fs::path& folder, const ReducedOptions
       (manifest->ambient_file.empty() || !manifest->ambient_raw_file.empty());
   bool developed_jpeg = false;
   if (!manifest->image_files.empty()) {
-    if (auto head = io_detail::MappedFile::open(folder / manifest->image_files.front()); head)
+    if (auto head = detail::MappedFile::open(folder / manifest->image_files.front()); head)
       developed_jpeg = jpeg_magic(head->bytes());
   }
   const bool wider = set->size.width > options.width;
@@ -508,4 +508,4 @@ Expected<ImageSet> read_set_reduced(const fs::path& folder, const ReducedOptions
   return set;
 }
 
-}  // namespace veneer
+}  // namespace veneer::io

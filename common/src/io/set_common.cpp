@@ -14,7 +14,7 @@
 #include "set_detail.hpp"
 #include "veneer/io/image_io.hpp"
 
-namespace veneer::io_detail {
+namespace veneer::io::detail {
 namespace fs = std::filesystem;
 
 std::string fmt_vec(const cv::Vec3d& v) {
@@ -96,7 +96,7 @@ Status decode_frames(const std::vector<Frame>& frames, const RawOptions& raw_opt
       return;
     }
     const Frame& f = frames[i];
-    auto mapped = io_detail::MappedFile::open(f.file);  // read in place: no copy, no fresh pages
+    auto mapped = detail::MappedFile::open(f.file);  // read in place: no copy, no fresh pages
     if (!mapped) {
       errors[i] = mapped.message();
       return;
@@ -228,4 +228,4 @@ Status parse_light_lines(const fs::path& file, const std::vector<Line>& lines, b
   return Status::success();
 }
 
-}  // namespace veneer::io_detail
+}  // namespace veneer::io::detail

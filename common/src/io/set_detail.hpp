@@ -15,7 +15,7 @@
 #include "veneer/util/expected.hpp"
 #include "veneer/util/progress.hpp"
 
-namespace veneer::io_detail {
+namespace veneer::io::detail {
 
 inline constexpr int kMaxSide = 1 << 16;
 inline constexpr size_t kMaxLights = 1024;
@@ -105,4 +105,4 @@ Expected<ImageSet> read_rti(const std::filesystem::path& folder, const ReadOptio
 // error when there are several.
 Expected<std::filesystem::path> find_lp_file(const std::filesystem::path& folder);
 
-}  // namespace veneer::io_detail
+}  // namespace veneer::io::detail

@@ -15,9 +15,9 @@
 #include "veneer/io/image_io.hpp"
 #include "veneer/util/log.hpp"
 
-namespace veneer {
+namespace veneer::io {
 namespace fs = std::filesystem;
-using namespace io_detail;
+using namespace detail;
 
 namespace {
 
@@ -37,7 +37,7 @@ void clean_stale_temps(const fs::path& target) {
   for (const auto& entry : fs::directory_iterator(parent, ec)) {
     const std::string name = entry.path().filename().string();
     for (const char* kind : {"tmp", "old"}) {
-      long pid = io_detail::temp_sibling_pid(target, name, kind);
+      long pid = detail::temp_sibling_pid(target, name, kind);
       if (pid <= 0) continue;
       if (pid == static_cast<long>(::getpid())) continue;  // ours, maybe another thread's
       if (::kill(static_cast<pid_t>(pid), 0) == 0 || errno != ESRCH) continue;
@@ -60,7 +60,7 @@ struct FolderGuard {
 
 Status write_bytes(const fs::path& file, const Expected<std::string>& bytes) {
   if (!bytes) return make_error(file.string() + ": " + bytes.message());
-  return io_detail::write_file_synced(file, *bytes);
+  return detail::write_file_synced(file, *bytes);
 }
 
 Status write_contents(const ImageSet& set, const fs::path& dir) {
@@ -72,7 +72,7 @@ Status write_contents(const ImageSet& set, const fs::path& dir) {
     for (int i = r.start; i < r.end; ++i) {
       const size_t k = static_cast<size_t>(i);
       const ImageSet::RawFile* camera = developed_file(set, k);
-      written[k] = camera ? io_detail::write_file_synced(dir / light_file_name(set.lights[k].index, camera->extension),
+      written[k] = camera ? detail::write_file_synced(dir / light_file_name(set.lights[k].index, camera->extension),
                                                          camera->bytes)
                           : write_bytes(dir / light_file_name(set.lights[k].index), encode_png16(set.images[k]));
     }
@@ -83,17 +83,17 @@ Status write_contents(const ImageSet& set, const fs::path& dir) {
   for (size_t i = 0; i < set.raw.size() && i < set.lights.size(); ++i) {
     if (set.raw[i].bytes.empty()) continue;
     const fs::path f = dir / raw_file_name(set.lights[i].index, set.raw[i].extension);
-    if (Status s = io_detail::write_file_synced(f, set.raw[i].bytes); !s) return s;
+    if (Status s = detail::write_file_synced(f, set.raw[i].bytes); !s) return s;
   }
   if (!set.ambient.empty()) {
     const ImageSet::RawFile& camera = set.ambient_developed;
     if (Status s = camera.bytes.empty() ? write_bytes(dir / "ambient.png", encode_png16(set.ambient))
-                                        : io_detail::write_file_synced(dir / ("ambient." + camera.extension), camera.bytes);
+                                        : detail::write_file_synced(dir / ("ambient." + camera.extension), camera.bytes);
         !s)
       return s;
     if (!set.ambient_raw.bytes.empty()) {
       const fs::path f = dir / ("ambient." + set.ambient_raw.extension);
-      if (Status s = io_detail::write_file_synced(f, set.ambient_raw.bytes); !s) return s;
+      if (Status s = detail::write_file_synced(f, set.ambient_raw.bytes); !s) return s;
     }
   }
   if (!set.mask.empty()) {
@@ -105,7 +105,7 @@ Status write_contents(const ImageSet& set, const fs::path& dir) {
     std::error_code ec;
     if (!fs::create_directory(truth, ec)) return make_error(truth.string() + ": cannot create folder: " + ec.message());
     if (!t.normals.empty()) {
-      if (Status s = io_detail::write_file_synced(truth / "normals.pfm", encode_pfm(t.normals, true)); !s) return s;
+      if (Status s = detail::write_file_synced(truth / "normals.pfm", encode_pfm(t.normals, true)); !s) return s;
     }
     if (!t.mask.empty()) {
       if (Status s = write_bytes(truth / "mask.png", encode_png8(t.mask)); !s) return s;
@@ -114,13 +114,13 @@ Status write_contents(const ImageSet& set, const fs::path& dir) {
       if (Status s = write_bytes(truth / "albedo.png", encode_png16(t.albedo)); !s) return s;
     }
     if (!t.depth.empty()) {
-      if (Status s = io_detail::write_file_synced(truth / "depth.pfm", encode_pfm(t.depth, true)); !s) return s;
+      if (Status s = detail::write_file_synced(truth / "depth.pfm", encode_pfm(t.depth, true)); !s) return s;
     }
-    if (Status s = io_detail::fsync_dir(truth); !s) return s;
+    if (Status s = detail::fsync_dir(truth); !s) return s;
   }
   // The manifest last: a folder with a set.json has everything it names.
-  if (Status s = io_detail::write_file_synced(dir / "set.json", manifest_json(set)); !s) return s;
-  return io_detail::fsync_dir(dir);
+  if (Status s = detail::write_file_synced(dir / "set.json", manifest_json(set)); !s) return s;
+  return detail::fsync_dir(dir);
 }
 }  // namespace
 
@@ -141,7 +141,7 @@ Status write_set(const ImageSet& set_in, const fs::path& folder_in, bool overwri
   if (set.created.empty()) set.created = utc_now();
   if (set.id.empty()) set.id = folder.filename().string();
 
-  fs::path tmp = io_detail::temp_sibling(folder);
+  fs::path tmp = detail::temp_sibling(folder);
   if (!fs::create_directory(tmp, ec)) return make_error(tmp.string() + ": cannot create temporary folder: " + ec.message());
   FolderGuard guard{tmp};
   if (Status s = write_contents(set, tmp); !s) return s;
@@ -161,7 +161,7 @@ Status write_set(const ImageSet& set_in, const fs::path& folder_in, bool overwri
     if (::renameat2(AT_FDCWD, tmp.c_str(), AT_FDCWD, folder.c_str(), RENAME_EXCHANGE) != 0) {
       int err = errno;
       if (err != EINVAL && err != ENOSYS) return make_error(folder.string() + ": cannot swap the new set into place: " + std::strerror(err));
-      fs::path old = io_detail::temp_sibling(folder, "old");
+      fs::path old = detail::temp_sibling(folder, "old");
       if (::rename(folder.c_str(), old.c_str()) != 0)
         return make_error(folder.string() + ": cannot move the old set aside: " + std::strerror(errno));
       if (::rename(tmp.c_str(), folder.c_str()) != 0) {
@@ -173,7 +173,7 @@ Status write_set(const ImageSet& set_in, const fs::path& folder_in, bool overwri
     }
     // guard.path now holds the old set (tmp after the exchange) and removes it.
   }
-  return io_detail::fsync_dir(parent);
+  return detail::fsync_dir(parent);
 }
 
-}  // namespace veneer
+}  // namespace veneer::io

@@ -178,11 +178,11 @@ Status write_motion_json(const std::filesystem::path& file, const MotionSequence
                            {"still_to_frame", {{a(0, 0), a(0, 1), a(0, 2)}, {a(1, 0), a(1, 1), a(1, 2)}}},
                            {"lamp_m", {l[0], l[1], l[2]}}});
   }
-  return write_file_atomic(file, j.dump(1) + "\n");
+  return io::write_file_atomic(file, j.dump(1) + "\n");
 }
 
 Expected<MotionTruth> read_motion_json(const std::filesystem::path& file) {
-  auto bytes = read_file_bytes(file);
+  auto bytes = io::read_file_bytes(file);
   if (!bytes) return bytes.error();
   try {
     const auto j = nlohmann::json::parse(*bytes);

@@ -376,8 +376,8 @@ cv::Mat render(const Scene& scene, const std::vector<Lamp>& lamps, const RenderO
   return out;
 }
 
-Truth render_truth(const Scene& scene, const RenderOptions& options) {
-  Truth t;
+io::Truth render_truth(const Scene& scene, const RenderOptions& options) {
+  io::Truth t;
   if (auto st = options.check(); !st) {
     VLOG_ERROR("Sim", "render_truth: {}", st.message());
     return t;
@@ -452,12 +452,12 @@ namespace {
 
 // simulate_set of a scene made already; `object` names it in the set (its
 // object name and id), `scene_name` is the shape's scene.
-Expected<ImageSet> simulate_scene_set(const Scene& scene, const std::string& scene_name, const std::string& object,
-                                      const RenderOptions& options, Role role, const Progress& progress) {
+Expected<io::ImageSet> simulate_scene_set(const Scene& scene, const std::string& scene_name, const std::string& object,
+                                      const RenderOptions& options, io::Role role, const Progress& progress) {
   const auto lamps = thesis_rig();
   const double focal = focal_for(options);
 
-  ImageSet set;
+  io::ImageSet set;
   set.role = role;
   set.object = object;
   set.scene = scene_name;
@@ -481,7 +481,7 @@ Expected<ImageSet> simulate_scene_set(const Scene& scene, const std::string& sce
     RenderOptions o = options;
     o.shot = static_cast<uint32_t>(i);
     set.images.push_back(shade(scene, *gb, shot_lamps({lamps[i]}), o));
-    Light light;
+    io::Light light;
     light.index = static_cast<int>(i);
     light.lamp_id = "sim-" + std::to_string(i);
     cv::Vec3d pos = lamps[i].position_m;
@@ -506,15 +506,15 @@ Expected<ImageSet> simulate_scene_set(const Scene& scene, const std::string& sce
 
 }  // namespace
 
-Expected<ImageSet> simulate_set(const std::string& scene_name, const RenderOptions& options, Role role,
+Expected<io::ImageSet> simulate_set(const std::string& scene_name, const RenderOptions& options, io::Role role,
                                 const Progress& progress) {
   auto scene = make_scene(scene_name, options);
   if (!scene) return scene.error();
   return simulate_scene_set(**scene, scene_name, scene_name, options, role, progress);
 }
 
-Expected<ImageSet> simulate_set_with_material(const std::string& shape_scene, const std::string& material_scene,
-                                              const RenderOptions& options, Role role, const Progress& progress) {
+Expected<io::ImageSet> simulate_set_with_material(const std::string& shape_scene, const std::string& material_scene,
+                                              const RenderOptions& options, io::Role role, const Progress& progress) {
   auto scene = make_scene_with_material(shape_scene, material_scene, options);
   if (!scene) return scene.error();
   return simulate_scene_set(**scene, shape_scene, shape_scene + "-in-" + material_scene, options, role, progress);

@@ -73,7 +73,7 @@ std::string describe(const Event& e) {
   switch (e.kind) {
     case Event::Kind::button_pressed: s += e.long_press ? " long" : " short"; break;
     case Event::Kind::capture_started:
-      s += " " + e.set_id + " " + role_name(e.role) + " '" + e.object + "' " + std::to_string(e.n) + " shots";
+      s += " " + e.set_id + " " + io::role_name(e.role) + " '" + e.object + "' " + std::to_string(e.n) + " shots";
       break;
     case Event::Kind::shot_taken: {
       char eta[32];
@@ -102,11 +102,11 @@ std::string describe(const Event& e) {
 
 namespace {
 
-Role from_wire(int role) {
-  return role == pb::ROLE_DESTINATION ? Role::destination : role == pb::ROLE_SOURCE ? Role::source : Role::unknown;
+io::Role from_wire(int role) {
+  return role == pb::ROLE_DESTINATION ? io::Role::destination : role == pb::ROLE_SOURCE ? io::Role::source : io::Role::unknown;
 }
-pb::Role to_wire(Role role) {
-  return role == Role::destination ? pb::ROLE_DESTINATION : role == Role::source ? pb::ROLE_SOURCE : pb::ROLE_UNSPECIFIED;
+pb::Role to_wire(io::Role role) {
+  return role == io::Role::destination ? pb::ROLE_DESTINATION : role == io::Role::source ? pb::ROLE_SOURCE : pb::ROLE_UNSPECIFIED;
 }
 
 RigStatus convert(const pb::RigStatus& s) {

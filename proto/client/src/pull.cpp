@@ -40,9 +40,9 @@ enum class Holds { nothing, other, preview_of_set, the_set };
 Holds what_is_in(const fs::path& folder, const std::string& set_id) {
   std::error_code ec;
   if (!fs::exists(folder, ec)) return Holds::nothing;
-  auto text = read_file_bytes(folder / "set.json");
+  auto text = io::read_file_bytes(folder / "set.json");
   if (!text) return Holds::other;
-  auto m = parse_manifest(*text, folder);
+  auto m = io::parse_manifest(*text, folder);
   if (!m) return Holds::other;
   if (m->set.preview_of) return m->set.preview_of->id == set_id ? Holds::preview_of_set : Holds::other;
   return m->set.id == set_id ? Holds::the_set : Holds::other;
@@ -199,9 +199,9 @@ Status Client::pull_set(const std::string& set_id, const fs::path& folder, const
   for (const auto& f : fetched->skipped) {
     if (!fs::is_regular_file(staging / f, ec)) return make_error("pull " + set_id + ": " + f + " is missing");
   }
-  auto text = read_file_bytes(staging / "set.json");
+  auto text = io::read_file_bytes(staging / "set.json");
   if (!text) return make_error("pull " + set_id + ": " + text.message());
-  auto manifest = parse_manifest(*text, staging);
+  auto manifest = io::parse_manifest(*text, staging);
   if (!manifest) return make_error("pull " + set_id + ": " + manifest.message());
   std::vector<fs::path> named = manifest->image_files;
   named.insert(named.end(), manifest->raw_files.begin(), manifest->raw_files.end());

@@ -432,7 +432,7 @@ struct PtpipRig {
       std::lock_guard l(mu);
       seen = events.size();
     }
-    auto id = rig->capture({veneer::Role::destination, "sphere", {}});
+    auto id = rig->capture({veneer::io::Role::destination, "sphere", {}});
     if (!id) {
       ADD_FAILURE() << id.message();
       return std::nullopt;
@@ -487,7 +487,7 @@ TEST(Gphoto2OverPtpip, AWholeSetThroughTheRigAndTheStore) {
   // The stored set holds exactly the served shots (decoded the way the back-end decodes).
   auto stored = r.store->list();
   ASSERT_EQ(stored.size(), 1u);
-  auto set = veneer::read_set(r.store->folder(stored[0].id));
+  auto set = veneer::io::read_set(r.store->folder(stored[0].id));
   ASSERT_TRUE(set.ok()) << set.message();
   ASSERT_EQ(set->images.size(), size_t(PtpipRig::kLamps));
   EXPECT_EQ(set->camera.model, "Veneer PTP/IP twin");
@@ -523,7 +523,7 @@ TEST(Gphoto2OverPtpip, ADropMidSetReconnectsAndRetakesTheShot) {
   EXPECT_EQ(r.twin->files_on_card(), std::vector<std::string>{files[2].name});
   auto stored = r.store->list();
   ASSERT_EQ(stored.size(), 1u);
-  auto set = veneer::read_set(r.store->folder(stored[0].id));
+  auto set = veneer::io::read_set(r.store->folder(stored[0].id));
   ASSERT_TRUE(set.ok()) << set.message();
   auto retaken = veneerd::hw::decode_jpeg_linear(files[3].bytes, {128, 85});
   ASSERT_TRUE(retaken.ok());

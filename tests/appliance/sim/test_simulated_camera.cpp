@@ -91,10 +91,10 @@ TEST_F(Camera, EachStillComesWithADngOfItsLinearRender) {
   ASSERT_TRUE(lamps->set(one_hot(7, 4)).ok());
   auto still = camera->capture();
   ASSERT_TRUE(still.ok()) << still.message();
-  EXPECT_TRUE(veneer::is_raw_file_name(still->original_name)) << still->original_name;
+  EXPECT_TRUE(veneer::io::is_raw_file_name(still->original_name)) << still->original_name;
   ASSERT_FALSE(still->original.empty());
   const std::string_view bytes(reinterpret_cast<const char*>(still->original.data()), still->original.size());
-  auto decoded = veneer::decode_raw_linear(bytes, {}, still->original_name);
+  auto decoded = veneer::io::decode_raw_linear(bytes, {}, still->original_name);
   ASSERT_TRUE(decoded.ok()) << decoded.message();
   ASSERT_EQ(decoded->size(), still->linear.size());
   // The RAW path gives the render back: each channel's mean within 1 %.
@@ -154,7 +154,7 @@ TEST_F(Camera, ExposureScalesTheImage) {
 TEST_F(Camera, SceneSwitchAndTruth) {
   ASSERT_TRUE(lamps->set(one_hot(7, 0)).ok());
   EXPECT_EQ(camera->scene(), "sphere-gray");
-  ASSERT_TRUE(camera->set_scene(rig->scene_for(veneer::Role::source)).ok());
+  ASSERT_TRUE(camera->set_scene(rig->scene_for(veneer::io::Role::source)).ok());
   EXPECT_EQ(camera->scene(), "two-spheres");
   auto r = camera->still_options();
   auto still = camera->capture();

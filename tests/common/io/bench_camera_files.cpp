@@ -62,30 +62,30 @@ int main() {
     const std::string name = std::to_string(size.width) + "x" + std::to_string(size.height);
 
     t0 = Clock::now();
-    auto png = encode_png16(photo);
+    auto png = io::encode_png16(photo);
     const double png_s = s_since(t0);
-    DngOptions before;
+    io::DngOptions before;
     before.compress = false;
     before.preview_divisor = 0;
     t0 = Clock::now();
-    auto plain = encode_dng(photo, before);
+    auto plain = io::encode_dng(photo, before);
     const double plain_s = s_since(t0);
     t0 = Clock::now();
-    auto jpeg = encode_developed_jpeg(photo, CameraFileOptions{}.jpeg_quality);
+    auto jpeg = io::encode_developed_jpeg(photo, io::CameraFileOptions{}.jpeg_quality);
     const double jpeg_s = s_since(t0);
     t0 = Clock::now();
-    auto dng = encode_dng(photo, CameraFileOptions{}.dng);
+    auto dng = io::encode_dng(photo, io::CameraFileOptions{}.dng);
     const double dng_s = s_since(t0);
     if (!png || !plain || !jpeg || !dng) {
       std::fprintf(stderr, "bench_camera_files: an encoder failed\n");
       return 1;
     }
-    auto preview = find_dng_preview(*dng, dng->size(), "frame.dng");
+    auto preview = io::find_dng_preview(*dng, dng->size(), "frame.dng");
     t0 = Clock::now();
-    auto a = decode_raw_linear(*plain, {}, "plain.dng");
+    auto a = io::decode_raw_linear(*plain, {}, "plain.dng");
     const double plain_decode_s = s_since(t0);
     t0 = Clock::now();
-    auto b = decode_raw_linear(*dng, {}, "lj92.dng");
+    auto b = io::decode_raw_linear(*dng, {}, "lj92.dng");
     const double dng_decode_s = s_since(t0);
     const bool same = a && b && cv::norm(*a, *b, cv::NORM_INF) == 0;
 

@@ -19,7 +19,7 @@
 #include "veneer/io/imageset.hpp"
 
 namespace fs = std::filesystem;
-using veneer::ImageSet;
+using veneer::io::ImageSet;
 
 namespace {
 
@@ -45,7 +45,7 @@ ImageSet make_set(cv::Size size, int lights) {
   rng.fill(albedo, cv::RNG::UNIFORM, cv::Scalar::all(0.3), cv::Scalar::all(0.9));
   cv::GaussianBlur(albedo, albedo, {0, 0}, 3.0);
   for (int i = 0; i < lights; ++i) {
-    veneer::Light l;
+    veneer::io::Light l;
     l.index = i;
     double a = 2 * CV_PI * i / lights;
     cv::Vec3d p(0.47 * std::cos(a), 0.47 * std::sin(a), 1.0);
@@ -82,7 +82,7 @@ int main() {
   int n = 0;
   double write_ms = median_ms(repeats, [&] {
     fs::path out = root / (std::string("w").append(std::to_string(n++)));
-    if (auto s = veneer::write_set(set, out); !s) std::fprintf(stderr, "write_set: %s\n", s.message().c_str());
+    if (auto s = veneer::io::write_set(set, out); !s) std::fprintf(stderr, "write_set: %s\n", s.message().c_str());
   });
   const fs::path folder = root / "w0";
   std::vector<cv::Mat> u16;
@@ -109,7 +109,7 @@ int main() {
   });
 
   double read_ms = median_ms(repeats, [&] {
-    auto r = veneer::read_set(folder);
+    auto r = veneer::io::read_set(folder);
     if (!r) std::fprintf(stderr, "read_set: %s\n", r.message().c_str());
   });
   std::vector<std::string> files;

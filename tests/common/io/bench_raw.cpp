@@ -29,7 +29,7 @@ struct AngleStats {
   double mean = 0, p95 = 0;
 };
 
-AngleStats angles_to_truth(const cv::Mat& normals, const Truth& truth) {
+AngleStats angles_to_truth(const cv::Mat& normals, const io::Truth& truth) {
   std::vector<double> a;
   for (int y = 0; y < normals.rows; ++y)
     for (int x = 0; x < normals.cols; ++x) {
@@ -47,7 +47,7 @@ AngleStats angles_to_truth(const cv::Mat& normals, const Truth& truth) {
   return s;
 }
 
-AngleStats ps_error(const ImageSet& set) {
+AngleStats ps_error(const io::ImageSet& set) {
   auto ps = ps::photometric_stereo(set, set.truth.mask);
   if (!ps) {
     std::fprintf(stderr, "bench_raw: photometric stereo: %s\n", ps.message().c_str());
@@ -70,8 +70,8 @@ int main() {
   const sim::RenderOptions camera = sim::RenderOptions().camera_optics();
   const Optics optics[] = {{"camera optics (the twin's)", camera.edge_samples, camera.olpf_spread_px},
                            {"point-sampled", 1, 0.0}};
-  const std::vector<Demosaic> methods = {Demosaic::bilinear, Demosaic::vng, Demosaic::ppg, Demosaic::ahd,
-                                         Demosaic::dcb,      Demosaic::dht, Demosaic::aahd, Demosaic::mhc};
+  const std::vector<io::Demosaic> methods = {io::Demosaic::bilinear, io::Demosaic::vng, io::Demosaic::ppg, io::Demosaic::ahd,
+                                         io::Demosaic::dcb,      io::Demosaic::dht, io::Demosaic::aahd, io::Demosaic::mhc};
   for (const auto& op : optics) {
     for (const std::string scene : {"orange", "bull"}) {
       sim::RenderOptions o;
@@ -89,7 +89,7 @@ int main() {
       }
       std::vector<std::string> dngs;
       for (const auto& img : set->images) {
-        auto d = encode_dng(img);
+        auto d = io::encode_dng(img);
         if (!d) {
           std::fprintf(stderr, "bench_raw: %s\n", d.message().c_str());
           return 1;
@@ -99,14 +99,14 @@ int main() {
       const AngleStats from_render = ps_error(*set);
       std::printf("| %s | %s | render (%.0f ms for the set) | - | - | %.2f | %.2f |\n", op.name, scene.c_str(), render_ms,
                   from_render.mean, from_render.p95);
-      for (Demosaic m : methods) {
-        RawOptions ro;
+      for (io::Demosaic m : methods) {
+        io::RawOptions ro;
         ro.demosaic = m;
-        ImageSet decoded = *set;
+        io::ImageSet decoded = *set;
         double decode_ms = 0, worst_rgb = 0;
         for (size_t i = 0; i < dngs.size(); ++i) {
           auto t1 = Clock::now();
-          auto img = decode_raw_linear(dngs[i], ro, "frame.dng");
+          auto img = io::decode_raw_linear(dngs[i], ro, "frame.dng");
           decode_ms += ms_since(t1);
           if (!img) {
             std::fprintf(stderr, "bench_raw: %s\n", img.message().c_str());
@@ -117,7 +117,7 @@ int main() {
           decoded.images[i] = std::move(*img);
         }
         const AngleStats s = ps_error(decoded);
-        std::printf("| %s | %s | RAW, %s | %.1f | %.2f %% | %.2f | %.2f |\n", op.name, scene.c_str(), demosaic_name(m),
+        std::printf("| %s | %s | RAW, %s | %.1f | %.2f %% | %.2f | %.2f |\n", op.name, scene.c_str(), io::demosaic_name(m),
                     decode_ms / static_cast<double>(dngs.size()), 100 * worst_rgb, s.mean, s.p95);
         std::fflush(stdout);
       }

@@ -17,10 +17,10 @@ using test::Scratch;
 
 TEST(Cache, SizeCapEvictsTheLeastRecentlyUsed) {
   Scratch dir;
-  CacheOptions o;
+  io::CacheOptions o;
   o.dir = dir / "cache";
   o.max_bytes = 3u << 20;
-  ResultCache cache(o);
+  io::ResultCache cache(o);
   const std::string mib(1u << 20, 'x');
   ASSERT_TRUE(cache.store("a", {{"blob", mib}}));
   ASSERT_TRUE(cache.store("b", {{"blob", mib}}));
@@ -38,34 +38,34 @@ TEST(Cache, SizeCapEvictsTheLeastRecentlyUsed) {
 
 TEST(Cache, MatricesRoundTrip) {
   cv::Mat m(5, 7, CV_32FC3, cv::Scalar(0.25f, -1.5f, 3.0f));
-  auto back = decode_mat(encode_mat(m), "m");
+  auto back = io::decode_mat(io::encode_mat(m), "m");
   ASSERT_TRUE(back);
   EXPECT_EQ(cv::norm(m, *back, cv::NORM_INF), 0.0);
-  auto half = decode_mat(encode_mat(m, true), "h");
+  auto half = io::decode_mat(io::encode_mat(m, true), "h");
   ASSERT_TRUE(half);
   EXPECT_EQ(half->type(), CV_32FC3);
   EXPECT_LT(cv::norm(m, *half, cv::NORM_INF), 1e-3);
-  EXPECT_FALSE(decode_mat(encode_mat(m).substr(0, 30), "cut"));
-  EXPECT_FALSE(decode_mat("MAT1", "short"));
+  EXPECT_FALSE(io::decode_mat(io::encode_mat(m).substr(0, 30), "cut"));
+  EXPECT_FALSE(io::decode_mat("MAT1", "short"));
 }
 
 TEST(Cache, MatrixFilesRoundTripAndRefuseDamage) {
   Scratch dir;
   cv::Mat m(300, 211, CV_32FC3);
   cv::RNG(3).fill(m, cv::RNG::UNIFORM, 0.0, 1.0);
-  ASSERT_TRUE(write_mat_file(dir / "f", m));
-  auto back = read_mat_file(dir / "f");
+  ASSERT_TRUE(io::write_mat_file(dir / "f", m));
+  auto back = io::read_mat_file(dir / "f");
   ASSERT_TRUE(back) << back.message();
   EXPECT_EQ(cv::norm(*back, m, cv::NORM_INF), 0.0);
-  ASSERT_TRUE(write_mat_file(dir / "h", m, true));
-  auto half = read_mat_file(dir / "h");
+  ASSERT_TRUE(io::write_mat_file(dir / "h", m, true));
+  auto half = io::read_mat_file(dir / "h");
   ASSERT_TRUE(half) << half.message();
   ASSERT_EQ(half->type(), CV_32FC3);
   EXPECT_LT(cv::norm(*half, m, cv::NORM_INF), 1e-3);
   // The file is the blob encode_mat makes, byte for byte.
-  EXPECT_EQ(test::slurp(dir / "h"), encode_mat(m, true));
-  test::spit(dir / "cut", encode_mat(m).substr(0, 5000));
-  auto cut = read_mat_file(dir / "cut");
+  EXPECT_EQ(test::slurp(dir / "h"), io::encode_mat(m, true));
+  test::spit(dir / "cut", io::encode_mat(m).substr(0, 5000));
+  auto cut = io::read_mat_file(dir / "cut");
   ASSERT_FALSE(cut);
   EXPECT_NE(cut.message().find("cut"), std::string::npos);
   EXPECT_NE(cut.message().find("size does not match"), std::string::npos) << cut.message();

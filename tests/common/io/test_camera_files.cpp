@@ -26,19 +26,19 @@ namespace {
 
 using test::Scratch;
 
-ImageSet rendered(cv::Size size, double noise = 0.002, const std::string& scene = "bull") {
+io::ImageSet rendered(cv::Size size, double noise = 0.002, const std::string& scene = "bull") {
   sim::RenderOptions o;
   o.size = size;
   o.noise_sigma = noise;
   o.seed = 7;
   o.camera_optics();  // as the rig's camera twin renders
-  auto set = sim::simulate_set(scene, o, Role::destination);
+  auto set = sim::simulate_set(scene, o, io::Role::destination);
   EXPECT_TRUE(set) << set.message();
-  return set ? std::move(set).value() : ImageSet{};
+  return set ? std::move(set).value() : io::ImageSet{};
 }
 
 // A frame that is neither flat nor dark: the brightest of the set.
-const cv::Mat& brightest(const ImageSet& set) {
+const cv::Mat& brightest(const io::ImageSet& set) {
   size_t best = 0;
   for (size_t i = 1; i < set.images.size(); ++i) {
     if (cv::sum(set.images[i])[1] > cv::sum(set.images[best])[1]) best = i;
@@ -51,22 +51,22 @@ TEST(CameraFiles, CompressedDngDecodesExactlyAsTheUncompressed) {
   // tiles; 200x120: one strip; 96x64 the ramp size of Raw tests.
   for (cv::Size size : {cv::Size(512, 340), cv::Size(600, 400), cv::Size(200, 120), cv::Size(96, 64)}) {
     SCOPED_TRACE(std::to_string(size.width) + "x" + std::to_string(size.height));
-    ImageSet set = rendered(size);
+    io::ImageSet set = rendered(size);
     ASSERT_FALSE(set.images.empty());
     const cv::Mat& photo = brightest(set);
-    DngOptions plain;
+    io::DngOptions plain;
     plain.compress = false;
     plain.preview_divisor = 0;
-    auto uncompressed = encode_dng(photo, plain);
-    auto compressed = encode_dng(photo);
+    auto uncompressed = io::encode_dng(photo, plain);
+    auto compressed = io::encode_dng(photo);
     ASSERT_TRUE(uncompressed) << uncompressed.message();
     ASSERT_TRUE(compressed) << compressed.message();
     EXPECT_LT(compressed->size(), uncompressed->size());
     for (bool half : {false, true}) {
-      RawOptions o;
+      io::RawOptions o;
       o.half_size = half;
-      auto a = decode_raw_linear(*uncompressed, o, "plain.dng");
-      auto b = decode_raw_linear(*compressed, o, "lj92.dng");
+      auto a = io::decode_raw_linear(*uncompressed, o, "plain.dng");
+      auto b = io::decode_raw_linear(*compressed, o, "lj92.dng");
       ASSERT_TRUE(a) << a.message();
       ASSERT_TRUE(b) << b.message();
       ASSERT_EQ(a->size(), b->size());
@@ -85,28 +85,28 @@ TEST(CameraFiles, LosslessJpegKeepsEveryCount) {
       const float v = y < 16 ? 0.0f : y < 32 ? 1.0f : y < 48 ? static_cast<float>((x / 2 + y / 2) % 2) : rng.uniform(0.f, 1.f);
       photo.at<cv::Vec3f>(y, x) = cv::Vec3f(v, v, v);
     }
-  DngOptions plain;
+  io::DngOptions plain;
   plain.compress = false;
   for (int white : {16383, 65535}) {
     plain.white_level = white;
-    DngOptions lj92;
+    io::DngOptions lj92;
     lj92.white_level = white;
-    auto a = decode_raw_linear(*encode_dng(photo, plain), {RawOptions{true}}, "plain.dng");
-    auto b = decode_raw_linear(*encode_dng(photo, lj92), {RawOptions{true}}, "lj92.dng");
+    auto a = io::decode_raw_linear(*io::encode_dng(photo, plain), {io::RawOptions{true}}, "plain.dng");
+    auto b = io::decode_raw_linear(*io::encode_dng(photo, lj92), {io::RawOptions{true}}, "lj92.dng");
     ASSERT_TRUE(a && b);
     EXPECT_EQ(cv::norm(*a, *b, cv::NORM_INF), 0.0) << "white level " << white;
   }
 }
 
 TEST(CameraFiles, DngPreviewIsFoundByLibRawAndWithoutIt) {
-  ImageSet set = rendered({640, 420});
+  io::ImageSet set = rendered({640, 420});
   ASSERT_FALSE(set.images.empty());
   const cv::Mat& photo = brightest(set);
-  auto dng = encode_dng(photo);
+  auto dng = io::encode_dng(photo);
   ASSERT_TRUE(dng) << dng.message();
-  auto by_libraw = raw_preview_jpeg(*dng, "frame.dng");
+  auto by_libraw = io::raw_preview_jpeg(*dng, "frame.dng");
   ASSERT_TRUE(by_libraw) << by_libraw.message();
-  auto found = find_dng_preview(*dng, dng->size(), "frame.dng");
+  auto found = io::find_dng_preview(*dng, dng->size(), "frame.dng");
   ASSERT_TRUE(found) << found.message();
   EXPECT_EQ(found->size, cv::Size(160, 105));
   // LibRaw hands the stored JPEG out with an Exif block of its own after the
@@ -117,12 +117,12 @@ TEST(CameraFiles, DngPreviewIsFoundByLibRawAndWithoutIt) {
   auto pixels = [](const std::string& jpeg) { return cv::imdecode(std::vector<uchar>(jpeg.begin(), jpeg.end()), cv::IMREAD_COLOR); };
   EXPECT_EQ(cv::norm(pixels(stored), pixels(*by_libraw), cv::NORM_INF), 0.0);
   Scratch dir;
-  ASSERT_TRUE(write_file_synced(dir / "frame.dng", *dng));
-  auto from_file = read_dng_preview(dir / "frame.dng");
+  ASSERT_TRUE(io::write_file_synced(dir / "frame.dng", *dng));
+  auto from_file = io::read_dng_preview(dir / "frame.dng");
   ASSERT_TRUE(from_file) << from_file.message();
   EXPECT_EQ(*from_file, stored);
   // The preview is the developed photo reduced: linearised, within JPEG's loss of an area-averaged frame.
-  auto linear = decode_linear_image(*from_file, "preview.jpg");
+  auto linear = io::decode_linear_image(*from_file, "preview.jpg");
   ASSERT_TRUE(linear) << linear.message();
   ASSERT_EQ(linear->size(), cv::Size(160, 105));
   cv::Mat expect;
@@ -130,15 +130,15 @@ TEST(CameraFiles, DngPreviewIsFoundByLibRawAndWithoutIt) {
   const double rel = cv::norm(*linear, expect, cv::NORM_L1) / cv::norm(expect, cv::NORM_L1);
   EXPECT_LT(rel, 0.05);
   // No preview asked: none found, with the reason.
-  DngOptions none;
+  io::DngOptions none;
   none.preview_divisor = 0;
-  auto bare = encode_dng(photo, none);
+  auto bare = io::encode_dng(photo, none);
   ASSERT_TRUE(bare);
-  auto missing = find_dng_preview(*bare, bare->size(), "bare.dng");
+  auto missing = io::find_dng_preview(*bare, bare->size(), "bare.dng");
   ASSERT_FALSE(missing);
   EXPECT_NE(missing.message().find("no embedded JPEG preview"), std::string::npos) << missing.message();
-  EXPECT_FALSE(find_dng_preview(std::string_view("II*\0\x08\0\0\0", 8), 8, "cut.dng"));
-  EXPECT_FALSE(find_dng_preview(std::string_view("GIF89a.."), 8, "gif"));
+  EXPECT_FALSE(io::find_dng_preview(std::string_view("II*\0\x08\0\0\0", 8), 8, "cut.dng"));
+  EXPECT_FALSE(io::find_dng_preview(std::string_view("GIF89a.."), 8, "gif"));
 }
 
 // Bytes per pixel of the twin's files against a 24 Mpx body's: a JPEG of
@@ -147,9 +147,9 @@ TEST(CameraFiles, DngPreviewIsFoundByLibRawAndWithoutIt) {
 // DNG's entropy, is the rig twin's); bench_raw reports the full size.
 TEST(CameraFiles, FileSizesAreACamerasPerPixel) {
   const cv::Size size(1200, 800);
-  ImageSet set = rendered(size);
+  io::ImageSet set = rendered(size);
   ASSERT_FALSE(set.images.empty());
-  auto files = encode_camera_files(brightest(set));
+  auto files = io::encode_camera_files(brightest(set));
   ASSERT_TRUE(files) << files.message();
   const double px = size.area();
   const double jpeg = files->developed.bytes.size() / px, dng = files->raw.bytes.size() / px;
@@ -164,22 +164,22 @@ TEST(CameraFiles, FileSizesAreACamerasPerPixel) {
 }
 
 TEST(CameraFiles, ASetOfThemReadsBackFromTheRawOrTheJpeg) {
-  ImageSet set = rendered({320, 214}, 0.0, "orange");
+  io::ImageSet set = rendered({320, 214}, 0.0, "orange");
   ASSERT_FALSE(set.images.empty());
-  ImageSet with_files = set;
-  ASSERT_TRUE(add_camera_files(with_files));
+  io::ImageSet with_files = set;
+  ASSERT_TRUE(io::add_camera_files(with_files));
   Scratch dir;
-  ASSERT_TRUE(write_set(with_files, dir / "set"));
+  ASSERT_TRUE(io::write_set(with_files, dir / "set"));
   EXPECT_TRUE(std::filesystem::exists(dir / "set" / "light_00.jpg"));
   EXPECT_TRUE(std::filesystem::exists(dir / "set" / "light_00.dng"));
   EXPECT_TRUE(std::filesystem::exists(dir / "set" / "ambient.jpg"));
   EXPECT_FALSE(std::filesystem::exists(dir / "set" / "light_00.png"));
-  auto raw = read_set(dir / "set");
+  auto raw = io::read_set(dir / "set");
   ASSERT_TRUE(raw) << raw.message();
   EXPECT_EQ(raw->photos_from, "raw");
-  ReadOptions developed;
-  developed.photos = PhotoSource::developed;
-  auto jpeg = read_set(dir / "set", developed);
+  io::ReadOptions developed;
+  developed.photos = io::PhotoSource::developed;
+  auto jpeg = io::read_set(dir / "set", developed);
   ASSERT_TRUE(jpeg) << jpeg.message();
   EXPECT_EQ(jpeg->photos_from, "jpeg");
   const cv::Mat& mask = set.truth.mask;

@@ -34,21 +34,21 @@ double mean_relative_error(const cv::Mat& a, const cv::Mat& b, int border) {
   return cv::norm(a(inner), b(inner), cv::NORM_L1) / cv::norm(b(inner), cv::NORM_L1);
 }
 
-Expected<cv::Mat> decode(const std::string& dng, Demosaic d) {
-  RawOptions o;
+Expected<cv::Mat> decode(const std::string& dng, io::Demosaic d) {
+  io::RawOptions o;
   o.demosaic = d;
-  return decode_raw_linear(dng, o, "photo.dng");
+  return io::decode_raw_linear(dng, o, "photo.dng");
 }
 
 TEST(Demosaic, MhcRecoversATexturedPhotoNearlyAsWellAsAhdAndBetterThanBilinear) {
   const cv::Mat photo = textured({160, 120});
-  DngOptions dng_options;
+  io::DngOptions dng_options;
   dng_options.as_shot_neutral = {0.5, 1.0, 0.8};
-  auto dng = encode_dng(photo, dng_options);
+  auto dng = io::encode_dng(photo, dng_options);
   ASSERT_TRUE(dng) << dng.message();
-  auto mhc = decode(*dng, Demosaic::mhc);
-  auto ahd = decode(*dng, Demosaic::ahd);
-  auto bilinear = decode(*dng, Demosaic::bilinear);
+  auto mhc = decode(*dng, io::Demosaic::mhc);
+  auto ahd = decode(*dng, io::Demosaic::ahd);
+  auto bilinear = decode(*dng, io::Demosaic::bilinear);
   ASSERT_TRUE(mhc) << mhc.message();
   ASSERT_TRUE(ahd) << ahd.message();
   ASSERT_TRUE(bilinear) << bilinear.message();
@@ -70,13 +70,13 @@ TEST(Demosaic, MhcKeepsLibRawsLevelsWhiteBalanceAndClipping) {
   cv::Mat photo(64, 96, CV_32FC3);
   photo(cv::Rect(0, 0, 48, 64)).setTo(cv::Scalar(0.2, 0.5, 0.7));   // B, G, R
   photo(cv::Rect(48, 0, 48, 64)).setTo(cv::Scalar(1.0, 0.05, 1.0));  // clipped blue and red
-  DngOptions dng_options;
+  io::DngOptions dng_options;
   dng_options.as_shot_neutral = {0.6, 1.0, 0.7};
   dng_options.black_level = 1024;
-  auto dng = encode_dng(photo, dng_options);
+  auto dng = io::encode_dng(photo, dng_options);
   ASSERT_TRUE(dng) << dng.message();
-  auto mhc = decode(*dng, Demosaic::mhc);
-  auto libraw = decode(*dng, Demosaic::bilinear);
+  auto mhc = decode(*dng, io::Demosaic::mhc);
+  auto libraw = decode(*dng, io::Demosaic::bilinear);
   ASSERT_TRUE(mhc) << mhc.message();
   ASSERT_TRUE(libraw) << libraw.message();
   for (const cv::Rect patch : {cv::Rect(8, 8, 32, 48), cv::Rect(56, 8, 32, 48)}) {
@@ -89,10 +89,10 @@ TEST(Demosaic, MhcKeepsLibRawsLevelsWhiteBalanceAndClipping) {
 }
 
 TEST(Demosaic, MhcIsParsedAndNamed) {
-  auto d = parse_demosaic("mhc");
+  auto d = io::parse_demosaic("mhc");
   ASSERT_TRUE(d);
-  EXPECT_EQ(*d, Demosaic::mhc);
-  EXPECT_STREQ(demosaic_name(Demosaic::mhc), "mhc");
+  EXPECT_EQ(*d, io::Demosaic::mhc);
+  EXPECT_STREQ(io::demosaic_name(io::Demosaic::mhc), "mhc");
 }
 
 }  // namespace

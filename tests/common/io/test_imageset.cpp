@@ -38,12 +38,12 @@ std::vector<std::string> others(const fs::path& dir, const std::string& keep) {
 
 TEST(ImageSet, RoundTripKeepsPixelsAndManifest) {
   Scratch dir;
-  ImageSet set = synthetic_set({256, 170}, 5);
-  ASSERT_TRUE(write_set(set, dir / "s"));
-  auto back = read_set(dir / "s");
+  io::ImageSet set = synthetic_set({256, 170}, 5);
+  ASSERT_TRUE(io::write_set(set, dir / "s"));
+  auto back = io::read_set(dir / "s");
   ASSERT_TRUE(back) << back.message();
   EXPECT_EQ(back->id, set.id);
-  EXPECT_EQ(back->role, Role::destination);
+  EXPECT_EQ(back->role, io::Role::destination);
   EXPECT_EQ(back->object, set.object);
   EXPECT_EQ(back->created, set.created);
   EXPECT_EQ(back->size, set.size);
@@ -57,7 +57,7 @@ TEST(ImageSet, RoundTripKeepsPixelsAndManifest) {
   EXPECT_EQ(back->camera.cx, set.camera.cx);
   ASSERT_EQ(back->lights.size(), 5u);
   for (size_t i = 0; i < 5; ++i) {
-    const Light &a = set.lights[i], &b = back->lights[i];
+    const io::Light &a = set.lights[i], &b = back->lights[i];
     EXPECT_EQ(b.index, static_cast<int>(i));
     EXPECT_EQ(b.lamp_id, a.lamp_id);
     ASSERT_TRUE(b.position_m.has_value());
@@ -75,26 +75,26 @@ TEST(ImageSet, RoundTripKeepsPixelsAndManifest) {
   EXPECT_LE(cv::norm(back->truth.albedo, set.truth.albedo, cv::NORM_INF), kQuant);
 
   // the truth's geometry only: normals and mask, no albedo or depth decoded
-  ReadOptions geometry;
+  io::ReadOptions geometry;
   geometry.load_truth_appearance = false;
-  auto shape = read_set(dir / "s", geometry);
+  auto shape = io::read_set(dir / "s", geometry);
   ASSERT_TRUE(shape);
   EXPECT_EQ(cv::norm(shape->truth.normals, set.truth.normals, cv::NORM_INF), 0.0);
   EXPECT_EQ(cv::norm(shape->truth.mask, set.truth.mask, cv::NORM_INF), 0.0);
   EXPECT_TRUE(shape->truth.albedo.empty());
   EXPECT_TRUE(shape->truth.depth.empty());
 
-  ReadOptions without_truth;
+  io::ReadOptions without_truth;
   without_truth.load_truth = false;
-  auto no_truth = read_set(dir / "s", without_truth);
+  auto no_truth = io::read_set(dir / "s", without_truth);
   ASSERT_TRUE(no_truth);
   EXPECT_FALSE(no_truth->truth.present());
 }
 
 TEST(ImageSet, ManifestOnDiskHasTheDesignFields) {
   Scratch dir;
-  ImageSet set = synthetic_set({32, 24}, 3);
-  ASSERT_TRUE(write_set(set, dir / "s"));
+  io::ImageSet set = synthetic_set({32, 24}, 3);
+  ASSERT_TRUE(io::write_set(set, dir / "s"));
   for (const char* f : {"set.json", "light_00.png", "light_01.png", "light_02.png", "ambient.png", "mask.png",
                         "truth/normals.pfm", "truth/mask.png", "truth/albedo.png", "truth/depth.pfm"})
     EXPECT_TRUE(fs::exists(dir / "s" / f)) << f;
@@ -112,19 +112,19 @@ TEST(ImageSet, ManifestOnDiskHasTheDesignFields) {
   // 16-bit linear RGB on disk.
   EXPECT_EQ(cv::imread((dir / "s" / "light_00.png").string(), cv::IMREAD_UNCHANGED).type(), CV_16UC3);
   // The truth normals are x,y,z in the file's R,G,B slots.
-  auto raw = read_pfm(dir / "s" / "truth/normals.pfm", false);
+  auto raw = io::read_pfm(dir / "s" / "truth/normals.pfm", false);
   ASSERT_TRUE(raw);
   EXPECT_EQ(raw->at<cv::Vec3f>(3, 4)[2], set.truth.normals.at<cv::Vec3f>(3, 4)[0]);
 }
 
 TEST(ImageSet, TextFieldsWithBracketsQuotesAndUnicodeSurvive) {
   Scratch dir;
-  ImageSet set = synthetic_set({16, 12}, 3, 1, false);
+  io::ImageSet set = synthetic_set({16, 12}, 3, 1, false);
   set.lights[0].lamp_id = "hue [3, 4] \"left\" \\ back";
   set.object = "tasse \u00e0 caf\u00e9 [blue]";
   set.warnings = {"[", "]", "{\"x\": [1, 2]}"};
-  ASSERT_TRUE(write_set(set, dir / "s"));
-  auto back = read_set(dir / "s");
+  ASSERT_TRUE(io::write_set(set, dir / "s"));
+  auto back = io::read_set(dir / "s");
   ASSERT_TRUE(back) << back.message();
   EXPECT_EQ(back->lights[0].lamp_id, set.lights[0].lamp_id);
   EXPECT_EQ(back->object, set.object);
@@ -135,15 +135,15 @@ TEST(ImageSet, TextFieldsWithBracketsQuotesAndUnicodeSurvive) {
 
 TEST(ImageSet, WritesFillCreatedAndIdAndOmitEmptyParts) {
   Scratch dir;
-  ImageSet set = synthetic_set({16, 12}, 3, 1, false);
+  io::ImageSet set = synthetic_set({16, 12}, 3, 1, false);
   set.created.clear();
   set.id.clear();
   set.ambient = cv::Mat();
   set.mask = cv::Mat();
-  ASSERT_TRUE(write_set(set, dir / "plain"));
+  ASSERT_TRUE(io::write_set(set, dir / "plain"));
   EXPECT_FALSE(fs::exists(dir / "plain" / "truth"));
   EXPECT_FALSE(fs::exists(dir / "plain" / "ambient.png"));
-  auto back = read_set(dir / "plain");
+  auto back = io::read_set(dir / "plain");
   ASSERT_TRUE(back) << back.message();
   EXPECT_EQ(back->id, "plain");
   ASSERT_EQ(back->created.size(), 20u);  // 2026-01-02T03:04:05Z
@@ -153,29 +153,29 @@ TEST(ImageSet, WritesFillCreatedAndIdAndOmitEmptyParts) {
 
 TEST(ImageSet, RefusesToOverwriteUnlessAskedThenSwaps) {
   Scratch dir;
-  ImageSet a = synthetic_set({16, 12}, 3, 1);
-  ImageSet b = synthetic_set({16, 12}, 4, 2);
-  ASSERT_TRUE(write_set(a, dir / "s"));
-  auto refused = write_set(b, dir / "s");
+  io::ImageSet a = synthetic_set({16, 12}, 3, 1);
+  io::ImageSet b = synthetic_set({16, 12}, 4, 2);
+  ASSERT_TRUE(io::write_set(a, dir / "s"));
+  auto refused = io::write_set(b, dir / "s");
   ASSERT_FALSE(refused);
   EXPECT_NE(refused.message().find("already exists"), std::string::npos);
-  EXPECT_EQ(read_set(dir / "s")->lights.size(), 3u);
-  ASSERT_TRUE(write_set(b, dir / "s", true));
-  auto back = read_set(dir / "s");
+  EXPECT_EQ(io::read_set(dir / "s")->lights.size(), 3u);
+  ASSERT_TRUE(io::write_set(b, dir / "s", true));
+  auto back = io::read_set(dir / "s");
   ASSERT_TRUE(back);
   EXPECT_EQ(back->lights.size(), 4u);
   EXPECT_TRUE(others(dir.path(), "s").empty());
 }
 
 // Writes with the process's file-size limit at `limit` bytes: writes past it fail (EFBIG).
-Status write_with_file_limit(const ImageSet& set, const fs::path& folder, rlim_t limit, bool overwrite) {
+Status write_with_file_limit(const io::ImageSet& set, const fs::path& folder, rlim_t limit, bool overwrite) {
   rlimit old{};
   getrlimit(RLIMIT_FSIZE, &old);
   auto old_handler = std::signal(SIGXFSZ, SIG_IGN);
   rlimit low = old;
   low.rlim_cur = limit;
   setrlimit(RLIMIT_FSIZE, &low);
-  Status s = write_set(set, folder, overwrite);
+  Status s = io::write_set(set, folder, overwrite);
   setrlimit(RLIMIT_FSIZE, &old);
   std::signal(SIGXFSZ, old_handler);
   return s;
@@ -185,7 +185,7 @@ TEST(ImageSet, FailedWriteLeavesNoFolderAndNoTemporary) {
   Scratch dir;
   // Flat images compress to a few hundred bytes; light 2 is noise and does not
   // fit under the limit, so the write fails midway, after light 0 and 1.
-  ImageSet set = synthetic_set({96, 64}, 4, 9, false);
+  io::ImageSet set = synthetic_set({96, 64}, 4, 9, false);
   for (size_t i = 0; i < set.images.size(); ++i) {
     if (i != 2) set.images[i].setTo(cv::Scalar::all(0.25));
   }
@@ -197,11 +197,11 @@ TEST(ImageSet, FailedWriteLeavesNoFolderAndNoTemporary) {
   EXPECT_TRUE(others(dir.path(), "").empty());
 
   // The same failure while overwriting keeps the old set intact.
-  ImageSet old = synthetic_set({16, 12}, 3, 1, false);
-  ASSERT_TRUE(write_set(old, dir / "s"));
+  io::ImageSet old = synthetic_set({16, 12}, 3, 1, false);
+  ASSERT_TRUE(io::write_set(old, dir / "s"));
   auto s2 = write_with_file_limit(set, dir / "s", 8000, true);
   ASSERT_FALSE(s2);
-  auto still = read_set(dir / "s");
+  auto still = io::read_set(dir / "s");
   ASSERT_TRUE(still) << still.message();
   EXPECT_EQ(still->lights.size(), 3u);
   EXPECT_TRUE(others(dir.path(), "s").empty());
@@ -209,10 +209,10 @@ TEST(ImageSet, FailedWriteLeavesNoFolderAndNoTemporary) {
 
 TEST(ImageSet, ConcurrentWritersOfOneFolderOneWins) {
   Scratch dir;
-  ImageSet a = synthetic_set({32, 24}, 3, 1, false), b = synthetic_set({32, 24}, 4, 2, false);
+  io::ImageSet a = synthetic_set({32, 24}, 3, 1, false), b = synthetic_set({32, 24}, 4, 2, false);
   Status sa, sb;
-  std::thread ta([&] { sa = write_set(a, dir / "s"); });
-  std::thread tb([&] { sb = write_set(b, dir / "s"); });
+  std::thread ta([&] { sa = io::write_set(a, dir / "s"); });
+  std::thread tb([&] { sb = io::write_set(b, dir / "s"); });
   ta.join();
   tb.join();
   EXPECT_NE(sa.ok(), sb.ok()) << "exactly one writer must win";
@@ -220,7 +220,7 @@ TEST(ImageSet, ConcurrentWritersOfOneFolderOneWins) {
   if (!lost.ok()) {
     EXPECT_NE(lost.message().find("already exists"), std::string::npos) << lost.message();
   }
-  auto back = read_set(dir / "s");
+  auto back = io::read_set(dir / "s");
   ASSERT_TRUE(back) << back.message();
   EXPECT_EQ(back->lights.size(), sa.ok() ? 3u : 4u);
   EXPECT_TRUE(others(dir.path(), "s").empty());
@@ -231,7 +231,7 @@ TEST(ImageSet, StaleTemporaryOfADeadWriterIsCleaned) {
   // A pid above the kernel's maximum (2^22) belongs to no process.
   fs::create_directories(dir / ".s.tmp-2147483000-0" / "truth");
   fs::create_directories(dir / ".other.tmp-2147483000-0");
-  ASSERT_TRUE(write_set(synthetic_set({16, 12}, 3, 1, false), dir / "s"));
+  ASSERT_TRUE(io::write_set(synthetic_set({16, 12}, 3, 1, false), dir / "s"));
   EXPECT_FALSE(fs::exists(dir / ".s.tmp-2147483000-0"));
   EXPECT_TRUE(fs::exists(dir / ".other.tmp-2147483000-0"));  // not ours to touch
 }
@@ -239,47 +239,47 @@ TEST(ImageSet, StaleTemporaryOfADeadWriterIsCleaned) {
 TEST(ImageSet, ValidateAndWriteRefuseBadInMemorySets) {
   Scratch dir;
   struct Case {
-    std::function<void(ImageSet&)> spoil;
+    std::function<void(io::ImageSet&)> spoil;
     std::string expect;
   };
   std::vector<Case> cases = {
-      {[](ImageSet& s) { s.lights[1].direction = cv::Vec3d(std::nan(""), 0, 1); }, "light 1"},
-      {[](ImageSet& s) { s.lights[1].direction = cv::Vec3d(0, 0, 2); }, "unit"},
-      {[](ImageSet& s) { s.lights[2].intensity[0] = std::nanf(""); }, "light 2"},
-      {[](ImageSet& s) { s.lights[0].position_m = cv::Vec3d(INFINITY, 0, 1); }, "position_m"},
-      {[](ImageSet& s) { s.images.pop_back(); }, "3 lights but 2 images"},
-      {[](ImageSet& s) { s.images[1] = cv::Mat(5, 5, CV_32FC3); }, "image 1"},
-      {[](ImageSet& s) { s.images[1].convertTo(s.images[1], CV_16UC3); }, "CV_32FC3"},
-      {[](ImageSet& s) { s.lights[2].index = 7; }, "index"},
-      {[](ImageSet& s) { s.size = {0, 12}; }, "size"},
-      {[](ImageSet& s) { s.mask = cv::Mat(12, 16, CV_32FC1); }, "mask"},
-      {[](ImageSet& s) { s.truth.depth = cv::Mat(12, 16, CV_32FC3); }, "truth depth"},
-      {[](ImageSet& s) { s.lights.clear(); s.images.clear(); }, "no lights"},
+      {[](io::ImageSet& s) { s.lights[1].direction = cv::Vec3d(std::nan(""), 0, 1); }, "light 1"},
+      {[](io::ImageSet& s) { s.lights[1].direction = cv::Vec3d(0, 0, 2); }, "unit"},
+      {[](io::ImageSet& s) { s.lights[2].intensity[0] = std::nanf(""); }, "light 2"},
+      {[](io::ImageSet& s) { s.lights[0].position_m = cv::Vec3d(INFINITY, 0, 1); }, "position_m"},
+      {[](io::ImageSet& s) { s.images.pop_back(); }, "3 lights but 2 images"},
+      {[](io::ImageSet& s) { s.images[1] = cv::Mat(5, 5, CV_32FC3); }, "image 1"},
+      {[](io::ImageSet& s) { s.images[1].convertTo(s.images[1], CV_16UC3); }, "CV_32FC3"},
+      {[](io::ImageSet& s) { s.lights[2].index = 7; }, "index"},
+      {[](io::ImageSet& s) { s.size = {0, 12}; }, "size"},
+      {[](io::ImageSet& s) { s.mask = cv::Mat(12, 16, CV_32FC1); }, "mask"},
+      {[](io::ImageSet& s) { s.truth.depth = cv::Mat(12, 16, CV_32FC3); }, "truth depth"},
+      {[](io::ImageSet& s) { s.lights.clear(); s.images.clear(); }, "no lights"},
   };
   for (const Case& c : cases) {
-    ImageSet set = synthetic_set({16, 12}, 3, 1);
+    io::ImageSet set = synthetic_set({16, 12}, 3, 1);
     c.spoil(set);
-    auto v = validate(set);
+    auto v = io::validate(set);
     ASSERT_FALSE(v) << c.expect;
     EXPECT_NE(v.message().find(c.expect), std::string::npos) << v.message();
-    auto w = write_set(set, dir / "s");
+    auto w = io::write_set(set, dir / "s");
     ASSERT_FALSE(w);
     EXPECT_FALSE(fs::exists(dir / "s"));
   }
-  EXPECT_TRUE(validate(synthetic_set({16, 12}, 3, 1)));
+  EXPECT_TRUE(io::validate(synthetic_set({16, 12}, 3, 1)));
 }
 
 // --- bad veneer sets: each produces one error naming the file ---------------------
 
 class BadVeneerSet : public ::testing::Test {
  protected:
-  void SetUp() override { ASSERT_TRUE(write_set(synthetic_set({32, 24}, 4, 3), folder())); }
+  void SetUp() override { ASSERT_TRUE(io::write_set(synthetic_set({32, 24}, 4, 3), folder())); }
   fs::path folder() const { return dir_ / "s"; }
   json manifest() const { return json::parse(slurp(folder() / "set.json")); }
   void set_manifest(const json& j) const { spit(folder() / "set.json", j.dump()); }
   // read_set fails, and the message contains every one of `parts`.
   void expect_error(std::initializer_list<std::string> parts) const {
-    auto r = read_set(folder());
+    auto r = io::read_set(folder());
     ASSERT_FALSE(r) << "read_set accepted a bad set";
     for (const auto& p : parts) EXPECT_NE(r.message().find(p), std::string::npos) << "'" << p << "' not in: " << r.message();
   }
@@ -292,7 +292,7 @@ TEST_F(BadVeneerSet, MissingImage) {
 }
 
 TEST_F(BadVeneerSet, ImageOfADifferentSize) {
-  ASSERT_TRUE(write_png16(folder() / "light_01.png", cv::Mat(20, 30, CV_32FC3, cv::Scalar::all(0.5))));
+  ASSERT_TRUE(io::write_png16(folder() / "light_01.png", cv::Mat(20, 30, CV_32FC3, cv::Scalar::all(0.5))));
   expect_error({"light_01.png", "30x20", "32x24"});
 }
 
@@ -324,7 +324,7 @@ TEST_F(BadVeneerSet, CorruptPng) {
 TEST_F(BadVeneerSet, CorruptAmbientAndTruth) {
   spit(folder() / "ambient.png", "");
   expect_error({"ambient.png", "empty"});
-  ASSERT_TRUE(write_png16(folder() / "ambient.png", cv::Mat(24, 32, CV_32FC3, cv::Scalar::all(0))));
+  ASSERT_TRUE(io::write_png16(folder() / "ambient.png", cv::Mat(24, 32, CV_32FC3, cv::Scalar::all(0))));
   std::string pfm = slurp(folder() / "truth" / "normals.pfm");
   spit(folder() / "truth" / "normals.pfm", pfm.substr(0, 100));
   expect_error({"normals.pfm", "truncated"});
@@ -437,16 +437,16 @@ TEST_F(BadVeneerSet, WrongTypesAndMissingFields) {
 }
 
 TEST_F(BadVeneerSet, ParseManifestNeedsNoFiles) {
-  auto m = parse_manifest(slurp(folder() / "set.json"), "/nowhere/at/all");
+  auto m = io::parse_manifest(slurp(folder() / "set.json"), "/nowhere/at/all");
   ASSERT_TRUE(m) << m.message();
   EXPECT_EQ(m->image_files.size(), 4u);
   EXPECT_EQ(m->image_files[1], "light_01.png");
   EXPECT_EQ(m->ambient_file, "ambient.png");
   EXPECT_TRUE(m->set.images.empty());
   // manifest_json of a read set parses back to the same lights.
-  auto set = read_set(folder());
+  auto set = io::read_set(folder());
   ASSERT_TRUE(set);
-  auto again = parse_manifest(manifest_json(*set), "/x");
+  auto again = io::parse_manifest(io::manifest_json(*set), "/x");
   ASSERT_TRUE(again) << again.message();
   EXPECT_EQ(again->set.lights.size(), 4u);
   EXPECT_EQ(again->set.lights[3].direction, set->lights[3].direction);
@@ -458,7 +458,7 @@ fs::path real_set(const char* name) { return fs::path(VENEER_SHARED_DATA) / "rea
 
 TEST(DiLiGenT, ImportsTheRealCatSet) {
   if (!fs::exists(real_set("cat") / "filenames.txt")) GTEST_SKIP() << "no " << real_set("cat");
-  auto set = read_set(real_set("cat"));
+  auto set = io::read_set(real_set("cat"));
   ASSERT_TRUE(set) << set.message();
   EXPECT_EQ(set->lights.size(), 12u);
   EXPECT_EQ(set->images.size(), 12u);
@@ -480,16 +480,16 @@ TEST(DiLiGenT, ImportsTheRealCatSet) {
   EXPECT_EQ(set->lights[0].direction, cv::Vec3d(0.403259, 0.480808, 0.778592));
   EXPECT_EQ(set->lights[0].lamp_id, "001");
   EXPECT_EQ(set->object, "cat");
-  EXPECT_EQ(set->role, Role::unknown);
+  EXPECT_EQ(set->role, io::Role::unknown);
 }
 
 TEST(DiLiGenT, ImportsChromeAndConvertsToAVeneerSet) {
   if (!fs::exists(real_set("chrome") / "filenames.txt")) GTEST_SKIP() << "no " << real_set("chrome");
   Scratch dir;
-  auto set = read_set(real_set("chrome"));
+  auto set = io::read_set(real_set("chrome"));
   ASSERT_TRUE(set) << set.message();
-  ASSERT_TRUE(write_set(*set, dir / "chrome"));
-  auto back = read_set(dir / "chrome");
+  ASSERT_TRUE(io::write_set(*set, dir / "chrome"));
+  auto back = io::read_set(dir / "chrome");
   ASSERT_TRUE(back) << back.message();
   EXPECT_EQ(back->lights.size(), 12u);
   EXPECT_EQ(cv::norm(back->mask, set->mask, cv::NORM_INF), 0.0);
@@ -516,7 +516,7 @@ class BadDiLiGenT : public ::testing::Test {
     cv::imwrite((dir_ / "mask.png").string(), cv::Mat(24, 32, CV_8UC1, cv::Scalar(255)));
   }
   void expect_error(std::initializer_list<std::string> parts) const {
-    auto r = read_set(dir_.path());
+    auto r = io::read_set(dir_.path());
     ASSERT_FALSE(r) << "read_set accepted a bad set";
     for (const auto& p : parts) EXPECT_NE(r.message().find(p), std::string::npos) << "'" << p << "' not in: " << r.message();
   }
@@ -524,7 +524,7 @@ class BadDiLiGenT : public ::testing::Test {
 };
 
 TEST_F(BadDiLiGenT, GoodFolderReads) {
-  auto r = read_set(dir_.path());
+  auto r = io::read_set(dir_.path());
   ASSERT_TRUE(r) << r.message();
   EXPECT_EQ(r->lights.size(), 4u);
   EXPECT_NEAR(r->images[0].at<cv::Vec3f>(0, 0)[2], 120.0f / 255, 1e-6);
@@ -557,7 +557,7 @@ TEST_F(BadDiLiGenT, NonUnitDirection) {
 
 TEST_F(BadDiLiGenT, NearlyUnitDirectionIsAccepted) {
   spit(dir_ / "light_directions.txt", "0 0 1.0004\n0.6 0 0.8\n0 0.6 0.8\n-0.6 0 0.8\n");
-  EXPECT_TRUE(read_set(dir_.path()));
+  EXPECT_TRUE(io::read_set(dir_.path()));
 }
 
 TEST_F(BadDiLiGenT, NaNDirection) {
@@ -600,14 +600,14 @@ TEST(Thesis, ReadsNumberedPpmAndPfmWithLightsAndNormals) {
     cv::imwrite((dir / (i == 1 ? "1.ppm" : "0" + std::to_string(i) + ".ppm")).string(), u16);
   }
   cv::Mat f(size, CV_32FC3, cv::Scalar(0.25, 0.5, 0.75));
-  ASSERT_TRUE(write_pfm(dir / "4.pfm", f, false));
+  ASSERT_TRUE(io::write_pfm(dir / "4.pfm", f, false));
   spit(dir / "lights.txt", "# thesis rig\n0 0 1\n0.6 0 0.8  2 2 2\n0 0.6 0.8\n\n0 -0.6 0.8\n");
   cv::imwrite((dir / "mask.pgm").string(), cv::Mat(size, CV_8UC1, cv::Scalar(255)));
   cv::Mat n(size, CV_32FC3, cv::Scalar(0, 0, 1));
-  ASSERT_TRUE(write_pfm(dir / "normals.pfm", n, true));
+  ASSERT_TRUE(io::write_pfm(dir / "normals.pfm", n, true));
   spit(dir / "notes.txt", "not an image");
 
-  auto set = read_set(dir.path());
+  auto set = io::read_set(dir.path());
   ASSERT_TRUE(set) << set.message();
   ASSERT_EQ(set->lights.size(), 4u);
   EXPECT_EQ(set->size, size);
@@ -623,29 +623,29 @@ TEST(Thesis, ReadsNumberedPpmAndPfmWithLightsAndNormals) {
 
 TEST(Thesis, BadFoldersNameTheProblem) {
   Scratch dir;
-  auto none = read_set(dir.path());
+  auto none = io::read_set(dir.path());
   ASSERT_FALSE(none);
   EXPECT_NE(none.message().find("not an image set"), std::string::npos) << none.message();
 
   cv::imwrite((dir / "1.ppm").string(), cv::Mat(4, 4, CV_8UC3, cv::Scalar::all(7)));
   cv::imwrite((dir / "2.ppm").string(), cv::Mat(4, 4, CV_8UC3, cv::Scalar::all(7)));
   spit(dir / "lights.txt", "0 0 1\n0.6 0 0.8\n0 0.6 0.8\n");
-  auto count = read_set(dir.path());
+  auto count = io::read_set(dir.path());
   ASSERT_FALSE(count);
   EXPECT_NE(count.message().find("lights.txt"), std::string::npos) << count.message();
   EXPECT_NE(count.message().find("3 lights"), std::string::npos) << count.message();
 
   cv::imwrite((dir / "3.ppm").string(), cv::Mat(5, 4, CV_8UC3, cv::Scalar::all(7)));
-  auto sizes = read_set(dir.path());
+  auto sizes = io::read_set(dir.path());
   ASSERT_FALSE(sizes);
   EXPECT_NE(sizes.message().find("3.ppm"), std::string::npos) << sizes.message();
 
   cv::imwrite((dir / "03.ppm").string(), cv::Mat(4, 4, CV_8UC3, cv::Scalar::all(7)));
-  auto twice = read_set(dir.path());
+  auto twice = io::read_set(dir.path());
   ASSERT_FALSE(twice);
   EXPECT_NE(twice.message().find("number 3"), std::string::npos) << twice.message();
 
-  auto missing = read_set(dir / "nope");
+  auto missing = io::read_set(dir / "nope");
   ASSERT_FALSE(missing);
   EXPECT_NE(missing.message().find("nope"), std::string::npos);
 }
@@ -672,8 +672,8 @@ std::pair<std::string, int> run_veneer(const std::string& args) {
 TEST(InfoCommand, SummaryJsonAndErrors) {
   if (!fs::exists(fs::path(VENEER_BIN_DIR) / "veneer")) GTEST_SKIP() << "veneer is not built in " << VENEER_BIN_DIR;
   Scratch dir;
-  ImageSet set = synthetic_set({32, 24}, 3, 5);
-  ASSERT_TRUE(write_set(set, dir / "s"));
+  io::ImageSet set = synthetic_set({32, 24}, 3, 5);
+  ASSERT_TRUE(io::write_set(set, dir / "s"));
   auto [summary, rc] = run_veneer("info " + (dir / "s").string());
   EXPECT_EQ(rc, 0) << summary;
   for (const char* part : {"veneer-set/1", "destination", "32x24", "sim-2", "normals, mask, albedo, depth",

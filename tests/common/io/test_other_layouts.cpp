@@ -110,9 +110,9 @@ TEST(RtiFolder, CatJpegsGiveTheNormalsOfTheSameJpegsReadAsDiLiGenT) {
   fs::copy_file(kCat / "light_directions.txt", dir / "diligent" / "light_directions.txt");
   fs::copy_file(kCat / "mask.png", dir / "diligent" / "mask.png");
 
-  auto rti = read_set(dir / "rti");
+  auto rti = io::read_set(dir / "rti");
   ASSERT_TRUE(rti) << rti.message();
-  auto diligent = read_set(dir / "diligent");
+  auto diligent = io::read_set(dir / "diligent");
   ASSERT_TRUE(diligent) << diligent.message();
   EXPECT_EQ(rti->layout, "RTI .lp");
   EXPECT_EQ(rti->photos_from, "jpeg");
@@ -134,7 +134,7 @@ TEST(RtiFolder, CatJpegsGiveTheNormalsOfTheSameJpegsReadAsDiLiGenT) {
   const double agree = median_angle_deg(from_rti->normals, from_diligent->normals, rti->mask);
 
   write_rti_project(dir / "rti-y-down", jpegs, -1);
-  auto flipped = read_set(dir / "rti-y-down");
+  auto flipped = io::read_set(dir / "rti-y-down");
   ASSERT_TRUE(flipped) << flipped.message();
   auto from_flipped = ps::photometric_stereo(*flipped, flipped->mask);
   ASSERT_TRUE(from_flipped) << from_flipped.message();
@@ -151,7 +151,7 @@ TEST(RtiFolder, CatJpegsGiveTheNormalsOfTheSameJpegsReadAsDiLiGenT) {
 // linearised, 16-bit ones are linear.
 TEST(RtiFolder, EightBitPhotosAreLinearisedSixteenBitAreNot) {
   if (fs::exists(kCat / "filenames.txt")) {
-    auto cat = read_set(kCat);
+    auto cat = io::read_set(kCat);
     ASSERT_TRUE(cat) << cat.message();
     EXPECT_EQ(cat->photos_from, "png");
     EXPECT_NE(cat->photos_read.find("taken as linear"), std::string::npos) << cat->photos_read;
@@ -166,7 +166,7 @@ TEST(RtiFolder, EightBitPhotosAreLinearisedSixteenBitAreNot) {
   cv::imwrite((dir / "c.tif").string(), cv::Mat(size, CV_16UC3, cv::Scalar(16384, 32768, 65535)));
   cv::imwrite((dir / "d.png").string(), cv::Mat(size, CV_16UC3, cv::Scalar(16384, 32768, 65535)));
   spit(dir / "lights.lp", "4\na.png 0 0 1\nb.tif 0.5 0 0.866025\nc.tif 0 0.5 0.866025\nd.png 0 -1 1\n");
-  auto set = read_set(dir.path());
+  auto set = io::read_set(dir.path());
   ASSERT_TRUE(set) << set.message();
   EXPECT_EQ(set->layout, "RTI .lp");
   EXPECT_EQ(set->photos_from, "mixed");
@@ -206,15 +206,15 @@ TEST(RtiFolder, BadLightFilesAreRefusedWithTheirLine) {
                         Case{"2\na.jpg 0 0 1\na.jpg 0 1 1\n", "listed twice"}}) {
     SCOPED_TRACE(c.text);
     spit(dir / "set.lp", c.text);
-    auto set = read_set(dir.path());
+    auto set = io::read_set(dir.path());
     ASSERT_FALSE(set);
     EXPECT_NE(set.message().find("set.lp"), std::string::npos) << set.message();
     EXPECT_NE(set.message().find(c.expect), std::string::npos) << set.message();
   }
   spit(dir / "set.lp", "2\na.jpg 0 0 1\nb.jpg 0 1 1\n");
-  EXPECT_TRUE(read_set(dir.path()));
+  EXPECT_TRUE(io::read_set(dir.path()));
   spit(dir / "other.lp", "2\na.jpg 0 0 1\nb.jpg 0 1 1\n");
-  auto two = read_set(dir.path());
+  auto two = io::read_set(dir.path());
   ASSERT_FALSE(two);
   EXPECT_NE(two.message().find("2 RTI light files"), std::string::npos) << two.message();
 }
@@ -227,14 +227,14 @@ TEST(OtherLayouts, RawJpegAndTiffPhotosInTheDiLiGenTAndThesisLayouts) {
   const cv::Size size(64, 48);
   cv::Mat photo(size, CV_32FC3);
   cv::randu(photo, 0.1, 0.6);
-  const auto dng = encode_dng(photo);
+  const auto dng = io::encode_dng(photo);
   ASSERT_TRUE(dng) << dng.message();
   fs::create_directories(dir / "d");
   spit(dir / "d" / "filenames.txt", "one.DNG\ntwo.dng\n");
   spit(dir / "d" / "light_directions.txt", "0 0 1\n0.6 0 0.8\n");
   spit(dir / "d" / "one.DNG", *dng);
   spit(dir / "d" / "two.dng", *dng);
-  auto d = read_set(dir / "d");
+  auto d = io::read_set(dir / "d");
   ASSERT_TRUE(d) << d.message();
   EXPECT_EQ(d->photos_from, "raw");
   EXPECT_NE(d->photos_read.find("LibRaw"), std::string::npos) << d->photos_read;
@@ -242,15 +242,15 @@ TEST(OtherLayouts, RawJpegAndTiffPhotosInTheDiLiGenTAndThesisLayouts) {
   // The measured channel of each Bayer cell comes back (the rig's DNG is RGGB).
   EXPECT_NEAR(d->images[0].at<cv::Vec3f>(10, 10)[2], photo.at<cv::Vec3f>(10, 10)[2], 2e-3);
   EXPECT_NEAR(d->images[0].at<cv::Vec3f>(11, 11)[0], photo.at<cv::Vec3f>(11, 11)[0], 2e-3);
-  ReadOptions half;
+  io::ReadOptions half;
   half.raw.half_size = true;
-  auto small = read_set(dir / "d", half);
+  auto small = io::read_set(dir / "d", half);
   ASSERT_TRUE(small) << small.message();
   EXPECT_EQ(small->size, cv::Size(32, 24));
 
   spit(dir / "d" / "two.png", slurp(dir / "d" / "one.DNG"));  // wrong name: a DNG called .png
   spit(dir / "d" / "filenames.txt", "one.DNG\ntwo.png\n");
-  auto mixed = read_set(dir / "d");
+  auto mixed = io::read_set(dir / "d");
   ASSERT_FALSE(mixed);
   EXPECT_NE(mixed.message().find("RAW"), std::string::npos) << mixed.message();
 
@@ -260,7 +260,7 @@ TEST(OtherLayouts, RawJpegAndTiffPhotosInTheDiLiGenTAndThesisLayouts) {
   cv::imwrite((dir / "t" / "1.jpg").string(), bgr8);
   cv::imwrite((dir / "t" / "2.jpeg").string(), bgr8);
   cv::imwrite((dir / "t" / "3.tif").string(), cv::Mat(size, CV_16UC3, cv::Scalar::all(1000)));
-  auto t = read_set(dir / "t");
+  auto t = io::read_set(dir / "t");
   ASSERT_TRUE(t) << t.message();
   EXPECT_EQ(t->layout, "thesis");
   EXPECT_EQ(t->images.size(), 3u);
@@ -271,7 +271,7 @@ TEST(OtherLayouts, RawJpegAndTiffPhotosInTheDiLiGenTAndThesisLayouts) {
   spit(dir / "r" / "lights.txt", "0 0 1\n0.6 0 0.8\n");
   spit(dir / "r" / "1.dng", *dng);
   spit(dir / "r" / "2.dng", *dng);
-  auto r = read_set(dir / "r");
+  auto r = io::read_set(dir / "r");
   ASSERT_TRUE(r) << r.message();
   EXPECT_EQ(r->photos_from, "raw");
 }

@@ -116,7 +116,7 @@ TEST(PngCodec, EveryFilterColourTypeAndDepthDecodesAsOpenCV) {
         const std::string png = make_png(37, 23, channels, depth, 100 + channels * 10 + depth + shift, shift);
         const cv::Mat expect = opencv_samples(png);
         ASSERT_FALSE(expect.empty());
-        auto ours = decode_linear_image(png, "made.png");
+        auto ours = io::decode_linear_image(png, "made.png");
         ASSERT_TRUE(ours) << ours.message();
         ASSERT_EQ(ours->type(), CV_32FC3);
         ASSERT_EQ(ours->size(), expect.size());
@@ -128,7 +128,7 @@ TEST(PngCodec, EveryFilterColourTypeAndDepthDecodesAsOpenCV) {
 TEST(PngCodec, EncodedPhotosDecodeExactlyThroughOpenCV) {
   cv::Mat photo(123, 77, CV_32FC3);
   cv::RNG(7).fill(photo, cv::RNG::UNIFORM, cv::Scalar::all(0), cv::Scalar::all(1));
-  auto png = encode_png16(photo);
+  auto png = io::encode_png16(photo);
   ASSERT_TRUE(png) << png.message();
   cv::Mat u16;
   photo.convertTo(u16, CV_16UC3, 65535.0);
@@ -136,7 +136,7 @@ TEST(PngCodec, EncodedPhotosDecodeExactlyThroughOpenCV) {
   ASSERT_EQ(back.type(), CV_16UC3);
   EXPECT_EQ(cv::norm(back, u16, cv::NORM_INF), 0);  // same BGR samples, every one
   cv::Mat grey(9, 11, CV_32FC1, cv::Scalar(0.25));
-  auto g = encode_png16(grey);
+  auto g = io::encode_png16(grey);
   ASSERT_TRUE(g);
   cv::Mat gb = cv::imdecode(cv::Mat(1, static_cast<int>(g->size()), CV_8UC1, g->data()), cv::IMREAD_UNCHANGED);
   ASSERT_EQ(gb.type(), CV_16UC1);
@@ -155,24 +155,24 @@ TEST(PngCodec, StoredAndFastEncodingsKeepEverySample) {
   cv::patchNaNs(clean, 0.0);
   cv::Mat u16;
   clean.convertTo(u16, CV_16UC3, 65535.0);
-  for (PngDeflate mode : {PngDeflate::stored, PngDeflate::fast}) {
-    const char* name = mode == PngDeflate::stored ? "stored" : "fast";
-    auto png = encode_png16(photo, mode);
+  for (io::PngDeflate mode : {io::PngDeflate::stored, io::PngDeflate::fast}) {
+    const char* name = mode == io::PngDeflate::stored ? "stored" : "fast";
+    auto png = io::encode_png16(photo, mode);
     ASSERT_TRUE(png) << png.message();
-    if (mode == PngDeflate::stored) {
+    if (mode == io::PngDeflate::stored) {
       EXPECT_GT(png->size(), u16.total() * u16.elemSize()) << name;
     }
     cv::Mat back = cv::imdecode(cv::Mat(1, static_cast<int>(png->size()), CV_8UC1, png->data()), cv::IMREAD_UNCHANGED);
     ASSERT_EQ(back.type(), CV_16UC3) << name;
     EXPECT_EQ(cv::norm(back, u16, cv::NORM_INF), 0) << name;
-    auto ours = decode_linear_image(*png, "x.png");
+    auto ours = io::decode_linear_image(*png, "x.png");
     ASSERT_TRUE(ours) << ours.message();
     cv::Mat expect;
     u16.convertTo(expect, CV_32FC3, 1.0 / 65535.0);
     EXPECT_LT(cv::norm(*ours, expect, cv::NORM_INF), 1e-6) << name;
   }
   cv::Mat grey(9, 11, CV_32FC1, cv::Scalar(0.25));
-  auto g = encode_png16(grey, PngDeflate::stored);
+  auto g = io::encode_png16(grey, io::PngDeflate::stored);
   ASSERT_TRUE(g);
   cv::Mat gb = cv::imdecode(cv::Mat(1, static_cast<int>(g->size()), CV_8UC1, g->data()), cv::IMREAD_UNCHANGED);
   ASSERT_EQ(gb.type(), CV_16UC1);
@@ -181,7 +181,7 @@ TEST(PngCodec, StoredAndFastEncodingsKeepEverySample) {
 
 TEST(PngCodec, DamagedImageDataIsRefusedNamingTheProblem) {
   const std::string good = make_png(40, 30, 3, 16, 9);
-  ASSERT_TRUE(decode_linear_image(good, "good.png"));
+  ASSERT_TRUE(io::decode_linear_image(good, "good.png"));
   struct Case {
     std::string bytes, expect;
   };
@@ -191,7 +191,7 @@ TEST(PngCodec, DamagedImageDataIsRefusedNamingTheProblem) {
   for (const Case& c : {Case{make_png(40, 30, 3, 16, 9, 0, 7), "unknown row filter 7 in row 2"},
                         Case{make_png(40, 30, 3, 16, 9, 0, -1, 20), "truncated PNG (image data holds"},
                         Case{bad_crc, "CRC error in the IDAT chunk"}}) {
-    auto r = decode_linear_image(c.bytes, "bad.png");
+    auto r = io::decode_linear_image(c.bytes, "bad.png");
     ASSERT_FALSE(r) << c.expect;
     EXPECT_NE(r.message().find("bad.png"), std::string::npos) << r.message();
     EXPECT_NE(r.message().find(c.expect), std::string::npos) << r.message();
@@ -212,7 +212,7 @@ TEST(PngCodec, ADeclaredSizeTheDataCantHoldIsRefusedBeforeAllocating) {
     chunk(png, "IHDR", ihdr);
     chunk(png, "IDAT", std::string("\x78\x01\x03\x00\x00\x00\x00\x01", 8));  // an empty zlib stream
     chunk(png, "IEND", "");
-    auto r = decode_linear_image(png, "huge.png");
+    auto r = io::decode_linear_image(png, "huge.png");
     ASSERT_FALSE(r) << "interlace " << interlace;
     EXPECT_NE(r.message().find("huge.png: truncated PNG (8 bytes of image data can't hold the 60000x60000"),
               std::string::npos)

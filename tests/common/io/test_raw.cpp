@@ -28,20 +28,20 @@ double mean_relative_error(const cv::Mat& a, const cv::Mat& b, int border) {
 
 TEST(Raw, DngOfARampDecodesBack) {
   const cv::Mat photo = ramp({96, 64});
-  auto dng = encode_dng(photo);
+  auto dng = io::encode_dng(photo);
   ASSERT_TRUE(dng) << dng.message();
-  for (Demosaic d : {Demosaic::ahd, Demosaic::ppg, Demosaic::bilinear, Demosaic::vng, Demosaic::dcb, Demosaic::dht,
-                     Demosaic::aahd, Demosaic::mhc}) {
-    RawOptions o;
+  for (io::Demosaic d : {io::Demosaic::ahd, io::Demosaic::ppg, io::Demosaic::bilinear, io::Demosaic::vng, io::Demosaic::dcb, io::Demosaic::dht,
+                     io::Demosaic::aahd, io::Demosaic::mhc}) {
+    io::RawOptions o;
     o.demosaic = d;
-    auto back = decode_raw_linear(*dng, o, "ramp.dng");
+    auto back = io::decode_raw_linear(*dng, o, "ramp.dng");
     ASSERT_TRUE(back) << back.message();
-    ASSERT_EQ(back->size(), photo.size()) << demosaic_name(d);
-    EXPECT_LT(mean_relative_error(*back, photo, 4), 0.005) << demosaic_name(d);
+    ASSERT_EQ(back->size(), photo.size()) << io::demosaic_name(d);
+    EXPECT_LT(mean_relative_error(*back, photo, 4), 0.005) << io::demosaic_name(d);
   }
-  RawOptions half;
+  io::RawOptions half;
   half.half_size = true;
-  auto small = decode_raw_linear(*dng, half, "ramp.dng");
+  auto small = io::decode_raw_linear(*dng, half, "ramp.dng");
   ASSERT_TRUE(small) << small.message();
   ASSERT_EQ(small->size(), cv::Size(48, 32));
   cv::Mat expect;
@@ -55,69 +55,69 @@ TEST(Raw, EveryFrameKeepsTheFilesWhiteLevel) {
   // its set, or photometric stereo sees each frame scaled its own way.
   for (float peak : {0.05f, 0.8f, 0.95f}) {
     const cv::Mat photo = ramp({64, 48}) * (peak / 0.6f);
-    auto dng = encode_dng(photo);
+    auto dng = io::encode_dng(photo);
     ASSERT_TRUE(dng) << dng.message();
-    auto back = decode_raw_linear(*dng, {}, "dim.dng");
+    auto back = io::decode_raw_linear(*dng, {}, "dim.dng");
     ASSERT_TRUE(back) << back.message();
     EXPECT_LT(mean_relative_error(*back, photo, 4), 0.01) << "peak " << peak;
   }
 }
 
 TEST(Raw, DamagedFilesAreRefusedWithTheirName) {
-  auto dng = encode_dng(ramp({32, 16}));
+  auto dng = io::encode_dng(ramp({32, 16}));
   ASSERT_TRUE(dng);
   for (const std::string& bad : {std::string(), std::string("not a raw file at all"), dng->substr(0, 200),
                                  dng->substr(0, dng->size() / 2)}) {
-    auto r = decode_raw_linear(bad, {}, "bad.dng");
+    auto r = io::decode_raw_linear(bad, {}, "bad.dng");
     if (r) continue;  // LibRaw may fill a cut strip with zeros; it must not crash
     EXPECT_NE(r.message().find("bad.dng"), std::string::npos) << r.message();
   }
-  EXPECT_FALSE(decode_raw_linear("", {}, "empty.dng"));
-  EXPECT_FALSE(decode_raw_linear("II*\0garbage", {}, "x.dng"));
+  EXPECT_FALSE(io::decode_raw_linear("", {}, "empty.dng"));
+  EXPECT_FALSE(io::decode_raw_linear("II*\0garbage", {}, "x.dng"));
 }
 
 TEST(Raw, FileNamesAndOptions) {
-  EXPECT_TRUE(is_raw_file_name("IMG_0001.CR2"));
-  EXPECT_TRUE(is_raw_file_name("light_00.dng"));
-  EXPECT_FALSE(is_raw_file_name("light_00.png"));
-  EXPECT_FALSE(is_raw_file_name("dng"));
-  for (auto d : {Demosaic::bilinear, Demosaic::vng, Demosaic::ppg, Demosaic::ahd, Demosaic::dcb, Demosaic::dht,
-                 Demosaic::aahd})
-    EXPECT_EQ(*parse_demosaic(demosaic_name(d)), d);
-  auto amaze = parse_demosaic("amaze");  // not in Debian's LibRaw (no GPL demosaic packs)
+  EXPECT_TRUE(io::is_raw_file_name("IMG_0001.CR2"));
+  EXPECT_TRUE(io::is_raw_file_name("light_00.dng"));
+  EXPECT_FALSE(io::is_raw_file_name("light_00.png"));
+  EXPECT_FALSE(io::is_raw_file_name("dng"));
+  for (auto d : {io::Demosaic::bilinear, io::Demosaic::vng, io::Demosaic::ppg, io::Demosaic::ahd, io::Demosaic::dcb, io::Demosaic::dht,
+                 io::Demosaic::aahd})
+    EXPECT_EQ(*io::parse_demosaic(io::demosaic_name(d)), d);
+  auto amaze = io::parse_demosaic("amaze");  // not in Debian's LibRaw (no GPL demosaic packs)
   ASSERT_FALSE(amaze);
   EXPECT_NE(amaze.message().find("dcb"), std::string::npos) << amaze.message();
-  for (auto p : {PhotoSource::automatic, PhotoSource::raw, PhotoSource::developed})
-    EXPECT_EQ(*parse_photo_source(photo_source_name(p)), p);
-  EXPECT_FALSE(parse_photo_source("jpeg"));
-  EXPECT_FALSE(encode_dng(ramp({31, 16})));  // odd width: not whole Bayer cells
-  DngOptions o;
+  for (auto p : {io::PhotoSource::automatic, io::PhotoSource::raw, io::PhotoSource::developed})
+    EXPECT_EQ(*io::parse_photo_source(io::photo_source_name(p)), p);
+  EXPECT_FALSE(io::parse_photo_source("jpeg"));
+  EXPECT_FALSE(io::encode_dng(ramp({31, 16})));  // odd width: not whole Bayer cells
+  io::DngOptions o;
   o.black_level = o.white_level;
-  EXPECT_FALSE(encode_dng(ramp({32, 16}), o));
+  EXPECT_FALSE(io::encode_dng(ramp({32, 16}), o));
 }
 
 TEST(Raw, ManifestNamesRawFilesInsideTheSet) {
   test::Scratch dir;
-  ImageSet set = test::synthetic_set({64, 48}, 3, 5, false);  // LibRaw refuses sides < 22 px
-  ASSERT_TRUE(add_dng_raw_files(set));
-  ASSERT_TRUE(write_set(set, dir / "s"));
+  io::ImageSet set = test::synthetic_set({64, 48}, 3, 5, false);  // LibRaw refuses sides < 22 px
+  ASSERT_TRUE(io::add_dng_raw_files(set));
+  ASSERT_TRUE(io::write_set(set, dir / "s"));
   const std::string json = test::slurp(dir / "s" / "set.json");
   EXPECT_NE(json.find("\"raw\": \"light_02.dng\""), std::string::npos) << json;
   EXPECT_NE(json.find("\"ambient_raw\": \"ambient.dng\""), std::string::npos) << json;
-  auto m = parse_manifest(json, dir / "s");
+  auto m = io::parse_manifest(json, dir / "s");
   ASSERT_TRUE(m) << m.message();
   ASSERT_EQ(m->raw_files.size(), 3u);
   EXPECT_EQ(m->raw_files[1], "light_01.dng");
   EXPECT_EQ(m->ambient_raw_file, "ambient.dng");
   auto escape = json;
   escape.replace(escape.find("light_01.dng"), 12, "../x/b.dng");
-  auto bad = parse_manifest(escape, dir / "s");
+  auto bad = io::parse_manifest(escape, dir / "s");
   ASSERT_FALSE(bad);
   EXPECT_NE(bad.message().find("leaves the set folder"), std::string::npos) << bad.message();
   auto twice = json;
   twice.replace(twice.find("light_01.dng"), 12, "light_01.png");
-  EXPECT_FALSE(parse_manifest(twice, dir / "s"));
-  auto back = read_set(dir / "s");
+  EXPECT_FALSE(io::parse_manifest(twice, dir / "s"));
+  auto back = io::read_set(dir / "s");
   ASSERT_TRUE(back) << back.message();
   EXPECT_EQ(back->photos_from, "raw");
   // Pixel noise cannot survive a Bayer mosaic; the levels must.
@@ -130,8 +130,8 @@ TEST(Raw, JpegPhotosGoThroughTheInverseSrgbCurve) {
   std::vector<uchar> jpeg;
   ASSERT_TRUE(cv::imencode(".jpg", grey, jpeg, {cv::IMWRITE_JPEG_QUALITY, 100}));
   const std::string bytes(jpeg.begin(), jpeg.end());
-  EXPECT_EQ(image_file_kind(bytes), "jpeg");
-  auto linear = decode_linear_image(bytes, "grey.jpg");
+  EXPECT_EQ(io::image_file_kind(bytes), "jpeg");
+  auto linear = io::decode_linear_image(bytes, "grey.jpg");
   ASSERT_TRUE(linear) << linear.message();
   EXPECT_NEAR(cv::mean(*linear)[1], 0.5, 0.01);
 }

@@ -18,16 +18,16 @@ namespace {
 
 using test::Scratch;
 
-ImageSet simulated(const std::string& scene, double noise, cv::Size size = {512, 340}) {
+io::ImageSet simulated(const std::string& scene, double noise, cv::Size size = {512, 340}) {
   sim::RenderOptions o;
   o.size = size;
   o.noise_sigma = noise;
   o.seed = 3;
   o.scale = 2.5;  // the object fills the frame
   o.camera_optics();  // as the rig's camera twin renders
-  auto set = sim::simulate_set(scene, o, Role::destination);
+  auto set = sim::simulate_set(scene, o, io::Role::destination);
   EXPECT_TRUE(set) << set.message();
-  return set ? std::move(set).value() : ImageSet{};
+  return set ? std::move(set).value() : io::ImageSet{};
 }
 
 // Over `mask`: sum |a - b| / sum |b| counting, per pixel, only the channel the
@@ -50,7 +50,7 @@ double relative_error(const cv::Mat& a, const cv::Mat& b, const cv::Mat& mask) {
 }
 
 // Mean angle between normals and the truth over the truth mask, degrees.
-double mean_angle_deg(const cv::Mat& normals, const Truth& truth) {
+double mean_angle_deg(const cv::Mat& normals, const io::Truth& truth) {
   double sum = 0;
   int n = 0;
   for (int y = 0; y < normals.rows; ++y)
@@ -73,13 +73,13 @@ double mean_angle_deg(const cv::Mat& normals, const Truth& truth) {
 TEST(RawSim, DngSetDecodesToTheLinearRender) {
   for (const std::string scene : {"bull", "orange"}) {
     SCOPED_TRACE(scene);
-    ImageSet rendered = simulated(scene, 0.0);
+    io::ImageSet rendered = simulated(scene, 0.0);
     ASSERT_FALSE(rendered.images.empty());
-    ImageSet with_raw = rendered;
-    ASSERT_TRUE(add_dng_raw_files(with_raw));
+    io::ImageSet with_raw = rendered;
+    ASSERT_TRUE(io::add_dng_raw_files(with_raw));
     Scratch dir;
-    ASSERT_TRUE(write_set(with_raw, dir / "set"));
-    auto raw = read_set(dir / "set");
+    ASSERT_TRUE(io::write_set(with_raw, dir / "set"));
+    auto raw = io::read_set(dir / "set");
     ASSERT_TRUE(raw) << raw.message();
     EXPECT_EQ(raw->photos_from, "raw");
     ASSERT_EQ(raw->size, rendered.size);
@@ -91,24 +91,24 @@ TEST(RawSim, DngSetDecodesToTheLinearRender) {
     }
     worst_measured = std::max(worst_measured, measured_channel_error(raw->ambient, rendered.ambient, object));
     std::printf("%s: DNG -> RAW path (%s) vs the render, worst photo: %.3f %% measured channel, %.2f %% full RGB\n",
-                scene.c_str(), demosaic_name(RawOptions{}.demosaic), 100 * worst_measured, 100 * worst_rgb);
+                scene.c_str(), io::demosaic_name(io::RawOptions{}.demosaic), 100 * worst_measured, 100 * worst_rgb);
     EXPECT_LT(worst_measured, 0.01);
     EXPECT_LT(worst_rgb, 0.01);
 
     // The developed photos (PNG) when asked, and a set without RAW files.
-    ReadOptions developed;
-    developed.photos = PhotoSource::developed;
-    auto png = read_set(dir / "set", developed);
+    io::ReadOptions developed;
+    developed.photos = io::PhotoSource::developed;
+    auto png = io::read_set(dir / "set", developed);
     ASSERT_TRUE(png) << png.message();
     EXPECT_EQ(png->photos_from, "png");
     EXPECT_LT(relative_error(png->images[0], rendered.images[0], object), 1e-3);
-    ASSERT_TRUE(write_set(rendered, dir / "plain"));
-    auto plain = read_set(dir / "plain");
+    ASSERT_TRUE(io::write_set(rendered, dir / "plain"));
+    auto plain = io::read_set(dir / "plain");
     ASSERT_TRUE(plain) << plain.message();
     EXPECT_EQ(plain->photos_from, "png");
-    ReadOptions want_raw;
-    want_raw.photos = PhotoSource::raw;
-    auto refused = read_set(dir / "plain", want_raw);
+    io::ReadOptions want_raw;
+    want_raw.photos = io::PhotoSource::raw;
+    auto refused = io::read_set(dir / "plain", want_raw);
     ASSERT_FALSE(refused);
     EXPECT_NE(refused.message().find("RAW"), std::string::npos) << refused.message();
   }
@@ -125,12 +125,12 @@ TEST(RawSim, NormalsFromDngMatchTheTruthAsFromTheRender) {
   for (const std::string scene : {"orange", "bull"}) {
     SCOPED_TRACE(scene);
     const double noise = 0.002;  // the rig twin's
-    ImageSet rendered = simulated(scene, noise);
-    ImageSet with_raw = rendered;
-    ASSERT_TRUE(add_dng_raw_files(with_raw));
+    io::ImageSet rendered = simulated(scene, noise);
+    io::ImageSet with_raw = rendered;
+    ASSERT_TRUE(io::add_dng_raw_files(with_raw));
     Scratch dir;
-    ASSERT_TRUE(write_set(with_raw, dir / "set"));
-    auto raw = read_set(dir / "set");
+    ASSERT_TRUE(io::write_set(with_raw, dir / "set"));
+    auto raw = io::read_set(dir / "set");
     ASSERT_TRUE(raw) << raw.message();
     EXPECT_EQ(raw->photos_from, "raw");
     auto from_raw = ps::photometric_stereo(*raw, raw->truth.mask);
@@ -140,12 +140,12 @@ TEST(RawSim, NormalsFromDngMatchTheTruthAsFromTheRender) {
     const double e_raw = mean_angle_deg(from_raw->normals, raw->truth);
     const double e_render = mean_angle_deg(from_render->normals, rendered.truth);
 
-    ReadOptions half;
+    io::ReadOptions half;
     half.raw.half_size = true;
-    auto small = read_set(dir / "set", half);
+    auto small = io::read_set(dir / "set", half);
     ASSERT_TRUE(small) << small.message();
     EXPECT_EQ(small->photos_from, "raw-half");
-    ImageSet small_render = simulated(scene, noise, small->size);
+    io::ImageSet small_render = simulated(scene, noise, small->size);
     EXPECT_NEAR(small->camera.focal_px, small_render.camera.focal_px, 1e-6);
     auto from_small = ps::photometric_stereo(*small, small->truth.mask);
     auto from_small_render = ps::photometric_stereo(small_render, small_render.truth.mask);
@@ -156,7 +156,7 @@ TEST(RawSim, NormalsFromDngMatchTheTruthAsFromTheRender) {
     std::printf("%s normals, mean angle to the truth: %dx%d render %.2f deg, full-size RAW (%s) %.2f deg; "
                 "%dx%d render %.2f deg, half-size RAW %.2f deg\n",
                 scene.c_str(), rendered.size.width, rendered.size.height, e_render,
-                demosaic_name(RawOptions{}.demosaic), e_raw, small->size.width, small->size.height, e_small_render,
+                io::demosaic_name(io::RawOptions{}.demosaic), e_raw, small->size.width, small->size.height, e_small_render,
                 e_small);
     EXPECT_LT(e_raw - e_render, 0.6);
     EXPECT_LT(e_small - e_small_render, 1.0);

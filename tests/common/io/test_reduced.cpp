@@ -33,16 +33,16 @@ struct Scratch {
   ~Scratch() { fs::remove_all(dir); }
 };
 
-ImageSet simulated(const std::string& scene, cv::Size size, double noise = 0.0) {
+io::ImageSet simulated(const std::string& scene, cv::Size size, double noise = 0.0) {
   sim::RenderOptions o;
   o.size = size;
   o.noise_sigma = noise;
   o.seed = 5;
   o.scale = 2.5;
   o.camera_optics();
-  auto set = sim::simulate_set(scene, o, Role::destination);
+  auto set = sim::simulate_set(scene, o, io::Role::destination);
   EXPECT_TRUE(set) << set.message();
-  return set ? std::move(set).value() : ImageSet{};
+  return set ? std::move(set).value() : io::ImageSet{};
 }
 
 // sum |a - b| / sum |b| per channel over `mask` (CV_8UC1, nonzero = counted).
@@ -77,16 +77,16 @@ cv::Mat smooth_photo(cv::Size size) {
 
 TEST(Reduced, BinnedMosaicEqualsTheFullDecodeAreaAveraged) {
   const cv::Mat photo = smooth_photo({512, 344});
-  auto dng = encode_dng(photo);
+  auto dng = io::encode_dng(photo);
   ASSERT_TRUE(dng) << dng.message();
-  RawOptions full_options;
-  full_options.demosaic = Demosaic::ahd;
-  auto full = decode_raw_linear(*dng, full_options, "full");
+  io::RawOptions full_options;
+  full_options.demosaic = io::Demosaic::ahd;
+  auto full = io::decode_raw_linear(*dng, full_options, "full");
   ASSERT_TRUE(full) << full.message();
   ASSERT_EQ(full->size(), photo.size());
   for (int factor : {2, 4, 8}) {
     SCOPED_TRACE("factor " + std::to_string(factor));
-    auto binned = decode_raw_binned(*dng, factor, "binned");
+    auto binned = io::decode_raw_binned(*dng, factor, "binned");
     ASSERT_TRUE(binned) << binned.message();
     ASSERT_EQ(binned->size(), cv::Size(512 / factor, 344 / factor));
     cv::Mat averaged;
@@ -101,7 +101,7 @@ TEST(Reduced, BinnedMosaicEqualsTheFullDecodeAreaAveraged) {
   }
   // the factor picked for a width: the largest even one still at least that wide
   int factor = 0;
-  auto to_width = decode_raw_binned_to_width(*dng, 100, "to width", &factor);
+  auto to_width = io::decode_raw_binned_to_width(*dng, 100, "to width", &factor);
   ASSERT_TRUE(to_width) << to_width.message();
   EXPECT_EQ(factor, 4);  // 512 / 4 = 128 >= 100, 512 / 6 = 85 < 100
   EXPECT_EQ(to_width->cols, 128);
@@ -110,14 +110,14 @@ TEST(Reduced, BinnedMosaicEqualsTheFullDecodeAreaAveraged) {
 TEST(Reduced, BinnedMosaicOfATexturedRenderIsTheRenderAreaAveraged) {
   // The simulator's orange (dimpled texture, an outline): no demosaicing
   // between, so the binned photo is the render's area average.
-  ImageSet set = simulated("orange", {512, 344});
+  io::ImageSet set = simulated("orange", {512, 344});
   ASSERT_FALSE(set.images.empty());
   const cv::Mat& photo = set.images[2];
-  auto dng = encode_dng(photo);
+  auto dng = io::encode_dng(photo);
   ASSERT_TRUE(dng) << dng.message();
   for (int factor : {2, 4}) {
     SCOPED_TRACE("factor " + std::to_string(factor));
-    auto binned = decode_raw_binned(*dng, factor, "binned");
+    auto binned = io::decode_raw_binned(*dng, factor, "binned");
     ASSERT_TRUE(binned) << binned.message();
     cv::Mat render, mask;
     cv::resize(photo, render, binned->size(), 0, 0, cv::INTER_AREA);
@@ -131,18 +131,18 @@ TEST(Reduced, BinnedMosaicOfATexturedRenderIsTheRenderAreaAveraged) {
 }
 
 TEST(Reduced, BinningRefusesWhatIsNotABayerRaw) {
-  auto odd = decode_raw_binned(std::string(100, 'x'), 3, "odd.dng");
+  auto odd = io::decode_raw_binned(std::string(100, 'x'), 3, "odd.dng");
   ASSERT_FALSE(odd);
   EXPECT_NE(odd.message().find("not even"), std::string::npos) << odd.message();
-  auto junk = decode_raw_binned(std::string(4096, 'x'), 2, "junk.dng");
+  auto junk = io::decode_raw_binned(std::string(4096, 'x'), 2, "junk.dng");
   ASSERT_FALSE(junk);
   EXPECT_NE(junk.message().find("junk.dng"), std::string::npos) << junk.message();
   // the simulated DNG has no preview: one clear error
-  ImageSet set = simulated("orange", {128, 86});
+  io::ImageSet set = simulated("orange", {128, 86});
   ASSERT_FALSE(set.images.empty());
-  auto dng = encode_dng(set.images[0](cv::Rect(0, 0, 128, 86)).clone());
+  auto dng = io::encode_dng(set.images[0](cv::Rect(0, 0, 128, 86)).clone());
   ASSERT_TRUE(dng) << dng.message();
-  auto preview = decode_raw_preview(*dng, "nopreview.dng");
+  auto preview = io::decode_raw_preview(*dng, "nopreview.dng");
   if (!preview) {
     EXPECT_NE(preview.message().find("nopreview.dng"), std::string::npos) << preview.message();
   }
@@ -169,7 +169,7 @@ TEST(Reduced, JpegDecodedSmallInTheDctIsLinear) {
   const std::string bytes(jpeg.begin(), jpeg.end());
   for (int factor : {1, 2, 4, 8}) {
     SCOPED_TRACE("factor " + std::to_string(factor));
-    auto small = decode_jpeg_reduced(bytes, factor, "photo.jpg");
+    auto small = io::decode_jpeg_reduced(bytes, factor, "photo.jpg");
     ASSERT_TRUE(small) << small.message();
     ASSERT_EQ(small->size(), cv::Size(size.width / factor, size.height / factor));
     cv::Mat expect;
@@ -182,21 +182,21 @@ TEST(Reduced, JpegDecodedSmallInTheDctIsLinear) {
     cv::resize(code, code, small->size(), 0, 0, cv::INTER_AREA);
     EXPECT_GT(relative_error(code, expect, {})[1], 0.2);
   }
-  EXPECT_EQ(jpeg_reduction_for(5600, 1280), 4);
-  EXPECT_EQ(jpeg_reduction_for(1024, 1280), 1);
-  EXPECT_EQ(jpeg_reduction_for(6000, 700), 8);
-  EXPECT_FALSE(decode_jpeg_reduced(bytes, 3, "photo.jpg"));
-  EXPECT_FALSE(decode_jpeg_reduced(std::string(1000, 'x'), 2, "junk.jpg"));
+  EXPECT_EQ(io::jpeg_reduction_for(5600, 1280), 4);
+  EXPECT_EQ(io::jpeg_reduction_for(1024, 1280), 1);
+  EXPECT_EQ(io::jpeg_reduction_for(6000, 700), 8);
+  EXPECT_FALSE(io::decode_jpeg_reduced(bytes, 3, "photo.jpg"));
+  EXPECT_FALSE(io::decode_jpeg_reduced(std::string(1000, 'x'), 2, "junk.jpg"));
 }
 
 TEST(Reduced, SetReadAtTheLiveSizeKeepsTruthAndMaskInStep) {
   Scratch scratch;
-  ImageSet set = simulated("bull", {512, 340}, 0.005);
-  ASSERT_TRUE(add_dng_raw_files(set));
-  ASSERT_TRUE(write_set(set, scratch.dir / "set"));
-  ReducedOptions o;
+  io::ImageSet set = simulated("bull", {512, 340}, 0.005);
+  ASSERT_TRUE(io::add_dng_raw_files(set));
+  ASSERT_TRUE(io::write_set(set, scratch.dir / "set"));
+  io::ReducedOptions o;
   o.width = 200;
-  auto live = read_set_reduced(scratch.dir / "set", o);
+  auto live = io::read_set_reduced(scratch.dir / "set", o);
   ASSERT_TRUE(live) << live.message();
   EXPECT_EQ(live->photos_from, "raw-binned-2");  // 512 / 2 = 256 >= 200, then area-resized to 200
   EXPECT_EQ(live->size, cv::Size(200, 133));
@@ -212,30 +212,30 @@ TEST(Reduced, SetReadAtTheLiveSizeKeepsTruthAndMaskInStep) {
   const cv::Vec3d e = relative_error(live->images[0], render, mask);
   for (int c = 0; c < 3; ++c) EXPECT_LT(e[c], 0.05) << "channel " << c;
 
-  o.decode = ReducedDecode::developed;
-  auto developed = read_set_reduced(scratch.dir / "set", o);
+  o.decode = io::ReducedDecode::developed;
+  auto developed = io::read_set_reduced(scratch.dir / "set", o);
   ASSERT_TRUE(developed) << developed.message();
   EXPECT_EQ(developed->photos_from, "developed");
   EXPECT_EQ(developed->size, live->size);
   // a set no wider than the live width keeps its size: the developed photos
-  o.decode = ReducedDecode::automatic;
+  o.decode = io::ReducedDecode::automatic;
   o.width = 1280;
-  auto whole = read_set_reduced(scratch.dir / "set", o);
+  auto whole = io::read_set_reduced(scratch.dir / "set", o);
   ASSERT_TRUE(whole) << whole.message();
   EXPECT_EQ(whole->size, set.size);
   // asked for JPEGs the set does not have: one error naming the folder
-  o.decode = ReducedDecode::jpeg_reduced;
-  auto no_jpeg = read_set_reduced(scratch.dir / "set", o);
+  o.decode = io::ReducedDecode::jpeg_reduced;
+  auto no_jpeg = io::read_set_reduced(scratch.dir / "set", o);
   ASSERT_FALSE(no_jpeg);
   EXPECT_NE(no_jpeg.message().find("not JPEGs"), std::string::npos) << no_jpeg.message();
   o.width = 10;
-  EXPECT_FALSE(read_set_reduced(scratch.dir / "set", o));
+  EXPECT_FALSE(io::read_set_reduced(scratch.dir / "set", o));
 }
 
 TEST(Reduced, SetOfJpegPhotosIsReadSmallInTheDct) {
   Scratch scratch;
-  ImageSet set = simulated("orange", {512, 340});
-  ASSERT_TRUE(write_set(set, scratch.dir / "set"));
+  io::ImageSet set = simulated("orange", {512, 340});
+  ASSERT_TRUE(io::write_set(set, scratch.dir / "set"));
   // the developed photos replaced by camera JPEGs (sRGB, 8-bit), set.json renamed to them
   std::ifstream in(scratch.dir / "set" / "set.json");
   std::string manifest((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -260,9 +260,9 @@ TEST(Reduced, SetOfJpegPhotosIsReadSmallInTheDct) {
     manifest.replace(at + 1, png.size(), jpg);
   }
   std::ofstream(scratch.dir / "set" / "set.json") << manifest;
-  ReducedOptions o;
+  io::ReducedOptions o;
   o.width = 128;
-  auto live = read_set_reduced(scratch.dir / "set", o);
+  auto live = io::read_set_reduced(scratch.dir / "set", o);
   ASSERT_TRUE(live) << live.message();
   EXPECT_EQ(live->photos_from, "jpeg-reduced-4");
   EXPECT_EQ(live->size, cv::Size(128, 85));

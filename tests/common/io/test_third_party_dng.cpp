@@ -26,16 +26,16 @@ namespace {
 namespace fs = std::filesystem;
 using test::Scratch;
 
-ImageSet simulated(const std::string& scene) {
+io::ImageSet simulated(const std::string& scene) {
   sim::RenderOptions o;
   o.size = {512, 340};
   o.noise_sigma = 0.002;  // the rig twin's
   o.seed = 5;
   o.scale = 2.5;
   o.camera_optics();
-  auto set = sim::simulate_set(scene, o, Role::destination);
+  auto set = sim::simulate_set(scene, o, io::Role::destination);
   EXPECT_TRUE(set) << set.message();
-  return set ? std::move(set).value() : ImageSet{};
+  return set ? std::move(set).value() : io::ImageSet{};
 }
 
 struct Distance {
@@ -70,7 +70,7 @@ cv::Matx33f bgr(const cv::Matx33d& rgb) {
   return m;
 }
 
-cv::Mat normals_of(const ImageSet& set, const cv::Mat& mask) {
+cv::Mat normals_of(const io::ImageSet& set, const cv::Mat& mask) {
   auto ps = ps::photometric_stereo(set, mask);
   EXPECT_TRUE(ps) << ps.message();
   return ps ? ps->normals : cv::Mat();
@@ -80,7 +80,7 @@ cv::Mat normals_of(const ImageSet& set, const cv::Mat& mask) {
 // lamp positions: the distant-light model), each written by `encode` as
 // light_NN.<extension>.
 template <typename Encode>
-void write_diligent(const ImageSet& set, const fs::path& dir, const std::string& extension, Encode encode) {
+void write_diligent(const io::ImageSet& set, const fs::path& dir, const std::string& extension, Encode encode) {
   fs::create_directories(dir);
   std::ofstream names(dir / "filenames.txt"), dirs(dir / "light_directions.txt"), ints(dir / "light_intensities.txt");
   for (size_t i = 0; i < set.images.size(); ++i) {
@@ -108,27 +108,27 @@ TEST(ThirdPartyDng, RaspberryPiDngsGiveNormalsAsACorrectDecodeDoes) {
   flipped.orientation = 3;
   for (const std::string scene : {"orange", "bull"}) {
     SCOPED_TRACE(scene);
-    ImageSet rendered = simulated(scene);
+    io::ImageSet rendered = simulated(scene);
     ASSERT_FALSE(rendered.images.empty());
     rendered.ambient = cv::Mat();  // the Pi files are the lamps' photos only
     const cv::Mat mask = rendered.truth.mask;
     Scratch dir;
     auto read = [&](const fs::path& folder) {
-      auto set = read_set(folder);
+      auto set = io::read_set(folder);
       EXPECT_TRUE(set) << set.message();
-      return set ? std::move(set).value() : ImageSet{};
+      return set ? std::move(set).value() : io::ImageSet{};
     };
 
     // Each layout against the photos' normals in that layout: DiLiGenT (the
     // render as 16-bit PNGs; distant lights) and set.json (lamp positions).
-    write_diligent(rendered, dir / "png", "png", [](const cv::Mat& p) { return encode_png16(p).value(); });
+    write_diligent(rendered, dir / "png", "png", [](const cv::Mat& p) { return io::encode_png16(p).value(); });
     const cv::Mat photos_diligent = normals_of(read(dir / "png"), mask);
     const cv::Mat photos_json = normals_of(rendered, mask);
     for (const auto& [label, options] : {std::pair{"HQ 12-bit BGGR", hq}, std::pair{"10-bit GRBG upside down", flipped}}) {
       SCOPED_TRACE(label);
       auto pi_dng = [&, o = options](const cv::Mat& p) { return test::encode_pi_dng(p, o); };
       write_diligent(rendered, dir / label, "dng", pi_dng);
-      const ImageSet pi = read(dir / label);
+      const io::ImageSet pi = read(dir / label);
       EXPECT_EQ(pi.photos_from, "raw");
       ASSERT_EQ(pi.size, rendered.size);
       const Distance got = distance(normals_of(pi, mask), photos_diligent, mask);
@@ -140,27 +140,27 @@ TEST(ThirdPartyDng, RaspberryPiDngsGiveNormalsAsACorrectDecodeDoes) {
       auto to_camera = [&](const cv::Mat& p) {
         cv::Mat cam;
         cv::transform(p, cam, bgr(options.ccm.inv()));
-        return encode_dng(cam).value();
+        return io::encode_dng(cam).value();
       };
-      auto to_photo = [&](ImageSet set) {
+      auto to_photo = [&](io::ImageSet set) {
         for (auto& im : set.images) cv::transform(im, im, bgr(options.ccm));
         return set;
       };
       const std::string ref_label = std::string(label) + "-reference";
       write_diligent(rendered, dir / ref_label, "dng", to_camera);
-      const ImageSet ref_set = to_photo(read(dir / ref_label));
+      const io::ImageSet ref_set = to_photo(read(dir / ref_label));
       EXPECT_EQ(ref_set.photos_from, "raw");
       const Distance ref_diligent = distance(normals_of(ref_set, mask), photos_diligent, mask);
-      ImageSet ref_raw = rendered;
+      io::ImageSet ref_raw = rendered;
       for (const auto& im : rendered.images) ref_raw.raw.push_back({"dng", to_camera(im)});
-      ASSERT_TRUE(write_set(ref_raw, dir / (ref_label + "-set")));
+      ASSERT_TRUE(io::write_set(ref_raw, dir / (ref_label + "-set")));
       const Distance ref_json =
           distance(normals_of(to_photo(read(dir / (ref_label + "-set"))), mask), photos_json, mask);
 
-      ImageSet with_raw = rendered;
+      io::ImageSet with_raw = rendered;
       for (const auto& im : rendered.images) with_raw.raw.push_back({"dng", pi_dng(im)});
-      ASSERT_TRUE(write_set(with_raw, dir / (std::string(label) + "-set")));
-      const ImageSet via_json = read(dir / (std::string(label) + "-set"));
+      ASSERT_TRUE(io::write_set(with_raw, dir / (std::string(label) + "-set")));
+      const io::ImageSet via_json = read(dir / (std::string(label) + "-set"));
       EXPECT_EQ(via_json.photos_from, "raw");
       const Distance json = distance(normals_of(via_json, mask), photos_json, mask);
 

@@ -46,11 +46,11 @@ inline void spit(const std::filesystem::path& file, const std::string& bytes) {
 }
 
 // A small synthetic set with every optional part filled in; pixels from a fixed seed.
-inline ImageSet synthetic_set(cv::Size size = {64, 48}, int lights = 4, uint64_t seed = 7, bool truth = true) {
+inline io::ImageSet synthetic_set(cv::Size size = {64, 48}, int lights = 4, uint64_t seed = 7, bool truth = true) {
   cv::RNG rng(seed);
-  ImageSet set;
+  io::ImageSet set;
   set.id = "test-set";
-  set.role = Role::destination;
+  set.role = io::Role::destination;
   set.object = "synthetic";
   set.created = "2026-01-02T03:04:05Z";
   set.size = size;
@@ -58,7 +58,7 @@ inline ImageSet synthetic_set(cv::Size size = {64, 48}, int lights = 4, uint64_t
   set.scene = "synthetic";
   set.warnings = {"ambient frame is bright"};
   for (int i = 0; i < lights; ++i) {
-    Light l;
+    io::Light l;
     l.index = i;
     l.lamp_id = "sim-" + std::to_string(i);
     double a = 2 * CV_PI * i / lights;

@@ -146,7 +146,7 @@ TEST(Simulator, CastAndAttachedShadows) {
   ASSERT_TRUE(scene);
   const auto rig = thesis_rig();
   cv::Mat right = render(*scene, {rig[2]}, o), left = render(*scene, {rig[5]}, o);
-  Truth truth = render_truth(*scene, o);
+  io::Truth truth = render_truth(*scene, o);
   // the table just left of the silhouette (x ~ -4.8 cm): in the sphere's shadow
   // under the right lamp, lit under the left one
   const int tx = 104, ty = 85;
@@ -188,7 +188,7 @@ TEST(Simulator, ConcaveSceneCastsShadowsOnItself) {
   RenderOptions o = small_options();
   auto scene = scene_or_die("bull", o);
   ASSERT_TRUE(scene);
-  Truth truth = render_truth(*scene, o);
+  io::Truth truth = render_truth(*scene, o);
   int cast = 0;
   for (size_t li = 0; li < 7; ++li) {
     Lamp lamp = thesis_rig()[li];
@@ -231,9 +231,9 @@ TEST(Simulator, ScenesHaveTheirCharacter) {
   RenderOptions o = small_options();
   auto truth_of = [&](const std::string& name) {
     auto scene = scene_or_die(name, o);
-    return scene ? render_truth(*scene, o) : Truth{};
+    return scene ? render_truth(*scene, o) : io::Truth{};
   };
-  auto distinct_albedos = [](const Truth& t) {
+  auto distinct_albedos = [](const io::Truth& t) {
     std::set<std::tuple<int, int, int>> colours;
     for (int y = 0; y < t.mask.rows; ++y)
       for (int x = 0; x < t.mask.cols; ++x)
@@ -245,7 +245,7 @@ TEST(Simulator, ScenesHaveTheirCharacter) {
   };
   // blocks: few normal orientations (each brick shows the same three faces)
   {
-    Truth t = truth_of("blocks");
+    io::Truth t = truth_of("blocks");
     std::vector<cv::Vec3f> dirs;
     int pixels = 0, explained = 0;
     for (int y = 0; y < t.mask.rows; ++y)
@@ -264,14 +264,14 @@ TEST(Simulator, ScenesHaveTheirCharacter) {
   }
   // two-spheres: two separate objects of different colours
   {
-    Truth t = truth_of("two-spheres");
+    io::Truth t = truth_of("two-spheres");
     cv::Mat labels;
     EXPECT_EQ(cv::connectedComponents(t.mask, labels) - 1, 2);
     EXPECT_EQ(distinct_albedos(t), 2u);
   }
   // the cups: the same shape; one plain, one dotted in four colours
   {
-    Truth white = truth_of("cup-white"), dots = truth_of("cup-dots");
+    io::Truth white = truth_of("cup-white"), dots = truth_of("cup-dots");
     EXPECT_EQ(cv::countNonZero(white.mask != dots.mask), 0);
     EXPECT_EQ(distinct_albedos(white), 1u);
     EXPECT_GE(distinct_albedos(dots), 5u);
@@ -282,8 +282,8 @@ TEST(Simulator, ScenesHaveTheirCharacter) {
   for (const char* name : {"orange", "apple", "banana", "stone"}) EXPECT_GE(distinct_albedos(truth_of(name)), 4u) << name;
   // the stone is rough: its normals deviate from a smoothed version of themselves
   {
-    Truth t = truth_of("stone"), s = truth_of("sphere-gray");
-    auto roughness = [](const Truth& tr) {
+    io::Truth t = truth_of("stone"), s = truth_of("sphere-gray");
+    auto roughness = [](const io::Truth& tr) {
       cv::Mat blurred;
       cv::GaussianBlur(tr.normals, blurred, cv::Size(7, 7), 0);
       cv::Mat inner;
@@ -309,7 +309,7 @@ TEST(Simulator, TruthNormalsAreUnitInsideAndZeroOutside) {
     EXPECT_FALSE(scene_description(name).empty()) << name;
     auto scene = scene_or_die(name, o);
     ASSERT_TRUE(scene);
-    Truth t = render_truth(*scene, o);
+    io::Truth t = render_truth(*scene, o);
     ASSERT_EQ(t.normals.type(), CV_32FC3);
     ASSERT_EQ(t.mask.type(), CV_8UC1);
     ASSERT_EQ(t.albedo.type(), CV_32FC3);
@@ -335,9 +335,9 @@ TEST(Simulator, EverySceneRendersAPlausibleObject) {
   o.noise_sigma = 0.005;
   const double area = kSmall.area();
   for (const auto& name : scene_names()) {
-    auto set = simulate_set(name, o, Role::destination);
+    auto set = simulate_set(name, o, io::Role::destination);
     ASSERT_TRUE(set.ok()) << name << ": " << (set.ok() ? "" : set.message());
-    EXPECT_TRUE(validate(*set).ok()) << name;
+    EXPECT_TRUE(io::validate(*set).ok()) << name;
     const cv::Mat& mask = set->truth.mask;
     int pixels = cv::countNonZero(mask);
     EXPECT_GT(pixels, 0.02 * area) << name;
@@ -419,7 +419,7 @@ TEST(Simulator, OffsetMovesTheObject) {
   o.offset_m = {0.10, 0, 0};
   auto moved = scene_or_die("sphere-gray", o);
   ASSERT_TRUE(moved);
-  Truth t = render_truth(*moved, o);
+  io::Truth t = render_truth(*moved, o);
   cv::Point2d c1 = centroid(t.mask);
   // 10 cm at 1 m with f = 2 x 257 px: about 51 px to the right
   EXPECT_NEAR(c1.x - c0.x, 0.10 * 2 * 257, 2.0);
@@ -445,9 +445,9 @@ TEST(Simulator, ScaleGrowsTheObject) {
 TEST(Simulator, SimulatedSetDescribesTheRig) {
   RenderOptions o = small_options();
   o.exposure = 0.8;
-  auto set = simulate_set("sphere-gray", o, Role::source);
+  auto set = simulate_set("sphere-gray", o, io::Role::source);
   ASSERT_TRUE(set.ok());
-  EXPECT_EQ(set->role, Role::source);
+  EXPECT_EQ(set->role, io::Role::source);
   EXPECT_EQ(set->scene, "sphere-gray");
   ASSERT_EQ(set->lights.size(), 7u);
   ASSERT_FALSE(set->ambient.empty());
@@ -455,7 +455,7 @@ TEST(Simulator, SimulatedSetDescribesTheRig) {
   EXPECT_NEAR(set->camera.cx, 128, 1e-9);
   EXPECT_NEAR(set->camera.cy, 85, 1e-9);
   for (size_t i = 0; i < 7; ++i) {
-    const Light& l = set->lights[i];
+    const io::Light& l = set->lights[i];
     ASSERT_TRUE(l.position_m.has_value());
     EXPECT_NEAR(cv::norm(l.direction), 1.0, 1e-12);
     EXPECT_NEAR(cv::norm(l.direction - *l.position_m / cv::norm(*l.position_m)), 0.0, 1e-12);
@@ -463,7 +463,7 @@ TEST(Simulator, SimulatedSetDescribesTheRig) {
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(l.intensity[c], 0.8, 1e-6);
   }
   // the recorded intensity predicts the pixel: near-light model at the front pole
-  const Light& l0 = set->lights[0];
+  const io::Light& l0 = set->lights[0];
   cv::Vec3d p(0, 0, 0.04), L = *l0.position_m - p;
   double expected = 0.6 * l0.intensity[1] * l0.position_m->dot(*l0.position_m) / L.dot(L) * (L[2] / cv::norm(L));
   EXPECT_NEAR(set->images[0].at<cv::Vec3f>(85, 128)[1], expected, 1e-4);
@@ -489,7 +489,7 @@ TEST(Simulator, ShapeInAnotherMaterialKeepsItsNormals) {
   auto bull = scene_or_die("bull", o);
   auto red_bull = make_scene_with_material("bull", "sphere-red-gloss", o);
   ASSERT_TRUE(bull && red_bull.ok());
-  Truth a = render_truth(*bull, o), b = render_truth(**red_bull, o);
+  io::Truth a = render_truth(*bull, o), b = render_truth(**red_bull, o);
   EXPECT_EQ(cv::countNonZero(a.mask != b.mask), 0);
   EXPECT_EQ(cv::norm(a.normals, b.normals, cv::NORM_INF), 0.0);
   cv::Scalar mean = cv::mean(b.albedo, b.mask);
@@ -533,14 +533,14 @@ TEST(Simulator, ProgressIsReportedAndCancelStops) {
   std::vector<double> fractions;
   Progress progress;
   progress.on_progress = [&](double f, const std::string&) { fractions.push_back(f); };
-  ASSERT_TRUE(simulate_set("orange", o, Role::destination, progress).ok());
+  ASSERT_TRUE(simulate_set("orange", o, io::Role::destination, progress).ok());
   ASSERT_GE(fractions.size(), 8u);
   EXPECT_TRUE(std::is_sorted(fractions.begin(), fractions.end()));
   EXPECT_EQ(fractions.back(), 1.0);
   std::atomic<bool> cancel{true};
   Progress cancelled;
   cancelled.cancel = &cancel;
-  auto set = simulate_set("orange", o, Role::destination, cancelled);
+  auto set = simulate_set("orange", o, io::Role::destination, cancelled);
   ASSERT_FALSE(set.ok());
   EXPECT_NE(set.message().find("cancelled"), std::string::npos);
 }
@@ -548,12 +548,12 @@ TEST(Simulator, ProgressIsReportedAndCancelStops) {
 TEST(Simulator, WrittenSetReadsBackWithItsTruth) {
   RenderOptions o = small_options();
   o.noise_sigma = 0.005;
-  auto set = simulate_set("cup-dots", o, Role::destination);
+  auto set = simulate_set("cup-dots", o, io::Role::destination);
   ASSERT_TRUE(set.ok());
   auto dir = std::filesystem::temp_directory_path() / ("veneer-sim-test-" + std::to_string(::getpid()));
   std::filesystem::remove_all(dir);
-  ASSERT_TRUE(write_set(*set, dir).ok());
-  auto back = read_set(dir);
+  ASSERT_TRUE(io::write_set(*set, dir).ok());
+  auto back = io::read_set(dir);
   ASSERT_TRUE(back.ok()) << (back.ok() ? "" : back.message());
   EXPECT_EQ(back->lights.size(), 7u);
   ASSERT_TRUE(back->truth.present());

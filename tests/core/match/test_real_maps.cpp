@@ -27,8 +27,8 @@ using namespace veneer::pipeline;
 const std::filesystem::path kReal = std::filesystem::path(VENEER_SHARED_DATA) / "real";
 
 // A copy of `set` moved by (dx, dy) px (edges replicated) with Gaussian noise of `sigma` added to the photos.
-ImageSet moved_copy(const ImageSet& set, double dx, double dy, double sigma, unsigned seed) {
-  ImageSet out = set;
+io::ImageSet moved_copy(const io::ImageSet& set, double dx, double dy, double sigma, unsigned seed) {
+  io::ImageSet out = set;
   cv::Mat shift = (cv::Mat_<double>(2, 3) << 1, 0, dx, 0, 1, dy);
   cv::RNG rng(seed);
   auto move = [&](cv::Mat& m, int interp) {
@@ -90,7 +90,7 @@ class RealMaps : public ::testing::TestWithParam<std::string> {};
 TEST_P(RealMaps, ScaledAndMovedSelfMapsFindTheMotion) {
   const auto folder = kReal / GetParam();
   if (!std::filesystem::exists(folder / "filenames.txt")) GTEST_SKIP() << "no " << folder;
-  auto set = read_set(folder);
+  auto set = io::read_set(folder);
   ASSERT_TRUE(set.ok()) << set.message();
   auto src = prepare_object(*set, false);
   ASSERT_TRUE(src.ok()) << src.message();
@@ -99,7 +99,7 @@ TEST_P(RealMaps, ScaledAndMovedSelfMapsFindTheMotion) {
 
   // Scaled 0.8x: source pixel = (x + 0.5) / 0.8 - 0.5.
   {
-    ImageSet small = *set;
+    io::ImageSet small = *set;
     scale_set(small, 0.8);
     const double sx = static_cast<double>(set->size.width) / small.size.width;
     const double sy = static_cast<double>(set->size.height) / small.size.height;
@@ -118,7 +118,7 @@ TEST_P(RealMaps, ScaledAndMovedSelfMapsFindTheMotion) {
   }
   // Moved by (3, -2) px with noise of 2/255.
   {
-    ImageSet moved = moved_copy(*set, 3, -2, 2.0 / 255, 7);
+    io::ImageSet moved = moved_copy(*set, 3, -2, 2.0 / 255, 7);
     auto dst = prepare_object(moved, false);
     ASSERT_TRUE(dst.ok()) << dst.message();
     auto map = compute_map(dst->view, src->view, o);
@@ -136,9 +136,9 @@ TEST_P(RealMaps, ScaledAndMovedSelfMapsFindTheMotion) {
 TEST_P(RealMaps, RepaintedPhotosKeepTheInputsEncodingAndExposure) {
   const auto folder = kReal / GetParam();
   if (!std::filesystem::exists(folder / "filenames.txt")) GTEST_SKIP() << "no " << folder;
-  auto set = read_set(folder);
+  auto set = io::read_set(folder);
   ASSERT_TRUE(set.ok()) << set.message();
-  ImageSet moved = moved_copy(*set, 2, 1, 0.0, 3);
+  io::ImageSet moved = moved_copy(*set, 2, 1, 0.0, 3);
   TransferOptions o;
   o.match.method = Method::combined;
   auto r = transfer(moved, *set, o);
@@ -150,7 +150,7 @@ TEST_P(RealMaps, RepaintedPhotosKeepTheInputsEncodingAndExposure) {
   for (size_t i : {size_t{0}, set->images.size() / 2}) {
     char name[64];
     std::snprintf(name, sizeof name, "result_light_%02zu.png", i);
-    auto result = read_linear_image(out / name);
+    auto result = io::read_linear_image(out / name);
     ASSERT_TRUE(result.ok()) << result.message();
     const double src_mean = cv::mean(set->images[i], seg->view.mask)[1];
     cv::Mat moved_mask;
@@ -172,8 +172,8 @@ TEST_P(RealMaps, RepaintedPhotosKeepTheInputsEncodingAndExposure) {
 // A textured Lambertian ellipsoid rendered under `like`'s own lamps
 // (distant directions and intensities), the same size of frame, with its
 // normals as the truth: a simulated object for a cross-object pair.
-ImageSet ellipsoid_under(const ImageSet& like, unsigned seed) {
-  ImageSet out;
+io::ImageSet ellipsoid_under(const io::ImageSet& like, unsigned seed) {
+  io::ImageSet out;
   out.id = "ellipsoid";
   out.object = "ellipsoid";
   out.size = like.size;
@@ -216,9 +216,9 @@ ImageSet ellipsoid_under(const ImageSet& like, unsigned seed) {
 TEST_P(RealMaps, ARealObjectAndASimulatedOneUnderItsLamps) {
   const auto folder = kReal / GetParam();
   if (!std::filesystem::exists(folder / "filenames.txt")) GTEST_SKIP() << "no " << folder;
-  auto real = read_set(folder);
+  auto real = io::read_set(folder);
   ASSERT_TRUE(real.ok()) << real.message();
-  const ImageSet sim = ellipsoid_under(*real, 5);
+  const io::ImageSet sim = ellipsoid_under(*real, 5);
   auto a = prepare_object(*real, false);
   auto b = prepare_object(sim, false);
   ASSERT_TRUE(a.ok() && b.ok());

@@ -28,8 +28,8 @@ const std::filesystem::path kReal = std::filesystem::path(VENEER_SHARED_DATA) / 
 // pixel, pixel centres at integers), in a frame of `size`, with Gaussian noise
 // of `sigma` added to the photos. The copy has no truth: its mask is the
 // source's mask carried along when it has one, else it is segmented anew.
-ImageSet warped_copy(const ImageSet& set, const cv::Matx23d& a, cv::Size size, double sigma, unsigned seed) {
-  ImageSet out = set;
+io::ImageSet warped_copy(const io::ImageSet& set, const cv::Matx23d& a, cv::Size size, double sigma, unsigned seed) {
+  io::ImageSet out = set;
   out.size = size;
   out.truth = {};
   cv::RNG rng(seed);
@@ -111,7 +111,7 @@ cv::Point2d inverse_at(const cv::Matx23d& a, int x, int y) {
 // Real objects as they are; simulated ones through the camera's optics (box
 // aperture at outlines, low-pass filter) with sensor noise, the size of the
 // real photos.
-Expected<ImageSet> object_set(const std::string& name) {
+Expected<io::ImageSet> object_set(const std::string& name) {
   if (name.rfind("sim-", 0) == 0) {
     sim::RenderOptions ro;
     ro.size = {512, 340};
@@ -125,7 +125,7 @@ Expected<ImageSet> object_set(const std::string& name) {
       for (auto& l : set->lights) l.position_m.reset();
     return set;
   }
-  return read_set(kReal / name);
+  return io::read_set(kReal / name);
 }
 
 class SelfMaps : public ::testing::TestWithParam<std::string> {};
@@ -154,7 +154,7 @@ TEST_P(SelfMaps, FindTheMotionScaledShiftedTurnedAndCropped) {
     std::string what;
     double tolerance, goal;
   };
-  auto run = [&](const Case& k, const ImageSet& moved, const std::function<cv::Point2d(int, int)>& truth) {
+  auto run = [&](const Case& k, const io::ImageSet& moved, const std::function<cv::Point2d(int, int)>& truth) {
     auto dst = prepare_object(moved, false);
     ASSERT_TRUE(dst.ok()) << dst.message();
     auto map = compute_map(dst->view, src->view, o);
@@ -180,7 +180,7 @@ TEST_P(SelfMaps, FindTheMotionScaledShiftedTurnedAndCropped) {
   };
 
   {  // 0.8x, as scale_set resizes (area average): source = (x + 0.5) / 0.8 - 0.5
-    ImageSet small = *set;
+    io::ImageSet small = *set;
     small.truth = {};
     scale_set(small, 0.8);
     const double sx = static_cast<double>(set->size.width) / small.size.width;
@@ -222,8 +222,8 @@ TEST_P(SelfMaps, FindTheMotionScaledShiftedTurnedAndCropped) {
 TEST(SelfMapsMetrics, TransferSaysWhetherTheMotionWasFound) {
   for (const char* name : {"cat", "buddha"})
     if (!std::filesystem::exists(kReal / name / "filenames.txt")) GTEST_SKIP() << "no " << (kReal / name);
-  auto cat = read_set(kReal / "cat");
-  auto buddha = read_set(kReal / "buddha");
+  auto cat = io::read_set(kReal / "cat");
+  auto buddha = io::read_set(kReal / "buddha");
   ASSERT_TRUE(cat.ok() && buddha.ok());
   pipeline::TransferOptions o;
   o.match.method = Method::combined;

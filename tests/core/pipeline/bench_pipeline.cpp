@@ -66,7 +66,7 @@ void reset_peak_rss() {
   }
 }
 
-bool simulate(const std::string& scene, cv::Size size, Role role, const fs::path& out) {
+bool simulate(const std::string& scene, cv::Size size, io::Role role, const fs::path& out) {
   sim::RenderOptions o;
   o.size = size;
   o.noise_sigma = 0.005;  // veneer simulate's default
@@ -76,7 +76,7 @@ bool simulate(const std::string& scene, cv::Size size, Role role, const fs::path
     std::fprintf(stderr, "simulate %s: %s\n", scene.c_str(), set.message().c_str());
     return false;
   }
-  if (auto s = write_set(*set, out); !s) {
+  if (auto s = io::write_set(*set, out); !s) {
     std::fprintf(stderr, "write_set: %s\n", s.message().c_str());
     return false;
   }
@@ -138,7 +138,7 @@ Row run_pair(cv::Size size, const fs::path& root) {
   Row r;
   r.pair = "bull <- orange " + std::to_string(size.width) + "x" + std::to_string(size.height);
   const fs::path dst = root / "dst", src = root / "src";
-  if (!simulate("bull", size, Role::destination, dst) || !simulate("orange", size, Role::source, src)) return r;
+  if (!simulate("bull", size, io::Role::destination, dst) || !simulate("orange", size, io::Role::source, src)) return r;
   std::vector<fs::path> files = frames_of(dst), more = frames_of(src);
   files.insert(files.end(), more.begin(), more.end());
   r.frames = static_cast<int>(files.size());

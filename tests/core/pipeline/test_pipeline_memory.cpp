@@ -51,14 +51,14 @@ TEST(Pipeline, TransferPeakStaysWithinTheFramesBytes) {
   Scratch dir;
   const cv::Size size(1600, 1064);
   int frames = 0;
-  for (auto [scene, role, name] : {std::tuple{"bull", Role::destination, "dst"}, {"orange", Role::source, "src"}}) {
+  for (auto [scene, role, name] : {std::tuple{"bull", io::Role::destination, "dst"}, {"orange", io::Role::source, "src"}}) {
     sim::RenderOptions o;
     o.size = size;
     o.noise_sigma = 0.005;
     o.scale = 2.5;
     auto set = sim::simulate_set(scene, o, role);
     ASSERT_TRUE(set) << set.message();
-    ASSERT_TRUE(write_set(*set, dir / name));
+    ASSERT_TRUE(io::write_set(*set, dir / name));
     frames += static_cast<int>(set->images.size()) + (set->ambient.empty() ? 0 : 1);
   }
   const double frame_bytes = frames * static_cast<double>(size.area()) * 3 * sizeof(float);

@@ -21,15 +21,15 @@ void write_simulated(const std::filesystem::path& folder, const std::string& sce
   o.size = {256, 170};
   o.noise_sigma = 0.005;
   o.scale = 2.5;
-  auto set = sim::simulate_set(scene, o, Role::destination);
+  auto set = sim::simulate_set(scene, o, io::Role::destination);
   ASSERT_TRUE(set) << set.message();
-  ASSERT_TRUE(write_set(*set, folder));
+  ASSERT_TRUE(io::write_set(*set, folder));
 }
 
 TEST(Cache, SecondPreparationIsAHitWithTheSameResults) {
   Scratch dir;
   ::setenv("XDG_CACHE_HOME", (dir / "xdg").c_str(), 1);  // never the user's cache
-  EXPECT_EQ(default_cache_dir(), dir / "xdg" / "veneer");
+  EXPECT_EQ(io::default_cache_dir(), dir / "xdg" / "veneer");
   write_simulated(dir / "bull", "bull");
   pipeline::PrepareOptions options;
   auto first = pipeline::prepare_set(dir / "bull", 1.0, false, options);
@@ -49,14 +49,14 @@ TEST(Cache, SecondPreparationIsAHitWithTheSameResults) {
   EXPECT_TRUE(second->set.truth.present());
 
   // Another read option is another entry.
-  options.read.photos = PhotoSource::developed;
+  options.read.photos = io::PhotoSource::developed;
   auto other = pipeline::prepare_set(dir / "bull", 1.0, false, options);
   ASSERT_TRUE(other);
   EXPECT_FALSE(other->report.cache_hit);
   // A damaged entry is dropped and recomputed.
-  const auto entry = default_cache_dir() / second->report.checksum;
+  const auto entry = io::default_cache_dir() / second->report.checksum;
   test::spit(entry / "normals", "garbage");
-  options.read.photos = PhotoSource::automatic;
+  options.read.photos = io::PhotoSource::automatic;
   auto again = pipeline::prepare_set(dir / "bull", 1.0, false, options);
   ASSERT_TRUE(again) << again.message();
   EXPECT_FALSE(again->report.cache_hit);
@@ -123,10 +123,10 @@ TEST(Pipeline, PhotosAreTheFramesLessAmbientAndTheMedianIsTheirs) {
   o.noise_sigma = 0.005;
   o.scale = 2.5;
   o.ambient = 0.05;  // enough that the subtraction (and its clamp) shows
-  auto sim_set = sim::simulate_set("bull", o, Role::destination);
+  auto sim_set = sim::simulate_set("bull", o, io::Role::destination);
   ASSERT_TRUE(sim_set) << sim_set.message();
-  ASSERT_TRUE(write_set(*sim_set, dir / "bull"));
-  auto raw = read_set(dir / "bull");
+  ASSERT_TRUE(io::write_set(*sim_set, dir / "bull"));
+  auto raw = io::read_set(dir / "bull");
   ASSERT_TRUE(raw) << raw.message();
   ASSERT_FALSE(raw->ambient.empty());
   pipeline::PrepareOptions options;

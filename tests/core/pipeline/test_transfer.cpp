@@ -20,12 +20,12 @@ using namespace veneer::eval;
 using namespace veneer::pipeline;
 using namespace veneer::repaint;
 
-ImageSet simulated(const std::string& scene, Role role, cv::Size size = {160, 106}) {
+io::ImageSet simulated(const std::string& scene, io::Role role, cv::Size size = {160, 106}) {
   sim::RenderOptions o;
   o.size = size;
   auto set = sim::simulate_set(scene, o, role);
   EXPECT_TRUE(set.ok()) << (set.ok() ? "" : set.message());
-  return set.ok() ? *set : ImageSet{};
+  return set.ok() ? *set : io::ImageSet{};
 }
 
 TransferOptions options(Method m, bool truth = true) {
@@ -37,8 +37,8 @@ TransferOptions options(Method m, bool truth = true) {
 }
 
 TEST(Transfer, WritesEverythingAndMeasuresQuality) {
-  const ImageSet dst = simulated("cup-white", Role::destination);
-  const ImageSet src = simulated("sphere-gray", Role::source);
+  const io::ImageSet dst = simulated("cup-white", io::Role::destination);
+  const io::ImageSet src = simulated("sphere-gray", io::Role::source);
   auto r = transfer(dst, src, options(Method::linear));
   ASSERT_TRUE(r.ok()) << r.message();
   ASSERT_TRUE(r->quality.has_value());
@@ -72,8 +72,8 @@ TEST(Transfer, WritesEverythingAndMeasuresQuality) {
 
 TEST(Transfer, RelightingRewardsMatchingNormals) {
   // the relighting PSNR must tell a normal-matched map from the bounding-box baseline
-  const ImageSet dst = simulated("bull", Role::destination);
-  const ImageSet src = simulated("sphere-red-gloss", Role::source);
+  const io::ImageSet dst = simulated("bull", io::Role::destination);
+  const io::ImageSet src = simulated("sphere-red-gloss", io::Role::source);
   auto matched = transfer(dst, src, options(Method::linear));
   auto baseline = transfer(dst, src, options(Method::baseline));
   ASSERT_TRUE(matched.ok() && baseline.ok());
@@ -85,8 +85,8 @@ TEST(Transfer, RelightingRewardsMatchingNormals) {
 TEST(Transfer, RelightingLeavesOutTheCastShadowsNoMapCanCarry) {
   // the bull casts shadows under the relighting lamp (on its plinth, its legs);
   // the sphere has none, so even the map of exactly matching normals errs there
-  const ImageSet dst = simulated("bull", Role::destination, {320, 212});
-  const ImageSet src = simulated("sphere-red-gloss", Role::source, {320, 212});
+  const io::ImageSet dst = simulated("bull", io::Role::destination, {320, 212});
+  const io::ImageSet src = simulated("sphere-red-gloss", io::Role::source, {320, 212});
   auto exact = transfer(dst, src, options(Method::linear));
   ASSERT_TRUE(exact.ok()) << exact.message();
   ASSERT_TRUE(exact->relit.has_value());
@@ -112,8 +112,8 @@ TEST(Transfer, RelightingLeavesOutTheCastShadowsNoMapCanCarry) {
 }
 
 TEST(Transfer, PipelineWithPhotometricStereoAndScale) {
-  const ImageSet dst = simulated("bull", Role::destination, {320, 212});
-  const ImageSet src = simulated("orange", Role::source, {320, 212});
+  const io::ImageSet dst = simulated("bull", io::Role::destination, {320, 212});
+  const io::ImageSet src = simulated("orange", io::Role::source, {320, 212});
   auto o = options(Method::flann, false);
   o.scale = 0.5;
   auto r = transfer(dst, src, o);
@@ -160,8 +160,8 @@ TEST(Transfer, RepaintBlendedKeepsChunksSharp) {
   ASSERT_FALSE(misfit.ok());
   EXPECT_NE(misfit.message().find("mask"), std::string::npos) << misfit.message();
   // through transfer: the options reach the result, and a bad radius is refused
-  const ImageSet dst = simulated("cup-white", Role::destination);
-  const ImageSet src = simulated("cup-dots", Role::source);
+  const io::ImageSet dst = simulated("cup-white", io::Role::destination);
+  const io::ImageSet src = simulated("cup-dots", io::Role::source);
   auto o = options(Method::linear);
   o.blend = 2;
   auto r = transfer(dst, src, o);
@@ -194,8 +194,8 @@ TEST(Transfer, RepaintBlendedKeepsChunksSharp) {
 // slider): the same pictures as a full transfer with those options, the map
 // untouched, no matching time; a map of another size is refused.
 TEST(Transfer, FromAGivenMapRepaintsWithoutMatching) {
-  const ImageSet dst = simulated("cup-white", Role::destination);
-  const ImageSet src = simulated("cup-dots", Role::source);
+  const io::ImageSet dst = simulated("cup-white", io::Role::destination);
+  const io::ImageSet src = simulated("cup-dots", io::Role::source);
   auto o = options(Method::coherent);
   o.blend = 0;  // first without blending
   auto pair = prepare_pair(dst, src, o);
@@ -237,8 +237,8 @@ TEST(Transfer, FromAGivenMapRepaintsWithoutMatching) {
 // one file at a time, after the first -- that one is whole, nothing else is
 // there (no temporary), no metrics.json, and the call says "cancelled".
 TEST(Transfer, WritingStopsBetweenFilesWhenCancelled) {
-  const ImageSet dst = simulated("cup-white", Role::destination);
-  const ImageSet src = simulated("cup-dots", Role::source);
+  const io::ImageSet dst = simulated("cup-white", io::Role::destination);
+  const io::ImageSet src = simulated("cup-dots", io::Role::source);
   auto r = transfer(dst, src, options(Method::coherent));
   ASSERT_TRUE(r.ok()) << r.message();
   const auto dir = std::filesystem::temp_directory_path() / ("veneer-cancel-write-" + std::to_string(::getpid()));
@@ -273,8 +273,8 @@ TEST(Transfer, WritingStopsBetweenFilesWhenCancelled) {
 // What the live view needs to repaint frames as the stills were: the options
 // back from metrics.json, and the same blend plan from them.
 TEST(Transfer, OptionsComeBackFromMetricsAndGiveTheStillsBlend) {
-  const ImageSet dst = simulated("bull", Role::destination);
-  const ImageSet src = simulated("orange", Role::source);
+  const io::ImageSet dst = simulated("bull", io::Role::destination);
+  const io::ImageSet src = simulated("orange", io::Role::source);
   auto o = options(Method::coherent);
   o.match.fast = true;
   o.match.coherent_threshold = 0.15, o.match.seed = 7, o.match.coherent_sweeps = 3;
@@ -362,8 +362,8 @@ TEST(Transfer, OptionsComeBackFromMetricsAndGiveTheStillsBlend) {
 }
 
 TEST(Transfer, BadInput) {
-  const ImageSet dst = simulated("apple", Role::destination);
-  ImageSet src = simulated("banana", Role::source);
+  const io::ImageSet dst = simulated("apple", io::Role::destination);
+  io::ImageSet src = simulated("banana", io::Role::source);
   src.images.pop_back();
   src.lights.pop_back();
   auto o = options(Method::linear);
@@ -373,7 +373,7 @@ TEST(Transfer, BadInput) {
   EXPECT_NE(r.message().find("same lamps"), std::string::npos) << r.message();
   o.scale = 0;
   EXPECT_FALSE(transfer(dst, src, o).ok());
-  ImageSet no_truth = dst;
+  io::ImageSet no_truth = dst;
   no_truth.truth = {};
   auto t = transfer(no_truth, src, options(Method::linear));
   ASSERT_FALSE(t.ok());

@@ -62,7 +62,7 @@ std::string load_average() {
 
 // The straightforward way: for every object pixel, the n x 3 system solved by
 // cv::solve (SVD), grey intensities, distant lights, no robustness.
-cv::Mat solve_loop(const ImageSet& set, const cv::Mat& mask) {
+cv::Mat solve_loop(const io::ImageSet& set, const cv::Mat& mask) {
   const int n = static_cast<int>(set.images.size());
   cv::Mat L(n, 3, CV_32F);
   for (int i = 0; i < n; ++i)
@@ -99,7 +99,7 @@ int main() {
     std::fprintf(stderr, "bench_ps: simulate sphere-gray: %s\n", sim_set.message().c_str());
     return 1;
   }
-  ImageSet& set = *sim_set;
+  io::ImageSet& set = *sim_set;
   const cv::Mat full(size, CV_8UC1, cv::Scalar(255));
   auto seg = ps::segment(set, {});
   const cv::Mat object = seg ? seg->mask : set.truth.mask;
@@ -109,7 +109,7 @@ int main() {
   so.size = size;
   so.radius = 0.25;
   so.focal_scale = 1.0;
-  ImageSet big = ps::test::synth_sphere(so);
+  io::ImageSet big = ps::test::synth_sphere(so);
   const cv::Mat big_mask = big.truth.mask;
 
   ps::PsOptions distant, distant_robust, near_robust;
@@ -121,7 +121,7 @@ int main() {
 
   struct Row {
     std::string what;
-    const ImageSet* s;
+    const io::ImageSet* s;
     cv::Mat mask;
     int pixels;
   };
@@ -165,12 +165,12 @@ int main() {
   // ---- set loading ----
   const fs::path tmp = fs::temp_directory_path() / ("veneer-bench-ps-" + std::to_string(::getpid()));
   fs::remove_all(tmp);
-  if (Status st = write_set(set, tmp / "set"); !st) {
+  if (Status st = io::write_set(set, tmp / "set"); !st) {
     std::fprintf(stderr, "bench_ps: write_set: %s\n", st.message().c_str());
   } else {
-    ReadOptions rd;
+    io::ReadOptions rd;
     rd.load_truth = false;
-    const double tload = median_ms(5, [&] { (void)read_set(tmp / "set", rd); });
+    const double tload = median_ms(5, [&] { (void)io::read_set(tmp / "set", rd); });
     std::printf("Loading the set (7 lamp PNGs + ambient, 16-bit, %dx%d): %.1f ms\n", size.width, size.height, tload);
   }
   fs::remove_all(tmp);

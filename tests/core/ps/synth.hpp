@@ -51,8 +51,8 @@ inline std::vector<cv::Vec3d> rig_positions() {
   return p;
 }
 
-inline ImageSet synth_sphere(const SynthOptions& o) {
-  ImageSet set;
+inline io::ImageSet synth_sphere(const SynthOptions& o) {
+  io::ImageSet set;
   set.id = "synth";
   set.object = "sphere";
   set.size = o.size;
@@ -73,7 +73,7 @@ inline ImageSet synth_sphere(const SynthOptions& o) {
   std::uniform_real_distribution<double> uni(0.0, 1.0);
   std::vector<cv::Vec3d> true_dirs;
   for (int i = 0; i < n; ++i) {
-    Light l;
+    io::Light l;
     l.index = i;
     l.lamp_id = "synth-" + std::to_string(i);
     l.direction = pos[i] / cv::norm(pos[i]);

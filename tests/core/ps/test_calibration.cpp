@@ -43,8 +43,8 @@ TEST(Calibration, CircleFitRecoversACircleDespiteOutliers) {
 
 // A synthetic chrome sphere: a disc (antialiased mask) with, per lamp, a small
 // bright highlight where the lamp's reflection is and a dimmer flare beside it.
-ImageSet synthetic_sphere(const std::vector<cv::Vec3d>& dirs, cv::Point2d c, double r) {
-  ImageSet set;
+io::ImageSet synthetic_sphere(const std::vector<cv::Vec3d>& dirs, cv::Point2d c, double r) {
+  io::ImageSet set;
   const cv::Size size(320, 240);
   set.mask = cv::Mat::zeros(size, CV_8UC1);
   for (int y = 0; y < size.height; ++y)
@@ -66,7 +66,7 @@ ImageSet synthetic_sphere(const std::vector<cv::Vec3d>& dirs, cv::Point2d c, dou
     cv::circle(img, cv::Point(cvRound(h.x + 25), cvRound(h.y)), 1, cv::Scalar::all(0.97), cv::FILLED);
     img.setTo(cv::Scalar::all(0), set.mask == 0);
     set.images.push_back(img);
-    Light light;
+    io::Light light;
     light.index = static_cast<int>(i);
     set.lights.push_back(light);
   }
@@ -75,7 +75,7 @@ ImageSet synthetic_sphere(const std::vector<cv::Vec3d>& dirs, cv::Point2d c, dou
 
 TEST(Calibration, SyntheticSphereGivesTheLampDirections) {
   const std::vector<cv::Vec3d> dirs = {{0.3, 0.4, 0.866}, {-0.5, 0.1, 0.86}, {0.0, -0.6, 0.8}, {0.05, 0.02, 1.0}};
-  const ImageSet set = synthetic_sphere(dirs, {150.3, 118.7}, 70.0);
+  const io::ImageSet set = synthetic_sphere(dirs, {150.3, 118.7}, 70.0);
   CalibrationOptions o;
   o.highlight_fraction = 0.5;  // the blob around the peak; the flare is a separate blob
   o.lamp_distance_m = 1.5;
@@ -92,7 +92,7 @@ TEST(Calibration, SyntheticSphereGivesTheLampDirections) {
     EXPECT_LT(angle_deg(cal->positions_m[i], dirs[i]), 1.0);
   }
   // Applying it sets directions and positions; a wrong count is refused.
-  ImageSet copy = set;
+  io::ImageSet copy = set;
   ASSERT_TRUE(apply_calibration(copy, *cal).ok());
   EXPECT_EQ(copy.lights[2].direction, cal->directions[2]);
   ASSERT_TRUE(copy.lights[2].position_m.has_value());
@@ -102,7 +102,7 @@ TEST(Calibration, SyntheticSphereGivesTheLampDirections) {
 }
 
 TEST(Calibration, NotACircleIsRefused) {
-  ImageSet set = synthetic_sphere({{0, 0, 1}}, {150, 120}, 60);
+  io::ImageSet set = synthetic_sphere({{0, 0, 1}}, {150, 120}, 60);
   set.mask = cv::Mat::zeros(set.mask.size(), CV_8UC1);
   cv::rectangle(set.mask, cv::Rect(60, 60, 200, 40), cv::Scalar(255), cv::FILLED);
   auto cal = calibrate_mirror_sphere(set);
@@ -147,7 +147,7 @@ TEST(Calibration, LightsFileRoundTripsAndBadFilesAreRefused) {
 
 TEST(Calibration, RealChromeSphereWithin3DegreesOfTheSuppliedDirections) {
   if (!std::filesystem::exists(kReal / "chrome" / "filenames.txt")) GTEST_SKIP() << "no " << (kReal / "chrome");
-  auto set = read_set(kReal / "chrome");
+  auto set = io::read_set(kReal / "chrome");
   ASSERT_TRUE(set.ok()) << set.message();
   auto cal = calibrate_mirror_sphere(*set);
   ASSERT_TRUE(cal.ok()) << cal.message();
@@ -181,12 +181,12 @@ TEST(Calibration, RealChromeSphereWithin3DegreesOfTheSuppliedDirections) {
 // the supplied lamps, both as recorded (no refinement from the photos).
 TEST(Calibration, CalibratedLampsSolveRealObjectsNoWorse) {
   if (!std::filesystem::exists(kReal / "chrome" / "filenames.txt")) GTEST_SKIP() << "no " << (kReal / "chrome");
-  auto chrome = read_set(kReal / "chrome");
+  auto chrome = io::read_set(kReal / "chrome");
   ASSERT_TRUE(chrome.ok()) << chrome.message();
   auto cal = calibrate_mirror_sphere(*chrome);
   ASSERT_TRUE(cal.ok()) << cal.message();
   for (const char* name : {"cat", "buddha"}) {
-    auto set = read_set(kReal / name);
+    auto set = io::read_set(kReal / name);
     ASSERT_TRUE(set.ok()) << set.message();
     auto seg = segment(*set, {});
     ASSERT_TRUE(seg.ok()) << seg.message();
@@ -195,7 +195,7 @@ TEST(Calibration, CalibratedLampsSolveRealObjectsNoWorse) {
     po.light_model = LightModel::distant;
     auto supplied = photometric_stereo(*set, seg->mask, po);
     ASSERT_TRUE(supplied.ok()) << supplied.message();
-    ImageSet calibrated_set = *set;
+    io::ImageSet calibrated_set = *set;
     ASSERT_TRUE(apply_calibration(calibrated_set, *cal).ok());
     auto calibrated = photometric_stereo(calibrated_set, seg->mask, po);
     ASSERT_TRUE(calibrated.ok()) << calibrated.message();

@@ -13,7 +13,7 @@ namespace {
 using test::SynthOptions;
 using test::synth_sphere;
 
-AngularError solve_error(const ImageSet& set, const PsOptions& opt, PsResult* out = nullptr) {
+AngularError solve_error(const io::ImageSet& set, const PsOptions& opt, PsResult* out = nullptr) {
   auto r = photometric_stereo(set, set.truth.mask, opt);
   EXPECT_TRUE(r.ok()) << (r.ok() ? "" : r.message());
   if (!r.ok()) return {};
@@ -25,7 +25,7 @@ AngularError solve_error(const ImageSet& set, const PsOptions& opt, PsResult* ou
 TEST(PhotometricStereo, DistantLightsExactSphere) {
   SynthOptions o;
   o.distant = true;
-  ImageSet set = synth_sphere(o);
+  io::ImageSet set = synth_sphere(o);
   PsOptions opt;
   opt.light_model = LightModel::distant;
   opt.robust = true;
@@ -51,7 +51,7 @@ TEST(PhotometricStereo, PlainLeastSquaresIsBiasedByShadows) {
   // drops those samples, plain least squares does not.
   SynthOptions o;
   o.distant = true;
-  ImageSet set = synth_sphere(o);
+  io::ImageSet set = synth_sphere(o);
   PsOptions robust, plain;
   robust.light_model = plain.light_model = LightModel::distant;
   plain.robust = false;
@@ -64,7 +64,7 @@ TEST(PhotometricStereo, AmbientIsSubtracted) {
   SynthOptions o;
   o.distant = true;
   o.ambient = 0.05;
-  ImageSet set = synth_sphere(o);
+  io::ImageSet set = synth_sphere(o);
   PsOptions opt;
   opt.light_model = LightModel::distant;
   EXPECT_LT(solve_error(set, opt).mean_deg, 0.1);
@@ -75,7 +75,7 @@ TEST(PhotometricStereo, AmbientIsSubtracted) {
 TEST(PhotometricStereo, NearLightModelCorrectsOffCentreSphere) {
   SynthOptions o;
   o.center = cv::Vec3d(0.10, 0.0, 0.0);
-  ImageSet set = synth_sphere(o);
+  io::ImageSet set = synth_sphere(o);
   PsOptions near_opt, distant_opt;
   near_opt.light_model = LightModel::near;
   distant_opt.light_model = LightModel::distant;
@@ -95,7 +95,7 @@ TEST(PhotometricStereo, NearLightModelCorrectsOffCentreSphere) {
 
 TEST(PhotometricStereo, AutomaticPicksNearWhenLampPositionsKnown) {
   SynthOptions o;
-  ImageSet set = synth_sphere(o);
+  io::ImageSet set = synth_sphere(o);
   auto r = photometric_stereo(set, set.truth.mask, {});
   ASSERT_TRUE(r.ok()) << r.message();
   EXPECT_EQ(r->model_used, LightModel::near);
@@ -109,7 +109,7 @@ TEST(PhotometricStereo, RobustBeatsPlainUnderNoise) {
   SynthOptions o;
   o.noise = 0.01;
   o.seed = 7;
-  ImageSet set = synth_sphere(o);
+  io::ImageSet set = synth_sphere(o);
   PsOptions robust, plain;
   plain.robust = false;
   AngularError er = solve_error(set, robust), ep = solve_error(set, plain);
@@ -121,7 +121,7 @@ TEST(PhotometricStereo, SaturatedSamplesAreDropped) {
   SynthOptions o;
   o.distant = true;
   o.lamp_intensity = 1.6;  // bright lamps clip the facing part of the sphere
-  ImageSet set = synth_sphere(o);
+  io::ImageSet set = synth_sphere(o);
   PsOptions robust, plain;
   robust.light_model = plain.light_model = LightModel::distant;
   plain.robust = false;
@@ -134,7 +134,7 @@ TEST(PhotometricStereo, OutlierSampleIsDropped) {
   // A highlight-like bright patch in one photo: the robust fit drops it.
   SynthOptions o;
   o.distant = true;
-  ImageSet set = synth_sphere(o);
+  io::ImageSet set = synth_sphere(o);
   cv::Mat patch(set.images[0].size(), CV_8UC1, cv::Scalar(0));
   cv::circle(patch, {128, 85}, 8, cv::Scalar(255), cv::FILLED);
   for (int y = 0; y < patch.rows; ++y)
@@ -165,7 +165,7 @@ TEST(PhotometricStereo, GlossyColouredSurfaceIsSolvedOffItsHighlights) {
   o.specular = 0.6;
   o.shininess = 60;
   o.noise = 0.002;
-  ImageSet set = synth_sphere(o);
+  io::ImageSet set = synth_sphere(o);
   PsOptions with, without;
   with.light_model = without.light_model = LightModel::distant;
   without.diffuse_chroma = 0.f;
@@ -183,7 +183,7 @@ TEST(PhotometricStereo, GreySurfaceKeepsItsGreySolve) {
   o.distant = true;
   o.albedo_bgr = {0.6f, 0.6f, 0.6f};
   o.specular = 0.4;
-  ImageSet set = synth_sphere(o);
+  io::ImageSet set = synth_sphere(o);
   PsOptions with, without;
   with.light_model = without.light_model = LightModel::distant;
   without.diffuse_chroma = 0.f;
@@ -196,7 +196,7 @@ TEST(PhotometricStereo, UnreliablePixelsAreMarked) {
   // Three lamps only: every attached shadow leaves < 3 samples.
   SynthOptions o;
   o.distant = true;
-  ImageSet set = synth_sphere(o);
+  io::ImageSet set = synth_sphere(o);
   set.images.resize(3);
   set.lights.resize(3);
   PsOptions opt;
@@ -214,8 +214,8 @@ TEST(PhotometricStereo, ManyLightsUseNormalEquations) {
   // More lamps than the pattern cache holds: the same answer by another path.
   SynthOptions o;
   o.distant = true;
-  ImageSet set = synth_sphere(o);
-  ImageSet big = set;
+  io::ImageSet set = synth_sphere(o);
+  io::ImageSet big = set;
   for (int rep = 0; rep < 2; ++rep)
     for (size_t i = 0; i < set.images.size(); ++i) {
       big.images.push_back(set.images[i]);
@@ -230,7 +230,7 @@ TEST(PhotometricStereo, ManyLightsUseNormalEquations) {
 }
 
 TEST(PhotometricStereo, CancelIsHonoured) {
-  ImageSet set = synth_sphere({});
+  io::ImageSet set = synth_sphere({});
   std::atomic<bool> cancel{true};
   Progress p;
   p.cancel = &cancel;
@@ -240,7 +240,7 @@ TEST(PhotometricStereo, CancelIsHonoured) {
 }
 
 TEST(PhotometricStereo, ProgressReachesOne) {
-  ImageSet set = synth_sphere({});
+  io::ImageSet set = synth_sphere({});
   double last = -1;
   Progress p;
   p.on_progress = [&](double f, const std::string&) {
@@ -254,7 +254,7 @@ TEST(PhotometricStereo, ProgressReachesOne) {
 // ---- bad input ----
 
 TEST(PhotometricStereoBadInput, FewerThanThreeLights) {
-  ImageSet set = synth_sphere({});
+  io::ImageSet set = synth_sphere({});
   set.images.resize(2);
   set.lights.resize(2);
   auto r = photometric_stereo(set, {}, {});
@@ -265,7 +265,7 @@ TEST(PhotometricStereoBadInput, FewerThanThreeLights) {
 TEST(PhotometricStereoBadInput, IdenticalDirections) {
   SynthOptions o;
   o.distant = true;
-  ImageSet set = synth_sphere(o);
+  io::ImageSet set = synth_sphere(o);
   for (auto& l : set.lights) l.direction = set.lights[0].direction;
   PsOptions opt;
   opt.light_model = LightModel::distant;
@@ -277,7 +277,7 @@ TEST(PhotometricStereoBadInput, IdenticalDirections) {
 TEST(PhotometricStereoBadInput, CoplanarDirections) {
   SynthOptions o;
   o.distant = true;
-  ImageSet set = synth_sphere(o);
+  io::ImageSet set = synth_sphere(o);
   // All directions in the x-z plane.
   for (size_t i = 0; i < set.lights.size(); ++i) {
     const double a = 0.2 * double(i) - 0.6;
@@ -291,7 +291,7 @@ TEST(PhotometricStereoBadInput, CoplanarDirections) {
 }
 
 TEST(PhotometricStereoBadInput, EmptyMask) {
-  ImageSet set = synth_sphere({});
+  io::ImageSet set = synth_sphere({});
   cv::Mat mask(set.images[0].size(), CV_8UC1, cv::Scalar(0));
   auto r = photometric_stereo(set, mask, {});
   ASSERT_FALSE(r.ok());
@@ -299,7 +299,7 @@ TEST(PhotometricStereoBadInput, EmptyMask) {
 }
 
 TEST(PhotometricStereoBadInput, MaskOfWrongSize) {
-  ImageSet set = synth_sphere({});
+  io::ImageSet set = synth_sphere({});
   cv::Mat mask(10, 10, CV_8UC1, cv::Scalar(255));
   auto r = photometric_stereo(set, mask, {});
   ASSERT_FALSE(r.ok());
@@ -307,7 +307,7 @@ TEST(PhotometricStereoBadInput, MaskOfWrongSize) {
 }
 
 TEST(PhotometricStereoBadInput, ImagesOfDifferentSizes) {
-  ImageSet set = synth_sphere({});
+  io::ImageSet set = synth_sphere({});
   set.images[3] = cv::Mat(20, 30, CV_32FC3, cv::Scalar::all(0));
   auto r = photometric_stereo(set, {}, {});
   ASSERT_FALSE(r.ok());
@@ -315,7 +315,7 @@ TEST(PhotometricStereoBadInput, ImagesOfDifferentSizes) {
 }
 
 TEST(PhotometricStereoBadInput, NearWithoutPositions) {
-  ImageSet set = synth_sphere({});
+  io::ImageSet set = synth_sphere({});
   set.lights[2].position_m.reset();
   PsOptions opt;
   opt.light_model = LightModel::near;
@@ -325,7 +325,7 @@ TEST(PhotometricStereoBadInput, NearWithoutPositions) {
 }
 
 TEST(PhotometricStereoBadInput, BadOptions) {
-  ImageSet set = synth_sphere({});
+  io::ImageSet set = synth_sphere({});
   PsOptions opt;
   opt.shadow_fraction = 1.5f;
   EXPECT_FALSE(opt.check().ok());

@@ -19,7 +19,7 @@ const std::filesystem::path kReal = std::filesystem::path(VENEER_SHARED_DATA) / 
 
 TEST(PsReal, CatSilhouetteNormalsPointOutward) {
   if (!std::filesystem::exists(kReal / "cat" / "filenames.txt")) GTEST_SKIP() << "no " << (kReal / "cat");
-  auto set = read_set(kReal / "cat");
+  auto set = io::read_set(kReal / "cat");
   ASSERT_TRUE(set.ok()) << set.message();
   auto seg = segment(*set, {});
   ASSERT_TRUE(seg.ok()) << seg.message();
@@ -64,7 +64,7 @@ TEST(PsReal, CatSilhouetteNormalsPointOutward) {
 
 TEST(PsReal, ChromeSphereCalibrationMatchesSuppliedDirections) {
   if (!std::filesystem::exists(kReal / "chrome" / "filenames.txt")) GTEST_SKIP() << "no " << (kReal / "chrome");
-  auto set = read_set(kReal / "chrome");
+  auto set = io::read_set(kReal / "chrome");
   ASSERT_TRUE(set.ok()) << set.message();
   auto cal = calibrate_mirror_sphere(*set);
   ASSERT_TRUE(cal.ok()) << cal.message();
@@ -83,7 +83,7 @@ TEST(PsReal, ChromeSphereCalibrationMatchesSuppliedDirections) {
   EXPECT_LT(mean, 3.2) << "worst " << worst;
   EXPECT_LT(worst, 10.0);
   // Applying it changes the set's directions; a wrong count is refused.
-  ImageSet copy = *set;
+  io::ImageSet copy = *set;
   ASSERT_TRUE(apply_calibration(copy, *cal).ok());
   EXPECT_EQ(copy.lights[0].direction, cal->directions[0]);
   LightCalibration short_cal = *cal;
@@ -92,7 +92,7 @@ TEST(PsReal, ChromeSphereCalibrationMatchesSuppliedDirections) {
 }
 
 TEST(PsReal, CalibrationWithoutHighlightFails) {
-  ImageSet set;
+  io::ImageSet set;
   set.images.assign(3, cv::Mat(40, 40, CV_32FC3, cv::Scalar::all(0)));
   set.mask = cv::Mat(40, 40, CV_8UC1, cv::Scalar(0));
   cv::circle(set.mask, {20, 20}, 10, cv::Scalar(255), cv::FILLED);

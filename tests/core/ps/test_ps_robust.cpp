@@ -36,7 +36,7 @@ SynthOptions real_like(unsigned seed) {
   return o;
 }
 
-AngularError solve_error(const ImageSet& set, const PsOptions& po) {
+AngularError solve_error(const io::ImageSet& set, const PsOptions& po) {
   auto r = photometric_stereo(set, set.truth.mask, po);
   EXPECT_TRUE(r.ok()) << r.message();
   if (!r.ok()) return {};
@@ -51,7 +51,7 @@ double angle_deg(const cv::Vec3d& a, const cv::Vec3d& b) {
 // the lamps is what gets there (without it: 2.3-3.5 degrees).
 TEST(PsRobust, RealLikeMatteSphereWithinTwoDegreesByDefault) {
   for (unsigned seed : {1u, 2u, 3u}) {
-    ImageSet set = synth_sphere(real_like(seed));
+    io::ImageSet set = synth_sphere(real_like(seed));
     const AngularError def = solve_error(set, {});
     PsOptions recorded;
     recorded.refine_lights = false;
@@ -69,10 +69,10 @@ TEST(PsRobust, RealLikeMatteSphereWithinTwoDegreesByDefault) {
 
 TEST(PsRobust, RefinedLampsAreCloserToTheTruth) {
   SynthOptions o = real_like(4);
-  ImageSet set = synth_sphere(o);
+  io::ImageSet set = synth_sphere(o);
   SynthOptions exact = o;
   exact.light_error_deg = exact.light_error_min_deg = 0;
-  const ImageSet truth = synth_sphere(exact);  // same lamps, recorded as they are
+  const io::ImageSet truth = synth_sphere(exact);  // same lamps, recorded as they are
   auto r = photometric_stereo(set, set.truth.mask, {});
   ASSERT_TRUE(r.ok()) << r.message();
   ASSERT_TRUE(r->lights_refined);
@@ -95,7 +95,7 @@ TEST(PsRobust, ExactLampsStayExact) {
   SynthOptions o = real_like(5);
   o.light_error_deg = o.light_error_min_deg = 0;
   o.specular = 0;
-  ImageSet set = synth_sphere(o);
+  io::ImageSet set = synth_sphere(o);
   PsOptions recorded;
   recorded.refine_lights = false;
   const AngularError def = solve_error(set, {}), rec = solve_error(set, recorded);
@@ -106,7 +106,7 @@ TEST(PsRobust, ExactLampsStayExact) {
 // A small flat-ish patch cannot fix the lamps: the refinement is skipped
 // rather than bending the normals.
 TEST(PsRobust, APatchTooFlatKeepsTheRecordedLamps) {
-  ImageSet set = synth_sphere(real_like(6));
+  io::ImageSet set = synth_sphere(real_like(6));
   cv::Mat patch(set.truth.mask.size(), CV_8UC1, cv::Scalar(0));
   const cv::Point c(set.truth.mask.cols / 2, set.truth.mask.rows / 2);
   cv::rectangle(patch, cv::Rect(c.x - 6, c.y - 6, 12, 12), cv::Scalar(255), cv::FILLED);
@@ -121,7 +121,7 @@ TEST(PsRobust, APatchTooFlatKeepsTheRecordedLamps) {
 TEST(PsRobust, NearLightIsNotRefined) {
   SynthOptions o = real_like(7);
   o.distant = false;
-  ImageSet set = synth_sphere(o);
+  io::ImageSet set = synth_sphere(o);
   auto r = photometric_stereo(set, set.truth.mask, {});
   ASSERT_TRUE(r.ok()) << r.message();
   EXPECT_EQ(r->model_used, LightModel::near);

@@ -9,7 +9,7 @@
 namespace veneer::ps {
 namespace {
 
-ImageSet simulate(double noise, cv::Vec3d offset = {0, 0, 0}, cv::Size size = {1024, 680}) {
+io::ImageSet simulate(double noise, cv::Vec3d offset = {0, 0, 0}, cv::Size size = {1024, 680}) {
   sim::RenderOptions o;
   o.size = size;
   o.noise_sigma = noise;
@@ -17,10 +17,10 @@ ImageSet simulate(double noise, cv::Vec3d offset = {0, 0, 0}, cv::Size size = {1
   o.seed = 3;
   auto s = sim::simulate_set("sphere-gray", o);
   EXPECT_TRUE(s.ok()) << (s.ok() ? "" : s.message());
-  return s.ok() ? std::move(*s) : ImageSet{};
+  return s.ok() ? std::move(*s) : io::ImageSet{};
 }
 
-AngularError error_of(const ImageSet& set, const PsOptions& opt) {
+AngularError error_of(const io::ImageSet& set, const PsOptions& opt) {
   auto seg = segment(set, {});
   EXPECT_TRUE(seg.ok()) << (seg.ok() ? "" : seg.message());
   if (!seg.ok()) return {};
@@ -35,7 +35,7 @@ AngularError error_of(const ImageSet& set, const PsOptions& opt) {
 }
 
 TEST(PsSimulated, SphereGrayWithoutNoiseBelowOneDegree) {
-  ImageSet set = simulate(0.0);
+  io::ImageSet set = simulate(0.0);
   ASSERT_FALSE(set.images.empty());
   AngularError e = error_of(set, {});
   EXPECT_GT(e.pixels, 15000);
@@ -43,7 +43,7 @@ TEST(PsSimulated, SphereGrayWithoutNoiseBelowOneDegree) {
 }
 
 TEST(PsSimulated, SphereGrayNoisyRobustBelowThreeDegreesAndBeatsPlain) {
-  ImageSet set = simulate(0.005);  // `veneer simulate`'s default noise
+  io::ImageSet set = simulate(0.005);  // `veneer simulate`'s default noise
   ASSERT_FALSE(set.images.empty());
   PsOptions robust, plain;
   plain.robust = false;
@@ -54,7 +54,7 @@ TEST(PsSimulated, SphereGrayNoisyRobustBelowThreeDegreesAndBeatsPlain) {
 }
 
 TEST(PsSimulated, SphereTenCentimetresOffCentreNeedsNearLight) {
-  ImageSet set = simulate(0.005, {0.10, 0, 0});
+  io::ImageSet set = simulate(0.005, {0.10, 0, 0});
   ASSERT_FALSE(set.images.empty());
   PsOptions near_opt, distant_opt;
   near_opt.light_model = LightModel::near;
@@ -66,7 +66,7 @@ TEST(PsSimulated, SphereTenCentimetresOffCentreNeedsNearLight) {
 
 TEST(PsSimulated, DepthRefinementHelpsOffCentre) {
   // Small image: the near model with refinement beats the z = 0 plane alone.
-  ImageSet set = simulate(0.0, {0.10, 0.05, 0}, {512, 340});
+  io::ImageSet set = simulate(0.0, {0.10, 0.05, 0}, {512, 340});
   ASSERT_FALSE(set.images.empty());
   PsOptions refined, flat;
   refined.light_model = flat.light_model = LightModel::near;

@@ -15,7 +15,7 @@
 namespace veneer::ps {
 namespace {
 
-ImageSet simulate(const std::string& scene, double ambient = 0.02, bool optics = false) {
+io::ImageSet simulate(const std::string& scene, double ambient = 0.02, bool optics = false) {
   sim::RenderOptions o;
   o.size = {512, 340};
   o.seed = 5;
@@ -23,7 +23,7 @@ ImageSet simulate(const std::string& scene, double ambient = 0.02, bool optics =
   if (optics) o.camera_optics();
   auto s = sim::simulate_set(scene, o);
   EXPECT_TRUE(s.ok()) << (s.ok() ? "" : s.message());
-  return s.ok() ? std::move(*s) : ImageSet{};
+  return s.ok() ? std::move(*s) : io::ImageSet{};
 }
 
 struct Overlap {
@@ -36,7 +36,7 @@ Overlap overlap(const cv::Mat& mask, const cv::Mat& truth) {
 
 // The object, its base dropped after the normals are solved (what the
 // transfer and `veneer normals` do).
-cv::Mat object_of(const ImageSet& set, SupportRemoval* base = nullptr) {
+cv::Mat object_of(const io::ImageSet& set, SupportRemoval* base = nullptr) {
   auto seg = segment(set, {});
   EXPECT_TRUE(seg.ok()) << (seg.ok() ? "" : seg.message());
   if (!seg.ok()) return {};
@@ -50,7 +50,7 @@ cv::Mat object_of(const ImageSet& set, SupportRemoval* base = nullptr) {
 }
 
 TEST(SegmentObjects, TheBullWithoutItsPlinthWithItsShadowedLegsAndTail) {
-  ImageSet set = simulate("bull");
+  io::ImageSet set = simulate("bull");
   SupportRemoval base;
   const cv::Mat m = object_of(set, &base);
   const Overlap o = overlap(m, set.truth.mask);
@@ -66,7 +66,7 @@ TEST(SegmentObjects, TheBullWithoutItsPlinthWithItsShadowedLegsAndTail) {
 // mixed with the backdrop) the plinth is still found whole: its faces join
 // across the seams, and the seams and rim go with it.
 TEST(SegmentObjects, ThePlinthThroughACamerasOpticsSeamsAndRimIncluded) {
-  ImageSet set = simulate("bull", 0.02, true);
+  io::ImageSet set = simulate("bull", 0.02, true);
   SupportRemoval base;
   const cv::Mat m = object_of(set, &base);
   const Overlap o = overlap(m, set.truth.mask);
@@ -88,7 +88,7 @@ TEST(SegmentObjects, ObjectsWithoutABaseStayWhole) {
   for (const char* scene : {"blocks", "cup-white", "stone", "two-spheres", "banana"})
    for (const bool optics : {false, true}) {
     SCOPED_TRACE(optics ? "camera optics" : "point-sampled");
-    ImageSet set = simulate(scene, 0.02, optics);
+    io::ImageSet set = simulate(scene, 0.02, optics);
     SupportRemoval base;
     const cv::Mat m = object_of(set, &base);
     const Overlap o = overlap(m, set.truth.mask);
@@ -103,7 +103,7 @@ TEST(SegmentObjects, ObjectsWithoutABaseStayWhole) {
 // The thesis's summed threshold (Otsu on the mean) lost a dark object's
 // shadowed parts; the brightest lamp's photo keeps them.
 TEST(SegmentObjects, ContrastKeepsWhatOtsuOnTheMeanLoses) {
-  ImageSet set = simulate("bull", 0.0);
+  io::ImageSet set = simulate("bull", 0.0);
   SegmentOptions otsu;
   otsu.method = SegmentMethod::otsu;
   auto a = segment(set, otsu), b = segment(set, {});
@@ -117,7 +117,7 @@ TEST(SegmentObjects, ContrastKeepsWhatOtsuOnTheMeanLoses) {
 TEST(SegmentObjects, RealCatAgainstItsSuppliedMask) {
   const auto folder = std::filesystem::path(VENEER_SHARED_DATA) / "real" / "cat";
   if (!std::filesystem::exists(folder / "filenames.txt")) GTEST_SKIP() << "no " << folder;
-  auto set = read_set(folder);
+  auto set = io::read_set(folder);
   ASSERT_TRUE(set.ok()) << set.message();
   ASSERT_FALSE(set->mask.empty());
   SegmentOptions so;
@@ -136,7 +136,7 @@ TEST(SegmentObjects, RealCatAgainstItsSuppliedMask) {
 }
 
 TEST(SegmentObjects, BadContrastOptions) {
-  ImageSet set = simulate("orange");
+  io::ImageSet set = simulate("orange");
   SegmentOptions so;
   so.method = SegmentMethod::contrast;
   so.contrast_low = 0.9;

@@ -20,10 +20,10 @@ double iou(const cv::Mat& a, const cv::Mat& b) {
 }
 
 // A sphere on a dim background with a few bright specks and a dark hole.
-ImageSet speckled_sphere() {
+io::ImageSet speckled_sphere() {
   SynthOptions o;
   o.noise = 0.003;
-  ImageSet set = synth_sphere(o);
+  io::ImageSet set = synth_sphere(o);
   for (auto& im : set.images) {
     im += cv::Scalar::all(0.01);  // dim table
     cv::circle(im, {20, 20}, 1, cv::Scalar::all(0.8), cv::FILLED);    // speck
@@ -34,7 +34,7 @@ ImageSet speckled_sphere() {
 }
 
 TEST(Segmentation, OtsuFindsSphereAndCleans) {
-  ImageSet set = speckled_sphere();
+  io::ImageSet set = speckled_sphere();
   SegmentOptions opt;
   opt.method = SegmentMethod::otsu;
   auto s = segment(set, opt);
@@ -53,7 +53,7 @@ TEST(Segmentation, OtsuFindsSphereAndCleans) {
 }
 
 TEST(Segmentation, FixedThresholdIsTheThesisSummedIntensity) {
-  ImageSet set = speckled_sphere();
+  io::ImageSet set = speckled_sphere();
   SegmentOptions opt;
   opt.method = SegmentMethod::threshold;
   opt.threshold = 0.05;
@@ -69,7 +69,7 @@ TEST(Segmentation, FixedThresholdIsTheThesisSummedIntensity) {
 }
 
 TEST(Segmentation, RectangleLimitsTheObject) {
-  ImageSet set = speckled_sphere();
+  io::ImageSet set = speckled_sphere();
   SegmentOptions opt;
   opt.method = SegmentMethod::otsu;
   opt.rect = cv::Rect(0, 0, 128, 170);  // left half
@@ -84,7 +84,7 @@ TEST(Segmentation, RectangleLimitsTheObject) {
 }
 
 TEST(Segmentation, SuppliedMaskIsTheDefault) {
-  ImageSet set = speckled_sphere();
+  io::ImageSet set = speckled_sphere();
   set.mask = cv::Mat(set.images[0].size(), CV_8UC1, cv::Scalar(0));
   cv::rectangle(set.mask, cv::Rect(10, 10, 50, 40), cv::Scalar(255), cv::FILLED);
   auto s = segment(set, {});
@@ -104,7 +104,7 @@ TEST(Segmentation, SuppliedMaskIsTheDefault) {
 TEST(Segmentation, AmbientIsSubtracted) {
   SynthOptions o;
   o.ambient = 0.2;  // a bright room: without subtraction everything is "object"
-  ImageSet set = synth_sphere(o);
+  io::ImageSet set = synth_sphere(o);
   SegmentOptions opt;
   opt.method = SegmentMethod::threshold;
   opt.threshold = 0.05;
@@ -118,7 +118,7 @@ TEST(Segmentation, AmbientIsSubtracted) {
 }
 
 TEST(Segmentation, BadInput) {
-  ImageSet empty;
+  io::ImageSet empty;
   EXPECT_FALSE(segment(empty, {}).ok());
   SegmentOptions opt;
   opt.threshold = -1;

@@ -54,7 +54,7 @@ int main() {
     o.scale = scale;
     o.ambient = 0.05;
     o.noise_sigma = 0.005;
-    auto set = sim::simulate_set("orange", o, Role::source);
+    auto set = sim::simulate_set("orange", o, io::Role::source);
     auto spec = sim::parse_motion("shift=30:0,rotate=5,lamp=sweep");
     auto seq = sim::simulate_motion("orange", o, *spec, 30);
     if (!set || !seq) {

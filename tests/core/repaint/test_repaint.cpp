@@ -108,7 +108,7 @@ TEST(Relight, FitsTheThesisRingAndPredictsAnUnseenLamp) {
   sim::RenderOptions o;
   o.size = cv::Size(160, 106);
   o.noise_sigma = 0;
-  auto set = sim::simulate_set("sphere-gray", o, Role::source);
+  auto set = sim::simulate_set("sphere-gray", o, io::Role::source);
   ASSERT_TRUE(set.ok()) << set.message();
   auto relit = repaint::Relighter::fit(*set);
   ASSERT_TRUE(relit.ok()) << relit.message();
@@ -145,7 +145,7 @@ TEST(Relight, NoGhostRingsOrSpeckleAndTheBackgroundAsCaptured) {
   o.size = cv::Size(192, 128);
   o.scale = 2.5;
   o.noise_sigma = 0.002;
-  auto set = sim::simulate_set("orange", o, Role::source);
+  auto set = sim::simulate_set("orange", o, io::Role::source);
   ASSERT_TRUE(set.ok()) << set.message();
   auto relit = repaint::Relighter::fit(*set);
   ASSERT_TRUE(relit.ok()) << relit.message();
@@ -195,17 +195,17 @@ TEST(Relight, NoGhostRingsOrSpeckleAndTheBackgroundAsCaptured) {
 }
 
 TEST(Relight, RefusesTooFewOrAlikeLamps) {
-  ImageSet set;
+  io::ImageSet set;
   set.id = "few";
   set.size = cv::Size(4, 4);
   for (int i = 0; i < 4; ++i) {
-    set.lights.push_back(Light{});
+    set.lights.push_back(io::Light{});
     set.images.push_back(cv::Mat(4, 4, CV_32FC3, cv::Scalar::all(0.5)));
   }
   auto r = repaint::Relighter::fit(set);
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.message().find("at least 5"), std::string::npos);
-  set.lights.push_back(Light{});
+  set.lights.push_back(io::Light{});
   set.images.push_back(set.images[0]);
   auto same = repaint::Relighter::fit(set);  // five identical directions
   ASSERT_FALSE(same.ok());
@@ -219,7 +219,7 @@ TEST(Relight, FittingLeavesTheCallersPhotosAsTheyWere) {
   sim::RenderOptions o;
   o.size = cv::Size(96, 64);
   o.noise_sigma = 0;
-  auto set = sim::simulate_set("sphere-gray", o, Role::source);
+  auto set = sim::simulate_set("sphere-gray", o, io::Role::source);
   ASSERT_TRUE(set.ok()) << set.message();
   set->ambient.release();
   std::vector<cv::Mat> before;

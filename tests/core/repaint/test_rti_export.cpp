@@ -88,17 +88,17 @@ double rms_against(const Ptm& p, const cv::Mat& photo, const cv::Vec3d& d, doubl
   return std::sqrt(sq / (3.0 * photo.total()));
 }
 
-ImageSet simulated(const std::string& scene, Role role) {
+io::ImageSet simulated(const std::string& scene, io::Role role) {
   sim::RenderOptions o;
   o.size = {160, 106};
   auto set = sim::simulate_set(scene, o, role);
   EXPECT_TRUE(set) << set.message();
-  return set ? std::move(set).value() : ImageSet{};
+  return set ? std::move(set).value() : io::ImageSet{};
 }
 
 TEST(RtiExport, PtmReadFromItsDescriptionReproducesTheRepaintedPhotos) {
-  const ImageSet dst = simulated("cup-white", Role::destination);
-  const ImageSet src = simulated("orange", Role::source);
+  const io::ImageSet dst = simulated("cup-white", io::Role::destination);
+  const io::ImageSet src = simulated("orange", io::Role::source);
   pipeline::TransferOptions o;
   o.match.method = match::Method::linear;
   o.match.fast = false;
@@ -107,7 +107,7 @@ TEST(RtiExport, PtmReadFromItsDescriptionReproducesTheRepaintedPhotos) {
   ASSERT_TRUE(result) << result.message();
   ASSERT_EQ(result->repainted.size(), dst.lights.size());
   std::vector<cv::Vec3d> dirs;
-  for (const Light& l : dst.lights) dirs.push_back(l.direction);
+  for (const io::Light& l : dst.lights) dirs.push_back(l.direction);
 
   const fs::path dir = fs::temp_directory_path() / ("veneer-rti-export-" + std::to_string(::getpid()));
   fs::create_directories(dir);

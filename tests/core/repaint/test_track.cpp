@@ -66,7 +66,7 @@ TEST(Motion, TruthMovesTheCentreAsSpecified) {
 
 // The source set's photos and a moving sequence of the same scene.
 struct Sequence {
-  ImageSet source;
+  io::ImageSet source;
   sim::MotionSequence seq;
 };
 
@@ -77,7 +77,7 @@ Sequence make_sequence(const std::string& spec_text, int frames) {
   o.ambient = 0.05;
   o.noise_sigma = 0.005;
   o.seed = 7;
-  auto source = sim::simulate_set("orange", o, Role::source);
+  auto source = sim::simulate_set("orange", o, io::Role::source);
   EXPECT_TRUE(source) << source.message();
   auto spec = sim::parse_motion(spec_text);
   EXPECT_TRUE(spec) << spec.message();

@@ -99,9 +99,9 @@ class SimulatedCamera : public Camera {
   // The lamps the last capture rendered (ring order, brightness 0 = off).
   std::vector<veneer::sim::Lamp> last_lamps() const;
   // Ground truth of the current scene at the still size (for a set's truth/).
-  veneer::Expected<veneer::Truth> truth();
+  veneer::Expected<veneer::io::Truth> truth();
   // Camera intrinsics/metadata for a set's manifest.
-  veneer::CameraInfo camera_info() const;
+  veneer::io::CameraInfo camera_info() const;
 
  private:
   struct Impl;

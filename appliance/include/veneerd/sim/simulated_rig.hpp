@@ -75,7 +75,7 @@ class SimulatedRig {
   const std::vector<std::string>& scenes() const;
   std::string destination_scene() const;         // scenes[0]
   std::string source_scene() const;              // scenes[1] or scenes[0]
-  std::string scene_for(veneer::Role role) const;  // source -> source_scene(), else destination
+  std::string scene_for(veneer::io::Role role) const;  // source -> source_scene(), else destination
 
   nlohmann::json lamps_config() const;    // section for lamps backend "hue"
   nlohmann::json camera_config() const;   // section for camera backend "simulated"

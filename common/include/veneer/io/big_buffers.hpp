@@ -9,7 +9,7 @@
 // 4 MiB they come from OpenCV's usual allocator.
 #include <opencv2/core.hpp>
 
-namespace veneer {
+namespace veneer::io {
 
 // The allocator behind big_mat; set as `m.allocator` on an empty Mat before
 // m.create().
@@ -19,4 +19,4 @@ cv::MatAllocator* prefault_allocator();
 cv::Mat big_mat(int rows, int cols, int type);
 inline cv::Mat big_mat(cv::Size size, int type) { return big_mat(size.height, size.width, type); }
 
-}  // namespace veneer
+}  // namespace veneer::io

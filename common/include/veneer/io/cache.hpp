@@ -15,7 +15,7 @@
 
 #include "veneer/util/expected.hpp"
 
-namespace veneer {
+namespace veneer::io {
 
 struct CacheOptions {
   bool enabled = true;               // false: never read or write the cache
@@ -83,4 +83,4 @@ Expected<cv::Mat> decode_mat(const std::string& blob, const std::string& name);
 Status write_mat_file(const std::filesystem::path& file, const cv::Mat& m, bool half = false);
 Expected<cv::Mat> read_mat_file(const std::filesystem::path& file);
 
-}  // namespace veneer
+}  // namespace veneer::io

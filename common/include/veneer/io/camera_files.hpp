@@ -15,7 +15,7 @@
 #include "veneer/io/imageset.hpp"
 #include "veneer/util/expected.hpp"
 
-namespace veneer {
+namespace veneer::io {
 
 // A linear photo (CV_32FC3 BGR, 1.0 = white; clipped to [0, 1]) through the
 // sRGB transfer curve to 8 bits (CV_8UC3 BGR): what a camera's JPEG holds,
@@ -47,4 +47,4 @@ Expected<CameraFiles> encode_camera_files(const cv::Mat& linear_bgr, const Camer
 // light_NN.dng. The in-memory photos stay as they are.
 Status add_camera_files(ImageSet& set, const CameraFileOptions& options = {});
 
-}  // namespace veneer
+}  // namespace veneer::io

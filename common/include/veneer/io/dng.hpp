@@ -18,7 +18,7 @@
 #include "veneer/io/imageset.hpp"
 #include "veneer/util/expected.hpp"
 
-namespace veneer {
+namespace veneer::io {
 
 struct DngOptions {
   int black_level = 512;     // sensor counts of black (0 .. white_level - 1)
@@ -60,4 +60,4 @@ Expected<std::string> read_dng_preview(const std::filesystem::path& file);
 // whose RAW files are the simulator's linear renders.
 Status add_dng_raw_files(ImageSet& set, const DngOptions& options = {});
 
-}  // namespace veneer
+}  // namespace veneer::io

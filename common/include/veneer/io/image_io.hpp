@@ -8,7 +8,7 @@
 
 #include "veneer/util/expected.hpp"
 
-namespace veneer {
+namespace veneer::io {
 
 // How a file is put in place. Always written to a temporary beside it and
 // renamed over the name, so a reader never sees half a file; `each` also
@@ -72,4 +72,4 @@ Status write_file_synced(const std::filesystem::path& file, std::string_view byt
 // fsyncs a folder: the names written into it with Sync::later are durable.
 Status sync_folder(const std::filesystem::path& folder);
 
-}  // namespace veneer
+}  // namespace veneer::io

@@ -20,7 +20,7 @@
 #include "veneer/util/expected.hpp"
 #include "veneer/util/progress.hpp"
 
-namespace veneer {
+namespace veneer::io {
 
 enum class Role { unknown, destination, source };
 const char* role_name(Role role);                 // "destination" | "source" | "unknown"
@@ -190,4 +190,4 @@ Expected<Manifest> parse_manifest(const std::string& json, const std::filesystem
 // The set.json write_set would write for `set` (images named light_NN.png).
 std::string manifest_json(const ImageSet& set);
 
-}  // namespace veneer
+}  // namespace veneer::io

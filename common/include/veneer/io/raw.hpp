@@ -13,7 +13,7 @@
 
 #include "veneer/util/expected.hpp"
 
-namespace veneer {
+namespace veneer::io {
 
 // LibRaw's interpolations (user_qual 0, 1, 2, 3, 4, 11, 12), and mhc: Veneer's
 // own (Malvar-He-Cutler's gradient-corrected linear filters, rows in
@@ -48,4 +48,4 @@ Expected<std::string> raw_preview_jpeg(std::string_view bytes, const std::string
 // The LibRaw version this build decodes with, e.g. "0.20.2".
 std::string raw_decoder_version();
 
-}  // namespace veneer
+}  // namespace veneer::io

@@ -25,7 +25,7 @@
 #include "veneer/util/expected.hpp"
 #include "veneer/util/progress.hpp"
 
-namespace veneer {
+namespace veneer::io {
 
 enum class ReducedDecode {
   automatic,     // per set: jpeg-reduced when the developed photos are JPEGs and the set is wider
@@ -76,4 +76,4 @@ struct ReducedOptions {
 Expected<ImageSet> read_set_reduced(const std::filesystem::path& folder, const ReducedOptions& options = {},
                                     const Progress& progress = {});
 
-}  // namespace veneer
+}  // namespace veneer::io

@@ -102,7 +102,7 @@ cv::Mat render(const Scene& scene, const std::vector<Lamp>& lamps, const RenderO
 // stereo recovers from a pixel that mixes several); mask = the object covers
 // at least half the footprint; albedo and depth = their means over the object.
 // Point-sampled when edge_samples = 1 and olpf_spread_px = 0.
-Truth render_truth(const Scene& scene, const RenderOptions& options);
+io::Truth render_truth(const Scene& scene, const RenderOptions& options);
 
 // A whole image set as the thesis rig would capture it: ambient frame + one shot
 // per lamp, lights filled in with positions, directions (unit, origin -> lamp)
@@ -110,16 +110,16 @@ Truth render_truth(const Scene& scene, const RenderOptions& options);
 // so photometric stereo recovers the truth albedo), camera focal length and
 // principal point, truth attached. Noise stream per shot: light index, 255 for
 // the ambient frame. `created` honours SOURCE_DATE_EPOCH (byte-identical reruns).
-Expected<ImageSet> simulate_set(const std::string& scene_name, const RenderOptions& options,
-                                Role role = Role::unknown, const Progress& progress = {});
+Expected<io::ImageSet> simulate_set(const std::string& scene_name, const RenderOptions& options,
+                                io::Role role = io::Role::unknown, const Progress& progress = {});
 
 // The same for `shape_scene`'s shape in `material_scene`'s material
 // (make_scene_with_material), under the same lamps and pose: the look a
 // perfect transfer of material_scene onto shape_scene gives. The set's scene
 // is the shape's; its object and id say "<shape>-in-<material>"; its truth
 // albedo is the material's on the shape.
-Expected<ImageSet> simulate_set_with_material(const std::string& shape_scene, const std::string& material_scene,
-                                              const RenderOptions& options, Role role = Role::unknown,
+Expected<io::ImageSet> simulate_set_with_material(const std::string& shape_scene, const std::string& material_scene,
+                                              const RenderOptions& options, io::Role role = io::Role::unknown,
                                               const Progress& progress = {});
 
 }  // namespace veneer::sim

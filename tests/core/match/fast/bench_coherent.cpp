@@ -39,7 +39,7 @@ namespace {
 
 // the destination's normals, darkened, with the pixels whose match lies more
 // than 1.5 px from a right or lower neighbour's in red
-cv::Mat seam_picture(const Map& m, const Truth& t) {
+cv::Mat seam_picture(const Map& m, const io::Truth& t) {
   cv::Mat img(t.mask.size(), CV_8UC3, cv::Scalar(0, 0, 0));
   for (int y = 0; y < img.rows; ++y)
     for (int x = 0; x < img.cols; ++x) {
@@ -110,7 +110,7 @@ int main(int argc, char** argv) {
         std::printf("| %s | %s <- %s | scene missing |\n", fl, dname.c_str(), sname.c_str());
         continue;
       }
-      const Truth dt = sim::render_truth(**ds, ro), st = sim::render_truth(**ss, ro);
+      const io::Truth dt = sim::render_truth(**ds, ro), st = sim::render_truth(**ss, ro);
       ObjectView dv{dt.normals, dt.mask, {}, {}}, sv{st.normals, st.mask, {}, {}};
       const int px = cv::countNonZero(dt.mask);
       auto run = [&](const char* label, const MatchOptions& o, bool picture) {

@@ -113,7 +113,7 @@ bool sim_object(const std::string& scene, int target, ObjectView& v, int& got) {
   for (int pass = 0;; ++pass) {
     auto sc = sim::make_scene(scene, ro);
     if (!sc) return false;
-    veneer::Truth t = sim::render_truth(**sc, ro);
+    veneer::io::Truth t = sim::render_truth(**sc, ro);
     got = cv::countNonZero(t.mask);
     if (got == 0) return false;
     if (std::abs(got - target) <= target / 50 || pass == 5) {  // close enough, or the last try

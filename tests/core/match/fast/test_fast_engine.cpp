@@ -693,7 +693,7 @@ TEST(FastEngineScenes, NearestNormalMapsDoNotDependOnTheThreadCount) {
     EXPECT_TRUE(scene.ok());
     return veneer::sim::render_truth(**scene, ro);
   };
-  const veneer::Truth blocks = truth("blocks"), bull = truth("bull");
+  const veneer::io::Truth blocks = truth("blocks"), bull = truth("bull");
   ASSERT_GT(cv::countNonZero(blocks.mask), 4000);
   ASSERT_GT(cv::countNonZero(bull.mask), 7000);  // the bull without its plinth (not in the truth)
   const ObjectView d{bull.normals, bull.mask, {}, {}}, s{blocks.normals, blocks.mask, {}, {}};

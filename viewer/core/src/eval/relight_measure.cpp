@@ -13,7 +13,7 @@ namespace fast = match::fast;
 
 namespace {
 
-sim::RenderOptions render_options_for(const ImageSet& set) {
+sim::RenderOptions render_options_for(const io::ImageSet& set) {
   sim::RenderOptions o;
   o.size = set.size;
   o.focal_px = set.camera.focal_px;
@@ -22,7 +22,7 @@ sim::RenderOptions render_options_for(const ImageSet& set) {
 
 }  // namespace
 
-Expected<RelightScenes> relight_scenes(const ImageSet& destination, const ImageSet& source) {
+Expected<RelightScenes> relight_scenes(const io::ImageSet& destination, const io::ImageSet& source) {
   if (!relight_measurable(source.scene))
     return make_error("relighting is measured with a source of uniform material (sphere-red-gloss, sphere-gray), not '" +
                       source.scene + "'");
@@ -62,7 +62,7 @@ Expected<Relit> relight(const Map& map, const RelightScenes& scenes, const cv::M
   return out;
 }
 
-Expected<Relit> relight(const Map& map, const ImageSet& destination, const ImageSet& source,
+Expected<Relit> relight(const Map& map, const io::ImageSet& destination, const io::ImageSet& source,
                         const cv::Mat& destination_mask, int blend, const fast::BlendGuide* guide) {
   auto scenes = relight_scenes(destination, source);
   if (!scenes) return scenes.error();

@@ -85,7 +85,7 @@ Expected<TableObject> table_object(const std::string& scene, bool second, const 
   ro.threads = options.threads;
   ro.noise_sigma = options.noise;
   if (second) second_capture(ro);
-  auto set = sim::simulate_set(scene, ro, second ? Role::source : Role::destination);
+  auto set = sim::simulate_set(scene, ro, second ? io::Role::source : io::Role::destination);
   if (!set) return make_error("simulating " + scene + ": " + set.message());
   auto prepared = prepare_object(*set, options.truth_normals);
   if (!prepared) return make_error(scene + ": " + prepared.message());
@@ -112,8 +112,8 @@ Expected<std::vector<TableRow>> quality_table(const TableOptions& options, const
     if (!d) return d.error();
     auto s = object(sname, second);
     if (!s) return s.error();
-    const ImageSet& dset = (*d)->set;
-    const ImageSet& sset = (*s)->set;
+    const io::ImageSet& dset = (*d)->set;
+    const io::ImageSet& sset = (*s)->set;
     std::optional<Expected<RelightScenes>> relit_scenes;
     for (const RowSpec& spec : specs) {
       if (progress.cancelled()) return make_error("quality table cancelled");

@@ -23,7 +23,7 @@ cv::Size scaled_size(cv::Size size, double scale) {
           std::max(1, static_cast<int>(std::lround(size.height * scale)))};
 }
 
-void scale_set(ImageSet& set, double scale) {
+void scale_set(io::ImageSet& set, double scale) {
   if (scale == 1.0) return;
   const cv::Size size = scaled_size(set.size, scale);
   auto area = [&](cv::Mat& m) {
@@ -47,10 +47,10 @@ void scale_set(ImageSet& set, double scale) {
 }
 
 namespace {
-std::string who_of(const ImageSet& set) { return set.id.empty() ? set.origin.string() : set.id; }
+std::string who_of(const io::ImageSet& set) { return set.id.empty() ? set.origin.string() : set.id; }
 }  // namespace
 
-Expected<cv::Mat> object_mask(const ImageSet& set, bool truth_normals) {
+Expected<cv::Mat> object_mask(const io::ImageSet& set, bool truth_normals) {
   if (truth_normals) {
     if (!set.truth.present())
       return make_error("set " + who_of(set) + " has no truth/normals.pfm (needed by truth normals)");
@@ -64,7 +64,7 @@ Expected<cv::Mat> object_mask(const ImageSet& set, bool truth_normals) {
   return seg->mask;
 }
 
-Expected<PreparedObject> prepare_object(const ImageSet& set, bool truth_normals, const Progress& progress) {
+Expected<PreparedObject> prepare_object(const io::ImageSet& set, bool truth_normals, const Progress& progress) {
   PreparedObject out;
   auto t0 = Clock::now();
   auto mask = object_mask(set, truth_normals);

@@ -31,14 +31,14 @@ Expected<pipeline::PreparedPair> prepare_live_pair(const fs::path& destination, 
   std::vector<SetReport> made;
   const fs::path folders[2] = {destination, source};
   const cv::Mat* masks[2] = {&options.destination_mask, &options.source_mask};
-  ImageSet* sets[2] = {&pair.destination, &pair.source};
+  io::ImageSet* sets[2] = {&pair.destination, &pair.source};
   match::PreparedObject* objects[2] = {&pair.dst, &pair.src};
   for (int i = 0; i < 2; ++i) {
     const char* role = i == 0 ? "destination" : "source";
     SetReport r;
     r.folder = folders[i].string();
     const auto t0 = Clock::now();
-    auto set = read_set_reduced(folders[i], options.read, progress.part(0.3 * i, 0.3 * (i + 1)));
+    auto set = io::read_set_reduced(folders[i], options.read, progress.part(0.3 * i, 0.3 * (i + 1)));
     if (!set) return make_error(std::string(role) + ": " + set.message());
     r.read_s = since(t0);
     if (!masks[i]->empty()) cv::resize(*masks[i] > 127, set->mask, set->size, 0, 0, cv::INTER_NEAREST);

@@ -64,23 +64,23 @@ std::string mask_digest(const cv::Mat& mask) {
   return hex;
 }
 
-std::string salt_of(const ReadOptions& read, double scale, bool truth_normals, const cv::Mat& mask) {
+std::string salt_of(const io::ReadOptions& read, double scale, bool truth_normals, const cv::Mat& mask) {
   nlohmann::json j{{"mask", mask.empty() ? std::string("segmented") : mask_digest(mask)},
                    {"version", kCacheVersion},
-                   {"photos", photo_source_name(read.photos)},
+                   {"photos", io::photo_source_name(read.photos)},
                    {"half_size", read.raw.half_size},
-                   {"demosaic", demosaic_name(read.raw.demosaic)},
+                   {"demosaic", io::demosaic_name(read.raw.demosaic)},
                    {"scale", scale},
                    {"truth_normals", truth_normals},
-                   {"libraw", raw_decoder_version()}};
+                   {"libraw", io::raw_decoder_version()}};
   return j.dump();
 }
 
 // What a set's cache entry holds: a small meta.json, and the matrices
 // written straight from the Mats (photos and float pictures as half floats).
-std::pair<CacheEntry, CacheMats> to_entry(const PreparedSet& p) {
-  CacheEntry e;
-  CacheMats mats;
+std::pair<io::CacheEntry, io::CacheMats> to_entry(const PreparedSet& p) {
+  io::CacheEntry e;
+  io::CacheMats mats;
   const auto& v = p.object.view;
   nlohmann::json meta{{"photos_from", p.set.photos_from},
                       {"images", v.images.size()},
@@ -97,7 +97,7 @@ std::pair<CacheEntry, CacheMats> to_entry(const PreparedSet& p) {
 }
 
 // Fills `p` from a cache entry; false when the entry does not fit the set.
-bool from_entry(const CacheEntry& e, std::map<std::string, cv::Mat>& mats, PreparedSet& p) {
+bool from_entry(const io::CacheEntry& e, std::map<std::string, cv::Mat>& mats, PreparedSet& p) {
   auto get = [&](const std::string& name) -> cv::Mat {
     auto it = mats.find(name);
     return it == mats.end() ? cv::Mat() : it->second;
@@ -134,10 +134,10 @@ bool from_entry(const CacheEntry& e, std::map<std::string, cv::Mat>& mats, Prepa
 // that waiting is never waiting on a starved thread for more than the one
 // matrix it holds. Whoever writes the last matrix commits the entry.
 struct WriteJob {
-  ResultCache cache;
+  io::ResultCache cache;
   std::string key, id;
-  CacheEntry entry;
-  std::vector<std::pair<std::string, CachedMat>> mats;
+  io::CacheEntry entry;
+  std::vector<std::pair<std::string, io::CachedMat>> mats;
   fs::path folder;
   std::atomic<size_t> next{0}, done{0};
   std::mutex lock;
@@ -146,11 +146,11 @@ struct WriteJob {
   std::shared_future<Status> result = finished.get_future().share();
   Clock::time_point t0 = Clock::now();
 
-  WriteJob(ResultCache c, std::string k, std::string i) : cache(std::move(c)), key(std::move(k)), id(std::move(i)) {}
+  WriteJob(io::ResultCache c, std::string k, std::string i) : cache(std::move(c)), key(std::move(k)), id(std::move(i)) {}
 
   void help() {
     for (size_t i; (i = next++) < mats.size();) {
-      Status s = write_mat_file(folder / mats[i].first, mats[i].second.mat, mats[i].second.half);
+      Status s = io::write_mat_file(folder / mats[i].first, mats[i].second.mat, mats[i].second.half);
       mats[i].second.mat.release();  // a photo the caller lets go of is freed
       if (!s) {
         std::lock_guard<std::mutex> hold(lock);
@@ -211,7 +211,7 @@ void wait_for_write(const std::string& key) {
 }
 
 // Starts writing `p`'s cache entry under `key` in the background.
-void start_write(const ResultCache& cache, const std::string& key, const PreparedSet& p) {
+void start_write(const io::ResultCache& cache, const std::string& key, const PreparedSet& p) {
   auto job = std::make_shared<WriteJob>(cache, key, p.set.id);
   auto [entry, mats] = to_entry(p);
   job->entry = std::move(entry);
@@ -274,7 +274,7 @@ cv::Mat median_minus_ambient(const std::vector<cv::Mat>& photos, const cv::Mat* 
   std::vector<std::pair<int, int>> network;
   for (int round = 0; round < n; ++round)
     for (int i = round % 2; i + 1 < n; i += 2) network.emplace_back(i, i + 1);
-  cv::Mat out = big_mat(photos[0].size(), CV_32FC3);
+  cv::Mat out = io::big_mat(photos[0].size(), CV_32FC3);
   const int width = out.cols * 3;
   constexpr int kLanes = 256;
   cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& rows) {
@@ -329,7 +329,7 @@ Status PrepareOptions::check() const {
 namespace {
 // The hand-drawn mask on the set as read: one clear error for another size
 // or a mask that marks nothing.
-Status apply_mask(const cv::Mat& mask, ImageSet& set) {
+Status apply_mask(const cv::Mat& mask, io::ImageSet& set) {
   if (mask.size() != set.size)
     return make_error("the mask is " + std::to_string(mask.cols) + "x" + std::to_string(mask.rows) + ", the set " +
                       set.id + " is " + std::to_string(set.size.width) + "x" + std::to_string(set.size.height));
@@ -345,11 +345,11 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
   const auto t_all = Clock::now();
   PreparedSet p;
   p.report.folder = folder.string();
-  ResultCache cache(options.cache);
+  io::ResultCache cache(options.cache);
   const bool cacheable = options.cache.enabled && fs::exists(folder / "set.json");
   std::string key;
   if (cacheable) {
-    auto sum = set_checksum(folder, salt_of(options.read, scale, truth_normals, options.mask));
+    auto sum = io::set_checksum(folder, salt_of(options.read, scale, truth_normals, options.mask));
     if (!sum) return sum.error();
     key = *sum;
     p.report.checksum = key;
@@ -362,10 +362,10 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
     wait_for_write(key);
     std::map<std::string, cv::Mat> mats;
     if (auto entry = cache.load(key, &mats)) {
-      ReadOptions meta = options.read;
+      io::ReadOptions meta = options.read;
       meta.load_photos = false;
       meta.load_truth_appearance = false;
-      auto set = read_set(folder, meta);
+      auto set = io::read_set(folder, meta);
       if (!set) return set.error();
       p.set = std::move(set).value();
       if (!options.mask.empty()) {
@@ -400,9 +400,9 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
 
   // Miss: decode every frame once, in parallel; solve; store.
   auto t0 = Clock::now();
-  ReadOptions read = options.read;
+  io::ReadOptions read = options.read;
   read.load_truth_appearance = false;  // the truth's albedo and depth: a transfer measures with neither
-  auto set = read_set(folder, read, sub_progress(progress, 0.0, 0.6));
+  auto set = io::read_set(folder, read, sub_progress(progress, 0.0, 0.6));
   if (!set) return set.error();
   p.set = std::move(set).value();
   if (!options.mask.empty()) {

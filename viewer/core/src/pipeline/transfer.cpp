@@ -81,7 +81,7 @@ Status TransferOptions::check() const {
 
 
 
-Expected<PreparedPair> prepare_pair(const ImageSet& destination_in, const ImageSet& source_in,
+Expected<PreparedPair> prepare_pair(const io::ImageSet& destination_in, const io::ImageSet& source_in,
                                     const TransferOptions& options, const Progress& progress) {
   if (auto s = options.check(); !s) return s.error();
   PreparedPair pair;
@@ -165,8 +165,8 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
     return make_error("the prepared pair was made with scale " + std::to_string(pair.scale) + " and truth normals " +
                       (pair.truth_normals ? "on" : "off") + ", the options ask for scale " +
                       std::to_string(options.scale) + " and truth normals " + (options.truth_normals ? "on" : "off"));
-  const ImageSet& destination = pair.destination;
-  const ImageSet& source = pair.source;
+  const io::ImageSet& destination = pair.destination;
+  const io::ImageSet& source = pair.source;
   const PreparedObject* dst = &pair.dst;
   const PreparedObject* src = &pair.src;
   nlohmann::json timings;
@@ -286,7 +286,7 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
 
 }  // namespace
 
-Expected<TransferResult> transfer(const ImageSet& destination_in, const ImageSet& source_in,
+Expected<TransferResult> transfer(const io::ImageSet& destination_in, const io::ImageSet& source_in,
                                   const TransferOptions& options, const Progress& progress) {
   const auto t_all = Clock::now();  // the total includes the preparation
   auto pair = prepare_pair(destination_in, source_in, options, sub_progress(progress, 0.0, 0.3));
@@ -308,7 +308,7 @@ std::string transfer_options_json(const TransferOptions& options) {
 }
 
 Expected<TransferOptions> read_transfer_options(const std::filesystem::path& file) {
-  auto bytes = read_file_bytes(file);
+  auto bytes = io::read_file_bytes(file);
   if (!bytes) return bytes.error();
   return parse_transfer_options(*bytes, file.string());
 }
@@ -357,16 +357,16 @@ Expected<TransferOptions> parse_transfer_options(std::string_view text, const st
   return t;
 }
 
-double map_scale(const Map& map, const ImageSet& destination) {
+double map_scale(const Map& map, const io::ImageSet& destination) {
   return destination.size.width > 0 ? static_cast<double>(map.xy.cols) / destination.size.width : 1.0;
 }
 
-Expected<Quality> evaluate_sets(const Map& map, const ImageSet& destination_in, const ImageSet& source_in) {
+Expected<Quality> evaluate_sets(const Map& map, const io::ImageSet& destination_in, const io::ImageSet& source_in) {
   const double scale = map_scale(map, destination_in);
   if (!(scale > 0 && scale <= 1.0001))
     return make_error("the map is " + std::to_string(map.xy.cols) + " px wide but the destination set " +
                       std::to_string(destination_in.size.width));
-  ImageSet destination = destination_in, source = source_in;
+  io::ImageSet destination = destination_in, source = source_in;
   if (std::abs(scale - 1.0) > 1e-9) {
     scale_set(destination, scale);
     scale_set(source, scale);
@@ -406,33 +406,33 @@ Status write_files(const TransferResult& r, PreparedPair* pair, const std::files
   // its own; one fsync of the folder at the end, then metrics.json, synced,
   // last: a folder with a metrics.json holds the whole result.
   std::vector<std::function<Status()>> files;
-  files.push_back([&] { return write_map(folder / "map.pfm", r.map, Sync::later); });
-  files.push_back([&] { return write_picture(folder / "map.png", map_picture(r.map, r.source_size), Sync::later); });
+  files.push_back([&] { return write_map(folder / "map.pfm", r.map, io::Sync::later); });
+  files.push_back([&] { return io::write_picture(folder / "map.png", map_picture(r.map, r.source_size), io::Sync::later); });
   for (size_t i = 0; i < r.repainted.size(); ++i) {
     files.push_back([&, i] {
       char name[64];
       std::snprintf(name, sizeof name, "result_light_%02zu.png", i);
       // Linear 16-bit at the sets' own scale, as their light_NN.png: a
       // repainted photo and the photos it came from look alike side by side.
-      return write_png16(folder / name, r.repainted[i], Sync::later);
+      return io::write_png16(folder / name, r.repainted[i], io::Sync::later);
     });
   }
-  files.push_back([&] { return write_png16(folder / "result_median.png", r.repainted_median, Sync::later); });
+  files.push_back([&] { return io::write_png16(folder / "result_median.png", r.repainted_median, io::Sync::later); });
   files.push_back(
-      [&] { return write_picture(folder / "reuse.png", reuse_picture(r.reuse, r.source_median), Sync::later); });
-  files.push_back([&] { return write_picture(folder / "confidence.png", confidence_picture(r.map), Sync::later); });
+      [&] { return io::write_picture(folder / "reuse.png", reuse_picture(r.reuse, r.source_median), io::Sync::later); });
+  files.push_back([&] { return io::write_picture(folder / "confidence.png", confidence_picture(r.map), io::Sync::later); });
   if (r.relit) {
     files.push_back([&] {
       // one exposure for both, so that they compare
       cv::Mat both;
       cv::hconcat(r.relit->transferred, r.relit->reference, both);
-      const cv::Mat pic = tonemap_picture(both);
+      const cv::Mat pic = io::tonemap_picture(both);
       const int w = r.relit->transferred.cols;
-      if (auto s = write_picture(folder / "relight_transferred.png", pic(cv::Rect(0, 0, w, pic.rows)).clone(),
-                                 Sync::later);
+      if (auto s = io::write_picture(folder / "relight_transferred.png", pic(cv::Rect(0, 0, w, pic.rows)).clone(),
+                                 io::Sync::later);
           !s)
         return s;
-      return write_picture(folder / "relight_reference.png", pic(cv::Rect(w, 0, w, pic.rows)).clone(), Sync::later);
+      return io::write_picture(folder / "relight_reference.png", pic(cv::Rect(w, 0, w, pic.rows)).clone(), io::Sync::later);
     });
   }
   // The pictures painted from the pair's photos: one after another (each
@@ -458,7 +458,7 @@ Status write_files(const TransferResult& r, PreparedPair* pair, const std::files
         if (i < pair->source.images.size()) pair->source.images[i].release();
         char name[64];
         std::snprintf(name, sizeof name, "result_light_%02zu.png", i);
-        return write_png16(folder / name, out, Sync::later);
+        return io::write_png16(folder / name, out, io::Sync::later);
       });
     }
   }
@@ -488,8 +488,8 @@ Status write_files(const TransferResult& r, PreparedPair* pair, const std::files
   for (const Status& s : written) {
     if (!s) return s;  // the first by file order, whatever finished first
   }
-  if (auto s = sync_folder(folder); !s) return s;
-  return write_file_atomic(folder / "metrics.json", r.metrics_json + "\n");
+  if (auto s = io::sync_folder(folder); !s) return s;
+  return io::write_file_atomic(folder / "metrics.json", r.metrics_json + "\n");
 }
 
 }  // namespace
@@ -506,7 +506,7 @@ Status write_transfer(const TransferResult& r, PreparedPair&& pair_in, const std
   PreparedPair pair = std::move(pair_in);
   // the pictures need the photos (and the plan made from the rest): the
   // normals and the truth, a photo's bytes each, go before painting starts
-  for (ImageSet* set : {&pair.destination, &pair.source}) set->truth = Truth{};
+  for (io::ImageSet* set : {&pair.destination, &pair.source}) set->truth = io::Truth{};
   for (PreparedObject* object : {&pair.dst, &pair.src}) object->view.normals.release();
   return write_files(r, &pair, folder, progress);
 }

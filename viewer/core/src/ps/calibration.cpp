@@ -87,7 +87,7 @@ Expected<Circle> fit_circle(const std::vector<cv::Point2d>& points) {
   return c;
 }
 
-Expected<LightCalibration> calibrate_mirror_sphere(const ImageSet& set, const cv::Mat& sphere_mask,
+Expected<LightCalibration> calibrate_mirror_sphere(const io::ImageSet& set, const cv::Mat& sphere_mask,
                                                    const CalibrationOptions& options) {
   if (Status st = options.check(); !st) return make_error("calibration options: " + st.message());
   if (set.images.empty()) return make_error("the set has no images to calibrate from");
@@ -184,7 +184,7 @@ Expected<LightCalibration> calibrate_mirror_sphere(const ImageSet& set, const cv
   return cal;
 }
 
-Status apply_calibration(ImageSet& set, const LightCalibration& calibration) {
+Status apply_calibration(io::ImageSet& set, const LightCalibration& calibration) {
   if (calibration.directions.size() != set.lights.size())
     return make_error("the calibration has " + std::to_string(calibration.directions.size()) +
                       " directions, the set has " + std::to_string(set.lights.size()) + " lights");

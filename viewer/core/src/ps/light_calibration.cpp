@@ -123,7 +123,7 @@ bool integrable_gauge(const PsResult& r, const std::vector<cv::Vec3d>& recorded,
 // the whole set of fitted vectors mapped by the one linear transform that
 // brings them closest to the recorded ones, since the photos alone fix the
 // lamps only up to such a transform. False when the data does not allow it.
-bool refine_round(const ImageSet& set, const PsResult& r, const PsOptions& options, std::vector<Light>& lights) {
+bool refine_round(const io::ImageSet& set, const PsResult& r, const PsOptions& options, std::vector<io::Light>& lights) {
   const int n = static_cast<int>(set.images.size());
   const cv::Size size = set.images[0].size();
   // Pixels: reliable, a stride so that about 40k are used.
@@ -168,7 +168,7 @@ bool refine_round(const ImageSet& set, const PsResult& r, const PsOptions& optio
   if (px.size() < 200) return false;
   std::vector<cv::Vec3d> fitted(n), recorded(n);
   for (int i = 0; i < n; ++i) {
-    const Light& l = lights[i];
+    const io::Light& l = lights[i];
     const double e = (l.intensity[0] + l.intensity[1] + l.intensity[2]) / 3.0;
     recorded[i] = l.direction / cv::norm(l.direction) * e;
     cv::Vec3d cur = recorded[i];
@@ -231,14 +231,14 @@ bool refine_round(const ImageSet& set, const PsResult& r, const PsOptions& optio
 
 }  // namespace
 
-Status photometric_stereo_into(const ImageSet& set, const cv::Mat& mask_in, const PsOptions& options,
+Status photometric_stereo_into(const io::ImageSet& set, const cv::Mat& mask_in, const PsOptions& options,
                                const Progress& progress, PsResult& result) {
   if (Status st = solve_once(set, mask_in, options, progress, result); !st) return st;
   result.lights_refined = false;
   result.light_change_deg.clear();
   if (!options.refine_lights || !options.robust || result.model_used != LightModel::distant) return Status::success();
-  std::vector<Light> lights = set.lights;
-  ImageSet view = set;  // shares the photos; only the lights differ
+  std::vector<io::Light> lights = set.lights;
+  io::ImageSet view = set;  // shares the photos; only the lights differ
   std::vector<double> moved(set.lights.size());
   for (int it = 0; it < options.refine_iterations; ++it) {
     if (!refine_round(set, result, options, lights)) break;

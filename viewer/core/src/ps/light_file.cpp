@@ -51,7 +51,7 @@ std::string light_calibration_json(const LightCalibration& c) {
 
 Status write_light_calibration(const LightCalibration& calibration, const std::filesystem::path& file) {
   if (calibration.directions.empty()) return make_error("the calibration has no lamps to write");
-  return write_file_atomic(file, light_calibration_json(calibration));
+  return io::write_file_atomic(file, light_calibration_json(calibration));
 }
 
 Expected<LightCalibration> parse_light_calibration(const std::string& text) {
@@ -110,19 +110,19 @@ Expected<LightCalibration> parse_light_calibration(const std::string& text) {
 }
 
 Expected<LightCalibration> read_light_calibration(const std::filesystem::path& file) {
-  auto bytes = read_file_bytes(file);
+  auto bytes = io::read_file_bytes(file);
   if (!bytes) return make_error(file.string() + ": " + bytes.message());
   auto c = parse_light_calibration(*bytes);
   if (!c) return make_error(file.string() + ": " + c.message());
   return c;
 }
 
-cv::Mat calibration_picture(const ImageSet& set, const LightCalibration& calibration) {
+cv::Mat calibration_picture(const io::ImageSet& set, const LightCalibration& calibration) {
   if (set.images.empty()) return {};
   cv::Mat brightest = set.images[0].clone();
   for (size_t i = 1; i < set.images.size(); ++i) cv::max(brightest, set.images[i], brightest);
   // The sphere is dark but for its highlights: show its outline faintly too.
-  cv::Mat pic = tonemap_picture(brightest, 99.0);
+  cv::Mat pic = io::tonemap_picture(brightest, 99.0);
   if (pic.channels() == 1) cv::cvtColor(pic, pic, cv::COLOR_GRAY2BGR);
   const int shift = 4, one = 1 << shift;
   auto fixed = [&](cv::Point2d p) { return cv::Point(cvRound(p.x * one), cvRound(p.y * one)); };

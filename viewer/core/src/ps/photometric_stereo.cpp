@@ -132,7 +132,7 @@ void fill_from_neighbours(cv::Mat& normals, const cv::Mat& mask, const cv::Mat& 
 }
 }  // namespace
 
-Status solve_once(const ImageSet& set, const cv::Mat& mask_in, const PsOptions& options, const Progress& progress,
+Status solve_once(const io::ImageSet& set, const cv::Mat& mask_in, const PsOptions& options, const Progress& progress,
                   PsResult& result) {
   if (Status st = options.check(); !st) return make_error("photometric stereo options: " + st.message());
   const int n = static_cast<int>(set.images.size());
@@ -178,7 +178,7 @@ Status solve_once(const ImageSet& set, const cv::Mat& mask_in, const PsOptions& 
   s.inv_e.resize(size_t(n) * 3);
   bool have_positions = true;
   for (int i = 0; i < n; ++i) {
-    const Light& l = set.lights[i];
+    const io::Light& l = set.lights[i];
     const double len = cv::norm(l.direction);
     if (!(len > 0.5 && len < 1.5))
       return make_error("light " + std::to_string(i) + " has a direction of length " + std::to_string(len));
@@ -268,7 +268,7 @@ Status solve_once(const ImageSet& set, const cv::Mat& mask_in, const PsOptions& 
   // Every pixel is written by solve_rows (zeros outside the mask). Fresh
   // full-resolution results are prefaulted in one call (big_buffers.hpp).
   for (cv::Mat* m : {&result.normals, &result.albedo, &result.residual})
-    if (m->empty()) m->allocator = prefault_allocator();
+    if (m->empty()) m->allocator = io::prefault_allocator();
   result.normals.create(size, CV_32FC3);
   result.albedo.create(size, CV_32FC3);
   result.residual.create(size, CV_32FC1);
@@ -341,7 +341,7 @@ Status solve_once(const ImageSet& set, const cv::Mat& mask_in, const PsOptions& 
 
 }  // namespace detail
 
-Expected<PsResult> photometric_stereo(const ImageSet& set, const cv::Mat& mask, const PsOptions& options,
+Expected<PsResult> photometric_stereo(const io::ImageSet& set, const cv::Mat& mask, const PsOptions& options,
                                       const Progress& progress) {
   PsResult result;
   if (Status st = photometric_stereo_into(set, mask, options, progress, result); !st) return st.error();

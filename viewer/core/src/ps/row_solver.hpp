@@ -97,7 +97,7 @@ void run_parallel(int threads, F&& f) {
   }
 }
 // One solve of the whole set with its recorded lamps (photometric_stereo.cpp).
-Status solve_once(const ImageSet& set, const cv::Mat& mask_in, const PsOptions& options, const Progress& progress,
+Status solve_once(const io::ImageSet& set, const cv::Mat& mask_in, const PsOptions& options, const Progress& progress,
                   PsResult& result);
 
 }  // namespace veneer::ps::detail

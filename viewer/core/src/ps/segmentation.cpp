@@ -48,7 +48,7 @@ Status SegmentOptions::check() const {
 namespace {
 
 // Mean grey intensity over the lamps, ambient removed.
-cv::Mat summed_intensity(const ImageSet& set, bool subtract_ambient) {
+cv::Mat summed_intensity(const io::ImageSet& set, bool subtract_ambient) {
   const cv::Size size = set.images[0].size();
   cv::Mat acc(size, CV_32FC3, cv::Scalar::all(0));
   for (const cv::Mat& im : set.images) cv::add(acc, im, acc);
@@ -65,7 +65,7 @@ cv::Mat summed_intensity(const ImageSet& set, bool subtract_ambient) {
 }
 
 // The brightest grey over lamps, ambient removed: lit by some lamp.
-cv::Mat brightest_intensity(const ImageSet& set, bool subtract_ambient) {
+cv::Mat brightest_intensity(const io::ImageSet& set, bool subtract_ambient) {
   const cv::Size size = set.images[0].size();
   cv::Mat out(size, CV_32FC1, cv::Scalar(0));
   const bool amb = subtract_ambient && !set.ambient.empty() && set.ambient.size() == size && set.ambient.type() == CV_32FC3;
@@ -210,7 +210,7 @@ cv::Mat clean_mask(const cv::Mat& mask_in, const SegmentOptions& options) {
   return mask;
 }
 
-Expected<Segmentation> segment(const ImageSet& set, const SegmentOptions& options) {
+Expected<Segmentation> segment(const io::ImageSet& set, const SegmentOptions& options) {
   if (Status st = options.check(); !st) return make_error("segmentation options: " + st.message());
   if (set.images.empty()) return make_error("the set has no images to segment");
   const cv::Size size = set.images[0].size();

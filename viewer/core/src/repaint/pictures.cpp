@@ -26,7 +26,7 @@ cv::Mat reuse_picture(const cv::Mat& counts, const cv::Mat& source_photo) {
   cv::Mat grey(counts.size(), CV_8UC3, cv::Scalar::all(0));
   if (!source_photo.empty()) {
     cv::Mat g;
-    cv::cvtColor(tonemap_picture(source_photo), g, cv::COLOR_BGR2GRAY);
+    cv::cvtColor(io::tonemap_picture(source_photo), g, cv::COLOR_BGR2GRAY);
     g *= 0.45;  // dimmed so the heat stands out
     cv::cvtColor(g, grey, cv::COLOR_GRAY2BGR);
   }
@@ -47,7 +47,7 @@ cv::Mat reuse_picture(const cv::Mat& counts, const cv::Mat& source_photo) {
 
 cv::Mat origin_picture(const Map& map, const cv::Mat& destination_photo, const cv::Mat& source_photo,
                        const std::vector<cv::Point>& points) {
-  const cv::Mat d = tonemap_picture(destination_photo), s = tonemap_picture(source_photo);
+  const cv::Mat d = io::tonemap_picture(destination_photo), s = io::tonemap_picture(source_photo);
   const int h = std::max(d.rows, s.rows);
   cv::Mat out(h, d.cols + s.cols, CV_8UC3, cv::Scalar::all(0));
   d.copyTo(out(cv::Rect(0, 0, d.cols, d.rows)));

@@ -50,7 +50,7 @@ cv::Vec3d direction_on_sphere(double u, double v) {
   return cv::Vec3d(u, v, std::sqrt(std::max(0.0, 1.0 - r2)));
 }
 
-Expected<Relighter> Relighter::fit(const ImageSet& source) {
+Expected<Relighter> Relighter::fit(const io::ImageSet& source) {
   const int n = static_cast<int>(source.images.size());
   if (n < 5) {
     return make_error("relight: the source set '" + source.id + "' has " + std::to_string(n) +

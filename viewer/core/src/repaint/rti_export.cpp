@@ -310,7 +310,7 @@ Expected<RtiFit> export_ptm(const std::vector<cv::Mat>& photos, const std::vecto
     for (int x = 0; x < w; ++x)
       for (int c = 0; c < 3; ++c) *dst++ = static_cast<char>(colour[(static_cast<size_t>(y) * w + x) * 3 + static_cast<size_t>(c)]);
   if (progress.cancelled()) return make_error(name + ": cancelled");
-  if (Status s = write_file_atomic(file, out); !s) return s.error();
+  if (Status s = io::write_file_atomic(file, out); !s) return s.error();
   progress.report(1.0, "fitting PTM");
   return fit;
 }

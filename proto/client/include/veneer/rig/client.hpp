@@ -88,7 +88,7 @@ struct RigStatus {
   bool you_control = false;
   bool controller_taken = false;
   int sets_stored = 0;
-  Role next_role = Role::destination;
+  io::Role next_role = io::Role::destination;
   uint64_t free_bytes = 0;
   int clients = 0;
   uint64_t event_seq = 0;            // seq of the last event before this status; the next one is event_seq + 1
@@ -96,7 +96,7 @@ struct RigStatus {
 
 struct SetSummary {
   std::string id;
-  Role role = Role::unknown;
+  io::Role role = io::Role::unknown;
   std::string object;
   std::string created;
   cv::Size size;
@@ -116,7 +116,7 @@ struct Event {
   Kind kind = Kind::button_pressed;
   uint64_t seq = 0;
   std::string set_id;
-  Role role = Role::unknown;
+  io::Role role = io::Role::unknown;
   std::string object;
   int k = 0, n = 0;            // shot_taken (n also for capture_started)
   double eta_s = 0;
@@ -139,7 +139,7 @@ struct LiveFrame {
 };
 
 struct CaptureOptions {
-  Role role = Role::unknown;  // unknown = the rig's next role
+  io::Role role = io::Role::unknown;  // unknown = the rig's next role
   std::string object;         // empty = the rig decides
   double shutter_s = 0;       // 0 = the rig's configured exposure
   double aperture = 0;

@@ -73,7 +73,7 @@ struct Relit {
 };
 // blend > 0: the source carried through the map with repaint::repaint_blended (repaint.hpp),
 // weighed by `guide` when given (fast::BlendGuide; normals of the map's size and the source's).
-Expected<Relit> relight(const Map& map, const ImageSet& destination, const ImageSet& source,
+Expected<Relit> relight(const Map& map, const io::ImageSet& destination, const io::ImageSet& source,
                         const cv::Mat& destination_mask, int blend = 0, const fast::BlendGuide* guide = nullptr);
 // What the measure renders for a pair whatever the map (relight() renders it
 // on every call; the quality table once per pair and then uses the overload).
@@ -82,7 +82,7 @@ struct RelightScenes {
   cv::Mat reference;   // as Relit::reference
   cv::Mat shadowed;    // CV_8UC1: 255 where the lamp's cast shadows fall on the destination
 };
-Expected<RelightScenes> relight_scenes(const ImageSet& destination, const ImageSet& source);
+Expected<RelightScenes> relight_scenes(const io::ImageSet& destination, const io::ImageSet& source);
 Expected<Relit> relight(const Map& map, const RelightScenes& scenes, const cv::Mat& source_mask,
                         const cv::Mat& destination_mask, int blend = 0, const fast::BlendGuide* guide = nullptr);
 bool relight_measurable(const std::string& source_scene);

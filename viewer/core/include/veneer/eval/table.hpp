@@ -43,7 +43,7 @@ struct TableRow {
 // photometric stereo); second = the moved, smaller second capture a pair of
 // an object with itself takes as its source (second_capture()).
 struct TableObject {
-  ImageSet set;
+  io::ImageSet set;
   ObjectView view;
 };
 Expected<TableObject> table_object(const std::string& scene, bool second, const TableOptions& options);

@@ -9,7 +9,7 @@
 namespace veneer::match {
 
 // map.pfm (x, y, distance; -1 unmapped) in and out.
-Status write_map(const std::filesystem::path& file, const Map& map, Sync sync = Sync::each);
+Status write_map(const std::filesystem::path& file, const Map& map, io::Sync sync = io::Sync::each);
 Expected<Map> read_map(const std::filesystem::path& file);
 
 }  // namespace veneer::match

@@ -20,13 +20,13 @@ struct PreparedObject {
 
 // Resizes a set in place (photos by area, masks and truth nearest, normals
 // renormalized, camera intrinsics scaled).
-void scale_set(ImageSet& set, double scale);
+void scale_set(io::ImageSet& set, double scale);
 // The size scale_set gives a set of `size`.
 cv::Size scaled_size(cv::Size size, double scale);
 
-Expected<PreparedObject> prepare_object(const ImageSet& set, bool truth_normals, const Progress& progress = {});
+Expected<PreparedObject> prepare_object(const io::ImageSet& set, bool truth_normals, const Progress& progress = {});
 // Only the object's mask, as prepare_object finds it (the truth's with truth
 // normals, else the segmentation's), without solving for normals.
-Expected<cv::Mat> object_mask(const ImageSet& set, bool truth_normals);
+Expected<cv::Mat> object_mask(const io::ImageSet& set, bool truth_normals);
 
 }  // namespace veneer::match

@@ -17,7 +17,7 @@
 namespace veneer::pipeline {
 
 struct LiveOptions {
-  ReducedOptions read;  // live width (default 1280 px), which reduced decode (default auto)
+  io::ReducedOptions read;  // live width (default 1280 px), which reduced decode (default auto)
   // Hand-drawn object masks (CV_8UC1 at any size, > 127 = object), resized to
   // the live size and used instead of the segmentation; empty = segment.
   cv::Mat destination_mask, source_mask;

@@ -17,8 +17,8 @@
 namespace veneer::pipeline {
 
 struct PrepareOptions {
-  ReadOptions read;    // RAW or developed photos, half size, demosaic
-  CacheOptions cache;  // where, how large, or off
+  io::ReadOptions read;    // RAW or developed photos, half size, demosaic
+  io::CacheOptions cache;  // where, how large, or off
   // An object mask drawn by hand (CV_8UC1 of the set's size as read, > 127 =
   // object) instead of the automatic segmentation; empty = segment. Keyed into
   // the cache by its content, so a re-run with the same mask hits.
@@ -31,7 +31,7 @@ struct PrepareOptions {
 struct SetReport {
   std::string folder, id, checksum;
   bool cache_hit = false;
-  std::string photos_from;  // "raw", "raw-half", "png", "jpeg", ... (ImageSet::photos_from)
+  std::string photos_from;  // "raw", "raw-half", "png", "jpeg", ... (io::ImageSet::photos_from)
   double read_s = 0;        // decoding the frames (miss) or reading the cache files (hit)
   double normals_s = 0;     // segmentation + photometric stereo (0 on a hit)
   double cache_write_s = 0;  // -1: written in the background (finish_cache_writes)
@@ -44,7 +44,7 @@ struct SetReport {
 // normals and mask, all a transfer measures with), normals, mask, the
 // photometric stereo's albedo and residual (empty on truth normals), median.
 struct PreparedSet {
-  ImageSet set;
+  io::ImageSet set;
   match::PreparedObject object;
   cv::Mat albedo, residual, median;
   SetReport report;

@@ -63,7 +63,7 @@ struct TransferResult {
                                                  // repainting more photos the same way (live video)
 };
 
-Expected<TransferResult> transfer(const ImageSet& destination, const ImageSet& source,
+Expected<TransferResult> transfer(const io::ImageSet& destination, const io::ImageSet& source,
                                   const TransferOptions& options, const Progress& progress = {});
 
 // The same in two steps: the objects prepared once (sets scaled, segmented,
@@ -72,13 +72,13 @@ Expected<TransferResult> transfer(const ImageSet& destination, const ImageSet& s
 // while the user drags a slider. `options` must have the pair's scale and
 // truth_normals (else an error names the difference).
 struct PreparedPair {
-  ImageSet destination, source;  // as scaled
+  io::ImageSet destination, source;  // as scaled
   PreparedObject dst, src;
   cv::Mat destination_median, source_median;  // per-pixel medians of the photos
   double scale = 1.0;
   bool truth_normals = false;
 };
-Expected<PreparedPair> prepare_pair(const ImageSet& destination, const ImageSet& source,
+Expected<PreparedPair> prepare_pair(const io::ImageSet& destination, const io::ImageSet& source,
                                     const TransferOptions& options, const Progress& progress = {});
 Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOptions& options,
                                   const Progress& progress = {});
@@ -126,9 +126,9 @@ Status write_transfer(const TransferResult& result, PreparedPair&& pair, const s
 // carry truth (else segmentation masks and no normal agreement), relighting
 // PSNR when measurable. Sets are resized to the map's size first when the map
 // was computed at a reduced scale (same factor for the source).
-Expected<eval::Quality> evaluate_sets(const Map& map, const ImageSet& destination, const ImageSet& source);
+Expected<eval::Quality> evaluate_sets(const Map& map, const io::ImageSet& destination, const io::ImageSet& source);
 // The scale factor a map was computed at relative to `destination` (map width / set width).
-double map_scale(const Map& map, const ImageSet& destination);
+double map_scale(const Map& map, const io::ImageSet& destination);
 
 
 }  // namespace veneer::pipeline

@@ -43,7 +43,7 @@ struct LightCalibration {
 // highlight_fraction of the brightest that hold the brightest), its centroid
 // weighted by brightness. Fails when no sphere or a photo without a highlight
 // is found.
-Expected<LightCalibration> calibrate_mirror_sphere(const ImageSet& set, const cv::Mat& sphere_mask = {},
+Expected<LightCalibration> calibrate_mirror_sphere(const io::ImageSet& set, const cv::Mat& sphere_mask = {},
                                                    const CalibrationOptions& options = {});
 
 // A circle fitted to points by least squares (algebraic fit, then points
@@ -57,7 +57,7 @@ Expected<Circle> fit_circle(const std::vector<cv::Point2d>& points);
 
 // Replaces the set's light directions with calibrated ones (same count
 // required); positions too when the calibration has them.
-Status apply_calibration(ImageSet& set, const LightCalibration& calibration);
+Status apply_calibration(io::ImageSet& set, const LightCalibration& calibration);
 
 // The lights file ("veneer-lights/1"): written atomically; read back with the
 // sphere, highlights, directions and positions. A file with a wrong format,
@@ -70,7 +70,7 @@ std::string light_calibration_json(const LightCalibration& calibration);
 // A picture to check the calibration by eye: the brightest of the photos
 // (tone mapped), the fitted circle in green, each highlight as a red cross
 // numbered with its lamp (1-based), 8-bit BGR.
-cv::Mat calibration_picture(const ImageSet& set, const LightCalibration& calibration);
+cv::Mat calibration_picture(const io::ImageSet& set, const LightCalibration& calibration);
 
 // Angle in degrees between two directions (not necessarily unit).
 double angle_deg(const cv::Vec3d& a, const cv::Vec3d& b);

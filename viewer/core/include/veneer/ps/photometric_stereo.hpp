@@ -90,7 +90,7 @@ struct PsResult {
                      // (0 outside); empty in distant mode
   LightModel model_used = LightModel::distant;
   bool lights_refined = false;          // the normals were solved with refined lamps (PsOptions::refine_lights)
-  std::vector<Light> lights;            // lights_refined: the refined lamps (directions, intensities)
+  std::vector<io::Light> lights;            // lights_refined: the refined lamps (directions, intensities)
   std::vector<double> light_change_deg; // lights_refined: how far each lamp's direction moved
   int solved_pixels = 0;      // pixels in mask
   int unreliable_pixels = 0;  // pixels in mask that are not reliable
@@ -100,13 +100,13 @@ struct PsResult {
 // pixel). Fails with a message for: fewer than 3 lights, degenerate light
 // directions (rank < 3), an empty mask, a mask of the wrong size, near mode
 // without lamp positions/focal length, bad options, cancellation.
-Expected<PsResult> photometric_stereo(const ImageSet& set, const cv::Mat& mask, const PsOptions& options = {},
+Expected<PsResult> photometric_stereo(const io::ImageSet& set, const cv::Mat& mask, const PsOptions& options = {},
                                       const Progress& progress = {});
 
 // The same into `result`, reusing its buffers when their size and type fit:
 // repeated calls on same-sized sets (live view, benchmarks) allocate nothing,
 // which saves the page faults of ~20 MB of fresh output per call at 1024x680.
-Status photometric_stereo_into(const ImageSet& set, const cv::Mat& mask, const PsOptions& options,
+Status photometric_stereo_into(const io::ImageSet& set, const cv::Mat& mask, const PsOptions& options,
                                const Progress& progress, PsResult& result);
 
 // Angular error of `normals` against `truth` (both CV_32FC3 x,y,z) over the

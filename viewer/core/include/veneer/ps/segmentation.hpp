@@ -65,7 +65,7 @@ struct Segmentation {
 
 // Fails for: a set with no images, `supplied` without set.mask, a rectangle
 // outside the image, an empty result mask (nothing is object), bad options.
-Expected<Segmentation> segment(const ImageSet& set, const SegmentOptions& options = {});
+Expected<Segmentation> segment(const io::ImageSet& set, const SegmentOptions& options = {});
 
 // The cleaning step on its own (CV_8UC1 in, CV_8UC1 out).
 cv::Mat clean_mask(const cv::Mat& mask, const SegmentOptions& options);

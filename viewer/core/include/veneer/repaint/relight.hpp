@@ -40,7 +40,7 @@ using match::Map;
 class Relighter {
  public:
   // Fits the source's PTM from its photos (ambient removed when present).
-  static Expected<Relighter> fit(const ImageSet& source);
+  static Expected<Relighter> fit(const io::ImageSet& source);
 
   // The source itself under a light from `direction` (unit, rig frame):
   // linear BGR CV_32FC3 at the source size; the object relit, the rest as captured.
