@@ -1,58 +1,39 @@
-// Export: the map, the result pictures, the relight sweep; screenshots of the views.
-#include "main_window.hpp"
-#include "widgets.hpp"
+#include "export.hpp"
 
-#include <algorithm>
-#include <filesystem>
 #include <cmath>
+#include <filesystem>
 
-#include <QApplication>
-#include <QCheckBox>
-#include <QComboBox>
 #include <QDir>
 #include <QFile>
+#include <QFileDialog>
 #include <QFileInfo>
 #include <QPointer>
-#include <QDoubleSpinBox>
-#include <QFileDialog>
-#include <QFormLayout>
-#include <QGroupBox>
-#include <QHBoxLayout>
-#include <QLabel>
-#include <QLineEdit>
-#include <QMenuBar>
-#include <QProgressBar>
-#include <QPushButton>
-#include <QScrollArea>
-#include <QSpinBox>
-#include <QSplitter>
-#include <QStandardPaths>
-#include <QStatusBar>
-#include <QTabWidget>
-#include <QTreeWidget>
-#include <QVBoxLayout>
 #include <QtConcurrent/QtConcurrentRun>
 
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
 #include "veneer/io/image_io.hpp"
-#include "veneer/ps/segmentation.hpp"
+#include "widgets.hpp"
 
 namespace veneer::app {
 
-// ---------------------------------------------------------------- export
+ExportActions::ExportActions(Session& session, QWidget* window)
+    : QObject(window), session_(session), window_(window) {}
+
+ExportActions::~ExportActions() {
+  job_cancel_ = true;
+  job_future_.waitForFinished();
+}
 
 // A job off the GUI thread, told in the status line, cancellable there.
-void MainWindow::runJob(const QString& kind, const QString& text,
+void ExportActions::runJob(const QString& kind, const QString& text,
                         std::function<veneer::Status(const veneer::Progress&)> job, const QString& done) {
-  if (job_running_) return message(tr("an export is running: wait for it or cancel it"), true);
+  if (job_running_) return session_.message(tr("an export is running: wait for it or cancel it"), true);
   job_running_ = true;
   job_cancel_ = false;
-  step_.start(kind, text);
-  showStep();
-  QPointer<MainWindow> self(this);
+  session_.status.step().start(kind, text);
+  session_.status.showStep();
+  QPointer<ExportActions> self(this);
   job_future_ = QtConcurrent::run(job_pool(), [this, self, job, done] {
     veneer::Progress progress;
     progress.cancel = &job_cancel_;
@@ -60,8 +41,8 @@ void MainWindow::runJob(const QString& kind, const QString& text,
       const QString s = qs(stage);
       QMetaObject::invokeMethod(self.data(), [self, f, s] {
         if (!self) return;
-        self->step_.update(f);
-        self->showStep();
+        self->session_.status.step().update(f);
+        self->session_.status.showStep();
       });
     };
     const veneer::Status s = job(progress);
@@ -72,25 +53,25 @@ void MainWindow::runJob(const QString& kind, const QString& text,
     QMetaObject::invokeMethod(self.data(), [self, done, error, cancelled] {
       if (!self) return;
       self->job_running_ = false;
-      self->step_.finish();
-      self->showStep();
+      self->session_.status.step().finish();
+      self->session_.status.showStep();
       const QString line = cancelled ? tr("export cancelled; nothing half-written was left")
                                      : (error.isEmpty() ? done : error);
-      self->step_label_->setText(line);
-      self->message(line, !cancelled && !error.isEmpty());
+      self->session_.status.say(line);
+      self->session_.message(line, !cancelled && !error.isEmpty());
     });
   });
 }
 
-void MainWindow::exportMap() {
-  if (!result_) return message(tr("nothing to export: compute a transfer first"), true);
-  QString dir = QFileDialog::getExistingDirectory(this, tr("Export the map into"));
+void ExportActions::exportMap() {
+  if (!session_.result) return session_.message(tr("nothing to export: compute a transfer first"), true);
+  QString dir = QFileDialog::getExistingDirectory(window_, tr("Export the map into"));
   if (!dir.isEmpty()) exportMapTo(dir);
 }
 
-void MainWindow::exportMapTo(const QString& dir) {
-  if (!result_) return message(tr("nothing to export: compute a transfer first"), true);
-  auto result = result_;
+void ExportActions::exportMapTo(const QString& dir) {
+  if (!session_.result) return session_.message(tr("nothing to export: compute a transfer first"), true);
+  auto result = session_.result;
   runJob("export-map", tr("writing the map into %1").arg(dir), [result, dir](const veneer::Progress& p) -> veneer::Status {
     if (auto s = veneer::match::write_map((dir + "/map.pfm").toStdString(), result->map); !s) return s;
     p.report(0.5, "map.png");
@@ -107,15 +88,15 @@ void MainWindow::exportMapTo(const QString& dir) {
   }, tr("map written to %1").arg(dir));
 }
 
-void MainWindow::exportResults() {
-  if (!result_) return message(tr("nothing to export: compute a transfer first"), true);
-  QString dir = QFileDialog::getExistingDirectory(this, tr("Export the results into"));
+void ExportActions::exportResults() {
+  if (!session_.result) return session_.message(tr("nothing to export: compute a transfer first"), true);
+  QString dir = QFileDialog::getExistingDirectory(window_, tr("Export the results into"));
   if (!dir.isEmpty()) exportResultsTo(dir);
 }
 
-void MainWindow::exportResultsTo(const QString& dir) {
-  if (!result_) return message(tr("nothing to export: compute a transfer first"), true);
-  auto result = result_;
+void ExportActions::exportResultsTo(const QString& dir) {
+  if (!session_.result) return session_.message(tr("nothing to export: compute a transfer first"), true);
+  auto result = session_.result;
   // written into a temporary sibling and moved into place, so a cancel or a
   // failure leaves no half-written folder; a cancel stops between files
   // (write_transfer checks it before each one) and removes the sibling
@@ -145,17 +126,19 @@ void MainWindow::exportResultsTo(const QString& dir) {
          tr("results written to %1").arg(dir));
 }
 
-void MainWindow::exportRelightVideo() {
-  if (!result_ || !relighter_ || !dst_) return message(tr("nothing to export: compute a transfer first"), true);
-  QString file = QFileDialog::getSaveFileName(this, tr("Relight sweep video"), "relight.avi", "AVI (*.avi)");
+void ExportActions::exportRelightVideo() {
+  if (!session_.result || !session_.relighter || !session_.dst)
+    return session_.message(tr("nothing to export: compute a transfer first"), true);
+  QString file = QFileDialog::getSaveFileName(window_, tr("Relight sweep video"), "relight.avi", "AVI (*.avi)");
   if (!file.isEmpty()) exportRelightVideoTo(file);
 }
 
-void MainWindow::exportRelightVideoTo(const QString& file) {
-  if (!result_ || !relighter_ || !dst_) return message(tr("nothing to export: compute a transfer first"), true);
-  auto result = result_;
-  auto relighter = relighter_;
-  const cv::Mat backdrop = dst_->median * 0.25;
+void ExportActions::exportRelightVideoTo(const QString& file) {
+  if (!session_.result || !session_.relighter || !session_.dst)
+    return session_.message(tr("nothing to export: compute a transfer first"), true);
+  auto result = session_.result;
+  auto relighter = session_.relighter;
+  const cv::Mat backdrop = session_.dst->median * 0.25;
   runJob("export-video", tr("writing the relight sweep %1").arg(file),
          [result, relighter, backdrop, file](const veneer::Progress& p) -> veneer::Status {
            const cv::Size size = result->map.xy.size();
@@ -187,25 +170,6 @@ void MainWindow::exportRelightVideoTo(const QString& file) {
            return {};
          },
          tr("relight sweep written to %1").arg(file));
-}
-
-QStringList MainWindow::saveScreenshots(const QString& dir) {
-  QDir().mkpath(dir);
-  QStringList files;
-  const int current = tabs_->currentIndex();
-  for (int i = 0; i < tabs_->count(); ++i) {
-    tabs_->setCurrentIndex(i);
-    QApplication::processEvents();
-    const QString f = dir + "/" + tabs_->tabText(i).toLower() + ".png";
-    if (grab().save(f)) files << f;
-  }
-  tabs_->setCurrentIndex(current);
-  return files;
-}
-
-void MainWindow::showTab(const QString& name) {
-  for (int i = 0; i < tabs_->count(); ++i)
-    if (tabs_->tabText(i).compare(name, Qt::CaseInsensitive) == 0) tabs_->setCurrentIndex(i);
 }
 
 }  // namespace veneer::app

@@ -1,63 +1,61 @@
-// The one flow from capture to live repaint, and the status line that tells
-// where it is. Every step runs off the GUI thread; this file only chains them.
-#include <QCheckBox>
+#include "flow.hpp"
+
 #include <QFileInfo>
-#include <QLabel>
 #include <QPointer>
-#include <QProgressBar>
-#include <QPushButton>
 #include <QtConcurrent/QtConcurrentRun>
 
 #include <opencv2/imgproc.hpp>
 
-#include "main_window.hpp"
-#include "qt_convert.hpp"
+#include "capture_panel.hpp"
+#include "live_first.hpp"
+#include "live_tab.hpp"
+#include "map_library.hpp"
+#include "sets_panel.hpp"
+#include "transfer_panel.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/reduced.hpp"
+#include "veneer/ps/segmentation.hpp"
 #include "widgets.hpp"
 
 namespace veneer::app {
 
-bool MainWindow::autoFlow() const { return auto_flow_ && auto_flow_->isChecked(); }
-
-void MainWindow::setAutoFlow(bool on) { auto_flow_->setChecked(on); }
-
-QString MainWindow::stepLine() const { return step_label_ ? step_label_->text() : QString(); }
-
-void MainWindow::showStep() {
-  step_label_->setText(step_.line());
-  const double f = step_.fraction();
-  if (step_.running() && f < 0) {
-    step_bar_->setRange(0, 0);  // busy, amount unknown
-  } else {
-    step_bar_->setRange(0, 100);
-    step_bar_->setValue(f < 0 ? 0 : static_cast<int>(f * 100));
-  }
-  step_bar_->setVisible(step_.running());
-  step_cancel_->setVisible(step_.running() || computing_ || job_running_ || loads_running_ > 0 || rig_.pulling());
-  if (step_.running() && !step_timer_.isActive()) step_timer_.start();
-  if (!step_.running()) step_timer_.stop();
+FlowController::FlowController(Session& session, CapturePanel& capture, SetsPanel& sets, TransferPanel& transfer,
+                               LiveTab& live, LiveFirstJob& live_first, MapLibrary& library, QObject* parent)
+    : QObject(parent),
+      session_(session),
+      capture_(capture),
+      sets_(sets),
+      transfer_(transfer),
+      live_(live),
+      live_first_(live_first),
+      library_(library) {
+  connect(&capture_, &CapturePanel::setStored, this, &FlowController::setStored);
+  connect(&session_.rig, &RigLink::pulled, this, &FlowController::pulled);
+  connect(&sets_, &SetsPanel::loadRequested, this, &FlowController::loadSetInBackground);
+  connect(&library_, &MapLibrary::loadRequested, this,
+          [this](const QString& folder, veneer::io::Role role) { loadSetInBackground(folder, role); });
 }
+
+bool FlowController::autoFlow() const { return capture_.autoFlow(); }
 
 // A set was stored on the rig, by whatever pressed the trigger: pull it.
-void MainWindow::flowSetStored(const QString& id, veneer::io::Role role) {
+void FlowController::setStored(const QString& id, veneer::io::Role role) {
   if (!autoFlow()) return;
   auto_pulls_[id] = role;
-  step_.start("pull", role == veneer::io::Role::unknown ? tr("pulling %1").arg(id)
+  session_.status.step().start("pull", role == veneer::io::Role::unknown ? tr("pulling %1").arg(id)
                                                      : tr("pulling %1 (%2)").arg(id, qs(veneer::io::role_name(role))));
-  showStep();
-  pull_bar_->setVisible(true);
-  pull_bar_->setValue(0);
-  rig_.pull(id, workdir_ + "/sets/" + id);
+  session_.status.showStep();
+  sets_.pullStarted();
+  session_.rig.pull(id, session_.workdir + "/sets/" + id);
 }
 
-void MainWindow::flowPulled(const QString& id, const QString& folder) {
+void FlowController::pulled(const QString& id, const QString& folder) {
   auto it = auto_pulls_.find(id);
   std::optional<veneer::io::Role> role;
   if (it != auto_pulls_.end()) {
     role = it->second;
     auto_pulls_.erase(it);
-    step_.finish();
+    session_.status.step().finish();
   }
   loadSetInBackground(folder, role);
 }
@@ -96,20 +94,20 @@ veneer::Expected<veneer::io::ImageSet> read_live_size(const std::string& folder,
 }
 }  // namespace
 
-void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer::io::Role> as) {
-  ++loads_running_;
+void FlowController::loadSetInBackground(const QString& folder, std::optional<veneer::io::Role> as) {
+  ++session_.loads_running;
   const QString name = QFileInfo(folder).fileName();
   if (as) {
-    step_.start("load", *as == veneer::io::Role::unknown
+    session_.status.step().start("load", *as == veneer::io::Role::unknown
                             ? tr("loading %1").arg(name)
                             : tr("loading %1 as the %2").arg(name, qs(veneer::io::role_name(*as))));
-    showStep();
+    session_.status.showStep();
   }
   const bool full = as.has_value();
   // live first: the flow's sets at the live view's width (live_first.cpp)
   const int live_width = full && autoFlow() ? live_width_ : 0;
-  QPointer<MainWindow> self(this);
-  auto cancel = load_cancel_;
+  QPointer<FlowController> self(this);
+  auto cancel = session_.load_cancel;
   (void)QtConcurrent::run(job_pool(), [self, folder, as, full, cancel, live_width] {
     ReadSet r;
     bool live_size = false;
@@ -132,79 +130,93 @@ void MainWindow::loadSetInBackground(const QString& folder, std::optional<veneer
     }
     QMetaObject::invokeMethod(self.data(), [self, r, as, folder, cancel] {
       if (!self) return;
-      --self->loads_running_;
-      if (as) self->step_.finish();
+      --self->session_.loads_running;
+      if (as) self->session_.status.step().finish();
       if (cancel->load()) {
-        self->message(tr("loading %1 cancelled").arg(folder));
-        self->showStep();
+        self->session_.message(tr("loading %1 cancelled").arg(folder));
+        self->session_.status.showStep();
         return;
       }
       if (!r.loaded) {
-        if (self->reopen_ && (folder == self->reopen_->entry.destination || folder == self->reopen_->entry.source)) {
-          self->reopen_.reset();
-          self->message(tr("cannot reopen the map: %1").arg(r.error), true);
-          self->showStep();
-          return;
-        }
-        self->message(r.error, true);
-        self->showStep();
+        if (!self->library_.reopenFailed(folder, r.error)) self->session_.message(r.error, true);
+        self->session_.status.showStep();
         return;
       }
-      self->addLocalItem(folder, r.loaded->set, r.thumbnail);
+      self->sets_.addLocalItem(folder, r.loaded->set, r.thumbnail);
       if (!as) {
-        self->showStep();
+        self->session_.status.showStep();
         return;
       }
       // unknown: the role the set's manifest gives it
       const veneer::io::Role role = *as != veneer::io::Role::unknown ? *as : r.loaded->set.role;
       if (role == veneer::io::Role::unknown) {
-        self->message(tr("%1 has no role in its manifest: choose → Destination or → Source").arg(folder), true);
-        self->showStep();
+        self->session_.message(tr("%1 has no role in its manifest: choose → Destination or → Source").arg(folder),
+                               true);
+        self->session_.status.showStep();
         return;
       }
-      self->setLoaded(r.loaded, role);
+      self->session_.setLoaded(r.loaded, role);
       self->computeNormals(r.loaded);
-      self->message(tr("loaded %1 as the %2").arg(folder, qs(veneer::io::role_name(role))));
-      self->showStep();
-      if (!self->reopenWhenLoaded(folder, role)) self->flowMaybeCompute();
+      self->session_.message(tr("loaded %1 as the %2").arg(folder, qs(veneer::io::role_name(role))));
+      self->session_.status.showStep();
+      if (!self->library_.reopenWhenLoaded(folder, role)) self->maybeCompute();
     });
   });
 }
 
-void MainWindow::cancelStep() {
-  if (computing_) cancelTransfer();
-  if (job_running_) job_cancel_ = true;
-  if (full_running_) full_cancel_->store(true);
-  if (rig_.pulling()) {
-    rig_.cancelPulls();
-    auto_pulls_.clear();
+bool FlowController::loadLocalSet(const QString& folder, veneer::io::Role as) {
+  auto read = veneer::io::read_set(folder.toStdString());
+  if (!read) {
+    session_.message(qs(read.message()), true);
+    return false;
   }
-  reopen_.reset();
-  if (loads_running_ > 0) {
-    load_cancel_->store(true);
-    load_cancel_ = std::make_shared<std::atomic<bool>>(false);
-  }
-  if (step_.running() && (step_.kind() == "capture" || step_.kind() == "store")) rig_.cancelCapture();
-  message(tr("cancelling…"));
+  auto loaded = std::make_shared<LoadedSet>();
+  loaded->folder = folder;
+  loaded->set = std::move(*read);
+  loaded->median = veneer::repaint::median_photo(loaded->set.images);
+  loaded->median_picture = picture_of(loaded->median);
+  sets_.addLocalItem(folder, loaded->set);
+  session_.setLoaded(loaded, as);
+  computeNormals(loaded);
+  session_.message(tr("loaded %1 as the %2").arg(folder, qs(veneer::io::role_name(as))));
+  return true;
+}
+
+void FlowController::computeNormals(std::shared_ptr<LoadedSet> loaded) {
+  QPointer<Session> session(&session_);
+  (void)QtConcurrent::run(job_pool(), [session, loaded] {
+    auto seg = veneer::ps::segment(loaded->set);
+    if (!seg) return;
+    auto ps = veneer::ps::photometric_stereo(loaded->set, seg->mask);
+    if (!ps) return;
+    auto result = std::make_shared<veneer::ps::PsResult>(std::move(*ps));
+    if (!session) return;
+    QMetaObject::invokeMethod(session.data(), [session, loaded, result] {
+      if (!session) return;
+      loaded->normals.emplace(std::move(*result));  // moved: a 10 Mpx result is ~200 MB
+      session->normalsReady();
+    });
+  });
 }
 
 // Both sets there: the map, with the settings shown (the defaults unless the
 // user changed them).
-void MainWindow::flowMaybeCompute() {
-  if (!autoFlow() || !dst_ || !src_) return;
-  if (computing_) {
-    rerun_ = true;  // a set changed under the running transfer: once more with both
-    return;
-  }
-  if (result_) return;
-  startTransfer();
+void FlowController::maybeCompute() {
+  if (!autoFlow() || !session_.dst || !session_.src) return;
+  // a set changed under the running transfer: once more with both
+  if (!transfer_.computing() && session_.result) return;
+  transfer_.runOrRerun();
 }
 
-// A map is shown and a rig is there: the live repaint starts by itself.
-void MainWindow::flowMaybeGoLive() {
-  if (!autoFlow() || !result_ || !rig_.isConnected() || live_btn_->isChecked()) return;
-  showTab("Live");
-  live_btn_->setChecked(true);
+// A map is shown and a rig is there: the live repaint starts by itself; on a
+// live-size map, the full resolution follows behind it.
+void FlowController::resultShown() {
+  if (!autoFlow()) return;
+  if (session_.result && session_.rig.isConnected() && !live_.isLive()) {
+    emit tabWanted("Live");
+    live_.startLive();
+  }
+  live_first_.maybeStart();
 }
 
 }  // namespace veneer::app

@@ -1,10 +1,7 @@
-// Live first: the automatic flow went live on a map made at the live view's
-// width (flow.cpp reads the pulled sets through reduced decodes); here the
-// full-resolution map follows in the background, made as `veneer transfer`
-// makes it (pipeline::prepare_pair through the result cache, then the
-// transfer with the options of the map shown), and replaces the live one
-// when done. Everything heavy -- the sets, the pictures, the live session --
-// is made off the GUI thread; the swap itself only moves pointers.
+// The full-resolution map is made as `veneer transfer` makes it
+// (pipeline::prepare_pair through the result cache, then the transfer with
+// the options of the map shown). Everything heavy -- the sets, the pictures,
+// the live session -- is made off the GUI thread; the swap only moves pointers.
 #include <QLabel>
 #include <QPointer>
 #include <QProgressBar>
@@ -13,12 +10,11 @@
 
 #include <opencv2/imgproc.hpp>
 
-#include "main_window.hpp"
+#include "live_first.hpp"
 #include "qt_convert.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/pipeline/prepare.hpp"
-#include "image_view.hpp"
-#include "sphere_pad.hpp"
+#include "transfer_panel.hpp"
 #include "veneer/ps/photometric_stereo.hpp"
 #include "widgets.hpp"
 
@@ -52,45 +48,49 @@ std::shared_ptr<LoadedSet> loaded_from(const QString& folder, const veneer::io::
 
 }  // namespace
 
-QString MainWindow::fullResolutionLine() const { return full_label_ ? full_label_->text() : QString(); }
+LiveFirstJob::LiveFirstJob(Session& session, TransferPanel& transfer, QStatusBar* bar, QObject* parent)
+    : QObject(parent), session_(session), transfer_(transfer), bar_(bar) {}
 
-void MainWindow::flowMaybeFullResolution() {
-  if (!autoFlow() || full_running_ || !result_ || !dst_ || !src_ || !(dst_->live_size || src_->live_size)) return;
-  if (!full_label_) {
-    full_label_ = new QLabel;
-    full_label_->setObjectName("fullResolutionStatus");
-    full_bar_ = new QProgressBar;
-    full_bar_->setObjectName("fullResolutionProgress");
-    full_bar_->setMaximumWidth(100);
-    full_bar_->setTextVisible(false);
-    statusBar()->addPermanentWidget(full_label_);
-    statusBar()->addPermanentWidget(full_bar_);
+QString LiveFirstJob::line() const { return label_ ? label_->text() : QString(); }
+
+void LiveFirstJob::maybeStart() {
+  const Session& s = session_;
+  if (running_ || !s.result || !s.dst || !s.src || !(s.dst->live_size || s.src->live_size)) return;
+  if (!label_) {
+    label_ = new QLabel;
+    label_->setObjectName("fullResolutionStatus");
+    progress_ = new QProgressBar;
+    progress_->setObjectName("fullResolutionProgress");
+    progress_->setMaximumWidth(100);
+    progress_->setTextVisible(false);
+    bar_->addPermanentWidget(label_);
+    bar_->addPermanentWidget(progress_);
   }
-  full_running_ = true;
-  full_cancel_ = std::make_shared<std::atomic<bool>>(false);
-  full_step_.start("full", tr("full resolution"));
-  full_label_->setText(tr("full resolution: starting"));
-  full_label_->setVisible(true);
-  full_bar_->setValue(0);
-  full_bar_->setVisible(true);
-  const QString dst_folder = dst_->folder, src_folder = src_->folder;
-  const auto options = shown_.options;
-  const int generation = sets_loaded_;
-  const cv::Vec3d light = relight_pad_->direction();
-  auto cancel = full_cancel_;
-  QPointer<MainWindow> self(this);
+  running_ = true;
+  cancel_ = std::make_shared<std::atomic<bool>>(false);
+  step_.start("full", tr("full resolution"));
+  label_->setText(tr("full resolution: starting"));
+  label_->setVisible(true);
+  progress_->setValue(0);
+  progress_->setVisible(true);
+  const QString dst_folder = session_.dst->folder, src_folder = session_.src->folder;
+  const auto options = session_.shown.options;
+  const int generation = session_.sets_loaded;
+  const cv::Vec3d light = session_.light();
+  auto cancel = cancel_;
+  QPointer<LiveFirstJob> self(this);
   (void)QtConcurrent::run(job_pool(), [self, dst_folder, src_folder, options, generation, cancel, light] {
     auto report = [self](double f, const std::string& stage) {
       const QString s = qs(stage);
       if (self)
         QMetaObject::invokeMethod(self.data(), [self, f, s] {
-          if (!self || !self->full_running_) return;
-          self->full_step_.update(f, s);
-          const double left = self->full_step_.secondsLeft();
-          self->full_label_->setText(
+          if (!self || !self->running_) return;
+          self->step_.update(f, s);
+          const double left = self->step_.secondsLeft();
+          self->label_->setText(
               left >= 0 ? tr("full resolution: %1 · %2 % · about %3 s left").arg(s).arg(int(f * 100)).arg(int(left + 0.5))
                         : tr("full resolution: %1 · %2 %").arg(s).arg(int(f * 100)));
-          self->full_bar_->setValue(static_cast<int>(f * 100));
+          self->progress_->setValue(static_cast<int>(f * 100));
         });
     };
     veneer::Progress progress;
@@ -140,43 +140,36 @@ void MainWindow::flowMaybeFullResolution() {
     if (!self) return;
     QMetaObject::invokeMethod(self.data(), [self, out, generation, cancel, light] {
       if (!self) return;
-      self->full_running_ = false;
-      self->full_step_.finish();
-      self->full_bar_->setVisible(false);
-      if (cancel->load() || generation != self->sets_loaded_ || !self->dst_ || !self->src_) {
-        self->full_label_->setText(tr("full resolution: not used (the sets changed)"));
+      self->running_ = false;
+      self->step_.finish();
+      self->progress_->setVisible(false);
+      if (cancel->load() || generation != self->session_.sets_loaded || !self->session_.dst || !self->session_.src) {
+        self->label_->setText(tr("full resolution: not used (the sets changed)"));
         return;
       }
       if (!out.result) {
-        self->full_label_->setText(tr("full resolution failed: %1").arg(out.error));
-        self->message(tr("full resolution failed: %1").arg(out.error), true);
+        self->label_->setText(tr("full resolution failed: %1").arg(out.error));
+        self->session_.message(tr("full resolution failed: %1").arg(out.error), true);
         return;
       }
       // The swap: pointers only, everything was made by the job.
-      self->dst_ = out.dst;
-      self->src_ = out.src;
-      ++self->sets_loaded_;
-      self->prepared_ = out.pair;
-      self->prepared_key_ = self->preparationKey();
-      self->result_ = out.result;
-      self->result_picture_ = out.result_picture;
-      self->result_image_ = out.result_image;
-      if (out.relighter) self->relighter_ = out.relighter;
-      self->live_session_ = out.session;
-      self->live_refusal_.clear();
-      ++self->full_swaps_;
-      self->full_label_->setText(tr("full resolution: %1x%2 map in use")
+      self->session_.dst = out.dst;
+      self->session_.src = out.src;
+      ++self->session_.sets_loaded;
+      self->transfer_.adoptPrepared(out.pair);
+      self->session_.result = out.result;
+      self->session_.result_picture = out.result_picture;
+      self->session_.result_image = out.result_image;
+      if (out.relighter) self->session_.relighter = out.relighter;
+      self->session_.live_session = out.session;
+      self->session_.live_refusal.clear();
+      ++self->swaps_;
+      self->label_->setText(tr("full resolution: %1x%2 map in use")
                                      .arg(out.result->map.xy.cols)
                                      .arg(out.result->map.xy.rows));
-      self->message(tr("full-resolution map swapped in (%1x%2)").arg(out.result->map.xy.cols).arg(out.result->map.xy.rows));
-      self->refreshLook();
-      if (out.relighter && light == self->relight_pad_->direction()) {
-        self->relight_view_->setImage(out.relit);
-        self->relight_src_view_->setImage(out.relit_source);
-        self->updateRelightLabel(light);
-      } else {
-        self->refreshRelight();
-      }
+      self->session_.message(
+          tr("full-resolution map swapped in (%1x%2)").arg(out.result->map.xy.cols).arg(out.result->map.xy.rows));
+      emit self->swapped(out.relit, out.relit_source, light);
     });
   });
 }

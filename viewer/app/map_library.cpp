@@ -1,55 +1,42 @@
-// The maps of the local library: kept when computed, shown again after a
-// restart through the stored map (repainted, not matched again).
-#include <QCheckBox>
+#include "map_library.hpp"
+
 #include <QDateTime>
 #include <QDir>
 #include <QFileInfo>
 #include <QPointer>
 #include <QSaveFile>
-#include <QTreeWidget>
 #include <QtConcurrent/QtConcurrentRun>
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
-#include "main_window.hpp"
-#include "qt_convert.hpp"
+#include "segmentation.hpp"
+#include "sets_panel.hpp"
+#include "transfer_panel.hpp"
 #include "widgets.hpp"
 
 namespace veneer::app {
 
-void MainWindow::addMapItem(const LibraryMap& m) {
-  QTreeWidgetItem* item = nullptr;
-  for (int i = 0; i < maps_root_->childCount() && !item; ++i)
-    if (maps_root_->child(i)->data(0, Qt::UserRole).toString() == m.folder) item = maps_root_->child(i);
-  if (!item) item = new QTreeWidgetItem(maps_root_);
-  item->setText(0, QFileInfo(m.destination).fileName() + " ← " + QFileInfo(m.source).fileName());
-  item->setText(1, tr("map"));
-  item->setText(2, m.method);
-  item->setText(3, short_date(m.computed.toStdString()));
-  item->setData(0, Qt::UserRole, m.folder);
-  item->setToolTip(0, tr("%1\ndestination %2\nsource %3\nOpen map (or a double click) shows it again")
-                          .arg(m.folder, m.destination, m.source));
-  const QString picture = m.folder + "/map.png";
-  if (QFileInfo::exists(picture)) item->setIcon(0, QIcon(picture));
-  maps_root_->setExpanded(true);
-}
+MapLibrary::MapLibrary(Session& session, SetsPanel& sets, TransferPanel& transfer, SegmentationTool& segmentation,
+                       QObject* parent)
+    : QObject(parent), session_(session), sets_(sets), transfer_(transfer), segmentation_(segmentation) {}
 
 // The map shown goes into the library with the options and hand masks it was
 // made with (written off the GUI thread, each file through a temporary).
-void MainWindow::saveMapToLibrary() {
-  if (!result_ || !dst_ || !src_) return;
+void MapLibrary::saveShown() {
+  if (!session_.result || !session_.dst || !session_.src) return;
   LibraryMap m;
-  m.destination = dst_->folder;
-  m.source = src_->folder;
-  m.destination_id = qs(dst_->set.id);
-  m.source_id = qs(src_->set.id);
-  m.method = qs(veneer::match::method_name(shown_.options.match.method));
+  m.destination = session_.dst->folder;
+  m.source = session_.src->folder;
+  m.destination_id = qs(session_.dst->set.id);
+  m.source_id = qs(session_.src->set.id);
+  m.method = qs(veneer::match::method_name(session_.shown.options.match.method));
   m.computed = QDateTime::currentDateTimeUtc().toString(Qt::ISODate);
-  m.folder = library_->mapsFolder() + "/" + QFileInfo(m.destination).fileName() + "--" + QFileInfo(m.source).fileName();
-  auto result = result_;
-  const RunSettings settings = shown_;
-  QPointer<MainWindow> self(this);
+  m.folder = session_.library.mapsFolder() + "/" + QFileInfo(m.destination).fileName() + "--" +
+             QFileInfo(m.source).fileName();
+  auto result = session_.result;
+  const RunSettings settings = session_.shown;
+  QPointer<MapLibrary> self(this);
   (void)QtConcurrent::run(job_pool(), [self, result, settings, m] {
     QDir().mkpath(m.folder);
     QString error;
@@ -75,10 +62,11 @@ void MainWindow::saveMapToLibrary() {
     }
     QMetaObject::invokeMethod(self.data(), [self, m, error] {
       if (!self) return;
-      if (!error.isEmpty()) return self->message(tr("the map could not be kept in the library: %1").arg(error), true);
-      self->library_->addMap(m);
-      self->library_->save();
-      self->addMapItem(m);
+      if (!error.isEmpty())
+        return self->session_.message(tr("the map could not be kept in the library: %1").arg(error), true);
+      self->session_.library.addMap(m);
+      self->session_.library.save();
+      self->sets_.addMapItem(m);
     });
   });
 }
@@ -124,17 +112,17 @@ ReadMap read_library_map(const LibraryMap& m) {
 }
 }  // namespace
 
-bool MainWindow::openLibraryMap(const QString& map_folder) {
-  const LibraryMap* found = library_->findMap(map_folder);
+bool MapLibrary::open(const QString& map_folder) {
+  const LibraryMap* found = session_.library.findMap(map_folder);
   if (!found) {
-    message(tr("%1 is not a map of the library").arg(map_folder), true);
+    session_.message(tr("%1 is not a map of the library").arg(map_folder), true);
     return false;
   }
   const LibraryMap m = *found;
   const QString name = QFileInfo(m.destination).fileName() + " ← " + QFileInfo(m.source).fileName();
   for (auto [folder, role] : {std::pair{m.destination, tr("destination")}, std::pair{m.source, tr("source")}}) {
     if (!QFileInfo::exists(folder + "/set.json")) {
-      message(tr("cannot reopen the map %1: its %2 set %3 is gone from this computer (pull or open it again, "
+      session_.message(tr("cannot reopen the map %1: its %2 set %3 is gone from this computer (pull or open it again, "
                  "then compute)")
                   .arg(name, role, folder),
               true);
@@ -142,34 +130,34 @@ bool MainWindow::openLibraryMap(const QString& map_folder) {
     }
   }
   if (!QFileInfo::exists(m.folder + "/map.pfm")) {
-    message(tr("cannot reopen the map %1: %2 is gone").arg(name, m.folder + "/map.pfm"), true);
+    session_.message(tr("cannot reopen the map %1: %2 is gone").arg(name, m.folder + "/map.pfm"), true);
     return false;
   }
-  if (computing_) cancelTransfer();
-  step_.start("load", tr("reopening the map %1").arg(name));
-  showStep();
-  ++loads_running_;
-  QPointer<MainWindow> self(this);
-  auto cancel = load_cancel_;
+  if (transfer_.computing()) transfer_.cancelTransfer();
+  session_.status.step().start("load", tr("reopening the map %1").arg(name));
+  session_.status.showStep();
+  ++session_.loads_running;
+  QPointer<MapLibrary> self(this);
+  auto cancel = session_.load_cancel;
   (void)QtConcurrent::run(job_pool(), [self, m, name, cancel] {
     ReadMap r = read_library_map(m);
     QMetaObject::invokeMethod(self.data(), [self, m, name, cancel, r] {
       if (!self) return;
-      --self->loads_running_;
+      --self->session_.loads_running;
       if (cancel->load()) {
-        self->step_.finish();
-        self->showStep();
-        return self->message(tr("reopening %1 cancelled").arg(name));
+        self->session_.status.step().finish();
+        self->session_.status.showStep();
+        return self->session_.message(tr("reopening %1 cancelled").arg(name));
       }
       if (!r.map) {
-        self->step_.finish();
-        self->showStep();
-        return self->message(tr("cannot reopen the map %1: %2").arg(name, r.error), true);
+        self->session_.status.step().finish();
+        self->session_.status.showStep();
+        return self->session_.message(tr("cannot reopen the map %1: %2").arg(name, r.error), true);
       }
       self->reopen_ = Reopen{m, r.map, r.options, r.dst_hand, r.src_hand, false, false};
-      self->step_.finish();
-      self->loadSetInBackground(m.destination, veneer::io::Role::destination);
-      self->loadSetInBackground(m.source, veneer::io::Role::source);
+      self->session_.status.step().finish();
+      emit self->loadRequested(m.destination, veneer::io::Role::destination);
+      emit self->loadRequested(m.source, veneer::io::Role::source);
     });
   });
   return true;
@@ -178,68 +166,54 @@ bool MainWindow::openLibraryMap(const QString& map_folder) {
 // Called as each set finishes loading: once both of a reopened map's sets
 // are there, its options and hand masks are put back and the transfer
 // repaints through the stored map.
-bool MainWindow::reopenWhenLoaded(const QString& folder, veneer::io::Role role) {
+bool MapLibrary::reopenWhenLoaded(const QString& folder, veneer::io::Role role) {
   if (!reopen_) return false;
   if (role == veneer::io::Role::destination && folder == reopen_->entry.destination) reopen_->dst_loaded = true;
   if (role == veneer::io::Role::source && folder == reopen_->entry.source) reopen_->src_loaded = true;
   if (!reopen_->dst_loaded || !reopen_->src_loaded) return true;  // the other set is still loading
-  if (!dst_ || !src_ || dst_->folder != reopen_->entry.destination || src_->folder != reopen_->entry.source) {
+  const auto& dst = session_.dst;
+  const auto& src = session_.src;
+  if (!dst || !src || dst->folder != reopen_->entry.destination || src->folder != reopen_->entry.source) {
     reopen_.reset();  // another set was chosen meanwhile
     return false;
   }
   Reopen r = std::move(*reopen_);
   reopen_.reset();
   const QString name = QFileInfo(r.entry.destination).fileName() + " ← " + QFileInfo(r.entry.source).fileName();
-  for (auto [s, id, role] : {std::tuple{dst_.get(), r.entry.destination_id, tr("destination")},
-                             std::tuple{src_.get(), r.entry.source_id, tr("source")}}) {
+  for (auto [s, id, role] : {std::tuple{session_.dst.get(), r.entry.destination_id, tr("destination")},
+                             std::tuple{session_.src.get(), r.entry.source_id, tr("source")}}) {
     if (!id.isEmpty() && qs(s->set.id) != id) {
-      message(tr("cannot reopen the map %1: the %2 set in %3 is now %4, not %5 that the map was computed from "
+      session_.message(tr("cannot reopen the map %1: the %2 set in %3 is now %4, not %5 that the map was computed from "
                  "(compute again)")
                   .arg(name, role, s->folder, qs(s->set.id), id),
               true);
       return true;
     }
   }
-  if (r.map->xy.size() != dst_->set.size) {
-    message(tr("cannot reopen the map %1: it is %2x%3 and the destination %4x%5 (compute again)")
+  if (r.map->xy.size() != session_.dst->set.size) {
+    session_.message(tr("cannot reopen the map %1: it is %2x%3 and the destination %4x%5 (compute again)")
                 .arg(name)
                 .arg(r.map->xy.cols)
                 .arg(r.map->xy.rows)
-                .arg(dst_->set.size.width)
-                .arg(dst_->set.size.height),
+                .arg(session_.dst->set.size.width)
+                .arg(session_.dst->set.size.height),
             true);
     return true;
   }
-  const auto& o = r.options;
-  Preset p{tr("as reopened"),
-           qs(veneer::match::method_name(o.match.method)),
-           qs(veneer::match::feature_name(o.match.feature)),
-           o.match.patch,
-           o.match.candidates,
-           o.match.threshold,
-           o.match.iterations,
-           o.match.coherent_threshold,
-           o.match.coherent_smooth,
-           o.match.coherent_guide,
-           o.match.uniformity,
-           o.blend,
-           o.blend_guide,
-           o.match.fast};
-  applyPreset(p);
-  truth_normals_->setChecked(o.truth_normals);
-  for (auto [role, mask] : {std::pair{veneer::io::Role::destination, r.dst_hand}, std::pair{veneer::io::Role::source, r.src_hand}}) {
-    auto s = setFor(role);
-    if (mask.empty() || mask.size() != s->set.size) continue;
-    s->hand_mask = mask;
-    handMaskChanged(role);
-  }
-  given_map_ = r.map;
-  reopened_folder_ = r.entry.folder;
-  if (computing_) {
-    rerun_ = true;  // the transfer cancelled when the reopening began has not ended yet: after it
-    return true;
-  }
-  startTransfer();
+  transfer_.showOptions(r.options);
+  for (auto [role, mask] :
+       {std::pair{veneer::io::Role::destination, r.dst_hand}, std::pair{veneer::io::Role::source, r.src_hand}})
+    segmentation_.restoreHandMask(role, mask);
+  transfer_.repaintThrough(r.map, r.entry.folder);
+  // the transfer cancelled when the reopening began may not have ended yet: then after it
+  transfer_.runOrRerun();
+  return true;
+}
+
+bool MapLibrary::reopenFailed(const QString& folder, const QString& error) {
+  if (!reopen_ || (folder != reopen_->entry.destination && folder != reopen_->entry.source)) return false;
+  reopen_.reset();
+  session_.message(tr("cannot reopen the map: %1").arg(error), true);
   return true;
 }
 

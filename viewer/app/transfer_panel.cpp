@@ -1,42 +1,25 @@
 // The Transfer panel: the compute settings and the transfer run off the GUI thread.
-#include "main_window.hpp"
-#include "widgets.hpp"
+#include "transfer_panel.hpp"
 
-#include <algorithm>
-#include <cmath>
-
-#include <QApplication>
 #include <QCheckBox>
 #include <QComboBox>
-#include <QDir>
 #include <QDoubleSpinBox>
-#include <QFileDialog>
 #include <QFormLayout>
-#include <QGroupBox>
 #include <QHBoxLayout>
 #include <QLabel>
-#include <QLineEdit>
-#include <QMenuBar>
+#include <QPointer>
 #include <QProgressBar>
 #include <QPushButton>
-#include <QScrollArea>
 #include <QSignalBlocker>
 #include <QSpinBox>
 #include <QToolButton>
-#include <QSplitter>
-#include <QStandardPaths>
-#include <QStatusBar>
-#include <QTabWidget>
-#include <QTreeWidget>
 #include <QVBoxLayout>
 #include <QtConcurrent/QtConcurrentRun>
 
-#include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
-#include <opencv2/videoio.hpp>
 
-#include "veneer/io/image_io.hpp"
 #include "veneer/ps/segmentation.hpp"
+#include "widgets.hpp"
 
 namespace veneer::app {
 
@@ -44,9 +27,8 @@ namespace {
 const char* kMethods[] = {"combined", "coherent", "linear", "flann", "candidates", "patchmatch", "regiongrow", "baseline"};
 }  // namespace
 
-QWidget* MainWindow::buildTransferPanel() {
-  auto* box = new QGroupBox(tr("Transfer"));
-  auto* outer = new QVBoxLayout(box);
+TransferPanel::TransferPanel(Session& session, QWidget* parent) : QGroupBox(tr("Transfer"), parent), session_(session) {
+  auto* outer = new QVBoxLayout(this);
   auto* top = new QFormLayout;
   outer->addLayout(top);
   preset_ = new QComboBox;
@@ -150,22 +132,22 @@ QWidget* MainWindow::buildTransferPanel() {
   form->addRow(tr("Segmentation"), seg_method_);
   form->addRow(tr("Seg. threshold"), seg_threshold_);
   form->addRow(rect_label_);
-  compute_btn_ = button(tr("Compute"), "compute", box);
-  cancel_btn_ = button(tr("Cancel"), "cancelTransfer", box);
+  compute_btn_ = button(tr("Compute"), "compute", this);
+  cancel_btn_ = button(tr("Cancel"), "cancelTransfer", this);
   cancel_btn_->setEnabled(false);
-  connect(compute_btn_, &QPushButton::clicked, this, &MainWindow::startTransfer);
-  connect(cancel_btn_, &QPushButton::clicked, this, &MainWindow::cancelTransfer);
+  connect(compute_btn_, &QPushButton::clicked, this, &TransferPanel::startTransfer);
+  connect(cancel_btn_, &QPushButton::clicked, this, &TransferPanel::cancelTransfer);
   for (QComboBox* c : {method_, feature_, patch_})
-    connect(c, &QComboBox::currentIndexChanged, this, &MainWindow::matchOptionChanged);
+    connect(c, &QComboBox::currentIndexChanged, this, &TransferPanel::matchOptionChanged);
   for (QSpinBox* b : {candidates_, iterations_, blend_})
-    connect(b, &QSpinBox::valueChanged, this, &MainWindow::matchOptionChanged);
+    connect(b, &QSpinBox::valueChanged, this, &TransferPanel::matchOptionChanged);
   for (QDoubleSpinBox* b : {threshold_, coherent_threshold_, coherent_smooth_, coherent_guide_, uniformity_, blend_guide_})
-    connect(b, &QDoubleSpinBox::valueChanged, this, &MainWindow::matchOptionChanged);
-  connect(fast_, &QCheckBox::toggled, this, &MainWindow::matchOptionChanged);
+    connect(b, &QDoubleSpinBox::valueChanged, this, &TransferPanel::matchOptionChanged);
+  connect(fast_, &QCheckBox::toggled, this, &TransferPanel::matchOptionChanged);
   // segmentation and truth normals change the prepared objects: prepared again, then the map
-  connect(truth_normals_, &QCheckBox::toggled, this, &MainWindow::matchOptionChanged);
-  connect(seg_method_, &QComboBox::currentIndexChanged, this, &MainWindow::matchOptionChanged);
-  connect(seg_threshold_, &QDoubleSpinBox::valueChanged, this, &MainWindow::matchOptionChanged);
+  connect(truth_normals_, &QCheckBox::toggled, this, &TransferPanel::matchOptionChanged);
+  connect(seg_method_, &QComboBox::currentIndexChanged, this, &TransferPanel::matchOptionChanged);
+  connect(seg_threshold_, &QDoubleSpinBox::valueChanged, this, &TransferPanel::matchOptionChanged);
   connect(preset_, &QComboBox::currentIndexChanged, this, [this](int i) {
     if (i >= 0 && i < static_cast<int>(presets().size())) applyPreset(presets()[i]);
   });
@@ -194,12 +176,17 @@ QWidget* MainWindow::buildTransferPanel() {
   transfer_label_->setWordWrap(true);
   bottom->addRow(transfer_bar_);
   bottom->addRow(transfer_label_);
-  return box;
+  connect(&transfer_watch_, &QFutureWatcher<void>::finished, this, &TransferPanel::onTransferDone);
+}
+
+TransferPanel::~TransferPanel() {
+  cancel_ = true;
+  transfer_watch_.waitForFinished();
 }
 
 
 // The presets: the CLI's defaults first (what the flow computes with).
-const std::vector<MainWindow::Preset>& MainWindow::presets() {
+const std::vector<TransferPanel::Preset>& TransferPanel::presets() {
   static const std::vector<Preset> list = [] {
     const veneer::match::MatchOptions m;
     const veneer::pipeline::TransferOptions t;
@@ -219,7 +206,7 @@ const std::vector<MainWindow::Preset>& MainWindow::presets() {
   return list;
 }
 
-void MainWindow::applyPreset(const Preset& p) {
+void TransferPanel::applyPreset(const Preset& p) {
   applying_preset_ = true;
   {
     // one recomputation for the whole preset, not one per field
@@ -246,20 +233,20 @@ void MainWindow::applyPreset(const Preset& p) {
 
 // ---------------------------------------------------------------- transfer
 
-void MainWindow::startTransfer() {
+void TransferPanel::startTransfer() {
   if (computing_) return;
   // a library map reopened: repainted through it, not matched (this run only)
   std::shared_ptr<const veneer::match::Map> given = std::move(given_map_);
   given_map_.reset();
-  if (!dst_ || !src_) {
-    message(tr("load a destination and a source set first"), true);
+  if (!session_.dst || !session_.src) {
+    session_.message(tr("load a destination and a source set first"), true);
     return;
   }
   veneer::pipeline::TransferOptions options;
   auto method = veneer::match::parse_method(method_->currentText().toStdString());
   auto feature = veneer::match::parse_feature(feature_->currentText().toStdString());
   if (!method || !feature) {
-    message(qs(!method ? method.message() : feature.message()), true);
+    session_.message(qs(!method ? method.message() : feature.message()), true);
     return;
   }
   options.match.method = *method;
@@ -277,7 +264,7 @@ void MainWindow::startTransfer() {
   options.blend = blend_->value();
   options.blend_guide = blend_guide_->value();
   if (auto ok = options.check(); !ok) {
-    message(qs(ok.message()), true);
+    session_.message(qs(ok.message()), true);
     return;
   }
   veneer::ps::SegmentOptions seg;
@@ -287,7 +274,7 @@ void MainWindow::startTransfer() {
   seg.threshold = seg_threshold_->value();
   if (!seg_rect_.isEmpty()) seg.rect = cv::Rect(seg_rect_.x(), seg_rect_.y(), seg_rect_.width(), seg_rect_.height());
   const bool custom_segmentation = seg.method != veneer::ps::SegmentMethod::automatic || seg.rect.has_value();
-  const cv::Mat dst_hand = dst_->hand_mask.clone(), src_hand = src_->hand_mask.clone();
+  const cv::Mat dst_hand = session_.dst->hand_mask.clone(), src_hand = session_.src->hand_mask.clone();
   running_ = RunSettings{options, dst_hand, src_hand, given ? reopened_folder_ : QString()};
 
   computing_ = true;
@@ -296,22 +283,23 @@ void MainWindow::startTransfer() {
   cancel_btn_->setEnabled(true);
   transfer_bar_->setValue(0);
   transfer_label_->setText(tr("computing…"));
-  step_.start("compute", tr("computing the map (%1)").arg(method_->currentText()));
-  step_.update(0);
-  showStep();
+  session_.status.step().start("compute", tr("computing the map (%1)").arg(method_->currentText()));
+  session_.status.step().update(0);
+  session_.status.showStep();
   transfer_error_.clear();
-  relight_error_.clear();
+  session_.relight_error.clear();
+  pending_relight_error_.clear();
   pending_result_.reset();
   pending_relighter_.reset();
-  auto dst = dst_, src = src_;
+  auto dst = session_.dst, src = session_.src;
   // the prepared objects are kept while what made them stays the same
   const QString key = preparationKey();
   auto cached = key == prepared_key_ ? prepared_ : nullptr;
-  auto relighter = cached ? relighter_ : nullptr;
+  auto relighter = cached ? session_.relighter : nullptr;
   // the same matching options as the map shown (only the blend changed, or
   // Compute again): repainted from that map, not matched again
   std::shared_ptr<const veneer::pipeline::TransferResult> previous =
-      !given && cached && result_ && result_->match_options == options.match ? result_ : nullptr;
+      !given && cached && session_.result && session_.result->match_options == options.match ? session_.result : nullptr;
   if (previous)
     ++repaint_only_runs_;
   else if (cached)
@@ -322,9 +310,10 @@ void MainWindow::startTransfer() {
   pending_result_picture_ = cv::Mat();
   pending_result_image_ = QImage();
   pending_relit_ = pending_relit_source_ = cv::Mat();
-  const cv::Vec3d light = relight_pad_->direction();
-  QPointer<MainWindow> self(this);
-  transfer_watch_.setFuture(QtConcurrent::run(job_pool(), [this, self, dst, src, options, seg, custom_segmentation, dst_hand, src_hand, cached,
+  const cv::Vec3d light = session_.light();
+  QPointer<TransferPanel> self(this);
+  transfer_watch_.setFuture(QtConcurrent::run(job_pool(), [this, self, dst, src, options, seg, custom_segmentation,
+                                                           dst_hand, src_hand, cached,
                                                previous, given, relighter, light] {
     veneer::Progress progress;
     progress.cancel = &cancel_;
@@ -336,8 +325,8 @@ void MainWindow::startTransfer() {
           self->transfer_bar_->setValue(static_cast<int>(f * 100));
           self->transfer_label_->setText(s);
           if (self->computing_) {
-            self->step_.update(f, tr("computing the map: %1").arg(s));
-            self->showStep();
+            self->session_.status.step().update(f, tr("computing the map: %1").arg(s));
+            self->session_.status.showStep();
           }
         });
     };
@@ -394,7 +383,7 @@ void MainWindow::startTransfer() {
       if (fitted) {
         pending_relighter_ = std::make_shared<veneer::repaint::Relighter>(std::move(*fitted));
       } else {
-        relight_error_ = qs(fitted.message());
+        pending_relight_error_ = qs(fitted.message());
       }
     }
     if (pending_relighter_) {
@@ -405,7 +394,7 @@ void MainWindow::startTransfer() {
   }));
 }
 
-void MainWindow::cancelTransfer() {
+void TransferPanel::cancelTransfer() {
   if (!computing_) return;
   cancel_ = true;
   transfer_label_->setText(tr("cancelling…"));
@@ -413,9 +402,9 @@ void MainWindow::cancelTransfer() {
 
 // What the prepared objects depend on: the sets loaded, truth normals, the
 // segmentation settings. Anything else is a matching option.
-QString MainWindow::preparationKey() const {
+QString TransferPanel::preparationKey() const {
   return QString("%1|%2|%3|%4|%5,%6,%7,%8|%9,%10")
-      .arg(sets_loaded_)  // a set (re)loaded: everything is prepared again
+      .arg(session_.sets_loaded)  // a set (re)loaded: everything is prepared again
       .arg(truth_normals_->isChecked())
       .arg(seg_method_->currentText())
       .arg(seg_threshold_->value())
@@ -423,15 +412,19 @@ QString MainWindow::preparationKey() const {
       .arg(seg_rect_.y())
       .arg(seg_rect_.width())
       .arg(seg_rect_.height())
-      .arg(dst_ ? dst_->hand_version : 0)
-      .arg(src_ ? src_->hand_version : 0);
+      .arg(session_.dst ? session_.dst->hand_version : 0)
+      .arg(session_.src ? session_.src->hand_version : 0);
 }
 
 // An option changed: once a transfer has been shown, recompute (the map alone
 // when only matching options changed, the objects kept); while one runs,
 // once more when it ends.
-void MainWindow::matchOptionChanged() {
-  if (!live_update_ || !live_update_->isChecked() || !result_) return;
+void TransferPanel::matchOptionChanged() {
+  if (!live_update_ || !live_update_->isChecked() || !session_.result) return;
+  runOrRerun();
+}
+
+void TransferPanel::runOrRerun() {
   if (computing_) {
     rerun_ = true;
     return;
@@ -439,9 +432,43 @@ void MainWindow::matchOptionChanged() {
   startTransfer();
 }
 
-void MainWindow::onTransferDone() {
+void TransferPanel::handMaskChanged(const QString& hand) {
+  rect_label_->setText(hand);
+  matchOptionChanged();  // a new object outline: prepared again and matched
+}
+
+void TransferPanel::showOptions(const veneer::pipeline::TransferOptions& o) {
+  Preset p{tr("as reopened"),
+           qs(veneer::match::method_name(o.match.method)),
+           qs(veneer::match::feature_name(o.match.feature)),
+           o.match.patch,
+           o.match.candidates,
+           o.match.threshold,
+           o.match.iterations,
+           o.match.coherent_threshold,
+           o.match.coherent_smooth,
+           o.match.coherent_guide,
+           o.match.uniformity,
+           o.blend,
+           o.blend_guide,
+           o.match.fast};
+  applyPreset(p);
+  truth_normals_->setChecked(o.truth_normals);
+}
+
+void TransferPanel::repaintThrough(std::shared_ptr<const veneer::match::Map> map, const QString& library_folder) {
+  given_map_ = std::move(map);
+  reopened_folder_ = library_folder;
+}
+
+void TransferPanel::adoptPrepared(std::shared_ptr<const veneer::pipeline::PreparedPair> pair) {
+  prepared_ = std::move(pair);
+  prepared_key_ = preparationKey();
+}
+
+void TransferPanel::onTransferDone() {
   computing_ = false;
-  step_.finish();
+  session_.status.step().finish();
   compute_btn_->setEnabled(true);
   cancel_btn_->setEnabled(false);
   if (pending_prepared_) {
@@ -452,11 +479,12 @@ void MainWindow::onTransferDone() {
   if (rerun_) {  // the options moved on while this ran: show the latest
     rerun_ = false;
     if (pending_result_) {
-      result_ = pending_result_;
-      shown_ = running_;
-      relighter_ = pending_relighter_;
-      result_picture_ = pending_result_picture_;
-      result_image_ = pending_result_image_;
+      session_.result = pending_result_;
+      session_.shown = running_;
+      session_.relighter = pending_relighter_;
+      session_.relight_error = pending_relight_error_;
+      session_.result_picture = pending_result_picture_;
+      session_.result_image = pending_result_image_;
     }
     startTransfer();
     return;
@@ -464,56 +492,44 @@ void MainWindow::onTransferDone() {
   if (!pending_result_) {
     const bool cancelled = cancel_.load();
     transfer_label_->setText(cancelled ? tr("cancelled") : tr("failed: %1").arg(transfer_error_));
-    message(cancelled ? tr("transfer cancelled") : tr("transfer failed: %1").arg(transfer_error_), !cancelled);
+    session_.message(cancelled ? tr("transfer cancelled") : tr("transfer failed: %1").arg(transfer_error_), !cancelled);
     transfer_bar_->setValue(0);
-    step_label_->setText(transfer_label_->text());
-    showStep();
+    session_.status.say(transfer_label_->text());
+    session_.status.showStep();
     return;
   }
-  result_ = pending_result_;
-  shown_ = running_;
-  relighter_ = pending_relighter_;
+  session_.result = pending_result_;
+  session_.shown = running_;
+  session_.relighter = pending_relighter_;
+  session_.relight_error = pending_relight_error_;
   transfer_bar_->setValue(100);
   QString text = tr("done");
-  if (result_->quality) {
-    const auto& q = *result_->quality;
+  if (session_.result->quality) {
+    const auto& q = *session_.result->quality;
     text += tr(" · coverage %1% · coherence %2%").arg(q.coverage * 100, 0, 'f', 1).arg(q.coherence * 100, 0, 'f', 1);
     if (q.normal_mean_deg) text += tr(" · normals %1°").arg(*q.normal_mean_deg, 0, 'f', 2);
   }
-  if (result_->map_given)
+  if (session_.result->map_given)
     text += tr(" · map kept");
   else
-    text += tr(" · map %1 ms").arg(result_->match_seconds * 1000, 0, 'f', 1);
+    text += tr(" · map %1 ms").arg(session_.result->match_seconds * 1000, 0, 'f', 1);
   transfer_label_->setText(text);
-  if (!shown_.reopened.isEmpty())
-    message(tr("map reopened from the library, not matched again: %1").arg(shown_.reopened));
+  if (!session_.shown.reopened.isEmpty())
+    session_.message(tr("map reopened from the library, not matched again: %1").arg(session_.shown.reopened));
   else
-    message(tr("transfer done (%1)").arg(method_->currentText()));
-  showStep();
-  step_label_->setText((shown_.reopened.isEmpty() ? tr("map computed: ") : tr("map reopened from the library: ")) +
+    session_.message(tr("transfer done (%1)").arg(method_->currentText()));
+  session_.status.showStep();
+  session_.status.say((session_.shown.reopened.isEmpty() ? tr("map computed: ") : tr("map reopened from the library: ")) +
                        text);
-  result_picture_ = pending_result_picture_;
-  result_image_ = pending_result_image_;
+  session_.result_picture = pending_result_picture_;
+  session_.result_image = pending_result_image_;
   if (pending_session_) {
-    live_session_ = std::move(pending_session_);
-    live_refusal_.clear();
+    session_.live_session = std::move(pending_session_);
+    session_.live_refusal.clear();
   }
   pending_session_.reset();
-  if (look_what_->currentIndex() != 0)
-    look_what_->setCurrentIndex(0);  // refreshes the views
-  else
-    refreshLook();
-  if (relighter_ && !pending_relit_.empty() && pending_relit_direction_ == relight_pad_->direction()) {
-    // the worker rendered it for this direction
-    relight_view_->setImage(to_qimage(pending_relit_));
-    relight_src_view_->setImage(to_qimage(pending_relit_source_));
-    updateRelightLabel(pending_relit_direction_);
-  } else {
-    refreshRelight();
-  }
-  if (!result_->map_given) saveMapToLibrary();
-  flowMaybeGoLive();
-  flowMaybeFullResolution();  // live on a live-size map: the full resolution behind it
+  // the views, the library, the live repaint and the full resolution follow
+  emit resultShown(to_qimage(pending_relit_), to_qimage(pending_relit_source_), pending_relit_direction_);
 }
 
 }  // namespace veneer::app

@@ -10,7 +10,11 @@
 
 #include <algorithm>
 
+#include "veneer/io/image_io.hpp"
+
 namespace veneer::app {
+
+cv::Mat picture_of(const cv::Mat& linear) { return linear.empty() ? cv::Mat() : io::tonemap_picture(linear); }
 
 void gui_work(const std::function<void()>& f) { tbb::this_task_arena::isolate(f); }
 

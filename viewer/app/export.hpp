@@ -1,0 +1,46 @@
+#pragma once
+// The exports: the map, the result pictures and the relight sweep video, each
+// a job off the GUI thread told in the status line, cancellable there, and
+// written whole or not at all.
+#include <atomic>
+#include <functional>
+
+#include <QFuture>
+#include <QObject>
+
+#include "session.hpp"
+
+class QWidget;
+
+namespace veneer::app {
+
+class ExportActions : public QObject {
+  Q_OBJECT
+ public:
+  // `window` is the parent of the dialogs asking where to write.
+  ExportActions(Session& session, QWidget* window);
+  ~ExportActions() override;
+  // The menu's entries: ask for the place, then write.
+  void exportMap();
+  void exportResults();
+  void exportRelightVideo();
+  // Without a dialog.
+  void exportMapTo(const QString& dir);
+  void exportResultsTo(const QString& dir);
+  void exportRelightVideoTo(const QString& file);
+  bool exporting() const { return job_running_; }
+  void cancel() { job_cancel_ = true; }
+
+ private:
+  // Runs `job` off the GUI thread as a step of the status line.
+  void runJob(const QString& kind, const QString& text, std::function<veneer::Status(const veneer::Progress&)> job,
+              const QString& done);
+
+  Session& session_;
+  QWidget* window_;
+  std::atomic<bool> job_cancel_{false};
+  bool job_running_ = false;
+  QFuture<void> job_future_;
+};
+
+}  // namespace veneer::app

@@ -1,0 +1,217 @@
+#include "live_tab.hpp"
+
+#include <QCheckBox>
+#include <QDoubleSpinBox>
+#include <QHBoxLayout>
+#include <QLabel>
+#include <QPointer>
+#include <QPushButton>
+#include <QSignalBlocker>
+#include <QVBoxLayout>
+#include <QtConcurrent/QtConcurrentRun>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "widgets.hpp"
+
+namespace veneer::app {
+
+LiveTab::LiveTab(Session& session, QWidget* parent) : QWidget(parent), session_(session) {
+  live_pool_.setMaxThreadCount(1);
+  live_pool_.setExpiryTimeout(-1);  // the live view's thread stays while the window lives
+  auto* layout = new QVBoxLayout(this);
+  auto* top = new QHBoxLayout;
+  live_btn_ = button(tr("Start live view"), "liveToggle", this);
+  live_btn_->setCheckable(true);
+  fps_ = new QDoubleSpinBox;
+  fps_->setObjectName("liveFps");
+  fps_->setRange(1, 60);
+  fps_->setValue(15);
+  connect(live_btn_, &QPushButton::toggled, this, [this](bool on) {
+    live_btn_->setText(on ? tr("Stop live view") : tr("Start live view"));
+    if (on) {
+      live_clock_.start();
+      live_frames_ = 0;
+      session_.rig.startLive(fps_->value());
+    } else {
+      session_.rig.stopLive();
+    }
+  });
+  top->addWidget(live_btn_);
+  auto* live_cap_src = button(tr("Capture source"), "liveCaptureSource", this);
+  auto* live_cap_dst = button(tr("Capture destination"), "liveCaptureDestination", this);
+  connect(live_cap_src, &QPushButton::clicked, this, [this] { emit captureRequested(veneer::io::Role::source); });
+  connect(live_cap_dst, &QPushButton::clicked, this, [this] { emit captureRequested(veneer::io::Role::destination); });
+  top->addWidget(live_cap_src);
+  top->addWidget(live_cap_dst);
+  top->addWidget(new QLabel(tr("fps")));
+  top->addWidget(fps_);
+  top->addWidget(new QLabel(tr("Lamps:")));
+  lamp_row_ = new QHBoxLayout;
+  top->addLayout(lamp_row_);
+  top->addStretch();
+  live_label_ = new QLabel;
+  live_label_->setObjectName("liveStatus");
+  top->addWidget(live_label_);
+  layout->addLayout(top);
+  auto* row = new QHBoxLayout;
+  live_src_view_ = new ImageView(tr("source, live"));
+  live_dst_view_ = new ImageView(tr("destination, repainted live"));
+  row->addWidget(live_src_view_, 3);
+  row->addWidget(live_dst_view_, 3);
+  auto* pad_box = new QVBoxLayout;
+  pad_box->addWidget(new QLabel(tr("hand-held lamp\n(simulated rig)")));
+  hand_pad_ = new SpherePad;
+  hand_pad_->setObjectName("handLamp");
+  connect(hand_pad_, &SpherePad::directionChanged, this, [this](cv::Vec3d d) {
+    // The lamp 0.6 m from the object in the chosen direction.
+    session_.rig.moveHandLamp(d * 0.6);
+  });
+  pad_box->addWidget(hand_pad_);
+  pad_box->addStretch();
+  row->addLayout(pad_box, 1);
+  layout->addLayout(row, 1);
+  RigLink& rig = session_.rig;
+  connect(&rig, &RigLink::liveFrame, this, &LiveTab::onLiveFrame);
+  connect(&rig, &RigLink::statusUpdated, this, [this](veneer::rig::RigStatus) { updateLampBoxes(); });
+  connect(&rig, &RigLink::rigEvent, this, [this](const veneer::rig::Event& e) {
+    if (e.kind != veneer::rig::Event::Kind::lamp_state) return;
+    for (size_t i = 0; i < lamp_boxes_.size() && i < e.lamps_on.size(); ++i) {
+      QSignalBlocker block(lamp_boxes_[i]);
+      lamp_boxes_[i]->setChecked(e.lamps_on[i]);
+    }
+  });
+}
+
+LiveTab::~LiveTab() { live_pool_.waitForDone(); }
+
+bool LiveTab::isLive() const { return live_btn_->isChecked(); }
+
+void LiveTab::startLive() { live_btn_->setChecked(true); }
+
+void LiveTab::updateLampBoxes() {
+  QStringList names, tips;
+  const LoadedSet* set = session_.dst ? session_.dst.get() : session_.src.get();
+  if (set && !set->set.lights.empty()) {
+    for (const auto& l : set->set.lights) {
+      names << QString::number(l.index + 1);
+      tips << tr("lamp %1 (%2), direction (%3, %4, %5)")
+                  .arg(l.index + 1)
+                  .arg(qs(l.lamp_id))
+                  .arg(l.direction[0], 0, 'f', 2)
+                  .arg(l.direction[1], 0, 'f', 2)
+                  .arg(l.direction[2], 0, 'f', 2);
+    }
+  } else {
+    for (int i = 0; i < session_.rig.lastStatus().lamp_count; ++i) {
+      names << QString::number(i + 1);
+      tips << tr("rig lamp %1").arg(i + 1);
+    }
+  }
+  if (static_cast<int>(lamp_boxes_.size()) == names.size()) {
+    for (size_t i = 0; i < lamp_boxes_.size(); ++i) lamp_boxes_[i]->setToolTip(tips[static_cast<int>(i)]);
+    return;
+  }
+  qDeleteAll(lamp_boxes_);
+  lamp_boxes_.clear();
+  for (int i = 0; i < names.size(); ++i) {
+    auto* box = new QCheckBox(names[i]);
+    box->setObjectName(QString("lamp%1").arg(i + 1));
+    box->setToolTip(tips[i]);
+    lamp_boxes_.push_back(box);
+    lamp_row_->addWidget(box);
+    connect(box, &QCheckBox::toggled, this, [this] {
+      std::vector<bool> on;
+      for (auto* b : lamp_boxes_) on.push_back(b->isChecked());
+      // the rig takes one entry per lamp of its own
+      const int lamps = session_.rig.lastStatus().lamp_count;
+      if (lamps > 0) on.resize(static_cast<size_t>(lamps), false);
+      session_.rig.setLamps(on, 254);
+    });
+  }
+}
+
+// A live frame is decoded, registered and repainted off the GUI thread (one
+// at a time, on the live view's own thread; frames arriving meanwhile wait as
+// the newest one only); the GUI thread only shows the pictures made there.
+void LiveTab::onLiveFrame(const veneer::rig::LiveFrame& frame) {
+  if (live_busy_) {
+    live_next_ = frame;  // coalesced: an older waiting frame is dropped
+    return;
+  }
+  live_busy_ = true;
+  const auto& live = session_.live_session;
+  auto session = live && live->ready() && session_.live_refusal.isEmpty() ? live : nullptr;
+  QPointer<LiveTab> self(this);
+  (void)QtConcurrent::run(&live_pool_, [self, frame, session] {
+    auto out = std::make_shared<LiveOut>();
+    out->seq = frame.seq;
+    out->frame = cv::imdecode(frame.jpeg, cv::IMREAD_COLOR);
+    if (!out->frame.empty()) {
+      cv::Mat shown = out->frame;
+      if (session) {
+        auto r = session->process(out->frame);
+        if (!r) {
+          out->refusal = qs(r.message());
+        } else {
+          out->repainted = r->repainted;
+          out->repainted_image = to_qimage(r->repainted);
+          // where the source was found: its outline over the frame, green when tracked, red when lost
+          shown = out->frame.clone();
+          if (r->outline.size() >= 3) {
+            std::vector<cv::Point> poly;
+            for (const cv::Point2f& p : r->outline) poly.emplace_back(cvRound(p.x), cvRound(p.y));
+            cv::polylines(shown, std::vector<std::vector<cv::Point>>{poly}, true,
+                          r->lost ? cv::Scalar(0, 0, 255) : cv::Scalar(0, 220, 0), std::max(1, shown.cols / 500),
+                          cv::LINE_AA);
+          }
+          out->state = r->lost ? tr("LOST - hold still / recapture (match %1)").arg(r->quality, 0, 'f', 2)
+                               : tr("tracked, match %1").arg(r->quality, 0, 'f', 2);
+        }
+      }
+      out->shown_image = to_qimage(shown);
+    }
+    QMetaObject::invokeMethod(self.data(), [self, out, session] {
+      if (self) self->showLiveFrame(*out, session.get());
+    });
+  });
+}
+
+void LiveTab::showLiveFrame(const LiveOut& out, const veneer::repaint::LiveSession* session) {
+  live_busy_ = false;
+  if (out.frame.empty()) {
+    session_.message(tr("live view: a frame that is not a JPEG was dropped"), true);
+  } else {
+    live_frame_ = out.frame;
+    ++live_frames_;
+    if (live_clock_.isValid() && live_clock_.elapsed() > 0) live_fps_ = live_frames_ * 1000.0 / live_clock_.elapsed();
+    // the session may have been replaced meanwhile (a new map): its verdicts only for itself
+    const bool current = session && session == session_.live_session.get();
+    if (current && !out.refusal.isEmpty() && session_.live_refusal.isEmpty()) {
+      // the live view's framing can't be related to the stills: said once, no wrong picture
+      session_.live_refusal = out.refusal;
+      session_.message(tr("live view: %1").arg(session_.live_refusal), true);
+    }
+    if (current && !out.repainted.empty()) {
+      live_repainted_ = out.repainted;
+      live_dst_view_->setImage(out.repainted_image);
+    }
+    live_src_view_->setImage(out.shown_image);
+    const bool repainting = session_.live_session && session_.live_refusal.isEmpty();
+    live_label_->setText(tr("frame %1 · %2 fps").arg(out.seq).arg(live_fps_, 0, 'f', 1) +
+                         (out.state.isEmpty() || !current ? QString() : " · " + out.state));
+    if (!session_.status.step().running())
+      session_.status.say((repainting ? tr("live repaint · ")
+                                       : session_.live_session ? tr("live view (framing not related to the stills) · ")
+                                                       : tr("live view (no map yet) · ")) +
+                           live_label_->text());
+  }
+  if (live_next_) {
+    const veneer::rig::LiveFrame next = std::move(*live_next_);
+    live_next_.reset();
+    onLiveFrame(next);
+  }
+}
+
+}  // namespace veneer::app

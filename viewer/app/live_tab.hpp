@@ -1,0 +1,70 @@
+#pragma once
+// The Live tab: the rig's live view beside the destination repainted live
+// (each frame decoded, registered and repainted on the tab's own thread), the
+// lamps of the rig as check boxes, and the simulated rig's hand-held lamp.
+#include <optional>
+#include <vector>
+
+#include <QElapsedTimer>
+#include <QThreadPool>
+#include <QWidget>
+
+#include "image_view.hpp"
+#include "session.hpp"
+#include "sphere_pad.hpp"
+
+class QCheckBox;
+class QDoubleSpinBox;
+class QHBoxLayout;
+class QLabel;
+class QPushButton;
+
+namespace veneer::app {
+
+class LiveTab : public QWidget {
+  Q_OBJECT
+ public:
+  explicit LiveTab(Session& session, QWidget* parent = nullptr);
+  ~LiveTab() override;
+  bool isLive() const;
+  void startLive();  // as the Start button does
+  // One box per lamp: the lamps of the set loaded (its manifest's light
+  // list), else the rig's lamp count; none before either is known.
+  void updateLampBoxes();
+  cv::Mat lastFrame() const { return live_frame_; }
+  cv::Mat lastRepaintedFrame() const { return live_repainted_; }
+  int framesShown() const { return live_frames_; }
+  double fps() const { return live_fps_; }
+
+ signals:
+  void captureRequested(veneer::io::Role role);
+
+ private:
+  // What the live view's thread makes of one frame, for the GUI to show.
+  struct LiveOut {
+    uint64_t seq = 0;
+    cv::Mat frame, repainted;  // empty frame: not a JPEG
+    QImage shown_image, repainted_image;
+    QString state, refusal;
+  };
+  void onLiveFrame(const veneer::rig::LiveFrame& frame);
+  void showLiveFrame(const LiveOut& out, const veneer::repaint::LiveSession* session);
+
+  Session& session_;
+  QThreadPool live_pool_;  // the live frames' one worker thread (not the pool computes and exports queue in)
+  bool live_busy_ = false;  // a frame is being processed there
+  std::optional<veneer::rig::LiveFrame> live_next_;  // the newest frame that came meanwhile
+  int live_frames_ = 0;
+  double live_fps_ = 0;
+  QElapsedTimer live_clock_;
+  cv::Mat live_frame_, live_repainted_;
+  QPushButton* live_btn_ = nullptr;
+  QDoubleSpinBox* fps_ = nullptr;
+  QHBoxLayout* lamp_row_ = nullptr;
+  std::vector<QCheckBox*> lamp_boxes_;
+  QLabel* live_label_ = nullptr;
+  ImageView *live_src_view_ = nullptr, *live_dst_view_ = nullptr;
+  SpherePad* hand_pad_ = nullptr;
+};
+
+}  // namespace veneer::app
