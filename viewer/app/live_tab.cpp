@@ -202,10 +202,10 @@ void LiveTab::showLiveFrame(const LiveOut& out, const veneer::repaint::LiveSessi
     live_label_->setText(tr("frame %1 · %2 fps").arg(out.seq).arg(live_fps_, 0, 'f', 1) +
                          (out.state.isEmpty() || !current ? QString() : " · " + out.state));
     if (!session_.status.step().running())
-      session_.status.say((repainting ? tr("live repaint · ")
-                                       : session_.live_session ? tr("live view (framing not related to the stills) · ")
-                                                       : tr("live view (no map yet) · ")) +
-                           live_label_->text());
+      session_.status.say((repainting               ? tr("live repaint · ")
+                           : session_.live_session ? tr("live view (framing not related to the stills) · ")
+                                                   : tr("live view (no map yet) · ")) +
+                          live_label_->text());
   }
   if (live_next_) {
     const veneer::rig::LiveFrame next = std::move(*live_next_);

@@ -211,8 +211,8 @@ void LookTab::showOrigin(QPoint p) {
   if (m[0] >= 0) {
     src_view_->setMarkers({{QPointF(m[0], m[1]), QColor(0, 220, 255), false}});
     session_.message(tr("destination (%1, %2) ← source (%3, %4), distance %5")
-                .arg(p.x()).arg(p.y()).arg(m[0], 0, 'f', 0).arg(m[1], 0, 'f', 0)
-                .arg(map.distance.at<float>(p.y(), p.x()), 0, 'g', 3));
+                         .arg(p.x()).arg(p.y()).arg(m[0], 0, 'f', 0).arg(m[1], 0, 'f', 0)
+                         .arg(map.distance.at<float>(p.y(), p.x()), 0, 'g', 3));
   } else {
     src_view_->setMarkers({});
     session_.message(tr("destination (%1, %2) is not mapped").arg(p.x()).arg(p.y()));

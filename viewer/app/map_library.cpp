@@ -122,10 +122,10 @@ bool MapLibrary::open(const QString& map_folder) {
   const QString name = QFileInfo(m.destination).fileName() + " ← " + QFileInfo(m.source).fileName();
   for (auto [folder, role] : {std::pair{m.destination, tr("destination")}, std::pair{m.source, tr("source")}}) {
     if (!QFileInfo::exists(folder + "/set.json")) {
-      session_.message(tr("cannot reopen the map %1: its %2 set %3 is gone from this computer (pull or open it again, "
-                 "then compute)")
-                  .arg(name, role, folder),
-              true);
+      session_.message(tr("cannot reopen the map %1: its %2 set %3 is gone from this computer (pull or open it "
+                          "again, then compute)")
+                           .arg(name, role, folder),
+                       true);
       return false;
     }
   }
@@ -183,21 +183,21 @@ bool MapLibrary::reopenWhenLoaded(const QString& folder, veneer::io::Role role) 
   for (auto [s, id, role] : {std::tuple{session_.dst.get(), r.entry.destination_id, tr("destination")},
                              std::tuple{session_.src.get(), r.entry.source_id, tr("source")}}) {
     if (!id.isEmpty() && qs(s->set.id) != id) {
-      session_.message(tr("cannot reopen the map %1: the %2 set in %3 is now %4, not %5 that the map was computed from "
-                 "(compute again)")
-                  .arg(name, role, s->folder, qs(s->set.id), id),
-              true);
+      session_.message(tr("cannot reopen the map %1: the %2 set in %3 is now %4, not %5 that the map was computed "
+                          "from (compute again)")
+                           .arg(name, role, s->folder, qs(s->set.id), id),
+                       true);
       return true;
     }
   }
   if (r.map->xy.size() != session_.dst->set.size) {
     session_.message(tr("cannot reopen the map %1: it is %2x%3 and the destination %4x%5 (compute again)")
-                .arg(name)
-                .arg(r.map->xy.cols)
-                .arg(r.map->xy.rows)
-                .arg(session_.dst->set.size.width)
-                .arg(session_.dst->set.size.height),
-            true);
+                         .arg(name)
+                         .arg(r.map->xy.cols)
+                         .arg(r.map->xy.rows)
+                         .arg(session_.dst->set.size.width)
+                         .arg(session_.dst->set.size.height),
+                     true);
     return true;
   }
   transfer_.showOptions(r.options);

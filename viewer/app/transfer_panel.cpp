@@ -519,8 +519,8 @@ void TransferPanel::onTransferDone() {
   else
     session_.message(tr("transfer done (%1)").arg(method_->currentText()));
   session_.status.showStep();
-  session_.status.say((session_.shown.reopened.isEmpty() ? tr("map computed: ") : tr("map reopened from the library: ")) +
-                       text);
+  const bool reopened = !session_.shown.reopened.isEmpty();
+  session_.status.say((reopened ? tr("map reopened from the library: ") : tr("map computed: ")) + text);
   session_.result_picture = pending_result_picture_;
   session_.result_image = pending_result_image_;
   if (pending_session_) {
