@@ -148,21 +148,21 @@ int main(int argc, char** argv) {
   veneer::app::MainWindow w({QString("127.0.0.1:%1").arg(port), store + "/token", dpath, spath, dir.path()});
   w.show();
   if (!wait_for([&] { return w.rig().isConnected(); }, 10000)) {
-    std::fprintf(stderr, "bench_app: cannot connect: %s\n", w.lastMessage().toStdString().c_str());
+    std::fprintf(stderr, "bench_app: cannot connect: %s\n", w.status().lastMessage().toStdString().c_str());
     return 1;
   }
   // A first transfer so the live view has a map to repaint through.
-  w.startTransfer();
-  wait_for([&] { return !w.computing(); }, 120000);
+  w.transfer().startTransfer();
+  wait_for([&] { return !w.transfer().computing(); }, 120000);
   w.showTab("Live");
   w.findChild<QPushButton*>("liveToggle")->setChecked(true);
-  wait_for([&] { return w.liveFramesShown() > 5; }, 10000);
+  wait_for([&] { return w.live().framesShown() > 5; }, 10000);
 
   // The stream's own rate with nothing computing, as the peer of the rate below.
-  const int idle_before = w.liveFramesShown();
+  const int idle_before = w.live().framesShown();
   const double idle_t0 = now_ms();
   QTest::qWait(3000);
-  const double idle_fps = (w.liveFramesShown() - idle_before) * 1000.0 / (now_ms() - idle_t0);
+  const double idle_fps = (w.live().framesShown() - idle_before) * 1000.0 / (now_ms() - idle_t0);
 
   // Heartbeat: the longest gap between 10 ms timer ticks is the GUI's worst stall.
   double last = now_ms(), worst = 0;
@@ -176,22 +176,22 @@ int main(int argc, char** argv) {
   w.findChild<QComboBox*>("method")->setCurrentText("linear");
   w.findChild<QComboBox*>("patch")->setCurrentText("3");
   w.findChild<QCheckBox*>("fast")->setChecked(false);
-  const int frames_before = w.liveFramesShown();
+  const int frames_before = w.live().framesShown();
   const double t0 = now_ms();
-  w.startTransfer();
+  w.transfer().startTransfer();
   last = now_ms();
   beat.start(10);
   g_measuring = "live while computing";
   double window_ms = 0;
   int frames = 0;
-  wait_for([&] { return !w.computing() || now_ms() - t0 > 8000; }, 60000);
+  wait_for([&] { return !w.transfer().computing() || now_ms() - t0 > 8000; }, 60000);
   window_ms = now_ms() - t0;
-  frames = w.liveFramesShown() - frames_before;
-  const bool still_computing = w.computing();
+  frames = w.live().framesShown() - frames_before;
+  const bool still_computing = w.transfer().computing();
   beat.stop();
   g_measuring = nullptr;
-  w.cancelTransfer();
-  wait_for([&] { return !w.computing(); }, 60000);
+  w.transfer().cancelTransfer();
+  wait_for([&] { return !w.transfer().computing(); }, 60000);
   std::printf("## Live view while a transfer computes (rig asked for 15 fps, 1024x680 frames; the simulated\n"
               "## rig renders its frames on the same 2 cores as the transfer, a real rig does not)\n\n");
   std::printf("| measure | value | target |\n|---|---|---|\n");
@@ -206,7 +206,7 @@ int main(int argc, char** argv) {
   //    (issue 28: "loading a 10 Mpx set blocks the window about 5 s; export
   //    blocks 2-3 s"). Same heartbeat; the peer is the old synchronous path,
   //    measured in the same run.
-  w.setAutoFlow(false);  // the big set alone: no transfer starts by itself
+  w.capture().setAutoFlow(false);  // the big set alone: no transfer starts by itself
   auto stall_during = [&](const char* what, auto start, auto done) {
     last = now_ms();
     worst = 0;
@@ -220,10 +220,12 @@ int main(int argc, char** argv) {
     g_measuring = nullptr;
     return std::make_pair(worst, total);
   };
-  const auto results_export = stall_during("export results", [&] { w.exportResultsTo(dir.path() + "/export"); },
-                                           [&] { return !w.exporting(); });
-  const auto video_export = stall_during("export video", [&] { w.exportRelightVideoTo(dir.path() + "/relight.avi"); },
-                                         [&] { return !w.exporting(); });
+  const auto results_export =
+      stall_during("export results", [&] { w.exports().exportResultsTo(dir.path() + "/export"); },
+                   [&] { return !w.exports().exporting(); });
+  const auto video_export =
+      stall_during("export video", [&] { w.exports().exportRelightVideoTo(dir.path() + "/relight.avi"); },
+                   [&] { return !w.exports().exporting(); });
   const cv::Size big(3872, 2592);  // 10.0 Mpx
   veneer::io::ImageSet large = *dst;
   for (auto& im : large.images) cv::resize(im, im, big, 0, 0, cv::INTER_LINEAR);
@@ -237,10 +239,11 @@ int main(int argc, char** argv) {
     return 1;
   }
   large = {};
-  const auto load = stall_during("load 10 Mpx", [&] { w.loadSetInBackground(lpath, veneer::io::Role::destination); },
-                                 [&] { return w.loadsRunning() == 0; });
+  const auto load =
+      stall_during("load 10 Mpx", [&] { w.flow().loadSetInBackground(lpath, veneer::io::Role::destination); },
+                   [&] { return w.session().loads_running == 0; });
   const double sync_t = now_ms();
-  w.loadLocalSet(lpath, veneer::io::Role::destination);  // the old way: all on the GUI thread
+  w.flow().loadLocalSet(lpath, veneer::io::Role::destination);  // the old way: all on the GUI thread
   const double sync_load = now_ms() - sync_t;
   std::printf("\n## Longest GUI-thread stall (10 ms heartbeat) while the window works off the GUI thread\n\n");
   std::printf("| job | longest stall ms | job took s | target |\n|---|---|---|---|\n");
@@ -297,7 +300,7 @@ int main(int argc, char** argv) {
   });
   lw.findChild<QPushButton*>("captureSource")->click();
   if (!wait_for([&] { return stored >= 1; }, 1800000)) {
-    std::fprintf(stderr, "bench_app: the source was not stored: %s\n", lw.lastMessage().toStdString().c_str());
+    std::fprintf(stderr, "bench_app: the source was not stored: %s\n", lw.status().lastMessage().toStdString().c_str());
     return 1;
   }
   lw.showTab("Live");
@@ -310,24 +313,24 @@ int main(int argc, char** argv) {
   wait_for(
       [&] {
         const double t = now_ms();
-        if (both_loaded < 0 && lw.destination() && lw.source()) both_loaded = t;
-        if (map_ready < 0 && lw.result() && !lw.computing()) map_ready = t;
-        if (map_ready > 0 && lw.liveFramesShown() > 0 && !lw.lastRepaintedFrame().empty()) first_frame = t;
+        if (both_loaded < 0 && lw.session().dst && lw.session().src) both_loaded = t;
+        if (map_ready < 0 && lw.session().result && !lw.transfer().computing()) map_ready = t;
+        if (map_ready > 0 && lw.live().framesShown() > 0 && !lw.live().lastRepaintedFrame().empty()) first_frame = t;
         return first_frame > 0;
       },
       600000);
-  const cv::Size live_map = lw.result() ? lw.result()->map.xy.size() : cv::Size();
+  const cv::Size live_map = lw.session().result ? lw.session().result->map.xy.size() : cv::Size();
   last = now_ms();
   worst = 0;
   beat.start(10);
   g_measuring = "full resolution behind live";
   const double full_t0 = now_ms();
-  wait_for([&] { return lw.fullResolutionSwaps() > 0 || (!lw.fullResolutionRunning() && now_ms() - full_t0 > 2000); },
+  wait_for([&] { return lw.liveFirst().swaps() > 0 || (!lw.liveFirst().running() && now_ms() - full_t0 > 2000); },
            1800000);
   const double full_s = (now_ms() - full_t0) / 1000;
   beat.stop();
   g_measuring = nullptr;
-  const cv::Size full_map = lw.result() ? lw.result()->map.xy.size() : cv::Size();
+  const cv::Size full_map = lw.session().result ? lw.session().result->map.xy.size() : cv::Size();
   auto since = [&](double t) { return t > 0 ? (t - second_stored) / 1000 : -1.0; };
   std::printf("\n## Live first on a %dx%d simulated rig (whole sets pulled: no reduced pull in the rig API here)\n\n",
               full.width, full.height);
@@ -336,7 +339,7 @@ int main(int argc, char** argv) {
   std::printf("| live-size map ready (%dx%d) | %.2f | |\n", live_map.width, live_map.height, since(map_ready));
   std::printf("| first live repainted frame | %.2f | <= 3 s |\n", since(first_frame));
   std::printf("| full-resolution map swapped in (%dx%d), after the first frame | %.2f (%s) | |\n", full_map.width,
-              full_map.height, full_s, lw.fullResolutionSwaps() > 0 ? "swapped" : "not swapped");
+              full_map.height, full_s, lw.liveFirst().swaps() > 0 ? "swapped" : "not swapped");
   std::printf("| longest GUI stall meanwhile (10 ms heartbeat) | %.1f ms | < 100 ms |\n", worst);
   lw.findChild<QPushButton*>("liveToggle")->setChecked(false);
   big_rig.kill();

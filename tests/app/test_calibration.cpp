@@ -22,8 +22,9 @@ TEST(Viewer, CalibratesLampsFromAChromeSphereSet) {
   QTemporaryDir dir;
   MainWindow w({QString(), QString(), QString(), QString(), dir.path()});
   const QString file = dir.path() + "/lights.json";
-  ASSERT_TRUE(w.calibrateLamps(QString::fromStdString(chrome.string()), file)) << w.lastMessage().toStdString();
-  EXPECT_TRUE(w.lastMessage().contains("12 lamps calibrated")) << w.lastMessage().toStdString();
+  ASSERT_TRUE(w.calibration().calibrateLamps(QString::fromStdString(chrome.string()), file))
+      << w.status().lastMessage().toStdString();
+  EXPECT_TRUE(w.status().lastMessage().contains("12 lamps calibrated")) << w.status().lastMessage().toStdString();
   auto cal = veneer::ps::read_light_calibration(file.toStdString());
   ASSERT_TRUE(cal.ok()) << cal.message();
   EXPECT_EQ(cal->directions.size(), 12u);
@@ -41,7 +42,7 @@ TEST(Viewer, CalibratesLampsFromAChromeSphereSet) {
 
   // Not a sphere set: one clear message, no file.
   const QString bad = dir.path() + "/none.json";
-  EXPECT_FALSE(w.calibrateLamps(dir.path() + "/missing", bad));
-  EXPECT_TRUE(w.lastMessage().startsWith("calibration")) << w.lastMessage().toStdString();
+  EXPECT_FALSE(w.calibration().calibrateLamps(dir.path() + "/missing", bad));
+  EXPECT_TRUE(w.status().lastMessage().startsWith("calibration")) << w.status().lastMessage().toStdString();
   EXPECT_FALSE(QFileInfo::exists(bad));
 }

@@ -72,34 +72,34 @@ TEST(LiveFirst, GoesLiveOnTheLiveSizeMapThenSwapsInTheFullResolution) {
   ASSERT_TRUE(rig.started()) << rig.log().toStdString();
   QTemporaryDir work;
   MainWindow w({QString(), QString(), QString(), QString(), work.path()});
-  w.setLiveWidth(256);
+  w.flow().setLiveWidth(256);
   w.resize(1280, 720);
   w.show();
-  ASSERT_TRUE(w.autoFlow());
+  ASSERT_TRUE(w.capture().autoFlow());
   w.findChild<QLineEdit*>("rigAddress")->setText(rig.endpoint());
   w.findChild<QLineEdit*>("tokenFile")->setText(rig.token_file());
   QTest::mouseClick(w.findChild<QPushButton*>("connect"), Qt::LeftButton);
-  ASSERT_TRUE(wait_for([&] { return w.rig().isConnected(); }, 10000)) << w.lastMessage().toStdString();
+  ASSERT_TRUE(wait_for([&] { return w.rig().isConnected(); }, 10000)) << w.status().lastMessage().toStdString();
   QTest::mouseClick(w.findChild<QPushButton*>("captureSource"), Qt::LeftButton);
-  ASSERT_TRUE(wait_for([&] { return w.source() != nullptr; }, 60000)) << w.lastMessage().toStdString();
+  ASSERT_TRUE(wait_for([&] { return w.session().src != nullptr; }, 60000)) << w.status().lastMessage().toStdString();
   w.showTab("Live");
   QTest::mouseClick(w.findChild<QPushButton*>("liveCaptureDestination"), Qt::LeftButton);
 
   // live on the live-size map first
-  ASSERT_TRUE(wait_for([&] { return w.result() != nullptr && !w.computing(); }, 120000))
-      << w.lastMessage().toStdString();
-  EXPECT_TRUE(w.destination()->live_size);
-  EXPECT_TRUE(w.source()->live_size);
-  EXPECT_EQ(w.destination()->set.size, cv::Size(256, 170));
-  EXPECT_EQ(w.result()->map.xy.size(), cv::Size(256, 170));
-  EXPECT_EQ(w.fullResolutionSwaps(), 0);
+  ASSERT_TRUE(wait_for([&] { return w.session().result != nullptr && !w.transfer().computing(); }, 120000))
+      << w.status().lastMessage().toStdString();
+  EXPECT_TRUE(w.session().dst->live_size);
+  EXPECT_TRUE(w.session().src->live_size);
+  EXPECT_EQ(w.session().dst->set.size, cv::Size(256, 170));
+  EXPECT_EQ(w.session().result->map.xy.size(), cv::Size(256, 170));
+  EXPECT_EQ(w.liveFirst().swaps(), 0);
   // the repaint runs on it (or, on a slow machine, the full resolution was already swapped in)
-  ASSERT_TRUE(wait_for([&] { return w.liveFramesShown() >= 2 && !w.lastRepaintedFrame().empty(); }, 30000))
-      << w.lastMessage().toStdString();
-  if (w.fullResolutionSwaps() == 0) {
-    EXPECT_EQ(w.lastRepaintedFrame().size(), cv::Size(256, 170));
-    EXPECT_TRUE(w.fullResolutionRunning());
-    EXPECT_TRUE(w.fullResolutionLine().startsWith("full resolution")) << w.fullResolutionLine().toStdString();
+  ASSERT_TRUE(wait_for([&] { return w.live().framesShown() >= 2 && !w.live().lastRepaintedFrame().empty(); }, 30000))
+      << w.status().lastMessage().toStdString();
+  if (w.liveFirst().swaps() == 0) {
+    EXPECT_EQ(w.live().lastRepaintedFrame().size(), cv::Size(256, 170));
+    EXPECT_TRUE(w.liveFirst().running());
+    EXPECT_TRUE(w.liveFirst().line().startsWith("full resolution")) << w.liveFirst().line().toStdString();
   }
 
   // the full resolution follows and is swapped in; the GUI keeps its beat
@@ -113,31 +113,31 @@ TEST(LiveFirst, GoesLiveOnTheLiveSizeMapThenSwapsInTheFullResolution) {
     ++ticks;
   });
   beat.start(10);
-  ASSERT_TRUE(wait_for([&] { return w.fullResolutionSwaps() == 1; }, 240000))
-      << w.lastMessage().toStdString() << " / " << w.fullResolutionLine().toStdString();
+  ASSERT_TRUE(wait_for([&] { return w.liveFirst().swaps() == 1; }, 240000))
+      << w.status().lastMessage().toStdString() << " / " << w.liveFirst().line().toStdString();
   beat.stop();
   if (ticks > 0)  // a number, not asserted (bench_app measures it)
     std::printf("longest GUI stall while the full resolution was made and swapped in: %.0f ms\n", worst);
-  EXPECT_FALSE(w.destination()->live_size);
-  EXPECT_EQ(w.result()->map.xy.size(), cv::Size(512, 340));
-  EXPECT_TRUE(w.fullResolutionLine().contains("in use")) << w.fullResolutionLine().toStdString();
-  const int frames = w.liveFramesShown();
-  ASSERT_TRUE(wait_for([&] { return w.liveFramesShown() >= frames + 2; }, 30000));
-  EXPECT_EQ(w.lastRepaintedFrame().size(), cv::Size(512, 340));
+  EXPECT_FALSE(w.session().dst->live_size);
+  EXPECT_EQ(w.session().result->map.xy.size(), cv::Size(512, 340));
+  EXPECT_TRUE(w.liveFirst().line().contains("in use")) << w.liveFirst().line().toStdString();
+  const int frames = w.live().framesShown();
+  ASSERT_TRUE(wait_for([&] { return w.live().framesShown() >= frames + 2; }, 30000));
+  EXPECT_EQ(w.live().lastRepaintedFrame().size(), cv::Size(512, 340));
   w.findChild<QPushButton*>("liveToggle")->setChecked(false);
 
   // the same map as `veneer transfer` makes from the folders
   const QString out = work.path() + "/cli";
-  const std::string cmd = std::string(VENEER_BIN_DIR "/veneer transfer --dst '") + w.destination()->folder.toStdString() +
-                          "' --src '" + w.source()->folder.toStdString() + "' --out '" + out.toStdString() +
-                          "' >/dev/null";
+  const std::string cmd = std::string(VENEER_BIN_DIR "/veneer transfer --dst '") +
+                          w.session().dst->folder.toStdString() + "' --src '" + w.session().src->folder.toStdString() +
+                          "' --out '" + out.toStdString() + "' >/dev/null";
   const int status = std::system(cmd.c_str());
   ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << cmd;
   auto cli = veneer::match::read_map((out + "/map.pfm").toStdString());
   ASSERT_TRUE(cli) << cli.message();
-  ASSERT_EQ(cli->xy.size(), w.result()->map.xy.size());
+  ASSERT_EQ(cli->xy.size(), w.session().result->map.xy.size());
   cv::Mat diff;
-  cv::absdiff(cli->xy, w.result()->map.xy, diff);
+  cv::absdiff(cli->xy, w.session().result->map.xy, diff);
   const double same = 1.0 - static_cast<double>(cv::countNonZero(diff.reshape(1) > 0.01)) / (diff.total() * 2);
   EXPECT_GT(same, 0.99) << "share of map coordinates equal to the CLI's";
 }

@@ -121,17 +121,19 @@ std::unique_ptr<MainWindow> open_pair(const QTemporaryDir& dir) {
   QString dst, src;
   write_pair(dir.path(), dst, src);
   auto w = std::make_unique<MainWindow>(MainWindow::Options{QString(), QString(), dst, src, dir.path()});
-  EXPECT_NE(w->destination(), nullptr);
-  EXPECT_NE(w->source(), nullptr);
-  if (!w->destination() || !w->source()) return nullptr;
+  EXPECT_NE(w->session().dst, nullptr);
+  EXPECT_NE(w->session().src, nullptr);
+  if (!w->session().dst || !w->session().src) return nullptr;
   return w;
 }
 
 // Compute pressed and waited for: success when a result is shown.
 ::testing::AssertionResult compute_and_wait(MainWindow& w) {
   QTest::mouseClick(child<QPushButton>(w, "compute"), Qt::LeftButton);
-  if (!wait_for([&] { return !w.computing(); }, 60000)) return ::testing::AssertionFailure() << "still computing";
-  if (!w.result()) return ::testing::AssertionFailure() << "no result: " << w.lastMessage().toStdString();
+  if (!wait_for([&] { return !w.transfer().computing(); }, 60000)) return ::testing::AssertionFailure()
+      << "still computing";
+  if (!w.session().result) return ::testing::AssertionFailure()
+      << "no result: " << w.status().lastMessage().toStdString();
   return ::testing::AssertionSuccess();
 }
 
@@ -143,20 +145,20 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
   QTemporaryDir work;
   MainWindow w({QString(), QString(), QString(), QString(), work.path()});
   w.show();
-  w.setAutoFlow(false);  // every step by hand here; the automatic one is app/workflow.*
-  w.connectToRig(rig.endpoint(), rig.token_file());
-  ASSERT_TRUE(wait_for([&] { return w.rig().isConnected(); }, 10000)) << w.lastMessage().toStdString();
-  EXPECT_TRUE(w.lastMessage().contains("connected"));
+  w.capture().setAutoFlow(false);  // every step by hand here; the automatic one is app/workflow.*
+  w.rigPanel().connectToRig(rig.endpoint(), rig.token_file());
+  ASSERT_TRUE(wait_for([&] { return w.rig().isConnected(); }, 10000)) << w.status().lastMessage().toStdString();
+  EXPECT_TRUE(w.status().lastMessage().contains("connected"));
   EXPECT_TRUE(child<QLabel>(w, "rigStatus")->text().contains("simulated"));
 
   // The rig's button captures the destination, the UI's button the source.
   QTest::mouseClick(child<QPushButton>(w, "pressButton"), Qt::LeftButton);
   auto* tree = child<QTreeWidget>(w, "sets");
   QTreeWidgetItem* on_rig = tree->topLevelItem(0);
-  ASSERT_TRUE(wait_for([&] { return on_rig->childCount() >= 1; }, 60000)) << w.lastMessage().toStdString();
+  ASSERT_TRUE(wait_for([&] { return on_rig->childCount() >= 1; }, 60000)) << w.status().lastMessage().toStdString();
   EXPECT_TRUE(child<QLabel>(w, "captureStatus")->text().contains("stored"));
   QTest::mouseClick(child<QPushButton>(w, "captureSource"), Qt::LeftButton);
-  ASSERT_TRUE(wait_for([&] { return on_rig->childCount() >= 2; }, 60000)) << w.lastMessage().toStdString();
+  ASSERT_TRUE(wait_for([&] { return on_rig->childCount() >= 2; }, 60000)) << w.status().lastMessage().toStdString();
   auto* shots = child<QProgressBar>(w, "shotProgress");
   EXPECT_EQ(shots->value(), shots->maximum());
 
@@ -167,7 +169,8 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
     select_item(tree, on_rig->child(i));
     roles[i] = on_rig->child(i)->text(1);
     QTest::mouseClick(child<QPushButton>(w, "pullSet"), Qt::LeftButton);
-    ASSERT_TRUE(wait_for([&] { return local->childCount() >= i + 1; }, 30000)) << w.lastMessage().toStdString();
+    ASSERT_TRUE(wait_for([&] { return local->childCount() >= i + 1; }, 30000))
+        << w.status().lastMessage().toStdString();
   }
   EXPECT_TRUE(roles[0] != roles[1]) << "one destination and one source";
   for (int i = 0; i < 2; ++i) {
@@ -176,19 +179,21 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
     QTest::mouseClick(child<QPushButton>(w, is_source ? "useSource" : "useDestination"), Qt::LeftButton);
   }
   // loaded off the GUI thread
-  ASSERT_TRUE(wait_for([&] { return w.loadsRunning() == 0 && w.destination() && w.source(); }, 30000))
-      << w.lastMessage().toStdString();
-  ASSERT_NE(w.destination(), nullptr) << local->child(0)->text(1).toStdString() << " " << local->child(1)->text(1).toStdString();
-  ASSERT_NE(w.source(), nullptr) << local->child(0)->text(1).toStdString() << " " << local->child(1)->text(1).toStdString();
-  EXPECT_EQ(w.destination()->set.role, veneer::io::Role::destination);
-  EXPECT_EQ(w.source()->set.role, veneer::io::Role::source);
+  ASSERT_TRUE(wait_for([&] { return w.session().loads_running == 0 && w.session().dst && w.session().src; }, 30000))
+      << w.status().lastMessage().toStdString();
+  ASSERT_NE(w.session().dst, nullptr)
+      << local->child(0)->text(1).toStdString() << " " << local->child(1)->text(1).toStdString();
+  ASSERT_NE(w.session().src, nullptr)
+      << local->child(0)->text(1).toStdString() << " " << local->child(1)->text(1).toStdString();
+  EXPECT_EQ(w.session().dst->set.role, veneer::io::Role::destination);
+  EXPECT_EQ(w.session().src->set.role, veneer::io::Role::source);
 
   // Transfer in the background.
   QTest::mouseClick(child<QPushButton>(w, "compute"), Qt::LeftButton);
-  EXPECT_TRUE(w.computing());
-  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 120000));
-  ASSERT_NE(w.result(), nullptr) << w.lastMessage().toStdString();
-  const auto& map = w.result()->map;
+  EXPECT_TRUE(w.transfer().computing());
+  ASSERT_TRUE(wait_for([&] { return !w.transfer().computing(); }, 120000));
+  ASSERT_NE(w.session().result, nullptr) << w.status().lastMessage().toStdString();
+  const auto& map = w.session().result->map;
   cv::Mat xy[2];
   cv::split(map.xy, xy);
   const int mapped = cv::countNonZero(xy[0] >= 0);
@@ -197,9 +202,9 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
   // Live frames repainted through the map, checked against the map applied by hand.
   w.showTab("Live");
   child<QPushButton>(w, "liveToggle")->setChecked(true);
-  ASSERT_TRUE(wait_for([&] { return w.liveFramesShown() >= 3 && !w.lastRepaintedFrame().empty(); }, 20000))
-      << w.lastMessage().toStdString();
-  const cv::Mat frame = w.lastLiveFrame().clone(), shown = w.lastRepaintedFrame().clone();
+  ASSERT_TRUE(wait_for([&] { return w.live().framesShown() >= 3 && !w.live().lastRepaintedFrame().empty(); }, 20000))
+      << w.status().lastMessage().toStdString();
+  const cv::Mat frame = w.live().lastFrame().clone(), shown = w.live().lastRepaintedFrame().clone();
   ASSERT_EQ(shown.size(), map.xy.size());
   // The pictures are blended by default, and so are the live frames: each
   // mapped pixel the weighted sum of the frame (at the source's size) over
@@ -207,10 +212,10 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
   // first (the object here stands still: about the identity, to a fraction
   // of a pixel) and gathers at the nearest pixel, so a pixel may differ a
   // little, on the object's edges more; a wrong lookup differs everywhere.
-  const auto plan = w.result()->blend;
+  const auto plan = w.session().result->blend;
   ASSERT_NE(plan, nullptr) << "blended by default";
   cv::Mat at_source;
-  cv::resize(frame, at_source, w.result()->source_size, 0, 0, cv::INTER_AREA);
+  cv::resize(frame, at_source, w.session().result->source_size, 0, 0, cv::INTER_AREA);
   // Mean difference of the shown frame from the map applied to `src` by hand.
   auto mean_difference = [&](const cv::Mat& src, int* checked) {
     double sum = 0;
@@ -270,10 +275,10 @@ TEST(workflow, ConnectCaptureSourceCaptureDestinationRepaintsLive) {
   MainWindow w({QString(), QString(), QString(), QString(), work.path()});
   w.resize(1280, 720);
   w.show();
-  ASSERT_TRUE(w.autoFlow()) << "the flow is on by default";
+  ASSERT_TRUE(w.capture().autoFlow()) << "the flow is on by default";
   QStringList lines;  // every status line shown, sampled as the test waits
   auto seen = [&] {
-    if (lines.isEmpty() || lines.back() != w.stepLine()) lines << w.stepLine();
+    if (lines.isEmpty() || lines.back() != w.status().line()) lines << w.status().line();
   };
   save_stage(w, "workflow-1-launched");
 
@@ -281,39 +286,42 @@ TEST(workflow, ConnectCaptureSourceCaptureDestinationRepaintsLive) {
   child<QLineEdit>(w, "rigAddress")->setText(rig.endpoint());
   child<QLineEdit>(w, "tokenFile")->setText(rig.token_file());
   QTest::mouseClick(child<QPushButton>(w, "connect"), Qt::LeftButton);
-  ASSERT_TRUE(wait_for([&] { return w.rig().isConnected(); }, 10000)) << w.lastMessage().toStdString();
+  ASSERT_TRUE(wait_for([&] { return w.rig().isConnected(); }, 10000)) << w.status().lastMessage().toStdString();
   save_stage(w, "workflow-2-connected");
 
   // capture source: from the Capture panel
   QTest::mouseClick(child<QPushButton>(w, "captureSource"), Qt::LeftButton);
-  ASSERT_TRUE(wait_for([&] { seen(); return w.source() != nullptr; }, 60000)) << w.lastMessage().toStdString();
-  EXPECT_EQ(w.destination(), nullptr);
+  ASSERT_TRUE(wait_for([&] { seen(); return w.session().src != nullptr; }, 60000))
+      << w.status().lastMessage().toStdString();
+  EXPECT_EQ(w.session().dst, nullptr);
   save_stage(w, "workflow-3-source-captured");
 
   // capture destination: from the Live tab's own button
   w.showTab("Live");
   QTest::mouseClick(child<QPushButton>(w, "liveCaptureDestination"), Qt::LeftButton);
-  ASSERT_TRUE(wait_for([&] { seen(); return w.destination() != nullptr; }, 60000)) << w.lastMessage().toStdString();
+  ASSERT_TRUE(wait_for([&] { seen(); return w.session().dst != nullptr; }, 60000))
+      << w.status().lastMessage().toStdString();
   save_stage(w, "workflow-4-destination-captured");
 
   // the map, computed by itself with the default method
-  ASSERT_TRUE(wait_for([&] { seen(); return w.result() != nullptr && !w.computing(); }, 120000))
-      << w.lastMessage().toStdString();
-  EXPECT_EQ(w.source()->set.role, veneer::io::Role::source);
-  EXPECT_EQ(w.destination()->set.role, veneer::io::Role::destination);
-  EXPECT_EQ(w.result()->match_options.method, veneer::match::Method::combined);
+  ASSERT_TRUE(wait_for([&] { seen(); return w.session().result != nullptr && !w.transfer().computing(); }, 120000))
+      << w.status().lastMessage().toStdString();
+  EXPECT_EQ(w.session().src->set.role, veneer::io::Role::source);
+  EXPECT_EQ(w.session().dst->set.role, veneer::io::Role::destination);
+  EXPECT_EQ(w.session().result->match_options.method, veneer::match::Method::combined);
   cv::Mat xy[2];
-  cv::split(w.result()->map.xy, xy);
+  cv::split(w.session().result->map.xy, xy);
   EXPECT_GT(cv::countNonZero(xy[0] >= 0), 200) << "mapped pixels";
   save_stage(w, "workflow-5-map-computed");
 
   // live frames arrive and are repainted through that map
-  ASSERT_TRUE(wait_for([&] { seen(); return w.liveFramesShown() >= 3 && !w.lastRepaintedFrame().empty(); }, 20000))
-      << w.lastMessage().toStdString();
-  EXPECT_EQ(w.lastRepaintedFrame().size(), w.result()->map.xy.size());
+  ASSERT_TRUE(wait_for(
+      [&] { seen(); return w.live().framesShown() >= 3 && !w.live().lastRepaintedFrame().empty(); }, 20000))
+      << w.status().lastMessage().toStdString();
+  EXPECT_EQ(w.live().lastRepaintedFrame().size(), w.session().result->map.xy.size());
   EXPECT_TRUE(child<QPushButton>(w, "liveToggle")->isChecked());
   seen();
-  EXPECT_TRUE(w.stepLine().contains("live repaint")) << w.stepLine().toStdString();
+  EXPECT_TRUE(w.status().line().contains("live repaint")) << w.status().line().toStdString();
   save_stage(w, "workflow-6-live");
 
   // the line told each step, and never a finished-looking "0 s left"
@@ -332,21 +340,21 @@ TEST(Viewer, DeletingARigSetAsksAndUndoRestoresIt) {
   QTemporaryDir work;
   MainWindow w({QString(), QString(), QString(), QString(), work.path()});
   w.show();
-  w.setAutoFlow(false);
-  w.connectToRig(rig.endpoint(), rig.token_file());
-  ASSERT_TRUE(wait_for([&] { return w.rig().isConnected(); }, 10000)) << w.lastMessage().toStdString();
+  w.capture().setAutoFlow(false);
+  w.rigPanel().connectToRig(rig.endpoint(), rig.token_file());
+  ASSERT_TRUE(wait_for([&] { return w.rig().isConnected(); }, 10000)) << w.status().lastMessage().toStdString();
   QTest::mouseClick(child<QPushButton>(w, "pressButton"), Qt::LeftButton);
   auto* tree = child<QTreeWidget>(w, "sets");
   QTreeWidgetItem *on_rig = tree->topLevelItem(0), *trash = tree->topLevelItem(2);
-  ASSERT_TRUE(wait_for([&] { return on_rig->childCount() == 1; }, 60000)) << w.lastMessage().toStdString();
+  ASSERT_TRUE(wait_for([&] { return on_rig->childCount() == 1; }, 60000)) << w.status().lastMessage().toStdString();
   const QString id = on_rig->child(0)->text(0), date = on_rig->child(0)->text(3);
   EXPECT_TRUE(date.startsWith(QDateTime::currentDateTimeUtc().date().toString(Qt::ISODate))) << date.toStdString();
   // a second viewer on the same rig sees the delete and the undo without listing again
   QTemporaryDir other_work;
   MainWindow other({QString(), QString(), QString(), QString(), other_work.path()});
-  other.setAutoFlow(false);
-  other.connectToRig(rig.endpoint(), rig.token_file());
-  ASSERT_TRUE(wait_for([&] { return other.rig().isConnected(); }, 10000)) << other.lastMessage().toStdString();
+  other.capture().setAutoFlow(false);
+  other.rigPanel().connectToRig(rig.endpoint(), rig.token_file());
+  ASSERT_TRUE(wait_for([&] { return other.rig().isConnected(); }, 10000)) << other.status().lastMessage().toStdString();
   QTreeWidgetItem* other_rig = child<QTreeWidget>(other, "sets")->topLevelItem(0);
   ASSERT_TRUE(wait_for([&] { return other_rig->childCount() == 1; }, 10000));
 
@@ -372,7 +380,7 @@ TEST(Viewer, DeletingARigSetAsksAndUndoRestoresIt) {
   ASSERT_NE(box, nullptr);
   QTest::mouseClick(box->button(QMessageBox::Yes), Qt::LeftButton);
   ASSERT_TRUE(wait_for([&] { return on_rig->childCount() == 0 && trash->childCount() == 1; }, 10000))
-      << w.lastMessage().toStdString();
+      << w.status().lastMessage().toStdString();
   EXPECT_EQ(trash->child(0)->text(0), id);
   EXPECT_TRUE(wait_for([&] { return other_rig->childCount() == 0; }, 10000)) << "the other viewer saw the delete";
   auto* undo = child<QPushButton>(w, "undoDelete");
@@ -381,14 +389,15 @@ TEST(Viewer, DeletingARigSetAsksAndUndoRestoresIt) {
   // Undo: back on the rig, whole (it pulls)
   QTest::mouseClick(undo, Qt::LeftButton);
   ASSERT_TRUE(wait_for([&] { return on_rig->childCount() == 1 && trash->childCount() == 0; }, 10000))
-      << w.lastMessage().toStdString();
+      << w.status().lastMessage().toStdString();
   EXPECT_EQ(on_rig->child(0)->text(0), id);
   EXPECT_FALSE(undo->isVisible());
   ASSERT_TRUE(wait_for([&] { return other_rig->childCount() == 1; }, 10000)) << "the other viewer saw it come back";
   EXPECT_EQ(other_rig->child(0)->text(0), id);
   select_item(tree, on_rig->child(0));
   QTest::mouseClick(child<QPushButton>(w, "pullSet"), Qt::LeftButton);
-  ASSERT_TRUE(wait_for([&] { return tree->topLevelItem(1)->childCount() == 1; }, 30000)) << w.lastMessage().toStdString();
+  ASSERT_TRUE(wait_for([&] { return tree->topLevelItem(1)->childCount() == 1; }, 30000))
+      << w.status().lastMessage().toStdString();
 }
 
 // The local library -- pulled or opened sets with their roles, dates and
@@ -401,7 +410,8 @@ TEST(Viewer, TheLibrarySurvivesARestart) {
     child<QComboBox>(*window, "method")->setCurrentText("coherent");
     ASSERT_TRUE(compute_and_wait(*window));
     auto* maps = child<QTreeWidget>(*window, "sets")->topLevelItem(3);
-    ASSERT_TRUE(wait_for([&] { return maps->childCount() == 1; }, 10000)) << window->lastMessage().toStdString();
+    ASSERT_TRUE(wait_for([&] { return maps->childCount() == 1; }, 10000))
+        << window->status().lastMessage().toStdString();
   }
   MainWindow w({QString(), QString(), QString(), QString(), dir.path()});
   auto* tree = child<QTreeWidget>(w, "sets");
@@ -421,7 +431,7 @@ TEST(Viewer, TheLibrarySurvivesARestart) {
   // and a library row is used as a set: loaded from its folder
   select_item(tree, local->child(1));
   QTest::mouseClick(child<QPushButton>(w, "useSource"), Qt::LeftButton);
-  ASSERT_TRUE(wait_for([&] { return w.source() != nullptr; }, 20000)) << w.lastMessage().toStdString();
+  ASSERT_TRUE(wait_for([&] { return w.session().src != nullptr; }, 20000)) << w.status().lastMessage().toStdString();
 }
 
 namespace {
@@ -444,13 +454,14 @@ TEST(Viewer, ALibraryMapReopensAfterARestartWithoutMatchingAgain) {
   {
     auto window = open_pair(dir);
     ASSERT_TRUE(window);
-    dst = window->destination()->folder;
-    src = window->source()->folder;
+    dst = window->session().dst->folder;
+    src = window->session().src->folder;
     child<QComboBox>(*window, "method")->setCurrentText("coherent");
     child<QSpinBox>(*window, "blend")->setValue(3);
     ASSERT_TRUE(compute_and_wait(*window));
     auto* maps = child<QTreeWidget>(*window, "sets")->topLevelItem(3);
-    ASSERT_TRUE(wait_for([&] { return maps->childCount() == 1; }, 10000)) << window->lastMessage().toStdString();
+    ASSERT_TRUE(wait_for([&] { return maps->childCount() == 1; }, 10000))
+        << window->status().lastMessage().toStdString();
     map_folder = maps->child(0)->data(0, Qt::UserRole).toString();
   }
   // the stored map, altered: its top half unmapped
@@ -472,19 +483,19 @@ TEST(Viewer, ALibraryMapReopensAfterARestartWithoutMatchingAgain) {
     EXPECT_EQ(child<QComboBox>(w, "method")->currentText(), "combined") << "the default before reopening";
     select_item(tree, maps->child(0));
     QTest::mouseClick(child<QPushButton>(w, "openMap"), Qt::LeftButton);
-    ASSERT_TRUE(wait_for([&] { return w.result() != nullptr && !w.computing(); }, 60000))
-        << w.lastMessage().toStdString();
-    ASSERT_TRUE(w.destination() && w.source());
-    EXPECT_EQ(w.destination()->folder, dst);
-    EXPECT_EQ(w.source()->folder, src);
-    EXPECT_TRUE(w.result()->map_given) << "repainted through the stored map";
-    EXPECT_EQ(w.result()->match_seconds, 0.0);
-    EXPECT_EQ(mapped_in(w.result()->map, top), 0) << "the stored (altered) map, not one matched again";
-    EXPECT_EQ(cv::norm(w.result()->map.xy, stored->xy, cv::NORM_INF), 0.0);
-    EXPECT_EQ(w.result()->match_options.method, veneer::match::Method::coherent);
+    ASSERT_TRUE(wait_for([&] { return w.session().result != nullptr && !w.transfer().computing(); }, 60000))
+        << w.status().lastMessage().toStdString();
+    ASSERT_TRUE(w.session().dst && w.session().src);
+    EXPECT_EQ(w.session().dst->folder, dst);
+    EXPECT_EQ(w.session().src->folder, src);
+    EXPECT_TRUE(w.session().result->map_given) << "repainted through the stored map";
+    EXPECT_EQ(w.session().result->match_seconds, 0.0);
+    EXPECT_EQ(mapped_in(w.session().result->map, top), 0) << "the stored (altered) map, not one matched again";
+    EXPECT_EQ(cv::norm(w.session().result->map.xy, stored->xy, cv::NORM_INF), 0.0);
+    EXPECT_EQ(w.session().result->match_options.method, veneer::match::Method::coherent);
     EXPECT_EQ(child<QComboBox>(w, "method")->currentText(), "coherent") << "the options it was computed with";
     EXPECT_EQ(child<QSpinBox>(w, "blend")->value(), 3);
-    EXPECT_TRUE(w.lastMessage().contains("reopened")) << w.lastMessage().toStdString();
+    EXPECT_TRUE(w.status().lastMessage().contains("reopened")) << w.status().lastMessage().toStdString();
     w.resize(1280, 720);
     save_stage(w, "library-map-reopened");
     QTest::qWait(300);
@@ -496,13 +507,13 @@ TEST(Viewer, ALibraryMapReopensAfterARestartWithoutMatchingAgain) {
   MainWindow w({QString(), QString(), QString(), QString(), dir.path()});
   auto* maps = child<QTreeWidget>(w, "sets")->topLevelItem(3);
   ASSERT_EQ(maps->childCount(), 1);
-  EXPECT_FALSE(w.openLibraryMap(maps->child(0)->data(0, Qt::UserRole).toString()));
-  EXPECT_TRUE(w.lastMessage().contains("source set") && w.lastMessage().contains(src) &&
-              w.lastMessage().contains("gone"))
-      << w.lastMessage().toStdString();
+  EXPECT_FALSE(w.mapLibrary().open(maps->child(0)->data(0, Qt::UserRole).toString()));
+  EXPECT_TRUE(w.status().lastMessage().contains("source set") && w.status().lastMessage().contains(src) &&
+              w.status().lastMessage().contains("gone"))
+      << w.status().lastMessage().toStdString();
   QTest::qWait(200);
-  EXPECT_EQ(w.destination(), nullptr);
-  EXPECT_EQ(w.result(), nullptr);
+  EXPECT_EQ(w.session().dst, nullptr);
+  EXPECT_EQ(w.session().result, nullptr);
 }
 
 namespace {
@@ -565,13 +576,13 @@ TEST(Viewer, AdvancedFoldPresetsWheelFocusAndLampsFromTheManifest) {
   }
 
   // one lamp box per light of the set's manifest
-  EXPECT_EQ(lamp_boxes(w), static_cast<int>(w.destination()->set.lights.size()));
-  veneer::io::ImageSet three = w.destination()->set;
+  EXPECT_EQ(lamp_boxes(w), static_cast<int>(w.session().dst->set.lights.size()));
+  veneer::io::ImageSet three = w.session().dst->set;
   three.images.resize(3);
   three.lights.resize(3);
   const QString folder = dir.path() + "/bull3";
   ASSERT_TRUE(veneer::io::write_set(three, folder.toStdString()).ok());
-  ASSERT_TRUE(w.loadLocalSet(folder, veneer::io::Role::destination)) << w.lastMessage().toStdString();
+  ASSERT_TRUE(w.flow().loadLocalSet(folder, veneer::io::Role::destination)) << w.status().lastMessage().toStdString();
   EXPECT_EQ(lamp_boxes(w), 3);
 }
 
@@ -586,11 +597,11 @@ TEST(Viewer, ViewModesHistogramExposureAndSnapshot) {
   w.show();
   child<QComboBox>(w, "method")->setCurrentText("coherent");
   ASSERT_TRUE(compute_and_wait(w));
-  ASSERT_TRUE(wait_for([&] { return w.destination()->normals && w.source()->normals; }, 30000));
+  ASSERT_TRUE(wait_for([&] { return w.session().dst->normals && w.session().src->normals; }, 30000));
   // the simulator records 1/30 s at exposure 1, f/8, ISO 100
-  EXPECT_TRUE(w.exposureText().contains("1/30 s")) << w.exposureText().toStdString();
-  EXPECT_TRUE(w.exposureText().contains("f/8")) << w.exposureText().toStdString();
-  EXPECT_TRUE(w.exposureText().contains("ISO 100")) << w.exposureText().toStdString();
+  EXPECT_TRUE(w.look().exposureText().contains("1/30 s")) << w.look().exposureText().toStdString();
+  EXPECT_TRUE(w.look().exposureText().contains("f/8")) << w.look().exposureText().toStdString();
+  EXPECT_TRUE(w.look().exposureText().contains("ISO 100")) << w.look().exposureText().toStdString();
   EXPECT_FALSE(child<QLabel>(w, "histogram")->pixmap().isNull());
   auto* look = child<QComboBox>(w, "lookWhat");
   for (int i = 0; i < look->count(); ++i) {
@@ -602,12 +613,12 @@ TEST(Viewer, ViewModesHistogramExposureAndSnapshot) {
   }
   ASSERT_TRUE(w.showLook("specular enhancement"));
   const QString file = dir.path() + "/snap.png";
-  EXPECT_EQ(w.snapshotTo(file), file) << w.lastMessage().toStdString();
+  EXPECT_EQ(w.snapshotTo(file), file) << w.status().lastMessage().toStdString();
   QImage shot(file);
   ASSERT_FALSE(shot.isNull());
   EXPECT_GT(shot.width(), 600);
   EXPECT_TRUE(w.snapshotTo(dir.path() + "/snap.jpg").isEmpty());
-  EXPECT_TRUE(w.lastMessage().contains("snap.jpg")) << w.lastMessage().toStdString();
+  EXPECT_TRUE(w.status().lastMessage().contains("snap.jpg")) << w.status().lastMessage().toStdString();
   EXPECT_FALSE(QFileInfo::exists(dir.path() + "/snap.jpg"));
 }
 
@@ -621,29 +632,30 @@ TEST(Viewer, HandRectangleAndBrushMasksChangeTheMap) {
   MainWindow& w = *window;
   child<QComboBox>(w, "method")->setCurrentText("coherent");
   ASSERT_TRUE(compute_and_wait(w));
-  auto mapped = [&](const cv::Rect& inside) { return mapped_in(w.result()->map, inside); };
-  const cv::Size size = w.result()->map.xy.size();
+  auto mapped = [&](const cv::Rect& inside) { return mapped_in(w.session().result->map, inside); };
+  const cv::Size size = w.session().result->map.xy.size();
   const cv::Rect left(0, 0, size.width / 2, size.height), right(size.width / 2, 0, size.width - size.width / 2, size.height);
   const int left_before = mapped(left), right_before = mapped(right);
   ASSERT_GT(left_before, 100);
   ASSERT_GT(right_before, 100);
 
   // the rectangle: the right half of the destination only
-  const auto* first = w.result();
-  w.setHandRect(veneer::io::Role::destination, QRect(right.x, right.y, right.width, right.height));
-  ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.result() != first; }, 60000))
-      << w.lastMessage().toStdString();
-  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
+  const auto* first = w.session().result.get();
+  w.segmentation().setHandRect(veneer::io::Role::destination, QRect(right.x, right.y, right.width, right.height));
+  ASSERT_TRUE(wait_for(
+      [&] { return !w.transfer().computing() && w.session().result && w.session().result.get() != first; }, 60000))
+      << w.status().lastMessage().toStdString();
+  ASSERT_TRUE(wait_for([&] { return !w.transfer().computing(); }, 60000));
   EXPECT_EQ(mapped(left), 0) << "outside the rectangle nothing is the object";
   EXPECT_GT(mapped(right), right_before / 2);
 
   // the brush: a disc at the source's object centre taken out
-  cv::Mat sm = w.source()->hand_mask.empty() ? w.source()->normals->mask : w.source()->hand_mask;
+  cv::Mat sm = w.session().src->hand_mask.empty() ? w.session().src->normals->mask : w.session().src->hand_mask;
   const cv::Moments m = cv::moments(sm, true);
   const QPoint centre(static_cast<int>(m.m10 / m.m00), static_cast<int>(m.m01 / m.m00));
   auto from_disc = [&] {
     int n = 0;
-    const cv::Mat& xy = w.result()->map.xy;
+    const cv::Mat& xy = w.session().result->map.xy;
     for (int y = 0; y < xy.rows; ++y)
       for (int x = 0; x < xy.cols; ++x) {
         const cv::Vec2f v = xy.at<cv::Vec2f>(y, x);
@@ -652,22 +664,23 @@ TEST(Viewer, HandRectangleAndBrushMasksChangeTheMap) {
     return n;
   };
   ASSERT_GT(from_disc(), 0) << "the map takes from the centre before";
-  const auto* second = w.result();
-  w.brushHandMask(veneer::io::Role::source, centre, false, 10);
-  ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.result() != second; }, 60000))
-      << w.lastMessage().toStdString();
-  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
+  const auto* second = w.session().result.get();
+  w.segmentation().brushHandMask(veneer::io::Role::source, centre, false, 10);
+  ASSERT_TRUE(wait_for(
+      [&] { return !w.transfer().computing() && w.session().result && w.session().result.get() != second; }, 60000))
+      << w.status().lastMessage().toStdString();
+  ASSERT_TRUE(wait_for([&] { return !w.transfer().computing(); }, 60000));
   EXPECT_EQ(from_disc(), 0) << "nothing comes from the brushed-out disc";
-  EXPECT_FALSE(w.source()->hand_mask.empty());
+  EXPECT_FALSE(w.session().src->hand_mask.empty());
   // and a brush adds back
-  w.brushHandMask(veneer::io::Role::source, centre, true, 10);
-  EXPECT_EQ(w.source()->hand_mask.at<uchar>(centre.y(), centre.x()), 255);
-  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
+  w.segmentation().brushHandMask(veneer::io::Role::source, centre, true, 10);
+  EXPECT_EQ(w.session().src->hand_mask.at<uchar>(centre.y(), centre.x()), 255);
+  ASSERT_TRUE(wait_for([&] { return !w.transfer().computing(); }, 60000));
   // exported for the CLI, as drawn
-  const QStringList files = w.exportMasksTo(dir.path());
+  const QStringList files = w.segmentation().exportMasksTo(dir.path());
   ASSERT_EQ(files.size(), 2);
   cv::Mat back = cv::imread(files[0].toStdString(), cv::IMREAD_GRAYSCALE);
-  EXPECT_EQ(cv::norm(back, w.destination()->hand_mask, cv::NORM_INF), 0.0);
+  EXPECT_EQ(cv::norm(back, w.session().dst->hand_mask, cv::NORM_INF), 0.0);
 }
 
 // The CLI reuses a mask drawn by hand: `veneer transfer --dst-mask` maps
@@ -720,10 +733,10 @@ TEST(Viewer, CancelledComputationLeavesUiUsable) {
   child<QComboBox>(w, "patch")->setCurrentText("7");
   child<QCheckBox>(w, "fast")->setChecked(false);
   QTest::mouseClick(child<QPushButton>(w, "compute"), Qt::LeftButton);
-  ASSERT_TRUE(w.computing());
+  ASSERT_TRUE(w.transfer().computing());
   QTest::mouseClick(child<QPushButton>(w, "cancelTransfer"), Qt::LeftButton);
-  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
-  EXPECT_EQ(w.result(), nullptr);
+  ASSERT_TRUE(wait_for([&] { return !w.transfer().computing(); }, 60000));
+  EXPECT_EQ(w.session().result, nullptr);
   EXPECT_TRUE(child<QLabel>(w, "transferStatus")->text().contains("cancel"));
   EXPECT_TRUE(child<QPushButton>(w, "compute")->isEnabled());
   // Still usable: a fast transfer now completes.
@@ -731,8 +744,8 @@ TEST(Viewer, CancelledComputationLeavesUiUsable) {
   child<QComboBox>(w, "patch")->setCurrentText("1");
   child<QCheckBox>(w, "fast")->setChecked(true);
   ASSERT_TRUE(compute_and_wait(w));
-  ASSERT_TRUE(w.result()->quality.has_value());
-  EXPECT_GT(w.result()->quality->coverage, 0.9);
+  ASSERT_TRUE(w.session().result->quality.has_value());
+  EXPECT_GT(w.session().result->quality->coverage, 0.9);
 }
 
 // Exports cancelled leave nothing behind: not the results folder, not its
@@ -757,29 +770,29 @@ TEST(Viewer, CancelledExportsLeaveNoHalfWrittenFile) {
     QSemaphore gate;
     pool->start([&gate] { gate.acquire(); });
     start();
-    EXPECT_TRUE(w.exporting());
+    EXPECT_TRUE(w.exports().exporting());
     w.cancelStep();
     gate.release();
-    EXPECT_TRUE(wait_for([&] { return !w.exporting(); }, 30000));
+    EXPECT_TRUE(wait_for([&] { return !w.exports().exporting(); }, 30000));
     pool->setMaxThreadCount(threads);
   };
-  held_then_cancelled([&] { w.exportResultsTo(results); });
-  EXPECT_TRUE(w.lastMessage().contains("cancelled")) << w.lastMessage().toStdString();
+  held_then_cancelled([&] { w.exports().exportResultsTo(results); });
+  EXPECT_TRUE(w.status().lastMessage().contains("cancelled")) << w.status().lastMessage().toStdString();
   EXPECT_TRUE(QDir(results).isEmpty()) << "nothing moved into the folder";
   EXPECT_FALSE(QFileInfo::exists(results + ".part")) << "the temporary sibling removed";
-  held_then_cancelled([&] { w.exportRelightVideoTo(video); });
-  EXPECT_TRUE(w.lastMessage().contains("cancelled")) << w.lastMessage().toStdString();
+  held_then_cancelled([&] { w.exports().exportRelightVideoTo(video); });
+  EXPECT_TRUE(w.status().lastMessage().contains("cancelled")) << w.status().lastMessage().toStdString();
   EXPECT_EQ(QDir(dir.path()).entryList({"*.avi", ".*.avi"}, QDir::Files | QDir::Hidden), QStringList())
       << "no video, no temporary";
 
-  w.exportResultsTo(results);
-  ASSERT_TRUE(wait_for([&] { return !w.exporting(); }, 30000));
-  EXPECT_TRUE(w.lastMessage().contains("results written")) << w.lastMessage().toStdString();
+  w.exports().exportResultsTo(results);
+  ASSERT_TRUE(wait_for([&] { return !w.exports().exporting(); }, 30000));
+  EXPECT_TRUE(w.status().lastMessage().contains("results written")) << w.status().lastMessage().toStdString();
   EXPECT_TRUE(QFileInfo::exists(results + "/metrics.json"));
   EXPECT_TRUE(QFileInfo::exists(results + "/result_median.png"));
   EXPECT_FALSE(QFileInfo::exists(results + ".part"));
-  w.exportRelightVideoTo(video);
-  ASSERT_TRUE(wait_for([&] { return !w.exporting(); }, 60000));
+  w.exports().exportRelightVideoTo(video);
+  ASSERT_TRUE(wait_for([&] { return !w.exports().exporting(); }, 60000));
   EXPECT_EQ(QDir(dir.path()).entryList({"*.avi", ".*.avi"}, QDir::Files | QDir::Hidden), QStringList{"sweep.avi"});
   EXPECT_GT(QFileInfo(video).size(), 1000);
 }
@@ -794,11 +807,11 @@ TEST(Viewer, ALoadedSetsPictureIsMadeByTheLoader) {
   write_pair(dir.path(), dst, src);
   MainWindow w({QString(), QString(), QString(), QString(), dir.path()});
   w.show();
-  w.setAutoFlow(false);
-  w.loadSetInBackground(dst, veneer::io::Role::destination);
-  ASSERT_TRUE(wait_for([&] { return w.destination() != nullptr && w.loadsRunning() == 0; }, 20000))
-      << w.lastMessage().toStdString();
-  const veneer::app::LoadedSet* d = w.destination();
+  w.capture().setAutoFlow(false);
+  w.flow().loadSetInBackground(dst, veneer::io::Role::destination);
+  ASSERT_TRUE(wait_for([&] { return w.session().dst != nullptr && w.session().loads_running == 0; }, 20000))
+      << w.status().lastMessage().toStdString();
+  const veneer::app::LoadedSet* d = w.session().dst.get();
   ASSERT_FALSE(d->median_image.isNull());
   EXPECT_EQ(d->median_image.size(), QSize(d->set.size.width, d->set.size.height));
   int showing = 0;
@@ -821,34 +834,35 @@ TEST(Viewer, BadInputGivesClearMessages) {
   token.write("0123456789abcdef0123456789abcdef\n");
   token.close();
   w.rig().setAutoReconnect(false);
-  w.connectToRig(QString("127.0.0.1:%1").arg(free_port()), token.fileName());
-  ASSERT_TRUE(wait_for([&] { return w.lastMessage().contains("cannot connect"); }, 10000))
-      << w.lastMessage().toStdString();
+  w.rigPanel().connectToRig(QString("127.0.0.1:%1").arg(free_port()), token.fileName());
+  ASSERT_TRUE(wait_for([&] { return w.status().lastMessage().contains("cannot connect"); }, 10000))
+      << w.status().lastMessage().toStdString();
   EXPECT_FALSE(w.rig().isConnected());
 
   // A wrong token.
   SimulatedRig rig;
   ASSERT_TRUE(rig.started());
-  w.connectToRig(rig.endpoint(), token.fileName());
-  ASSERT_TRUE(wait_for([&] { return w.lastMessage().contains("cannot connect"); }, 10000))
-      << w.lastMessage().toStdString();
-  EXPECT_TRUE(w.lastMessage().contains("token", Qt::CaseInsensitive)) << w.lastMessage().toStdString();
+  w.rigPanel().connectToRig(rig.endpoint(), token.fileName());
+  ASSERT_TRUE(wait_for([&] { return w.status().lastMessage().contains("cannot connect"); }, 10000))
+      << w.status().lastMessage().toStdString();
+  EXPECT_TRUE(w.status().lastMessage().contains("token", Qt::CaseInsensitive))
+      << w.status().lastMessage().toStdString();
   EXPECT_FALSE(w.rig().isConnected());
 
   // A missing token file.
-  w.connectToRig(rig.endpoint(), dir.path() + "/no-such-token");
-  EXPECT_TRUE(w.lastMessage().contains("no-such-token")) << w.lastMessage().toStdString();
+  w.rigPanel().connectToRig(rig.endpoint(), dir.path() + "/no-such-token");
+  EXPECT_TRUE(w.status().lastMessage().contains("no-such-token")) << w.status().lastMessage().toStdString();
 
   // A folder that is not a set.
   QDir(dir.path()).mkpath("not-a-set");
-  EXPECT_FALSE(w.loadLocalSet(dir.path() + "/not-a-set", veneer::io::Role::destination));
-  EXPECT_TRUE(w.lastMessage().contains("not-a-set")) << w.lastMessage().toStdString();
-  EXPECT_EQ(w.destination(), nullptr);
+  EXPECT_FALSE(w.flow().loadLocalSet(dir.path() + "/not-a-set", veneer::io::Role::destination));
+  EXPECT_TRUE(w.status().lastMessage().contains("not-a-set")) << w.status().lastMessage().toStdString();
+  EXPECT_EQ(w.session().dst, nullptr);
 
   // Transfer without sets.
-  w.startTransfer();
-  EXPECT_FALSE(w.computing());
-  EXPECT_TRUE(w.lastMessage().contains("load a destination"));
+  w.transfer().startTransfer();
+  EXPECT_FALSE(w.transfer().computing());
+  EXPECT_TRUE(w.status().lastMessage().contains("load a destination"));
 }
 
 
@@ -861,57 +875,62 @@ TEST(Viewer, MatchingOptionChangesRecomputeTheMap) {
   ASSERT_TRUE(window);
   MainWindow& w = *window;
   child<QComboBox>(w, "method")->setCurrentText("coherent");
-  EXPECT_FALSE(w.computing());  // nothing shown yet: no recomputation
+  EXPECT_FALSE(w.transfer().computing());  // nothing shown yet: no recomputation
   ASSERT_TRUE(compute_and_wait(w));
-  const cv::Mat first = w.result()->map.xy.clone();
-  EXPECT_EQ(w.mapOnlyRuns(), 0);
+  const cv::Mat first = w.session().result->map.xy.clone();
+  EXPECT_EQ(w.transfer().mapOnlyRuns(), 0);
 
   auto* thr = child<QDoubleSpinBox>(w, "coherentThreshold");
   for (double t : {0.15, 0.2, 0.3}) thr->setValue(t);  // dragged
-  ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.mapOnlyRuns() >= 1; }, 60000));
-  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
-  EXPECT_LE(w.mapOnlyRuns(), 3);
-  ASSERT_NE(w.result(), nullptr) << w.lastMessage().toStdString();
+  ASSERT_TRUE(wait_for(
+      [&] { return !w.transfer().computing() && w.session().result && w.transfer().mapOnlyRuns() >= 1; }, 60000));
+  ASSERT_TRUE(wait_for([&] { return !w.transfer().computing(); }, 60000));
+  EXPECT_LE(w.transfer().mapOnlyRuns(), 3);
+  ASSERT_NE(w.session().result, nullptr) << w.status().lastMessage().toStdString();
   // the map shown is the one for the last value
-  EXPECT_NE(w.result()->metrics_json.find("\"coherent_threshold\": 0.3"), std::string::npos);
+  EXPECT_NE(w.session().result->metrics_json.find("\"coherent_threshold\": 0.3"), std::string::npos);
   cv::Mat diff;
-  cv::absdiff(first, w.result()->map.xy, diff);
+  cv::absdiff(first, w.session().result->map.xy, diff);
   EXPECT_GT(cv::countNonZero(diff.reshape(1) > 0.5), 0) << "a larger threshold makes other chunks";
   EXPECT_TRUE(child<QLabel>(w, "transferStatus")->text().contains("map"));
 
   // the blend radius and its guide change the pictures, not the map: repainted from the map shown
-  const int map_runs = w.mapOnlyRuns();
-  const auto* guided = w.result();
+  const int map_runs = w.transfer().mapOnlyRuns();
+  const auto* guided = w.session().result.get();
   const cv::Mat kept = guided->map.xy.clone(), guided_picture = guided->repainted_median.clone();
   EXPECT_EQ(child<QSpinBox>(w, "blend")->value(), veneer::pipeline::TransferOptions{}.blend);
   child<QDoubleSpinBox>(w, "blendGuide")->setValue(0);
-  ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.result() != guided; }, 60000));
-  const auto* plain_blend = w.result();
+  ASSERT_TRUE(wait_for(
+      [&] { return !w.transfer().computing() && w.session().result && w.session().result.get() != guided; }, 60000));
+  const auto* plain_blend = w.session().result.get();
   const cv::Mat plain_picture = plain_blend->repainted_median.clone();
   EXPECT_GT(cv::norm(plain_picture, guided_picture, cv::NORM_INF), 0.0);
   child<QSpinBox>(w, "blend")->setValue(0);
-  ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.result() != plain_blend; }, 60000));
-  EXPECT_EQ(w.repaintOnlyRuns(), 2);
-  EXPECT_EQ(w.mapOnlyRuns(), map_runs);
-  EXPECT_TRUE(w.result()->map_given);
-  EXPECT_EQ(cv::norm(w.result()->map.xy, kept, cv::NORM_INF), 0.0);
-  EXPECT_GT(cv::norm(w.result()->repainted_median, plain_picture, cv::NORM_INF), 0.0);
+  ASSERT_TRUE(wait_for(
+      [&] { return !w.transfer().computing() && w.session().result && w.session().result.get() != plain_blend; },
+      60000));
+  EXPECT_EQ(w.transfer().repaintOnlyRuns(), 2);
+  EXPECT_EQ(w.transfer().mapOnlyRuns(), map_runs);
+  EXPECT_TRUE(w.session().result->map_given);
+  EXPECT_EQ(cv::norm(w.session().result->map.xy, kept, cv::NORM_INF), 0.0);
+  EXPECT_GT(cv::norm(w.session().result->repainted_median, plain_picture, cv::NORM_INF), 0.0);
   EXPECT_TRUE(child<QLabel>(w, "transferStatus")->text().contains("map kept"));
 
   // a segmentation change prepares the objects again (not a map-only run) and matches
-  const int before = w.mapOnlyRuns();
-  const auto* shown = w.result();
+  const int before = w.transfer().mapOnlyRuns();
+  const auto* shown = w.session().result.get();
   child<QComboBox>(w, "segMethod")->setCurrentText("otsu");
-  ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.result() != shown; }, 60000));
-  ASSERT_TRUE(wait_for([&] { return !w.computing(); }, 60000));
-  EXPECT_EQ(w.mapOnlyRuns(), before);
+  ASSERT_TRUE(wait_for(
+      [&] { return !w.transfer().computing() && w.session().result && w.session().result.get() != shown; }, 60000));
+  ASSERT_TRUE(wait_for([&] { return !w.transfer().computing(); }, 60000));
+  EXPECT_EQ(w.transfer().mapOnlyRuns(), before);
 
   // switched off: a change does nothing until Compute
-  const int runs = w.mapOnlyRuns();
+  const int runs = w.transfer().mapOnlyRuns();
   child<QCheckBox>(w, "liveUpdate")->setChecked(false);
   thr->setValue(0.05);
-  EXPECT_FALSE(w.computing());
-  EXPECT_EQ(w.mapOnlyRuns(), runs);
+  EXPECT_FALSE(w.transfer().computing());
+  EXPECT_EQ(w.transfer().mapOnlyRuns(), runs);
 }
 
 int main(int argc, char** argv) {

@@ -30,6 +30,6 @@ int main(int argc, char** argv) {
   o.workdir = parser.value(workdir);
   veneer::app::MainWindow window(o);
   window.show();
-  if (parser.isSet(compute)) window.startTransfer();
+  if (parser.isSet(compute)) window.transfer().startTransfer();
   return app.exec();
 }

@@ -32,9 +32,9 @@ MainWindow::MainWindow(const Options& options, QWidget* parent) : QMainWindow(pa
   sets_->showLibrary();
   wire();
 
-  if (!options.destination.isEmpty()) loadLocalSet(options.destination, veneer::io::Role::destination);
-  if (!options.source.isEmpty()) loadLocalSet(options.source, veneer::io::Role::source);
-  if (!options.rig.isEmpty()) connectToRig(options.rig, options.token_file);
+  if (!options.destination.isEmpty()) flow_->loadLocalSet(options.destination, veneer::io::Role::destination);
+  if (!options.source.isEmpty()) flow_->loadLocalSet(options.source, veneer::io::Role::source);
+  if (!options.rig.isEmpty()) rig_panel_->connectToRig(options.rig, options.token_file);
 }
 
 MainWindow::~MainWindow() {
@@ -87,7 +87,7 @@ void MainWindow::buildMenus() {
   QMenu* file = menuBar()->addMenu(tr("&File"));
   file->addAction(tr("Open set folder…"), this, [this] {
     QString dir = QFileDialog::getExistingDirectory(this, tr("Image set folder"));
-    if (!dir.isEmpty()) loadSetInBackground(dir, veneer::io::Role::destination);
+    if (!dir.isEmpty()) flow_->loadSetInBackground(dir, veneer::io::Role::destination);
   });
   QMenu* exp = menuBar()->addMenu(tr("&Export"));
   exp->addAction(tr("Map (map.pfm, map.png)…"), exports_, &ExportActions::exportMap);
@@ -95,7 +95,7 @@ void MainWindow::buildMenus() {
   exp->addAction(tr("Relight sweep video…"), exports_, &ExportActions::exportRelightVideo);
   exp->addAction(tr("Masks drawn by hand (for veneer transfer --dst-mask)…"), this, [this] {
     const QString dir = QFileDialog::getExistingDirectory(this, tr("Write the masks into"));
-    if (!dir.isEmpty()) exportMasksTo(dir);
+    if (!dir.isEmpty()) segmentation_->exportMasksTo(dir);
   });
   file->addAction(tr("Calibrate lamps from a chrome-sphere set…"), calibration_, &CalibrationStep::ask);
   file->addSeparator();

@@ -43,34 +43,27 @@ class MainWindow : public QMainWindow {
   explicit MainWindow(const Options& options, QWidget* parent = nullptr);
   ~MainWindow() override;
 
-  // What the tests and scripts drive (the buttons call the same), each
-  // handed to the panel that does it.
+  // What the tests and scripts drive (the buttons call the same): the panels
+  // themselves, each doing its own part (its header says what).
   RigLink& rig() { return rig_; }
-  void connectToRig(const QString& endpoint, const QString& token_file) { rig_panel_->connectToRig(endpoint, token_file); }
-  bool loadLocalSet(const QString& folder, veneer::io::Role as) { return flow_->loadLocalSet(folder, as); }
-  void loadSetInBackground(const QString& folder, std::optional<veneer::io::Role> as) {
-    flow_->loadSetInBackground(folder, as);
-  }
-  int loadsRunning() const { return session_->loads_running; }
-  void startTransfer() { transfer_->startTransfer(); }
-  void cancelTransfer() { transfer_->cancelTransfer(); }
-  bool computing() const { return transfer_->computing(); }
-  int mapOnlyRuns() const { return transfer_->mapOnlyRuns(); }
-  int repaintOnlyRuns() const { return transfer_->repaintOnlyRuns(); }
-  const veneer::pipeline::TransferResult* result() const { return session_->result.get(); }
-  const LoadedSet* destination() const { return session_->dst.get(); }
-  const LoadedSet* source() const { return session_->src.get(); }
-  QString workdir() const { return session_->workdir; }
-  QString lastMessage() const { return status_->lastMessage(); }
-  // The one line of status: the step running, its progress and time left.
-  QString stepLine() const { return status_->line(); }
+  const Session& session() const { return *session_; }         // the sets, the result, the loads
+  StatusLine& status() { return *status_; }                    // the one line of status, the last message
+  RigPanel& rigPanel() { return *rig_panel_; }                 // connect
+  CapturePanel& capture() { return *capture_; }                // capture, the one flow on or off
+  TransferPanel& transfer() { return *transfer_; }             // compute, cancel
+  LookTab& look() { return *look_; }                           // the pictures, exposure
+  LiveTab& live() { return *live_; }                           // the live frames shown
+  SegmentationTool& segmentation() { return *segmentation_; }  // masks by hand
+  ExportActions& exports() { return *exports_; }               // exports without a dialog
+  MapLibrary& mapLibrary() { return *map_library_; }           // a kept map shown again
+  LiveFirstJob& liveFirst() { return *live_first_; }           // the full-resolution map behind live
+  FlowController& flow() { return *flow_; }                    // loading sets, the live width
+  CalibrationStep& calibration() { return *calibration_; }     // lamp calibration
+
+  // What spans the panels and the tabs.
   // Cancels whatever the status line shows running (compute, capture, pull,
   // load, export).
   void cancelStep();
-  cv::Mat lastLiveFrame() const { return live_->lastFrame(); }
-  cv::Mat lastRepaintedFrame() const { return live_->lastRepaintedFrame(); }
-  int liveFramesShown() const { return live_->framesShown(); }
-  double liveFps() const { return live_->fps(); }
   // Grabs every view as <dir>/<tab>.png; returns the files written.
   QStringList saveScreenshots(const QString& dir);
   void showTab(const QString& name);
@@ -79,35 +72,6 @@ class MainWindow : public QMainWindow {
   QString snapshotTo(const QString& file);
   // The Look tab's "Show" choice by its text (e.g. "specular enhancement").
   bool showLook(const QString& what);
-  QString exposureText() const { return look_->exposureText(); }
-  // Segmentation by hand (segmentation.hpp).
-  void setHandRect(veneer::io::Role set, const QRect& rect) { segmentation_->setHandRect(set, rect); }
-  void brushHandMask(veneer::io::Role set, QPoint pixel, bool add, int radius = 0) {
-    segmentation_->brushHandMask(set, pixel, add, radius);
-  }
-  void clearHandMask(veneer::io::Role set) { segmentation_->clearHandMask(set); }
-  QStringList exportMasksTo(const QString& dir) { return segmentation_->exportMasksTo(dir); }
-  // The one flow (flow.hpp).
-  bool autoFlow() const { return capture_->autoFlow(); }
-  void setAutoFlow(bool on) { capture_->setAutoFlow(on); }
-  // Exports without a dialog (export.hpp).
-  void exportMapTo(const QString& dir) { exports_->exportMapTo(dir); }
-  void exportResultsTo(const QString& dir) { exports_->exportResultsTo(dir); }
-  void exportRelightVideoTo(const QString& file) { exports_->exportRelightVideoTo(file); }
-  bool exporting() const { return exports_->exporting(); }
-  // A map kept in the library shown again (map_library.hpp).
-  bool openLibraryMap(const QString& map_folder) { return map_library_->open(map_folder); }
-  // Lamp calibration (calibration.hpp).
-  bool calibrateLamps(const QString& sphere_folder, const QString& lights_file) {
-    return calibration_->calibrateLamps(sphere_folder, lights_file);
-  }
-  QImage calibrationImage() const { return calibration_->image(); }
-  // Live first (live_first.hpp).
-  void setLiveWidth(int px) { flow_->setLiveWidth(px); }
-  int liveWidth() const { return flow_->liveWidth(); }
-  bool fullResolutionRunning() const { return live_first_->running(); }
-  int fullResolutionSwaps() const { return live_first_->swaps(); }
-  QString fullResolutionLine() const { return live_first_->line(); }
 
  private:
   void buildUi();
