@@ -56,6 +56,20 @@ struct PsOptions {
                                    // [0, 2]; 0 = off. Quality table, 512x340: the exact nearest's normal
                                    // error 3.20 -> 2.08 degrees, with the outlier pass
                                    // then off (bench_ps: red glossy sphere 3.85 -> 0.85)
+  float diffuse_chroma_min = 0.03f; // robust: ... and whose off-grey part averages at least this over the lamps
+                                   // (full scale 1); a fainter colour is mostly sensor noise and the pixel is
+                                   // solved on its grey (then fit_tolerance drops its highlights) [0, 1]; 0 = no
+                                   // floor. The bull's dark glossy hooves: 0.12 0.10 0.08
+  float fit_tolerance = 0.1f;      // robust: after a first fit, while a kept sample is off it by more than this
+                                   // fraction of the predicted value (of a quarter of the pixel's brightest
+                                   // sample when more, plus 0.01 of full scale for noise), the sample whose
+                                   // leaving out fits the rest best is dropped -- a part-lit sample at a cast
+                                   // shadow's blurred edge, a highlight on a grey surface -- while 4+ remain
+                                   // [0, 1); 0 = keep every lit sample
+  int part_lit_px = 2;             // robust: a sample within this many pixels of one the same lamp leaves in
+                                   // shadow may be part lit (the lens and the sensor's low-pass filter blur a
+                                   // shadow's edge): with only 4 samples, where the fit cannot tell which one
+                                   // is off, such a sample darker than the fit is the one dropped [0, 8]; 0 = none
   bool fill_unreliable = true;     // robust: a pixel left with < 3 lit samples takes its normal from its
                                    // reliable neighbours (diffused inward) instead of the plain fit over
                                    // shadowed samples, which errs by tens of degrees (the bull's far legs)
