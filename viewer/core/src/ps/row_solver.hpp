@@ -98,11 +98,13 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
                const uint8_t* mask, const RowOut& out);
 
 // After a first fit (b.a = albedo, b.acc rows 9-11 = albedo x normal): per
-// pixel, while some kept sample is off the fit by more than
-// Setup::fit_tolerance, the one whose leaving out fits the others best is
-// dropped (4+ must remain; with 4, only a sample darker than the fit that
-// may be part lit, or the brightest when it is brighter than the fit). W, K,
-// pat and redo are updated; returns how many pixels changed.
+// pixel whose fit misses a kept sample by more than Setup::fit_tolerance,
+// every 3 kept samples fix a normal and the one most others agree with wins
+// (ties: the one whose left-out samples are plausibly off -- darker and near
+// their lamp's shadow (b.held), or brighter -- then the smaller misfit); the
+// others are dropped. With 4 samples only a part-lit one, or the brightest
+// when brighter than the fit, is dropped. W, K, pat and redo are updated;
+// returns how many pixels changed (part_lit.cpp).
 int drop_inconsistent(const Setup& s, Scratch& b, int count);
 
 // Solves every row in [y0, y1) (step 1) in parallel, writing into `result`.

@@ -11,6 +11,8 @@
 //  - robust: per pixel, shadowed (dark relative to the pixel's brightest
 //    sample) and saturated samples are dropped; at least 3 must remain or the
 //    pixel is unreliable. Pseudo-inverses are cached per "lamps kept" pattern.
+//    Then samples the fit cannot explain (part lit at a shadow's blurred
+//    edge, highlights on grey) are dropped by consensus (fit_tolerance).
 //    Coloured pixels are solved on their colour's part off the lamps' colour
 //    (PsOptions::diffuse_chroma), where a glossy dielectric's highlight --
 //    the lamp's colour -- does not reach.
@@ -74,13 +76,16 @@ struct PsOptions {
                                    // reliable neighbours (diffused inward) instead of the plain fit over
                                    // shadowed samples, which errs by tens of degrees (the bull's far legs)
   bool subtract_ambient = true;    // subtract set.ambient when present
-  bool refine_lights = true;       // robust, distant model: refine the lamps' directions and intensities
+  bool refine_lights = true;       // robust: refine the lamps' directions (and, distant model, intensities)
                                    // from the photos (calibrated rigs are a few degrees off): each lamp's
                                    // vector fitted to the solved normals over the pixels it lights
                                    // clearly, the whole set then brought by one linear map as close as it
                                    // goes to the recorded lamps (the photos fix them only up to such a map),
                                    // and the normals solved again; skipped when the normals do not spread
-                                   // enough to fix a lamp. See PsResult::lights_refined
+                                   // enough to fix a lamp. Near model: each lamp's direction from the origin
+                                   // fitted to the solved normals and depth (distance and intensity kept),
+                                   // the set brought by one linear map as close as it goes to the recorded
+                                   // lamps, solved again. See PsResult::lights_refined
   int refine_iterations = 3;       // rounds of refine-then-solve (1..10)
   double refine_max_deg = 15.0;    // a lamp that would move farther than this is not a calibration error:
                                    // that round is dropped and the last plausible lamps (at first the
