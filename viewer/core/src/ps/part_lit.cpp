@@ -156,9 +156,11 @@ int drop_inconsistent(const Setup& s, Scratch& b, int count) {
           double err = 0;
           uint32_t set = 0;
           bool bad = false;
-          for (int j = 0; j < m; ++j) {
+          int out = 0;
+          for (int j = 0; j < m && m - out >= best_in; ++j) {  // stop once it cannot match the best
             const double pred = gj[0] * v[j][0] + gj[1] * v[j][1] + gj[2] * v[j][2];
             const double off = (yv[j] - pred) / limit(pred);
+            out += std::abs(off) > 1.0;
             if (std::abs(off) <= 1.0) {
               if (!(pred > 0)) bad = true;
               ++in;
@@ -169,7 +171,7 @@ int drop_inconsistent(const Setup& s, Scratch& b, int count) {
               plaus += part_lit ? 2 : off > 0 ? 1 : 0;
             }
           }
-          if (bad || in < 3) continue;
+          if (bad || in < 3 || m - out < best_in) continue;
           const bool better = in > best_in || (in == best_in && (plaus > best_plaus || (plaus == best_plaus && err < best_err)));
           if (!better) continue;
           best_in = in;
