@@ -164,10 +164,16 @@ Status solve_once(const io::ImageSet& set, const cv::Mat& mask_in, const PsOptio
   const int solved = cv::countNonZero(mask);
   if (solved == 0) return make_error("the mask is empty: no object pixels to solve");
 
-  Setup s{.n = n, .width = size.width, .height = size.height, .robust = options.robust,
-          .shadow_fraction = options.shadow_fraction, .saturation = options.saturation,
-          .min_signal = options.min_signal, .outlier_fraction = options.outlier_fraction,
-          .diffuse_chroma = options.robust ? options.diffuse_chroma : 0.f};
+  Setup s;
+  s.n = n;
+  s.width = size.width;
+  s.height = size.height;
+  s.robust = options.robust;
+  s.shadow_fraction = options.shadow_fraction;
+  s.saturation = options.saturation;
+  s.min_signal = options.min_signal;
+  s.outlier_fraction = options.outlier_fraction;
+  s.diffuse_chroma = options.robust ? options.diffuse_chroma : 0.f;
   s.dir.resize(size_t(n) * 3);
   s.inv_e.resize(size_t(n) * 3);
   bool have_positions = true;
