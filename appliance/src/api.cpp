@@ -61,6 +61,14 @@ veneer::Status check_set_id(const std::string& field, const std::string& id) {
   return {};
 }
 
+// A fetch's chunk size in bytes (0 = the default), or an error naming `field`.
+veneer::Expected<size_t> check_chunk_size(const std::string& field, uint32_t requested) {
+  const size_t chunk = requested == 0 ? kDefaultChunkBytes : requested;
+  if (chunk < kMinChunkBytes || chunk > kMaxChunkBytes)
+    return make_error(field + ": " + std::to_string(requested) + " is outside 1 KiB..4 MiB");
+  return chunk;
+}
+
 }  // namespace
 
 std::string trim_token(const std::string& token) {
@@ -108,15 +116,13 @@ veneer::Expected<Request> decode(const pb::ClientMessage& m) {
     case pb::ClientMessage::kFetchImages: {
       const auto& f = m.fetch_images();
       if (auto s = check_set_id("fetch_images.set_id", f.set_id()); !s) return s.error();
-      size_t chunk = f.chunk_size() == 0 ? kDefaultChunkBytes : f.chunk_size();
-      if (chunk < kMinChunkBytes || chunk > kMaxChunkBytes) {
-        return make_error("fetch_images.chunk_size: " + std::to_string(f.chunk_size()) + " is outside 1 KiB..4 MiB");
-      }
+      auto chunk = check_chunk_size("fetch_images.chunk_size", f.chunk_size());
+      if (!chunk) return chunk.error();
       if (static_cast<size_t>(f.skip_files_size()) > kMaxSkipFiles) {
         return make_error("fetch_images.skip_files: " + std::to_string(f.skip_files_size()) +
                           " files is more than the limit of " + std::to_string(kMaxSkipFiles));
       }
-      FetchImagesReq req{f.set_id(), f.include_truth(), chunk, {}};
+      FetchImagesReq req{f.set_id(), f.include_truth(), *chunk, {}};
       for (const auto& name : f.skip_files()) {
         if (name.empty() || name.size() > kMaxSkipFileChars || !printable(name)) {
           return make_error("fetch_images.skip_files: each must be a file name of 1.." +
@@ -130,11 +136,9 @@ veneer::Expected<Request> decode(const pb::ClientMessage& m) {
     case pb::ClientMessage::kFetchPreview: {
       const auto& f = m.fetch_preview();
       if (auto s = check_set_id("fetch_preview.set_id", f.set_id()); !s) return s.error();
-      size_t chunk = f.chunk_size() == 0 ? kDefaultChunkBytes : f.chunk_size();
-      if (chunk < kMinChunkBytes || chunk > kMaxChunkBytes) {
-        return make_error("fetch_preview.chunk_size: " + std::to_string(f.chunk_size()) + " is outside 1 KiB..4 MiB");
-      }
-      r.body = FetchPreviewReq{f.set_id(), chunk};
+      auto chunk = check_chunk_size("fetch_preview.chunk_size", f.chunk_size());
+      if (!chunk) return chunk.error();
+      r.body = FetchPreviewReq{f.set_id(), *chunk};
       return r;
     }
     case pb::ClientMessage::kDeleteSet:

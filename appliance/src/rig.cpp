@@ -5,6 +5,7 @@
 
 #include "veneer/io/image_io.hpp"
 #include "veneer/util/log.hpp"
+#include "veneer/util/utc_time.hpp"
 #include "veneerd/sequencer.hpp"
 
 namespace veneerd {
@@ -203,7 +204,7 @@ veneer::Status Rig::save_owner(const std::vector<LampState>& states) {
   }
   nlohmann::json doc;
   doc["format"] = "veneer-lamp-owner/1";
-  doc["saved"] = utc_now_iso();
+  doc["saved"] = veneer::utc_now();
   doc["lamps"] = nlohmann::json::array();
   for (std::size_t i = 0; i < states.size(); ++i) {
     nlohmann::json l = to_json(states[i]);

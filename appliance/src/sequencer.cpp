@@ -9,6 +9,7 @@
 
 #include "veneer/io/raw.hpp"
 #include "veneer/util/log.hpp"
+#include "veneer/util/utc_time.hpp"
 
 namespace veneerd {
 
@@ -21,15 +22,6 @@ double mean_level(const cv::Mat& linear) {
   double sum = 0;
   for (int c = 0; c < linear.channels() && c < 4; ++c) sum += m[c];
   return sum / std::max(1, linear.channels());
-}
-
-std::string utc_now_iso() {
-  std::time_t now = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&now, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
 }
 
 namespace {
@@ -81,7 +73,7 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
   set.role = plan.role;
   set.object = plan.object;
   set.scene = plan.scene;
-  set.created = utc_now_iso();
+  set.created = veneer::utc_now();
 
   // Step k's lamps: the ambient frame (k = 0) all off, then ring lamp k - 1
   // alone, rig white at full brightness. A lamp that is off keeps its owner's

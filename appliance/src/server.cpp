@@ -401,6 +401,11 @@ class Session : public std::enable_shared_from_this<Session> {
     authed_ = true;
     client_name_ = h.client_name;
     VLOG_INFO("Server", "{}: hello from '{}'", peer_, client_name_);
+    send_status(id);
+  }
+
+  // The reply to request `id`: ok, with the rig's status.
+  void send_status(uint64_t id) {
     pb::RigMessage m;
     auto* r = m.mutable_response();
     r->set_id(id);
@@ -449,14 +454,7 @@ class Session : public std::enable_shared_from_this<Session> {
     s.set_event_seq(srv_.event_seq);
   }
 
-  void on(uint64_t id, api::StatusReq&) {
-    pb::RigMessage m;
-    auto* r = m.mutable_response();
-    r->set_id(id);
-    r->set_ok(true);
-    fill_status(*r->mutable_status());
-    send(m);
-  }
+  void on(uint64_t id, api::StatusReq&) { send_status(id); }
 
   void on(uint64_t id, api::ListSetsReq& l) {
     pb::RigMessage m;

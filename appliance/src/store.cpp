@@ -17,6 +17,7 @@
 
 #include "veneer/io/image_io.hpp"
 #include "veneer/util/log.hpp"
+#include "veneer/util/utc_time.hpp"
 
 namespace veneerd {
 
@@ -135,18 +136,10 @@ veneer::Expected<StoredSet> Store::scan_one(const std::string& id) const {
     if (!f.empty() && !fs::is_regular_file(folder / f, ec)) return make_error((folder / f).string() + ": missing");
   }
   const veneer::io::ImageSet& s = manifest->set;
-  StoredSet out;
-  out.id = id;
-  out.role = s.role;
-  out.object = s.object;
-  out.created = s.created;
-  out.scene = s.scene;
-  out.size = s.size;
-  out.lights = static_cast<int>(s.lights.size());
-  out.warnings = s.warnings;
-  out.has_truth = fs::exists(folder / "truth" / "normals.pfm", ec);
-  out.bytes = folder_bytes(folder);
-  return out;
+  return StoredSet{.id = id, .role = s.role, .object = s.object, .created = s.created, .scene = s.scene,
+                   .size = s.size, .lights = static_cast<int>(s.lights.size()), .warnings = s.warnings,
+                   .has_truth = fs::exists(folder / "truth" / "normals.pfm", ec), .bytes = folder_bytes(folder),
+                   .deleted = {}};  // a stored set, not one in the trash
 }
 
 std::vector<StoredSet> Store::list() const {
@@ -199,12 +192,7 @@ veneer::Expected<std::vector<std::string>> Store::files(const std::string& id, b
 }
 
 std::string Store::new_id(veneer::io::Role role, const std::string& object) const {
-  std::time_t now = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&now, &tm);
-  char stamp[32];
-  std::strftime(stamp, sizeof stamp, "%Y%m%d-%H%M%S", &tm);
-  std::string base = std::string(stamp) + "-" + veneer::io::role_name(role);
+  std::string base = veneer::utc_now("%Y%m%d-%H%M%S") + "-" + veneer::io::role_name(role);
   std::string clean;
   for (char ch : object) {
     if (clean.size() >= 32) break;
@@ -436,14 +424,6 @@ veneer::Status SetWriter::commit(veneer::io::ImageSet& set) {
 }
 
 namespace {
-std::string iso_utc(std::time_t t) {
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char text[32];
-  std::strftime(text, sizeof text, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return text;
-}
-
 // <trash>/<id>.deleted holds when the set was deleted (Unix seconds).
 std::time_t deleted_at(const fs::path& stamp) {
   std::ifstream in(stamp);
@@ -500,7 +480,7 @@ std::vector<StoredSet> Store::trash() const {
     out.warnings = manifest->set.warnings;
     out.bytes = folder_bytes(entry.path());
     const std::time_t when = deleted_at(trash_folder() / (id + ".deleted"));
-    out.deleted = iso_utc(when);
+    out.deleted = veneer::utc_time(when);
     found.emplace_back(when, std::move(out));
   }
   std::sort(found.begin(), found.end(), [](const auto& a, const auto& b) { return a.first > b.first; });

@@ -142,13 +142,20 @@ rig_capture() {
     || bad "$who: veneer normals (see $out/test-$who-normals.log)"
 }
 
+# simulated_rig <root> <who> <size>: the root's veneerd --simulate as user
+# veneer on /var/lib/veneer/sets, driven through rig_capture, then stopped.
+simulated_rig() {
+  local root="$1" who="$2" size="$3" port
+  port=$(free_port)
+  exec_in_root "$root" runuser -u veneer -- veneerd --simulate --listen "127.0.0.1:$port" \
+    --store /var/lib/veneer/sets --size "$size" > "$out/test-$who-veneerd.log" 2>&1 &
+  pids+=($!)
+  rig_capture "$root" "$who" "$port" || true
+  kill "${pids[-1]}" 2>/dev/null || true; wait "${pids[-1]}" 2>/dev/null || true
+}
+
 step "amd64: /usr/bin/veneerd --simulate as user veneer on /var/lib/veneer/sets, driven by /usr/bin/veneer"
-port=$(free_port)
-exec_in_root "$amd64" runuser -u veneer -- veneerd --simulate --listen "127.0.0.1:$port" \
-  --store /var/lib/veneer/sets --size 320x212 > "$out/test-amd64-veneerd.log" 2>&1 &
-pids+=($!)
-rig_capture "$amd64" amd64 "$port" || true
-kill "${pids[-1]}" 2>/dev/null || true; wait "${pids[-1]}" 2>/dev/null || true
+simulated_rig "$amd64" amd64 320x212
 
 step "arm64: the binary"
 dir="$out/test-deb-arm64"; rm -rf "$dir"; dpkg-deb -x "$out/veneerd_${version}_arm64.deb" "$dir"
@@ -175,12 +182,7 @@ v=$(in_root "$arm64" veneerd --version 2>&1 || true)
 [ "$v" = "veneerd $version" ] && ok "arm64: /usr/bin/veneerd --version under qemu-aarch64: $v" || bad "arm64: veneerd --version printed '$v'"
 
 step "arm64: /usr/bin/veneerd --simulate (under qemu-user) as user veneer, driven by the amd64 root's veneer"
-port=$(free_port)
-exec_in_root "$arm64" runuser -u veneer -- veneerd --simulate --listen "127.0.0.1:$port" \
-  --store /var/lib/veneer/sets --size 160x106 > "$out/test-arm64-veneerd.log" 2>&1 &
-pids+=($!)
-rig_capture "$arm64" arm64 "$port" || true
-kill "${pids[-1]}" 2>/dev/null || true; wait "${pids[-1]}" 2>/dev/null || true
+simulated_rig "$arm64" arm64 160x106
 
 step "amd64: purge"
 if in_root "$amd64" sh -c 'DEBIAN_FRONTEND=noninteractive apt-get purge -y -qq veneerd' > "$out/test-amd64-purge.log" 2>&1; then

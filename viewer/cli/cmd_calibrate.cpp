@@ -104,13 +104,10 @@ int run_calibrate(const CalibrateArgs& a) {
 
 }  // namespace
 
-VENEER_COMMAND(calibrate) {
-  auto args = std::make_shared<CalibrateArgs>();
-  auto* cmd = app.add_subcommand(
-      "calibrate",
-      "lamp directions from photos of a chrome sphere (one per lamp): fits the sphere's outline, finds each lamp's "
-      "highlight and writes the reflected directions as a lights file for `normals --lights` (a picture of what "
-      "was found beside it)");
+VENEER_ARGS_COMMAND(calibrate, CalibrateArgs,
+                    "lamp directions from photos of a chrome sphere (one per lamp): fits the sphere's outline, finds "
+                    "each lamp's highlight and writes the reflected directions as a lights file for `normals "
+                    "--lights` (a picture of what was found beside it)") {
   cmd->add_option("SET", args->set, "set of chrome-sphere photos (its mask.png, if any, outlines the sphere)");
   cmd->add_option("--out", args->out, "the lights file to write (JSON, veneer-lights/1)");
   cmd->add_option("--picture", args->picture, "picture of the circle and highlights (default: --out with .png)");

@@ -5,6 +5,7 @@
 #include <iostream>
 
 #include "command.hpp"
+#include "inputs.hpp"
 #include "output.hpp"
 #include "veneer/eval/metrics.hpp"
 #include "veneer/eval/table.hpp"
@@ -47,15 +48,9 @@ int run_table(const EvalArgs& a) {
 
 int run_map(const EvalArgs& a) {
   if (a.dst.empty() || a.src.empty() || a.map.empty()) return report.usage("--dst, --src and --map are needed (or --table)");
-  auto dst = io::read_set(a.dst);
-  if (!dst) return report.fail(dst.message());
-  auto src = io::read_set(a.src);
-  if (!src) return report.fail(src.message());
-  std::filesystem::path file = a.map;
-  if (std::filesystem::is_directory(file)) file /= "map.pfm";
-  auto map = match::read_map(file);
-  if (!map) return report.fail(map.message());
-  auto q = pipeline::evaluate_sets(*map, *dst, *src);
+  auto in = read_map_inputs(a.dst, a.src, a.map);
+  if (!in) return report.fail(in.message());
+  auto q = pipeline::evaluate_sets(in->map, in->dst, in->src);
   if (!q) return report.fail(q.message());
   std::printf("destination object pixels  %d\n", q->destination_pixels);
   std::printf("coverage                   %.2f %%\n", 100 * q->coverage);
@@ -77,12 +72,9 @@ int run_map(const EvalArgs& a) {
 }  // namespace
 }  // namespace veneer::cli
 
-VENEER_COMMAND(eval) {
-  auto args = std::make_shared<veneer::cli::EvalArgs>();
-  auto* cmd = app.add_subcommand("eval", "quality of a map against ground truth, or the quality table (--table)");
-  cmd->add_option("--dst", args->dst, "destination image set");
-  cmd->add_option("--src", args->src, "source image set");
-  cmd->add_option("--map", args->map, "transfer output folder (or its map.pfm)");
+VENEER_ARGS_COMMAND(eval, veneer::cli::EvalArgs,
+                    "quality of a map against ground truth, or the quality table (--table)") {
+  veneer::cli::add_map_inputs(cmd, args->dst, args->src, args->map, false);
   cmd->add_flag("--table", args->table, "simulate the thesis pairs and print the quality table");
   cmd->add_flag("--full", args->full, "table: every method x feature x patch (slow)");
   cmd->add_option("--size", args->size, "table: render size WxH (default 512x340)");

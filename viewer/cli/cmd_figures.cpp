@@ -282,9 +282,7 @@ int run(const FiguresArgs& a) {
 }  // namespace
 }  // namespace veneer::cli
 
-VENEER_COMMAND(figures) {
-  auto args = std::make_shared<veneer::cli::FiguresArgs>();
-  auto* cmd = app.add_subcommand("figures", "re-make the thesis's figures 5.2-5.13 on the simulated pairs");
+VENEER_ARGS_COMMAND(figures, veneer::cli::FiguresArgs, "re-make the thesis's figures 5.2-5.13 on the simulated pairs") {
   cmd->add_option("--out", args->out, "output folder (default demo-out/figures)");
   cmd->add_option("--size", args->size, "render size WxH (default 512x340)");
   cmd->add_flag("--truth-normals", args->truth_normals, "match on true normals instead of photometric stereo");

@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "command.hpp"
+#include "inputs.hpp"
 #include "output.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
@@ -21,18 +22,15 @@ struct InspectArgs {
 ::veneer::cli::Output report{"inspect"};
 
 int run(const InspectArgs& a) {
-  auto dst = io::read_set(a.dst);
-  if (!dst) return report.fail(dst.message());
-  auto src = io::read_set(a.src);
-  if (!src) return report.fail(src.message());
-  std::filesystem::path file = a.map;
-  if (std::filesystem::is_directory(file)) file /= "map.pfm";
-  auto map = match::read_map(file);
-  if (!map) return report.fail(map.message());
-  const double scale = pipeline::map_scale(*map, *dst);
+  auto in = read_map_inputs(a.dst, a.src, a.map);
+  if (!in) return report.fail(in.message());
+  io::ImageSet& dst = in->dst;
+  io::ImageSet& src = in->src;
+  const match::Map& map = in->map;
+  const double scale = pipeline::map_scale(map, dst);
   if (!(scale > 0 && scale <= 1.0001)) return report.fail("the map is wider than the destination set");
-  match::scale_set(*dst, scale);
-  match::scale_set(*src, scale);
+  match::scale_set(dst, scale);
+  match::scale_set(src, scale);
   std::vector<cv::Point> points;
   if (!a.points.empty()) {
     std::stringstream ss(a.points);
@@ -46,15 +44,15 @@ int run(const InspectArgs& a) {
       points.emplace_back(static_cast<int>(x * scale), static_cast<int>(y * scale));
     }
   } else {
-    points = repaint::spread_points(*map, a.count);
+    points = repaint::spread_points(map, a.count);
   }
   const cv::Mat picture =
-      repaint::origin_picture(*map, repaint::median_photo(dst->images), repaint::median_photo(src->images), points);
+      repaint::origin_picture(map, repaint::median_photo(dst.images), repaint::median_photo(src.images), points);
   if (auto s = report.picture(a.out, picture); !s) return report.fail(s.message());
   for (const cv::Point p : points) {
-    if (p.x >= 0 && p.y >= 0 && p.x < map->xy.cols && p.y < map->xy.rows && map->valid(p.x, p.y)) {
-      const cv::Vec2f m = map->xy.at<cv::Vec2f>(p);
-      std::printf("(%d, %d) <- (%.0f, %.0f)  distance %.4f\n", p.x, p.y, m[0], m[1], map->distance.at<float>(p));
+    if (p.x >= 0 && p.y >= 0 && p.x < map.xy.cols && p.y < map.xy.rows && map.valid(p.x, p.y)) {
+      const cv::Vec2f m = map.xy.at<cv::Vec2f>(p);
+      std::printf("(%d, %d) <- (%.0f, %.0f)  distance %.4f\n", p.x, p.y, m[0], m[1], map.distance.at<float>(p));
     } else {
       std::printf("(%d, %d) not mapped\n", p.x, p.y);
     }
@@ -65,12 +63,9 @@ int run(const InspectArgs& a) {
 }  // namespace
 }  // namespace veneer::cli
 
-VENEER_COMMAND(inspect) {
-  auto args = std::make_shared<veneer::cli::InspectArgs>();
-  auto* cmd = app.add_subcommand("inspect", "side-by-side picture with lines from destination pixels to their source");
-  cmd->add_option("--dst", args->dst, "destination image set")->required();
-  cmd->add_option("--src", args->src, "source image set")->required();
-  cmd->add_option("--map", args->map, "transfer output folder (or its map.pfm)")->required();
+VENEER_ARGS_COMMAND(inspect, veneer::cli::InspectArgs,
+                    "side-by-side picture with lines from destination pixels to their source") {
+  veneer::cli::add_map_inputs(cmd, args->dst, args->src, args->map, true);
   cmd->add_option("--out", args->out, "picture to write (PNG)")->required();
   cmd->add_option("--points", args->points, "destination pixels 'x,y;x,y;...' in the set's pixels (default: a grid)");
   cmd->add_option("--count", args->count, "how many grid points when --points is not given (default 16)");

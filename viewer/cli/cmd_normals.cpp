@@ -210,14 +210,11 @@ int run_normals(const NormalsArgs& a) {
 
 }  // namespace
 
-VENEER_COMMAND(normals) {
-  auto args = std::make_shared<NormalsArgs>();
-  auto* cmd = app.add_subcommand(
-      "normals",
-      "photometric stereo on a set: normals (PFM + picture), albedo, mask, residual; angular error when the set "
-      "has truth/. Default: robust, near-light when the lamp positions and focal length are known, the set's "
-      "own mask if it has one, else the object against the backdrop under its brightest lamp (contrast), "
-      "a base it stands on left out");
+VENEER_ARGS_COMMAND(normals, NormalsArgs,
+                    "photometric stereo on a set: normals (PFM + picture), albedo, mask, residual; angular error "
+                    "when the set has truth/. Default: robust, near-light when the lamp positions and focal length "
+                    "are known, the set's own mask if it has one, else the object against the backdrop under its "
+                    "brightest lamp (contrast), a base it stands on left out") {
   cmd->add_option("SET", args->set, "image set folder (veneer-set/1, DiLiGenT or thesis layout)");
   cmd->add_option("--out", args->out, "output folder");
   cmd->add_flag("--robust", args->robust, "drop shadowed and saturated samples per pixel (the default)");

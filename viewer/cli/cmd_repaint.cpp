@@ -17,6 +17,7 @@
 #include <opencv2/videoio.hpp>
 
 #include "command.hpp"
+#include "inputs.hpp"
 #include "output.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
@@ -89,8 +90,7 @@ int run_repaint(const RepaintArgs& a) {
     return report.usage("--video " + a.video + ": OpenCV cannot read it as a video");
   }
 
-  fs::path map_file(a.map);
-  if (fs::is_directory(map_file)) map_file /= "map.pfm";
+  const fs::path map_file = cli::map_file(a.map);
   auto map = match::read_map(map_file);
   if (!map) return report.fail(map.message());
   pipeline::TransferOptions options;
@@ -205,11 +205,9 @@ int run_repaint(const RepaintArgs& a) {
 
 }  // namespace
 
-VENEER_COMMAND(repaint) {
-  auto args = std::make_shared<RepaintArgs>();
-  auto* cmd = app.add_subcommand("repaint",
-                                 "repaint a recorded video of the source onto the destination through a map, each "
-                                 "frame registered to the source's stills");
+VENEER_ARGS_COMMAND(repaint, RepaintArgs,
+                    "repaint a recorded video of the source onto the destination through a map, each "
+                    "frame registered to the source's stills") {
   cmd->add_option("--src", args->src, "the source set the map was computed against")->required();
   cmd->add_option("--dst", args->dst, "the destination set (its picture shows where nothing is mapped)")->required();
   cmd->add_option("--map", args->map, "a transfer folder or its map.pfm")->required();

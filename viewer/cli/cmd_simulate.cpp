@@ -89,18 +89,12 @@ int run_simulate(const SimulateArgs& a) {
   }
   if (a.scene.empty()) return report.usage("--scene is required (see --list)");
   if (a.out.empty()) return report.usage("--out is required");
-  veneer::sim::RenderOptions o;
+  veneer::sim::RenderOptions o{.focal_px = a.focal, .exposure = a.exposure, .noise_sigma = a.noise,
+                               .ambient = a.ambient, .seed = a.seed, .scale = a.scale, .threads = a.threads};
   if (!parse_size(a.size, &o.size)) return report.usage("--size '" + a.size + "': expected WIDTHxHEIGHT, e.g. 1024x680");
   if (!parse_vec3(a.offset, &o.offset_m)) return report.usage("--offset '" + a.offset + "': expected x,y,z in metres");
   auto role = veneer::io::parse_role(a.role);
   if (!role || *role == veneer::io::Role::unknown) return report.usage("--role '" + a.role + "': expected destination or source");
-  o.seed = a.seed;
-  o.noise_sigma = a.noise;
-  o.scale = a.scale;
-  o.ambient = a.ambient;
-  o.exposure = a.exposure;
-  o.focal_px = a.focal;
-  o.threads = a.threads;
   if (a.optics) o.camera_optics();
   if (auto st = o.check(); !st) return report.usage(st.message());
   if (!a.motion.empty()) {
@@ -139,12 +133,9 @@ int run_simulate(const SimulateArgs& a) {
 
 }  // namespace
 
-VENEER_COMMAND(simulate) {
-  auto args = std::make_shared<SimulateArgs>();
-  auto* cmd = app.add_subcommand(
-      "simulate",
-      "render a scene under the simulated thesis rig (7 lamps on a 0.47 m ring, object at 1 m) "
-      "and write a veneer-set/1 folder with truth/");
+VENEER_ARGS_COMMAND(simulate, SimulateArgs,
+                    "render a scene under the simulated thesis rig (7 lamps on a 0.47 m ring, object at 1 m) "
+                    "and write a veneer-set/1 folder with truth/") {
   cmd->add_option("--scene", args->scene, "scene name (see --list)");
   cmd->add_option("--material", args->material,
                   "render the scene's shape in this scene's material (albedo texture and gloss), same lamps and "

@@ -239,9 +239,8 @@ int run(const TransferArgs& a) {
 }  // namespace
 }  // namespace veneer::cli
 
-VENEER_COMMAND(transfer) {
-  auto args = std::make_shared<veneer::cli::TransferArgs>();
-  auto* cmd = app.add_subcommand("transfer", "correspondence map + destination repainted with the source's look");
+VENEER_ARGS_COMMAND(transfer, veneer::cli::TransferArgs,
+                    "correspondence map + destination repainted with the source's look") {
   cmd->add_option("--dst", args->dst, "destination image set (folder)")->required();
   cmd->add_option("--src", args->src, "source image set (folder)")->required();
   cmd->add_option("--dst-mask", args->dst_mask,

@@ -1,12 +1,18 @@
 #pragma once
-// Sub-commands of `veneer`. Each cmd_<name>.cpp defines one (or a group) with
-//   VENEER_COMMAND(simulate) { auto* cmd = app.add_subcommand("simulate", "...");
-//                              ...; return [=] { return run(...); }; }
+// Sub-commands of `veneer`. Each cmd_<name>.cpp defines one with its
+// options filling an arguments struct,
+//   VENEER_ARGS_COMMAND(simulate, SimulateArgs, "what it does") {
+//     cmd->add_option("--out", args->out, "...");  // cmd: CLI::App*, args: shared_ptr<SimulateArgs>
+//     return [args] { return run(*args); };
+//   }
+// or one (or a group) set up by hand with
+//   VENEER_COMMAND(rig) { auto* cmd = app.add_subcommand("rig", "..."); ...; return [=] { ... }; }
 // The returned function runs when the sub-command was chosen and gives the
 // exit code (0 ok, 1 failure, 2 bad usage). Every command reports through
 // output.hpp: errors as one line on stderr "veneer <cmd>: <what was wrong>",
 // the files it writes, and its closing summary on stdout.
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -50,3 +56,12 @@ class ProgressBar {
   static ::veneer::cli::Runner veneer_setup_##name(CLI::App& app);               \
   static ::veneer::cli::CommandRegistrar veneer_registrar_##name(#name, veneer_setup_##name); \
   static ::veneer::cli::Runner veneer_setup_##name(CLI::App& app)
+
+// The sub-command `name` described by `description`, with a fresh `Args` its
+// options fill in: the body sees `cmd` (CLI::App*) and `args`.
+#define VENEER_ARGS_COMMAND(name, Args, description)                                                      \
+  static ::veneer::cli::Runner veneer_setup_##name(CLI::App* cmd, const std::shared_ptr<Args>& args);     \
+  static ::veneer::cli::CommandRegistrar veneer_registrar_##name(#name, [](CLI::App& app) {                 \
+    return veneer_setup_##name(app.add_subcommand(#name, description), std::make_shared<Args>());          \
+  });                                                                                                      \
+  static ::veneer::cli::Runner veneer_setup_##name(CLI::App* cmd, const std::shared_ptr<Args>& args)

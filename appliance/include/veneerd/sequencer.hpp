@@ -83,7 +83,4 @@ veneer::Expected<CaptureResult> run_capture(Lamps& lamps, Camera& camera, const 
 // The mean linear level of a photo (all channels), used for the ambient check.
 double mean_level(const cv::Mat& linear);
 
-// "2026-11-22T08:15:30Z"
-std::string utc_now_iso();
-
 }  // namespace veneerd

@@ -9,6 +9,7 @@
 #include <ctime>
 
 #include "veneer/util/log.hpp"
+#include "veneer/util/utc_time.hpp"
 
 namespace veneerd::ptpip {
 
@@ -66,14 +67,7 @@ bool write_packet(int fd, uint32_t type, const std::vector<uint8_t>& payload) {
   return write_packet(fd, type, payload.data(), payload.size());
 }
 
-std::string ptp_date_now() {
-  std::time_t t = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y%m%dT%H%M%S", &tm);
-  return buf;
-}
+std::string ptp_date_now() { return veneer::utc_now("%Y%m%dT%H%M%S"); }
 
 // Width and height from a JPEG's frame header; 0, 0 when there is none.
 std::pair<int, int> jpeg_size(const std::vector<unsigned char>& d) {

@@ -26,12 +26,8 @@ veneer::Expected<std::unique_ptr<SimulatedRig>> SimulatedRig::start(const Simula
     return veneer::make_error("simulated rig: lamps must be 1..64, got " + std::to_string(options.lamps));
   std::unique_ptr<SimulatedRig> rig(new SimulatedRig());
   rig->options_ = options;
-  HueEmulatorOptions eo;
-  eo.lamps = options.lamps;
-  eo.key = options.key;
-  eo.apply_delay_ms = options.apply_delay_ms;
-  eo.latency_ms = options.latency_ms;
-  eo.enforce_limits = options.rate_limits;
+  const HueEmulatorOptions eo{.lamps = options.lamps, .key = options.key, .apply_delay_ms = options.apply_delay_ms,
+                              .latency_ms = options.latency_ms, .enforce_limits = options.rate_limits};
   rig->bridge_ = std::make_unique<HueBridgeEmulator>(eo);
   if (auto st = rig->bridge_->start(options.host, options.port); !st) return st.error();
   rig->context_.bridge = rig->bridge_->address();
@@ -71,17 +67,16 @@ json SimulatedRig::lamps_config() const {
 }
 
 json SimulatedRig::camera_config() const {
-  SimulatedCameraOptions c;
   auto lamps = hw::HueLampsOptions::from_json(lamps_config());
-  if (lamps) c.bridge = *lamps;
-  c.scene = destination_scene();
-  c.preview_scene = source_scene();
-  c.size = options_.size;
-  c.preview_size = options_.preview_size;
-  c.preview_motion = options_.preview_motion;
-  c.preview_motion_frames = options_.preview_motion_frames;
-  c.noise_sigma = options_.noise_sigma;
-  c.raw = options_.raw;
+  const SimulatedCameraOptions c{.bridge = lamps ? *lamps : hw::HueLampsOptions{},
+                                 .scene = destination_scene(),
+                                 .preview_scene = source_scene(),
+                                 .size = options_.size,
+                                 .preview_size = options_.preview_size,
+                                 .noise_sigma = options_.noise_sigma,
+                                 .preview_motion = options_.preview_motion,
+                                 .preview_motion_frames = options_.preview_motion_frames,
+                                 .raw = options_.raw};
   return c.to_json();
 }
 

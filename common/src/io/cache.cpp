@@ -68,29 +68,22 @@ struct Fd {
   }
 };
 
-bool write_all(int fd, const void* data, size_t n) {
-  const char* p = static_cast<const char*>(data);
+// All n bytes at p through `io` (::read or ::write), again after EINTR;
+// false on an error or at the end of the file.
+template <class Byte, class Io>
+bool all_bytes(Io io, int fd, Byte* p, size_t n) {
   while (n > 0) {
-    const ssize_t w = ::write(fd, p, n);
-    if (w < 0 && errno == EINTR) continue;
-    if (w <= 0) return false;
-    p += w;
-    n -= static_cast<size_t>(w);
+    const ssize_t done = io(fd, p, n);
+    if (done < 0 && errno == EINTR) continue;
+    if (done <= 0) return false;
+    p += done;
+    n -= static_cast<size_t>(done);
   }
   return true;
 }
 
-bool read_all(int fd, void* data, size_t n) {
-  char* p = static_cast<char*>(data);
-  while (n > 0) {
-    const ssize_t r = ::read(fd, p, n);
-    if (r < 0 && errno == EINTR) continue;
-    if (r <= 0) return false;
-    p += r;
-    n -= static_cast<size_t>(r);
-  }
-  return true;
-}
+bool write_all(int fd, const void* data, size_t n) { return all_bytes(::write, fd, static_cast<const char*>(data), n); }
+bool read_all(int fd, void* data, size_t n) { return all_bytes(::read, fd, static_cast<char*>(data), n); }
 
 // A file that starts with the matrix header's magic.
 bool is_mat_file(const fs::path& file) {

@@ -10,6 +10,8 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 
+#include "set_detail.hpp"
+
 namespace veneer::io {
 
 namespace {
@@ -83,24 +85,18 @@ Expected<CameraFiles> encode_camera_files(const cv::Mat& linear, const CameraFil
 
 Status add_camera_files(ImageSet& set, const CameraFileOptions& options) {
   if (Status s = options.check(); !s) return s;
-  const size_t n = set.images.size() + (set.ambient.empty() ? 0 : 1);
-  std::vector<Expected<CameraFiles>> encoded(n, Expected<CameraFiles>(CameraFiles{}));
-  tbb::parallel_for(size_t(0), n, [&](size_t i) {
-    encoded[i] = encode_camera_files(i < set.images.size() ? set.images[i] : set.ambient, options);
-  });
-  for (size_t i = 0; i < n; ++i) {
-    if (!encoded[i]) return make_error((i < set.images.size() ? "image " + std::to_string(i) : std::string("ambient")) +
-                                       ": " + encoded[i].message());
-  }
+  auto encoded = detail::encode_frames<CameraFiles>(
+      set, [&](const cv::Mat& photo) { return encode_camera_files(photo, options); });
+  if (!encoded) return encoded.error();
   set.developed.clear();
   set.raw.clear();
   for (size_t i = 0; i < set.images.size(); ++i) {
-    set.developed.push_back(std::move(encoded[i]->developed));
-    set.raw.push_back(std::move(encoded[i]->raw));
+    set.developed.push_back(std::move((*encoded)[i].developed));
+    set.raw.push_back(std::move((*encoded)[i].raw));
   }
   if (!set.ambient.empty()) {
-    set.ambient_developed = std::move(encoded.back()->developed);
-    set.ambient_raw = std::move(encoded.back()->raw);
+    set.ambient_developed = std::move(encoded->back().developed);
+    set.ambient_raw = std::move(encoded->back().raw);
   }
   return Status::success();
 }

@@ -12,6 +12,7 @@
 #include <tbb/parallel_for.h>
 
 #include "lj92.hpp"
+#include "set_detail.hpp"
 #include "veneer/io/camera_files.hpp"
 #include "veneer/io/dng.hpp"
 
@@ -309,18 +310,11 @@ Expected<std::string> encode_dng(const cv::Mat& photo, const DngOptions& o) {
 }
 
 Status add_dng_raw_files(ImageSet& set, const DngOptions& options) {
-  const size_t n = set.images.size() + (set.ambient.empty() ? 0 : 1);
-  std::vector<Expected<std::string>> encoded(n, Expected<std::string>(std::string()));
-  tbb::parallel_for(size_t(0), n, [&](size_t i) {
-    encoded[i] = encode_dng(i < set.images.size() ? set.images[i] : set.ambient, options);
-  });
-  for (size_t i = 0; i < n; ++i) {
-    if (!encoded[i]) return make_error((i < set.images.size() ? "image " + std::to_string(i) : std::string("ambient")) +
-                                       ": " + encoded[i].message());
-  }
+  auto encoded = detail::encode_frames<std::string>(set, [&](const cv::Mat& photo) { return encode_dng(photo, options); });
+  if (!encoded) return encoded.error();
   set.raw.clear();
-  for (size_t i = 0; i < set.images.size(); ++i) set.raw.push_back({"dng", std::move(encoded[i]).value()});
-  if (!set.ambient.empty()) set.ambient_raw = {"dng", std::move(encoded.back()).value()};
+  for (size_t i = 0; i < set.images.size(); ++i) set.raw.push_back({"dng", std::move((*encoded)[i])});
+  if (!set.ambient.empty()) set.ambient_raw = {"dng", std::move(encoded->back())};
   return Status::success();
 }
 

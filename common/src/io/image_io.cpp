@@ -18,10 +18,82 @@
 #include <opencv2/imgproc.hpp>
 
 #include "file_util.hpp"
+#include "pixels.hpp"
 #include "png_codec.hpp"
 
 namespace veneer::io {
 namespace fs = std::filesystem;
+
+// --- pixel conversions (pixels.hpp) --------------------------------------
+
+namespace detail {
+
+Expected<cv::Mat> to_linear_bgr(const cv::Mat& raw, const std::string& name) {
+  double scale;
+  switch (raw.depth()) {
+    case CV_8U: scale = 1.0 / 255.0; break;
+    case CV_16U: scale = 1.0 / 65535.0; break;
+    case CV_32F: scale = 1.0; break;
+    default: return make_error(name + ": unsupported sample type (only 8- and 16-bit images are read)");
+  }
+  cv::Mat bgr;
+  switch (raw.channels()) {
+    case 1: cv::cvtColor(raw, bgr, cv::COLOR_GRAY2BGR); break;
+    case 2: {
+      cv::Mat grey;
+      cv::extractChannel(raw, grey, 0);
+      cv::cvtColor(grey, bgr, cv::COLOR_GRAY2BGR);
+      break;
+    }
+    case 3: bgr = raw; break;
+    case 4: cv::cvtColor(raw, bgr, cv::COLOR_BGRA2BGR); break;
+    default: return make_error(name + ": unsupported channel count " + std::to_string(raw.channels()));
+  }
+  cv::Mat out;
+  bgr.convertTo(out, CV_32FC3, scale);
+  return out;
+}
+
+bool has_jpeg_magic(std::string_view b) {
+  return b.size() >= 3 && static_cast<unsigned char>(b[0]) == 0xFF && static_cast<unsigned char>(b[1]) == 0xD8 &&
+         static_cast<unsigned char>(b[2]) == 0xFF;
+}
+
+const std::array<float, 256>& srgb_to_linear_lut() {
+  static const std::array<float, 256> lut = [] {
+    std::array<float, 256> t{};
+    for (int i = 0; i < 256; ++i) {
+      const double c = i / 255.0;
+      t[static_cast<size_t>(i)] = static_cast<float>(c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4));
+    }
+    return t;
+  }();
+  return lut;
+}
+
+Expected<cv::Mat> imdecode_bytes(std::string_view bytes, int flags, const std::string& name, const char* kind) {
+  try {
+    cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8UC1, const_cast<char*>(bytes.data()));
+    return cv::imdecode(buffer, flags);
+  } catch (const cv::Exception& e) {
+    return make_error(name + ": cannot decode" + kind + ": " + e.what());
+  }
+}
+
+cv::Mat srgb8_to_linear(const cv::Mat& bgr8) {
+  const auto& lut = srgb_to_linear_lut();
+  cv::Mat out(bgr8.size(), CV_32FC3);
+  for (int y = 0; y < bgr8.rows; ++y) {
+    const uchar* s = bgr8.ptr<uchar>(y);
+    float* o = out.ptr<float>(y);
+    for (int x = 0; x < bgr8.cols * 3; ++x) o[x] = lut[s[x]];
+  }
+  return out;
+}
+
+}  // namespace detail
+
+using namespace detail;
 
 namespace {
 
@@ -128,69 +200,12 @@ Status check_pnm(std::string_view b, const std::string& name) {
   return Status::success();
 }
 
-// A decoded 8/16-bit Mat of 1..4 channels as CV_32FC3 BGR in [0,1].
-Expected<cv::Mat> to_linear_bgr(const cv::Mat& raw, const std::string& name) {
-  double scale;
-  switch (raw.depth()) {
-    case CV_8U: scale = 1.0 / 255.0; break;
-    case CV_16U: scale = 1.0 / 65535.0; break;
-    case CV_32F: scale = 1.0; break;
-    default: return make_error(name + ": unsupported sample type (only 8- and 16-bit images are read)");
-  }
-  cv::Mat bgr;
-  switch (raw.channels()) {
-    case 1: cv::cvtColor(raw, bgr, cv::COLOR_GRAY2BGR); break;
-    case 2: {
-      cv::Mat grey;
-      cv::extractChannel(raw, grey, 0);
-      cv::cvtColor(grey, bgr, cv::COLOR_GRAY2BGR);
-      break;
-    }
-    case 3: bgr = raw; break;
-    case 4: cv::cvtColor(raw, bgr, cv::COLOR_BGRA2BGR); break;
-    default: return make_error(name + ": unsupported channel count " + std::to_string(raw.channels()));
-  }
-  cv::Mat out;
-  bgr.convertTo(out, CV_32FC3, scale);
-  return out;
-}
-
-bool has_jpeg_magic(std::string_view b) {
-  return b.size() >= 3 && static_cast<unsigned char>(b[0]) == 0xFF && static_cast<unsigned char>(b[1]) == 0xD8 &&
-         static_cast<unsigned char>(b[2]) == 0xFF;
-}
-
-// 8-bit sRGB code value -> linear, the camera JPEG's inverse transfer curve.
-const std::array<float, 256>& srgb_to_linear_lut() {
-  static const std::array<float, 256> lut = [] {
-    std::array<float, 256> t{};
-    for (int i = 0; i < 256; ++i) {
-      const double c = i / 255.0;
-      t[static_cast<size_t>(i)] = static_cast<float>(c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4));
-    }
-    return t;
-  }();
-  return lut;
-}
-
 // A JPEG (a camera's developed photo: 8-bit sRGB) as linear CV_32FC3 BGR.
 Expected<cv::Mat> decode_jpeg_linear(std::string_view bytes, const std::string& name) {
-  cv::Mat bgr8;
-  try {
-    cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8UC1, const_cast<char*>(bytes.data()));
-    bgr8 = cv::imdecode(buffer, cv::IMREAD_COLOR);
-  } catch (const cv::Exception& e) {
-    return make_error(name + ": cannot decode JPEG: " + e.what());
-  }
-  if (bgr8.empty() || bgr8.type() != CV_8UC3) return make_error(name + ": corrupt or truncated JPEG (decoder failed)");
-  const auto& lut = srgb_to_linear_lut();
-  cv::Mat out(bgr8.size(), CV_32FC3);
-  for (int y = 0; y < bgr8.rows; ++y) {
-    const uchar* s = bgr8.ptr<uchar>(y);
-    float* o = out.ptr<float>(y);
-    for (int x = 0; x < bgr8.cols * 3; ++x) o[x] = lut[s[x]];
-  }
-  return out;
+  auto bgr8 = imdecode_bytes(bytes, cv::IMREAD_COLOR, name, " JPEG");
+  if (!bgr8) return bgr8.error();
+  if (bgr8->empty() || bgr8->type() != CV_8UC3) return make_error(name + ": corrupt or truncated JPEG (decoder failed)");
+  return srgb8_to_linear(*bgr8);
 }
 
 Expected<cv::Mat> decode_raw(std::string_view bytes, const std::string& name) {
@@ -203,14 +218,8 @@ Expected<cv::Mat> decode_raw(std::string_view bytes, const std::string& name) {
   } else {
     return make_error(name + ": not a PNG, PPM, PGM or PFM file (unrecognised first bytes)");
   }
-  cv::Mat raw;
-  try {
-    cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8UC1, const_cast<char*>(bytes.data()));
-    raw = cv::imdecode(buffer, cv::IMREAD_UNCHANGED);
-  } catch (const cv::Exception& e) {
-    return make_error(name + ": cannot decode: " + e.what());
-  }
-  if (raw.empty()) return make_error(name + ": corrupt or truncated image (decoder failed)");
+  auto raw = imdecode_bytes(bytes, cv::IMREAD_UNCHANGED, name);
+  if (raw && raw->empty()) return make_error(name + ": corrupt or truncated image (decoder failed)");
   return raw;
 }
 

@@ -9,6 +9,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "pixels.hpp"
 #include "set_detail.hpp"
 #include "veneer/io/image_io.hpp"
 
@@ -61,47 +62,27 @@ Status check_tiff_size(std::string_view b, const std::string& name) {
 
 Expected<cv::Mat> decode_tiff(std::string_view bytes, const std::string& name, bool srgb8, PhotoKind& kind) {
   if (Status s = check_tiff_size(bytes, name); !s) return s.error();
-  cv::Mat raw;
-  try {
-    cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8UC1, const_cast<char*>(bytes.data()));
-    raw = cv::imdecode(buffer, cv::IMREAD_UNCHANGED);
-  } catch (const cv::Exception& e) {
-    return make_error(name + ": cannot decode TIFF: " + e.what());
-  }
+  auto decoded = imdecode_bytes(bytes, cv::IMREAD_UNCHANGED, name, " TIFF");
+  if (!decoded) return decoded.error();
+  const cv::Mat& raw = *decoded;
   if (raw.empty()) return make_error(name + ": corrupt, truncated or unsupported TIFF (decoder failed)");
-  double scale = 0;
-  switch (raw.depth()) {
-    case CV_8U: scale = 1.0 / 255.0; break;
-    case CV_16U: scale = 1.0 / 65535.0; break;
-    case CV_32F: scale = 1.0; break;
-    default: return make_error(name + ": TIFF sample type not supported (8-, 16-bit or float only)");
-  }
-  cv::Mat bgr;
-  switch (raw.channels()) {
-    case 1: cv::cvtColor(raw, bgr, cv::COLOR_GRAY2BGR); break;
-    case 3: bgr = raw; break;
-    case 4: cv::cvtColor(raw, bgr, cv::COLOR_BGRA2BGR); break;
-    default: return make_error(name + ": TIFF with " + std::to_string(raw.channels()) + " channels is not a photo");
-  }
-  const bool eight = raw.depth() == CV_8U;
+  const int depth = raw.depth(), channels = raw.channels();
+  if (depth != CV_8U && depth != CV_16U && depth != CV_32F)
+    return make_error(name + ": TIFF sample type not supported (8-, 16-bit or float only)");
+  if (channels != 1 && channels != 3 && channels != 4)
+    return make_error(name + ": TIFF with " + std::to_string(channels) + " channels is not a photo");
+  auto out = to_linear_bgr(raw, name);
+  if (!out) return out;
+  const bool eight = depth == CV_8U;
   kind = {"tiff", eight ? 8 : 16};
-  cv::Mat out;
-  bgr.convertTo(out, CV_32FC3, scale);
-  if (eight && srgb8) srgb_to_linear_inplace(out);
+  if (eight && srgb8) srgb_to_linear_inplace(*out);
   return out;
 }
 
 }  // namespace
 
 void srgb_to_linear_inplace(cv::Mat& image) {
-  static const std::array<float, 256> lut = [] {
-    std::array<float, 256> t{};
-    for (int i = 0; i < 256; ++i) {
-      const double c = i / 255.0;
-      t[static_cast<size_t>(i)] = static_cast<float>(c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4));
-    }
-    return t;
-  }();
+  const auto& lut = srgb_to_linear_lut();
   CV_Assert(image.depth() == CV_32F);
   for (int y = 0; y < image.rows; ++y) {
     float* p = image.ptr<float>(y);

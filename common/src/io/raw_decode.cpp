@@ -20,6 +20,12 @@ constexpr long long kMaxRawPixels = 100'000'000;
 
 std::string libraw_error(int code) { return libraw_strerror(code); }
 
+// An image LibRaw made in memory (dcraw_make_mem_image / _thumb), freed by it.
+struct MemImageFree {
+  void operator()(libraw_processed_image_t* i) const { LibRaw::dcraw_clear_mem(i); }
+};
+using MemImage = std::unique_ptr<libraw_processed_image_t, MemImageFree>;
+
 }  // namespace
 
 namespace {
@@ -165,8 +171,7 @@ Expected<cv::Mat> decode_raw_linear(std::string_view bytes, const RawOptions& op
   r = raw->dcraw_process();
   if (r != LIBRAW_SUCCESS) return make_error(name + ": cannot develop RAW data (" + libraw_error(r) + ")");
   int err = 0;
-  std::unique_ptr<libraw_processed_image_t, void (*)(libraw_processed_image_t*)> img(
-      raw->dcraw_make_mem_image(&err), [](libraw_processed_image_t* i) { LibRaw::dcraw_clear_mem(i); });
+  const MemImage img(raw->dcraw_make_mem_image(&err));
   if (!img || err != LIBRAW_SUCCESS) return make_error(name + ": cannot make an image from RAW data (" + libraw_error(err) + ")");
   if (img->type != LIBRAW_IMAGE_BITMAP || img->bits != 16 || img->colors != 3 || img->width == 0 || img->height == 0)
     return make_error(name + ": LibRaw returned an unexpected image layout");
@@ -200,8 +205,7 @@ Expected<std::string> raw_preview_jpeg(std::string_view bytes, const std::string
   r = raw->unpack_thumb();
   if (r != LIBRAW_SUCCESS) return make_error(name + ": no preview LibRaw can take (" + libraw_error(r) + ")");
   int err = 0;
-  std::unique_ptr<libraw_processed_image_t, void (*)(libraw_processed_image_t*)> thumb(
-      raw->dcraw_make_mem_thumb(&err), [](libraw_processed_image_t* i) { LibRaw::dcraw_clear_mem(i); });
+  const MemImage thumb(raw->dcraw_make_mem_thumb(&err));
   if (!thumb || err != LIBRAW_SUCCESS) return make_error(name + ": cannot take its preview (" + libraw_error(err) + ")");
   if (thumb->type != LIBRAW_IMAGE_JPEG) return make_error(name + ": its preview is not a JPEG");
   return std::string(reinterpret_cast<const char*>(thumb->data), thumb->data_size);

@@ -89,23 +89,10 @@ Expected<ImageSet> read_rti(const fs::path& folder, const ReadOptions& options, 
   set.origin = folder;
   set.id = set.object = folder_name(folder);
 
-  // Not read_lines: a '#' is a legal character of a file name here.
-  auto bytes = read_file_bytes(lp_file);
-  if (!bytes) return bytes.error();
-  if (bytes->find('\0') != std::string::npos) return make_error(lp_file.string() + ": not a text file");
-  std::vector<Line> lines;
-  {
-    std::stringstream ss(*bytes);
-    std::string line;
-    int number = 0;
-    while (std::getline(ss, line)) {
-      ++number;
-      const auto first = line.find_first_not_of(" \t\r");
-      if (first == std::string::npos) continue;
-      const auto last = line.find_last_not_of(" \t\r");
-      lines.push_back({number, line.substr(first, last - first + 1)});
-    }
-  }
+  // No comments: a '#' is a legal character of a file name here.
+  auto read = read_lines(lp_file, false);
+  if (!read) return read.error();
+  const std::vector<Line>& lines = *read;
   if (lines.empty()) return make_error(lp_file.string() + ": empty light file");
   std::vector<double> count;
   if (!parse_numbers(lines[0].text, count) || count.size() != 1 || count[0] != std::floor(count[0]) || count[0] < 1 ||

@@ -17,35 +17,26 @@ Status load_truth(const fs::path& truth_dir, ImageSet& set, bool appearance) {
   std::error_code ec;
   if (!fs::is_directory(truth_dir, ec)) return Status::success();
   Truth& t = set.truth;
-  const std::string why = "the set's size";
-  if (fs::path f = truth_dir / "normals.pfm"; fs::exists(f, ec)) {
-    auto n = read_pfm(f, true);
-    if (!n) return n.error();
-    if (n->channels() != 3) return make_error(f.string() + ": normals must have 3 channels (x, y, z)");
-    if (Status s = check_size(f, *n, set.size, why); !s) return s;
-    t.normals = std::move(n).value();
-  }
-  if (fs::path f = truth_dir / "mask.png"; fs::exists(f, ec)) {
-    auto m = read_mask(f);
+  // truth/<name> when there is one, read by `read`, into `into`: of the set's
+  // size and, unless `channels` is 0, of that many channels (else `wrong`).
+  auto load = [&](const char* name, auto read, int channels, const char* wrong, cv::Mat& into) -> Status {
+    const fs::path f = truth_dir / name;
+    if (!fs::exists(f, ec)) return Status::success();
+    auto m = read(f);
     if (!m) return m.error();
-    if (Status s = check_size(f, *m, set.size, why); !s) return s;
-    t.mask = std::move(m).value();
-  }
+    if (channels && m->channels() != channels) return make_error(f.string() + ": " + wrong);
+    if (Status s = check_size(f, *m, set.size, "the set's size"); !s) return s;
+    into = std::move(m).value();
+    return Status::success();
+  };
+  auto pfm = [](const fs::path& f) { return read_pfm(f, true); };
+  auto mask = [](const fs::path& f) { return read_mask(f); };
+  auto picture = [](const fs::path& f) { return read_linear_image(f); };
+  if (Status s = load("normals.pfm", pfm, 3, "normals must have 3 channels (x, y, z)", t.normals); !s) return s;
+  if (Status s = load("mask.png", mask, 0, "", t.mask); !s) return s;
   if (!appearance) return Status::success();
-  if (fs::path f = truth_dir / "albedo.png"; fs::exists(f, ec)) {
-    auto a = read_linear_image(f);
-    if (!a) return a.error();
-    if (Status s = check_size(f, *a, set.size, why); !s) return s;
-    t.albedo = std::move(a).value();
-  }
-  if (fs::path f = truth_dir / "depth.pfm"; fs::exists(f, ec)) {
-    auto d = read_pfm(f, true);
-    if (!d) return d.error();
-    if (d->channels() != 1) return make_error(f.string() + ": depth must have 1 channel");
-    if (Status s = check_size(f, *d, set.size, why); !s) return s;
-    t.depth = std::move(d).value();
-  }
-  return Status::success();
+  if (Status s = load("albedo.png", picture, 0, "", t.albedo); !s) return s;
+  return load("depth.pfm", pfm, 1, "depth must have 1 channel", t.depth);
 }
 
 // Resizes what comes with the photos (mask, truth, intrinsics) from the

@@ -13,6 +13,8 @@
 #include <tbb/parallel_for.h>
 
 #include "file_util.hpp"
+#include "pixels.hpp"
+#include "set_detail.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/raw.hpp"
 #include "veneer/io/reduced.hpp"
@@ -23,35 +25,6 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr long long kMaxRawPixels = 100'000'000;  // as raw_decode.cpp: a damaged header can claim anything
-
-const std::array<float, 256>& srgb_lut() {
-  static const std::array<float, 256> lut = [] {
-    std::array<float, 256> t{};
-    for (int i = 0; i < 256; ++i) {
-      const double c = i / 255.0;
-      t[static_cast<size_t>(i)] = static_cast<float>(c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4));
-    }
-    return t;
-  }();
-  return lut;
-}
-
-// 8-bit sRGB BGR -> linear float BGR.
-cv::Mat linearise(const cv::Mat& bgr8) {
-  const auto& lut = srgb_lut();
-  cv::Mat out(bgr8.size(), CV_32FC3);
-  for (int y = 0; y < bgr8.rows; ++y) {
-    const uchar* s = bgr8.ptr<uchar>(y);
-    float* o = out.ptr<float>(y);
-    for (int x = 0; x < bgr8.cols * 3; ++x) o[x] = lut[s[x]];
-  }
-  return out;
-}
-
-bool jpeg_magic(std::string_view b) {
-  return b.size() >= 3 && static_cast<unsigned char>(b[0]) == 0xFF && static_cast<unsigned char>(b[1]) == 0xD8 &&
-         static_cast<unsigned char>(b[2]) == 0xFF;
-}
 
 // LibRaw with a look at what its parser found about the mosaic's layout.
 class RawPeek : public LibRaw {
@@ -264,16 +237,11 @@ Expected<cv::Mat> decode_jpeg_reduced(std::string_view bytes, int factor, const 
     case 8: flag = cv::IMREAD_REDUCED_COLOR_8; break;
     default: return make_error(name + ": JPEG reduction " + std::to_string(factor) + " is not 1, 2, 4 or 8");
   }
-  if (!jpeg_magic(bytes)) return make_error(name + ": not a JPEG file");
-  cv::Mat bgr8;
-  try {
-    cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8UC1, const_cast<char*>(bytes.data()));
-    bgr8 = cv::imdecode(buffer, flag | cv::IMREAD_IGNORE_ORIENTATION);
-  } catch (const cv::Exception& e) {
-    return make_error(name + ": cannot decode JPEG: " + e.what());
-  }
-  if (bgr8.empty() || bgr8.type() != CV_8UC3) return make_error(name + ": corrupt or truncated JPEG (decoder failed)");
-  return linearise(bgr8);
+  if (!detail::has_jpeg_magic(bytes)) return make_error(name + ": not a JPEG file");
+  auto bgr8 = detail::imdecode_bytes(bytes, flag | cv::IMREAD_IGNORE_ORIENTATION, name, " JPEG");
+  if (!bgr8) return bgr8.error();
+  if (bgr8->empty() || bgr8->type() != CV_8UC3) return make_error(name + ": corrupt or truncated JPEG (decoder failed)");
+  return detail::srgb8_to_linear(*bgr8);
 }
 
 Expected<cv::Mat> decode_raw_preview(std::string_view bytes, const std::string& name) {
@@ -292,7 +260,7 @@ Expected<cv::Mat> decode_raw_preview(std::string_view bytes, const std::string& 
     cv::Mat rgb(t.theight, t.twidth, CV_8UC3, const_cast<char*>(t.thumb));
     cv::Mat bgr;
     cv::cvtColor(rgb, bgr, cv::COLOR_RGB2BGR);
-    return linearise(bgr);
+    return detail::srgb8_to_linear(bgr);
   }
   return make_error(name + ": the embedded preview is in a format not read here (" + std::to_string(t.tformat) + ")");
 }
@@ -396,30 +364,12 @@ Expected<Decoded> decode_one(ReducedDecode decode, const fs::path& file, int wid
 Status decode_all(ReducedDecode decode, const std::vector<fs::path>& files, int width, const Progress& progress,
                   const std::string& stage, std::vector<Decoded>& out) {
   out.assign(files.size(), Decoded{});
-  std::vector<std::string> errors(files.size());
-  std::atomic<size_t> done{0};
-  std::mutex lock;
-  progress.report(0.0, stage);
-  tbb::parallel_for(size_t(0), files.size(), [&](size_t i) {
-    if (progress.cancelled()) {
-      errors[i] = "cancelled";
-      return;
-    }
+  return detail::for_each_parallel(files.size(), progress, stage, [&](size_t i) -> Status {
     auto d = decode_one(decode, files[i], width);
-    if (!d) {
-      errors[i] = d.message();
-      return;
-    }
+    if (!d) return d.error();
     out[i] = std::move(*d);
-    const size_t n = ++done;
-    if (progress.on_progress) {
-      std::lock_guard<std::mutex> g(lock);
-      progress.report(static_cast<double>(n) / static_cast<double>(files.size()), stage);
-    }
+    return Status::success();
   });
-  for (const auto& e : errors)
-    if (!e.empty()) return make_error(e);
-  return Status::success();
 }
 
 }  // namespace
@@ -456,7 +406,7 @@ Expected<ImageSet> read_set_reduced(const fs::path& folder, const ReducedOptions
   bool developed_jpeg = false;
   if (!manifest->image_files.empty()) {
     if (auto head = detail::MappedFile::open(folder / manifest->image_files.front()); head)
-      developed_jpeg = jpeg_magic(head->bytes());
+      developed_jpeg = detail::has_jpeg_magic(head->bytes());
   }
   const bool wider = set->size.width > options.width;
   ReducedDecode decode = options.decode;

@@ -82,43 +82,48 @@ std::string folder_name(const fs::path& folder) {
 
 // --- loading pixels ------------------------------------------------------------
 
-Status decode_frames(const std::vector<Frame>& frames, const RawOptions& raw_options, const Progress& progress,
-                     const std::string& stage, std::vector<cv::Mat>& out, std::vector<PhotoKind>* kinds) {
-  out.assign(frames.size(), cv::Mat());
-  if (kinds) kinds->assign(frames.size(), PhotoKind{});
-  std::vector<std::string> errors(frames.size());
+Status for_each_parallel(size_t n, const Progress& progress, const std::string& stage,
+                         const std::function<Status(size_t)>& job) {
+  std::vector<std::string> errors(n);
   std::atomic<size_t> done{0};
   std::mutex report_lock;
   progress.report(0.0, stage);
-  tbb::parallel_for(size_t(0), frames.size(), [&](size_t i) {
+  tbb::parallel_for(size_t(0), n, [&](size_t i) {
     if (progress.cancelled()) {
       errors[i] = "cancelled";
       return;
     }
-    const Frame& f = frames[i];
-    auto mapped = detail::MappedFile::open(f.file);  // read in place: no copy, no fresh pages
-    if (!mapped) {
-      errors[i] = mapped.message();
+    if (Status s = job(i); !s) {
+      errors[i] = s.message();
       return;
     }
-    PhotoKind kind;
-    Expected<cv::Mat> image = decode_photo(mapped->bytes(), f, raw_options, kind);
-    if (!image) {
-      errors[i] = image.message();
-      return;
-    }
-    out[i] = std::move(image).value();
-    if (kinds) (*kinds)[i] = kind;
-    const size_t n = ++done;
+    const size_t finished = ++done;
     if (progress.on_progress) {
       std::lock_guard<std::mutex> lock(report_lock);
-      progress.report(static_cast<double>(n) / static_cast<double>(frames.size()), stage);
+      progress.report(static_cast<double>(finished) / static_cast<double>(n), stage);
     }
   });
   for (const auto& e : errors) {
     if (!e.empty()) return make_error(e);
   }
   return Status::success();
+}
+
+Status decode_frames(const std::vector<Frame>& frames, const RawOptions& raw_options, const Progress& progress,
+                     const std::string& stage, std::vector<cv::Mat>& out, std::vector<PhotoKind>* kinds) {
+  out.assign(frames.size(), cv::Mat());
+  if (kinds) kinds->assign(frames.size(), PhotoKind{});
+  return for_each_parallel(frames.size(), progress, stage, [&](size_t i) -> Status {
+    const Frame& f = frames[i];
+    auto mapped = detail::MappedFile::open(f.file);  // read in place: no copy, no fresh pages
+    if (!mapped) return mapped.error();
+    PhotoKind kind;
+    Expected<cv::Mat> image = decode_photo(mapped->bytes(), f, raw_options, kind);
+    if (!image) return image.error();
+    out[i] = std::move(image).value();
+    if (kinds) (*kinds)[i] = kind;
+    return Status::success();
+  });
 }
 
 void note_photo_kinds(ImageSet& set, const std::vector<PhotoKind>& kinds, bool srgb8, const RawOptions& raw_options) {
@@ -169,7 +174,7 @@ fs::path find_with_ext(const fs::path& folder, const std::string& stem, std::ini
 
 // --- text lists (DiLiGenT, thesis) -----------------------------------------------
 
-Expected<std::vector<Line>> read_lines(const fs::path& file) {
+Expected<std::vector<Line>> read_lines(const fs::path& file, bool comments) {
   auto bytes = read_file_bytes(file);
   if (!bytes) return bytes.error();
   if (bytes->find('\0') != std::string::npos) return make_error(file.string() + ": not a text file");
@@ -179,7 +184,7 @@ Expected<std::vector<Line>> read_lines(const fs::path& file) {
   int number = 0;
   while (std::getline(ss, line)) {
     ++number;
-    if (auto hash = line.find('#'); hash != std::string::npos) line.erase(hash);
+    if (auto hash = line.find('#'); comments && hash != std::string::npos) line.erase(hash);
     auto first = line.find_first_not_of(" \t\r");
     if (first == std::string::npos) continue;
     auto last = line.find_last_not_of(" \t\r");

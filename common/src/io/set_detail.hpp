@@ -3,12 +3,14 @@
 // limits, checks of directions and file names, the parallel photo decoder
 // and the text-list parser of the DiLiGenT, thesis and RTI layouts.
 #include <filesystem>
+#include <functional>
 #include <initializer_list>
 #include <string>
 #include <string_view>
 #include <vector>
 
 #include <opencv2/core.hpp>
+#include <tbb/parallel_for.h>
 
 #include "veneer/io/imageset.hpp"
 #include "veneer/io/raw.hpp"
@@ -36,6 +38,12 @@ std::string raw_file_name(int index, const std::string& extension);       // lig
 std::string folder_name(const std::filesystem::path& folder);             // "a/b/" -> "b"
 
 // --- loading pixels ---
+
+// job(i) for every i in [0, n) in parallel, reporting progress under `stage`
+// and checking for cancellation before each; the first error in index order
+// (or "cancelled") is the result.
+Status for_each_parallel(size_t n, const Progress& progress, const std::string& stage,
+                         const std::function<Status(size_t)>& job);
 
 // One file to decode into a photo: through LibRaw when `raw`, else by its magic
 // (PNG, JPEG, PFM, PNM).
@@ -82,8 +90,9 @@ struct Line {
   int number;  // 1-based
   std::string text;
 };
-// Non-empty lines with '#' comments and surrounding blanks removed.
-Expected<std::vector<Line>> read_lines(const std::filesystem::path& file);
+// Non-empty lines with surrounding blanks and (unless `comments` is false)
+// '#' comments removed; an error for an unreadable or binary file.
+Expected<std::vector<Line>> read_lines(const std::filesystem::path& file, bool comments = true);
 // Parses whitespace-separated numbers (strict: every token must be a number).
 bool parse_numbers(const std::string& text, std::vector<double>& out);
 // "x y z" (and optionally "r g b" when allow_rgb) per line.
@@ -104,5 +113,26 @@ Expected<ImageSet> read_rti(const std::filesystem::path& folder, const ReadOptio
 // assembly-files/ (RTIBuilder's project layout); empty when there is none, an
 // error when there are several.
 Expected<std::filesystem::path> find_lp_file(const std::filesystem::path& folder);
+
+// --- camera files of a set (dng_writer.cpp, camera_files.cpp) ---
+
+// encode(photo) for each of the set's photos, then its ambient frame if it has
+// one, in parallel: the results in that order, or the first failure, named
+// "image <i>" or "ambient".
+template <class T, class Encode>
+Expected<std::vector<T>> encode_frames(const ImageSet& set, Encode encode) {
+  const size_t n = set.images.size() + (set.ambient.empty() ? 0 : 1);
+  std::vector<Expected<T>> encoded(n, Expected<T>(T{}));
+  tbb::parallel_for(size_t(0), n, [&](size_t i) {
+    encoded[i] = encode(i < set.images.size() ? set.images[i] : set.ambient);
+  });
+  std::vector<T> out;
+  for (size_t i = 0; i < n; ++i) {
+    if (!encoded[i]) return make_error((i < set.images.size() ? "image " + std::to_string(i) : std::string("ambient")) +
+                                       ": " + encoded[i].message());
+    out.push_back(std::move(encoded[i]).value());
+  }
+  return out;
+}
 
 }  // namespace veneer::io::detail

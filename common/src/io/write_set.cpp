@@ -14,21 +14,13 @@
 #include "set_detail.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/util/log.hpp"
+#include "veneer/util/utc_time.hpp"
 
 namespace veneer::io {
 namespace fs = std::filesystem;
 using namespace detail;
 
 namespace {
-
-std::string utc_now() {
-  std::time_t t = std::time(nullptr);
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
-}
 
 // Removes temporary folders left beside `target` by writers that died.
 void clean_stale_temps(const fs::path& target) {
@@ -138,7 +130,7 @@ Status write_set(const ImageSet& set_in, const fs::path& folder_in, bool overwri
   clean_stale_temps(folder);
 
   ImageSet set = set_in;  // shallow: cv::Mat shares pixels
-  if (set.created.empty()) set.created = utc_now();
+  if (set.created.empty()) set.created = veneer::utc_now();
   if (set.id.empty()) set.id = folder.filename().string();
 
   fs::path tmp = detail::temp_sibling(folder);

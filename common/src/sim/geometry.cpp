@@ -14,29 +14,55 @@ M3 M3::operator*(const M3& o) const {
   return m;
 }
 
-M3 M3::rot_x(double a) {
+namespace {
+
+M3 rows(V3 r0, V3 r1, V3 r2) {
   M3 m;
-  double c = std::cos(a), s = std::sin(a);
-  m.r[0] = {1, 0, 0};
-  m.r[1] = {0, c, -s};
-  m.r[2] = {0, s, c};
+  m.r[0] = r0;
+  m.r[1] = r1;
+  m.r[2] = r2;
   return m;
+}
+
+Primitive finished(Primitive p, PrimKind kind, int part) {
+  p.kind = kind;
+  p.part = part;
+  p.finish();
+  return p;
+}
+
+// A primitive placed by its centre, half extents (radii) and rotation.
+Primitive centred(PrimKind kind, V3 centre, V3 half, M3 rotation, int part) {
+  Primitive p;
+  p.c = centre;
+  p.h = half;
+  p.R = rotation;
+  return finished(p, kind, part);
+}
+
+// A primitive along the segment a..b, radius ra at a and rb at b.
+Primitive along(PrimKind kind, V3 a, V3 b, double ra, double rb, int part) {
+  Primitive p;
+  p.a = a;
+  p.b = b;
+  p.ra = ra;
+  p.rb = rb;
+  return finished(p, kind, part);
+}
+
+}  // namespace
+
+M3 M3::rot_x(double a) {
+  const double c = std::cos(a), s = std::sin(a);
+  return rows({1, 0, 0}, {0, c, -s}, {0, s, c});
 }
 M3 M3::rot_y(double a) {
-  M3 m;
-  double c = std::cos(a), s = std::sin(a);
-  m.r[0] = {c, 0, s};
-  m.r[1] = {0, 1, 0};
-  m.r[2] = {-s, 0, c};
-  return m;
+  const double c = std::cos(a), s = std::sin(a);
+  return rows({c, 0, s}, {0, 1, 0}, {-s, 0, c});
 }
 M3 M3::rot_z(double a) {
-  M3 m;
-  double c = std::cos(a), s = std::sin(a);
-  m.r[0] = {c, -s, 0};
-  m.r[1] = {s, c, 0};
-  m.r[2] = {0, 0, 1};
-  return m;
+  const double c = std::cos(a), s = std::sin(a);
+  return rows({c, -s, 0}, {s, c, 0}, {0, 0, 1});
 }
 
 Primitive Primitive::sphere(V3 centre, double radius, int part) {
@@ -44,55 +70,23 @@ Primitive Primitive::sphere(V3 centre, double radius, int part) {
 }
 
 Primitive Primitive::ellipsoid(V3 centre, V3 radii, M3 rotation, int part) {
-  Primitive p;
-  p.kind = PrimKind::ellipsoid;
-  p.c = centre;
-  p.h = radii;
-  p.R = rotation;
-  p.part = part;
-  p.finish();
-  return p;
+  return centred(PrimKind::ellipsoid, centre, radii, rotation, part);
 }
 
 Primitive Primitive::box(V3 centre, V3 half, M3 rotation, int part) {
-  Primitive p;
-  p.kind = PrimKind::box;
-  p.c = centre;
-  p.h = half;
-  p.R = rotation;
-  p.part = part;
-  p.finish();
-  return p;
+  return centred(PrimKind::box, centre, half, rotation, part);
 }
 
 Primitive Primitive::round_cone(V3 a, V3 b, double ra, double rb, int part) {
-  Primitive p;
-  p.kind = PrimKind::round_cone;
   // The intersection routine wants the larger sphere at a.
   if (rb > ra) {
     std::swap(a, b);
     std::swap(ra, rb);
   }
-  p.a = a;
-  p.b = b;
-  p.ra = ra;
-  p.rb = rb;
-  p.part = part;
-  p.finish();
-  return p;
+  return along(PrimKind::round_cone, a, b, ra, rb, part);
 }
 
-Primitive Primitive::cylinder(V3 a, V3 b, double r, int part) {
-  Primitive p;
-  p.kind = PrimKind::cylinder;
-  p.a = a;
-  p.b = b;
-  p.ra = r;
-  p.rb = r;
-  p.part = part;
-  p.finish();
-  return p;
-}
+Primitive Primitive::cylinder(V3 a, V3 b, double r, int part) { return along(PrimKind::cylinder, a, b, r, r, part); }
 
 Primitive Primitive::cup(V3 bottom, V3 top, double outer, double inner, double floor, int part) {
   Primitive p = cylinder(bottom, top, outer, part);
@@ -251,13 +245,26 @@ double hit_round_cone(const Primitive& p, const V3& o, const V3& d, double t_min
   return best;
 }
 
+// The ray o + t d in the frame of the axis a..b: the axis's length L and unit
+// direction w, the ray's origin and direction along it (oy, dy) and across it
+// (op, dp).
+struct AxisFrame {
+  double L;
+  V3 w;
+  double oy, dy;
+  V3 op, dp;
+};
+AxisFrame axis_frame(const Primitive& p, const V3& o, const V3& d) {
+  const V3 ba = p.b - p.a;
+  const double L = length(ba);
+  const V3 w = ba / L;
+  const V3 oc = o - p.a;
+  const double oy = dot(oc, w), dy = dot(d, w);
+  return {L, w, oy, dy, oc - w * oy, d - w * dy};
+}
+
 double hit_cylinder(const Primitive& p, const V3& o, const V3& d, double t_min, double t_max, V3* n) {
-  V3 ba = p.b - p.a;
-  double L = length(ba);
-  V3 w = ba / L;
-  V3 oc = o - p.a;
-  double oy = dot(oc, w), dy = dot(d, w);
-  V3 op = oc - w * oy, dp = d - w * dy;
+  const auto [L, w, oy, dy, op, dp] = axis_frame(p, o, d);
   double r2 = p.ra * p.ra;
   double best = std::numeric_limits<double>::infinity();
   V3 nb;
@@ -293,12 +300,7 @@ double hit_cylinder(const Primitive& p, const V3& o, const V3& d, double t_min, 
 // The open cup: the nearest of outer wall, rim, inner wall (seen from the
 // hollow), inner floor and outer bottom.
 double hit_cup(const Primitive& p, const V3& o, const V3& d, double t_min, double t_max, V3* n) {
-  V3 ba = p.b - p.a;
-  double L = length(ba);
-  V3 w = ba / L;
-  V3 oc = o - p.a;
-  double oy = dot(oc, w), dy = dot(d, w);
-  V3 op = oc - w * oy, dp = d - w * dy;
+  const auto [L, w, oy, dy, op, dp] = axis_frame(p, o, d);
   const double ro = p.ra, ri = p.rb, floor = p.h.x;
   double best = t_max;
   V3 nb;
@@ -379,20 +381,14 @@ bool Primitive::inside(const V3& q) const {
       return f(0.5 * (lo + hi)) < 0;
     }
     case PrimKind::cylinder: {
-      V3 ba = b - a;
-      double L = length(ba);
-      V3 w = ba / L;
-      double y = dot(q - a, w);
-      V3 radial = (q - a) - w * y;
-      return y > 0 && y < L && dot(radial, radial) < ra * ra;
+      const AxisFrame f = axis_frame(*this, q, {0, 0, 0});
+      const double y = f.oy, L = f.L;
+      return y > 0 && y < L && dot(f.op, f.op) < ra * ra;
     }
     case PrimKind::cup: {
-      V3 ba = b - a;
-      double L = length(ba);
-      V3 w = ba / L;
-      double y = dot(q - a, w);
-      V3 radial = (q - a) - w * y;
-      double r2 = dot(radial, radial);
+      const AxisFrame f = axis_frame(*this, q, {0, 0, 0});
+      const double y = f.oy, L = f.L;
+      double r2 = dot(f.op, f.op);
       bool solid = y > 0 && y < L && r2 < ra * ra;
       bool hollow = y > h.x && r2 < rb * rb;
       return solid && !hollow;

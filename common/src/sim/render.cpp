@@ -22,6 +22,7 @@
 #include "scene.hpp"
 #include "veneer/sim/simulator.hpp"
 #include "veneer/util/log.hpp"
+#include "veneer/util/utc_time.hpp"
 
 namespace veneer::sim {
 
@@ -89,16 +90,12 @@ void gauss3(const float* quantiles, uint64_t key, uint64_t pixel, double out[3])
   out[2] = quantiles[(h >> 32) & 0xffff];
 }
 
-std::string utc_now() {
+std::string created_now() {
   // SOURCE_DATE_EPOCH (reproducible-builds convention) pins the timestamp, so
   // two runs with the same seed can produce byte-identical manifests.
   std::time_t t = std::time(nullptr);
   if (const char* epoch = std::getenv("SOURCE_DATE_EPOCH")) t = static_cast<std::time_t>(std::atoll(epoch));
-  std::tm tm{};
-  gmtime_r(&t, &tm);
-  char buf[32];
-  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", &tm);
-  return buf;
+  return utc_time(t);
 }
 
 }  // namespace
@@ -462,7 +459,7 @@ Expected<io::ImageSet> simulate_scene_set(const Scene& scene, const std::string&
   set.object = object;
   set.scene = scene_name;
   set.id = "sim-" + object + "-" + std::to_string(options.seed);
-  set.created = utc_now();
+  set.created = created_now();
   set.size = options.size;
   set.camera.model = "veneer simulated camera";
   set.camera.exposure_s = options.exposure / 30.0;  // 1/30 s, f/8, ISO 100 is gain 1

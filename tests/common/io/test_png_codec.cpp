@@ -86,19 +86,13 @@ std::string make_png(int width, int height, int channels, int depth, uint64_t se
 cv::Mat opencv_samples(const std::string& png) {
   cv::Mat raw = cv::imdecode(cv::Mat(1, static_cast<int>(png.size()), CV_8UC1, const_cast<char*>(png.data())),
                              cv::IMREAD_UNCHANGED);
-  cv::Mat bgr;
-  switch (raw.channels()) {
-    case 1: cv::cvtColor(raw, bgr, cv::COLOR_GRAY2BGR); break;
-    case 2: {
-      cv::Mat grey;
-      cv::extractChannel(raw, grey, 0);
-      cv::cvtColor(grey, bgr, cv::COLOR_GRAY2BGR);
-      break;
-    }
-    case 4: cv::cvtColor(raw, bgr, cv::COLOR_BGRA2BGR); break;
-    default: bgr = raw;
-  }
-  cv::Mat out;
+  // planes B, G, R; grey (plane 0 of grey or grey + alpha) in all three
+  std::vector<cv::Mat> planes;
+  cv::split(raw, planes);
+  if (planes.size() <= 2) planes = {planes[0], planes[0], planes[0]};
+  planes.resize(3);
+  cv::Mat bgr, out;
+  cv::merge(planes, bgr);
   bgr.convertTo(out, CV_32SC3);
   return out;
 }

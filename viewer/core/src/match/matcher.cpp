@@ -174,6 +174,25 @@ Expected<Map> run_patchmatch(const FeatureSet& dst, const FeatureSet& src, const
 // reaches becomes the next seed (scan order). With T = 0 nothing grows (no
 // match beats the direct one by a negative margin), so the result is direct
 // matching.
+// squared_distance summed as products then additions, never fused into
+// multiply-adds (which -mfma lets the compiler do): as the fast engine's
+// region growing sums (fast/object.cpp, patch_sq_ordered_pairs), so that the
+// chained growth decisions of the two agree to the bit
+// (tests/core/match/test_region_grow_twins.cpp).
+#if defined(__clang__)
+float unfused_squared_distance(const float* a, const float* b, int dims) {
+#pragma clang fp contract(off)
+#else
+__attribute__((optimize("fp-contract=off"))) float unfused_squared_distance(const float* a, const float* b, int dims) {
+#endif
+  float s = 0;
+  for (int i = 0; i < dims; ++i) {
+    const float d = a[i] - b[i];
+    s += d * d;
+  }
+  return s;
+}
+
 Expected<Map> run_regiongrow(const FeatureSet& dst, const FeatureSet& src, const MatchOptions& o,
                              const Progress& p) {
   std::vector<int> direct;
@@ -207,11 +226,11 @@ Expected<Map> run_regiongrow(const FeatureSet& dst, const FeatureSet& src, const
         if (q < 0) continue;
         const int qs = src.row_at(m.x + off.x, m.y + off.y);
         if (qs < 0) continue;
-        const float data = squared_distance(dst.row(q), src.row(qs), dims);
+        const float data = unfused_squared_distance(dst.row(q), src.row(qs), dims);
         if (!(data < sq[q])) continue;  // only a smaller distance overwrites
         if (!(rms(data) - rms(direct_sq[q]) < t)) continue;
-        if (!(rms(squared_distance(dst.row(q), dst.row(d), dims)) < t)) continue;
-        if (!(rms(squared_distance(src.row(qs), src.row(match[d]), dims)) < t)) continue;
+        if (!(rms(unfused_squared_distance(dst.row(q), dst.row(d), dims)) < t)) continue;
+        if (!(rms(unfused_squared_distance(src.row(qs), src.row(match[d]), dims)) < t)) continue;
         match[q] = qs;
         sq[q] = data;
         queue.push_back(q);

@@ -57,6 +57,38 @@ bool pattern_pinv(const std::vector<float>& dir, int n, uint32_t pattern, float*
 
 namespace {
 
+// The per-pixel normal equations A g = b of a run of `cap` pixels: the upper
+// triangle of the symmetric 3x3 A and b, nine lanes of `cap` floats in `acc`
+// (zeroed here), to which each sample adds weight w times its light vector e.
+struct NormalEquations {
+  float* __restrict a00;
+  float* __restrict a01;
+  float* __restrict a02;
+  float* __restrict a11;
+  float* __restrict a12;
+  float* __restrict a22;
+  float* __restrict b0;
+  float* __restrict b1;
+  float* __restrict b2;
+  NormalEquations(std::vector<float>& acc, int cap)
+      : a00(acc.data()), a01(a00 + cap), a02(a00 + 2 * cap), a11(a00 + 3 * cap), a12(a00 + 4 * cap),
+        a22(a00 + 5 * cap), b0(a00 + 6 * cap), b1(a00 + 7 * cap), b2(a00 + 8 * cap) {
+    std::fill(acc.begin(), acc.begin() + 9 * cap, 0.f);
+  }
+  // Pixel k's sample of weight w and weighted value wy = w * y under light e.
+  __attribute__((always_inline)) void add(int k, float w, float wy, float ex, float ey, float ez) const {
+    a00[k] += w * ex * ex;
+    a01[k] += w * ex * ey;
+    a02[k] += w * ex * ez;
+    a11[k] += w * ey * ey;
+    a12[k] += w * ey * ez;
+    a22[k] += w * ez * ez;
+    b0[k] += wy * ex;
+    b1[k] += wy * ey;
+    b2[k] += wy * ez;
+  }
+};
+
 struct LoadArgs {
   const float* src;
   const float* amb;
@@ -292,33 +324,13 @@ VENEER_IVDEP
         }
       } else {
         // Many lamps: per-pixel weighted normal equations with the constant directions.
-        std::fill(b.acc.begin(), b.acc.begin() + 9 * cap, 0.f);
-        float* __restrict a00 = b.acc.data();
-        float* __restrict a01 = a00 + cap;
-        float* __restrict a02 = a00 + 2 * cap;
-        float* __restrict a11 = a00 + 3 * cap;
-        float* __restrict a12 = a00 + 4 * cap;
-        float* __restrict a22 = a00 + 5 * cap;
-        float* __restrict b0 = a00 + 6 * cap;
-        float* __restrict b1 = a00 + 7 * cap;
-        float* __restrict b2 = a00 + 8 * cap;
+        const NormalEquations eq(b.acc, cap);
         for (int i = 0; i < n; ++i) {
           const float* __restrict yy = b.Y.data() + size_t(i) * cap;
           const float* __restrict w = b.W.data() + size_t(i) * cap;
           const float lx = s.dir[i * 3], ly = s.dir[i * 3 + 1], lz = s.dir[i * 3 + 2];
 VENEER_IVDEP
-          for (int k = 0; k < count; ++k) {
-            const float wk = w[k], wy = wk * yy[k];
-            a00[k] += wk * lx * lx;
-            a01[k] += wk * lx * ly;
-            a02[k] += wk * lx * lz;
-            a11[k] += wk * ly * ly;
-            a12[k] += wk * ly * lz;
-            a22[k] += wk * lz * lz;
-            b0[k] += wy * lx;
-            b1[k] += wy * ly;
-            b2[k] += wy * lz;
-          }
+          for (int k = 0; k < count; ++k) eq.add(k, w[k], w[k] * yy[k], lx, ly, lz);
         }
       }
     } else {
@@ -338,16 +350,7 @@ VENEER_IVDEP
         py[k] = -t * v;
         pz[k] = zz;
       }
-      std::fill(b.acc.begin(), b.acc.begin() + 9 * cap, 0.f);
-      float* __restrict a00 = b.acc.data();
-      float* __restrict a01 = a00 + cap;
-      float* __restrict a02 = a00 + 2 * cap;
-      float* __restrict a11 = a00 + 3 * cap;
-      float* __restrict a12 = a00 + 4 * cap;
-      float* __restrict a22 = a00 + 5 * cap;
-      float* __restrict b0 = a00 + 6 * cap;
-      float* __restrict b1 = a00 + 7 * cap;
-      float* __restrict b2 = a00 + 8 * cap;
+      const NormalEquations eq(b.acc, cap);
       for (int i = 0; i < n; ++i) {
         const float* __restrict yy = b.Y.data() + size_t(i) * cap;
         const float* __restrict w = b.W.data() + size_t(i) * cap;
@@ -365,16 +368,7 @@ VENEER_IVDEP
           vx[k] = ex;
           vy[k] = ey;
           vz[k] = ez;
-          const float wk = w[k], wy = wk * yy[k];
-          a00[k] += wk * ex * ex;
-          a01[k] += wk * ex * ey;
-          a02[k] += wk * ex * ez;
-          a11[k] += wk * ey * ey;
-          a12[k] += wk * ey * ez;
-          a22[k] += wk * ez * ez;
-          b0[k] += wy * ex;
-          b1[k] += wy * ey;
-          b2[k] += wy * ez;
+          eq.add(k, w[k], w[k] * yy[k], ex, ey, ez);
         }
       }
     }
@@ -488,34 +482,26 @@ VENEER_IVDEP
     const float* __restrict cb = b.C.data() + (size_t(i) * 3 + 0) * cap;
     const float* __restrict cg = b.C.data() + (size_t(i) * 3 + 1) * cap;
     const float* __restrict cr = b.C.data() + (size_t(i) * 3 + 2) * cap;
+    // pixel k's sample of this lamp under shading sh
+    auto add = [&](int k, float sh) {
+      const float ws = w[k] * sh;
+      numb[k] += ws * cb[k];
+      numg[k] += ws * cg[k];
+      numr[k] += ws * cr[k];
+      den[k] += ws * sh;
+      const float d = yy[k] - ga[k] * sh;
+      res[k] += w[k] * d * d;
+    };
     if (s.near) {
       const float* __restrict vx = b.V.data() + (size_t(i) * 3 + 0) * cap;
       const float* __restrict vy = b.V.data() + (size_t(i) * 3 + 1) * cap;
       const float* __restrict vz = b.V.data() + (size_t(i) * 3 + 2) * cap;
 VENEER_IVDEP
-      for (int k = 0; k < count; ++k) {
-        const float sh = nx[k] * vx[k] + ny[k] * vy[k] + nz[k] * vz[k];
-        const float ws = w[k] * sh;
-        numb[k] += ws * cb[k];
-        numg[k] += ws * cg[k];
-        numr[k] += ws * cr[k];
-        den[k] += ws * sh;
-        const float d = yy[k] - ga[k] * sh;
-        res[k] += w[k] * d * d;
-      }
+      for (int k = 0; k < count; ++k) add(k, nx[k] * vx[k] + ny[k] * vy[k] + nz[k] * vz[k]);
     } else {
       const float lx = s.dir[i * 3], ly = s.dir[i * 3 + 1], lz = s.dir[i * 3 + 2];
 VENEER_IVDEP
-      for (int k = 0; k < count; ++k) {
-        const float sh = nx[k] * lx + ny[k] * ly + nz[k] * lz;
-        const float ws = w[k] * sh;
-        numb[k] += ws * cb[k];
-        numg[k] += ws * cg[k];
-        numr[k] += ws * cr[k];
-        den[k] += ws * sh;
-        const float d = yy[k] - ga[k] * sh;
-        res[k] += w[k] * d * d;
-      }
+      for (int k = 0; k < count; ++k) add(k, nx[k] * lx + ny[k] * ly + nz[k] * lz);
     }
   }
   // 6. write.

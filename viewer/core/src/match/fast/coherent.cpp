@@ -398,6 +398,21 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
   const float area = static_cast<float>(dst.patch * dst.patch);
   const float fair = std::max(1e-6f, static_cast<float>(n) / static_cast<float>(src.rows()));
   std::vector<int> uses;
+  // Row's candidate of least cost -- its distance plus the reuse penalty for
+  // the source pixel's uses so far -- or -1 when it has none.
+  auto least_cost = [&](int row) {
+    float best = std::numeric_limits<float>::infinity();
+    int pick = -1;
+    for (int m = 0; m < k; ++m) {
+      const int id = nn.ids[static_cast<size_t>(row) * k + m];
+      if (id < 0) break;
+      const cv::Point q = src.pixels[id];
+      const float cost = std::sqrt(nn.sq[static_cast<size_t>(row) * k + m] / area) +
+                         u * static_cast<float>(uses[static_cast<size_t>(q.y) * src.size.width + q.x]) / fair;
+      if (cost < best) best = cost, pick = id;
+    }
+    return pick;
+  };
   if (u > 0) uses.assign(static_cast<size_t>(src.size.area()), 0);
 
   for (int level = 0; spacing >= 2; ++level, spacing /= 2) {
@@ -423,15 +438,7 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
           seed_row[cell] = row;  // its match once its nearest is known
           continue;
         }
-        float best = std::numeric_limits<float>::infinity();
-        for (int m = 0; m < k; ++m) {
-          const int id = nn.ids[static_cast<size_t>(row) * k + m];
-          if (id < 0) break;
-          const cv::Point q = src.pixels[id];
-          const float cost = std::sqrt(nn.sq[static_cast<size_t>(row) * k + m] / area) +
-                             u * static_cast<float>(uses[static_cast<size_t>(q.y) * src.size.width + q.x]) / fair;
-          if (cost < best) best = cost, seed_match[cell] = id;
-        }
+        if (const int pick = least_cost(row); pick >= 0) seed_match[cell] = pick;
         // this chunk's footprint, until the true counts replace it
         const cv::Point q = src.pixels[seed_match[cell]];
         for (int y = std::max(0, q.y - s / 2); y < std::min(src.size.height, q.y + s / 2 + 1); ++y)
@@ -659,16 +666,7 @@ Expected<Map> run_coherent(const Object& dst, const Object& src, const MatchOpti
       chosen[d] = packed_row(near[d]);
       continue;
     }
-    float best = std::numeric_limits<float>::infinity();
-    int pick = -1;
-    for (int m = 0; m < k; ++m) {
-      const int id = nn.ids[static_cast<size_t>(d) * k + m];
-      if (id < 0) break;
-      const cv::Point q = src.pixels[id];
-      const float cost = std::sqrt(nn.sq[static_cast<size_t>(d) * k + m] / area) +
-                         u * static_cast<float>(uses[static_cast<size_t>(q.y) * src.size.width + q.x]) / fair;
-      if (cost < best) best = cost, pick = id;
-    }
+    const int pick = least_cost(d);
     if (pick >= 0) {
       chosen[d] = packed_row(pick);
       const cv::Point q = src.pixels[pick];

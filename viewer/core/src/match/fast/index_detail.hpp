@@ -8,26 +8,23 @@
 #include <utility>
 #include <vector>
 
+#include "object.hpp"  // TopK
+
 namespace veneer::match::fast::detail {
 
 inline constexpr float kInf = std::numeric_limits<float>::infinity();
 
 // Keeps the k best (distance, id) pairs, ties to the lower id. Small k: a
-// sorted array; large k: a max-heap sorted once at the end (finish()).
-struct Best {
-  int k;
-  int* ids;
-  float* d;
-  int filled = 0;
+// sorted array (TopK); large k: a max-heap sorted once at the end (finish()).
+struct Best : TopK {
   bool heap;
   std::vector<std::pair<float, int>> h;
-  Best(int k_, int* ids_, float* d_) : k(k_), ids(ids_), d(d_), heap(k_ > 16) {
-    for (int j = 0; j < k; ++j) ids[j] = -1, d[j] = kInf;
+  Best(int k_, int* ids_, float* d_) : TopK(k_, ids_, d_), heap(k_ > 16) {
     if (heap) h.reserve(k);
   }
   __attribute__((always_inline)) float worst() const {
     if (heap) return static_cast<int>(h.size()) < k ? kInf : h.front().first;
-    return filled < k ? kInf : d[k - 1];
+    return TopK::worst();
   }
   __attribute__((always_inline)) int worst_id() const {
     if (heap) return static_cast<int>(h.size()) < k ? std::numeric_limits<int>::max() : h.front().second;
@@ -46,15 +43,7 @@ struct Best {
       }
       return;
     }
-    if (filled == k && !(dist < d[k - 1] || (dist == d[k - 1] && id < ids[k - 1]))) return;
-    int j = filled < k ? filled++ : k - 1;
-    while (j > 0 && (d[j - 1] > dist || (d[j - 1] == dist && ids[j - 1] > id))) {
-      d[j] = d[j - 1];
-      ids[j] = ids[j - 1];
-      --j;
-    }
-    d[j] = dist;
-    ids[j] = id;
+    TopK::add(dist, id);
   }
   void finish() {
     if (!heap) return;

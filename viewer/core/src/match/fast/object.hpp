@@ -117,8 +117,10 @@ struct TopK {
   TopK(int k_, int* ids_, float* d_) : k(k_), ids(ids_), d(d_) {
     for (int j = 0; j < k; ++j) ids[j] = -1, d[j] = std::numeric_limits<float>::infinity();
   }
-  float worst() const { return filled < k ? std::numeric_limits<float>::infinity() : d[k - 1]; }
-  void add(float dist, int id) {
+  __attribute__((always_inline)) float worst() const {
+    return filled < k ? std::numeric_limits<float>::infinity() : d[k - 1];
+  }
+  __attribute__((always_inline)) void add(float dist, int id) {
     if (filled == k && !(dist < d[k - 1] || (dist == d[k - 1] && id < ids[k - 1]))) return;
     int j = filled < k ? filled++ : k - 1;
     while (j > 0 && (d[j - 1] > dist || (d[j - 1] == dist && ids[j - 1] > id))) {
