@@ -144,7 +144,6 @@ TEST(PhotometricStereo, OutlierSampleIsDropped) {
   with.light_model = without.light_model = LightModel::distant;
   with.outlier_fraction = 0.1f;
   without.outlier_fraction = 0.f;
-  with.fit_tolerance = without.fit_tolerance = 0.f;  // the outlier pass alone (fit_tolerance drops it too)
   cv::Mat m;
   cv::bitwise_and(patch, set.truth.mask, m);
   auto rw = photometric_stereo(set, set.truth.mask, with), ro = photometric_stereo(set, set.truth.mask, without);

@@ -229,142 +229,6 @@ bool refine_round(const io::ImageSet& set, const PsResult& r, const PsOptions& o
   return true;
 }
 
-// One round of near-light refinement: each lamp's direction from the origin
-// fitted (Gauss-Newton, with its intensity as a nuisance) to the grey photos
-// given the solved normals, albedo and depth, over the reliable pixels it
-// lights clearly (as refine_round); its distance and intensity stay as
-// recorded: the fitted intensities follow a glossy object's highlights and
-// the depth's errors (the simulated bull, its lamps exact: median error 1.96
-// -> 3.16 degrees when they were applied). False when the data does not
-// allow it.
-bool refine_round_near(const io::ImageSet& set, const PsResult& r, const PsOptions& options, std::vector<io::Light>& lights) {
-  const int n = static_cast<int>(set.images.size());
-  const cv::Size size = set.images[0].size();
-  if (r.depth.empty() || !(set.camera.focal_px > 0)) return false;
-  const int count = cv::countNonZero(r.reliable & r.mask);
-  if (count < 300) return false;
-  const int stride = std::max(1, static_cast<int>(std::sqrt(double(count) / 20000.0)));
-  const double f = set.camera.focal_px;
-  const double cx = set.camera.cx > 0 ? set.camera.cx : (size.width - 1) * 0.5;
-  const double cy = set.camera.cy > 0 ? set.camera.cy : (size.height - 1) * 0.5;
-  const bool amb = options.subtract_ambient && !set.ambient.empty() && set.ambient.size() == size;
-  struct Px {
-    cv::Vec3d p, b;  // surface point (rig frame), grey albedo x normal
-    float peak;
-  };
-  std::vector<Px> px;
-  std::vector<float> grey;  // n per pixel, -1 = saturated
-  for (int y = 0; y < size.height; y += stride)
-    for (int x = 0; x < size.width; x += stride) {
-      if (!r.reliable.at<uint8_t>(y, x) || !r.mask.at<uint8_t>(y, x)) continue;
-      const cv::Vec3f al = r.albedo.at<cv::Vec3f>(y, x);
-      const double rho = (al[0] + al[1] + al[2]) / 3.0;
-      if (!(rho > 0)) continue;
-      const double depth = r.depth.at<float>(y, x);
-      const cv::Vec3d ray((x - cx) / f, -(y - cy) / f, -1.0);
-      Px q;
-      q.p = cv::Vec3d(0, 0, 1) + depth * ray;
-      q.b = cv::Vec3d(r.normals.at<cv::Vec3f>(y, x)) * rho;
-      q.peak = 0;
-      for (int i = 0; i < n; ++i) {
-        const cv::Vec3f v = set.images[i].at<cv::Vec3f>(y, x);
-        float g = (v[0] + v[1] + v[2]) / 3.f;
-        if (amb) {
-          const cv::Vec3f a = set.ambient.at<cv::Vec3f>(y, x);
-          g -= (a[0] + a[1] + a[2]) / 3.f;
-        }
-        q.peak = std::max(q.peak, g);
-        grey.push_back(std::max({v[0], v[1], v[2]}) >= options.saturation ? -1.f : g);
-      }
-      px.push_back(q);
-    }
-  if (px.size() < 200) return false;
-  const std::vector<io::Light> recorded = set.lights;
-  std::vector<cv::Vec3d> fitted(n);
-  for (int i = 0; i < n; ++i) {
-    io::Light& l = lights[i];
-    if (!l.position_m || !recorded[i].position_m) return false;
-    const double e0 = (l.intensity[0] + l.intensity[1] + l.intensity[2]) / 3.0;
-    const cv::Vec3d p0 = *l.position_m;
-    const double r0 = cv::norm(p0);
-    // Parameters: the lamp's direction from the origin (two angles; its
-    // distance, which trades off against its intensity over an object this
-    // small, stays as recorded) and its intensity. The model's grey value at a
-    // pixel is e * b . (q - p) |q|^2 / |q - p|^3 (the solver's convention: e is
-    // the irradiance at the origin).
-    const cv::Vec3d w = p0 / r0;
-    cv::Vec3d u1 = w.cross(std::abs(w[2]) < 0.9 ? cv::Vec3d(0, 0, 1) : cv::Vec3d(1, 0, 0));
-    u1 /= cv::norm(u1);
-    const cv::Vec3d u2 = w.cross(u1);
-    auto position = [&](const double* t) {
-      const cv::Vec3d d = w + t[0] * u1 + t[1] * u2;
-      return d * (r0 / cv::norm(d));
-    };
-    double q[3] = {0, 0, e0};  // two angles, the intensity (fitted, not applied)
-    auto model = [&](const double* t, const Px& x) {
-      const cv::Vec3d L = position(t) - x.p;
-      const double d = cv::norm(L);
-      return t[2] * x.b.dot(L) * r0 * r0 / (d * d * d);
-    };
-    double cut = 1e30;
-    for (int it = 0; it < 5; ++it) {
-      cv::Matx33d A = cv::Matx33d::zeros();
-      cv::Vec3d rhs(0, 0, 0);
-      std::vector<float> res;
-      int used = 0;
-      for (size_t k = 0; k < px.size(); ++k) {
-        const float g = grey[k * n + i];
-        const Px& x = px[k];
-        if (g < options.shadow_fraction * x.peak) continue;
-        const double pred = model(q, x);
-        if (pred <= 0.05 * x.peak) continue;
-        const double d = g - pred;
-        if (it > 0 && std::abs(d) > cut) continue;
-        res.push_back(static_cast<float>(std::abs(d)));
-        cv::Vec3d J;
-        for (int c = 0; c < 3; ++c) {
-          double t[3] = {q[0], q[1], q[2]};
-          const double h = c < 2 ? 1e-4 : 1e-4 * q[2];
-          t[c] += h;
-          J[c] = (model(t, x) - pred) / h;
-        }
-        A += J * J.t();
-        rhs += J * d;
-        ++used;
-      }
-      if (used < 100) return false;
-      std::nth_element(res.begin(), res.begin() + res.size() / 2, res.end());
-      cut = std::max(3.0 * 1.4826 * res[res.size() / 2], 1e-4);
-      cv::Vec3d step;
-      if (!cv::solve(A, rhs, step, cv::DECOMP_SVD)) return false;
-      for (int c = 0; c < 3; ++c) q[c] += step[c];
-    }
-    const cv::Vec3d p = position(q);
-    // A lamp that would move by more than a fifth of its distance is not a calibration error.
-    if (!(q[2] > 0) || !(cv::norm(p - p0) < 0.2 * r0)) return false;
-    fitted[i] = p;
-  }
-  // The gauge: one linear map applied to every lamp (and its inverse to the
-  // normals) changes the photos little over an object this small, so the
-  // photos do not fix it and the solved normals drift with it (the distant
-  // model's ambiguity, nearly). The map that brings the fitted lamps closest
-  // to the recorded ones is taken out; what stays is each lamp's own error.
-  cv::Matx33d FF = cv::Matx33d::zeros(), RF = cv::Matx33d::zeros();
-  for (int i = 0; i < n; ++i) {
-    FF += fitted[i] * fitted[i].t();
-    RF += *recorded[i].position_m * fitted[i].t();
-  }
-  if (std::abs(cv::determinant(FF)) < 1e-12) return false;
-  const cv::Matx33d M = RF * FF.inv();
-  for (int i = 0; i < n; ++i) {
-    const cv::Vec3d d = M * fitted[i];
-    const cv::Vec3d p = d * (cv::norm(*recorded[i].position_m) / cv::norm(d));
-    lights[i].position_m = p;
-    lights[i].direction = p / cv::norm(p);
-  }
-  return true;
-}
-
 }  // namespace
 
 Status photometric_stereo_into(const io::ImageSet& set, const cv::Mat& mask_in, const PsOptions& options,
@@ -372,13 +236,12 @@ Status photometric_stereo_into(const io::ImageSet& set, const cv::Mat& mask_in, 
   if (Status st = solve_once(set, mask_in, options, progress, result); !st) return st;
   result.lights_refined = false;
   result.light_change_deg.clear();
-  if (!options.refine_lights || !options.robust) return Status::success();
-  const bool near = result.model_used == LightModel::near;
+  if (!options.refine_lights || !options.robust || result.model_used != LightModel::distant) return Status::success();
   std::vector<io::Light> lights = set.lights;
   io::ImageSet view = set;  // shares the photos; only the lights differ
   std::vector<double> moved(set.lights.size());
   for (int it = 0; it < options.refine_iterations; ++it) {
-    if (!(near ? refine_round_near(set, result, options, lights) : refine_round(set, result, options, lights))) break;
+    if (!refine_round(set, result, options, lights)) break;
     // Directions that moved implausibly far are not a calibration error: keep the last plausible ones.
     for (size_t i = 0; i < lights.size(); ++i) {
       const double c = lights[i].direction.dot(set.lights[i].direction / cv::norm(set.lights[i].direction));

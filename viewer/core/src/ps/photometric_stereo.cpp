@@ -58,12 +58,6 @@ Status PsOptions::check() const {
     return make_error("outlier_fraction must be in [0, 1), got " + std::to_string(outlier_fraction));
   if (!(diffuse_chroma >= 0.f && diffuse_chroma <= 2.f))
     return make_error("diffuse_chroma must be in [0, 2], got " + std::to_string(diffuse_chroma));
-  if (part_lit_px < 0 || part_lit_px > 8)
-    return make_error("part_lit_px must be in 0..8, got " + std::to_string(part_lit_px));
-  if (!(diffuse_chroma_min >= 0.f && diffuse_chroma_min <= 1.f))
-    return make_error("diffuse_chroma_min must be in [0, 1], got " + std::to_string(diffuse_chroma_min));
-  if (!(fit_tolerance >= 0.f && fit_tolerance < 1.f))
-    return make_error("fit_tolerance must be in [0, 1), got " + std::to_string(fit_tolerance));
   if (refine_iterations < 1 || refine_iterations > 10)
     return make_error("refine_iterations must be in 1..10, got " + std::to_string(refine_iterations));
   if (!(refine_max_deg > 0 && refine_max_deg <= 45))
@@ -180,8 +174,6 @@ Status solve_once(const io::ImageSet& set, const cv::Mat& mask_in, const PsOptio
   s.min_signal = options.min_signal;
   s.outlier_fraction = options.outlier_fraction;
   s.diffuse_chroma = options.robust ? options.diffuse_chroma : 0.f;
-  s.diffuse_chroma_min = options.diffuse_chroma_min;
-  s.fit_tolerance = options.robust && n <= kMaxNearLights ? options.fit_tolerance : 0.f;
   s.dir.resize(size_t(n) * 3);
   s.inv_e.resize(size_t(n) * 3);
   bool have_positions = true;
@@ -285,12 +277,7 @@ Status solve_once(const io::ImageSet& set, const cv::Mat& mask_in, const PsOptio
   std::atomic<bool> cancelled{false};
   cv::Mat zfull;
   bool failed_depth = false;
-  cv::Mat near_shadow;
   run_parallel(options.threads, [&] {
-    if (s.robust && options.part_lit_px > 0 && n <= 32) {
-      near_shadow = near_shadow_bits(s, mask, options.part_lit_px);
-      s.near_shadow = near_shadow.ptr<uint32_t>();
-    }
     if (s.near) {
       // Depth refinement on a sub-sampled grid: z = 0 first, then integrate the
       // normals into a depth map and solve again.

@@ -185,11 +185,10 @@ VENEER_IVDEP
       }
     }
     const float dc = s.diffuse_chroma;
-    const float chroma_floor = s.diffuse_chroma_min * float(n);
 VENEER_IVDEP
     for (int k = 0; k < count; ++k) {
       const float len = std::sqrt(c0[k] * c0[k] + c1[k] * c1[k] + c2[k] * c2[k]);
-      const bool coloured = (len >= dc * sy[k]) & (sy[k] > 0.f) & (len >= chroma_floor);
+      const bool coloured = (len >= dc * sy[k]) & (sy[k] > 0.f);
       use[k] = coloured ? 1.f : 0.f;
       const float il = (coloured ? 1.f : 0.f) / (coloured ? len : 1.f);
       c0[k] *= il;
@@ -250,14 +249,6 @@ VENEER_IVDEP
         pat[k] = s.full;
       }
     }
-    // Maybe part lit: samples near ones the same lamp leaves in shadow.
-    uint32_t* __restrict held = b.held.data();
-    if (s.near_shadow) {
-      const uint32_t* bits = s.near_shadow + size_t(y) * s.width + x0;
-      for (int k = 0; k < count; ++k) held[k] = bits[size_t(k) * step];
-    } else {
-      std::fill(held, held + count, 0u);
-    }
   } else {
     for (int i = 0; i < n; ++i) std::fill(b.W.begin() + size_t(i) * cap, b.W.begin() + size_t(i) * cap + count, 1.f);
     std::fill(pat, pat + count, s.full);
@@ -272,13 +263,8 @@ VENEER_IVDEP
   float* __restrict nz = b.nz.data();
   float* __restrict ga = b.a.data();
   const float ms = s.min_signal;
-  // 3-4 run once, again when held-back samples were taken back, and again
-  // when outliers were dropped; later passes re-solve only the pixels that
-  // changed (redo).
-  float* __restrict redo = b.redo.data();
-  bool consistency_pending = s.robust && s.fit_tolerance > 0.f;
-  bool outliers_pending = s.robust && s.outlier_fraction > 0.f;
-  for (int pass = 0; pass < 4; ++pass) {
+  // 3-4 run once, or twice when outliers were dropped after the first fit.
+  for (int pass = 0; pass < 2; ++pass) {
     // 3. solve g = albedo * n.
     if (!s.near) {
       if (s.use_cache || !s.robust) {
@@ -301,10 +287,12 @@ VENEER_IVDEP
           }
         }
         if (s.robust) {
+          const float* dropped = b.acc.data();  // best_i of the outlier step: -1 = kept all
 VENEER_IVDEP
           for (int k = 0; k < count; ++k) {
             const uint32_t p = pat[k];
-            if (pass == 0 ? p == s.full : redo[k] == 0.f) continue;
+            if (p == s.full) continue;
+            if (pass == 1 && dropped[k] < 0.f) continue;
             if (!s.pinv_ok[p]) {
               okv[k] = 0.f;
               continue;
@@ -411,15 +399,7 @@ VENEER_IVDEP
       ga[k] = sig ? len : 0.f;
       okv[k] = sig ? okv[k] : 0.f;
     }
-    if (consistency_pending) {
-      // Samples the Lambertian fit cannot explain (part lit, highlights) are
-      // dropped one at a time (part_lit.cpp); the pixels that changed are
-      // solved again.
-      consistency_pending = false;
-      if (drop_inconsistent(s, b, count) > 0) continue;
-    }
-    if (!outliers_pending) break;
-    outliers_pending = false;
+    if (pass == 1 || !s.robust || !(s.outlier_fraction > 0.f)) break;
     // Outliers: the sample farthest from the first fit (a specular highlight,
     // a cast shadow) is dropped when it is off by more than outlier_fraction of
     // the pixel's brightest sample and 4+ samples remain; then solve again.
@@ -450,7 +430,6 @@ VENEER_IVDEP
       // Dark pixels (brightest sample < 0.2) need an absolute 0.02 of full scale: sensor noise.
       const bool drop = (best[k] > of * std::max(M[k], 0.2f)) & (K[k] >= 4.f) & (ga[k] > 0.f);
       best_i[k] = drop ? best_i[k] : -1.f;
-      redo[k] = drop ? 1.f : 0.f;
       K[k] -= drop ? 1.f : 0.f;
       drops += drop;
     }

@@ -26,7 +26,6 @@ struct Setup {
   bool robust = true;
   float shadow_fraction = 0.1f, saturation = 0.98f, min_signal = 1e-3f, outlier_fraction = 0.0f;
   float diffuse_chroma = 0.0f;   // see PsOptions::diffuse_chroma
-  float diffuse_chroma_min = 0.0f;  // see PsOptions::diffuse_chroma_min
   std::vector<float> dir;        // n*3 distant directions
   std::vector<float> pos;        // n*3 lamp positions (near)
   std::vector<float> pos_norm2;  // n: |position|^2 (intensity reference distance)
@@ -39,18 +38,7 @@ struct Setup {
   uint32_t full = 0;
   std::vector<const float*> images;  // n, continuous CV_32FC3
   const float* ambient = nullptr;
-  // Part-lit samples (PsOptions::part_lit_px): per image pixel (width*height,
-  // row-major), bit i set where lamp i's sample lies near one it leaves in
-  // shadow; null = off.
-  const uint32_t* near_shadow = nullptr;
-  float fit_tolerance = 0.1f;  // PsOptions::fit_tolerance; 0 = keep every lit sample
 };
-
-// The near_shadow bits of Setup over the pixels of `mask` (CV_32SC1 of the
-// image size): a lamp's sample is shadowed below shadow_fraction of the
-// pixel's brightest (grey, lamp colour divided out), and every object pixel
-// within `radius` pixels (a square) of a shadowed one gets that lamp's bit.
-cv::Mat near_shadow_bits(const Setup& s, const cv::Mat& mask, int radius);
 
 // Pseudo-inverse of the rows of `dir` selected by `pattern`: (L^T L)^-1 L^T,
 // in double. False when the kept directions do not span 3-D.
@@ -66,8 +54,6 @@ struct Scratch {
   std::vector<float> acc;  // 12*cap: A00 A01 A02 A11 A12 A22 b0 b1 b2 gx gy gz
   std::vector<float> M, K, a, nx, ny, nz, ok, den, px, py, pz;
   std::vector<uint32_t> pat;
-  std::vector<uint32_t> held;  // per pixel: the lamps whose sample may be part lit (Setup::near_shadow)
-  std::vector<float> redo;     // per pixel: 1 = solve again in this pass
   std::vector<float> sat;  // n*cap: 1 where a channel is saturated
   void resize(int n_, int cap_) {
     n = n_;
@@ -79,8 +65,6 @@ struct Scratch {
     acc.assign(size_t(12) * cap, 0.f);
     for (auto* v : {&M, &K, &a, &nx, &ny, &nz, &ok, &den, &px, &py, &pz}) v->assign(cap, 0.f);
     pat.assign(cap, 0);
-    held.assign(cap, 0);
-    redo.assign(cap, 0.f);
     sat.assign(size_t(n) * cap, 0.f);
   }
 };
@@ -96,16 +80,6 @@ struct RowOut {
 // from x0, sampled with the same step.
 void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, const float* z,
                const uint8_t* mask, const RowOut& out);
-
-// After a first fit (b.a = albedo, b.acc rows 9-11 = albedo x normal): per
-// pixel whose fit misses a kept sample by more than Setup::fit_tolerance,
-// every 3 kept samples fix a normal and the one most others agree with wins
-// (ties: the one whose left-out samples are plausibly off -- darker and near
-// their lamp's shadow (b.held), or brighter -- then the smaller misfit); the
-// others are dropped. With 4 samples only a part-lit one, or the brightest
-// when brighter than the fit, is dropped. W, K, pat and redo are updated;
-// returns how many pixels changed (part_lit.cpp).
-int drop_inconsistent(const Setup& s, Scratch& b, int count);
 
 // Solves every row in [y0, y1) (step 1) in parallel, writing into `result`.
 void solve_rows(const Setup& s, const cv::Mat& mask, const cv::Mat* zmap, int y0, int y1, PsResult& result);

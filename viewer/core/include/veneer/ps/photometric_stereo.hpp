@@ -11,8 +11,6 @@
 //  - robust: per pixel, shadowed (dark relative to the pixel's brightest
 //    sample) and saturated samples are dropped; at least 3 must remain or the
 //    pixel is unreliable. Pseudo-inverses are cached per "lamps kept" pattern.
-//    Then samples the fit cannot explain (part lit at a shadow's blurred
-//    edge, highlights on grey) are dropped by consensus (fit_tolerance).
 //    Coloured pixels are solved on their colour's part off the lamps' colour
 //    (PsOptions::diffuse_chroma), where a glossy dielectric's highlight --
 //    the lamp's colour -- does not reach.
@@ -58,34 +56,17 @@ struct PsOptions {
                                    // [0, 2]; 0 = off. Quality table, 512x340: the exact nearest's normal
                                    // error 3.20 -> 2.08 degrees, with the outlier pass
                                    // then off (bench_ps: red glossy sphere 3.85 -> 0.85)
-  float diffuse_chroma_min = 0.03f; // robust: ... and whose off-grey part averages at least this over the lamps
-                                   // (full scale 1); a fainter colour is mostly sensor noise and the pixel is
-                                   // solved on its grey (then fit_tolerance drops its highlights) [0, 1]; 0 = no
-                                   // floor. The bull's dark glossy hooves: 0.12 0.10 0.08
-  float fit_tolerance = 0.1f;      // robust: after a first fit, while a kept sample is off it by more than this
-                                   // fraction of the predicted value (of a quarter of the pixel's brightest
-                                   // sample when more, plus 0.01 of full scale for noise), the sample whose
-                                   // leaving out fits the rest best is dropped -- a part-lit sample at a cast
-                                   // shadow's blurred edge, a highlight on a grey surface -- while 4+ remain
-                                   // [0, 1); 0 = keep every lit sample
-  int part_lit_px = 2;             // robust: a sample within this many pixels of one the same lamp leaves in
-                                   // shadow may be part lit (the lens and the sensor's low-pass filter blur a
-                                   // shadow's edge): with only 4 samples, where the fit cannot tell which one
-                                   // is off, such a sample darker than the fit is the one dropped [0, 8]; 0 = none
   bool fill_unreliable = true;     // robust: a pixel left with < 3 lit samples takes its normal from its
                                    // reliable neighbours (diffused inward) instead of the plain fit over
                                    // shadowed samples, which errs by tens of degrees (the bull's far legs)
   bool subtract_ambient = true;    // subtract set.ambient when present
-  bool refine_lights = true;       // robust: refine the lamps' directions (and, distant model, intensities)
+  bool refine_lights = true;       // robust, distant model: refine the lamps' directions and intensities
                                    // from the photos (calibrated rigs are a few degrees off): each lamp's
                                    // vector fitted to the solved normals over the pixels it lights
                                    // clearly, the whole set then brought by one linear map as close as it
                                    // goes to the recorded lamps (the photos fix them only up to such a map),
                                    // and the normals solved again; skipped when the normals do not spread
-                                   // enough to fix a lamp. Near model: each lamp's direction from the origin
-                                   // fitted to the solved normals and depth (distance and intensity kept),
-                                   // the set brought by one linear map as close as it goes to the recorded
-                                   // lamps, solved again. See PsResult::lights_refined
+                                   // enough to fix a lamp. See PsResult::lights_refined
   int refine_iterations = 3;       // rounds of refine-then-solve (1..10)
   double refine_max_deg = 15.0;    // a lamp that would move farther than this is not a calibration error:
                                    // that round is dropped and the last plausible lamps (at first the
