@@ -37,7 +37,7 @@ using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
 // Bump when what is cached, or how it is computed, changes.
-constexpr const char* kCacheVersion = "prepared-set/4";
+constexpr const char* kCacheVersion = "prepared-set/3";
 
 Progress sub_progress(const Progress& p, double from, double to) { return p.part(from, to); }
 
