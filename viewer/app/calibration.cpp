@@ -6,6 +6,7 @@
 #include <QVBoxLayout>
 
 #include "veneer/ps/calibration.hpp"
+#include "widgets.hpp"
 
 namespace veneer::app {
 
@@ -43,12 +44,10 @@ bool CalibrationStep::calibrateLamps(const QString& sphere_folder, const QString
   }
   session_.message(text);
   if (!dialog_) {
-    dialog_ = new QDialog(window_);
-    dialog_->setObjectName("calibrationDialog");
+    dialog_ = named<QDialog>("calibrationDialog", window_);
     dialog_->setWindowTitle(tr("Lamp calibration"));
     auto* layout = new QVBoxLayout(dialog_);
-    picture_ = new QLabel;
-    picture_->setObjectName("calibrationPicture");
+    picture_ = named<QLabel>("calibrationPicture");
     text_ = new QLabel;
     text_->setWordWrap(true);
     layout->addWidget(picture_);

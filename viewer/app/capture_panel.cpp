@@ -18,26 +18,20 @@ namespace veneer::app {
 
 CapturePanel::CapturePanel(Session& session, QWidget* parent) : QGroupBox(tr("Capture"), parent), session_(session) {
   auto* form = new QFormLayout(this);
-  object_edit_ = new QLineEdit;
-  object_edit_->setObjectName("objectName");
+  object_edit_ = named<QLineEdit>("objectName");
   object_edit_->setPlaceholderText(tr("object name (optional)"));
-  shutter_ = new QDoubleSpinBox;
-  shutter_->setObjectName("shutter");
+  shutter_ = named<QDoubleSpinBox>("shutter");
   shutter_->setRange(0, 30);
   shutter_->setDecimals(4);
   shutter_->setSpecialValueText(tr("rig default"));
-  aperture_ = new QDoubleSpinBox;
-  aperture_->setObjectName("aperture");
+  aperture_ = named<QDoubleSpinBox>("aperture");
   aperture_->setRange(0, 32);
   aperture_->setSpecialValueText(tr("rig default"));
-  iso_ = new QSpinBox;
-  iso_->setObjectName("iso");
+  iso_ = named<QSpinBox>("iso");
   iso_->setRange(0, 25600);
   iso_->setSpecialValueText(tr("rig default"));
-  auto_flow_ = new QCheckBox(tr("automatic: pull, compute the map, go live"));
-  auto_flow_->setObjectName("autoFlow");
-  auto_flow_->setChecked(true);
-  auto_flow_->setToolTip(tr("every capture stored on the rig is pulled and used as its role; the map is computed "
+  auto_flow_ = check_box("autoFlow", tr("automatic: pull, compute the map, go live"), true,
+                         tr("every capture stored on the rig is pulled and used as its role; the map is computed "
                             "as soon as both sets are there and the live repaint starts"));
   form->addRow(auto_flow_);
   form->addRow(tr("Object"), object_edit_);
@@ -60,12 +54,10 @@ CapturePanel::CapturePanel(Session& session, QWidget* parent) : QGroupBox(tr("Ca
   row2->addWidget(cancel);
   form->addRow(row1);
   form->addRow(row2);
-  shot_bar_ = new QProgressBar;
-  shot_bar_->setObjectName("shotProgress");
+  shot_bar_ = named<QProgressBar>("shotProgress");
   shot_bar_->setFormat(tr("shot %v of %m"));
   shot_bar_->setValue(0);
-  capture_label_ = new QLabel(tr("idle"));
-  capture_label_->setObjectName("captureStatus");
+  capture_label_ = named<QLabel>("captureStatus", tr("idle"));
   capture_label_->setWordWrap(true);
   form->addRow(shot_bar_);
   form->addRow(capture_label_);

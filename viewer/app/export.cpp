@@ -63,14 +63,21 @@ void ExportActions::runJob(const QString& kind, const QString& text,
   });
 }
 
-void ExportActions::exportMap() {
-  if (!session_.result) return session_.message(tr("nothing to export: compute a transfer first"), true);
-  QString dir = QFileDialog::getExistingDirectory(window_, tr("Export the map into"));
-  if (!dir.isEmpty()) exportMapTo(dir);
+bool ExportActions::haveResult() {
+  if (!session_.result) session_.message(tr("nothing to export: compute a transfer first"), true);
+  return session_.result != nullptr;
 }
 
+void ExportActions::exportIntoFolder(const QString& title, void (ExportActions::*into)(const QString&)) {
+  if (!haveResult()) return;
+  const QString dir = QFileDialog::getExistingDirectory(window_, title);
+  if (!dir.isEmpty()) (this->*into)(dir);
+}
+
+void ExportActions::exportMap() { exportIntoFolder(tr("Export the map into"), &ExportActions::exportMapTo); }
+
 void ExportActions::exportMapTo(const QString& dir) {
-  if (!session_.result) return session_.message(tr("nothing to export: compute a transfer first"), true);
+  if (!haveResult()) return;
   auto result = session_.result;
   runJob("export-map", tr("writing the map into %1").arg(dir), [result, dir](const veneer::Progress& p) -> veneer::Status {
     if (auto s = veneer::match::write_map((dir + "/map.pfm").toStdString(), result->map); !s) return s;
@@ -89,13 +96,11 @@ void ExportActions::exportMapTo(const QString& dir) {
 }
 
 void ExportActions::exportResults() {
-  if (!session_.result) return session_.message(tr("nothing to export: compute a transfer first"), true);
-  QString dir = QFileDialog::getExistingDirectory(window_, tr("Export the results into"));
-  if (!dir.isEmpty()) exportResultsTo(dir);
+  exportIntoFolder(tr("Export the results into"), &ExportActions::exportResultsTo);
 }
 
 void ExportActions::exportResultsTo(const QString& dir) {
-  if (!session_.result) return session_.message(tr("nothing to export: compute a transfer first"), true);
+  if (!haveResult()) return;
   auto result = session_.result;
   // written into a temporary sibling and moved into place, so a cancel or a
   // failure leaves no half-written folder; a cancel stops between files

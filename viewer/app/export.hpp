@@ -35,6 +35,10 @@ class ExportActions : public QObject {
   // Runs `job` off the GUI thread as a step of the status line.
   void runJob(const QString& kind, const QString& text, std::function<veneer::Status(const veneer::Progress&)> job,
               const QString& done);
+  // Whether there is a result to export; without one, says so.
+  bool haveResult();
+  // Asks for a folder (dialog titled `title`), then writes into it with `into`.
+  void exportIntoFolder(const QString& title, void (ExportActions::*into)(const QString&));
 
   Session& session_;
   QWidget* window_;

@@ -57,10 +57,8 @@ void LiveFirstJob::maybeStart() {
   const Session& s = session_;
   if (running_ || !s.result || !s.dst || !s.src || !(s.dst->live_size || s.src->live_size)) return;
   if (!label_) {
-    label_ = new QLabel;
-    label_->setObjectName("fullResolutionStatus");
-    progress_ = new QProgressBar;
-    progress_->setObjectName("fullResolutionProgress");
+    label_ = named<QLabel>("fullResolutionStatus");
+    progress_ = named<QProgressBar>("fullResolutionProgress");
     progress_->setMaximumWidth(100);
     progress_->setTextVisible(false);
     bar_->addPermanentWidget(label_);

@@ -24,8 +24,7 @@ LiveTab::LiveTab(Session& session, QWidget* parent) : QWidget(parent), session_(
   auto* top = new QHBoxLayout;
   live_btn_ = button(tr("Start live view"), "liveToggle", this);
   live_btn_->setCheckable(true);
-  fps_ = new QDoubleSpinBox;
-  fps_->setObjectName("liveFps");
+  fps_ = named<QDoubleSpinBox>("liveFps");
   fps_->setRange(1, 60);
   fps_->setValue(15);
   connect(live_btn_, &QPushButton::toggled, this, [this](bool on) {
@@ -51,8 +50,7 @@ LiveTab::LiveTab(Session& session, QWidget* parent) : QWidget(parent), session_(
   lamp_row_ = new QHBoxLayout;
   top->addLayout(lamp_row_);
   top->addStretch();
-  live_label_ = new QLabel;
-  live_label_->setObjectName("liveStatus");
+  live_label_ = named<QLabel>("liveStatus");
   top->addWidget(live_label_);
   layout->addLayout(top);
   auto* row = new QHBoxLayout;
@@ -62,8 +60,7 @@ LiveTab::LiveTab(Session& session, QWidget* parent) : QWidget(parent), session_(
   row->addWidget(live_dst_view_, 3);
   auto* pad_box = new QVBoxLayout;
   pad_box->addWidget(new QLabel(tr("hand-held lamp\n(simulated rig)")));
-  hand_pad_ = new SpherePad;
-  hand_pad_->setObjectName("handLamp");
+  hand_pad_ = named<SpherePad>("handLamp");
   connect(hand_pad_, &SpherePad::directionChanged, this, [this](cv::Vec3d d) {
     // The lamp 0.6 m from the object in the chosen direction.
     session_.rig.moveHandLamp(d * 0.6);
@@ -116,8 +113,7 @@ void LiveTab::updateLampBoxes() {
   qDeleteAll(lamp_boxes_);
   lamp_boxes_.clear();
   for (int i = 0; i < names.size(); ++i) {
-    auto* box = new QCheckBox(names[i]);
-    box->setObjectName(QString("lamp%1").arg(i + 1));
+    auto* box = named<QCheckBox>(QString("lamp%1").arg(i + 1), names[i]);
     box->setToolTip(tips[i]);
     lamp_boxes_.push_back(box);
     lamp_row_->addWidget(box);

@@ -22,8 +22,7 @@ namespace veneer::app {
 LookTab::LookTab(Session& session, QWidget* parent) : QWidget(parent), session_(session) {
   auto* layout = new QVBoxLayout(this);
   auto* top = new QHBoxLayout;
-  look_what_ = new QComboBox;
-  look_what_->setObjectName("lookWhat");
+  look_what_ = named<QComboBox>("lookWhat");
   look_what_->addItems({tr("median of all lamps"), tr("normals"), tr("albedo"), tr("mask"),
                         tr("correspondence map"), tr("source reuse"), tr("confidence"),
                         tr("specular enhancement")});
@@ -41,11 +40,9 @@ LookTab::LookTab(Session& session, QWidget* parent) : QWidget(parent), session_(
   connect(snap, &QPushButton::clicked, this, &LookTab::snapshotAsked);
   top->addWidget(snap);
   top->addStretch();
-  histogram_ = new QLabel;
-  histogram_->setObjectName("histogram");
+  histogram_ = named<QLabel>("histogram");
   top->addWidget(histogram_);
-  exposure_label_ = new QLabel;
-  exposure_label_->setObjectName("exposure");
+  exposure_label_ = named<QLabel>("exposure");
   top->addWidget(exposure_label_);
   layout->addLayout(top);
   auto* row = new QHBoxLayout;

@@ -63,8 +63,7 @@ void MainWindow::buildUi() {
   scroll->setMinimumWidth(330);
   split->addWidget(scroll);
 
-  tabs_ = new QTabWidget;
-  tabs_->setObjectName("tabs");
+  tabs_ = named<QTabWidget>("tabs");
   tabs_->addTab(look_ = new LookTab(s), tr("Look"));
   tabs_->addTab(live_ = new LiveTab(s), tr("Live"));
   tabs_->addTab(relight_ = new RelightTab(s), tr("Relight"));

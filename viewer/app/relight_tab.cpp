@@ -6,14 +6,15 @@
 #include <QLabel>
 #include <QVBoxLayout>
 
+#include "widgets.hpp"
+
 namespace veneer::app {
 
 RelightTab::RelightTab(Session& session, QWidget* parent) : QWidget(parent), session_(session) {
   auto* layout = new QHBoxLayout(this);
   auto* left = new QVBoxLayout;
   left->addWidget(new QLabel(tr("Drag the light over the sphere")));
-  relight_pad_ = new SpherePad;
-  relight_pad_->setObjectName("relightPad");
+  relight_pad_ = named<SpherePad>("relightPad");
   relight_pad_->setDirection(cv::Vec3d(-0.4, 0.4, std::sqrt(1 - 0.32)));
   connect(relight_pad_, &SpherePad::directionChanged, this, [this] {
     refresh();

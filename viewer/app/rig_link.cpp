@@ -17,6 +17,10 @@ RigLink::RigLink(QObject* parent) : QObject(parent) {
 
 RigLink::~RigLink() {
   wanted_ = false;
+  if (auto c = takeClient()) c->close();
+}
+
+RigLink::ClientPtr RigLink::takeClient() {
   ClientPtr c;
   {
     std::lock_guard lock(mutex_);
@@ -26,8 +30,8 @@ RigLink::~RigLink() {
     c->on_event = nullptr;
     c->on_live_frame = nullptr;
     c->on_disconnect = nullptr;
-    c->close();
   }
+  return c;
 }
 
 bool RigLink::isConnected() const {
@@ -52,15 +56,7 @@ void RigLink::disconnectFromRig() {
   wanted_ = false;
   reconnect_timer_.stop();
   ++generation_;
-  ClientPtr c;
-  {
-    std::lock_guard lock(mutex_);
-    c.swap(client_);
-  }
-  if (c) {
-    c->on_disconnect = nullptr;
-    c->on_event = nullptr;
-    c->on_live_frame = nullptr;
+  if (auto c = takeClient()) {
     (void)QtConcurrent::run([c] { c->close(); });
     emit connectedChanged(false, tr("disconnected from %1").arg(endpoint_));
   }
@@ -182,32 +178,30 @@ void RigLink::run(const QString& what, std::function<veneer::Status(veneer::rig:
   });
 }
 
-void RigLink::refreshStatus() {
+template <class Call, class Deliver>
+void RigLink::fetch(const QString& what, Call call, Deliver deliver) {
   QPointer<RigLink> self(this);
-  run(tr("status"), [self](veneer::rig::Client& c) -> veneer::Status {
-    auto s = c.status();
-    if (!s) return s.error();
-    auto st = *s;
-    QMetaObject::invokeMethod(self.data(), [self, st] {
-      if (!self) return;
-      self->status_ = st;
-      emit self->statusUpdated(st);
+  run(what, [self, call, deliver](veneer::rig::Client& c) -> veneer::Status {
+    auto got = call(c);
+    if (!got) return got.error();
+    QMetaObject::invokeMethod(self.data(), [self, deliver, v = *got] {
+      if (self) deliver(*self, v);
     });
     return {};
   });
 }
 
+void RigLink::refreshStatus() {
+  fetch(tr("status"), [](veneer::rig::Client& c) { return c.status(); },
+        [](RigLink& link, const veneer::rig::RigStatus& st) {
+          link.status_ = st;
+          emit link.statusUpdated(st);
+        });
+}
+
 void RigLink::listSets() {
-  QPointer<RigLink> self(this);
-  run(tr("list sets"), [self](veneer::rig::Client& c) -> veneer::Status {
-    auto sets = c.list_sets();
-    if (!sets) return sets.error();
-    auto v = *sets;
-    QMetaObject::invokeMethod(self.data(), [self, v] {
-      if (self) emit self->setsListed(v);
-    });
-    return {};
-  });
+  fetch(tr("list sets"), [](veneer::rig::Client& c) { return c.list_sets(); },
+        [](RigLink& link, const std::vector<veneer::rig::SetSummary>& v) { emit link.setsListed(v); });
 }
 
 void RigLink::capture(const veneer::rig::CaptureOptions& options) {
@@ -241,35 +235,26 @@ void RigLink::moveHandLamp(const cv::Vec3d& position) {
   run(tr("hand lamp"), [position](veneer::rig::Client& c) { return c.move_hand_lamp(position); });
 }
 
-void RigLink::deleteSet(const QString& id) {
+void RigLink::moveSet(const QString& what, const QString& id, SetMove move, void (RigLink::*moved)(QString)) {
   const std::string sid = id.toStdString();
-  run(tr("delete %1").arg(id), [sid](veneer::rig::Client& c) { return c.delete_set(sid); },
-      [this, id] {
-        emit deleted(id);
+  run(what, [sid, move](veneer::rig::Client& c) { return (c.*move)(sid); },
+      [this, id, moved] {
+        emit (this->*moved)(id);
         listSets();
       });
+}
+
+void RigLink::deleteSet(const QString& id) {
+  moveSet(tr("delete %1").arg(id), id, &veneer::rig::Client::delete_set, &RigLink::deleted);
 }
 
 void RigLink::listTrash() {
-  QPointer<RigLink> self(this);
-  run(tr("list the rig's trash"), [self](veneer::rig::Client& c) -> veneer::Status {
-    auto sets = c.list_trash();
-    if (!sets) return sets.error();
-    auto v = *sets;
-    QMetaObject::invokeMethod(self.data(), [self, v] {
-      if (self) emit self->trashListed(v);
-    });
-    return {};
-  });
+  fetch(tr("list the rig's trash"), [](veneer::rig::Client& c) { return c.list_trash(); },
+        [](RigLink& link, const std::vector<veneer::rig::SetSummary>& v) { emit link.trashListed(v); });
 }
 
 void RigLink::restoreSet(const QString& id) {
-  const std::string sid = id.toStdString();
-  run(tr("restore %1").arg(id), [sid](veneer::rig::Client& c) { return c.restore_set(sid); },
-      [this, id] {
-        emit restored(id);
-        listSets();
-      });
+  moveSet(tr("restore %1").arg(id), id, &veneer::rig::Client::restore_set, &RigLink::restored);
 }
 
 void RigLink::cancelPulls() {

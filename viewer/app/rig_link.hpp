@@ -67,7 +67,16 @@ class RigLink : public QObject {
   // Runs `job` on a worker with the current client; reports failure as failed(what).
   void run(const QString& what, std::function<veneer::Status(veneer::rig::Client&)> job,
            std::function<void()> on_ok = {});
+  // Runs `call` (the client's answer or an error) on a worker; on success
+  // `deliver(*this, answer)` runs on the GUI thread, while this link lives.
+  template <class Call, class Deliver>
+  void fetch(const QString& what, Call call, Deliver deliver);
+  // Deleting a set or restoring one: `move` on the rig, then `moved(id)` and the list read again.
+  using SetMove = veneer::Status (veneer::rig::Client::*)(const std::string&);
+  void moveSet(const QString& what, const QString& id, SetMove move, void (RigLink::*moved)(QString));
   ClientPtr client() const;
+  // Takes the client out of the link, its callbacks (which point at this link) cleared.
+  ClientPtr takeClient();
   void tryConnect();
   void onDropped(const QString& why);
 

@@ -17,13 +17,10 @@ namespace veneer::app {
 RigPanel::RigPanel(Session& session, QWidget* parent)
     : QGroupBox(tr("Rig"), parent), session_(session), settings_("veneer", "veneer-viewer") {
   auto* form = new QFormLayout(this);
-  rig_edit_ = new QLineEdit(settings_.value("rig/last", "127.0.0.1:7878").toString());
-  rig_edit_->setObjectName("rigAddress");
-  token_edit_ = new QLineEdit(settings_.value("rig/token_file").toString());
-  token_edit_->setObjectName("tokenFile");
+  rig_edit_ = named<QLineEdit>("rigAddress", settings_.value("rig/last", "127.0.0.1:7878").toString());
+  token_edit_ = named<QLineEdit>("tokenFile", settings_.value("rig/token_file").toString());
   token_edit_->setPlaceholderText(tr("token file (the rig's <store>/token)"));
-  recent_ = new QComboBox;
-  recent_->setObjectName("recentRigs");
+  recent_ = named<QComboBox>("recentRigs");
   recent_->addItems(settings_.value("rig/recent").toStringList());
   connect(recent_, &QComboBox::textActivated, rig_edit_, &QLineEdit::setText);
   connect_btn_ = button(tr("Connect"), "connect", this);
@@ -47,8 +44,7 @@ RigPanel::RigPanel(Session& session, QWidget* parent)
   form->addRow(tr("Token"), token_row);
   form->addRow(connect_btn_);
 
-  status_label_ = new QLabel(tr("no rig"));
-  status_label_->setObjectName("rigStatus");
+  status_label_ = named<QLabel>("rigStatus", tr("no rig"));
   RigLink& rig = session_.rig;
   connect(&rig, &RigLink::connectedChanged, this, [this](bool ok, QString msg) {
     session_.message(msg, !ok);

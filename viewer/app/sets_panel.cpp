@@ -20,8 +20,7 @@ namespace veneer::app {
 
 SetsPanel::SetsPanel(Session& session, QWidget* parent) : QGroupBox(tr("Sets"), parent), session_(session) {
   auto* layout = new QVBoxLayout(this);
-  sets_tree_ = new QTreeWidget;
-  sets_tree_->setObjectName("sets");
+  sets_tree_ = named<QTreeWidget>("sets");
   sets_tree_->setHeaderLabels({tr("Set"), tr("Role"), tr("Object"), tr("Captured")});
   sets_tree_->setIconSize(QSize(64, 42));
   rig_root_ = new QTreeWidgetItem(sets_tree_, {tr("On the rig")});
@@ -30,8 +29,7 @@ SetsPanel::SetsPanel(Session& session, QWidget* parent) : QGroupBox(tr("Sets"), 
   maps_root_ = new QTreeWidgetItem(sets_tree_, {tr("Maps on this computer")});
   for (auto* root : {rig_root_, local_root_, trash_root_, maps_root_}) root->setExpanded(true);
   layout->addWidget(sets_tree_, 1);
-  pull_bar_ = new QProgressBar;
-  pull_bar_->setObjectName("pullProgress");
+  pull_bar_ = named<QProgressBar>("pullProgress");
   pull_bar_->setVisible(false);
   layout->addWidget(pull_bar_);
   auto* row = new QHBoxLayout;

@@ -10,15 +10,12 @@
 namespace veneer::app {
 
 StatusLine::StatusLine(QStatusBar* bar, QObject* parent) : QObject(parent) {
-  message_label_ = new QLabel;
-  message_label_->setObjectName("message");
-  step_bar_ = new QProgressBar;
-  step_bar_->setObjectName("stepProgress");
+  message_label_ = named<QLabel>("message");
+  step_bar_ = named<QProgressBar>("stepProgress");
   step_bar_->setMaximumWidth(140);
   step_bar_->setTextVisible(false);
   step_bar_->setVisible(false);
-  step_label_ = new QLabel(tr("connect to a rig, then capture a source and a destination"));
-  step_label_->setObjectName("stepStatus");
+  step_label_ = named<QLabel>("stepStatus", tr("connect to a rig, then capture a source and a destination"));
   // the one line: the step running and its progress first, the last message, the rig
   bar->addWidget(step_label_, 3);
   bar->addWidget(step_bar_);

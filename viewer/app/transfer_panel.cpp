@@ -31,23 +31,20 @@ TransferPanel::TransferPanel(Session& session, QWidget* parent) : QGroupBox(tr("
   auto* outer = new QVBoxLayout(this);
   auto* top = new QFormLayout;
   outer->addLayout(top);
-  preset_ = new QComboBox;
-  preset_->setObjectName("preset");
+  preset_ = named<QComboBox>("preset");
   for (const auto& p : presets()) preset_->addItem(p.name);
   preset_->addItem(tr("custom"));
   preset_->setToolTip(tr("settings for common needs; changing a setting under Advanced makes it \"custom\""));
   top->addRow(tr("Preset"), preset_);
   // Every expert parameter lives in a fold, closed at first.
-  auto* fold = new QToolButton;
-  fold->setObjectName("advancedToggle");
+  auto* fold = named<QToolButton>("advancedToggle");
   fold->setText(tr("Advanced"));
   fold->setCheckable(true);
   fold->setToolButtonStyle(Qt::ToolButtonTextBesideIcon);
   fold->setArrowType(Qt::RightArrow);
   fold->setAutoRaise(true);
   outer->addWidget(fold);
-  auto* advanced = new QWidget;
-  advanced->setObjectName("advanced");
+  auto* advanced = named<QWidget>("advanced");
   advanced->setVisible(false);
   outer->addWidget(advanced);
   connect(fold, &QToolButton::toggled, this, [fold, advanced](bool open) {
@@ -56,24 +53,19 @@ TransferPanel::TransferPanel(Session& session, QWidget* parent) : QGroupBox(tr("
   });
   auto* form = new QFormLayout(advanced);
   form->setContentsMargins(12, 0, 0, 0);
-  method_ = new QComboBox;
-  method_->setObjectName("method");
+  method_ = named<QComboBox>("method");
   for (const char* m : kMethods) method_->addItem(m);
-  feature_ = new QComboBox;
-  feature_->setObjectName("feature");
+  feature_ = named<QComboBox>("feature");
   feature_->addItems({"normals", "intensities"});
-  patch_ = new QComboBox;
-  patch_->setObjectName("patch");
+  patch_ = named<QComboBox>("patch");
   patch_->addItems({"1", "3", "5", "7"});
   const veneer::match::MatchOptions defaults;  // every matching box starts at the library's default
   const veneer::pipeline::TransferOptions transfer_defaults;
-  candidates_ = new QSpinBox;
-  candidates_->setObjectName("candidates");
+  candidates_ = named<QSpinBox>("candidates");
   candidates_->setRange(1, 100);
   candidates_->setValue(defaults.candidates);
   threshold_ = number_box("threshold", 0, 2, 3, 0.01, defaults.threshold);
-  iterations_ = new QSpinBox;
-  iterations_->setObjectName("iterations");
+  iterations_ = named<QSpinBox>("iterations");
   iterations_->setRange(1, 50);
   iterations_->setValue(defaults.iterations);
   coherent_threshold_ = number_box("coherentThreshold", 0, 2, 3, 0.01, defaults.coherent_threshold,
@@ -86,8 +78,7 @@ TransferPanel::TransferPanel(Session& session, QWidget* parent) : QGroupBox(tr("
                                tr("coherent on normals: match the source's normals smoothed over this radius, so "
                                   "its small relief (dimples, grain) is copied whole (0 = off)"));
   coherent_guide_->setSuffix(tr(" px"));
-  blend_ = new QSpinBox;
-  blend_->setObjectName("blend");
+  blend_ = named<QSpinBox>("blend");
   blend_->setRange(0, 16);
   blend_->setSuffix(tr(" px"));
   blend_->setValue(transfer_defaults.blend);
@@ -98,13 +89,9 @@ TransferPanel::TransferPanel(Session& session, QWidget* parent) : QGroupBox(tr("
                                "(fall-off |dn|, 0.1 = about 6°), so outlines such as a leg in front of the body "
                                "stay sharp (0 = plain blend)"));
   uniformity_ = number_box("uniformity", 0, 10, 2, 0.1, defaults.uniformity);
-  fast_ = new QCheckBox(tr("fast engine"));
-  fast_->setObjectName("fast");
-  fast_->setChecked(true);
-  truth_normals_ = new QCheckBox(tr("truth normals (simulated sets)"));
-  truth_normals_->setObjectName("truthNormals");
-  seg_method_ = new QComboBox;
-  seg_method_->setObjectName("segMethod");
+  fast_ = check_box("fast", tr("fast engine"), true);
+  truth_normals_ = check_box("truthNormals", tr("truth normals (simulated sets)"), false);
+  seg_method_ = named<QComboBox>("segMethod");
   seg_method_->addItems({"automatic", "otsu", "threshold"});
   seg_threshold_ = number_box("segThreshold", 0, 0.99, 3, 0.005, veneer::ps::SegmentOptions{}.threshold);
   rect_label_ = new QLabel(tr("no rectangle (shift+drag on the destination)"));
@@ -123,10 +110,8 @@ TransferPanel::TransferPanel(Session& session, QWidget* parent) : QGroupBox(tr("
   form->addRow(tr("Blend guide"), blend_guide_);
   form->addRow(fast_);
   form->addRow(truth_normals_);
-  live_update_ = new QCheckBox(tr("recompute as options change"));
-  live_update_->setObjectName("liveUpdate");
-  live_update_->setChecked(true);
-  live_update_->setToolTip(tr("after a first Compute, changing a matching option recomputes the map alone "
+  live_update_ = check_box("liveUpdate", tr("recompute as options change"), true,
+                           tr("after a first Compute, changing a matching option recomputes the map alone "
                               "(normals and masks are kept)"));
   top->addRow(live_update_);
   form->addRow(tr("Segmentation"), seg_method_);
@@ -169,10 +154,8 @@ TransferPanel::TransferPanel(Session& session, QWidget* parent) : QGroupBox(tr("
   row->addWidget(compute_btn_);
   row->addWidget(cancel_btn_);
   bottom->addRow(row);
-  transfer_bar_ = new QProgressBar;
-  transfer_bar_->setObjectName("transferProgress");
-  transfer_label_ = new QLabel;
-  transfer_label_->setObjectName("transferStatus");
+  transfer_bar_ = named<QProgressBar>("transferProgress");
+  transfer_label_ = named<QLabel>("transferStatus");
   transfer_label_->setWordWrap(true);
   bottom->addRow(transfer_bar_);
   bottom->addRow(transfer_label_);

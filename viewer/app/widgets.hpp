@@ -1,20 +1,28 @@
 #pragma once
 // Small helpers the panels share to build their widgets.
+#include <QCheckBox>
 #include <QDoubleSpinBox>
 #include <QPushButton>
 #include <QString>
 #include <QThreadPool>
 
 #include <functional>
+#include <utility>
 
 #include <opencv2/core.hpp>
 
 namespace veneer::app {
 
+// A new widget of type W named `name` (what the tests find it by); `args` go to its constructor.
+template <class W, class... Args>
+W* named(const QString& name, Args&&... args) {
+  auto* w = new W(std::forward<Args>(args)...);
+  w->setObjectName(name);
+  return w;
+}
+
 inline QPushButton* button(const QString& text, const QString& name, QWidget* parent) {
-  auto* b = new QPushButton(text, parent);
-  b->setObjectName(name);
-  return b;
+  return named<QPushButton>(name, text, parent);
 }
 
 // A number box of the transfer panel: range, decimals, step and start value.
@@ -26,6 +34,14 @@ inline QDoubleSpinBox* number_box(const QString& name, double lo, double hi, int
   b->setDecimals(decimals);
   b->setSingleStep(step);
   b->setValue(value);
+  if (!tip.isEmpty()) b->setToolTip(tip);
+  return b;
+}
+
+// A check box, ticked or not, with an optional tool tip.
+inline QCheckBox* check_box(const QString& name, const QString& text, bool checked, const QString& tip = {}) {
+  auto* b = named<QCheckBox>(name, text);
+  b->setChecked(checked);
   if (!tip.isEmpty()) b->setToolTip(tip);
   return b;
 }
