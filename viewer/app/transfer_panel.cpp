@@ -83,7 +83,8 @@ QWidget* MainWindow::buildTransferPanel() {
   patch_ = new QComboBox;
   patch_->setObjectName("patch");
   patch_->addItems({"1", "3", "5", "7"});
-  const veneer::match::MatchOptions defaults;  // every matching box starts at the library's default
+  // every matching box starts at the default transfer's (the CLI's)
+  const veneer::match::MatchOptions defaults = veneer::pipeline::default_match_options();
   const veneer::pipeline::TransferOptions transfer_defaults;
   candidates_ = new QSpinBox;
   candidates_->setObjectName("candidates");
@@ -201,7 +202,7 @@ QWidget* MainWindow::buildTransferPanel() {
 // The presets: the CLI's defaults first (what the flow computes with).
 const std::vector<MainWindow::Preset>& MainWindow::presets() {
   static const std::vector<Preset> list = [] {
-    const veneer::match::MatchOptions m;
+    const veneer::match::MatchOptions m = veneer::pipeline::default_match_options();
     const veneer::pipeline::TransferOptions t;
     Preset standard{tr("default (combined)"), "combined", "normals", 1, m.candidates, m.threshold, m.iterations,
                     m.coherent_threshold, m.coherent_smooth, m.coherent_guide, m.uniformity, t.blend, t.blend_guide,

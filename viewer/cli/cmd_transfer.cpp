@@ -22,14 +22,15 @@ namespace {
 
 struct TransferArgs {
   std::string dst, src, out, method = "combined", feature = "normals";
+  std::string look = repaint::look_name(pipeline::TransferOptions{}.look);
   std::string dst_mask, src_mask;  // object masks drawn elsewhere (e.g. the viewer's hand segmentation)
   // the matching defaults are the library's (MatchOptions)
   int patch = 1, candidates = match::MatchOptions{}.candidates, iterations = match::MatchOptions{}.iterations,
       threads = 0, blend = pipeline::TransferOptions{}.blend;
   double threshold = match::MatchOptions{}.threshold, scale = 1.0,
-         coherent_threshold = match::MatchOptions{}.coherent_threshold,
          uniformity = match::MatchOptions{}.uniformity, coherent_smooth = match::MatchOptions{}.coherent_smooth,
          coherent_guide = match::MatchOptions{}.coherent_guide, blend_guide = pipeline::TransferOptions{}.blend_guide;
+  std::optional<double> coherent_threshold;  // unset: pipeline::default_match_options(look)'s
   bool no_grow = false;
   unsigned seed = match::MatchOptions{}.seed;
   bool faithful = false, truth_normals = false;
@@ -92,13 +93,17 @@ int run(const TransferArgs& a) {
                 "--patch, or pick a method that takes them (coherent, flann, patchmatch ...)");
   auto feature = match::parse_feature(a.feature);
   if (!feature) return report.usage(feature.message());
+  auto look = repaint::parse_look(a.look);
+  if (!look) return report.usage("--look: " + look.message());
+  options.look = *look;
   options.match.method = *method;
   options.match.feature = *feature;
   options.match.patch = a.patch;
   options.match.candidates = a.candidates;
   options.match.threshold = a.threshold;
   options.match.iterations = a.iterations;
-  options.match.coherent_threshold = a.coherent_threshold;
+  options.match.coherent_threshold =
+      a.coherent_threshold ? *a.coherent_threshold : pipeline::default_match_options(*look).coherent_threshold;
   options.match.uniformity = a.uniformity;
   options.match.coherent_smooth = a.coherent_smooth;
   options.match.coherent_guide = a.coherent_guide;
@@ -254,15 +259,21 @@ VENEER_COMMAND(transfer) {
                   "combined (the default: finds the motion when the destination is the source moved, scaled or "
                   "cropped, else coherent chunks of the nearest normals; uses normals and photos, --feature is "
                   "ignored) | coherent | linear | flann | candidates | patchmatch | regiongrow | baseline");
+  cmd->add_option("--look", args->look,
+                  "how the pictures are painted: shaded (the default: the source's texture carried whole through "
+                  "the map, each lamp shading it as it shades the destination's own shape, the source's gloss "
+                  "placed where the destination's normals put the highlights) | copy (each lamp's source photo "
+                  "pasted through the map and blended, the thesis's repaint; --blend, --blend-guide)");
   cmd->add_option("--feature", args->feature, "normals | intensities (default normals)");
   cmd->add_option("--patch", args->patch, "patch side 1, 3, 5 or 7 (default 1)");
   cmd->add_option("--candidates", args->candidates, "K for candidates, 1..100 (default 10)");
   cmd->add_option("--threshold", args->threshold, "regiongrow threshold >= 0 (default 0.05; 0 = direct matching)");
   cmd->add_option("--iterations", args->iterations, "patchmatch iterations (default 5)");
   cmd->add_option("--coherent-threshold", args->coherent_threshold,
-                  "coherent: normal error |dn| a chunk may make, >= 0 (default 0.10, about 6 degrees; larger = "
-                  "larger chunks, more texture kept whole, less exact shading; with --feature intensities "
-                  "converted by the destination's change of intensities per change of normal)");
+                  "coherent: normal error |dn| a chunk may make, >= 0 (default 0.6 with --look shaded, whose "
+                  "shading does not come from the chunks; 0.10, about 6 degrees, with --look copy; larger = "
+                  "larger chunks, more texture kept whole, with --look copy less exact shading; with --feature "
+                  "intensities converted by the destination's change of intensities per change of normal)");
   cmd->add_option("--coherent-smooth", args->coherent_smooth,
                   "coherent: cost of a seam between two chunks, in coherent thresholds, >= 0 (default 2; 0 = "
                   "chunks only; larger = fewer seams, less exact shading)");
