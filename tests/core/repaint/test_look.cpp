@@ -140,7 +140,7 @@ Pair simulated(const char* destination, const char* source) {
 
 }  // namespace
 
-TEST(Look, NamesRoundTripAndOptionsAreChecked) {
+TEST(ShadedLook, NamesRoundTripAndOptionsAreChecked) {
   for (repaint::Look l : {repaint::Look::shaded, repaint::Look::copy}) {
     auto back = repaint::parse_look(repaint::look_name(l));
     ASSERT_TRUE(back);
@@ -160,7 +160,7 @@ TEST(Look, NamesRoundTripAndOptionsAreChecked) {
   EXPECT_FALSE(t.check());
 }
 
-TEST(Look, RefusesAMapOfAnotherSizeAndCancels) {
+TEST(ShadedLook, RefusesAMapOfAnotherSizeAndCancels) {
   match::ObjectView v;
   v.mask = cv::Mat(20, 30, CV_8UC1, cv::Scalar(255));
   v.normals = cv::Mat(20, 30, CV_32FC3, cv::Scalar(0, 0, 1));
@@ -192,7 +192,7 @@ TEST(Look, RefusesAMapOfAnotherSizeAndCancels) {
 
 // The demo pair, smaller: the default transfer against the truth look, beside
 // the exact nearest normal's pixel copy (`linear`, the floor of pixel copying).
-TEST(Look, DemoPairTextureWholeAndShadingRight) {
+TEST(ShadedLook, DemoPairTextureWholeAndShadingRight) {
   const Pair p = simulated("bull", "orange");
   ASSERT_FALSE(p.truth.images.empty());
   pipeline::TransferOptions shaded;  // the default: shaded, the default map
@@ -233,7 +233,7 @@ TEST(Look, DemoPairTextureWholeAndShadingRight) {
 // channel holds almost only the highlight, and follows the truth's; the
 // source's photos copied through the same map of large chunks put the
 // sphere's highlights where the sphere had them.
-TEST(Look, GlossySourceHighlightsFollowTheDestinationsNormals) {
+TEST(ShadedLook, GlossySourceHighlightsFollowTheDestinationsNormals) {
   const Pair p = simulated("bull", "sphere-red-gloss");
   ASSERT_FALSE(p.truth.images.empty());
   pipeline::TransferOptions shaded;
@@ -277,7 +277,7 @@ TEST(Look, GlossySourceHighlightsFollowTheDestinationsNormals) {
   EXPECT_GT(shaded_corr, copy_corr + 0.1);
 }
 
-TEST(Look, GlossFitFindsTheSpheresLobe) {
+TEST(ShadedLook, GlossFitFindsTheSpheresLobe) {
   auto s = sim::simulate_set("sphere-red-gloss", small(), io::Role::source);
   ASSERT_TRUE(s);
   std::vector<cv::Vec3d> lamps;
