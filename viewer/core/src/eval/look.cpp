@@ -106,6 +106,7 @@ cv::Mat object_mask(const cv::Mat& mask, cv::Size size, Status& status) {
 }  // namespace
 
 cv::Mat look_gray(const cv::Mat& image) {
+  if (image.type() == CV_32FC1) return image;  // already one: shared, not copied
   cv::Mat f;
   image.convertTo(f, CV_32F);
   if (f.channels() == 1) return f;

@@ -42,7 +42,8 @@ struct Look {
   std::optional<double> texture_corr;  // with a source (see look_folders)
 };
 
-// A photo as look.py sees it: CV_32FC1, the mean of its channels.
+// A photo as look.py sees it: CV_32FC1, the mean of its channels (a CV_32FC1
+// image is returned as it is, sharing its pixels).
 cv::Mat look_gray(const cv::Mat& image);
 // The per-pixel median of equally sized CV_32FC1 images (numpy's median).
 cv::Mat median_image(const std::vector<cv::Mat>& gray);
