@@ -33,7 +33,7 @@ struct TransferArgs {
   std::optional<double> coherent_threshold;  // unset: pipeline::default_match_options(look)'s
   bool no_grow = false;
   unsigned seed = match::MatchOptions{}.seed;
-  bool faithful = false, truth_normals = false;
+  bool faithful = false, truth_normals = false, look_floor = false;
   // reading the sets (pipeline::PrepareOptions)
   // RAW interpolation: our own (Demosaic::mhc), ~20x faster than LibRaw's DCB,
   // the library's default, at normals as good on the simulator's 5600x3750
@@ -115,6 +115,7 @@ int run(const TransferArgs& a) {
   options.blend = a.blend;
   options.blend_guide = a.blend_guide;
   options.scale = a.scale;
+  options.look_floor = a.look_floor;
   options.keep_pictures = false;  // painted and written one at a time (write_transfer with the pair)
   if (auto s = options.check(); !s) return report.usage(s.message());
   repaint::RtiExportOptions rti_options;
@@ -297,6 +298,11 @@ VENEER_COMMAND(transfer) {
   cmd->add_option("--scale", args->scale, "resize both sets first, (0, 1] (default 1)");
   cmd->add_flag("--faithful", args->faithful, "use the thesis's code paths, never the fast engine");
   cmd->add_flag("--truth-normals", args->truth_normals, "match on truth/ normals and masks (simulated sets)");
+  cmd->add_flag("--look-floor", args->look_floor,
+                "metrics.json's look (per-lamp shading error and texture_corr, always measured against the "
+                "destination's own photos, and on simulated pairs against the truth look rendered once): also the "
+                "floor, the `linear` map's pixel copy scored the same way, and shading / floor (a second match "
+                "and repaint)");
   cmd->add_option("--photos", args->photos,
                   "auto | raw | developed: the sets' RAW files (linear, LibRaw) or their PNG/JPEG photos (default "
                   "auto = RAW where every photo has one)");

@@ -24,6 +24,7 @@
 #include "veneer/ps/segmentation.hpp"
 #include "veneer/repaint/repaint.hpp"
 #include "veneer/util/log.hpp"
+#include "transfer_look.hpp"
 
 namespace veneer::pipeline {
 
@@ -304,6 +305,14 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
     j["quality"] = quality_json(q);
     j["quality"]["measured_against"] = "segmentation masks and photometric-stereo normals (no truth)";
     timings["quality_s"] = since(t0);
+  }
+  {
+    // The look (eval/look.hpp): shading per lamp and texture, beside coverage and coherence.
+    const nlohmann::json& qj = j["quality"];
+    auto look = detail::look_block(pair, options, result, paint, qj.value("coverage", 0.0), qj.value("coherence", 0.0),
+                                   sub_progress(progress, 0.92, 1.0));
+    if (look) j["look"] = std::move(*look);
+    else j["look_error"] = look.message();
   }
   if (result.map.motion.searched) {
     // Whether the destination was found to be the source moved (combined):

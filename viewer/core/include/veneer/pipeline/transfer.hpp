@@ -48,6 +48,12 @@ struct TransferOptions {
   bool keep_pictures = true;   // transfer(): every photo repainted into result.repainted (~250 MB
                                // each at full resolution); false leaves them out, for
                                // write_transfer(result, pair, ...) to paint and write one at a time
+  // metrics.json's "look" (eval/look.hpp) is always measured against the
+  // destination's own photos (its cost: the pictures in grey, and painted once
+  // more when not kept); on a simulated pair also against the truth look (the
+  // destination's scene rendered in the source's material: one set rendered).
+  bool look_floor = false;     // also the floor: the `linear` map's pixel copy scored the same way, and
+                               // the ratio shading / floor (a second match and repaint)
   Status check() const;
 };
 

@@ -1,0 +1,230 @@
+// metrics.json's "look" block (transfer_look.hpp).
+#include "transfer_look.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <optional>
+
+#include "veneer/eval/look.hpp"
+#include "veneer/eval/metrics.hpp"
+#include "veneer/match/fast.hpp"
+#include "veneer/sim/simulator.hpp"
+
+namespace veneer::pipeline::detail {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+nlohmann::json shading_json(const eval::ShadingError& s) {
+  return {{"shading_mean", s.mean}, {"shading_median", s.median}, {"shading_p90", s.p90}, {"samples", s.samples}};
+}
+
+// The transfer's pictures in grey: taken from the result, or painted again
+// one at a time (each released once in grey) when it did not keep them.
+Expected<std::vector<cv::Mat>> grey_pictures(const std::vector<cv::Mat>& kept, const PreparedPair& pair,
+                                             const Paint& paint) {
+  std::vector<cv::Mat> out;
+  if (!kept.empty()) {
+    for (const cv::Mat& p : kept) out.push_back(eval::look_gray(p));
+    return out;
+  }
+  const auto& src = pair.src.view.images;
+  const auto& dst = pair.dst.view.images;
+  for (size_t i = 0; i < src.size() && i < dst.size(); ++i) {
+    auto painted = paint(src[i], dst[i]);
+    if (!painted) return painted.error();
+    out.push_back(eval::look_gray(*painted));
+  }
+  return out;
+}
+
+std::vector<cv::Mat> greys(const std::vector<cv::Mat>& photos) {
+  std::vector<cv::Mat> out;
+  for (const cv::Mat& p : photos) out.push_back(eval::look_gray(p));
+  return out;
+}
+
+// The truth look: the destination's scene in the source's material under the
+// same lamps and pose, as `veneer simulate --scene A --material B` makes it
+// (its default noise, 0.005 of full scale, seed 1: where the destination was
+// made the same way its background is the same to the bit). When the
+// destination's background is not that (another noise, or none), it is
+// rendered again without noise. Refused when it does not line up with the
+// destination (lamps or object mask differ: a pose the set does not record).
+struct TruthLook {
+  std::vector<cv::Mat> photos;  // grey
+  double noise = 0;             // the noise it was rendered with
+};
+Expected<TruthLook> truth_look(const io::ImageSet& destination, const io::ImageSet& source, const Progress& progress) {
+  sim::RenderOptions o;
+  o.size = destination.size;
+  o.focal_px = destination.camera.focal_px;
+  o.noise_sigma = 0.005;
+  auto set = sim::simulate_set_with_material(destination.scene, source.scene, o, io::Role::destination,
+                                             progress.part(0, 0.5));
+  if (!set) return set.error();
+  if (set->images.size() != destination.images.size() || destination.images.empty())
+    return make_error("the truth look has " + std::to_string(set->images.size()) + " lamps, the destination " +
+                      std::to_string(destination.images.size()));
+  for (size_t i = 0; i < set->lights.size() && i < destination.lights.size(); ++i) {
+    const auto &a = set->lights[i].position_m, &b = destination.lights[i].position_m;
+    if (a && b && cv::norm(*a - *b) > 1e-3)
+      return make_error("the truth look's lamp " + std::to_string(i) + " is not the destination's");
+  }
+  if (!destination.truth.mask.empty() && destination.truth.mask.size() == set->truth.mask.size()) {
+    cv::Mat both, either;
+    cv::bitwise_and(destination.truth.mask, set->truth.mask, both);
+    cv::bitwise_or(destination.truth.mask, set->truth.mask, either);
+    const double overlap = cv::countNonZero(both) / std::max(1.0, double(cv::countNonZero(either)));
+    if (overlap < 0.98)
+      return make_error("the truth look does not line up with the destination (object masks overlap " +
+                        std::to_string(overlap) + "): posed otherwise than `veneer simulate` poses it?");
+  }
+  TruthLook out;
+  out.noise = o.noise_sigma;
+  // The background under the first lamp: the same noise makes most of its
+  // lit pixels the same to the bit (not all: the object's shadow and
+  // reflections on its base change with its material).
+  const cv::Mat a = eval::look_gray(destination.images[0]), b = eval::look_gray(set->images[0]);
+  long lit = 0, same = 0;
+  for (int y = 0; y < a.rows; ++y)
+    for (int x = 0; x < a.cols; ++x) {
+      if (!set->truth.mask.empty() && set->truth.mask.at<uchar>(y, x)) continue;
+      const float u = a.at<float>(y, x), v = b.at<float>(y, x);
+      if (u <= 0 && v <= 0) continue;
+      ++lit;
+      same += u == v;
+    }
+  if (lit == 0 || same < 0.9 * static_cast<double>(lit)) {
+    o.noise_sigma = 0;
+    set = sim::simulate_set_with_material(destination.scene, source.scene, o, io::Role::destination,
+                                          progress.part(0.5, 1));
+    if (!set) return set.error();
+    out.noise = 0;
+  }
+  out.photos = greys(set->images);
+  return out;
+}
+
+// The figures of one set of pictures against the references.
+struct Scored {
+  nlohmann::json json;
+  double shading = 0;  // against the first reference
+};
+Expected<Scored> score(const std::vector<cv::Mat>& pictures, const cv::Mat& median_picture,
+                       const std::vector<const std::vector<cv::Mat>*>& references, const cv::Mat& mask,
+                       const cv::Mat& source_median, const cv::Mat& map_xy) {
+  Scored out;
+  for (size_t k = 0; k < references.size(); ++k) {
+    auto s = eval::shading_error(pictures, *references[k], mask);
+    if (!s) return s.error();
+    if (k == 0) {
+      out.json = shading_json(*s);
+      out.shading = s->mean;
+    } else {
+      out.json["own_photos"] = shading_json(*s);
+    }
+  }
+  auto corr = eval::texture_corr(median_picture, source_median, map_xy, mask);
+  if (corr) out.json["texture_corr"] = *corr;
+  else out.json["texture_corr_error"] = corr.message();
+  return out;
+}
+
+}  // namespace
+
+Expected<nlohmann::json> look_block(const PreparedPair& pair, const TransferOptions& options,
+                                    const TransferResult& result, const Paint& paint, double coverage,
+                                    double coherence, const Progress& progress) {
+  const auto t0 = Clock::now();
+  nlohmann::json j;
+  // look.py's mask: the destination's mask.png when it has one, else every pixel
+  const cv::Mat& mask = pair.destination.mask;
+  const bool masked = !mask.empty() && mask.size() == pair.dst.view.mask.size();
+  // the set's photos as look.py reads them (an ambient frame not taken off)
+  const std::vector<cv::Mat> own = greys(pair.destination.images);
+  std::vector<cv::Mat> truth;
+  std::vector<const std::vector<cv::Mat>*> references{&own};
+  std::string reference = "the destination's own photos";
+  if (!pair.destination.scene.empty() && !pair.source.scene.empty()) {
+    auto rendered = truth_look(pair.destination, pair.source, progress.part(0.0, 0.4));
+    if (rendered) {
+      truth = std::move(rendered->photos);
+      references.insert(references.begin(), &truth);
+      reference = "the truth look: " + pair.destination.scene + " in " + pair.source.scene +
+                  "'s material (veneer simulate --scene " + pair.destination.scene + " --material " +
+                  pair.source.scene + ", same size and lamps, noise " + std::to_string(rendered->noise) +
+                  "); own_photos: against the destination's own photos";
+      j["truth_noise"] = rendered->noise;
+    } else {
+      j["truth_error"] = rendered.message();
+    }
+  }
+  j["reference"] = reference;
+  j["mask"] = masked ? "the destination's mask" : "every pixel (the destination has no mask)";
+  const cv::Mat source_median = eval::median_image(greys(pair.src.view.images));
+  auto pictures = grey_pictures(result.repainted, pair, paint);
+  if (!pictures) return pictures.error();
+  auto scored = score(*pictures, result.repainted_median, references, masked ? mask : cv::Mat(), source_median,
+                      result.map.xy);
+  if (!scored) return scored.error();
+  j.update(scored->json);
+  // Without a mask the background, the destination's own photo in the result,
+  // dilutes the figures (the bull is 3 % of its frame): the same over the
+  // object the transfer repainted.
+  const bool truth_masks = pair.destination.truth.present() && pair.source.truth.present();
+  const cv::Mat& object = truth_masks ? pair.destination.truth.mask : pair.dst.view.mask;
+  std::optional<Scored> on_object;
+  if (!masked) {
+    auto o = score(*pictures, result.repainted_median, references, object, source_median, result.map.xy);
+    if (!o) return o.error();
+    on_object = std::move(*o);
+    j["object"] = on_object->json;
+    j["object"]["mask"] = truth_masks ? "the destination's truth mask" : "the destination's object (segmented)";
+  }
+  j["coverage"] = coverage;
+  j["coherence"] = coherence;
+  j["look_s"] = since(t0);
+
+  if (options.look_floor) {
+    // The floor of pixel copying: the exact nearest-normal map, painted the
+    // way the transfer paints a copy (its blend), scored the same way.
+    const auto t1 = Clock::now();
+    match::MatchOptions linear = options.match;
+    linear.method = match::Method::linear;
+    auto map = match::compute_map(pair.dst.view, pair.src.view, linear, progress.part(0.4, 0.9));
+    if (!map) return make_error("floor: " + map.message());
+    auto plan = blend_plan_for(pair, options, *map);
+    if (!plan) return make_error("floor: " + plan.message());
+    const std::shared_ptr<const fast::BlendPlan> floor_plan = *plan;
+    const Paint copy = [&](const cv::Mat& photo, const cv::Mat& backdrop) -> Expected<cv::Mat> {
+      if (!floor_plan) return repaint::repaint(*map, photo, backdrop);
+      return repaint::repaint_planned(*floor_plan, photo, backdrop);
+    };
+    auto floor_pictures = grey_pictures({}, pair, copy);
+    if (!floor_pictures) return make_error("floor: " + floor_pictures.message());
+    auto floor_median = copy(pair.source_median, pair.destination_median);
+    if (!floor_median) return make_error("floor: " + floor_median.message());
+    auto floor = score(*floor_pictures, *floor_median, references, masked ? mask : cv::Mat(), source_median, map->xy);
+    if (!floor) return make_error("floor: " + floor.message());
+    const eval::Quality q = eval::evaluate(*map, truth_masks ? pair.destination.truth.mask : pair.dst.view.mask,
+                                           truth_masks ? pair.source.truth.mask : pair.src.view.mask);
+    nlohmann::json f = {{"method", "linear"}, {"what", "the exact nearest-normal map's pixel copy"}};
+    f.update(floor->json);
+    f["coverage"] = q.coverage;
+    f["coherence"] = q.coherence;
+    f["floor_s"] = since(t1);
+    j["floor"] = f;
+    if (on_object) {
+      auto o = score(*floor_pictures, *floor_median, references, object, source_median, map->xy);
+      if (!o) return make_error("floor: " + o.message());
+      j["floor"]["object"] = o->json;
+      if (o->shading > 0) j["object"]["shading_vs_floor"] = on_object->shading / o->shading;
+    }
+    if (floor->shading > 0) j["shading_vs_floor"] = scored->shading / floor->shading;
+  }
+  return j;
+}
+
+}  // namespace veneer::pipeline::detail
