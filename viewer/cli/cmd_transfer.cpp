@@ -30,6 +30,8 @@ struct TransferArgs {
   double threshold = match::MatchOptions{}.threshold, scale = 1.0,
          uniformity = match::MatchOptions{}.uniformity, coherent_smooth = match::MatchOptions{}.coherent_smooth,
          coherent_guide = match::MatchOptions{}.coherent_guide, blend_guide = pipeline::TransferOptions{}.blend_guide;
+  double look_smoothing = repaint::LookOptions{}.normal_smoothing, look_headroom = repaint::LookOptions{}.ratio_headroom,
+         look_feather = repaint::LookOptions{}.seam_feather;
   std::optional<double> coherent_threshold;  // unset: pipeline::default_match_options(look)'s
   bool no_grow = false;
   unsigned seed = match::MatchOptions{}.seed;
@@ -96,6 +98,9 @@ int run(const TransferArgs& a) {
   auto look = repaint::parse_look(a.look);
   if (!look) return report.usage("--look: " + look.message());
   options.look = *look;
+  options.look_options.normal_smoothing = a.look_smoothing;
+  options.look_options.ratio_headroom = a.look_headroom;
+  options.look_options.seam_feather = a.look_feather;
   options.match.method = *method;
   options.match.feature = *feature;
   options.match.patch = a.patch;
@@ -265,6 +270,16 @@ VENEER_COMMAND(transfer) {
                   "the map, each lamp shading it as it shades the destination's own shape, the source's gloss "
                   "placed where the destination's normals put the highlights) | copy (each lamp's source photo "
                   "pasted through the map and blended, the thesis's repaint; --blend, --blend-guide)");
+  cmd->add_option("--look-smoothing", args->look_smoothing,
+                  "--look shaded: the normals smoothed over this Gaussian sigma, px, for the coarse shading moved "
+                  "from the source's normals to the destination's, 0..64 (default 4; the source's relief finer "
+                  "than it stays its texture, coarser is re-shaded)");
+  cmd->add_option("--look-headroom", args->look_headroom,
+                  "--look shaded: a lamp's shading ratio at most this x the Lambert model's, 1..100 (default 2; "
+                  "smaller keeps pixels whose median lamp is in a cast shadow from blowing up, at some shading error)");
+  cmd->add_option("--look-feather", args->look_feather,
+                  "--look shaded: spread the texture's steps at chunk seams over about this many px (screened "
+                  "Poisson), 0..64 (default 0 = off: the fine detail then follows the source through the map less)");
   cmd->add_option("--feature", args->feature, "normals | intensities (default normals)");
   cmd->add_option("--patch", args->patch, "patch side 1, 3, 5 or 7 (default 1)");
   cmd->add_option("--candidates", args->candidates, "K for candidates, 1..100 (default 10)");

@@ -3,11 +3,13 @@
 #include <algorithm>
 #include <cmath>
 #include <numeric>
+#include <atomic>
 #include <vector>
 
 #include <gtest/gtest.h>
 #include <opencv2/imgproc.hpp>
 
+#include "veneer/eval/look.hpp"
 #include "veneer/pipeline/transfer.hpp"
 #include "veneer/repaint/gloss.hpp"
 #include "veneer/repaint/look.hpp"
@@ -15,107 +17,24 @@
 
 using namespace veneer;
 
-namespace lookscore {
-
-cv::Mat grey(const cv::Mat& bgr) {
-  cv::Mat g;
-  cv::transform(bgr, g, cv::Matx13f(1.f / 3, 1.f / 3, 1.f / 3));
-  return g;
-}
-
-cv::Mat median_of(const std::vector<cv::Mat>& planes) {
-  cv::Mat out(planes[0].size(), CV_32FC1);
-  std::vector<float> v(planes.size());
-  for (int y = 0; y < out.rows; ++y)
-    for (int x = 0; x < out.cols; ++x) {
-      for (size_t i = 0; i < planes.size(); ++i) v[i] = planes[i].at<float>(y, x);
-      std::sort(v.begin(), v.end());
-      const size_t n = v.size();
-      out.at<float>(y, x) = n % 2 ? v[n / 2] : 0.5f * (v[n / 2 - 1] + v[n / 2]);
-    }
-  return out;
-}
-
-// The shading error of ../shared/tools/look.py: per lamp, log(result / its
-// median) against log(reference / its median), mean |difference| over the
-// mask where both are lit (above 5 % of the pixel's brightest).
-double shading_error(const std::vector<cv::Mat>& result, const std::vector<cv::Mat>& reference, const cv::Mat& mask) {
-  std::vector<cv::Mat> r, d;
-  for (const cv::Mat& m : result) r.push_back(grey(m));
-  for (const cv::Mat& m : reference) d.push_back(grey(m));
-  const cv::Mat rm = median_of(r), dm = median_of(d);
-  cv::Mat rx = r[0].clone(), dx = d[0].clone();
-  for (size_t i = 1; i < r.size(); ++i) rx = cv::max(rx, r[i]), dx = cv::max(dx, d[i]);
-  const double eps = 1e-6;
-  double sum = 0;
-  long n = 0;
-  for (size_t l = 0; l < r.size(); ++l)
-    for (int y = 0; y < mask.rows; ++y)
-      for (int x = 0; x < mask.cols; ++x) {
-        const float R = r[l].at<float>(y, x), D = d[l].at<float>(y, x), Rm = rm.at<float>(y, x),
-                    Dm = dm.at<float>(y, x);
-        if (!mask.at<uchar>(y, x) || !(D > 0.05f * dx.at<float>(y, x)) || !(R > 0.05f * rx.at<float>(y, x)) ||
-            !(Dm > eps) || !(Rm > eps))
-          continue;
-        sum += std::abs(std::log((R + eps) / (Rm + eps)) - std::log((D + eps) / (Dm + eps)));
-        ++n;
-      }
-  return n ? sum / n : 1e9;
-}
-
-// look.py's texture correlation: the high-pass of log(result median)
-// against that of the source's median photo warped through the map
-// (nearest pixel), over the mapped mask eroded by 3 px.
-double texture_correlation(const cv::Mat& result_median, const cv::Mat& source_median, const match::Map& map,
-                           const cv::Mat& mask) {
-  const cv::Mat med = grey(result_median), src = grey(source_median);
-  cv::Mat ok(mask.size(), CV_8UC1, cv::Scalar(0)), warped(mask.size(), CV_32FC1, cv::Scalar(0));
-  for (int y = 0; y < mask.rows; ++y)
-    for (int x = 0; x < mask.cols; ++x) {
-      const cv::Vec2f m = map.xy.at<cv::Vec2f>(y, x);
-      if (!mask.at<uchar>(y, x) || m[0] < 0) continue;
-      ok.at<uchar>(y, x) = 1;
-      const int sx = std::clamp(static_cast<int>(std::lround(m[0])), 0, src.cols - 1);
-      const int sy = std::clamp(static_cast<int>(std::lround(m[1])), 0, src.rows - 1);
-      warped.at<float>(y, x) = src.at<float>(sy, sx);
-    }
-  cv::Mat okf;
-  ok.convertTo(okf, CV_32F);
-  cv::Mat w;
-  cv::GaussianBlur(okf, w, cv::Size(), 3);
-  auto high_pass = [&](const cv::Mat& im) {
-    double top = 0;
-    cv::minMaxLoc(im, nullptr, &top);
-    cv::Mat lg(im.size(), CV_32FC1, cv::Scalar(0));
-    for (int y = 0; y < im.rows; ++y)
-      for (int x = 0; x < im.cols; ++x)
-        if (ok.at<uchar>(y, x)) lg.at<float>(y, x) = std::log(im.at<float>(y, x) + 1e-3f * static_cast<float>(std::max(top, 1e-6)));
-    cv::Mat b;
-    cv::GaussianBlur(lg, b, cv::Size(), 3);
-    return cv::Mat(lg - b / cv::max(w, 1e-6));
-  };
-  const cv::Mat a = high_pass(med), b = high_pass(warped);
-  cv::Mat inner;
-  cv::erode(ok, inner, cv::Mat::ones(7, 7, CV_8U));
-  std::vector<double> va, vb;
-  for (int y = 0; y < mask.rows; ++y)
-    for (int x = 0; x < mask.cols; ++x)
-      if (inner.at<uchar>(y, x)) va.push_back(a.at<float>(y, x)), vb.push_back(b.at<float>(y, x));
-  if (va.empty()) return 0;
-  const double ma = std::accumulate(va.begin(), va.end(), 0.0) / va.size();
-  const double mb = std::accumulate(vb.begin(), vb.end(), 0.0) / vb.size();
-  double ab = 0, aa = 0, bb = 0;
-  for (size_t i = 0; i < va.size(); ++i) {
-    ab += (va[i] - ma) * (vb[i] - mb);
-    aa += (va[i] - ma) * (va[i] - ma);
-    bb += (vb[i] - mb) * (vb[i] - mb);
-  }
-  return ab / std::max(std::sqrt(aa * bb), 1e-12);
-}
-
-}  // namespace lookscore
-using namespace lookscore;
 namespace {
+
+// eval/look.hpp's figures (look.py's), over `mask`
+double shading_error(const std::vector<cv::Mat>& result, const std::vector<cv::Mat>& reference, const cv::Mat& mask) {
+  auto e = eval::shading_error(result, reference, mask);
+  EXPECT_TRUE(e) << e.message();
+  return e ? e->mean : 1e9;
+}
+
+double texture_correlation(const cv::Mat& result_median, const std::vector<cv::Mat>& source_photos,
+                           const match::Map& map, const cv::Mat& mask) {
+  std::vector<cv::Mat> grey;
+  for (const cv::Mat& p : source_photos) grey.push_back(eval::look_gray(p));
+  auto t = eval::texture_corr(result_median, eval::median_image(grey), map.xy, mask);
+  EXPECT_TRUE(t) << t.message();
+  return t ? *t : 0;
+}
+
 
 sim::RenderOptions small() {
   sim::RenderOptions o;
@@ -212,7 +131,7 @@ TEST(ShadedLook, DemoPairTextureWholeAndShadingRight) {
   const cv::Mat& mask = p.truth.truth.mask;
   const double e_shaded = shading_error(result->repainted, p.truth.images, mask);
   const double e_floor = shading_error(copied->repainted, p.truth.images, mask);
-  const double texture = texture_correlation(result->repainted_median, result->source_median, result->map, mask);
+  const double texture = texture_correlation(result->repainted_median, pair->src.view.images, result->map, mask);
   ASSERT_TRUE(result->quality);
   const eval::Quality q = *result->quality;
   // coverage of the object the transfer found (segmentation), as the map sees it

@@ -241,7 +241,7 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
     auto look = shaded_look(pair, options, result.map, sub_progress(progress, 0.85, 0.9));
     if (!look) return make_error("repaint: " + look.message());
     result.look = std::move(*look);
-    timings["look_s"] = since(t0);
+    timings["shaded_look_s"] = since(t0);
   }
   const size_t lamps = std::min(src->view.images.size(), dst->view.images.size());
   for (size_t i = 0; options.keep_pictures && i < (result.look ? dst->view.images.size() : lamps); ++i) {
@@ -263,14 +263,14 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
                  {"object_pixels", cv::countNonZero(src->view.mask)}};
   j["options"] = options_json(options, guided ? options.blend_guide : 0.0);
   if (result.look) {
-    j["look"] = {{"look", "shaded"},
+    j["repaint"] = {{"look", "shaded"},
                  {"means", "the source's texture through the map under the destination's shading per lamp, the "
                            "source's gloss lobe at the destination's normals (repaint/look.hpp)"},
                  {"source_gloss_exponent", result.look->source_exponent()},
                  {"destination_gloss_exponent", result.look->destination_exponent()},
                  {"seams_feathered", result.look->seams()}};
   } else {
-    j["look"] = {{"look", "copy"}, {"means", "each lamp's source photo pasted through the map"}};
+    j["repaint"] = {{"look", "copy"}, {"means", "each lamp's source photo pasted through the map"}};
   }
   j["pictures"] = {{"result_light_NN.png, result_median.png",
                     "linear 16-bit RGB at the sets' photometric scale, as the sets' light_NN.png (no exposure or "

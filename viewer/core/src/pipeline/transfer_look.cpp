@@ -21,9 +21,10 @@ nlohmann::json shading_json(const eval::ShadingError& s) {
 }
 
 // The transfer's pictures in grey: taken from the result, or painted again
-// one at a time (each released once in grey) when it did not keep them.
+// one at a time (each released once in grey) when it did not keep them --
+// by the shaded look when there is one, else by `paint`.
 Expected<std::vector<cv::Mat>> grey_pictures(const std::vector<cv::Mat>& kept, const PreparedPair& pair,
-                                             const Paint& paint) {
+                                             const Paint& paint, const repaint::ShadedLook* look = nullptr) {
   std::vector<cv::Mat> out;
   if (!kept.empty()) {
     for (const cv::Mat& p : kept) out.push_back(eval::look_gray(p));
@@ -31,8 +32,8 @@ Expected<std::vector<cv::Mat>> grey_pictures(const std::vector<cv::Mat>& kept, c
   }
   const auto& src = pair.src.view.images;
   const auto& dst = pair.dst.view.images;
-  for (size_t i = 0; i < src.size() && i < dst.size(); ++i) {
-    auto painted = paint(src[i], dst[i]);
+  for (size_t i = 0; i < dst.size() && (look || i < src.size()); ++i) {
+    auto painted = look ? look->paint(i, dst[i]) : paint(src[i], dst[i]);
     if (!painted) return painted.error();
     out.push_back(eval::look_gray(*painted));
   }
@@ -164,7 +165,7 @@ Expected<nlohmann::json> look_block(const PreparedPair& pair, const TransferOpti
   j["reference"] = reference;
   j["mask"] = masked ? "the destination's mask" : "every pixel (the destination has no mask)";
   const cv::Mat source_median = eval::median_image(greys(pair.src.view.images));
-  auto pictures = grey_pictures(result.repainted, pair, paint);
+  auto pictures = grey_pictures(result.repainted, pair, paint, result.look.get());
   if (!pictures) return pictures.error();
   auto scored = score(*pictures, result.repainted_median, references, masked ? mask : cv::Mat(), source_median,
                       result.map.xy);

@@ -30,7 +30,7 @@ cv::Vec3f half_vector(const cv::Vec3d& lamp_direction) {
 float Gloss::lobe(const cv::Vec3f& n, const cv::Vec3f& l, const cv::Vec3f& half, double exponent) {
   if (n.dot(l) <= 0) return 0.f;
   const float c = n.dot(half);
-  return c > 0 ? static_cast<float>(std::pow(static_cast<double>(c), exponent)) : 0.f;
+  return c > 0 ? std::pow(c, static_cast<float>(exponent)) : 0.f;
 }
 
 cv::Mat masked_blur(const cv::Mat& image, const cv::Mat& mask, double sigma) {

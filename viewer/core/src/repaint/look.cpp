@@ -87,18 +87,20 @@ cv::Mat median_shading(const cv::Mat& normals, const std::vector<cv::Vec3d>& lam
   return out;
 }
 
-// Per pixel and channel (CV_32FC3), or of the grey (CV_32FC1): the median
-// over the photos less k (n.h)^alpha, at least `floor`.
+// Per pixel of `used` and channel (CV_32FC3), or of the grey (CV_32FC1): the
+// median over the photos less k (n.h)^alpha, at least `floor`; 0 elsewhere.
 cv::Mat diffuse_median(const std::vector<cv::Mat>& photos, const cv::Mat& normals, const cv::Mat& weight,
-                       const std::vector<cv::Vec3d>& lamps, double exponent, float floor, bool grey) {
+                       const std::vector<cv::Vec3d>& lamps, double exponent, float floor, bool grey,
+                       const cv::Mat& used) {
   const int n = static_cast<int>(photos.size());
   std::vector<cv::Vec3f> l, h;
   for (const cv::Vec3d& d : lamps) l.emplace_back(d / std::max(1e-9, cv::norm(d))), h.push_back(half_vector(d));
-  cv::Mat out(photos[0].size(), grey ? CV_32FC1 : CV_32FC3);
+  cv::Mat out(photos[0].size(), grey ? CV_32FC1 : CV_32FC3, cv::Scalar::all(0));
   cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& r) {
     std::vector<float> v(3 * n);
     for (int y = r.start; y < r.end; ++y)
       for (int x = 0; x < out.cols; ++x) {
+        if (!used.at<uchar>(y, x)) continue;
         const float k = weight.empty() ? 0.f : weight.at<float>(y, x);
         const cv::Vec3f nn = normals.at<cv::Vec3f>(y, x);
         for (int i = 0; i < n; ++i) {
@@ -159,13 +161,24 @@ Expected<ShadedLook> ShadedLook::make(const LookSide& dst, const LookSide& src, 
   }
   if (progress.cancelled()) return make_error("look cancelled");
   progress.report(0.6, "shading");
+  // the pixels each side needs: the mapped ones and the sources they map to
+  cv::Mat mapped(dsize, CV_8UC1, cv::Scalar(0)), sourced(ssize, CV_8UC1, cv::Scalar(0));
+  for (int y = 0; y < dsize.height; ++y)
+    for (int x = 0; x < dsize.width; ++x) {
+      const cv::Vec2f m = map.xy.at<cv::Vec2f>(y, x);
+      if (m[0] < 0) continue;
+      mapped.at<uchar>(y, x) = 255;
+      sourced.at<uchar>(std::clamp(static_cast<int>(std::lround(m[1])), 0, ssize.height - 1),
+                        std::clamp(static_cast<int>(std::lround(m[0])), 0, ssize.width - 1)) = 255;
+    }
   look.shading_median_ = diffuse_median(dst.view.images, dst.view.normals, look.destination_weight_, dst.lamps,
-                                        look.destination_exponent_, 0.f, true) +
+                                        look.destination_exponent_, 0.f, true, mapped) +
                          kRatioFloor;
   look.model_median_ = median_shading(dst.view.normals, dst.lamps);
   look.headroom_ = static_cast<float>(options.ratio_headroom);
   const cv::Mat source_diffuse =
-      diffuse_median(src.view.images, src.view.normals, source_weight, src.lamps, look.source_exponent_, 0.f, false);
+      diffuse_median(src.view.images, src.view.normals, source_weight, src.lamps, look.source_exponent_, 0.f, false,
+                     options.seam_feather > 0 ? src.view.mask : sourced);  // the seams read the matches' neighbours
   const float e = static_cast<float>(options.shading_floor), top = static_cast<float>(options.max_correction);
   const cv::Mat shade_d = median_shading(coarse_normals(dst.view.normals, dst.view.mask, options.normal_smoothing),
                                          dst.lamps);
@@ -178,7 +191,7 @@ Expected<ShadedLook> ShadedLook::make(const LookSide& dst, const LookSide& src, 
   if (!source_weight.empty()) look.source_weight_ = cv::Mat(dsize, CV_32FC1, cv::Scalar(0));
   // log's floor: a hundredth of the source's mean (linear units), so a dark
   // pixel's noise does not make a step of the seams' targets
-  const cv::Scalar mean_diffuse = cv::mean(source_diffuse, src.view.mask);
+  const cv::Scalar mean_diffuse = cv::mean(source_diffuse, sourced);
   const float tiny =
       std::max(1e-6f, 0.01f * static_cast<float>(mean_diffuse[0] + mean_diffuse[1] + mean_diffuse[2]) / 3.f);
   cv::parallel_for_(cv::Range(0, ssize.height), [&](const cv::Range& r) {

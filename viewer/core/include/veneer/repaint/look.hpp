@@ -54,12 +54,12 @@ struct LookOptions {
                                  // [0, 64]; default 4 (finer relief stays the source's texture)
   double shading_floor = 0.05;   // e added to both coarse shadings before their ratio, [0.001, 1]; default 0.05
   double max_correction = 5;     // the ratio clipped to [1/x, x], [1, 100]; default 5
-  double ratio_headroom = 5;     // a lamp's shading ratio Dd_l / Dd at most this x the Lambert model's on the
+  double ratio_headroom = 2;     // a lamp's shading ratio Dd_l / Dd at most this x the Lambert model's on the
                                  // destination's normals (and at least 2), [1, 100]: where the median lamp
                                  // is in a cast shadow, T (shaded by the model) times the measured ratio
                                  // blows up (inside the bull's legs 30-100x); smaller guards more but errs
                                  // from the destination's shading more (bull <- orange 512x340: 1.5 0.58x
-                                 // the linear copy's shading error, 5 0.45x, off 0.27x); default 5
+                                 // the linear copy's shading error, 5 0.45x, off 0.27x); default 2
   bool source_gloss = true;      // fit the source's gloss, take it off its texture and place it by the
                                  // destination's normals; default on
   bool destination_gloss = true; // fit the destination's own gloss and take it off its shading ratio; default on
@@ -108,7 +108,7 @@ class ShadedLook {
   cv::Mat source_weight_;        // k_s(m(p)) (CV_32FC1), empty without source gloss
   cv::Mat normals_;              // n_d
   cv::Mat model_median_;         // the median over the lamps of max(0, n_d.l) (CV_32FC1)
-  float headroom_ = 5.f;
+  float headroom_ = 2.f;
   std::vector<cv::Vec3f> lamp_, half_;
   double source_exponent_ = 0, destination_exponent_ = 0;
   size_t seams_ = 0;
