@@ -33,8 +33,12 @@ nlohmann::json look_of(const TransferResult& r) {
   return j.contains("look") ? j["look"] : nlohmann::json::object();
 }
 
+// The look block's figures on the copy look, whose pictures stay within what
+// the 16-bit files hold and whose `linear` transfer is its own floor (the
+// shaded look is scored in core/ShadedLook.*).
 TransferOptions method(match::Method m) {
   TransferOptions o;
+  o.look = repaint::Look::copy;
   o.match.method = m;
   o.truth_normals = true;
   return o;

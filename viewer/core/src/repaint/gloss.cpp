@@ -85,17 +85,18 @@ Expected<Gloss> fit_gloss(const std::vector<cv::Mat>& photos, const cv::Mat& nor
   const int alphas = static_cast<int>(options.exponents.size());
   Gloss out;
   out.albedo = cv::Mat(mask.size(), CV_32FC3, cv::Scalar::all(0));
-  std::vector<cv::Mat> weights(alphas);
-  for (auto& w : weights) w = cv::Mat(mask.size(), CV_32FC1, cv::Scalar(0));
+  cv::Mat weight(mask.size(), CV_32FC1, cv::Scalar(0));
+  int best = 0;
   std::vector<double> row_error(static_cast<size_t>(rows) * alphas, 0.0);
   const float lit = static_cast<float>(options.lit), ridge = static_cast<float>(options.ridge);
   progress.report(0.0, "fitting the gloss");
   // Per pixel the albedo and the residual; `pass` 0 sums each lobe's fit over
   // the object (the object-wide k0 a pixel no highlight reached is pulled to),
-  // pass 1 solves k per pixel against that prior and sums the errors.
+  // pass 1 solves k per pixel against that prior and sums the errors, pass 2
+  // keeps k of the best lobe (one plane, not one per exponent).
   std::vector<double> row_num(static_cast<size_t>(rows) * alphas, 0.0), row_den(row_num.size(), 0.0);
   std::vector<float> prior(alphas, 0.f);
-  for (int pass = 0; pass < 2; ++pass) {
+  for (int pass = 0; pass < 3; ++pass) {
     cv::parallel_for_(cv::Range(0, rows), [&](const cv::Range& range) {
       std::vector<float> ratio(lamps), res(lamps), c(lamps), s(lamps);
       for (int y = range.start; y < range.end; ++y) {
@@ -126,7 +127,7 @@ Expected<Gloss> fit_gloss(const std::vector<cv::Mat>& photos, const cv::Mat& nor
             const cv::Vec3f& p = photos[i].ptr<cv::Vec3f>(y)[x];
             res[i] = (p[0] + p[1] + p[2]) / 3.f - grey_rho * c[i];
           }
-          for (int a = 0; a < alphas; ++a) {
+          for (int a = pass == 2 ? best : 0; a < (pass == 2 ? best + 1 : alphas); ++a) {
             float num = 0, den = 0;
             for (int i = 0; i < lamps; ++i) {
               s[i] = c[i] > 0 ? Gloss::lobe(n[x], l[i], h[i], options.exponents[a]) : 0.f;
@@ -139,7 +140,10 @@ Expected<Gloss> fit_gloss(const std::vector<cv::Mat>& photos, const cv::Mat& nor
               continue;
             }
             const float k = std::max(0.f, (num + ridge * prior[a]) / (den + ridge));
-            weights[a].ptr<float>(y)[x] = k;
+            if (pass == 2) {
+              weight.ptr<float>(y)[x] = k;
+              continue;
+            }
             double e = 0;
             for (int i = 0; i < lamps; ++i) e += static_cast<double>(res[i] - k * s[i]) * (res[i] - k * s[i]);
             row_error[at] += e;
@@ -154,21 +158,22 @@ Expected<Gloss> fit_gloss(const std::vector<cv::Mat>& photos, const cv::Mat& nor
         for (int y = 0; y < rows; ++y) num += row_num[static_cast<size_t>(y) * alphas + a], den += row_den[static_cast<size_t>(y) * alphas + a];
         prior[a] = den > 0 ? static_cast<float>(num / den) : 0.f;
       }
-      progress.report(0.5, "fitting the gloss");
+      progress.report(0.4, "fitting the gloss");
+    } else if (pass == 1) {
+      std::vector<double> error(alphas, 0.0);
+      for (int y = 0; y < rows; ++y)
+        for (int a = 0; a < alphas; ++a) error[a] += row_error[static_cast<size_t>(y) * alphas + a];
+      for (int a = 1; a < alphas; ++a)
+        if (error[a] < error[best]) best = a;
+      const double samples = std::max(1.0, static_cast<double>(cv::countNonZero(mask)) * lamps);
+      out.residual = std::sqrt(error[best] / samples);
+      progress.report(0.8, "fitting the gloss");
     }
   }
   if (progress.cancelled()) return make_error("fitting the gloss cancelled");
-  int best = 0;
-  std::vector<double> error(alphas, 0.0);
-  for (int y = 0; y < rows; ++y)
-    for (int a = 0; a < alphas; ++a) error[a] += row_error[static_cast<size_t>(y) * alphas + a];
-  for (int a = 1; a < alphas; ++a)
-    if (error[a] < error[best]) best = a;
   out.exponent = options.exponents[best];
   out.object_weight = prior[best];
-  const double samples = std::max(1.0, static_cast<double>(cv::countNonZero(mask)) * lamps);
-  out.residual = std::sqrt(error[best] / samples);
-  out.weight = masked_blur(weights[best], mask, options.smoothing);
+  out.weight = masked_blur(weight, mask, options.smoothing);
   out.weight.setTo(0, mask == 0);
   progress.report(1.0, "fitting the gloss");
   return out;

@@ -184,53 +184,49 @@ Expected<ShadedLook> ShadedLook::make(const LookSide& dst, const LookSide& src, 
                                          dst.lamps);
   const cv::Mat shade_s = median_shading(coarse_normals(src.view.normals, src.view.mask, options.normal_smoothing),
                                          src.lamps);
-  // T through the map (nearest source pixel), and the fields the seams need
+  // T through the map (nearest source pixel)
   look.texture_ = cv::Mat(dsize, CV_32FC3, cv::Scalar::all(0));
-  cv::Mat log_texture(dsize, CV_32FC3, cv::Scalar::all(0)), destination_field(dsize, CV_32FC1, cv::Scalar(0));
-  cv::Mat source_field(ssize, CV_32FC3, cv::Scalar::all(0));
   if (!source_weight.empty()) look.source_weight_ = cv::Mat(dsize, CV_32FC1, cv::Scalar(0));
-  // log's floor: a hundredth of the source's mean (linear units), so a dark
-  // pixel's noise does not make a step of the seams' targets
-  const cv::Scalar mean_diffuse = cv::mean(source_diffuse, sourced);
-  const float tiny =
-      std::max(1e-6f, 0.01f * static_cast<float>(mean_diffuse[0] + mean_diffuse[1] + mean_diffuse[2]) / 3.f);
-  cv::parallel_for_(cv::Range(0, ssize.height), [&](const cv::Range& r) {
-    for (int y = r.start; y < r.end; ++y)
-      for (int x = 0; x < ssize.width; ++x) {
-        const cv::Vec3f s = source_diffuse.at<cv::Vec3f>(y, x);
-        const float lc = std::log(shade_s.at<float>(y, x) + e);
-        for (int c = 0; c < 3; ++c) source_field.at<cv::Vec3f>(y, x)[c] = std::log(std::max(s[c], tiny)) - lc;
-      }
-  });
   cv::parallel_for_(cv::Range(0, dsize.height), [&](const cv::Range& r) {
     for (int y = r.start; y < r.end; ++y)
       for (int x = 0; x < dsize.width; ++x) {
-        destination_field.at<float>(y, x) = std::log(shade_d.at<float>(y, x) + e);
         const cv::Vec2f m = map.xy.at<cv::Vec2f>(y, x);
         if (m[0] < 0) continue;
         const int sx = std::clamp(static_cast<int>(std::lround(m[0])), 0, ssize.width - 1);
         const int sy = std::clamp(static_cast<int>(std::lround(m[1])), 0, ssize.height - 1);
         const float ratio =
             std::clamp((shade_d.at<float>(y, x) + e) / (shade_s.at<float>(sy, sx) + e), 1.f / top, top);
-        const cv::Vec3f t = source_diffuse.at<cv::Vec3f>(sy, sx) * ratio;
-        look.texture_.at<cv::Vec3f>(y, x) = t;
-        for (int c = 0; c < 3; ++c) log_texture.at<cv::Vec3f>(y, x)[c] = std::log(std::max(t[c], tiny));
+        look.texture_.at<cv::Vec3f>(y, x) = source_diffuse.at<cv::Vec3f>(sy, sx) * ratio;
         if (!source_weight.empty()) look.source_weight_.at<float>(y, x) = source_weight.at<float>(sy, sx);
       }
   });
   if (options.seam_feather > 0) {
+    // log's floor: a hundredth of the source's mean (linear units), so a dark
+    // pixel's noise does not make a step of the seams' targets
+    const cv::Scalar mean_diffuse = cv::mean(source_diffuse, sourced);
+    const float tiny =
+        std::max(1e-6f, 0.01f * static_cast<float>(mean_diffuse[0] + mean_diffuse[1] + mean_diffuse[2]) / 3.f);
+    auto log_of = [tiny](const cv::Vec3f& v) {
+      return cv::Vec3f(std::log(std::max(v[0], tiny)), std::log(std::max(v[1], tiny)), std::log(std::max(v[2], tiny)));
+    };
+    cv::Mat log_texture(dsize, CV_32FC3, cv::Scalar::all(0)), destination_field(dsize, CV_32FC1);
+    cv::Mat source_field(ssize, CV_32FC3);
+    source_field.forEach<cv::Vec3f>([&](cv::Vec3f& v, const int* at) {
+      v = log_of(source_diffuse.at<cv::Vec3f>(at[0], at[1])) -
+          cv::Vec3f::all(std::log(shade_s.at<float>(at[0], at[1]) + e));
+    });
+    destination_field.forEach<float>([&](float& v, const int* at) { v = std::log(shade_d.at<float>(at[0], at[1]) + e); });
+    log_texture.forEach<cv::Vec3f>([&](cv::Vec3f& v, const int* at) {
+      if (map.xy.at<cv::Vec2f>(at[0], at[1])[0] >= 0) v = log_of(look.texture_.at<cv::Vec3f>(at[0], at[1]));
+    });
     detail::SeamInputs in{log_texture,       map.xy, source_field, src.view.mask, destination_field,
                           options.seam_feather, options.seam_iterations};
     auto solved = detail::feather_seams(in, look.seams_, progress.part(0.7, 1.0));
     if (!solved) return make_error("look: " + solved.message());
-    cv::parallel_for_(cv::Range(0, dsize.height), [&](const cv::Range& r) {
-      for (int y = r.start; y < r.end; ++y)
-        for (int x = 0; x < dsize.width; ++x) {
-          if (map.xy.at<cv::Vec2f>(y, x)[0] < 0) continue;
-          cv::Vec3f& t = look.texture_.at<cv::Vec3f>(y, x);
-          const cv::Vec3f u = solved->at<cv::Vec3f>(y, x), u0 = log_texture.at<cv::Vec3f>(y, x);
-          for (int c = 0; c < 3; ++c) t[c] *= std::exp(u[c] - u0[c]);
-        }
+    look.texture_.forEach<cv::Vec3f>([&](cv::Vec3f& t, const int* at) {
+      if (map.xy.at<cv::Vec2f>(at[0], at[1])[0] < 0) return;
+      const cv::Vec3f u = solved->at<cv::Vec3f>(at[0], at[1]), u0 = log_texture.at<cv::Vec3f>(at[0], at[1]);
+      for (int c = 0; c < 3; ++c) t[c] *= std::exp(u[c] - u0[c]);
     });
   }
   progress.report(1.0, "shading");
