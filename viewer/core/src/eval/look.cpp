@@ -35,7 +35,20 @@ struct ShadingInputs {
   const std::vector<cv::Mat>* reference;
   cv::Mat mask;  // CV_8UC1 or empty
   cv::Mat rm, rx, dm, dx;  // medians and maxima over the lamps
+  cv::Mat log_rm, log_dm;  // log(median + eps), where compared
 };
+
+cv::Mat log_of(const cv::Mat& median, const cv::Mat& mask) {
+  cv::Mat out(median.size(), CV_32FC1, cv::Scalar(0));
+  for (int y = 0; y < median.rows; ++y) {
+    const float* m = median.ptr<float>(y);
+    const uchar* k = mask.empty() ? nullptr : mask.ptr<uchar>(y);
+    float* o = out.ptr<float>(y);
+    for (int x = 0; x < median.cols; ++x)
+      if (!k || k[x]) o[x] = std::log(m[x] + kEps);
+  }
+  return out;
+}
 
 cv::Mat max_image(const std::vector<cv::Mat>& gray) {
   cv::Mat m = gray[0].clone();
@@ -50,16 +63,15 @@ void for_each_error(const ShadingInputs& in, int r0, int r1, F&& f) {
   for (int y = r0; y < r1; ++y) {
     const uchar* mk = in.mask.empty() ? nullptr : in.mask.ptr<uchar>(y);
     const float *rm = in.rm.ptr<float>(y), *rx = in.rx.ptr<float>(y), *dm = in.dm.ptr<float>(y),
-                *dx = in.dx.ptr<float>(y);
+                *dx = in.dx.ptr<float>(y), *lrm = in.log_rm.ptr<float>(y), *ldm = in.log_dm.ptr<float>(y);
     for (size_t l = 0; l < lamps; ++l) {
       const float* r = (*in.result)[l].ptr<float>(y);
       const float* d = (*in.reference)[l].ptr<float>(y);
       for (int x = 0; x < in.rm.cols; ++x) {
         if (mk && !mk[x]) continue;
         if (!(d[x] > kLitShare * dx[x] && r[x] > kLitShare * rx[x] && dm[x] > kEps && rm[x] > kEps)) continue;
-        const double e = std::abs(std::log((r[x] + double(kEps)) / (rm[x] + double(kEps))) -
-                                  std::log((d[x] + double(kEps)) / (dm[x] + double(kEps))));
-        f(e);
+        // in float, as look.py's numpy computes it
+        f(static_cast<double>(std::abs((std::log(r[x] + kEps) - lrm[x]) - (std::log(d[x] + kEps) - ldm[x]))));
       }
     }
   }
@@ -115,17 +127,21 @@ cv::Mat look_gray(const cv::Mat& image) {
   return g;
 }
 
-cv::Mat median_image(const std::vector<cv::Mat>& gray) {
+cv::Mat median_image(const std::vector<cv::Mat>& gray) { return median_image(gray, cv::Mat()); }
+
+cv::Mat median_image(const std::vector<cv::Mat>& gray, const cv::Mat& mask) {
   if (gray.empty()) return {};
   const int n = static_cast<int>(gray.size());
-  cv::Mat out(gray[0].size(), CV_32FC1);
+  cv::Mat out(gray[0].size(), CV_32FC1, cv::Scalar(0));
   cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& rows) {
     std::vector<float> v(n);
     std::vector<const float*> p(n);
     for (int y = rows.start; y < rows.end; ++y) {
       for (int i = 0; i < n; ++i) p[i] = gray[i].ptr<float>(y);
       float* o = out.ptr<float>(y);
+      const uchar* m = mask.empty() ? nullptr : mask.ptr<uchar>(y);
       for (int x = 0; x < out.cols; ++x) {
+        if (m && !m[x]) continue;
         for (int i = 0; i < n; ++i) v[i] = p[i][x];
         const int h = n / 2;
         std::nth_element(v.begin(), v.begin() + h, v.end());
@@ -157,8 +173,10 @@ Expected<ShadingError> shading_error(const std::vector<cv::Mat>& result, const s
   const std::vector<cv::Mat> r = grays(result), d = grays(reference);
   in.result = &r;
   in.reference = &d;
-  in.rm = median_image(r);
-  in.dm = median_image(d);
+  in.rm = median_image(r, in.mask);  // only where compared
+  in.dm = median_image(d, in.mask);
+  in.log_rm = log_of(in.rm, in.mask);
+  in.log_dm = log_of(in.dm, in.mask);
   in.rx = max_image(r);
   in.dx = max_image(d);
 

@@ -1,9 +1,14 @@
 // metrics.json's "look" block (transfer_look.hpp).
 #include "transfer_look.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <mutex>
 #include <optional>
+#include <sstream>
+
+#include <opencv2/core/utility.hpp>
 
 #include "veneer/eval/look.hpp"
 #include "veneer/eval/metrics.hpp"
@@ -18,6 +23,20 @@ double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock:
 
 nlohmann::json shading_json(const eval::ShadingError& s) {
   return {{"shading_mean", s.mean}, {"shading_median", s.median}, {"shading_p90", s.p90}, {"samples", s.samples}};
+}
+
+// Marks in `read` the source pixels a map's nearest-pixel lookups reach.
+void mark_read(const cv::Mat& xy, cv::Mat& read) {
+  if (read.empty()) return;
+  for (int y = 0; y < xy.rows; ++y) {
+    const cv::Vec2f* m = xy.ptr<cv::Vec2f>(y);
+    for (int x = 0; x < xy.cols; ++x) {
+      if (!(m[x][0] >= 0 && m[x][1] >= 0)) continue;
+      const int sx = std::clamp(static_cast<int>(std::nearbyint(m[x][0])), 0, read.cols - 1);
+      const int sy = std::clamp(static_cast<int>(std::nearbyint(m[x][1])), 0, read.rows - 1);
+      read.at<uchar>(sy, sx) = 255;
+    }
+  }
 }
 
 // The transfer's pictures in grey: taken from the result, or painted again
@@ -40,8 +59,10 @@ Expected<std::vector<cv::Mat>> grey_pictures(const std::vector<cv::Mat>& kept, c
 }
 
 std::vector<cv::Mat> greys(const std::vector<cv::Mat>& photos) {
-  std::vector<cv::Mat> out;
-  for (const cv::Mat& p : photos) out.push_back(eval::look_gray(p));
+  std::vector<cv::Mat> out(photos.size());
+  cv::parallel_for_(cv::Range(0, static_cast<int>(photos.size())), [&](const cv::Range& r) {
+    for (int i = r.start; i < r.end; ++i) out[i] = eval::look_gray(photos[i]);
+  });
   return out;
 }
 
@@ -107,6 +128,49 @@ Expected<TruthLook> truth_look(const io::ImageSet& destination, const io::ImageS
   return out;
 }
 
+// The last truth look rendered, for the next transfer of the same pair (the
+// viewer transfers a pair again whenever an option changes; the render is
+// seconds at 1024x680, the figures milliseconds). Keyed by what it was
+// rendered from: the scenes, the size, the focal length and the destination's
+// first photo (its sum and a few pixels).
+struct TruthCache {
+  std::mutex lock;
+  std::string key;
+  std::optional<TruthLook> look;
+};
+TruthCache& truth_cache() {
+  static TruthCache cache;
+  return cache;
+}
+std::string truth_key(const io::ImageSet& destination, const io::ImageSet& source) {
+  std::ostringstream k;
+  k.precision(17);
+  k << destination.scene << '|' << source.scene << '|' << destination.size.width << 'x' << destination.size.height
+    << '|' << destination.camera.focal_px << '|' << destination.images.size();
+  if (!destination.images.empty()) {
+    const cv::Mat& first = destination.images[0];
+    k << '|' << cv::sum(first)[0] << '|' << cv::sum(first)[1] << '|' << cv::sum(first)[2];
+  }
+  for (const auto& light : destination.lights)
+    if (light.position_m) k << '|' << (*light.position_m)[0] << ',' << (*light.position_m)[1] << ',' << (*light.position_m)[2];
+  return k.str();
+}
+Expected<TruthLook> cached_truth_look(const io::ImageSet& destination, const io::ImageSet& source,
+                                      const Progress& progress) {
+  TruthCache& cache = truth_cache();
+  const std::string key = truth_key(destination, source);
+  {
+    std::lock_guard hold(cache.lock);
+    if (cache.look && cache.key == key) return *cache.look;
+  }
+  auto look = truth_look(destination, source, progress);
+  if (!look) return look;
+  std::lock_guard hold(cache.lock);
+  cache.key = key;
+  cache.look = *look;
+  return look;
+}
+
 // The figures of one set of pictures against the references.
 struct Scored {
   nlohmann::json json;
@@ -148,7 +212,7 @@ Expected<nlohmann::json> look_block(const PreparedPair& pair, const TransferOpti
   std::vector<const std::vector<cv::Mat>*> references{&own};
   std::string reference = "the destination's own photos";
   if (!pair.destination.scene.empty() && !pair.source.scene.empty()) {
-    auto rendered = truth_look(pair.destination, pair.source, progress.part(0.0, 0.4));
+    auto rendered = cached_truth_look(pair.destination, pair.source, progress.part(0.0, 0.4));
     if (rendered) {
       truth = std::move(rendered->photos);
       references.insert(references.begin(), &truth);
@@ -163,7 +227,13 @@ Expected<nlohmann::json> look_block(const PreparedPair& pair, const TransferOpti
   }
   j["reference"] = reference;
   j["mask"] = masked ? "the destination's mask" : "every pixel (the destination has no mask)";
-  const cv::Mat source_median = eval::median_image(greys(pair.src.view.images));
+  // The source's median where the map reads it (texture_corr's nearest
+  // pixel): the rest of it is never looked at.
+  const auto& source_photos = pair.src.view.images;
+  cv::Mat read(source_photos.empty() ? cv::Size() : source_photos[0].size(), CV_8UC1, cv::Scalar(0));
+  mark_read(result.map.xy, read);
+  if (options.look_floor) read.setTo(255);  // the floor's map reads elsewhere
+  const cv::Mat source_median = eval::median_image(greys(source_photos), read);
   auto pictures = grey_pictures(result.repainted, pair, paint);
   if (!pictures) return pictures.error();
   auto scored = score(*pictures, result.repainted_median, references, masked ? mask : cv::Mat(), source_median,
