@@ -35,31 +35,62 @@ struct ShadingInputs {
   const std::vector<cv::Mat>* reference;
   cv::Mat mask;  // CV_8UC1 or empty
   cv::Mat rm, rx, dm, dx;  // medians and maxima over the lamps
+  cv::Mat log_rm, log_dm;  // log(median + eps), where compared
 };
 
-cv::Mat max_image(const std::vector<cv::Mat>& gray) {
-  cv::Mat m = gray[0].clone();
-  for (size_t i = 1; i < gray.size(); ++i) cv::max(m, gray[i], m);
-  return m;
+cv::Mat log_of(const cv::Mat& median, const cv::Mat& mask) {
+  cv::Mat out(median.size(), CV_32FC1, cv::Scalar(0));
+  for (int y = 0; y < median.rows; ++y) {
+    const float* m = median.ptr<float>(y);
+    const uchar* k = mask.empty() ? nullptr : mask.ptr<uchar>(y);
+    float* o = out.ptr<float>(y);
+    for (int x = 0; x < median.cols; ++x)
+      if (!k || k[x]) o[x] = std::log(m[x] + kEps);
+  }
+  return out;
+}
+
+// A pixel's grey: the mean of its channels (CV_32FC3 photos are read in
+// place, never copied to grey: a grey copy of a set is a third of its frames).
+inline float grey_at(const float* row, int x, int channels) {
+  return channels == 3 ? (row[3 * x] + row[3 * x + 1] + row[3 * x + 2]) * (1.0f / 3) : row[x];
+}
+
+cv::Mat max_image(const std::vector<cv::Mat>& photos, const cv::Mat& mask) {
+  cv::Mat out(photos[0].size(), CV_32FC1, cv::Scalar(0));
+  const int channels = photos[0].channels();
+  cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& rows) {
+    for (int y = rows.start; y < rows.end; ++y) {
+      const uchar* k = mask.empty() ? nullptr : mask.ptr<uchar>(y);
+      float* o = out.ptr<float>(y);
+      for (const cv::Mat& p : photos) {
+        const float* row = p.ptr<float>(y);
+        for (int x = 0; x < out.cols; ++x)
+          if (!k || k[x]) o[x] = std::max(o[x], grey_at(row, x, channels));
+      }
+    }
+  });
+  return out;
 }
 
 // Calls f(row stripe index, error) for every lit pixel-lamp pair of rows [r0, r1).
 template <class F>
 void for_each_error(const ShadingInputs& in, int r0, int r1, F&& f) {
   const size_t lamps = in.result->size();
+  const int rc = (*in.result)[0].channels(), dc = (*in.reference)[0].channels();
   for (int y = r0; y < r1; ++y) {
     const uchar* mk = in.mask.empty() ? nullptr : in.mask.ptr<uchar>(y);
     const float *rm = in.rm.ptr<float>(y), *rx = in.rx.ptr<float>(y), *dm = in.dm.ptr<float>(y),
-                *dx = in.dx.ptr<float>(y);
+                *dx = in.dx.ptr<float>(y), *lrm = in.log_rm.ptr<float>(y), *ldm = in.log_dm.ptr<float>(y);
     for (size_t l = 0; l < lamps; ++l) {
       const float* r = (*in.result)[l].ptr<float>(y);
       const float* d = (*in.reference)[l].ptr<float>(y);
       for (int x = 0; x < in.rm.cols; ++x) {
         if (mk && !mk[x]) continue;
-        if (!(d[x] > kLitShare * dx[x] && r[x] > kLitShare * rx[x] && dm[x] > kEps && rm[x] > kEps)) continue;
-        const double e = std::abs(std::log((r[x] + double(kEps)) / (rm[x] + double(kEps))) -
-                                  std::log((d[x] + double(kEps)) / (dm[x] + double(kEps))));
-        f(e);
+        const float rv = grey_at(r, x, rc), dv = grey_at(d, x, dc);
+        if (!(dv > kLitShare * dx[x] && rv > kLitShare * rx[x] && dm[x] > kEps && rm[x] > kEps)) continue;
+        // in float, as look.py's numpy computes it
+        f(static_cast<double>(std::abs((std::log(rv + kEps) - lrm[x]) - (std::log(dv + kEps) - ldm[x]))));
       }
     }
   }
@@ -74,7 +105,11 @@ Status check_images(const std::vector<cv::Mat>& images, cv::Size size, const cha
   return {};
 }
 
-std::vector<cv::Mat> grays(const std::vector<cv::Mat>& images) {
+// The photos as the figures read them: CV_32FC3 ones as they are (every one
+// of them), anything else in grey.
+std::vector<cv::Mat> readable(const std::vector<cv::Mat>& images) {
+  const bool colour = std::all_of(images.begin(), images.end(), [](const cv::Mat& m) { return m.type() == CV_32FC3; });
+  if (colour) return images;
   std::vector<cv::Mat> g(images.size());
   cv::parallel_for_(cv::Range(0, static_cast<int>(images.size())), [&](const cv::Range& r) {
     for (int i = r.start; i < r.end; ++i) g[i] = look_gray(images[i]);
@@ -115,18 +150,27 @@ cv::Mat look_gray(const cv::Mat& image) {
   return g;
 }
 
-cv::Mat median_image(const std::vector<cv::Mat>& gray) {
+cv::Mat median_image(const std::vector<cv::Mat>& gray) { return median_image(gray, cv::Mat()); }
+
+cv::Mat median_image(const std::vector<cv::Mat>& gray, const cv::Mat& mask) {
   if (gray.empty()) return {};
   const int n = static_cast<int>(gray.size());
-  cv::Mat out(gray[0].size(), CV_32FC1);
+  cv::Mat out(gray[0].size(), CV_32FC1, cv::Scalar(0));
   cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& rows) {
     std::vector<float> v(n);
     std::vector<const float*> p(n);
+    const bool colour = gray[0].type() == CV_32FC3;  // look_gray's mean, pixel by pixel
     for (int y = rows.start; y < rows.end; ++y) {
       for (int i = 0; i < n; ++i) p[i] = gray[i].ptr<float>(y);
       float* o = out.ptr<float>(y);
+      const uchar* m = mask.empty() ? nullptr : mask.ptr<uchar>(y);
       for (int x = 0; x < out.cols; ++x) {
-        for (int i = 0; i < n; ++i) v[i] = p[i][x];
+        if (m && !m[x]) continue;
+        if (colour) {
+          for (int i = 0; i < n; ++i) v[i] = (p[i][3 * x] + p[i][3 * x + 1] + p[i][3 * x + 2]) * (1.0f / 3);
+        } else {
+          for (int i = 0; i < n; ++i) v[i] = p[i][x];
+        }
         const int h = n / 2;
         std::nth_element(v.begin(), v.begin() + h, v.end());
         if (n % 2) {
@@ -154,13 +198,15 @@ Expected<ShadingError> shading_error(const std::vector<cv::Mat>& result, const s
   ShadingInputs in;
   in.mask = object_mask(mask, size, status);
   if (!status) return status.error();
-  const std::vector<cv::Mat> r = grays(result), d = grays(reference);
+  const std::vector<cv::Mat> r = readable(result), d = readable(reference);
   in.result = &r;
   in.reference = &d;
-  in.rm = median_image(r);
-  in.dm = median_image(d);
-  in.rx = max_image(r);
-  in.dx = max_image(d);
+  in.rm = median_image(r, in.mask);  // only where compared
+  in.dm = median_image(d, in.mask);
+  in.log_rm = log_of(in.rm, in.mask);
+  in.log_dm = log_of(in.dm, in.mask);
+  in.rx = max_image(r, in.mask);
+  in.dx = max_image(d, in.mask);
 
   const int stripes = std::min(size.height, 16);
   auto stripe_rows = [&](int s) { return std::pair(size.height * s / stripes, size.height * (s + 1) / stripes); };
@@ -254,31 +300,42 @@ Expected<double> texture_corr(const cv::Mat& result_median, const cv::Mat& sourc
       warped.at<float>(y, x) = src.at<float>(yi, xi);
     }
   }
+  // look.py's floor of the logs: 1e-3 of each picture's brightest value
+  double top_med = 0, top_warped = 0;
+  cv::minMaxLoc(med, nullptr, &top_med);
+  cv::minMaxLoc(warped, nullptr, &top_warped);
+  // The rest within the mapped pixels' bounds and a margin wider than the
+  // Gaussian's reach (12 px) and the erosion's: the same figures as over the
+  // whole picture (zeros around the object either way), for the object's area
+  // (the bull is 3 % of its frame).
+  const int margin = 16;
+  const cv::Rect bounds = cv::boundingRect(ok);
+  if (bounds.empty()) return make_error("no mapped pixel left 3 px inside the mask");
+  const cv::Rect roi = (bounds + cv::Size(2 * margin, 2 * margin) - cv::Point(margin, margin)) & cv::Rect(cv::Point(), size);
+  const cv::Mat ok_roi = ok(roi);
   cv::Mat okf, weight;
-  ok.convertTo(okf, CV_32F);
+  ok_roi.convertTo(okf, CV_32F);
   cv::GaussianBlur(okf, weight, cv::Size(0, 0), kHighPassSigma);
   cv::max(weight, 1e-6, weight);
-  auto high_pass = [&](const cv::Mat& im) {
-    double top = 0;
-    cv::minMaxLoc(im, nullptr, &top);
+  auto high_pass = [&](const cv::Mat& im, double top) {
     const float floor = static_cast<float>(1e-3 * std::max(top, 1e-6));
-    cv::Mat lg(size, CV_32FC1, cv::Scalar(0));
-    for (int y = 0; y < size.height; ++y)
-      for (int x = 0; x < size.width; ++x)
-        if (ok.at<uchar>(y, x)) lg.at<float>(y, x) = std::log(im.at<float>(y, x) + floor);
+    cv::Mat lg(roi.size(), CV_32FC1, cv::Scalar(0));
+    for (int y = 0; y < roi.height; ++y)
+      for (int x = 0; x < roi.width; ++x)
+        if (ok_roi.at<uchar>(y, x)) lg.at<float>(y, x) = std::log(im.at<float>(y, x) + floor);
     cv::Mat blurred;
     cv::GaussianBlur(lg, blurred, cv::Size(0, 0), kHighPassSigma);
     return cv::Mat(lg - blurred / weight);
   };
   cv::Mat inner;
-  cv::erode(ok, inner, cv::Mat::ones(kErodeSide, kErodeSide, CV_8U));
-  const cv::Mat a = high_pass(med), b = high_pass(warped);
+  cv::erode(ok_roi, inner, cv::Mat::ones(kErodeSide, kErodeSide, CV_8U));
+  const cv::Mat a = high_pass(med(roi), top_med), b = high_pass(warped(roi), top_warped);
   const int count = cv::countNonZero(inner);
   if (count == 0) return make_error("no mapped pixel left 3 px inside the mask");
   const double ma = cv::mean(a, inner)[0], mb = cv::mean(b, inner)[0];
   double ab = 0, aa = 0, bb = 0;
-  for (int y = 0; y < size.height; ++y)
-    for (int x = 0; x < size.width; ++x) {
+  for (int y = 0; y < roi.height; ++y)
+    for (int x = 0; x < roi.width; ++x) {
       if (!inner.at<uchar>(y, x)) continue;
       const double u = a.at<float>(y, x) - ma, v = b.at<float>(y, x) - mb;
       ab += u * v;

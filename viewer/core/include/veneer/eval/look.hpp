@@ -45,8 +45,11 @@ struct Look {
 // A photo as look.py sees it: CV_32FC1, the mean of its channels (a CV_32FC1
 // image is returned as it is, sharing its pixels).
 cv::Mat look_gray(const cv::Mat& image);
-// The per-pixel median of equally sized CV_32FC1 images (numpy's median).
+// The per-pixel median of equally sized CV_32FC1 images (numpy's median), or
+// of CV_32FC3 photos' grey (the mean of their channels) without a grey copy.
 cv::Mat median_image(const std::vector<cv::Mat>& gray);
+// The same where `mask` (CV_8UC1 of their size) is non-zero, 0 elsewhere.
+cv::Mat median_image(const std::vector<cv::Mat>& gray, const cv::Mat& mask);
 
 // `result[l]` and `reference[l]` lit by lamp l (same count, same size);
 // `mask`: CV_8UC1, non-zero = compared (empty = every pixel). Fails naming
