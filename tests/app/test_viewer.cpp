@@ -879,15 +879,21 @@ TEST(Viewer, MatchingOptionChangesRecomputeTheMap) {
   EXPECT_GT(cv::countNonZero(diff.reshape(1) > 0.5), 0) << "a larger threshold makes other chunks";
   EXPECT_TRUE(child<QLabel>(w, "transferStatus")->text().contains("map"));
 
-  // the blend radius and its guide change the pictures, not the map: repainted from the map shown
+  // the blend radius and its guide change how the source's photos are
+  // pasted (the live view's frames; the stills are in the shaded look, which
+  // does not blend), not the map: repainted from the map shown
+  const auto pasted = [](const veneer::pipeline::TransferResult& r) {
+    return r.blend ? *veneer::repaint::repaint_planned(*r.blend, r.source_median)
+                   : veneer::repaint::repaint(r.map, r.source_median);
+  };
   const int map_runs = w.mapOnlyRuns();
   const auto* guided = w.result();
-  const cv::Mat kept = guided->map.xy.clone(), guided_picture = guided->repainted_median.clone();
+  const cv::Mat kept = guided->map.xy.clone(), guided_picture = pasted(*guided);
   EXPECT_EQ(child<QSpinBox>(w, "blend")->value(), veneer::pipeline::TransferOptions{}.blend);
   child<QDoubleSpinBox>(w, "blendGuide")->setValue(0);
   ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.result() != guided; }, 60000));
   const auto* plain_blend = w.result();
-  const cv::Mat plain_picture = plain_blend->repainted_median.clone();
+  const cv::Mat plain_picture = pasted(*plain_blend);
   EXPECT_GT(cv::norm(plain_picture, guided_picture, cv::NORM_INF), 0.0);
   child<QSpinBox>(w, "blend")->setValue(0);
   ASSERT_TRUE(wait_for([&] { return !w.computing() && w.result() && w.result() != plain_blend; }, 60000));
@@ -895,7 +901,7 @@ TEST(Viewer, MatchingOptionChangesRecomputeTheMap) {
   EXPECT_EQ(w.mapOnlyRuns(), map_runs);
   EXPECT_TRUE(w.result()->map_given);
   EXPECT_EQ(cv::norm(w.result()->map.xy, kept, cv::NORM_INF), 0.0);
-  EXPECT_GT(cv::norm(w.result()->repainted_median, plain_picture, cv::NORM_INF), 0.0);
+  EXPECT_GT(cv::norm(pasted(*w.result()), plain_picture, cv::NORM_INF), 0.0);
   EXPECT_TRUE(child<QLabel>(w, "transferStatus")->text().contains("map kept"));
 
   // a segmentation change prepares the objects again (not a map-only run) and matches
