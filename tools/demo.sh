@@ -48,7 +48,7 @@ step "photometric stereo"
 "$bin/veneer" normals "$out/destination" --out "$out/destination-normals"
 "$bin/veneer" normals "$out/source" --out "$out/source-normals"
 
-step "correspondence map + repaint: veneer transfer --method combined (the default: the motion when the destination is the source moved, else coherent chunks of the nearest normals)"
+step "correspondence map + repaint: veneer transfer --method combined (the default: the motion when the destination is the source moved, else coherent chunks of the nearest normals), painted in the shaded look (the default: the source's texture under the destination's shading)"
 "$bin/veneer" transfer --method combined --dst "$out/destination" --src "$out/source" --out "$out/transfer"
 "$bin/veneer" inspect --dst "$out/destination" --src "$out/source" --map "$out/transfer" --out "$out/transfer/inspect.png"
 

@@ -894,26 +894,29 @@ TEST(Viewer, MatchingOptionChangesRecomputeTheMap) {
   EXPECT_GT(cv::countNonZero(diff.reshape(1) > 0.5), 0) << "a larger threshold makes other chunks";
   EXPECT_TRUE(child<QLabel>(w, "transferStatus")->text().contains("map"));
 
-  // the blend radius and its guide change the pictures, not the map: repainted from the map shown
+  // the blend radius and its guide change how the source's photos are
+  // pasted (the live view's frames; the stills are in the shaded look, which
+  // does not blend), not the map: repainted from the map shown
+  const auto pasted = [](const veneer::pipeline::TransferResult& r) {
+    return r.blend ? *veneer::repaint::repaint_planned(*r.blend, r.source_median)
+                   : veneer::repaint::repaint(r.map, r.source_median);
+  };
   const int map_runs = w.transfer().mapOnlyRuns();
   const auto* guided = w.session().result.get();
-  const cv::Mat kept = guided->map.xy.clone(), guided_picture = guided->repainted_median.clone();
+  const cv::Mat kept = guided->map.xy.clone(), guided_picture = pasted(*guided);
   EXPECT_EQ(child<QSpinBox>(w, "blend")->value(), veneer::pipeline::TransferOptions{}.blend);
   child<QDoubleSpinBox>(w, "blendGuide")->setValue(0);
-  ASSERT_TRUE(wait_for(
-      [&] { return !w.transfer().computing() && w.session().result && w.session().result.get() != guided; }, 60000));
+  ASSERT_TRUE(wait_for([&] { return !w.transfer().computing() && w.session().result && w.session().result.get() != guided; }, 60000));
   const auto* plain_blend = w.session().result.get();
-  const cv::Mat plain_picture = plain_blend->repainted_median.clone();
+  const cv::Mat plain_picture = pasted(*plain_blend);
   EXPECT_GT(cv::norm(plain_picture, guided_picture, cv::NORM_INF), 0.0);
   child<QSpinBox>(w, "blend")->setValue(0);
-  ASSERT_TRUE(wait_for(
-      [&] { return !w.transfer().computing() && w.session().result && w.session().result.get() != plain_blend; },
-      60000));
+  ASSERT_TRUE(wait_for([&] { return !w.transfer().computing() && w.session().result && w.session().result.get() != plain_blend; }, 60000));
   EXPECT_EQ(w.transfer().repaintOnlyRuns(), 2);
   EXPECT_EQ(w.transfer().mapOnlyRuns(), map_runs);
-  EXPECT_TRUE(w.session().result->map_given);
-  EXPECT_EQ(cv::norm(w.session().result->map.xy, kept, cv::NORM_INF), 0.0);
-  EXPECT_GT(cv::norm(w.session().result->repainted_median, plain_picture, cv::NORM_INF), 0.0);
+  EXPECT_TRUE(w.session().result.get()->map_given);
+  EXPECT_EQ(cv::norm(w.session().result.get()->map.xy, kept, cv::NORM_INF), 0.0);
+  EXPECT_GT(cv::norm(pasted(*w.session().result.get()), plain_picture, cv::NORM_INF), 0.0);
   EXPECT_TRUE(child<QLabel>(w, "transferStatus")->text().contains("map kept"));
 
   // a segmentation change prepares the objects again (not a map-only run) and matches

@@ -59,7 +59,8 @@ TransferPanel::TransferPanel(Session& session, QWidget* parent) : QGroupBox(tr("
   feature_->addItems({"normals", "intensities"});
   patch_ = named<QComboBox>("patch");
   patch_->addItems({"1", "3", "5", "7"});
-  const veneer::match::MatchOptions defaults;  // every matching box starts at the library's default
+  // every matching box starts at the default transfer's (the CLI's)
+  const veneer::match::MatchOptions defaults = veneer::pipeline::default_match_options();
   const veneer::pipeline::TransferOptions transfer_defaults;
   candidates_ = named<QSpinBox>("candidates");
   candidates_->setRange(1, 100);
@@ -171,7 +172,7 @@ TransferPanel::~TransferPanel() {
 // The presets: the CLI's defaults first (what the flow computes with).
 const std::vector<TransferPanel::Preset>& TransferPanel::presets() {
   static const std::vector<Preset> list = [] {
-    const veneer::match::MatchOptions m;
+    const veneer::match::MatchOptions m = veneer::pipeline::default_match_options();
     const veneer::pipeline::TransferOptions t;
     Preset standard{tr("default (combined)"), "combined", "normals", 1, m.candidates, m.threshold, m.iterations,
                     m.coherent_threshold, m.coherent_smooth, m.coherent_guide, m.uniformity, t.blend, t.blend_guide,

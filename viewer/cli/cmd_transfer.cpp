@@ -22,17 +22,20 @@ namespace {
 
 struct TransferArgs {
   std::string dst, src, out, method = "combined", feature = "normals";
+  std::string look = repaint::look_name(pipeline::TransferOptions{}.look);
   std::string dst_mask, src_mask;  // object masks drawn elsewhere (e.g. the viewer's hand segmentation)
   // the matching defaults are the library's (MatchOptions)
   int patch = 1, candidates = match::MatchOptions{}.candidates, iterations = match::MatchOptions{}.iterations,
       threads = 0, blend = pipeline::TransferOptions{}.blend;
   double threshold = match::MatchOptions{}.threshold, scale = 1.0,
-         coherent_threshold = match::MatchOptions{}.coherent_threshold,
          uniformity = match::MatchOptions{}.uniformity, coherent_smooth = match::MatchOptions{}.coherent_smooth,
          coherent_guide = match::MatchOptions{}.coherent_guide, blend_guide = pipeline::TransferOptions{}.blend_guide;
+  double look_smoothing = repaint::LookOptions{}.normal_smoothing, look_headroom = repaint::LookOptions{}.ratio_headroom,
+         look_feather = repaint::LookOptions{}.seam_feather;
+  std::optional<double> coherent_threshold;  // unset: pipeline::default_match_options(look)'s
   bool no_grow = false;
   unsigned seed = match::MatchOptions{}.seed;
-  bool faithful = false, truth_normals = false;
+  bool faithful = false, truth_normals = false, look_floor = false;
   // reading the sets (pipeline::PrepareOptions)
   // RAW interpolation: our own (Demosaic::mhc), ~20x faster than LibRaw's DCB,
   // the library's default, at normals as good on the simulator's 5600x3750
@@ -92,13 +95,20 @@ int run(const TransferArgs& a) {
                 "--patch, or pick a method that takes them (coherent, flann, patchmatch ...)");
   auto feature = match::parse_feature(a.feature);
   if (!feature) return report.usage(feature.message());
+  auto look = repaint::parse_look(a.look);
+  if (!look) return report.usage("--look: " + look.message());
+  options.look = *look;
+  options.look_options.normal_smoothing = a.look_smoothing;
+  options.look_options.ratio_headroom = a.look_headroom;
+  options.look_options.seam_feather = a.look_feather;
   options.match.method = *method;
   options.match.feature = *feature;
   options.match.patch = a.patch;
   options.match.candidates = a.candidates;
   options.match.threshold = a.threshold;
   options.match.iterations = a.iterations;
-  options.match.coherent_threshold = a.coherent_threshold;
+  options.match.coherent_threshold =
+      a.coherent_threshold ? *a.coherent_threshold : pipeline::default_match_options(*look).coherent_threshold;
   options.match.uniformity = a.uniformity;
   options.match.coherent_smooth = a.coherent_smooth;
   options.match.coherent_guide = a.coherent_guide;
@@ -110,6 +120,7 @@ int run(const TransferArgs& a) {
   options.blend = a.blend;
   options.blend_guide = a.blend_guide;
   options.scale = a.scale;
+  options.look_floor = a.look_floor;
   options.keep_pictures = false;  // painted and written one at a time (write_transfer with the pair)
   if (auto s = options.check(); !s) return report.usage(s.message());
   repaint::RtiExportOptions rti_options;
@@ -253,15 +264,31 @@ VENEER_ARGS_COMMAND(transfer, veneer::cli::TransferArgs,
                   "combined (the default: finds the motion when the destination is the source moved, scaled or "
                   "cropped, else coherent chunks of the nearest normals; uses normals and photos, --feature is "
                   "ignored) | coherent | linear | flann | candidates | patchmatch | regiongrow | baseline");
+  cmd->add_option("--look", args->look,
+                  "how the pictures are painted: shaded (the default: the source's texture carried whole through "
+                  "the map, each lamp shading it as it shades the destination's own shape, the source's gloss "
+                  "placed where the destination's normals put the highlights) | copy (each lamp's source photo "
+                  "pasted through the map and blended, the thesis's repaint; --blend, --blend-guide)");
+  cmd->add_option("--look-smoothing", args->look_smoothing,
+                  "--look shaded: the normals smoothed over this Gaussian sigma, px, for the coarse shading moved "
+                  "from the source's normals to the destination's, 0..64 (default 4; the source's relief finer "
+                  "than it stays its texture, coarser is re-shaded)");
+  cmd->add_option("--look-headroom", args->look_headroom,
+                  "--look shaded: a lamp's shading ratio at most this x the Lambert model's, 1..100 (default 2; "
+                  "smaller keeps pixels whose median lamp is in a cast shadow from blowing up, at some shading error)");
+  cmd->add_option("--look-feather", args->look_feather,
+                  "--look shaded: spread the texture's steps at chunk seams over about this many px (screened "
+                  "Poisson), 0..64 (default 0 = off: the fine detail then follows the source through the map less)");
   cmd->add_option("--feature", args->feature, "normals | intensities (default normals)");
   cmd->add_option("--patch", args->patch, "patch side 1, 3, 5 or 7 (default 1)");
   cmd->add_option("--candidates", args->candidates, "K for candidates, 1..100 (default 10)");
   cmd->add_option("--threshold", args->threshold, "regiongrow threshold >= 0 (default 0.05; 0 = direct matching)");
   cmd->add_option("--iterations", args->iterations, "patchmatch iterations (default 5)");
   cmd->add_option("--coherent-threshold", args->coherent_threshold,
-                  "coherent: normal error |dn| a chunk may make, >= 0 (default 0.10, about 6 degrees; larger = "
-                  "larger chunks, more texture kept whole, less exact shading; with --feature intensities "
-                  "converted by the destination's change of intensities per change of normal)");
+                  "coherent: normal error |dn| a chunk may make, >= 0 (default 0.6 with --look shaded, whose "
+                  "shading does not come from the chunks; 0.10, about 6 degrees, with --look copy; larger = "
+                  "larger chunks, more texture kept whole, with --look copy less exact shading; with --feature "
+                  "intensities converted by the destination's change of intensities per change of normal)");
   cmd->add_option("--coherent-smooth", args->coherent_smooth,
                   "coherent: cost of a seam between two chunks, in coherent thresholds, >= 0 (default 2; 0 = "
                   "chunks only; larger = fewer seams, less exact shading)");
@@ -285,6 +312,11 @@ VENEER_ARGS_COMMAND(transfer, veneer::cli::TransferArgs,
   cmd->add_option("--scale", args->scale, "resize both sets first, (0, 1] (default 1)");
   cmd->add_flag("--faithful", args->faithful, "use the thesis's code paths, never the fast engine");
   cmd->add_flag("--truth-normals", args->truth_normals, "match on truth/ normals and masks (simulated sets)");
+  cmd->add_flag("--look-floor", args->look_floor,
+                "metrics.json's look (per-lamp shading error and texture_corr, always measured against the "
+                "destination's own photos, and on simulated pairs against the truth look rendered once): also the "
+                "floor, the `linear` map's pixel copy scored the same way, and shading / floor (a second match "
+                "and repaint)");
   cmd->add_option("--photos", args->photos,
                   "auto | raw | developed: the sets' RAW files (linear, LibRaw) or their PNG/JPEG photos (default "
                   "auto = RAW where every photo has one)");

@@ -164,6 +164,7 @@ TEST(Transfer, RepaintBlendedKeepsChunksSharp) {
   const io::ImageSet src = simulated("cup-dots", io::Role::source);
   auto o = options(Method::linear);
   o.blend = 2;
+  o.look = repaint::Look::copy;  // the blend paints the copy's pictures
   auto r = transfer(dst, src, o);
   ASSERT_TRUE(r.ok()) << r.message();
   EXPECT_NE(r->metrics_json.find("\"blend\": 2"), std::string::npos);
@@ -198,6 +199,7 @@ TEST(Transfer, FromAGivenMapRepaintsWithoutMatching) {
   const io::ImageSet src = simulated("cup-dots", io::Role::source);
   auto o = options(Method::coherent);
   o.blend = 0;  // first without blending
+  o.look = repaint::Look::copy;  // the blend paints the copy's pictures
   auto pair = prepare_pair(dst, src, o);
   ASSERT_TRUE(pair.ok()) << pair.message();
   auto first = transfer(*pair, o);

@@ -24,6 +24,7 @@
 #include "veneer/ps/segmentation.hpp"
 #include "veneer/repaint/repaint.hpp"
 #include "veneer/util/log.hpp"
+#include "transfer_look.hpp"
 
 namespace veneer::pipeline {
 
@@ -76,10 +77,18 @@ Status TransferOptions::check() const {
   if (blend < 0 || blend > 16) return make_error("blend radius must be in 0..16 px, got " + std::to_string(blend));
   if (!(blend_guide >= 0 && blend_guide <= 2))
     return make_error("blend_guide must be in [0, 2] (|dn|; 0 = off), got " + std::to_string(blend_guide));
+  if (look == repaint::Look::shaded) return look_options.check();
   return {};
 }
 
 
+
+MatchOptions default_match_options(repaint::Look look) {
+  MatchOptions m;
+  m.method = match::Method::combined;
+  if (look == repaint::Look::shaded) m.coherent_threshold = 0.6;
+  return m;
+}
 
 Expected<PreparedPair> prepare_pair(const io::ImageSet& destination_in, const io::ImageSet& source_in,
                                     const TransferOptions& options, const Progress& progress) {
@@ -114,11 +123,16 @@ void for_each_option(Options& t, F&& f) {
   f("coherent_smooth", m.coherent_smooth), f("coherent_sweeps", m.coherent_sweeps);
   f("coherent_guide", m.coherent_guide), f("fast", m.fast), f("seed", m.seed), f("truth_normals", t.truth_normals);
   f("scale", t.scale), f("blend", t.blend), f("blend_guide", t.blend_guide);
+  auto& l = t.look_options;
+  f("look_normal_smoothing", l.normal_smoothing), f("look_seam_feather", l.seam_feather);
+  f("look_source_gloss", l.source_gloss), f("look_destination_gloss", l.destination_gloss);
 }
 
 // metrics.json's "options" (blend_guide as the pictures were blended: 0 plain)
 nlohmann::json options_json(const TransferOptions& options, double blend_guide) {
-  nlohmann::json j = {{"method", method_name(options.match.method)}, {"feature", feature_name(options.match.feature)}};
+  nlohmann::json j = {{"method", method_name(options.match.method)},
+                      {"feature", feature_name(options.match.feature)},
+                      {"look", repaint::look_name(options.look)}};
   TransferOptions written = options;
   written.blend_guide = blend_guide;
   for_each_option(std::as_const(written), [&](const char* key, const auto& value) { j[key] = value; });
@@ -152,6 +166,19 @@ Expected<std::shared_ptr<const fast::BlendPlan>> blend_plan_for(const PreparedPa
                                guide.destination.empty() ? nullptr : &guide);
   if (!made) return made.error();
   return std::shared_ptr<const fast::BlendPlan>(std::make_shared<const fast::BlendPlan>(std::move(*made)));
+}
+
+Expected<std::shared_ptr<const repaint::ShadedLook>> shaded_look(const PreparedPair& pair,
+                                                                 const TransferOptions& options, const Map& map,
+                                                                 const Progress& progress) {
+  if (auto s = options.check(); !s) return s.error();
+  std::vector<cv::Vec3d> dst_lamps, src_lamps;
+  for (const io::Light& l : pair.destination.lights) dst_lamps.push_back(l.direction);
+  for (const io::Light& l : pair.source.lights) src_lamps.push_back(l.direction);
+  auto look = repaint::ShadedLook::make({pair.dst.view, dst_lamps}, {pair.src.view, src_lamps}, map,
+                                        options.look_options, progress);
+  if (!look) return look.error();
+  return std::shared_ptr<const repaint::ShadedLook>(std::make_shared<const repaint::ShadedLook>(std::move(*look)));
 }
 
 namespace {
@@ -210,13 +237,20 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
     if (!plan) return repaint::repaint(result.map, photo, backdrop);
     return repaint_planned(*plan, photo, backdrop);
   };
-  for (size_t i = 0; options.keep_pictures && i < src->view.images.size() && i < dst->view.images.size(); ++i) {
-    auto painted = paint(src->view.images[i], dst->view.images[i]);
+  if (options.look == repaint::Look::shaded) {
+    auto look = shaded_look(pair, options, result.map, sub_progress(progress, 0.85, 0.9));
+    if (!look) return make_error("repaint: " + look.message());
+    result.look = std::move(*look);
+    timings["shaded_look_s"] = since(t0);
+  }
+  const size_t lamps = std::min(src->view.images.size(), dst->view.images.size());
+  for (size_t i = 0; options.keep_pictures && i < (result.look ? dst->view.images.size() : lamps); ++i) {
+    auto painted = result.look ? result.look->paint(i, dst->view.images[i]) : paint(src->view.images[i], dst->view.images[i]);
     if (!painted) return make_error("repaint: " + painted.message());
     result.repainted.push_back(std::move(*painted));
   }
   result.source_median = pair.source_median;
-  auto median = paint(pair.source_median, pair.destination_median);
+  auto median = result.look ? result.look->median(dst->view.images) : paint(pair.source_median, pair.destination_median);
   if (!median) return make_error("repaint: " + median.message());
   result.repainted_median = std::move(*median);
   result.reuse = reuse_counts(result.map, source.size);
@@ -228,6 +262,16 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
   j["source"] = {{"id", source.id}, {"scene", source.scene}, {"size", {source.size.width, source.size.height}},
                  {"object_pixels", cv::countNonZero(src->view.mask)}};
   j["options"] = options_json(options, guided ? options.blend_guide : 0.0);
+  if (result.look) {
+    j["repaint"] = {{"look", "shaded"},
+                 {"means", "the source's texture through the map under the destination's shading per lamp, the "
+                           "source's gloss lobe at the destination's normals (repaint/look.hpp)"},
+                 {"source_gloss_exponent", result.look->source_exponent()},
+                 {"destination_gloss_exponent", result.look->destination_exponent()},
+                 {"seams_feathered", result.look->seams()}};
+  } else {
+    j["repaint"] = {{"look", "copy"}, {"means", "each lamp's source photo pasted through the map"}};
+  }
   j["pictures"] = {{"result_light_NN.png, result_median.png",
                     "linear 16-bit RGB at the sets' photometric scale, as the sets' light_NN.png (no exposure or "
                     "gamma change)"},
@@ -261,6 +305,14 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
     j["quality"] = quality_json(q);
     j["quality"]["measured_against"] = "segmentation masks and photometric-stereo normals (no truth)";
     timings["quality_s"] = since(t0);
+  }
+  {
+    // The look (eval/look.hpp): shading per lamp and texture, beside coverage and coherence.
+    const nlohmann::json& qj = j["quality"];
+    auto look = detail::look_block(pair, options, result, paint, qj.value("coverage", 0.0), qj.value("coherence", 0.0),
+                                   sub_progress(progress, 0.92, 1.0));
+    if (look) j["look"] = std::move(*look);
+    else j["look_error"] = look.message();
   }
   if (result.map.motion.searched) {
     // Whether the destination was found to be the source moved (combined):
@@ -344,15 +396,18 @@ Expected<TransferOptions> parse_transfer_options(std::string_view text, const st
     }
     into = v.get<T>();
   };
-  std::string method = method_name(t.match.method), feature = feature_name(t.match.feature);
-  get("method", method), get("feature", feature);
+  std::string method = method_name(t.match.method), feature = feature_name(t.match.feature),
+              look = repaint::look_name(t.look);
+  get("method", method), get("feature", feature), get("look", look);
   for_each_option(t, get);
   if (!bad.empty()) return make_error(name + ": options." + bad + " has the wrong type or is out of range");
   auto me = parse_method(method);
   if (!me) return make_error(name + ": options.method: " + me.message());
   auto fe = parse_feature(feature);
   if (!fe) return make_error(name + ": options.feature: " + fe.message());
-  t.match.method = *me, t.match.feature = *fe;
+  auto lo = repaint::parse_look(look);
+  if (!lo) return make_error(name + ": options.look: " + lo.message());
+  t.match.method = *me, t.match.feature = *fe, t.look = *lo;
   if (auto s = t.check(); !s) return make_error(name + ": options: " + s.message());
   return t;
 }
@@ -439,13 +494,18 @@ Status write_files(const TransferResult& r, PreparedPair* pair, const std::files
   // painting and encoding is parallel within), so one is in memory at a time.
   std::vector<std::function<Status()>> painted;
   if (pair) {
-    const size_t lamps = std::min(pair->src.view.images.size(), pair->dst.view.images.size());
+    const size_t lamps = r.look ? pair->dst.view.images.size()
+                                : std::min(pair->src.view.images.size(), pair->dst.view.images.size());
     for (size_t i = 0; i < lamps; ++i) {
       painted.push_back([&r, pair, &folder, i]() -> Status {
         cv::Mat& backdrop = pair->dst.view.images[i];
         const cv::Mat& photo = pair->src.view.images[i];
         cv::Mat out;
-        if (r.blend) {
+        if (r.look) {
+          auto shaded = r.look->paint(i, backdrop);
+          if (!shaded) return make_error("repaint: " + shaded.message());
+          out = std::move(*shaded);
+        } else if (r.blend) {
           out = backdrop;  // painted in place: the photo is released next
           if (auto s = fast::apply_blend(*r.blend, photo, out); !s) return make_error("repaint: " + s.message());
         } else {

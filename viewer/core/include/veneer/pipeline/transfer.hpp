@@ -18,6 +18,7 @@
 #include "veneer/match/map_file.hpp"
 #include "veneer/match/matcher.hpp"
 #include "veneer/match/object.hpp"
+#include "veneer/repaint/look.hpp"
 #include "veneer/repaint/repaint.hpp"
 #include "veneer/util/expected.hpp"
 #include "veneer/util/progress.hpp"
@@ -39,12 +40,32 @@ struct TransferOptions {
   double blend_guide = 0.1;    // blend: weigh each proposal by its normal's fit, fall-off |dn| (0 = off,
                                // plain Gaussian; [0, 2]; see fast::BlendGuide); maps matched on
                                // normals only (an intensities map is blended plain)
+  repaint::Look look = repaint::Look::shaded;  // how the pictures are painted: shaded (the default: the
+                               // source's texture through the map, each lamp shading it as it shades the
+                               // destination, the source's gloss placed by the destination's normals;
+                               // repaint/look.hpp) | copy (each lamp's source photo pasted, blended)
+  repaint::LookOptions look_options;  // the shaded look's
   bool keep_pictures = true;   // transfer(): every photo repainted into result.repainted (~250 MB
                                // each at full resolution); false leaves them out, for
                                // write_transfer(result, pair, ...) to paint and write one at a time
+  // metrics.json's "look" (eval/look.hpp) is always measured against the
+  // destination's own photos (its cost: the pictures in grey, and painted once
+  // more when not kept); on a simulated pair also against the truth look (the
+  // destination's scene rendered in the source's material: one set rendered).
+  bool look_floor = false;     // also the floor: the `linear` map's pixel copy scored the same way, and
+                               // the ratio shading / floor (a second match and repaint)
   Status check() const;
 };
 
+
+// The matching the product's default transfer runs (the CLI's, the viewer's
+// and `make demo`'s defaults): `combined`, whose chunks of the nearest
+// normals may err by up to 0.6 with the shaded look -- large chunks keep the
+// source's texture whole, the look puts the shading right (bull <- orange
+// 512x340: coherence 0.92, shading error 0.45x the linear map's pixel copy)
+// -- and by the matcher's 0.10 with the copy look, whose shading is the
+// chunks' own.
+MatchOptions default_match_options(repaint::Look look = repaint::Look::shaded);
 
 struct TransferResult {
   Map map;
@@ -61,6 +82,7 @@ struct TransferResult {
   bool map_given = false;          // made from a map computed earlier (transfer(pair, options, map))
   std::shared_ptr<const fast::BlendPlan> blend;  // the pictures' blend weights (blend > 0), for
                                                  // repainting more photos the same way (live video)
+  std::shared_ptr<const repaint::ShadedLook> look;  // what painted the pictures (look shaded; null for copy)
 };
 
 Expected<TransferResult> transfer(const io::ImageSet& destination, const io::ImageSet& source,
@@ -95,6 +117,11 @@ Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOption
 // Fails for a map of another size than the pair's destination.
 Expected<std::shared_ptr<const fast::BlendPlan>> blend_plan_for(const PreparedPair& pair,
                                                                 const TransferOptions& options, const Map& map);
+// The shaded look of `map` for the pair (options.look_options), what
+// transfer() paints the pictures with when options.look is shaded.
+Expected<std::shared_ptr<const repaint::ShadedLook>> shaded_look(const PreparedPair& pair,
+                                                                 const TransferOptions& options, const Map& map,
+                                                                 const Progress& progress = {});
 // The options a transfer folder's metrics.json records (write_transfer), for
 // redoing its pictures the same way -- TransferOptions' defaults for any it
 // leaves out. Fails, naming the file and the key, when the file cannot be
