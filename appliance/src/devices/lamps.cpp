@@ -8,6 +8,7 @@
 #include <sstream>
 #include <thread>
 
+#include "veneer/util/enum_names.hpp"
 #include "veneer/util/log.hpp"
 
 namespace veneerd {
@@ -23,14 +24,10 @@ int xy_to_mired(double x, double y) {
 
 }  // namespace
 
-const char* colour_mode_name(ColourMode mode) {
-  switch (mode) {
-    case ColourMode::xy: return "xy";
-    case ColourMode::ct: return "ct";
-    case ColourMode::hs: return "hs";
-  }
-  return "?";
-}
+constexpr veneer::EnumName<ColourMode> kColourModeNames[] = {
+    {ColourMode::xy, "xy"}, {ColourMode::ct, "ct"}, {ColourMode::hs, "hs"}};
+
+const char* colour_mode_name(ColourMode mode) { return veneer::name_of(kColourModeNames, mode, "?"); }
 
 LampState rig_white(int brightness) {
   LampState s;

@@ -11,17 +11,14 @@
 #include <sys/socket.h>
 
 #include "veneer/dnssd/dnssd.hpp"
+#include "veneer/util/enum_names.hpp"
 
 namespace veneer::dnssd {
 
-const char* family_name(Family family) {
-  switch (family) {
-    case Family::ipv4: return "IPv4";
-    case Family::ipv6: return "IPv6";
-    case Family::any: break;
-  }
-  return "IPv4 and IPv6";
-}
+constexpr EnumName<Family> kFamilyNames[] = {
+    {Family::any, "IPv4 and IPv6"}, {Family::ipv4, "IPv4"}, {Family::ipv6, "IPv6"}};
+
+const char* family_name(Family family) { return name_of(kFamilyNames, family, "IPv4 and IPv6"); }
 
 std::string Reach::describe() const {
   return (interface == 0 ? std::string("every interface") : interface_name) + ", " + family_name(family);

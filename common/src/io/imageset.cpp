@@ -29,6 +29,7 @@
 #include <cmath>
 
 #include "set_detail.hpp"
+#include "veneer/util/enum_names.hpp"
 
 namespace veneer::io {
 namespace fs = std::filesystem;
@@ -36,36 +37,22 @@ using namespace detail;
 
 // --- public ----------------------------------------------------------------------
 
-const char* role_name(Role role) {
-  switch (role) {
-    case Role::destination: return "destination";
-    case Role::source: return "source";
-    case Role::unknown: break;
-  }
-  return "unknown";
-}
+constexpr EnumName<Role> kRoleNames[] = {
+    {Role::destination, "destination"}, {Role::source, "source"}, {Role::unknown, "unknown"}};
+constexpr EnumName<PhotoSource> kPhotoSourceNames[] = {
+    {PhotoSource::automatic, "auto"}, {PhotoSource::raw, "raw"}, {PhotoSource::developed, "developed"}};
+
+const char* role_name(Role role) { return name_of(kRoleNames, role); }
 
 std::optional<Role> parse_role(const std::string& name) {
-  if (name == "destination") return Role::destination;
-  if (name == "source") return Role::source;
-  if (name == "unknown" || name.empty()) return Role::unknown;
-  return std::nullopt;
+  if (name.empty()) return Role::unknown;
+  return find_value(kRoleNames, name);
 }
 
-const char* photo_source_name(PhotoSource p) {
-  switch (p) {
-    case PhotoSource::automatic: return "auto";
-    case PhotoSource::raw: return "raw";
-    case PhotoSource::developed: return "developed";
-  }
-  return "auto";
-}
+const char* photo_source_name(PhotoSource p) { return name_of(kPhotoSourceNames, p, "auto"); }
 
 Expected<PhotoSource> parse_photo_source(const std::string& name) {
-  for (PhotoSource p : {PhotoSource::automatic, PhotoSource::raw, PhotoSource::developed}) {
-    if (name == photo_source_name(p)) return p;
-  }
-  return make_error("photo source \"" + name.substr(0, 32) + "\" is not auto, raw or developed");
+  return parse_name(kPhotoSourceNames, name, "photo source");
 }
 
 Status ReadOptions::check() const { return raw.check(); }

@@ -18,6 +18,7 @@
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/raw.hpp"
 #include "veneer/io/reduced.hpp"
+#include "veneer/util/enum_names.hpp"
 
 namespace veneer::io {
 namespace fs = std::filesystem;
@@ -65,23 +66,15 @@ Expected<std::unique_ptr<RawPeek>> open_raw(std::string_view bytes, const std::s
 
 }  // namespace
 
-const char* reduced_decode_name(ReducedDecode d) {
-  switch (d) {
-    case ReducedDecode::automatic: return "auto";
-    case ReducedDecode::raw_binned: return "raw-binned";
-    case ReducedDecode::jpeg_reduced: return "jpeg-reduced";
-    case ReducedDecode::raw_preview: return "raw-preview";
-    case ReducedDecode::developed: return "developed";
-  }
-  return "unknown";
-}
+constexpr EnumName<ReducedDecode> kReducedDecodeNames[] = {
+    {ReducedDecode::automatic, "auto"},           {ReducedDecode::raw_binned, "raw-binned"},
+    {ReducedDecode::jpeg_reduced, "jpeg-reduced"}, {ReducedDecode::raw_preview, "raw-preview"},
+    {ReducedDecode::developed, "developed"}};
+
+const char* reduced_decode_name(ReducedDecode d) { return name_of(kReducedDecodeNames, d); }
 
 Expected<ReducedDecode> parse_reduced_decode(const std::string& name) {
-  for (ReducedDecode d : {ReducedDecode::automatic, ReducedDecode::raw_binned, ReducedDecode::jpeg_reduced,
-                          ReducedDecode::raw_preview, ReducedDecode::developed})
-    if (name == reduced_decode_name(d)) return d;
-  return make_error("reduced decode \"" + name.substr(0, 32) +
-                    "\" is not one of auto, raw-binned, jpeg-reduced, raw-preview, developed");
+  return parse_name(kReducedDecodeNames, name, "reduced decode");
 }
 
 Expected<cv::Mat> decode_raw_binned(std::string_view bytes, int factor, const std::string& name) {

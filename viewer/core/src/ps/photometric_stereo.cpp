@@ -28,25 +28,20 @@
 #include "depth.hpp"
 #include "row_solver.hpp"
 #include "veneer/io/big_buffers.hpp"
+#include "veneer/util/enum_names.hpp"
 #include "veneer/util/log.hpp"
 
 namespace veneer::ps {
 
-const char* light_model_name(LightModel m) {
-  switch (m) {
-    case LightModel::automatic: return "automatic";
-    case LightModel::distant: return "distant";
-    case LightModel::near: return "near";
-  }
-  return "automatic";
-}
+// "auto" is an alias of "automatic".
+constexpr EnumName<LightModel> kLightModelNames[] = {{LightModel::automatic, "automatic"},
+                                                     {LightModel::distant, "distant"},
+                                                     {LightModel::near, "near"},
+                                                     {LightModel::automatic, "auto"}};
 
-Expected<LightModel> parse_light_model(const std::string& s) {
-  if (s == "automatic" || s == "auto") return LightModel::automatic;
-  if (s == "distant") return LightModel::distant;
-  if (s == "near") return LightModel::near;
-  return make_error("unknown light model '" + s + "' (automatic, distant, near)");
-}
+const char* light_model_name(LightModel m) { return name_of(kLightModelNames, m, "automatic"); }
+
+Expected<LightModel> parse_light_model(const std::string& s) { return parse_name(kLightModelNames, s, "light model"); }
 
 Status PsOptions::check() const {
   if (!(shadow_fraction >= 0.f && shadow_fraction < 1.f))
@@ -130,6 +125,16 @@ void fill_from_neighbours(cv::Mat& normals, const cv::Mat& mask, const cv::Mat& 
     front.swap(next);
   }
 }
+
+// The solver's thresholds from the options, for n lamps over images of
+// `size`; the robust-only ones are off without `robust`. The lamps, the
+// pseudo-inverses and the images are the caller's to fill in.
+Setup setup_for(const PsOptions& o, int n, cv::Size size) {
+  return Setup{.n = n, .width = size.width, .height = size.height, .robust = o.robust,
+               .shadow_fraction = o.shadow_fraction, .saturation = o.saturation, .min_signal = o.min_signal,
+               .outlier_fraction = o.outlier_fraction, .diffuse_chroma = o.robust ? o.diffuse_chroma : 0.f};
+}
+
 }  // namespace
 
 Status solve_once(const io::ImageSet& set, const cv::Mat& mask_in, const PsOptions& options, const Progress& progress,
@@ -164,16 +169,7 @@ Status solve_once(const io::ImageSet& set, const cv::Mat& mask_in, const PsOptio
   const int solved = cv::countNonZero(mask);
   if (solved == 0) return make_error("the mask is empty: no object pixels to solve");
 
-  Setup s;
-  s.n = n;
-  s.width = size.width;
-  s.height = size.height;
-  s.robust = options.robust;
-  s.shadow_fraction = options.shadow_fraction;
-  s.saturation = options.saturation;
-  s.min_signal = options.min_signal;
-  s.outlier_fraction = options.outlier_fraction;
-  s.diffuse_chroma = options.robust ? options.diffuse_chroma : 0.f;
+  Setup s = setup_for(options, n, size);
   s.dir.resize(size_t(n) * 3);
   s.inv_e.resize(size_t(n) * 3);
   bool have_positions = true;

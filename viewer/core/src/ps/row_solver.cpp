@@ -132,6 +132,29 @@ VENEER_IVDEP
     M[k] = std::max(M[k], g);
   }
 }
+
+// Calls f(k, sh) for the pixels k < count with lamp i's shading sh = n . V_i
+// (near: the pixel's own light vector, b.V) or n . l_i (distant), n the
+// pixel's fitted normal (b.nx, b.ny, b.nz).
+template <class F>
+void for_each_shading(const Setup& s, const Scratch& b, int i, int count, F&& f) {
+  const float* __restrict nx = b.nx.data();
+  const float* __restrict ny = b.ny.data();
+  const float* __restrict nz = b.nz.data();
+  if (s.near) {
+    const size_t cap = size_t(b.cap);
+    const float* __restrict vx = b.V.data() + (size_t(i) * 3 + 0) * cap;
+    const float* __restrict vy = b.V.data() + (size_t(i) * 3 + 1) * cap;
+    const float* __restrict vz = b.V.data() + (size_t(i) * 3 + 2) * cap;
+VENEER_IVDEP
+    for (int k = 0; k < count; ++k) f(k, nx[k] * vx[k] + ny[k] * vy[k] + nz[k] * vz[k]);
+  } else {
+    const float lx = s.dir[i * 3], ly = s.dir[i * 3 + 1], lz = s.dir[i * 3 + 2];
+VENEER_IVDEP
+    for (int k = 0; k < count; ++k) f(k, nx[k] * lx + ny[k] * ly + nz[k] * lz);
+  }
+}
+
 }  // namespace
 
 void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, const float* z,
@@ -410,19 +433,12 @@ VENEER_IVDEP
     for (int i = 0; i < n; ++i) {
       const float* __restrict yy = b.Y.data() + size_t(i) * cap;
       const float* __restrict w = b.W.data() + size_t(i) * cap;
-      const float* __restrict vx = b.V.data() + (size_t(i) * 3 + 0) * cap;
-      const float* __restrict vy = b.V.data() + (size_t(i) * 3 + 1) * cap;
-      const float* __restrict vz = b.V.data() + (size_t(i) * 3 + 2) * cap;
-      const float lx = s.dir[i * 3], ly = s.dir[i * 3 + 1], lz = s.dir[i * 3 + 2];
-      const bool near = s.near;
-VENEER_IVDEP
-      for (int k = 0; k < count; ++k) {
-        const float sh = near ? nx[k] * vx[k] + ny[k] * vy[k] + nz[k] * vz[k] : nx[k] * lx + ny[k] * ly + nz[k] * lz;
+      for_each_shading(s, b, i, count, [&](int k, float sh) {
         const float r = std::abs(yy[k] - ga[k] * sh) * w[k];
         const bool sel = r > best[k];
         best[k] = sel ? r : best[k];
         best_i[k] = sel ? float(i) : best_i[k];
-      }
+      });
     }
     int drops = 0;
     const float of = s.outlier_fraction;
@@ -471,17 +487,7 @@ VENEER_IVDEP
       const float d = yy[k] - ga[k] * sh;
       res[k] += w[k] * d * d;
     };
-    if (s.near) {
-      const float* __restrict vx = b.V.data() + (size_t(i) * 3 + 0) * cap;
-      const float* __restrict vy = b.V.data() + (size_t(i) * 3 + 1) * cap;
-      const float* __restrict vz = b.V.data() + (size_t(i) * 3 + 2) * cap;
-VENEER_IVDEP
-      for (int k = 0; k < count; ++k) add(k, nx[k] * vx[k] + ny[k] * vy[k] + nz[k] * vz[k]);
-    } else {
-      const float lx = s.dir[i * 3], ly = s.dir[i * 3 + 1], lz = s.dir[i * 3 + 2];
-VENEER_IVDEP
-      for (int k = 0; k < count; ++k) add(k, nx[k] * lx + ny[k] * ly + nz[k] * lz);
-    }
+    for_each_shading(s, b, i, count, add);
   }
   // 6. write.
   float* __restrict on = out.normals;

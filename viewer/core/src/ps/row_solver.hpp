@@ -19,6 +19,8 @@ namespace veneer::ps::detail {
 constexpr int kMaxPatternLights = 12;  // cache every pattern up to 2^12 (distant model)
 constexpr int kMaxNearLights = 32;
 
+// Every member has an initializer, so that setup_for (photometric_stereo.cpp)
+// can name only the ones it sets.
 struct Setup {
   int n = 0;
   int width = 0, height = 0;
@@ -26,17 +28,17 @@ struct Setup {
   bool robust = true;
   float shadow_fraction = 0.1f, saturation = 0.98f, min_signal = 1e-3f, outlier_fraction = 0.0f;
   float diffuse_chroma = 0.0f;   // see PsOptions::diffuse_chroma
-  std::vector<float> dir;        // n*3 distant directions
-  std::vector<float> pos;        // n*3 lamp positions (near)
-  std::vector<float> pos_norm2;  // n: |position|^2 (intensity reference distance)
-  std::vector<float> inv_e;      // n*3 BGR 1/intensity
+  std::vector<float> dir{};      // n*3 distant directions
+  std::vector<float> pos{};      // n*3 lamp positions (near)
+  std::vector<float> pos_norm2{};  // n: |position|^2 (intensity reference distance)
+  std::vector<float> inv_e{};    // n*3 BGR 1/intensity
   float f = 1, cx = 0, cy = 0;   // intrinsics (near)
   // Distant model: pseudo-inverse (3 x n, zero columns for dropped lamps) per pattern.
   bool use_cache = false;
-  std::vector<float> pinv;       // (1 << n) * 3 * n, or only the full pattern when !use_cache
-  std::vector<uint8_t> pinv_ok;
+  std::vector<float> pinv{};     // (1 << n) * 3 * n, or only the full pattern when !use_cache
+  std::vector<uint8_t> pinv_ok{};
   uint32_t full = 0;
-  std::vector<const float*> images;  // n, continuous CV_32FC3
+  std::vector<const float*> images{};  // n, continuous CV_32FC3
   const float* ambient = nullptr;
 };
 

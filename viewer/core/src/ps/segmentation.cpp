@@ -7,25 +7,19 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "veneer/util/enum_names.hpp"
+
 namespace veneer::ps {
 
-const char* segment_method_name(SegmentMethod m) {
-  switch (m) {
-    case SegmentMethod::automatic: return "automatic";
-    case SegmentMethod::supplied: return "supplied";
-    case SegmentMethod::threshold: return "threshold";
-    case SegmentMethod::otsu: return "otsu";
-    case SegmentMethod::none: return "none";
-    case SegmentMethod::contrast: return "contrast";
-  }
-  return "automatic";
-}
+constexpr EnumName<SegmentMethod> kSegmentMethodNames[] = {
+    {SegmentMethod::automatic, "automatic"}, {SegmentMethod::supplied, "supplied"},
+    {SegmentMethod::contrast, "contrast"},   {SegmentMethod::threshold, "threshold"},
+    {SegmentMethod::otsu, "otsu"},           {SegmentMethod::none, "none"}};
+
+const char* segment_method_name(SegmentMethod m) { return name_of(kSegmentMethodNames, m, "automatic"); }
 
 Expected<SegmentMethod> parse_segment_method(const std::string& s) {
-  for (SegmentMethod m : {SegmentMethod::automatic, SegmentMethod::supplied, SegmentMethod::threshold,
-                          SegmentMethod::otsu, SegmentMethod::none, SegmentMethod::contrast})
-    if (s == segment_method_name(m)) return m;
-  return make_error("unknown segmentation method '" + s + "' (automatic, supplied, contrast, threshold, otsu, none)");
+  return parse_name(kSegmentMethodNames, s, "segmentation method");
 }
 
 Status SegmentOptions::check() const {
