@@ -1,5 +1,6 @@
-// bench_look: the coherence-shading frontier (issue 35). Each matching
-// method's transfer, scored by metrics.json's look (eval/look.hpp): coverage
+// bench_look: the coherence-shading frontier (issue 35). The default
+// transfer (the shaded look over default_match_options()) and the pixel copy
+// through each matching method's map, scored by metrics.json's look (eval/look.hpp): coverage
 // and coherence of the map, the per-lamp shading error against the reference,
 // that error over the `linear` map's (the floor of pixel copying, same run),
 // and texture_corr (the result's fine detail against the source's warped
@@ -73,18 +74,24 @@ void frontier(const std::string& title, const io::ImageSet& dst, const io::Image
     pipeline::TransferOptions options;
   };
   std::vector<Method> methods;
-  const pipeline::TransferOptions defaults;
-  methods.push_back({std::string("default (") + match::method_name(defaults.match.method) + ")", defaults});
+  // The product's default: the shaded look over default_match_options()
+  // (what the CLI, the viewer and `make demo` run); then pixel copies through
+  // each map, `linear` the floor, `combined` the default before the look.
+  pipeline::TransferOptions defaults;
+  defaults.match = pipeline::default_match_options(repaint::Look::shaded);
+  methods.push_back({std::string("default (shaded look, ") + match::method_name(defaults.match.method) + ")", defaults});
   for (match::Method m : {match::Method::linear, match::Method::coherent, match::Method::combined}) {
     pipeline::TransferOptions o;
+    o.look = repaint::Look::copy;
+    o.match = pipeline::default_match_options(repaint::Look::copy);
     o.match.method = m;
-    methods.push_back({match::method_name(m), o});
+    methods.push_back({std::string(match::method_name(m)) + " (copy)", o});
   }
   std::vector<Row> rows;
   for (const Method& m : methods) rows.push_back(run(m.name, dst, src, m.options));
   double floor = 0, object_floor = 0;
   for (const Row& r : rows)
-    if (r.ok && r.name == "linear") floor = r.shading, object_floor = r.object_shading;
+    if (r.ok && r.name == "linear (copy)") floor = r.shading, object_floor = r.object_shading;
   if (!rows.empty()) std::printf("reference: %s\n\n", rows.back().reference.c_str());
   // Where the reference has no mask (look.py then compares every pixel), the
   // figures over the object follow, their own columns.
