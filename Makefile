@@ -2,8 +2,8 @@
 #   make          install what is missing (tools/install-deps), build into build/ (programs in build/bin/)
 #   make demo     install what is missing, build the programs the demo runs (veneerd, veneer),
 #                 run the main job on the simulated rig (and veneer-viewer, if built, with a display)
-#   make test     install what is missing, build everything (tests, benchmarks), run every test (CTest)
-#   make bench    run the benchmarks and print their tables
+#   make test     install what is missing, build everything but the benchmarks, run every test (CTest)
+#   make bench    build the benchmarks (target benches) and run them, printing their tables
 #   make asan     address/undefined-sanitizer build + tests in build-asan/
 #   make fuzz     build the libFuzzer targets with clang and run each briefly
 #   make package  Debian packages into build-package/: veneerd (arm64, cross-built, and amd64),
@@ -48,6 +48,7 @@ test: deps
 
 bench: deps
 	@$(MAKE) --no-print-directory build
+	cmake --build $(BUILD) -j $(JOBS) --target benches
 	tools/bench.sh $(BUILD)
 
 asan: deps
