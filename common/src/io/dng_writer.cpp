@@ -215,7 +215,7 @@ Expected<std::string> encode_dng(const cv::Mat& photo, const DngOptions& o) {
     for (int c = 0; c < 3; ++c) matrix.push_back(o.as_shot_neutral[r] * xyz_to_srgb[r][c]);
 
   const uint32_t uw = static_cast<uint32_t>(w), uh = static_cast<uint32_t>(h);
-  const std::vector<uint32_t> placeholder(blocks.size(), 0);
+  const std::vector<uint32_t> offsets_to_come(blocks.size(), 0);  // known once the IFD is laid out
   std::vector<Entry> ifd0 = {
       longs(254, {0}),                    // NewSubfileType: the main image
       longs(256, {uw}),                   // ImageWidth
@@ -237,7 +237,7 @@ Expected<std::string> encode_dng(const cv::Mat& photo, const DngOptions& o) {
   if (tiled) {
     ifd0.push_back(longs(322, {static_cast<uint32_t>(tile_w)}));  // TileWidth
     ifd0.push_back(longs(323, {static_cast<uint32_t>(tile_h)}));  // TileLength
-    ifd0.push_back(long_array(324, placeholder));                  // TileOffsets (set below)
+    ifd0.push_back(long_array(324, offsets_to_come));                  // TileOffsets (set below)
     std::vector<uint32_t> sizes;
     for (const auto& b : blocks) sizes.push_back(static_cast<uint32_t>(b.size()));
     ifd0.push_back(long_array(325, sizes));                        // TileByteCounts
