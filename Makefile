@@ -4,6 +4,8 @@
 #                 run the main job on the simulated rig (and veneer-viewer, if built, with a display)
 #   make test     install what is missing, build everything but the benchmarks, run every test (CTest)
 #   make bench    build the benchmarks (target benches) and run them, printing their tables
+#   make buildtime  a cold build (no compiler cache) in build-time/: wall time of make demo's and
+#                 make test's targets, the load beside them, the slowest translation units
 #   make asan     address/undefined-sanitizer build + tests in build-asan/
 #   make fuzz     build the libFuzzer targets with clang and run each briefly
 #   make package  Debian packages into build-package/: veneerd (arm64, cross-built, and amd64),
@@ -18,7 +20,7 @@ FUZZ_SECONDS ?= 30
 
 PACKAGE_OUT ?= build-package
 
-.PHONY: all deps configure build demo test bench asan fuzz package package-deps package-test clean
+.PHONY: all deps configure build demo test bench buildtime asan fuzz package package-deps package-test clean
 
 all: deps
 	@$(MAKE) --no-print-directory build
@@ -38,7 +40,7 @@ build: configure
 # What tools/demo.sh runs, and the libraries they link: nothing else.
 demo: deps
 	@$(MAKE) --no-print-directory configure
-	@echo "make demo: building veneerd and veneer (make builds veneer-viewer, make test the tests and benchmarks)"
+	@echo "make demo: building veneerd and veneer (make builds veneer-viewer too, make test the tests, make bench the benchmarks)"
 	cmake --build $(BUILD) -j $(JOBS) --target veneerd veneer
 	tools/demo.sh $(BUILD)
 
@@ -50,6 +52,9 @@ bench: deps
 	@$(MAKE) --no-print-directory build
 	cmake --build $(BUILD) -j $(JOBS) --target benches
 	tools/bench.sh $(BUILD)
+
+buildtime: deps
+	tools/buildtime.sh build-time $(JOBS)
 
 asan: deps
 	cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DVENEER_SANITIZE=ON $(CMAKE_ARGS)
@@ -75,4 +80,4 @@ package-test: package-deps
 	tools/package/test.sh $(PACKAGE_OUT)
 
 clean:
-	rm -rf $(BUILD) build-asan build-fuzz demo-out $(PACKAGE_OUT)
+	rm -rf $(BUILD) build-asan build-fuzz build-time demo-out $(PACKAGE_OUT)
