@@ -15,6 +15,7 @@
 #include "veneer/pipeline/live.hpp"
 #include "veneer/pipeline/prepare.hpp"
 #include "veneer/pipeline/transfer.hpp"
+#include "veneer/repaint/hsh.hpp"
 #include "veneer/repaint/rti_export.hpp"
 
 namespace veneer::cli {
@@ -185,6 +186,12 @@ int run(const TransferArgs& a) {
     pair = pipeline::prepare_pair(a.dst, a.src, options, prep, &reports, reading);
   }
   if (!pair) return report.fail(pair.message());
+  // an HSH order the destination's lamps cannot determine fails now, not after the transfer
+  if (hsh_options && hsh_options->order > 0 &&
+      static_cast<size_t>(repaint::hsh_terms(hsh_options->order)) > pair->destination.lights.size())
+    return report.usage("--hsh-order " + std::to_string(hsh_options->order) + " has " +
+                        std::to_string(repaint::hsh_terms(hsh_options->order)) + " coefficients per colour, the destination has " +
+                        std::to_string(pair->destination.lights.size()) + " lamps (at least as many are needed; 0 = automatic)");
   auto result = pipeline::transfer(*pair, options, matching);
   if (!result) return report.fail(result.message());
   std::vector<cv::Vec3d> lamp_directions;
