@@ -241,8 +241,8 @@ VENEER_ARGS_COMMAND(simulate, SimulateArgs,
                   "affine per frame) into --out; frame 0 is the pose of a set rendered with the same options");
   cmd->add_option("--light-path", args->light_path,
                   "render a live sequence instead of a set: the source, still, under one lamp moving on a path "
-                  "between and beyond the rig's lamps: spiral (8.5 to 38.7 degrees off the camera's axis over one "
-                  "turn, across the ring of lamps), circle (40.9 degrees, beyond the ring) or arc (15.3 degrees, "
+                  "between and beyond the rig's lamps: spiral (3.6 to 48.4 degrees off the camera's axis over half "
+                  "a turn, across the ring of lamps between two of them), circle (40.9 degrees, beyond the ring) or arc (15.3 degrees, "
                   "over the top), optionally with overrides, e.g. circle,radius=0.5,height=0.9,from=0,to=360,"
                   "colour=1:0.9:0.8; writes frame_NNNN.png (8-bit sRGB), motion.json (for veneer repaint --video) "
                   "and light_path.json (the lamp per frame); the source is --scene, or with --material that scene "

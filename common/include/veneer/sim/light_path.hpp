@@ -28,20 +28,21 @@ namespace veneer::sim {
 // the camera's axis), every 45 degrees from 0, the bottom (180) empty.
 struct LightPathSpec {
   std::string name = "spiral";  // the named path the fields start from (spiral | circle | arc)
-  double inner_m = 0.12;        // radius at the first frame [m]
-  double radius_m = 0.64;       // radius at the last frame [m]
+  double inner_m = 0.05;        // radius at the first frame [m]
+  double radius_m = 0.9;        // radius at the last frame [m]
   double height_m = 0.8;        // the lamp's z [m] (> 0.05: in front of the object)
-  double from_deg = 67.5;       // azimuth at the first frame [deg]
-  double to_deg = 427.5;        // azimuth at the last frame [deg]
+  double from_deg = 112.5;      // azimuth at the first frame [deg]
+  double to_deg = 292.5;        // azimuth at the last frame [deg]
   bool closed = false;          // a closed loop: the last frame stops one step short of the first again
   cv::Vec3f colour{1, 1, 1};    // the lamp's colour [r, g, b] (1 = the rig's white)
   bool operator==(const LightPathSpec&) const = default;
   Status check() const;
 };
 
-// "spiral" (the default: from 8.5 to 38.7 degrees off the camera's axis over
-// one turn, inside the ring of lamps, across it between the bottom-left and
-// left lamps, and beyond it), "circle" (a closed turn 0.65 m out at 0.75 m:
+// "spiral" (the default: from 3.6 to 48.4 degrees off the camera's axis over
+// half a turn from the lower right to the left, inside the ring of lamps,
+// across it at the empty bottom socket -- between the bottom-right and
+// bottom-left lamps -- and beyond it; never nearer than 9.8 degrees to a lamp), "circle" (a closed turn 0.65 m out at 0.75 m:
 // 40.9 degrees, beyond the ring, starting between the top and top-right
 // sockets), "arc" (over the top from the left to the right, 0.3 m out at
 // 1.1 m: 15.3 degrees, between the ring and the camera), each optionally
