@@ -1,5 +1,6 @@
 // veneer eval: quality figures of a map (against the sets' truth), or the
 // quality table of the thesis pairs.
+#include <filesystem>
 #include <cstdio>
 #include <fstream>
 #include <iostream>
@@ -7,6 +8,7 @@
 #include "command.hpp"
 #include "inputs.hpp"
 #include "output.hpp"
+#include "veneer/eval/live_look.hpp"
 #include "veneer/eval/metrics.hpp"
 #include "veneer/eval/table.hpp"
 #include "veneer/io/imageset.hpp"
@@ -16,7 +18,7 @@ namespace veneer::cli {
 namespace {
 
 struct EvalArgs {
-  std::string dst, src, map, out;
+  std::string dst, src, map, out, live, truth;
   bool table = false, full = false, truth_normals = false, no_fast = false;
   std::string size = "512x340";
 };
@@ -43,6 +45,22 @@ int run_table(const EvalArgs& a) {
   if (!a.out.empty()) {
     if (auto s = report.text(a.out, text); !s) return report.fail(s.message());
   }
+  return 0;
+}
+
+// --live: a repainted live sequence scored frame by frame against the truth frames.
+int run_live(const EvalArgs& a) {
+  if (a.truth.empty()) return report.usage("--live needs --truth (a `veneer simulate --light-path ... --material SOURCE` folder)");
+  if (!std::filesystem::is_directory(a.live)) return report.usage("--live " + a.live + ": no such folder");
+  if (!std::filesystem::is_directory(a.truth)) return report.usage("--truth " + a.truth + ": no such folder");
+  auto look = eval::live_look_folders(a.live, a.truth);
+  if (!look) return report.fail(look.message());
+  std::fputs(look->table().c_str(), stdout);
+  const std::filesystem::path out = a.out.empty() ? std::filesystem::path(a.live) / "live_look.json" : std::filesystem::path(a.out);
+  if (auto s = report.text(out, look->json() + "\n"); !s) return report.fail(s.message());
+  report.line("wrote " + out.string() + ": " + std::to_string(look->frames.size()) + " frames, shading error mean " +
+              std::to_string(look->shading_mean) +
+              (look->texture_corr_mean ? ", texture_corr mean " + std::to_string(*look->texture_corr_mean) : ""));
   return 0;
 }
 
@@ -73,13 +91,25 @@ int run_map(const EvalArgs& a) {
 }  // namespace veneer::cli
 
 VENEER_ARGS_COMMAND(eval, veneer::cli::EvalArgs,
-                    "quality of a map against ground truth, or the quality table (--table)") {
+                    "quality of a map against ground truth, the quality table (--table), or a repainted live sequence against its truth frames (--live, --truth)") {
   veneer::cli::add_map_inputs(cmd, args->dst, args->src, args->map, false);
   cmd->add_flag("--table", args->table, "simulate the thesis pairs and print the quality table");
   cmd->add_flag("--full", args->full, "table: every method x feature x patch (slow)");
   cmd->add_option("--size", args->size, "table: render size WxH (default 512x340)");
   cmd->add_flag("--truth-normals", args->truth_normals, "table: match on true normals, not photometric stereo");
   cmd->add_flag("--no-fast", args->no_fast, "table: leave out the fast engine's rows");
-  cmd->add_option("--out", args->out, "table: also write it to this markdown file");
-  return [args] { return args->table ? veneer::cli::run_table(*args) : veneer::cli::run_map(*args); };
+  cmd->add_option("--out", args->out,
+                  "table: also write it to this markdown file; --live: the per-frame JSON (default "
+                  "<live>/live_look.json)");
+  cmd->add_option("--live", args->live,
+                  "score a repainted live sequence (a `veneer repaint --video` folder) frame by frame against "
+                  "--truth with look.py's measure (shading error, texture_corr; eval/live_look.hpp); prints the "
+                  "table with its mean");
+  cmd->add_option("--truth", args->truth,
+                  "--live: the sequence's folder from `veneer simulate --light-path ... --material SOURCE` "
+                  "(light_path.json, truth/frame_NNNN.png, truth/mask.png)");
+  return [args] {
+    if (!args->live.empty()) return veneer::cli::run_live(*args);
+    return args->table ? veneer::cli::run_table(*args) : veneer::cli::run_map(*args);
+  };
 }

@@ -15,6 +15,7 @@
 #include "veneer/io/camera_files.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
+#include "veneer/sim/light_path.hpp"
 #include "veneer/sim/motion.hpp"
 #include "veneer/sim/simulator.hpp"
 
@@ -41,7 +42,7 @@ bool parse_vec3(const std::string& text, cv::Vec3d* v) {
 ::veneer::cli::Output report{"simulate"};
 
 struct SimulateArgs {
-  std::string scene, material, out, size = "1024x680", offset = "0,0,0", role = "destination", preview, motion;
+  std::string scene, material, out, size = "1024x680", offset = "0,0,0", role = "destination", preview, motion, light_path;
   int frames = 30;
   uint64_t seed = 1;
   double noise = 0.005, scale = 1.0, ambient = 0.0, exposure = 1.0, focal = 0.0;
@@ -78,6 +79,66 @@ int run_motion(const SimulateArgs& a, const veneer::sim::RenderOptions& o) {
                       std::to_string(o.size.width) + "x" + std::to_string(o.size.height) + " (8-bit sRGB PNG) + motion.json");
 }
 
+// --light-path: the source, still, under one lamp moving on a path (a live
+// sequence to measure the live look against); with --material the truth frames.
+int run_light_path(const SimulateArgs& a, const veneer::sim::RenderOptions& o) {
+  namespace fs = std::filesystem;
+  auto spec = veneer::sim::parse_light_path(a.light_path);
+  if (!spec) return report.usage("--light-path: " + spec.message());
+  if (a.frames < 1 || a.frames > 100000) return report.usage("--frames " + std::to_string(a.frames) + ": expected 1..100000");
+  // --material names the source (the scene the live camera sees); --scene is then the destination
+  const std::string source = a.material.empty() ? a.scene : a.material;
+  const std::string destination = a.material.empty() ? "" : a.scene;
+  if (fs::exists(a.out / fs::path("light_path.json")) && !a.overwrite)
+    return report.fail(a.out + ": already holds a sequence (use --overwrite)");
+  if (auto st = report.folder(a.out); !st) return report.fail(st.message());
+  veneer::cli::ProgressBar bar("simulate " + source + " under a moving lamp");
+  veneer::Progress progress;
+  progress.on_progress = [&bar](double f, const std::string& stage) { bar.update(f * 0.9, stage); };
+  auto seq = veneer::sim::simulate_light_path(source, destination, o, *spec, a.frames, progress);
+  if (!seq) return seq.message().rfind("unknown scene", 0) == 0 ? report.usage(seq.message()) : report.fail(seq.message());
+  veneer::sim::LightPathFile sidecar;
+  sidecar.spec = a.light_path.empty() ? spec->name : a.light_path;
+  sidecar.source = source;
+  sidecar.destination = destination;
+  sidecar.size = o.size;
+  sidecar.lights = seq->lights;
+  if (!seq->truth.empty()) {
+    std::error_code ec;
+    fs::create_directories(report.path("truth"), ec);
+    if (ec) return report.fail(report.path("truth").string() + ": " + ec.message());
+    sidecar.truth_mask = "truth/mask.png";
+    if (auto st = report.picture(sidecar.truth_mask, seq->truth_mask); !st) return report.fail(st.message());
+  }
+  for (size_t i = 0; i < seq->frames.size(); ++i) {
+    char name[48];
+    std::snprintf(name, sizeof name, "frame_%04zu.png", i);
+    sidecar.files.emplace_back(name);
+    if (auto st = report.picture(name, seq->frames[i]); !st) return report.fail(st.message());
+    if (!seq->truth.empty()) {
+      std::snprintf(name, sizeof name, "truth/frame_%04zu.png", i);
+      sidecar.truth_files.emplace_back(name);
+      if (auto st = veneer::io::write_png16(report.path(name), seq->truth[i]); !st) return report.fail(st.message());
+    }
+  }
+  // motion.json: the object stays at the stills' pose, so `veneer repaint --video` registers it as a motion sequence
+  veneer::sim::MotionSequence still;
+  still.frames = seq->frames;
+  still.centre = seq->centre;
+  still.mask = seq->mask;
+  for (const auto& l : seq->lights) still.truth.push_back({cv::Matx23d(1, 0, 0, 0, 1, 0), l.position_m});
+  if (auto st = veneer::sim::write_motion_json(report.path("motion.json"), still, "light-path=" + sidecar.spec, sidecar.files); !st)
+    return report.fail(st.message());
+  if (auto st = veneer::sim::write_light_path_json(report.path("light_path.json"), sidecar); !st)
+    return report.fail(st.message());
+  bar.update(1.0, "done");
+  bar.done();
+  return report.wrote("scene " + source + " under a lamp on the " + sidecar.spec + " path, " +
+                      std::to_string(sidecar.files.size()) + " frames " + std::to_string(o.size.width) + "x" +
+                      std::to_string(o.size.height) + " (8-bit sRGB PNG) + motion.json + light_path.json" +
+                      (destination.empty() ? "" : " + truth/ (" + destination + " in " + source + "'s material, 16-bit linear)"));
+}
+
 int run_simulate(const SimulateArgs& a) {
   if (a.list) {
     for (const auto& name : veneer::sim::scene_names()) {
@@ -97,6 +158,10 @@ int run_simulate(const SimulateArgs& a) {
   if (!role || *role == veneer::io::Role::unknown) return report.usage("--role '" + a.role + "': expected destination or source");
   if (a.optics) o.camera_optics();
   if (auto st = o.check(); !st) return report.usage(st.message());
+  if (!a.light_path.empty()) {
+    if (!a.motion.empty()) return report.usage("--light-path and --motion: one sequence at a time");
+    return run_light_path(a, o);
+  }
   if (!a.motion.empty()) {
     if (!a.material.empty()) return report.usage("--material renders a set, not a --motion sequence");
     return run_motion(a, o);
@@ -174,7 +239,16 @@ VENEER_ARGS_COMMAND(simulate, SimulateArgs,
                   "e.g. shift=30:0,rotate=5,scale=1.05,turn=3,lamp=sweep (shift in image pixels, rotate and turn "
                   "in degrees); writes frame_NNNN.png (8-bit sRGB) and motion.json (the true still->frame "
                   "affine per frame) into --out; frame 0 is the pose of a set rendered with the same options");
-  cmd->add_option("--frames", args->frames, "with --motion: how many frames")->capture_default_str();
+  cmd->add_option("--light-path", args->light_path,
+                  "render a live sequence instead of a set: the source, still, under one lamp moving on a path "
+                  "between and beyond the rig's lamps: spiral (3.6 to 48.4 degrees off the camera's axis over half "
+                  "a turn, across the ring of lamps between two of them), circle (40.9 degrees, beyond the ring) or arc (15.3 degrees, "
+                  "over the top), optionally with overrides, e.g. circle,radius=0.5,height=0.9,from=0,to=360,"
+                  "colour=1:0.9:0.8; writes frame_NNNN.png (8-bit sRGB), motion.json (for veneer repaint --video) "
+                  "and light_path.json (the lamp per frame); the source is --scene, or with --material that scene "
+                  "and then --scene is the destination: truth/frame_NNNN.png (16-bit linear, no noise) are the "
+                  "destination in the source's material under the same lamp, truth/mask.png its object");
+  cmd->add_option("--frames", args->frames, "with --motion or --light-path: how many frames")->capture_default_str();
   cmd->add_option("--preview", args->preview, "also write an 8-bit picture of all lamps on (PNG)");
   return [args] { return run_simulate(*args); };
 }

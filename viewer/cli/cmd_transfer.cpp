@@ -15,6 +15,7 @@
 #include "veneer/pipeline/live.hpp"
 #include "veneer/pipeline/prepare.hpp"
 #include "veneer/pipeline/transfer.hpp"
+#include "veneer/repaint/hsh.hpp"
 #include "veneer/repaint/rti_export.hpp"
 
 namespace veneer::cli {
@@ -45,6 +46,7 @@ struct TransferArgs {
   double cache_size_gb = 4.0;
   // the repainted destination as a relightable file (repaint/rti_export.hpp)
   std::string rti, rti_format = "lrgb";
+  int hsh_order = 0;  // --rti-format hsh: 0 = automatic (HshExportOptions)
   // live first (pipeline/live.hpp): only the map at the live view's size
   bool live = false, live_no_truth = false;
   int live_width = io::ReducedOptions{}.width;
@@ -56,7 +58,8 @@ struct TransferArgs {
 // The repainted photos a transfer folder holds (result_light_NN.png, linear
 // 16-bit) fitted into a PTM under the destination's lamp directions.
 Expected<repaint::RtiFit> export_rti(const std::string& folder, const std::vector<cv::Vec3d>& directions,
-                                     const std::string& file, const repaint::RtiExportOptions& options) {
+                                     const std::string& file, const repaint::RtiExportOptions& options,
+                                     const std::optional<repaint::HshExportOptions>& hsh) {
   std::vector<cv::Mat> photos;
   for (size_t i = 0; i < directions.size(); ++i) {
     char name[48];
@@ -65,6 +68,7 @@ Expected<repaint::RtiFit> export_rti(const std::string& folder, const std::vecto
     if (!photo) return photo.error();
     photos.push_back(std::move(photo).value());
   }
+  if (hsh) return repaint::export_hsh(photos, directions, file, *hsh);
   return repaint::export_ptm(photos, directions, file, options);
 }
 
@@ -124,11 +128,16 @@ int run(const TransferArgs& a) {
   options.keep_pictures = false;  // painted and written one at a time (write_transfer with the pair)
   if (auto s = options.check(); !s) return report.usage(s.message());
   repaint::RtiExportOptions rti_options;
+  std::optional<repaint::HshExportOptions> hsh_options;
   if (a.rti_format == "rgb") {
     rti_options.format = repaint::PtmFormat::rgb;
-  } else if (a.rti_format != "lrgb") {
-    return report.usage("--rti-format must be lrgb or rgb, got \"" + a.rti_format + "\"");
+  } else if (a.rti_format == "hsh") {
+    hsh_options = repaint::HshExportOptions{.order = a.hsh_order};
+    if (auto s = hsh_options->check(); !s) return report.usage("--hsh-order: " + s.message());
+  } else if (a.rti_format != "lrgb" && a.rti_format != "ptm") {
+    return report.usage("--rti-format must be lrgb (or ptm), rgb or hsh, got \"" + a.rti_format + "\"");
   }
+  if (a.hsh_order != 0 && !hsh_options) return report.usage("--hsh-order goes with --rti-format hsh");
 
   const auto t_wall = std::chrono::steady_clock::now();
   pipeline::PrepareOptions prep;
@@ -177,6 +186,12 @@ int run(const TransferArgs& a) {
     pair = pipeline::prepare_pair(a.dst, a.src, options, prep, &reports, reading);
   }
   if (!pair) return report.fail(pair.message());
+  // an HSH order the destination's lamps cannot determine fails now, not after the transfer
+  if (hsh_options && hsh_options->order > 0 &&
+      static_cast<size_t>(repaint::hsh_terms(hsh_options->order)) > pair->destination.lights.size())
+    return report.usage("--hsh-order " + std::to_string(hsh_options->order) + " has " +
+                        std::to_string(repaint::hsh_terms(hsh_options->order)) + " coefficients per colour, the destination has " +
+                        std::to_string(pair->destination.lights.size()) + " lamps (at least as many are needed; 0 = automatic)");
   auto result = pipeline::transfer(*pair, options, matching);
   if (!result) return report.fail(result.message());
   std::vector<cv::Vec3d> lamp_directions;
@@ -187,7 +202,7 @@ int run(const TransferArgs& a) {
   std::optional<repaint::RtiFit> rti;
   if (!a.rti.empty()) {
     bar.update(0.99, "fitting the relightable file");
-    auto fit = export_rti(a.out, lamp_directions, a.rti, rti_options);
+    auto fit = export_rti(a.out, lamp_directions, a.rti, rti_options, hsh_options);
     if (!fit) return report.fail(fit.message());
     rti = *fit;
   }
@@ -229,7 +244,7 @@ int run(const TransferArgs& a) {
               a.feature.c_str(), a.patch, a.patch, a.out.c_str());
   if (rti)
     std::printf("  relightable file %s (%s, exposure %.3g): residual %.2f levels RMS, p99 %.2f (the photos spread %.2f)\n",
-                a.rti.c_str(), repaint::ptm_format_name(rti->format), rti->exposure, rti->rms, rti->p99,
+                a.rti.c_str(), rti->format_label().c_str(), rti->exposure, rti->rms, rti->p99,
                 rti->photo_spread);
   if (a.scale < 1)
     std::printf("  computed at %.2fx (--scale): the map and the pictures are %dx%d, smaller than the sets\n", a.scale,
@@ -324,9 +339,17 @@ VENEER_ARGS_COMMAND(transfer, veneer::cli::TransferArgs,
   cmd->add_option("--demosaic", args->demosaic,
                   "RAW interpolation: mhc (the default: ours, on the mosaic LibRaw unpacks, in parallel) | LibRaw's dcb | ahd | ppg | vng | dht | aahd | bilinear");
   cmd->add_option("--rti", args->rti,
-                  "also write the repainted destination as a relightable PTM file (RTIViewer, Relight), fitted to "
+                  "also write the repainted destination as a relightable file (a PTM or, with --rti-format hsh, an "
+                  "HSH .rti; RTIViewer, Relight), fitted to "
                   "the repainted photos under the destination's lamps; its residual goes to stdout and metrics.json");
-  cmd->add_option("--rti-format", args->rti_format, "PTM layout: lrgb (luminance polynomial + colour, default) | rgb");
+  cmd->add_option("--rti-format", args->rti_format,
+                  "the relightable file's layout: lrgb (a PTM: luminance polynomial + colour, the default; also "
+                  "'ptm') | rgb (a PTM, a polynomial per colour) | hsh (an HSH .rti: hemispherical harmonics per "
+                  "colour, --hsh-order)");
+  cmd->add_option("--hsh-order", args->hsh_order,
+                  "--rti-format hsh: 1, 2 or 3 (1, 4 or 9 coefficients per colour; at least as many lamps as "
+                  "coefficients); 0 = automatic, the highest the lamps determine (7 lamps: 2)")
+      ->capture_default_str();
   cmd->add_flag("--no-cache", args->no_cache, "neither read nor write the per-set result cache");
   cmd->add_option("--cache-dir", args->cache_dir, "result cache folder (default $XDG_CACHE_HOME/veneer or ~/.cache/veneer)");
   cmd->add_option("--cache-size-gb", args->cache_size_gb, "result cache size cap, GiB (default 4; least recently used go first)");

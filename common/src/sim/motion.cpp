@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "live_frame.hpp"
 #include "veneer/io/image_io.hpp"
 
 namespace veneer::sim {
@@ -18,12 +19,6 @@ bool parse_number(const std::string& text, double* v) {
   std::istringstream in(text);
   char extra = 0;
   return static_cast<bool>(in >> *v) && !(in >> extra) && std::isfinite(*v);
-}
-
-uint8_t srgb_encode(float linear) {
-  const float c = std::clamp(linear, 0.0f, 1.0f);
-  const float s = c <= 0.0031308f ? 12.92f * c : 1.055f * std::pow(c, 1.0f / 2.4f) - 0.055f;
-  return static_cast<uint8_t>(std::lround(s * 255.0f));
 }
 
 }  // namespace
@@ -117,8 +112,6 @@ Expected<MotionSequence> simulate_motion(const std::string& scene_name, const Re
                           : cv::Point2d((options.size.width - 1) / 2.0, (options.size.height - 1) / 2.0);
   const cv::Matx23d view = view_transform(options.size, spec.view);
   const cv::Size frame_size = spec.view.area() ? spec.view : options.size;
-  uint8_t lut[4096];
-  for (int i = 0; i < 4096; ++i) lut[i] = srgb_encode(i / 4095.0f);
   for (int i = 0; i < frames; ++i) {
     if (progress.cancelled()) return make_error("cancelled");
     MotionFrame m = motion_at(spec, i, frames, seq.centre);
@@ -147,14 +140,7 @@ Expected<MotionSequence> simulate_motion(const std::string& scene_name, const Re
       const cv::Matx33d both = v * cv::Matx33d(a(0, 0), a(0, 1), a(0, 2), a(1, 0), a(1, 1), a(1, 2), 0, 0, 1);
       m.still_to_frame = cv::Matx23d(both(0, 0), both(0, 1), both(0, 2), both(1, 0), both(1, 1), both(1, 2));
     }
-    cv::Mat bgr8(moved.size(), CV_8UC3);
-    for (int y = 0; y < moved.rows; ++y) {
-      const float* src = moved.ptr<float>(y);
-      uint8_t* dst = bgr8.ptr<uint8_t>(y);
-      for (int x = 0; x < moved.cols * 3; ++x)
-        dst[x] = lut[static_cast<int>(std::clamp(src[x], 0.0f, 1.0f) * 4095.0f + 0.5f)];
-    }
-    seq.frames.push_back(bgr8);
+    seq.frames.push_back(encode_live_frame(moved));
     seq.truth.push_back(m);
     progress.report(static_cast<double>(i + 1) / frames, "frame " + std::to_string(i + 1));
   }

@@ -275,6 +275,53 @@ Expected<ShadingError> shading_error(const std::vector<cv::Mat>& result, const s
   return out;
 }
 
+Expected<std::vector<ShadingError>> shading_error_per_lamp(const std::vector<cv::Mat>& result,
+                                                          const std::vector<cv::Mat>& reference, const cv::Mat& mask) {
+  if (result.size() != reference.size())
+    return make_error(std::to_string(result.size()) + " result pictures for " + std::to_string(reference.size()) +
+                      " lamps");
+  if (result.empty()) return make_error("no lamp to compare");
+  const cv::Size size = reference[0].size();
+  if (Status s = check_images(reference, size, "reference photo"); !s) return s.error();
+  if (Status s = check_images(result, size, "result picture"); !s) return s.error();
+  Status status;
+  ShadingInputs in;
+  in.mask = object_mask(mask, size, status);
+  if (!status) return status.error();
+  const std::vector<cv::Mat> r = readable(result), d = readable(reference);
+  in.result = &r;
+  in.reference = &d;
+  in.rm = median_image(r, in.mask);
+  in.dm = median_image(d, in.mask);
+  in.log_rm = log_of(in.rm, in.mask);
+  in.log_dm = log_of(in.dm, in.mask);
+  in.rx = max_image(r, in.mask);
+  in.dx = max_image(d, in.mask);
+  // One lamp at a time: its errors are one picture's lit pixels, few enough to hold.
+  std::vector<ShadingError> out(result.size());
+  cv::parallel_for_(cv::Range(0, static_cast<int>(result.size())), [&](const cv::Range& lamps) {
+    for (int l = lamps.start; l < lamps.end; ++l) {
+      const std::vector<cv::Mat> one_r{r[static_cast<size_t>(l)]}, one_d{d[static_cast<size_t>(l)]};
+      ShadingInputs lamp = in;
+      lamp.result = &one_r;
+      lamp.reference = &one_d;
+      std::vector<double> e;
+      for_each_error(lamp, 0, size.height, [&](double v) { e.push_back(v); });
+      ShadingError& s = out[static_cast<size_t>(l)];
+      s.samples = static_cast<long long>(e.size());
+      if (e.empty()) continue;
+      std::sort(e.begin(), e.end());
+      double sum = 0;
+      for (double v : e) sum += v;
+      s.mean = sum / static_cast<double>(e.size());
+      auto value = [&](long long rank) { return e[static_cast<size_t>(rank)]; };
+      s.median = quantile(s.samples, 0.5, value);
+      s.p90 = quantile(s.samples, 0.9, value);
+    }
+  });
+  return out;
+}
+
 Expected<double> texture_corr(const cv::Mat& result_median, const cv::Mat& source_median, const cv::Mat& map_xy,
                               const cv::Mat& mask) {
   const cv::Size size = result_median.size();

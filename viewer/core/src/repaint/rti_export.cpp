@@ -3,14 +3,18 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
+#include <cstring>
 #include <atomic>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/core/utility.hpp>
 
 #include "veneer/io/image_io.hpp"
+#include "veneer/repaint/hsh.hpp"
 
 namespace veneer::repaint {
 namespace fs = std::filesystem;
@@ -75,9 +79,25 @@ Status RtiExportOptions::check() const {
   return Status::success();
 }
 
+std::string RtiFit::format_label() const {
+  if (hsh_order > 0)
+    return "HSH order " + std::to_string(hsh_order) + " (" + std::to_string(hsh_terms(hsh_order)) + " terms)";
+  return ptm_format_name(format);
+}
+
+Status HshExportOptions::check() const {
+  if (order < 0 || order > 3) return make_error("HSH export: order must be 1..3 (0 = automatic)");
+  if (!std::isfinite(exposure) || exposure < 0) return make_error("HSH export: exposure must be a finite gain >= 0 (0 = automatic)");
+  return Status::success();
+}
+
 std::string RtiFit::json() const {
   nlohmann::ordered_json j;
-  j["format"] = ptm_format_name(format);
+  j["format"] = hsh_order > 0 ? "HSH" : ptm_format_name(format);
+  if (hsh_order > 0) {
+    j["hsh_order"] = hsh_order;
+    j["terms"] = hsh_terms(hsh_order);
+  }
   j["width"] = size.width;
   j["height"] = size.height;
   j["exposure"] = exposure;
@@ -312,6 +332,128 @@ Expected<RtiFit> export_ptm(const std::vector<cv::Mat>& photos, const std::vecto
   if (progress.cancelled()) return make_error(name + ": cancelled");
   if (Status s = io::write_file_atomic(file, out); !s) return s.error();
   progress.report(1.0, "fitting PTM");
+  return fit;
+}
+
+Expected<RtiFit> export_hsh(const std::vector<cv::Mat>& photos, const std::vector<cv::Vec3d>& directions,
+                            const fs::path& file, const HshExportOptions& options, const Progress& progress) {
+  static_assert(std::endian::native == std::endian::little, "the HSH file's floats are written as the host holds them");
+  const std::string name = file.string();
+  if (Status s = options.check(); !s) return make_error(name + ": " + s.message());
+  if (photos.empty() || directions.empty()) return make_error(name + ": HSH fit: no lamps (no photos or no lamp directions)");
+  for (size_t i = 0; i < photos.size(); ++i)
+    if (photos[i].type() != CV_32FC3 || photos[i].size() != photos[0].size() || photos[i].empty())
+      return make_error(name + ": photo " + std::to_string(i) + " is not a linear CV_32FC3 photo of the first's size");
+  const int order = options.order > 0 ? options.order : hsh_order_for(photos.size());
+  RtiFit fit;
+  fit.size = photos[0].size();
+  fit.hsh_order = order;
+  fit.exposure = options.exposure > 0 ? options.exposure : auto_exposure(photos);
+  progress.report(0.0, "fitting HSH");
+  // the photos as the file shows them, 0..1 (BGR)
+  const size_t n = photos.size();
+  std::vector<cv::Mat> display(n);
+  cv::parallel_for_(cv::Range(0, static_cast<int>(n)), [&](const cv::Range& r) {
+    for (int i = r.start; i < r.end; ++i)
+      display[static_cast<size_t>(i)] = ptm_display(photos[static_cast<size_t>(i)], fit.exposure) / 255.0;
+  });
+  if (progress.cancelled()) return make_error(name + ": cancelled");
+  auto hsh = fit_hsh(display, directions, order);
+  if (!hsh) return make_error(name + ": " + hsh.message());
+  progress.report(0.5, "fitting HSH");
+  const int terms = hsh_terms(order);
+  const int w = fit.size.width, h = fit.size.height;
+
+  // One scale and bias per term over every pixel and colour: coefficient = byte / 255 * scale + bias.
+  std::vector<float> scale(static_cast<size_t>(terms)), bias(static_cast<size_t>(terms));
+  for (int k = 0; k < terms; ++k) {
+    float lo = std::numeric_limits<float>::max(), hi = std::numeric_limits<float>::lowest();
+    for (const cv::Mat& c : hsh->coefficients)
+      for (int y = 0; y < h; ++y) {
+        const float* p = c.ptr<float>(y);
+        for (int x = 0; x < w; ++x) {
+          lo = std::min(lo, p[x * terms + k]);
+          hi = std::max(hi, p[x * terms + k]);
+        }
+      }
+    bias[static_cast<size_t>(k)] = lo;
+    scale[static_cast<size_t>(k)] = hi - lo > 1e-12f ? hi - lo : 1.0f;
+  }
+  // bytes[((y * w + x) * 3 + colour) * terms + k], colour 0 = R (the Mats are B, G, R)
+  std::vector<uint8_t> bytes(static_cast<size_t>(w) * h * 3 * static_cast<size_t>(terms));
+  cv::parallel_for_(cv::Range(0, h), [&](const cv::Range& rows) {
+    for (int y = rows.start; y < rows.end; ++y)
+      for (int colour = 0; colour < 3; ++colour) {
+        const float* p = hsh->coefficients[static_cast<size_t>(2 - colour)].ptr<float>(y);
+        for (int x = 0; x < w; ++x)
+          for (int k = 0; k < terms; ++k) {
+            const float v = (p[x * terms + k] - bias[static_cast<size_t>(k)]) / scale[static_cast<size_t>(k)] * 255.0f;
+            bytes[((static_cast<size_t>(y) * w + x) * 3 + static_cast<size_t>(colour)) * terms + static_cast<size_t>(k)] =
+                static_cast<uint8_t>(std::clamp<long>(std::lround(v), 0, 255));
+          }
+      }
+  });
+  if (progress.cancelled()) return make_error(name + ": cancelled");
+  progress.report(0.7, "fitting HSH");
+
+  // The residual of what the file stores, and the photos' own spread, in 8-bit levels.
+  std::vector<std::vector<double>> lamp_basis;
+  for (const auto& d : directions) lamp_basis.push_back(hsh_basis(d, order));
+  constexpr int kBins = 25600;  // |error| histogram, 0.01 level per bin
+  std::vector<double> lamp_sq(n, 0.0);
+  std::vector<long long> hist(kBins + 1, 0);
+  double spread_sq = 0;
+  std::vector<double> coef(static_cast<size_t>(terms));
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x)
+      for (int colour = 0; colour < 3; ++colour) {
+        const uint8_t* b = &bytes[((static_cast<size_t>(y) * w + x) * 3 + static_cast<size_t>(colour)) * terms];
+        for (int k = 0; k < terms; ++k)
+          coef[static_cast<size_t>(k)] = b[k] / 255.0 * scale[static_cast<size_t>(k)] + bias[static_cast<size_t>(k)];
+        double mean = 0;
+        for (size_t i = 0; i < n; ++i) mean += display[i].at<cv::Vec3f>(y, x)[2 - colour] * 255.0 / static_cast<double>(n);
+        for (size_t i = 0; i < n; ++i) {
+          double v = 0;
+          for (int k = 0; k < terms; ++k) v += coef[static_cast<size_t>(k)] * lamp_basis[i][static_cast<size_t>(k)];
+          const double t = display[i].at<cv::Vec3f>(y, x)[2 - colour] * 255.0;
+          const double e = std::clamp(v, 0.0, 1.0) * 255.0 - t;
+          lamp_sq[i] += e * e;
+          hist[static_cast<size_t>(std::min<double>(kBins, std::abs(e) * 100))]++;
+          spread_sq += (t - mean) * (t - mean);
+        }
+      }
+  const double per_lamp = static_cast<double>(w) * h * 3;
+  double total_sq = 0;
+  for (double s : lamp_sq) {
+    fit.rms_per_lamp.push_back(std::sqrt(s / per_lamp));
+    total_sq += s;
+  }
+  fit.rms = std::sqrt(total_sq / (per_lamp * static_cast<double>(n)));
+  fit.photo_spread = std::sqrt(spread_sq / (per_lamp * static_cast<double>(n)));
+  const long long want = static_cast<long long>(std::ceil(0.99 * per_lamp * static_cast<double>(n)));
+  long long seen = 0;
+  for (int b = 0; b <= kBins; ++b) {
+    seen += hist[static_cast<size_t>(b)];
+    if (seen >= want) {
+      fit.p99 = (b + 1) / 100.0;
+      break;
+    }
+  }
+  progress.report(0.9, "fitting HSH");
+
+  std::string out = "#HSH1.2\n3\n" + std::to_string(w) + " " + std::to_string(h) + " 3\n" + std::to_string(terms) + " 2 1\n";
+  const size_t header = out.size();
+  out.resize(header + 2 * sizeof(float) * static_cast<size_t>(terms) + bytes.size());
+  char* dst = out.data() + header;
+  std::memcpy(dst, scale.data(), sizeof(float) * scale.size());
+  dst += sizeof(float) * scale.size();
+  std::memcpy(dst, bias.data(), sizeof(float) * bias.size());
+  dst += sizeof(float) * bias.size();
+  const size_t row = static_cast<size_t>(w) * 3 * static_cast<size_t>(terms);
+  for (int y = h - 1; y >= 0; --y, dst += row) std::memcpy(dst, &bytes[static_cast<size_t>(y) * row], row);
+  if (progress.cancelled()) return make_error(name + ": cancelled");
+  if (Status s = io::write_file_atomic(file, out); !s) return s.error();
+  progress.report(1.0, "fitting HSH");
   return fit;
 }
 

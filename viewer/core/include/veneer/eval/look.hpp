@@ -57,6 +57,14 @@ cv::Mat median_image(const std::vector<cv::Mat>& gray, const cv::Mat& mask);
 Expected<ShadingError> shading_error(const std::vector<cv::Mat>& result, const std::vector<cv::Mat>& reference,
                                      const cv::Mat& mask = {});
 
+// The same per lamp: element l holds lamp l's lit pixels only (medians and
+// maxima still over all lamps, as above); a lamp with no lit pixel has
+// samples = 0. What a live sequence is scored with frame by frame
+// (eval/live_look.hpp), each frame a lamp.
+Expected<std::vector<ShadingError>> shading_error_per_lamp(const std::vector<cv::Mat>& result,
+                                                          const std::vector<cv::Mat>& reference,
+                                                          const cv::Mat& mask = {});
+
 // `result_median`: the transfer's median picture (result_median.png);
 // `source_median`: the per-pixel median of the source's grey photos
 // (median_image of look_gray of each); `map_xy`: the map (CV_32FC2 or

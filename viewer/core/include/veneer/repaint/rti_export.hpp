@@ -36,6 +36,15 @@ struct RtiExportOptions {
   Status check() const;
 };
 
+// The HSH .rti export: the same photos, exposure and display encoding as the
+// PTM's, fitted in hemispherical harmonics (repaint/hsh.hpp).
+struct HshExportOptions {
+  int order = 0;       // 1..3 (1, 4 or 9 coefficients per colour); 0 = automatic: the highest the lamps
+                       // determine by count, hsh_order_for (7 lamps: order 2, 4 coefficients)
+  double exposure = 0; // as RtiExportOptions::exposure
+  Status check() const;
+};
+
 // How well the stored file reproduces the photos: the polynomial evaluated
 // from the file's bytes (quantised coefficients and colours, clamped to
 // 0..255) at each lamp's direction against the photo in the same display
@@ -49,6 +58,8 @@ struct RtiFit {
   double p99 = 0;                      // 99th percentile of |error| over all lamps, pixels, channels
   double photo_spread = 0;             // RMS of the photos about their per-pixel mean over the lamps:
                                        // the residual of a fit that ignored the light
+  int hsh_order = 0;                   // > 0: an HSH file of this order (`format` then unused)
+  std::string format_label() const;    // "PTM_FORMAT_LRGB" | "PTM_FORMAT_RGB" | "HSH order 2 (4 terms)"
   std::string json() const;            // {"format", "width", "height", "exposure", "rms", "rms_per_lamp", ...}
 };
 
@@ -65,6 +76,22 @@ cv::Mat ptm_display(const cv::Mat& linear_bgr, double exposure);
 // and no file.
 Expected<RtiFit> export_ptm(const std::vector<cv::Mat>& photos, const std::vector<cv::Vec3d>& directions,
                             const std::filesystem::path& file, const RtiExportOptions& options = {},
+                            const Progress& progress = {});
+
+// Fits and writes an HSH .rti file (RTIViewer's and Relight's "#HSH1.2"),
+// through a temporary renamed into place:
+//   "#HSH1.2\n", "3\n" (the file type: HSH), "<width> <height> 3\n" (3
+//   colours), "<terms> 2 1\n" (terms per colour, the basis type, 1 byte per
+//   coefficient); then terms float32 scales and terms float32 biases
+//   (little-endian); then the bytes, rows bottom to top, per pixel R, G, B
+//   each with its terms in hsh_basis's order: coefficient = byte / 255 *
+//   scale[k] + bias[k]. A viewer shows clamp(sum_k coefficient_k H_k(light),
+//   0, 1) * 255. One scale and bias per term over every pixel and colour.
+// The residual is of what the file stores (bytes decoded, clamped), in 8-bit
+// levels, as the PTM's. Errors: those of fit_hsh (no lamps, fewer lamps than
+// coefficients, ...), named after the file; no file is left behind.
+Expected<RtiFit> export_hsh(const std::vector<cv::Mat>& photos, const std::vector<cv::Vec3d>& directions,
+                            const std::filesystem::path& file, const HshExportOptions& options = {},
                             const Progress& progress = {});
 
 }  // namespace veneer::repaint

@@ -1,0 +1,80 @@
+// Issue 40 through the real binary: `veneer simulate --light-path` writes a
+// live sequence with its sidecar and truth, `veneer repaint --video` repaints
+// it, `veneer eval --live --truth` scores it frame by frame, `veneer transfer
+// --rti-format hsh` writes an HSH file; bad options exit 2 (usage) with one line.
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+int run(const std::string& args) {
+  const std::string cmd = VENEER_BIN_DIR "/veneer " + args + " >/dev/null 2>&1";
+  const int status = std::system(cmd.c_str());
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+nlohmann::json read_json(const fs::path& file) {
+  std::ifstream in(file);
+  return nlohmann::json::parse(in, nullptr, false);
+}
+
+TEST(LiveLookCli, SimulateRepaintEvalAndHshExport) {
+  const fs::path dir = fs::temp_directory_path() / ("veneer-cli-live-look-" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  const std::string common = " --size 256x170 --scale 2.5 --overwrite";
+  ASSERT_EQ(run("simulate --scene bull --role destination --out " + (dir / "dst").string() + common), 0);
+  ASSERT_EQ(run("simulate --scene orange --role source --out " + (dir / "src").string() + common), 0);
+  const std::string seq = (dir / "seq").string();
+  ASSERT_EQ(run("simulate --scene bull --material orange --light-path spiral --frames 5 --out " + seq + common), 0);
+  for (const char* f : {"frame_0000.png", "frame_0004.png", "motion.json", "light_path.json", "truth/frame_0004.png",
+                        "truth/mask.png"})
+    EXPECT_TRUE(fs::exists(dir / "seq" / f)) << f;
+  const auto sidecar = read_json(dir / "seq" / "light_path.json");
+  ASSERT_TRUE(sidecar.is_object());
+  EXPECT_EQ(sidecar["format"], "veneer-light-path/1");
+  EXPECT_EQ(sidecar["source"], "orange");
+  EXPECT_EQ(sidecar["destination"], "bull");
+  ASSERT_EQ(sidecar["frames"].size(), 5u);
+  for (const char* key : {"position_m", "direction", "intensity", "colour"}) EXPECT_EQ(sidecar["frames"][0][key].size(), 3u) << key;
+
+  const std::string pair = " --dst " + (dir / "dst").string() + " --src " + (dir / "src").string();
+  const fs::path rti = dir / "out.rti";
+  ASSERT_EQ(run("transfer --no-cache --rti " + rti.string() + " --rti-format hsh --out " + (dir / "tr").string() + pair), 0);
+  EXPECT_TRUE(fs::exists(rti));
+  const auto metrics = read_json(dir / "tr" / "metrics.json");
+  ASSERT_TRUE(metrics.contains("rti"));
+  EXPECT_EQ(metrics["rti"]["format"], "HSH");
+  EXPECT_EQ(metrics["rti"]["hsh_order"], 2);  // 7 lamps
+  EXPECT_GT(metrics["rti"]["residual_rms_levels"].get<double>(), 0.0);
+
+  ASSERT_EQ(run("repaint" + pair + " --map " + (dir / "tr").string() + " --video " + seq + " --out " + (dir / "rep").string()), 0);
+  ASSERT_EQ(run("eval --live " + (dir / "rep").string() + " --truth " + seq), 0);
+  const auto look = read_json(dir / "rep" / "live_look.json");
+  ASSERT_TRUE(look.is_object());
+  ASSERT_EQ(look["frames"].size(), 5u);
+  EXPECT_GT(look["frames"][0]["samples"].get<long long>(), 100);
+  EXPECT_TRUE(look["mean"].contains("shading_mean"));
+
+  // usage errors: exit 2
+  EXPECT_EQ(run("simulate --scene orange --light-path zigzag --out " + (dir / "bad").string()), 2);
+  EXPECT_EQ(run("simulate --scene orange --light-path spiral --motion shift=1:0 --out " + (dir / "bad").string()), 2);
+  EXPECT_EQ(run("eval --live " + (dir / "rep").string()), 2);  // no --truth
+  EXPECT_EQ(run("transfer --no-cache --rti-format bogus --out " + (dir / "bad").string() + pair), 2);
+  EXPECT_EQ(run("transfer --no-cache --rti " + (dir / "bad.rti").string() + " --rti-format hsh --hsh-order 3 --out " +
+                (dir / "bad").string() + pair),
+            2);  // 9 coefficients, 7 lamps
+  EXPECT_FALSE(fs::exists(dir / "bad.rti"));
+  fs::remove_all(dir);
+}
+
+}  // namespace
