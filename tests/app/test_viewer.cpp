@@ -895,8 +895,10 @@ TEST(Viewer, MatchingOptionChangesRecomputeTheMap) {
   EXPECT_TRUE(child<QLabel>(w, "transferStatus")->text().contains("map"));
 
   // the blend radius and its guide change how the source's photos are
-  // pasted (the live view's frames; the stills are in the shaded look, which
-  // does not blend), not the map: repainted from the map shown
+  // pasted (the copy look's: the live view's frames), not the map: repainted
+  // from the map shown. Here only that the paste changes and the map stays;
+  // what the blended pixels must be is checked against an oracle independent
+  // of the plan in Viewer.LookSelectorAndTheBlendAgainstAnIndependentOracle.
   const auto pasted = [](const veneer::pipeline::TransferResult& r) {
     return r.blend ? *veneer::repaint::repaint_planned(*r.blend, r.source_median)
                    : veneer::repaint::repaint(r.map, r.source_median);
@@ -934,6 +936,339 @@ TEST(Viewer, MatchingOptionChangesRecomputeTheMap) {
   thr->setValue(0.05);
   EXPECT_FALSE(w.transfer().computing());
   EXPECT_EQ(w.transfer().mapOnlyRuns(), runs);
+}
+
+namespace {
+
+// The oracle of the copy look's blend, worked out here pixel by pixel from
+// what fast::blend_plan's header promises (no plan, no engine call): each
+// mapped pixel p averages, with Gaussian weights exp(-|d|^2 / (2 s^2)),
+// s = max(1, radius / 2), the source pixels its mapped neighbours p + d
+// within the radius propose for it -- their match moved back by d (the
+// match's integer part) -- leaving out proposals off the source's object;
+// with none left, its own match. Unmapped pixels keep `backdrop`. Plain
+// blend only (no normal guide): the caller sets blend_guide to 0.
+cv::Mat blended_by_hand(const veneer::match::Map& map, const cv::Mat& photo, const cv::Mat& source_mask, int radius,
+                        const cv::Mat& backdrop) {
+  cv::Mat out = backdrop.clone();
+  const int w = map.xy.cols, h = map.xy.rows;
+  const double s = std::max(1.0, radius / 2.0);
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const cv::Vec2f own = map.xy.at<cv::Vec2f>(y, x);
+      if (own[0] < 0) continue;
+      cv::Vec3d sum(0, 0, 0);
+      double total = 0;
+      for (int dy = -radius; dy <= radius; ++dy)
+        for (int dx = -radius; dx <= radius; ++dx) {
+          const int nx = x + dx, ny = y + dy;
+          if (nx < 0 || ny < 0 || nx >= w || ny >= h) continue;
+          const cv::Vec2f m = map.xy.at<cv::Vec2f>(ny, nx);
+          if (m[0] < 0) continue;
+          const int qx = static_cast<int>(m[0]) - dx, qy = static_cast<int>(m[1]) - dy;
+          if (qx < 0 || qy < 0 || qx >= photo.cols || qy >= photo.rows || !source_mask.at<uchar>(qy, qx)) continue;
+          const double weight = std::exp(-(dx * dx + dy * dy) / (2 * s * s));
+          sum += weight * cv::Vec3d(photo.at<cv::Vec3f>(qy, qx));
+          total += weight;
+        }
+      if (total > 0) {
+        out.at<cv::Vec3f>(y, x) = cv::Vec3f(sum / total);
+      } else {
+        const int qx = static_cast<int>(std::lround(own[0])), qy = static_cast<int>(std::lround(own[1]));
+        out.at<cv::Vec3f>(y, x) = photo.at<cv::Vec3f>(qy, qx);
+      }
+    }
+  return out;
+}
+
+// The largest difference of the still shown (the median repainted) from the
+// oracle's, over the whole picture, and how many mapped pixels the blend
+// changed from the plain lookup (so the oracle is not checked on a map without seams).
+struct BlendCheck {
+  double worst = 1e9;
+  int blended = 0;
+};
+BlendCheck check_blend(MainWindow& w, int radius) {
+  const auto& r = *w.session().result;
+  const auto pair = w.transfer().prepared();
+  EXPECT_NE(pair, nullptr);
+  if (!pair) return {};
+  EXPECT_EQ(r.look, nullptr) << "the copy look";
+  const cv::Mat want = blended_by_hand(r.map, pair->source_median, pair->src.view.mask, radius,
+                                       pair->destination_median);
+  const cv::Mat plain = blended_by_hand(r.map, pair->source_median, pair->src.view.mask, 0, pair->destination_median);
+  BlendCheck c;
+  c.worst = cv::norm(r.repainted_median, want, cv::NORM_INF);
+  cv::Mat changed;
+  cv::absdiff(want, plain, changed);
+  c.blended = cv::countNonZero(changed.reshape(1) > 1e-4);
+  return c;
+}
+
+// A simulated rig's destination (bull) and source (orange) captured and
+// computed by the one flow, as in workflow.*; false (with a failure) when not.
+::testing::AssertionResult capture_pair_by_flow(MainWindow& w, SimulatedRig& rig) {
+  w.rigPanel().connectToRig(rig.endpoint(), rig.token_file());
+  if (!wait_for([&] { return w.rig().isConnected(); }, 10000))
+    return ::testing::AssertionFailure() << "not connected: " << w.status().lastMessage().toStdString();
+  QTest::mouseClick(child<QPushButton>(w, "captureSource"), Qt::LeftButton);
+  if (!wait_for([&] { return w.session().src != nullptr; }, 60000))
+    return ::testing::AssertionFailure() << "no source: " << w.status().lastMessage().toStdString();
+  QTest::mouseClick(child<QPushButton>(w, "liveCaptureDestination"), Qt::LeftButton);
+  if (!wait_for([&] { return w.session().dst != nullptr && w.session().result != nullptr && !w.transfer().computing(); },
+                120000))
+    return ::testing::AssertionFailure() << "no map: " << w.status().lastMessage().toStdString();
+  return ::testing::AssertionSuccess();
+}
+
+// `veneer transfer` run on the viewer's sets into `out` (extra flags after);
+// its exit code. With the result cache, as the viewer prepares: a set
+// prepared from the cache's files differs from one decoded afresh by up to
+// ~25 16-bit steps in the still (measured 3.9e-4), which is the cache's, not
+// a difference between the programs.
+int run_cli_transfer(MainWindow& w, const QString& out, const QStringList& extra, QString* log) {
+  QProcess p;
+  p.setProcessChannelMode(QProcess::MergedChannels);
+  p.start(VENEER_BIN_DIR "/veneer", QStringList{"transfer", "--dst", w.session().dst->folder, "--src",
+                                                w.session().src->folder, "--out", out} + extra);
+  p.waitForFinished(180000);
+  *log = QString::fromUtf8(p.readAll());
+  return p.exitStatus() == QProcess::NormalExit ? p.exitCode() : -1;
+}
+
+// The viewer's map and still against the folder `veneer transfer` wrote:
+// the same pixels mapped to the same source pixels, the same median picture
+// (to a quarter of an 8-bit step, see below).
+void expect_same_as_cli(MainWindow& w, const QString& folder) {
+  const auto& r = *w.session().result;
+  auto map = veneer::match::read_map((folder + "/map.pfm").toStdString());
+  ASSERT_TRUE(map) << map.message();
+  ASSERT_EQ(map->xy.size(), r.map.xy.size());
+  cv::Mat viewer_xy[2], cli_xy[2];
+  cv::split(r.map.xy, viewer_xy);
+  cv::split(map->xy, cli_xy);
+  const cv::Mat viewer_mapped = viewer_xy[0] >= 0, cli_mapped = cli_xy[0] >= 0;
+  EXPECT_EQ(cv::countNonZero(viewer_mapped != cli_mapped), 0) << "the same pixels mapped";
+  EXPECT_LE(cv::norm(r.map.xy, map->xy, cv::NORM_INF, viewer_mapped), 1e-3) << "to the same source pixels";
+  auto median = veneer::io::read_linear_image((folder + "/result_median.png").toStdString());
+  ASSERT_TRUE(median) << median.message();
+  cv::Mat shown = cv::min(cv::max(r.repainted_median, 0.0), 1.0);
+  // measured up to 5.2e-4 (0.13 of an 8-bit step) in the shaded look, 2.8e-5
+  // to 2.4e-4 in the copy look, with the same map: not yet explained (threads'
+  // summing order? the CLI paints with keep_pictures off), left open
+  EXPECT_LE(cv::norm(shown, *median, cv::NORM_INF), 1e-3) << "the same still";
+  EXPECT_LE(cv::norm(shown, *median, cv::NORM_L1) / shown.total() / 3, 2e-5) << "the same still, on average";
+}
+
+}  // namespace
+
+namespace {
+// The viewer's transfer shown in `w` against `veneer transfer` on the same
+// sets, in the shaded look (the default) and then the copy look (the Look
+// tab's selector against --look copy): the same mask (the Look tab's too),
+// map and still. With `plinth_grey`, the plinth -- what the segmentation sees
+// lit that the set's truth (the bull alone) leaves out -- is mapped by
+// neither and the still leaves it as the destination's own photo.
+void expect_one_answer(MainWindow& w, const QString& work, bool plinth_grey) {
+  const auto pair = w.transfer().prepared();
+  ASSERT_NE(pair, nullptr);
+  const veneer::io::ImageSet& dst = pair->destination;
+  ASSERT_TRUE(dst.truth.present() && !dst.truth.mask.empty()) << "simulated sets carry their truth";
+  EXPECT_EQ(w.session().result->match_options, veneer::pipeline::default_match_options());
+  auto lit = veneer::ps::segment(dst);
+  ASSERT_TRUE(lit) << lit.message();
+  cv::Mat bull;
+  cv::dilate(dst.truth.mask > 127, bull, cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(7, 7)));
+  const cv::Mat plinth = lit->mask & ~bull;
+  ASSERT_GT(cv::countNonZero(plinth), 300) << "the bull stands on a plinth the segmentation sees";
+  auto mapped_on_plinth = [&](const veneer::match::Map& map) {
+    cv::Mat xy[2];
+    cv::split(map.xy, xy);
+    return cv::countNonZero((xy[0] >= 0) & plinth);
+  };
+  for (const char* look : {"shaded", "copy"}) {
+    SCOPED_TRACE(look);
+    if (std::string(look) == "copy") {
+      const auto* before = w.session().result.get();
+      child<QComboBox>(w, "look")->setCurrentText("copy");
+      ASSERT_TRUE(wait_for(
+          [&] { return !w.transfer().computing() && w.session().result && w.session().result.get() != before; }, 60000))
+          << w.status().lastMessage().toStdString();
+      ASSERT_TRUE(wait_for([&] { return !w.transfer().computing(); }, 60000));
+      EXPECT_EQ(w.session().result->look, nullptr) << "the pixel copy";
+      EXPECT_EQ(w.session().result->match_options, veneer::pipeline::default_match_options(veneer::repaint::Look::copy));
+    } else {
+      EXPECT_NE(w.session().result->look, nullptr) << "the shaded look by default";
+    }
+    const QString out = work + "/cli-" + look;
+    QString log;
+    ASSERT_EQ(run_cli_transfer(w, out, {"--look", look}, &log), 0) << log.toStdString();
+    expect_same_as_cli(w, out);
+    const auto shown_pair = w.transfer().prepared();
+    ASSERT_NE(shown_pair, nullptr);
+    ASSERT_TRUE(wait_for([&] { return w.session().dst->normals.has_value(); }, 30000));
+    EXPECT_EQ(cv::countNonZero(w.session().dst->normals->mask != shown_pair->dst.view.mask), 0)
+        << "the Look tab's mask is the one the map was made on";
+    auto cli_map = veneer::match::read_map((out + "/map.pfm").toStdString());
+    ASSERT_TRUE(cli_map);
+    const int viewer_on_plinth = mapped_on_plinth(w.session().result->map), cli_on_plinth = mapped_on_plinth(*cli_map);
+    EXPECT_EQ(viewer_on_plinth, cli_on_plinth) << "the plinth alike in both";
+    if (plinth_grey) {
+      EXPECT_EQ(cv::countNonZero(shown_pair->dst.view.mask & plinth), 0) << "the base left out of the object";
+      EXPECT_EQ(cli_on_plinth, 0) << "veneer transfer leaves the plinth out";
+      EXPECT_EQ(viewer_on_plinth, 0) << "the viewer leaves the plinth out";
+      EXPECT_LE(cv::norm(w.session().result->repainted_median, shown_pair->destination_median, cv::NORM_INF, plinth),
+                1e-6)
+          << "grey: the destination's own photo";
+    } else {
+      std::printf("plinth pixels mapped (%s): viewer %d, veneer transfer %d of %d\n", look, viewer_on_plinth,
+                  cli_on_plinth, cv::countNonZero(plinth));
+    }
+  }
+}
+}  // namespace
+
+// Issue 40: the viewer and `veneer transfer` give one answer on the
+// simulated rig's 256x170 bull (destination) and orange (source), captured
+// and computed by the viewer's one flow: the viewer prepares its pairs as the
+// CLI does (pipeline::default_prepare_options, prepare_pair from the sets'
+// folders; it used to read them with LibRaw's DCB and prepare them from
+// memory). On these camera-like sets (DNG + JPEG) the base removal keeps the
+// plinth in both (their photometric stereo is 8.3 deg off the truth, 45 deg
+// at the 95th percentile, against 3.6 / 6.1 on `veneer simulate`'s sets, and
+// the plinth's top is not flat within ps::SupportOptions' 3 deg): that is
+// the engine's, issue 40 keeps it open; here both must agree on it.
+TEST(Viewer, TheViewerAndVeneerTransferGiveOneAnswer) {
+  SimulatedRig rig;
+  ASSERT_TRUE(rig.started()) << rig.log().toStdString();
+  QTemporaryDir work;
+  MainWindow w({QString(), QString(), QString(), QString(), work.path()});
+  w.resize(1280, 720);
+  w.show();
+  ASSERT_TRUE(capture_pair_by_flow(w, rig));
+  child<QPushButton>(w, "liveToggle")->setChecked(false);
+  expect_one_answer(w, work.path(), false);
+}
+
+// The same on simulated sets written as files (linear PNG, as `veneer
+// simulate` writes them): there the base removal takes the plinth out, and
+// both leave it grey.
+TEST(Viewer, ThePlinthIsGreyInTheViewerAsInVeneerTransfer) {
+  QTemporaryDir dir;
+  auto window = open_pair(dir);
+  ASSERT_TRUE(window);
+  MainWindow& w = *window;
+  w.resize(1280, 720);
+  w.show();
+  ASSERT_TRUE(compute_and_wait(w));
+  expect_one_answer(w, dir.path(), true);
+  w.showTab("Look");
+  save_stage(w, "look-plinth-grey");
+}
+
+// The Look tab's selector paints the stills in the shaded look or the pixel
+// copy; the blend radius is the copy look's: under the shaded look it leaves
+// the stills as they are (to the bit), under the copy look each still pixel is
+// the blend worked out by hand from the source's photos and the map
+// (blended_by_hand: an oracle independent of the engine's plan).
+TEST(Viewer, LookSelectorAndTheBlendAgainstAnIndependentOracle) {
+  QTemporaryDir dir;
+  auto window = open_pair(dir);
+  ASSERT_TRUE(window);
+  MainWindow& w = *window;
+  w.resize(1280, 720);
+  w.show();
+  child<QComboBox>(w, "method")->setCurrentText("coherent");  // chunks, so seams to blend
+  child<QDoubleSpinBox>(w, "blendGuide")->setValue(0);       // the plain blend the oracle works out
+  EXPECT_EQ(child<QComboBox>(w, "look")->currentText(), "shaded") << "the default look";
+  ASSERT_TRUE(compute_and_wait(w));
+  ASSERT_NE(w.session().result->look, nullptr);
+  const cv::Mat shaded = w.session().result->repainted_median.clone();
+  std::vector<cv::Mat> shaded_lamps;
+  for (const cv::Mat& m : w.session().result->repainted) shaded_lamps.push_back(m.clone());
+  const cv::Mat map_shown = w.session().result->map.xy.clone();
+
+  // shaded: the blend radius changes nothing in the stills
+  auto recomputed = [&](const veneer::pipeline::TransferResult* before) {
+    return wait_for([&] { return !w.transfer().computing() && w.session().result && w.session().result.get() != before; },
+                    60000) &&
+           wait_for([&] { return !w.transfer().computing(); }, 60000);
+  };
+  const int repaints = w.transfer().repaintOnlyRuns();
+  const auto* before = w.session().result.get();
+  child<QSpinBox>(w, "blend")->setValue(5);
+  ASSERT_TRUE(recomputed(before));
+  EXPECT_EQ(w.transfer().repaintOnlyRuns(), repaints + 1) << "the map kept";
+  EXPECT_EQ(cv::norm(w.session().result->map.xy, map_shown, cv::NORM_INF), 0.0);
+  EXPECT_EQ(cv::norm(w.session().result->repainted_median, shaded, cv::NORM_INF), 0.0)
+      << "the shaded look does not blend";
+  ASSERT_EQ(w.session().result->repainted.size(), shaded_lamps.size());
+  for (size_t i = 0; i < shaded_lamps.size(); ++i)
+    EXPECT_EQ(cv::norm(w.session().result->repainted[i], shaded_lamps[i], cv::NORM_INF), 0.0) << "lamp " << i;
+
+  // copy: the same map (custom matching is kept), the stills blended as the oracle says
+  before = w.session().result.get();
+  child<QComboBox>(w, "look")->setCurrentText("copy");
+  ASSERT_TRUE(recomputed(before));
+  EXPECT_EQ(cv::norm(w.session().result->map.xy, map_shown, cv::NORM_INF), 0.0) << "a custom matching is kept";
+  EXPECT_GT(cv::norm(w.session().result->repainted_median, shaded, cv::NORM_INF), 0.01) << "another look";
+  BlendCheck c = check_blend(w, 5);
+  EXPECT_LE(c.worst, 1e-5);
+  EXPECT_GT(c.blended, 100) << "seams blended";
+  for (int radius : {2, 0}) {
+    SCOPED_TRACE(radius);
+    before = w.session().result.get();
+    child<QSpinBox>(w, "blend")->setValue(radius);
+    ASSERT_TRUE(recomputed(before));
+    c = check_blend(w, radius);
+    EXPECT_LE(c.worst, 1e-5);
+  }
+  save_stage(w, "look-copy");
+  // back to shaded: the stills are the shaded ones again
+  before = w.session().result.get();
+  child<QComboBox>(w, "look")->setCurrentText("shaded");
+  ASSERT_TRUE(recomputed(before));
+  EXPECT_EQ(cv::norm(w.session().result->repainted_median, shaded, cv::NORM_INF), 0.0);
+  save_stage(w, "look-shaded");
+}
+
+// The Live tab has its own look selector (shaded by default) and a light
+// overlay: the light a frame's estimate gives (a stand-in LiveLight here,
+// until repaint::LiveSession estimates one), its intensity and residual, and
+// what the view did when one lamp did not explain the frame.
+TEST(Viewer, LiveLookSelectorAndLightOverlay) {
+  QTemporaryDir dir;
+  auto window = open_pair(dir);
+  ASSERT_TRUE(window);
+  MainWindow& w = *window;
+  w.resize(1280, 720);
+  w.show();
+  w.showTab("Live");
+  auto* look = child<QComboBox>(w, "liveLook");
+  EXPECT_EQ(look->currentText(), "shaded") << "the live view paints the look by default";
+  EXPECT_EQ(w.live().look(), veneer::repaint::Look::shaded);
+  look->setCurrentText("copy");
+  EXPECT_EQ(w.live().look(), veneer::repaint::Look::copy);
+  w.live().setLook(veneer::repaint::Look::shaded);
+  EXPECT_EQ(look->currentText(), "shaded");
+
+  EXPECT_TRUE(w.live().lightDial().text().contains("no light estimate")) << w.live().lightDial().text().toStdString();
+  veneer::repaint::LiveLight light;  // the stand-in: a lamp up and to the left, explained
+  light.direction = cv::normalize(cv::Vec3d(-0.5, 0.5, 0.7));
+  light.intensity = 0.82;
+  light.residual = 0.07;
+  w.live().showLight(light, veneer::repaint::Look::shaded);
+  const QString said = w.live().lightDial().text();
+  EXPECT_TRUE(said.contains("0.82") && said.contains("0.07")) << said.toStdString();
+  EXPECT_FALSE(said.contains("not one lamp"));
+  save_stage(w, "live-light-explained");
+  light.explained = false;
+  light.residual = 0.61;
+  light.fallback = "held the last good light";
+  w.live().showLight(light, veneer::repaint::Look::shaded);
+  EXPECT_TRUE(w.live().lightDial().text().contains("held the last good light"))
+      << w.live().lightDial().text().toStdString();
+  save_stage(w, "live-light-not-explained");
 }
 
 int main(int argc, char** argv) {

@@ -14,6 +14,7 @@
 #include "transfer_panel.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/reduced.hpp"
+#include "veneer/pipeline/prepare.hpp"
 #include "veneer/ps/segmentation.hpp"
 #include "widgets.hpp"
 
@@ -78,6 +79,13 @@ cv::Mat thumbnail_of(const veneer::io::ImageSet& set) {
 }  // namespace
 
 namespace {
+// A set read as the transfer reads it (veneer transfer's and the
+// pipeline's reading: RAW where present, the same demosaic), so the photos
+// the views show and the live repaint uses are the pixels the map was made of.
+veneer::Expected<veneer::io::ImageSet> read_as_transfer(const std::string& folder) {
+  return veneer::io::read_set(folder, veneer::pipeline::default_prepare_options().read);
+}
+
 // A set at the live view's width; `smaller` says whether that is smaller than the set.
 // A set no wider is read whole, as before (the map is then the full-resolution one).
 veneer::Expected<veneer::io::ImageSet> read_live_size(const std::string& folder, int width, bool* smaller) {
@@ -85,7 +93,7 @@ veneer::Expected<veneer::io::ImageSet> read_live_size(const std::string& folder,
   manifest.load_photos = false;
   manifest.load_truth = false;
   auto whole = veneer::io::read_set(folder, manifest);
-  if (!whole || whole->size.width <= width) return veneer::io::read_set(folder);
+  if (!whole || whole->size.width <= width) return read_as_transfer(folder);
   veneer::io::ReducedOptions o;
   o.width = width;
   auto set = veneer::io::read_set_reduced(folder, o);
@@ -112,7 +120,7 @@ void FlowController::loadSetInBackground(const QString& folder, std::optional<ve
     ReadSet r;
     bool live_size = false;
     auto read = live_width > 0 ? read_live_size(folder.toStdString(), live_width, &live_size)
-                               : veneer::io::read_set(folder.toStdString());
+                               : read_as_transfer(folder.toStdString());
     if (!read) {
       r.error = qs(read.message());
     } else {
@@ -120,6 +128,7 @@ void FlowController::loadSetInBackground(const QString& folder, std::optional<ve
       r.loaded->folder = folder;
       r.loaded->set = std::move(*read);
       r.loaded->live_size = live_size;
+      r.loaded->live_width = live_size ? live_width : 0;
       r.thumbnail = thumbnail_of(r.loaded->set);
       if (full) {
         r.loaded->median = veneer::repaint::median_photo(r.loaded->set.images);
@@ -165,7 +174,7 @@ void FlowController::loadSetInBackground(const QString& folder, std::optional<ve
 }
 
 bool FlowController::loadLocalSet(const QString& folder, veneer::io::Role as) {
-  auto read = veneer::io::read_set(folder.toStdString());
+  auto read = read_as_transfer(folder.toStdString());
   if (!read) {
     session_.message(qs(read.message()), true);
     return false;
@@ -182,14 +191,32 @@ bool FlowController::loadLocalSet(const QString& folder, veneer::io::Role as) {
   return true;
 }
 
+// The Look tab's normals, albedo, mask and confidence: the set prepared as
+// the transfer prepares it (pipeline::prepare_set, through the result cache,
+// which the transfer then hits), so the mask shown is the one the map is made
+// on (the base the object stands on left out). A live-size set: the same
+// steps on the set as read (what pipeline::prepare_live_pair does per set).
 void FlowController::computeNormals(std::shared_ptr<LoadedSet> loaded) {
   QPointer<Session> session(&session_);
   (void)QtConcurrent::run(job_pool(), [session, loaded] {
-    auto seg = veneer::ps::segment(loaded->set);
-    if (!seg) return;
-    auto ps = veneer::ps::photometric_stereo(loaded->set, seg->mask);
-    if (!ps) return;
-    auto result = std::make_shared<veneer::ps::PsResult>(std::move(*ps));
+    auto result = std::make_shared<veneer::ps::PsResult>();
+    if (!loaded->live_size) {
+      auto prepared = veneer::pipeline::prepare_set(loaded->folder.toStdString(), 1.0, false,
+                                                    veneer::pipeline::default_prepare_options());
+      (void)veneer::pipeline::finish_cache_writes();
+      if (!prepared) return;
+      result->normals = prepared->object.view.normals;
+      result->mask = prepared->object.view.mask;
+      result->albedo = prepared->albedo;
+      result->residual = prepared->residual;
+    } else {
+      auto seg = veneer::ps::segment(loaded->set);
+      if (!seg) return;
+      auto ps = veneer::ps::photometric_stereo(loaded->set, seg->mask);
+      if (!ps) return;
+      if (loaded->set.mask.empty()) veneer::ps::drop_supports(*ps);  // as match::prepare_object
+      *result = std::move(*ps);
+    }
     if (!session) return;
     QMetaObject::invokeMethod(session.data(), [session, loaded, result] {
       if (!session) return;

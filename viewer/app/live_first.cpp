@@ -98,8 +98,7 @@ void LiveFirstJob::maybeStart() {
     veneer::pipeline::TransferOptions o = options;
     o.keep_pictures = true;
     std::vector<veneer::pipeline::SetReport> reports;
-    veneer::pipeline::PrepareOptions prep;
-    prep.read.raw.demosaic = veneer::io::Demosaic::mhc;  // as `veneer transfer` reads RAW files (its default)
+    veneer::pipeline::PrepareOptions prep = veneer::pipeline::default_prepare_options();  // as `veneer transfer`
     auto pair = veneer::pipeline::prepare_pair(dst_folder.toStdString(), src_folder.toStdString(), o, prep, &reports,
                                                progress.part(0, 0.6));
     if (!pair) {

@@ -1,6 +1,7 @@
 #include "live_tab.hpp"
 
 #include <QCheckBox>
+#include <QComboBox>
 #include <QDoubleSpinBox>
 #include <QHBoxLayout>
 #include <QLabel>
@@ -44,6 +45,16 @@ LiveTab::LiveTab(Session& session, QWidget* parent) : QWidget(parent), session_(
   connect(live_cap_dst, &QPushButton::clicked, this, [this] { emit captureRequested(veneer::io::Role::destination); });
   top->addWidget(live_cap_src);
   top->addWidget(live_cap_dst);
+  look_box_ = named<QComboBox>("liveLook");
+  for (auto l : {veneer::repaint::Look::shaded, veneer::repaint::Look::copy}) look_box_->addItem(qs(veneer::repaint::look_name(l)));
+  look_box_->setCurrentText(qs(veneer::repaint::look_name(look_)));
+  look_box_->setToolTip(tr("shaded: each frame painted in the source's look at the light estimated in it (the "
+                           "still look, live); copy: the frame's pixels pasted through the map"));
+  connect(look_box_, &QComboBox::currentTextChanged, this, [this](const QString& name) {
+    if (auto l = veneer::repaint::parse_look(name.toStdString())) look_ = *l;
+  });
+  top->addWidget(new QLabel(tr("Look")));
+  top->addWidget(look_box_);
   top->addWidget(new QLabel(tr("fps")));
   top->addWidget(fps_);
   top->addWidget(new QLabel(tr("Lamps:")));
@@ -66,6 +77,9 @@ LiveTab::LiveTab(Session& session, QWidget* parent) : QWidget(parent), session_(
     session_.rig.moveHandLamp(d * 0.6);
   });
   pad_box->addWidget(hand_pad_);
+  pad_box->addWidget(new QLabel(tr("light in the frame")));
+  light_dial_ = named<LightDial>("liveLight");
+  pad_box->addWidget(light_dial_);
   pad_box->addStretch();
   row->addLayout(pad_box, 1);
   layout->addLayout(row, 1);
@@ -86,6 +100,15 @@ LiveTab::~LiveTab() { live_pool_.waitForDone(); }
 bool LiveTab::isLive() const { return live_btn_->isChecked(); }
 
 void LiveTab::startLive() { live_btn_->setChecked(true); }
+
+void LiveTab::setLook(veneer::repaint::Look look) {
+  look_box_->setCurrentText(qs(veneer::repaint::look_name(look)));  // sets look_
+}
+
+void LiveTab::showLight(const std::optional<veneer::repaint::LiveLight>& light, veneer::repaint::Look painted) {
+  last_painted_ = painted;
+  light_dial_->setLight(light, painted);
+}
 
 void LiveTab::updateLampBoxes() {
   QStringList names, tips;
@@ -139,20 +162,24 @@ void LiveTab::onLiveFrame(const veneer::rig::LiveFrame& frame) {
   live_busy_ = true;
   const auto& live = session_.live_session;
   auto session = live && live->ready() && session_.live_refusal.isEmpty() ? live : nullptr;
+  const veneer::repaint::Look look = look_;
   QPointer<LiveTab> self(this);
-  (void)QtConcurrent::run(&live_pool_, [self, frame, session] {
+  (void)QtConcurrent::run(&live_pool_, [self, frame, session, look] {
     auto out = std::make_shared<LiveOut>();
     out->seq = frame.seq;
     out->frame = cv::imdecode(frame.jpeg, cv::IMREAD_COLOR);
     if (!out->frame.empty()) {
       cv::Mat shown = out->frame;
       if (session) {
+        session->set_look(look);  // here, on the one thread that paints with the session
         auto r = session->process(out->frame);
         if (!r) {
           out->refusal = qs(r.message());
         } else {
           out->repainted = r->repainted;
           out->repainted_image = to_qimage(r->repainted);
+          out->painted = r->look;
+          out->light = r->light;
           // where the source was found: its outline over the frame, green when tracked, red when lost
           shown = out->frame.clone();
           if (r->outline.size() >= 3) {
@@ -192,6 +219,7 @@ void LiveTab::showLiveFrame(const LiveOut& out, const veneer::repaint::LiveSessi
     if (current && !out.repainted.empty()) {
       live_repainted_ = out.repainted;
       live_dst_view_->setImage(out.repainted_image);
+      showLight(out.light, out.painted);
     }
     live_src_view_->setImage(out.shown_image);
     const bool repainting = session_.live_session && session_.live_refusal.isEmpty();

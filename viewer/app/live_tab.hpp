@@ -10,10 +10,12 @@
 #include <QWidget>
 
 #include "image_view.hpp"
+#include "light_dial.hpp"
 #include "session.hpp"
 #include "sphere_pad.hpp"
 
 class QCheckBox;
+class QComboBox;
 class QDoubleSpinBox;
 class QHBoxLayout;
 class QLabel;
@@ -35,6 +37,16 @@ class LiveTab : public QWidget {
   cv::Mat lastRepaintedFrame() const { return live_repainted_; }
   int framesShown() const { return live_frames_; }
   double fps() const { return live_fps_; }
+  // How the live frames are painted (the tab's selector; shaded by default):
+  // each frame's session is told (repaint::LiveSession::set_look) before it
+  // paints the frame.
+  veneer::repaint::Look look() const { return look_; }
+  void setLook(veneer::repaint::Look look);
+  // The light overlay shows `light` (the frame's estimate; none = no
+  // estimate) for a frame painted `painted`.
+  void showLight(const std::optional<veneer::repaint::LiveLight>& light, veneer::repaint::Look painted);
+  const LightDial& lightDial() const { return *light_dial_; }
+  veneer::repaint::Look lastPaintedLook() const { return last_painted_; }  // what the last frame shown shows
 
  signals:
   void captureRequested(veneer::io::Role role);
@@ -46,6 +58,8 @@ class LiveTab : public QWidget {
     cv::Mat frame, repainted;  // empty frame: not a JPEG
     QImage shown_image, repainted_image;
     QString state, refusal;
+    veneer::repaint::Look painted = veneer::repaint::Look::copy;  // what `repainted` shows
+    std::optional<veneer::repaint::LiveLight> light;              // the frame's light (shaded look)
   };
   void onLiveFrame(const veneer::rig::LiveFrame& frame);
   void showLiveFrame(const LiveOut& out, const veneer::repaint::LiveSession* session);
@@ -58,6 +72,10 @@ class LiveTab : public QWidget {
   double live_fps_ = 0;
   QElapsedTimer live_clock_;
   cv::Mat live_frame_, live_repainted_;
+  veneer::repaint::Look look_ = veneer::repaint::Look::shaded;  // the live look by default
+  veneer::repaint::Look last_painted_ = veneer::repaint::Look::copy;
+  QComboBox* look_box_ = nullptr;
+  LightDial* light_dial_ = nullptr;
   QPushButton* live_btn_ = nullptr;
   QDoubleSpinBox* fps_ = nullptr;
   QHBoxLayout* lamp_row_ = nullptr;

@@ -9,6 +9,7 @@
 #include <QLabel>
 #include <QPainter>
 #include <QPushButton>
+#include <QSignalBlocker>
 #include <QVBoxLayout>
 
 #include <opencv2/imgproc.hpp>
@@ -32,6 +33,19 @@ LookTab::LookTab(Session& session, QWidget* parent) : QWidget(parent), session_(
   connect(look_what_, &QComboBox::currentIndexChanged, this, [this] { refresh(); });
   top->addWidget(new QLabel(tr("Show")));
   top->addWidget(look_what_);
+  look_style_ = named<QComboBox>("look");
+  for (auto l : {veneer::repaint::Look::shaded, veneer::repaint::Look::copy})
+    look_style_->addItem(qs(veneer::repaint::look_name(l)));
+  look_style_->setCurrentText(qs(veneer::repaint::look_name(veneer::pipeline::TransferOptions{}.look)));
+  look_style_->setToolTip(tr("how the result is painted, as veneer transfer --look: shaded (the source's texture "
+                             "whole, each lamp shading it as it shades the destination, the source's gloss "
+                             "placed by the destination's normals) or copy (each lamp's source photo pasted "
+                             "through the map, blended)"));
+  connect(look_style_, &QComboBox::currentTextChanged, this, [this](const QString& name) {
+    if (auto l = veneer::repaint::parse_look(name.toStdString())) emit lookChosen(*l);
+  });
+  top->addWidget(new QLabel(tr("Look")));
+  top->addWidget(look_style_);
   auto* reset = button(tr("Fit"), "fitViews", this);
   connect(reset, &QPushButton::clicked, this, [this] { sync_.reset(); });
   top->addWidget(reset);
@@ -228,6 +242,11 @@ void LookTab::showResult() {
 
 void LookTab::lightChanged() {
   if (look_what_->currentIndex() == 7) refresh();  // specular enhancement follows the light
+}
+
+void LookTab::setLook(veneer::repaint::Look look) {
+  QSignalBlocker block(look_style_);
+  look_style_->setCurrentText(qs(veneer::repaint::look_name(look)));
 }
 
 int LookTab::lookIndex(const QString& what) const { return look_what_->findText(what); }

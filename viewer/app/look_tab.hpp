@@ -28,9 +28,14 @@ class LookTab : public QWidget {
   void showLook(int index);
   void setOutline(veneer::io::Role set, const std::vector<QPolygonF>& outline);
   QString exposureText() const { return exposure_text_; }
+  // The look selector (the transfer's TransferOptions::look): shown without telling anyone.
+  void setLook(veneer::repaint::Look look);
+
 
  signals:
   void snapshotAsked();
+  // The user chose how the stills are painted (shaded or the pixel copy).
+  void lookChosen(veneer::repaint::Look look);
   // shift+drag (rectangle) and ctrl/alt+drag (brush) on the destination or source view
   void handRectDrawn(veneer::io::Role set, QRect rect);
   void brushed(veneer::io::Role set, QPoint pixel, bool add);
@@ -43,7 +48,7 @@ class LookTab : public QWidget {
   Session& session_;
   ViewSync sync_;
   QString exposure_text_;
-  QComboBox* look_what_ = nullptr;
+  QComboBox *look_what_ = nullptr, *look_style_ = nullptr;
   QLabel *histogram_ = nullptr, *exposure_label_ = nullptr;
   ImageView *dst_view_ = nullptr, *src_view_ = nullptr, *result_view_ = nullptr, *origin_view_ = nullptr;
 };

@@ -138,6 +138,9 @@ void MainWindow::wire() {
             relight_->showRelit(relit, relit_source, light);
           });
   connect(flow_, &FlowController::tabWanted, this, &MainWindow::showTab);
+  // the Look tab's look is the transfer's (TransferOptions::look); a reopened map's shows there
+  connect(look_, &LookTab::lookChosen, transfer_, &TransferPanel::setLook);
+  connect(transfer_, &TransferPanel::lookShown, look_, &LookTab::setLook);
 }
 
 void MainWindow::cancelStep() {

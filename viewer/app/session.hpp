@@ -36,6 +36,7 @@ struct LoadedSet {
   cv::Mat hand_mask;  // segmentation by hand (CV_8UC1, 255 = object); empty = automatic
   int hand_version = 0;
   bool live_size = false;  // read at the live view's width (reduced decode), smaller than the set
+  int live_width = 0;      // ... the width asked for (pipeline::LiveOptions' read.width), when live_size
 };
 
 // What a transfer ran with (the options, the hand masks), kept with the

@@ -18,6 +18,8 @@
 
 #include <opencv2/imgproc.hpp>
 
+#include "veneer/pipeline/live.hpp"
+#include "veneer/pipeline/prepare.hpp"
 #include "veneer/ps/segmentation.hpp"
 #include "widgets.hpp"
 
@@ -32,7 +34,7 @@ TransferPanel::TransferPanel(Session& session, QWidget* parent) : QGroupBox(tr("
   auto* top = new QFormLayout;
   outer->addLayout(top);
   preset_ = named<QComboBox>("preset");
-  for (const auto& p : presets()) preset_->addItem(p.name);
+  for (const auto& p : presets(look_)) preset_->addItem(p.name);
   preset_->addItem(tr("custom"));
   preset_->setToolTip(tr("settings for common needs; changing a setting under Advanced makes it \"custom\""));
   top->addRow(tr("Preset"), preset_);
@@ -60,8 +62,8 @@ TransferPanel::TransferPanel(Session& session, QWidget* parent) : QGroupBox(tr("
   patch_ = named<QComboBox>("patch");
   patch_->addItems({"1", "3", "5", "7"});
   // every matching box starts at the default transfer's (the CLI's)
-  const veneer::match::MatchOptions defaults = veneer::pipeline::default_match_options();
-  const veneer::pipeline::TransferOptions transfer_defaults;
+  const veneer::pipeline::TransferOptions transfer_defaults = veneer::pipeline::default_transfer_options(look_);
+  const veneer::match::MatchOptions defaults = transfer_defaults.match;
   candidates_ = named<QSpinBox>("candidates");
   candidates_->setRange(1, 100);
   candidates_->setValue(defaults.candidates);
@@ -83,8 +85,9 @@ TransferPanel::TransferPanel(Session& session, QWidget* parent) : QGroupBox(tr("
   blend_->setRange(0, 16);
   blend_->setSuffix(tr(" px"));
   blend_->setValue(transfer_defaults.blend);
-  blend_->setToolTip(tr("result pictures: blend the chunks meeting at a seam over this radius (0 = off: each "
-                        "pixel its own source pixel)"));
+  blend_->setToolTip(tr("the copy look (the stills' and the live view's): blend the chunks meeting at a seam "
+                        "over this radius (0 = off: each pixel its own source pixel); the shaded look does not "
+                        "blend"));
   blend_guide_ = number_box("blendGuide", 0, 2, 2, 0.05, transfer_defaults.blend_guide,
                             tr("result pictures, maps matched on normals: blend only chunks whose normals fit "
                                "(fall-off |dn|, 0.1 = about 6°), so outlines such as a leg in front of the body "
@@ -135,7 +138,7 @@ TransferPanel::TransferPanel(Session& session, QWidget* parent) : QGroupBox(tr("
   connect(seg_method_, &QComboBox::currentIndexChanged, this, &TransferPanel::matchOptionChanged);
   connect(seg_threshold_, &QDoubleSpinBox::valueChanged, this, &TransferPanel::matchOptionChanged);
   connect(preset_, &QComboBox::currentIndexChanged, this, [this](int i) {
-    if (i >= 0 && i < static_cast<int>(presets().size())) applyPreset(presets()[i]);
+    if (i >= 0 && i < static_cast<int>(presets(look_).size())) applyPreset(presets(look_)[i]);
   });
   // a setting changed by hand: no preset describes it any more
   auto custom = [this] {
@@ -148,7 +151,7 @@ TransferPanel::TransferPanel(Session& session, QWidget* parent) : QGroupBox(tr("
   for (QDoubleSpinBox* b : {threshold_, coherent_threshold_, coherent_smooth_, coherent_guide_, uniformity_, blend_guide_})
     connect(b, &QDoubleSpinBox::valueChanged, this, custom);
   connect(fast_, &QCheckBox::toggled, this, custom);
-  applyPreset(presets().front());
+  applyPreset(presets(look_).front());
   auto* bottom = new QFormLayout;
   outer->addLayout(bottom);
   auto* row = new QHBoxLayout;
@@ -169,11 +172,11 @@ TransferPanel::~TransferPanel() {
 }
 
 
-// The presets: the CLI's defaults first (what the flow computes with).
-const std::vector<TransferPanel::Preset>& TransferPanel::presets() {
-  static const std::vector<Preset> list = [] {
-    const veneer::match::MatchOptions m = veneer::pipeline::default_match_options();
-    const veneer::pipeline::TransferOptions t;
+// The presets for a look: the CLI's defaults first (what the flow computes with).
+std::vector<TransferPanel::Preset> TransferPanel::presets(veneer::repaint::Look look) {
+  return [look] {
+    const veneer::pipeline::TransferOptions t = veneer::pipeline::default_transfer_options(look);
+    const veneer::match::MatchOptions m = t.match;
     Preset standard{tr("default (combined)"), "combined", "normals", 1, m.candidates, m.threshold, m.iterations,
                     m.coherent_threshold, m.coherent_smooth, m.coherent_guide, m.uniformity, t.blend, t.blend_guide,
                     true};
@@ -187,7 +190,16 @@ const std::vector<TransferPanel::Preset>& TransferPanel::presets() {
     faithful.fast = false;
     return std::vector<Preset>{standard, quick, faithful};
   }();
-  return list;
+}
+
+void TransferPanel::setLook(veneer::repaint::Look look) {
+  if (look == look_) return;
+  look_ = look;
+  const int i = preset_->currentIndex();
+  if (i >= 0 && i < static_cast<int>(presets(look_).size()))
+    applyPreset(presets(look_)[i]);  // the look's matching (coherent threshold), and a recomputation
+  else
+    matchOptionChanged();  // custom: the user's matching, painted the other way
 }
 
 void TransferPanel::applyPreset(const Preset& p) {
@@ -226,7 +238,8 @@ void TransferPanel::startTransfer() {
     session_.message(tr("load a destination and a source set first"), true);
     return;
   }
-  veneer::pipeline::TransferOptions options;
+  // the CLI's default transfer for the look, then what the boxes say
+  veneer::pipeline::TransferOptions options = veneer::pipeline::default_transfer_options(look_);
   auto method = veneer::match::parse_method(method_->currentText().toStdString());
   auto feature = veneer::match::parse_feature(feature_->currentText().toStdString());
   if (!method || !feature) {
@@ -316,24 +329,34 @@ void TransferPanel::startTransfer() {
     };
     std::shared_ptr<const veneer::pipeline::PreparedPair> pair = cached;
     if (!pair) {
-      veneer::io::ImageSet d = dst->set;
-      if (!dst_hand.empty()) {
-        d.mask = dst_hand;  // by hand: the supplied mask
-      } else if (custom_segmentation) {
+      // Prepared from the sets' folders as `veneer transfer` prepares them
+      // (pipeline::default_prepare_options; live-size sets as `veneer transfer
+      // --live`), so the viewer and the CLI give one answer (issue 40).
+      veneer::pipeline::PrepareOptions prep = veneer::pipeline::default_prepare_options();
+      prep.destination_mask = dst_hand;  // by hand: the supplied mask (as --dst-mask)
+      prep.source_mask = src_hand;
+      if (dst_hand.empty() && custom_segmentation) {
         // The user's threshold / rectangle decide the destination's object pixels.
-        auto m = veneer::ps::segment(d, seg);
+        auto m = veneer::ps::segment(dst->set, seg);
         if (!m) {
           transfer_error_ = tr("segmentation: %1").arg(qs(m.message()));
           return;
         }
-        d.mask = m->mask;
+        prep.destination_mask = m->mask;
       }
-      veneer::io::ImageSet s;
-      if (!src_hand.empty()) {
-        s = src->set;
-        s.mask = src_hand;
+      veneer::Expected<veneer::pipeline::PreparedPair> prepared = veneer::make_error("not prepared");
+      if (dst->live_size || src->live_size) {
+        veneer::pipeline::LiveOptions live;
+        live.read.width = std::max(dst->live_width, src->live_width);
+        live.destination_mask = prep.destination_mask;
+        live.source_mask = prep.source_mask;
+        prepared = veneer::pipeline::prepare_live_pair(dst->folder.toStdString(), src->folder.toStdString(), options,
+                                                       live, nullptr, progress);
+      } else {
+        prepared = veneer::pipeline::prepare_pair(dst->folder.toStdString(), src->folder.toStdString(), options,
+                                                  prep, nullptr, progress);
+        (void)veneer::pipeline::finish_cache_writes();  // not fatal: the next run prepares again
       }
-      auto prepared = veneer::pipeline::prepare_pair(d, src_hand.empty() ? src->set : s, options, progress);
       if (!prepared) {
         transfer_error_ = qs(prepared.message());
         return;
@@ -436,6 +459,10 @@ void TransferPanel::showOptions(const veneer::pipeline::TransferOptions& o) {
            o.blend,
            o.blend_guide,
            o.match.fast};
+  if (o.look != look_) {
+    look_ = o.look;
+    emit lookShown(look_);
+  }
   applyPreset(p);
   truth_normals_->setChecked(o.truth_normals);
 }

@@ -47,11 +47,22 @@ class TransferPanel : public QGroupBox {
   // recomputed once a transfer has been shown.
   void matchOptionChanged();
   void handMaskChanged(const QString& hand);
+  // How the stills are painted (the Look tab's selector): shaded or the
+  // pixel copy, as `veneer transfer --look`. The default preset follows the
+  // look's matching (pipeline::default_transfer_options), a custom one is
+  // kept; a result shown is painted again (the map kept when it still fits).
+  void setLook(veneer::repaint::Look look);
+  veneer::repaint::Look look() const { return look_; }
+  // The pair the result shown was made from (as pipeline::prepare_pair or
+  // prepare_live_pair made it from the sets' folders; null before a transfer).
+  std::shared_ptr<const veneer::pipeline::PreparedPair> prepared() const { return prepared_; }
 
  signals:
   // A transfer's result is shown now; `relit` and `relit_source` are the
   // relight pictures its worker made for `light` (null when none).
   void resultShown(QImage relit, QImage relit_source, cv::Vec3d light);
+  // The look changed here (a library map reopened with its options): the selectors follow.
+  void lookShown(veneer::repaint::Look look);
 
  private:
   struct Preset {
@@ -64,7 +75,7 @@ class TransferPanel : public QGroupBox {
     double blend_guide;
     bool fast;
   };
-  static const std::vector<Preset>& presets();
+  static std::vector<Preset> presets(veneer::repaint::Look look);
   void applyPreset(const Preset& preset);
   QString preparationKey() const;
   void onTransferDone();
@@ -75,6 +86,7 @@ class TransferPanel : public QGroupBox {
   bool rerun_ = false;  // a matching option changed while computing: run again when done
   int map_only_runs_ = 0, repaint_only_runs_ = 0;
   bool applying_preset_ = false;
+  veneer::repaint::Look look_ = veneer::pipeline::TransferOptions{}.look;
   std::shared_ptr<const veneer::match::Map> given_map_;  // the next transfer repaints through it
   QString reopened_folder_;                              // ... the library map it came from
   RunSettings running_;

@@ -38,10 +38,10 @@ struct TransferArgs {
   unsigned seed = match::MatchOptions{}.seed;
   bool faithful = false, truth_normals = false, look_floor = false;
   // reading the sets (pipeline::PrepareOptions)
-  // RAW interpolation: our own (Demosaic::mhc), ~20x faster than LibRaw's DCB,
-  // the library's default, at normals as good on the simulator's 5600x3750
-  // pair (issue 34: normal agreement 4.18 vs 4.51 deg mean).
-  std::string photos = "auto", demosaic = io::demosaic_name(io::Demosaic::mhc), cache_dir;
+  // the reading the viewer does too (pipeline::default_prepare_options: RAW
+  // where present, our MHC demosaic)
+  std::string photos = io::photo_source_name(pipeline::default_prepare_options().read.photos),
+              demosaic = io::demosaic_name(pipeline::default_prepare_options().read.raw.demosaic), cache_dir;
   bool raw_half = false, no_cache = false;
   double cache_size_gb = 4.0;
   // the repainted destination as a relightable file (repaint/rti_export.hpp)
@@ -91,7 +91,10 @@ Status read_mask(const std::string& option, const std::string& file, const std::
 }
 
 int run(const TransferArgs& a) {
-  pipeline::TransferOptions options;
+  auto look = repaint::parse_look(a.look);
+  if (!look) return report.usage("--look: " + look.message());
+  // the default transfer the viewer runs too, then the flags
+  pipeline::TransferOptions options = pipeline::default_transfer_options(*look);
   auto method = match::parse_method(a.method);
   if (!method) return report.usage(method.message());
   if (*method == match::Method::combined && (a.feature != "normals" || a.patch != 1))
@@ -99,9 +102,6 @@ int run(const TransferArgs& a) {
                 "--patch, or pick a method that takes them (coherent, flann, patchmatch ...)");
   auto feature = match::parse_feature(a.feature);
   if (!feature) return report.usage(feature.message());
-  auto look = repaint::parse_look(a.look);
-  if (!look) return report.usage("--look: " + look.message());
-  options.look = *look;
   options.look_options.normal_smoothing = a.look_smoothing;
   options.look_options.ratio_headroom = a.look_headroom;
   options.look_options.seam_feather = a.look_feather;
@@ -140,7 +140,7 @@ int run(const TransferArgs& a) {
   if (a.hsh_order != 0 && !hsh_options) return report.usage("--hsh-order goes with --rti-format hsh");
 
   const auto t_wall = std::chrono::steady_clock::now();
-  pipeline::PrepareOptions prep;
+  pipeline::PrepareOptions prep = pipeline::default_prepare_options();
   auto photos = io::parse_photo_source(a.photos);
   if (!photos) return report.usage(photos.message());
   auto demosaic = io::parse_demosaic(a.demosaic);

@@ -319,6 +319,14 @@ cv::Mat median_minus_ambient(const std::vector<cv::Mat>& photos, const cv::Mat* 
 
 cv::Mat median_of(const std::vector<cv::Mat>& photos) { return median_minus_ambient(photos, nullptr); }
 
+PrepareOptions default_prepare_options() {
+  PrepareOptions o;
+  o.read.photos = io::PhotoSource::automatic;
+  o.read.raw.demosaic = io::Demosaic::mhc;
+  o.read.raw.half_size = false;
+  return o;
+}
+
 Status PrepareOptions::check() const {
   if (auto s = read.check(); !s) return s;
   for (const cv::Mat* m : {&mask, &destination_mask, &source_mask})

@@ -90,6 +90,13 @@ MatchOptions default_match_options(repaint::Look look) {
   return m;
 }
 
+TransferOptions default_transfer_options(repaint::Look look) {
+  TransferOptions o;
+  o.look = look;
+  o.match = default_match_options(look);
+  return o;
+}
+
 Expected<PreparedPair> prepare_pair(const io::ImageSet& destination_in, const io::ImageSet& source_in,
                                     const TransferOptions& options, const Progress& progress) {
   if (auto s = options.check(); !s) return s.error();

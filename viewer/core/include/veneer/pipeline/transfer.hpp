@@ -66,6 +66,10 @@ struct TransferOptions {
 // -- and by the matcher's 0.10 with the copy look, whose shading is the
 // chunks' own.
 MatchOptions default_match_options(repaint::Look look = repaint::Look::shaded);
+// The whole default transfer for `look`: TransferOptions' defaults with
+// default_match_options(look). What `veneer transfer` starts from before its
+// flags and what the viewer's default preset shows, so both give one answer.
+TransferOptions default_transfer_options(repaint::Look look = repaint::Look::shaded);
 
 struct TransferResult {
   Map map;

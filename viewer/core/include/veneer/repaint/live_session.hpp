@@ -23,6 +23,8 @@
 #include "veneer/match/fast.hpp"
 #include "veneer/match/matcher.hpp"
 #include "veneer/repaint/live.hpp"
+#include "veneer/repaint/live_look.hpp"
+#include "veneer/repaint/look.hpp"
 #include "veneer/repaint/track.hpp"
 #include "veneer/util/expected.hpp"
 
@@ -57,6 +59,10 @@ struct LiveFrame {
   bool lost = false;                // registration failed: `repainted` is not to be trusted
   cv::Matx23d still_to_frame = cv::Matx23d(1, 0, 0, 0, 1, 0);
   double track_ms = 0, repaint_ms = 0;
+  Look look = Look::copy;           // what `repainted` shows: the shaded look at the frame's light, or the
+                                    // pixel copy (the copy look, no LiveLook, a lost frame, or the fallback)
+  std::optional<LiveLight> light;   // the light estimated in the frame (shaded look, frame not lost)
+  double light_ms = 0, shade_ms = 0;  // of repaint_ms: the light estimate, and the painting at it
 };
 
 class LiveSession {
@@ -69,6 +75,12 @@ class LiveSession {
   LiveSession(const std::vector<cv::Mat>& photos, const cv::Mat& mask, const Map& map, cv::Size source_size,
               const cv::Mat& backdrop = {}, std::shared_ptr<const fast::BlendPlan> blend = nullptr,
               const TrackOptions& options = {});
+  // The same with the live look (live_look.hpp) made for `map`: frames are
+  // painted shaded by default (set_look). The old constructor above paints
+  // the pixel copy only.
+  LiveSession(const std::vector<cv::Mat>& photos, const cv::Mat& mask, const Map& map, cv::Size source_size,
+              std::shared_ptr<const LiveLook> live_look, const cv::Mat& backdrop = {},
+              std::shared_ptr<const fast::BlendPlan> blend = nullptr, const TrackOptions& options = {});
   // (frames are gathered at the nearest pixel unless set_smooth(true))
   bool ready() const { return tracker_.ready() && repainter_.ready(); }
   // Tracks and repaints one frame (8-bit BGR). The first frame fixes the
@@ -83,6 +95,11 @@ class LiveSession {
   // bilinear gather alone took 8-12 ms median, the nearest 1-2 ms, at up to
   // half a pixel of jitter). `veneer repaint --video` turns it on.
   void set_smooth(bool on) { repainter_.set_bilinear(on); }
+  // Shaded (the default; needs the LiveLook constructor, else frames stay the
+  // copy) or the pixel copy through the map.
+  void set_look(Look look) { look_ = look; }
+  Look look() const { return look_; }
+  bool has_live_look() const { return live_look_ != nullptr; }
   // A new session on the same sets (the object was put back, the camera moved).
   void reset();
   const cv::Mat& still_mask() const { return mask_; }
@@ -99,6 +116,10 @@ class LiveSession {
   cv::Mat backdrop_;
   std::vector<std::vector<cv::Point>> contours_;
   std::optional<LiveGeometry> geometry_;
+  std::shared_ptr<const LiveLook> live_look_;
+  Look look_ = Look::shaded;
+  std::optional<LiveLight> last_good_;   // the last light one lamp explained
+  int held_ = 0;                         // frames the last good light has been held for
 };
 
 // The backdrop dimmed and red with "LOST - hold still / recapture".
