@@ -112,7 +112,11 @@ inline float dot_active(const float* c, const Active& a) {
   return s;
 }
 
-// Bilinear sample of an 8-bit BGR frame at (x, y), linear; false outside.
+constexpr uchar kClipped = 250;  // a frame value at or above this may be clipped: it says nothing of the light
+
+inline bool clipped(const cv::Vec3b& v) { return v[0] >= kClipped || v[1] >= kClipped || v[2] >= kClipped; }
+
+// Bilinear sample of an 8-bit BGR frame at (x, y), linear; false outside or clipped.
 inline bool sample_frame(const cv::Mat& frame, const std::array<float, 256>& lin, float x, float y, cv::Vec3f* out) {
   if (!(x >= 0 && y >= 0 && x <= frame.cols - 1 && y <= frame.rows - 1)) return false;
   const int x0 = std::min(static_cast<int>(x), frame.cols - 2 < 0 ? 0 : frame.cols - 2);
@@ -121,16 +125,18 @@ inline bool sample_frame(const cv::Mat& frame, const std::array<float, 256>& lin
   const float fx = x - x0, fy = y - y0;
   const cv::Vec3b a = frame.at<cv::Vec3b>(y0, x0), b = frame.at<cv::Vec3b>(y0, x1);
   const cv::Vec3b c = frame.at<cv::Vec3b>(y1, x0), d = frame.at<cv::Vec3b>(y1, x1);
+  if (clipped(a) || clipped(b) || clipped(c) || clipped(d)) return false;
   for (int k = 0; k < 3; ++k)
     (*out)[k] = (1 - fy) * ((1 - fx) * lin[a[k]] + fx * lin[b[k]]) + fy * ((1 - fx) * lin[c[k]] + fx * lin[d[k]]);
   return true;
 }
 
-// Nearest-pixel sample, linear; false outside.
+// Nearest-pixel sample, linear; false outside or clipped.
 inline bool nearest_frame(const cv::Mat& frame, const std::array<float, 256>& lin, float x, float y, cv::Vec3f* out) {
-  const int xi = static_cast<int>(std::lround(x)), yi = static_cast<int>(std::lround(y));
-  if (xi < 0 || yi < 0 || xi >= frame.cols || yi >= frame.rows) return false;
+  const int xi = static_cast<int>(x + 0.5f), yi = static_cast<int>(y + 0.5f);
+  if (x < -0.5f || y < -0.5f || xi >= frame.cols || yi >= frame.rows) return false;
   const cv::Vec3b a = frame.at<cv::Vec3b>(yi, xi);
+  if (clipped(a)) return false;
   *out = cv::Vec3f(lin[a[0]], lin[a[1]], lin[a[2]]);
   return true;
 }
@@ -424,8 +430,35 @@ LiveLight LiveLook::estimate_light(const cv::Mat& frame, const cv::Matx23d& a) c
   return light;
 }
 
+double LiveLook::exposure_for(const LiveLight& light, double percentile, double white) const {
+  const LiveLookData& d = *data_;
+  const cv::Vec3d& l = light.direction;
+  const Active wd = active_weights(d.dmodel, l);
+  const cv::Vec3f lf(static_cast<float>(l[0]), static_cast<float>(l[1]), static_cast<float>(l[2]));
+  const cv::Vec3f h = half_vector(l);
+  const float s = static_cast<float>(light.intensity), am = static_cast<float>(light.ambient);
+  const float cmax = static_cast<float>(std::max({light.colour[0], light.colour[1], light.colour[2]}));
+  std::vector<float> v;
+  const size_t step = std::max<size_t>(1, d.pixel.size() / 4000);
+  for (size_t i = 0; i < d.pixel.size(); i += step) {
+    const float S = std::max(dot_active(d.dcoef.ptr<float>(static_cast<int>(i)), wd), 0.f) + ShadedLook::ratio_floor();
+    const cv::Vec3f& nn = d.normal[i];
+    const float nl = std::max(0.f, nn.dot(lf));
+    const float cap = std::max(2.f, d.headroom * (nl + kModelFloor) * d.inv_model[i]);
+    const float ratio = std::min(S * d.inv_median[i], cap);
+    const float gloss = d.source_gloss[i] > 0 ? d.source_gloss[i] * Gloss::lobe(nn, lf, h, d.source_exponent) : 0.f;
+    const cv::Vec3f& t = d.texture[i];
+    const float top = std::max({t[0], t[1], t[2]});
+    v.push_back(cmax * (top * (s * ratio + am * d.inv_shading[i]) + s * gloss));
+  }
+  if (v.empty()) return 1.0;
+  const size_t k = std::min(v.size() - 1, static_cast<size_t>(percentile * (v.size() - 1)));
+  std::nth_element(v.begin(), v.begin() + static_cast<long>(k), v.end());
+  return v[k] > white ? white / v[k] : 1.0;
+}
+
 cv::Mat LiveLook::paint(const cv::Mat& frame, const cv::Matx23d& a, const LiveLight& light,
-                        const cv::Mat& backdrop) const {
+                        const cv::Mat& backdrop, double exposure) const {
   const LiveLookData& d = *data_;
   cv::Mat out;
   if (!backdrop.empty() && backdrop.size() == d.dsize && backdrop.type() == CV_8UC3)
@@ -437,9 +470,11 @@ cv::Mat LiveLook::paint(const cv::Mat& frame, const cv::Matx23d& a, const LiveLi
   const cv::Vec3f lf(static_cast<float>(l[0]), static_cast<float>(l[1]), static_cast<float>(l[2]));
   const cv::Vec3f h = half_vector(l);
   const float s = static_cast<float>(light.intensity), am = static_cast<float>(light.ambient);
-  // r, g, b -> BGR
-  const cv::Vec3f colour(static_cast<float>(light.colour[2]), static_cast<float>(light.colour[1]),
-                         static_cast<float>(light.colour[0]));
+  // r, g, b -> BGR, times the exposure
+  const cv::Vec3f colour = static_cast<float>(exposure) *
+                           cv::Vec3f(static_cast<float>(light.colour[2]), static_cast<float>(light.colour[1]),
+                                     static_cast<float>(light.colour[0]));
+  const cv::Vec3f frame_colour = colour / static_cast<float>(std::max(exposure, 1e-9));
   const float lo = static_cast<float>(std::exp(options_.change_dead_zone));
   const float clip = static_cast<float>(options_.change_clip);
   const bool change = frame.type() == CV_8UC3 && !frame.empty();
@@ -467,7 +502,7 @@ cv::Mat LiveLook::paint(const cv::Mat& frame, const cv::Matx23d& a, const LiveLi
           const float pred = s * std::max(dot_active(d.scoef.ptr<float>(i), ws), 0.f) + am * d.source_albedo[i];
           if (pred > 1e-4f * std::max(s, 1e-6f)) {
             for (int c = 0; c < 3; ++c) {
-              const float pc = pred * d.chroma[i][c] * colour[c];
+              const float pc = pred * d.chroma[i][c] * frame_colour[c];
               float k = g[c] / std::max(pc, 1e-6f);
               // within the dead zone the model's own error: 1; beyond it what changed, clipped
               k = k > lo ? k / lo : (k * lo < 1.f ? k * lo : 1.f);

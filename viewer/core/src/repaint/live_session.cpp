@@ -144,6 +144,7 @@ void LiveSession::reset() {
   tracker_.reset();
   last_good_.reset();
   held_ = 0;
+  exposure_.reset();
 }
 
 Status LiveSession::fix_geometry(const cv::Mat& frame) {
@@ -200,7 +201,8 @@ LiveFrame LiveSession::finish(const cv::Mat& frame, const TrackResult& r, double
       }
       if (use) {
         const auto t1 = std::chrono::steady_clock::now();
-        out.repainted = live_look_->paint(frame, source_to_frame, *use, look_backdrop_);
+        if (!exposure_) exposure_ = live_look_->exposure_for(*use);
+        out.repainted = live_look_->paint(frame, source_to_frame, *use, look_backdrop_, *exposure_);
         out.shade_ms = ms_since(t1);
         out.look = Look::shaded;
         painted = true;
