@@ -398,7 +398,6 @@ LiveLight LiveLook::estimate_light(const cv::Mat& frame, const cv::Matx23d& a) c
   }
   light.direction = dir;
   light.residual = best;
-  light.ambient = am;
   // colour: per channel the frame against the grey prediction times the source's chroma
   const Active act = active_weights(d.smodel, dir);
   cv::Vec3d num(0, 0, 0), den(0, 0, 0);
