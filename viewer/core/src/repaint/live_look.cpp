@@ -39,16 +39,25 @@ Status LiveLookOptions::check() const {
 struct LiveLookData {
   cv::Size dsize;
   std::vector<int> pixel;            // y * width + x
-  std::vector<cv::Vec2f> source;     // the map's source coordinates
-  cv::Mat dcoef, scoef;              // N x terms (CV_32FC1): the destination's model, the source's at m(p)
-  std::vector<cv::Vec3f> texture;    // T
-  std::vector<float> inv_median;     // 1 / (Dd + floor)
-  std::vector<cv::Vec3f> normal;     // n_d
-  std::vector<float> inv_model;      // 1 / (median of max(0, n_d.l) + 0.05): the headroom's Lambert ratio
-  std::vector<float> inv_shading;    // 1 / max(median of max(0, n_d.l), 0.05): T / it ~ the albedo (ambient)
-  std::vector<float> source_gloss;   // k_s(m(p))
-  std::vector<cv::Vec3f> chroma;     // the source's albedo per channel over its grey, at m(p)
-  std::vector<float> source_albedo;  // the source's grey albedo at m(p)
+  cv::Mat dcoef, scoef;              // terms x N (CV_32FC1, a plane per term): the destination's model, the
+                                     // source's at m(p)
+  // one record per pixel, read in one stream per frame
+  struct Pixel {
+    cv::Vec3f texture;    // T
+    cv::Vec3f normal;     // n_d
+    float inv_median;     // 1 / (Dd + floor)
+    float inv_model;      // 1 / (median of max(0, n_d.l) + 0.05): the headroom's Lambert ratio; T times it ~ the
+                          // albedo (the ambient's share)
+    float source_gloss;   // k_s(m(p))
+  };
+  struct Source {
+    cv::Vec2f xy;         // the map's source coordinates
+    cv::Vec3f chroma;     // the source's albedo per channel over its grey, at m(p)
+    float albedo;         // the source's grey albedo at m(p)
+  };
+  std::vector<Pixel> px;
+  std::vector<Source> src;
+  bool any_gloss = false;
   float headroom = 2;
   double source_exponent = 32;
   RelightableModel dmodel, smodel;   // for their weights (coefficients dropped; kept compact above)
@@ -115,6 +124,24 @@ inline float dot_active(const float* c, const Active& a) {
 constexpr uchar kClipped = 250;  // a frame value at or above this may be clipped: it says nothing of the light
 
 inline bool clipped(const cv::Vec3b& v) { return v[0] >= kClipped || v[1] >= kClipped || v[2] >= kClipped; }
+
+// x^k for a whole k >= 1, by squaring
+inline float whole_power(float x, int k) {
+  float r = 1.f;
+  while (k > 0) {
+    if (k & 1) r *= x;
+    x *= x;
+    k >>= 1;
+  }
+  return r;
+}
+
+// the same for pixel i of planes (terms x pixels)
+inline float dot_column(const cv::Mat& planes, int i, const Active& a) {
+  float s = 0;
+  for (size_t k = 0; k < a.at.size(); ++k) s += planes.at<float>(a.at[k], i) * a.w[k];
+  return s;
+}
 
 // Bilinear sample of an 8-bit BGR frame at (x, y), linear; false outside or clipped.
 inline bool sample_frame(const cv::Mat& frame, const std::array<float, 256>& lin, float x, float y, cv::Vec3f* out) {
@@ -209,39 +236,34 @@ Expected<LiveLook> LiveLook::make(const ShadedLook& look, const LookSide& destin
       if (xy.at<cv::Vec2f>(y, x)[0] >= 0) d.pixel.push_back(y * dsize.width + x);
   const int n = static_cast<int>(d.pixel.size());
   const int td = dm->terms(), ts = sm->terms();
-  d.dcoef = cv::Mat(n, td, CV_32FC1);
-  d.scoef = cv::Mat(n, ts, CV_32FC1);
-  d.source.resize(n);
-  d.texture.resize(n);
-  d.inv_median.resize(n);
-  d.normal.resize(n);
-  d.inv_model.resize(n);
-  d.inv_shading.resize(n);
-  d.source_gloss.assign(n, 0.f);
-  d.chroma.resize(n);
-  d.source_albedo.resize(n);
+  d.dcoef = cv::Mat(td, n, CV_32FC1);
+  d.scoef = cv::Mat(ts, n, CV_32FC1);
+  d.px.assign(n, {});
+  d.src.assign(n, {});
   const cv::Mat& ks = look.source_gloss_weight();
   cv::parallel_for_(cv::Range(0, n), [&](const cv::Range& r) {
     std::vector<float> buf;
     for (int i = r.start; i < r.end; ++i) {
       const int x = d.pixel[i] % dsize.width, y = d.pixel[i] / dsize.width;
       const cv::Vec2f m = xy.at<cv::Vec2f>(y, x);
-      d.source[i] = m;
+      LiveLookData::Pixel& e = d.px[i];
+      LiveLookData::Source& f = d.src[i];
+      f.xy = m;
       const int sx = std::clamp(static_cast<int>(std::lround(m[0])), 0, ssize.width - 1);
       const int sy = std::clamp(static_cast<int>(std::lround(m[1])), 0, ssize.height - 1);
-      std::copy_n(dm->coefficients().ptr<float>(y) + x * td, td, d.dcoef.ptr<float>(i));
-      std::copy_n(sm->coefficients().ptr<float>(sy) + sx * ts, ts, d.scoef.ptr<float>(i));
-      d.texture[i] = look.texture().at<cv::Vec3f>(y, x);
-      d.inv_median[i] = 1.f / look.shading_median().at<float>(y, x);
-      d.normal[i] = dv.normals.at<cv::Vec3f>(y, x);
-      const float mm = look.model_median().at<float>(y, x);
-      d.inv_model[i] = 1.f / (mm + kModelFloor);
-      d.inv_shading[i] = 1.f / std::max(mm, kModelFloor);
-      if (!ks.empty()) d.source_gloss[i] = ks.at<float>(y, x);
+      const float* dc = dm->coefficients().ptr<float>(y) + x * td;
+      const float* sc = sm->coefficients().ptr<float>(sy) + sx * ts;
+      for (int k = 0; k < td; ++k) d.dcoef.at<float>(k, i) = dc[k];
+      for (int k = 0; k < ts; ++k) d.scoef.at<float>(k, i) = sc[k];
+      e.texture = look.texture().at<cv::Vec3f>(y, x);
+      e.inv_median = 1.f / look.shading_median().at<float>(y, x);
+      e.normal = dv.normals.at<cv::Vec3f>(y, x);
+      e.inv_model = 1.f / (look.model_median().at<float>(y, x) + kModelFloor);
+      e.source_gloss = ks.empty() ? 0.f : ks.at<float>(y, x);
       const cv::Vec3f a = albedo_at(sv, sl, sx, sy, buf);
       const float g = grey(a);
-      d.source_albedo[i] = g;
-      d.chroma[i] = g > 1e-6f ? a / g : cv::Vec3f(1, 1, 1);
+      f.albedo = g;
+      f.chroma = g > 1e-6f ? a / g : cv::Vec3f(1, 1, 1);
     }
   });
   // the light estimate's samples: source object pixels on a regular grid
@@ -267,6 +289,7 @@ Expected<LiveLook> LiveLook::make(const ShadedLook& look, const LookSide& destin
                     static_cast<int>(d.sample_xy[i][0]) * ts,
                 ts, d.sample_coef.ptr<float>(static_cast<int>(i)));
   if (d.sample_xy.size() < 50) return make_error("live look: fewer than 50 lit source pixels to estimate light on");
+  for (const auto& e : d.px) d.any_gloss = d.any_gloss || e.source_gloss > 0;
   d.dmodel = std::move(*dm);
   d.smodel = std::move(*sm);
   d.dmodel.drop_coefficients();
@@ -440,15 +463,14 @@ double LiveLook::exposure_for(const LiveLight& light, double percentile, double 
   std::vector<float> v;
   const size_t step = std::max<size_t>(1, d.pixel.size() / 4000);
   for (size_t i = 0; i < d.pixel.size(); i += step) {
-    const float S = std::max(dot_active(d.dcoef.ptr<float>(static_cast<int>(i)), wd), 0.f) + ShadedLook::ratio_floor();
-    const cv::Vec3f& nn = d.normal[i];
-    const float nl = std::max(0.f, nn.dot(lf));
-    const float cap = std::max(2.f, d.headroom * (nl + kModelFloor) * d.inv_model[i]);
-    const float ratio = std::min(S * d.inv_median[i], cap);
-    const float gloss = d.source_gloss[i] > 0 ? d.source_gloss[i] * Gloss::lobe(nn, lf, h, d.source_exponent) : 0.f;
-    const cv::Vec3f& t = d.texture[i];
-    const float top = std::max({t[0], t[1], t[2]});
-    v.push_back(cmax * (top * (s * ratio + am * d.inv_shading[i]) + s * gloss));
+    const float S = std::max(dot_column(d.dcoef, static_cast<int>(i), wd), 0.f) + ShadedLook::ratio_floor();
+    const LiveLookData::Pixel& e = d.px[i];
+    const float nl = std::max(0.f, e.normal.dot(lf));
+    const float cap = std::max(2.f, d.headroom * (nl + kModelFloor) * e.inv_model);
+    const float ratio = std::min(S * e.inv_median, cap);
+    const float gloss = e.source_gloss > 0 ? e.source_gloss * Gloss::lobe(e.normal, lf, h, d.source_exponent) : 0.f;
+    const float top = std::max({e.texture[0], e.texture[1], e.texture[2]});
+    v.push_back(cmax * (top * (s * ratio + am * e.inv_model) + s * gloss));
   }
   if (v.empty()) return 1.0;
   const size_t k = std::min(v.size() - 1, static_cast<size_t>(percentile * (v.size() - 1)));
@@ -478,30 +500,59 @@ cv::Mat LiveLook::paint(const cv::Mat& frame, const cv::Matx23d& a, const LiveLi
   const float clip = static_cast<float>(options_.change_clip);
   const bool change = frame.type() == CV_8UC3 && !frame.empty();
   const float floor = ShadedLook::ratio_floor();
+  // the lobe below a ten-thousandth of its peak is left out (no pow for most pixels)
+  const float gloss_from = static_cast<float>(std::pow(1e-4, 1.0 / std::max(1.0, d.source_exponent)));
+  const float alpha = static_cast<float>(d.source_exponent);
+  // the fitted exponents are whole (4..128 by default): by squaring, not pow
+  const int whole_alpha = d.source_exponent == std::floor(d.source_exponent) && d.source_exponent >= 1 &&
+                                  d.source_exponent <= 1024
+                              ? static_cast<int>(d.source_exponent)
+                              : 0;
+  const float ax = static_cast<float>(a(0, 0)), bx = static_cast<float>(a(0, 1)), cx = static_cast<float>(a(0, 2));
+  const float ay = static_cast<float>(a(1, 0)), by = static_cast<float>(a(1, 1)), cy = static_cast<float>(a(1, 2));
+  const float pred_floor = 1e-4f * std::max(s, 1e-6f);
   const int n = static_cast<int>(d.pixel.size());
-  cv::parallel_for_(cv::Range(0, n), [&](const cv::Range& r) {
-    for (int i = r.start; i < r.end; ++i) {
-      const float S = std::max(dot_active(d.dcoef.ptr<float>(i), wd), 0.f) + floor;
-      const cv::Vec3f& nn = d.normal[i];
-      const float nl = std::max(0.f, nn.dot(lf));
-      // as ShadedLook::shade: at most `headroom` x the Lambert model's ratio (and 2)
-      const float cap = std::max(2.f, d.headroom * (nl + kModelFloor) * d.inv_model[i]);
-      const float ratio = std::min(S * d.inv_median[i], cap);
-      const float gloss = d.source_gloss[i] > 0 ? d.source_gloss[i] * Gloss::lobe(nn, lf, h, d.source_exponent) : 0.f;
-      cv::Vec3f v;
-      const cv::Vec3f& t = d.texture[i];
-      const float amb = am * d.inv_shading[i];
-      for (int c = 0; c < 3; ++c) v[c] = colour[c] * (t[c] * (s * ratio + amb) + s * gloss);
-      if (change) {
-        const cv::Vec2f q = d.source[i];
-        const float fx = static_cast<float>(a(0, 0) * q[0] + a(0, 1) * q[1] + a(0, 2));
-        const float fy = static_cast<float>(a(1, 0) * q[0] + a(1, 1) * q[1] + a(1, 2));
-        cv::Vec3f g;
-        if (nearest_frame(frame, d.to_linear, fx, fy, &g)) {
-          const float pred = s * std::max(dot_active(d.scoef.ptr<float>(i), ws), 0.f) + am * d.source_albedo[i];
-          if (pred > 1e-4f * std::max(s, 1e-6f)) {
+  uchar* base = out.ptr<uchar>();  // continuous: clone() and create() make it so
+  // the dot products as sums of planes (terms x pixels, one row per term): vectorised over the pixels
+  auto shade_planes = [](const cv::Mat& planes, const Active& w, int from, int count, float* into) {
+    std::fill(into, into + count, 0.f);
+    for (size_t k = 0; k < w.at.size(); ++k) {
+      const float* p = planes.ptr<float>(w.at[k]) + from;
+      const float wk = w.w[k];
+      for (int i = 0; i < count; ++i) into[i] += wk * p[i];
+    }
+  };
+  cv::parallel_for_(cv::Range(0, (n + 4095) / 4096), [&](const cv::Range& blocks) {
+    std::vector<float> S(4096), P(4096);
+    for (int block = blocks.start; block < blocks.end; ++block) {
+      const int from = block * 4096, count = std::min(4096, n - from);
+      shade_planes(d.dcoef, wd, from, count, S.data());
+      if (change) shade_planes(d.scoef, ws, from, count, P.data());
+      for (int j = 0; j < count; ++j) {
+        const int i = from + j;
+        const LiveLookData::Pixel& e = d.px[i];
+        const float nl = std::max(0.f, e.normal.dot(lf));
+        // as ShadedLook::shade: at most `headroom` x the Lambert model's ratio (and 2)
+        const float cap = std::max(2.f, d.headroom * (nl + kModelFloor) * e.inv_model);
+        const float ratio = std::min((std::max(S[j], 0.f) + floor) * e.inv_median, cap);
+        float gloss = 0.f;
+        if (d.any_gloss && e.source_gloss > 0 && nl > 0) {
+          const float nh = e.normal.dot(h);
+          if (nh > gloss_from) gloss = e.source_gloss * (whole_alpha > 0 ? whole_power(nh, whole_alpha) : std::pow(nh, alpha));
+        }
+        const cv::Vec3f& t = e.texture;
+        const float lit = s * ratio + am * e.inv_model;
+        cv::Vec3f v(colour[0] * (t[0] * lit + s * gloss), colour[1] * (t[1] * lit + s * gloss),
+                    colour[2] * (t[2] * lit + s * gloss));
+        if (change) {
+          const LiveLookData::Source& f = d.src[i];
+          const cv::Vec2f q = f.xy;
+          cv::Vec3f g;
+          const float pred = s * std::max(P[j], 0.f) + am * f.albedo;
+          if (pred > pred_floor && nearest_frame(frame, d.to_linear, ax * q[0] + bx * q[1] + cx,
+                                                 ay * q[0] + by * q[1] + cy, &g)) {
             for (int c = 0; c < 3; ++c) {
-              const float pc = pred * d.chroma[i][c] * frame_colour[c];
+              const float pc = pred * f.chroma[c] * frame_colour[c];
               float k = g[c] / std::max(pc, 1e-6f);
               // within the dead zone the model's own error: 1; beyond it what changed, clipped
               k = k > lo ? k / lo : (k * lo < 1.f ? k * lo : 1.f);
@@ -509,10 +560,9 @@ cv::Mat LiveLook::paint(const cv::Mat& frame, const cv::Matx23d& a, const LiveLi
             }
           }
         }
+        uchar* o = base + static_cast<size_t>(d.pixel[i]) * 3;
+        for (int c = 0; c < 3; ++c) o[c] = d.to_srgb[static_cast<int>(std::clamp(v[c], 0.f, 1.f) * kSrgbSteps + 0.5f)];
       }
-      cv::Vec3b& o = out.at<cv::Vec3b>(d.pixel[i] / d.dsize.width, d.pixel[i] % d.dsize.width);
-      for (int c = 0; c < 3; ++c)
-        o[c] = d.to_srgb[static_cast<size_t>(std::clamp(v[c], 0.f, 1.f) * kSrgbSteps + 0.5f)];
     }
   });
   return out;
@@ -527,14 +577,13 @@ cv::Mat LiveLook::paint_linear(const cv::Vec3d& direction) const {
   const cv::Vec3f h = half_vector(l);
   const float floor = ShadedLook::ratio_floor();
   for (size_t i = 0; i < d.pixel.size(); ++i) {
-    const float S = std::max(dot_active(d.dcoef.ptr<float>(static_cast<int>(i)), wd), 0.f) + floor;
-    const cv::Vec3f& nn = d.normal[i];
-    const float nl = std::max(0.f, nn.dot(lf));
-    const float cap = std::max(2.f, d.headroom * (nl + kModelFloor) * d.inv_model[i]);
-    const float ratio = std::min(S * d.inv_median[i], cap);
-    const float gloss = d.source_gloss[i] > 0 ? d.source_gloss[i] * Gloss::lobe(nn, lf, h, d.source_exponent) : 0.f;
-    out.at<cv::Vec3f>(d.pixel[i] / d.dsize.width, d.pixel[i] % d.dsize.width) =
-        d.texture[i] * ratio + cv::Vec3f::all(gloss);
+    const float S = std::max(dot_column(d.dcoef, static_cast<int>(i), wd), 0.f) + floor;
+    const LiveLookData::Pixel& e = d.px[i];
+    const float nl = std::max(0.f, e.normal.dot(lf));
+    const float cap = std::max(2.f, d.headroom * (nl + kModelFloor) * e.inv_model);
+    const float ratio = std::min(S * e.inv_median, cap);
+    const float gloss = e.source_gloss > 0 ? e.source_gloss * Gloss::lobe(e.normal, lf, h, d.source_exponent) : 0.f;
+    out.at<cv::Vec3f>(d.pixel[i] / d.dsize.width, d.pixel[i] % d.dsize.width) = e.texture * ratio + cv::Vec3f::all(gloss);
   }
   return out;
 }
