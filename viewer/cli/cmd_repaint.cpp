@@ -147,19 +147,9 @@ int run_repaint(const RepaintArgs& a) {
   double look_s = 0;
   if (*look == repaint::Look::shaded) {
     const auto t0 = std::chrono::steady_clock::now();
-    auto still = pipeline::shaded_look(*pair, options, *map);
-    if (!still) return report.fail("the shaded look: " + still.message());
-    std::vector<cv::Vec3d> dst_lamps, src_lamps, positions;
-    for (const io::Light& l : pair->destination.lights) dst_lamps.push_back(l.direction);
-    for (const io::Light& l : pair->source.lights) {
-      src_lamps.push_back(l.direction);
-      if (l.position_m) positions.push_back(*l.position_m);
-    }
-    if (positions.size() != src_lamps.size()) positions.clear();  // distant lamps (or not all placed)
-    auto made = repaint::LiveLook::make(**still, {pair->dst.view, dst_lamps}, {pair->src.view, src_lamps}, *map,
-                                        positions);
-    if (!made) return report.fail(made.message());
-    live_look = std::make_shared<const repaint::LiveLook>(std::move(*made));
+    auto made = pipeline::live_look(*pair, options, *map);
+    if (!made) return report.fail("the shaded look: " + made.message());
+    live_look = *made;
     look_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }
   repaint::TrackOptions track_options;

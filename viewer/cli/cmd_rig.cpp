@@ -412,19 +412,9 @@ VENEER_COMMAND(rig) {
           std::cout << "preparing the shaded look ..." << std::endl;
           auto pair = pipeline::prepare_pair(*dst, *src, options);
           if (!pair) return fail("live", pair.message());
-          auto still = pipeline::shaded_look(*pair, options, *map);
-          if (!still) return fail("live", "the shaded look: " + still.message());
-          std::vector<cv::Vec3d> dst_lamps, src_lamps, positions;
-          for (const io::Light& l : pair->destination.lights) dst_lamps.push_back(l.direction);
-          for (const io::Light& l : pair->source.lights) {
-            src_lamps.push_back(l.direction);
-            if (l.position_m) positions.push_back(*l.position_m);
-          }
-          if (positions.size() != src_lamps.size()) positions.clear();
-          auto made = repaint::LiveLook::make(**still, {pair->dst.view, dst_lamps}, {pair->src.view, src_lamps},
-                                              *map, positions);
-          if (!made) return fail("live", made.message());
-          shaded = std::make_shared<const repaint::LiveLook>(std::move(*made));
+          auto made = pipeline::live_look(*pair, options, *map);
+          if (!made) return fail("live", "the shaded look: " + made.message());
+          shaded = *made;
         } else if (*look == repaint::Look::shaded && live_look_opt->count()) {
           return fail("live", "--look shaded needs --dst (the destination's photos and normals) and tracking", 2);
         }
