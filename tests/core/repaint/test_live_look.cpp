@@ -252,6 +252,24 @@ TEST(LiveLook, LightEstimateRecoversTheSimulatedHandLamp) {
     worst = std::max(worst, e);
   }
   EXPECT_LT(worst, 2.0);  // measured 0.59 deg (the lamp near: its direction varies over the object)
+
+  // with the rig's lamp positions: the light's position where its direction meets the lamps' plane
+  std::vector<cv::Vec3d> positions;
+  for (const io::Light& l : s.set.lights)
+    if (l.position_m) positions.push_back(*l.position_m);
+  ASSERT_EQ(positions.size(), s.set.lights.size());
+  const auto lamps = directions(s.set);
+  auto near = repaint::LiveLook::make(*s.look, {s.view, lamps}, {s.view, lamps}, s.map, positions);
+  ASSERT_TRUE(near) << near.message();
+  const repaint::LiveLight l = near->estimate_light(seq->frames[2], seq->truth[2].still_to_frame);
+  ASSERT_TRUE(l.position_m);
+  double plane = 0;
+  for (const auto& p : positions) plane += p[2] / positions.size();
+  EXPECT_NEAR((*l.position_m)[2], plane, 1e-9);
+  EXPECT_LT(angle_deg(*l.position_m, l.direction), 1e-6);
+  EXPECT_FALSE(s.live->estimate_light(seq->frames[2], seq->truth[2].still_to_frame).position_m);  // distant: none
+  // bad input is named
+  EXPECT_FALSE(repaint::LiveLook::make(*s.look, {s.view, lamps}, {s.view, lamps}, s.map, {positions[0]}));
 }
 
 // A hand over the top of the object: one lamp does not explain the frame; the
