@@ -161,7 +161,7 @@ int run_repaint(const RepaintArgs& a) {
   session.set_smooth(true);  // offline: bilinear, no frame budget
 
   cv::VideoWriter writer;
-  const fs::path mp4 = report.path("repainted.mp4");
+  fs::path mp4;  // in the output folder, once it is made (the first frame)
   nlohmann::json per_frame = nlohmann::json::array();
   std::vector<double> ms, errors;
   int lost = 0, count = 0, fallbacks = 0;
@@ -173,6 +173,7 @@ int run_repaint(const RepaintArgs& a) {
     if (!live) return report.fail("frame " + std::to_string(count) + ": " + live.message());
     if (count == 0) {
       if (auto st = report.folder(a.out); !st) return report.fail(st.message());
+      mp4 = report.path("repainted.mp4");
       if (!session.geometry()->same) std::cout << "live view: " << session.geometry()->describe() << "\n";
     }
     repaint::TrackResult r;
