@@ -186,6 +186,16 @@ TEST(Relightable, RecoversCoefficientsOfPhotosInItsSpan) {
   ASSERT_TRUE(exact) << exact.message();
   for (size_t i = 0; i < lamps.size(); ++i)
     EXPECT_LT(cv::norm(exact->evaluate(lamps[i]), cv::max(photos[i], 0.f), cv::NORM_INF), 5e-3) << "lamp " << i;
+  // the basis in RTI files' order: a lamp in the x-z plane (phi = 0) has no sin(phi) or sin(2 phi) terms
+  float b[9];
+  repaint::hsh_basis(cv::Vec3d(1, 0, 1), 3, b);
+  const double ct = std::sqrt(0.5), sq = std::sqrt(ct - ct * ct);
+  EXPECT_NEAR(b[0], 1 / std::sqrt(2 * CV_PI), 1e-6);
+  EXPECT_NEAR(b[1], std::sqrt(6 / CV_PI) * sq, 1e-6);
+  EXPECT_NEAR(b[3], 0, 1e-6);
+  EXPECT_NEAR(b[4], std::sqrt(30 / CV_PI) * (ct * ct - ct), 1e-6);
+  EXPECT_NEAR(b[7], 0, 1e-6);
+  EXPECT_NEAR(b[8], 0, 1e-6);
   // bad input is named
   EXPECT_FALSE(repaint::RelightableModel::fit(photos, mask, std::vector<cv::Vec3d>(3, unseen), o));
   o.order = 5;

@@ -36,15 +36,16 @@ void hsh_basis(const cv::Vec3d& direction, int order, float* out) {
   const double c = std::cos(phi), s = std::sin(phi);
   out[0] = static_cast<float>(1 / std::sqrt(2 * pi));
   if (order < 2) return;
-  out[1] = static_cast<float>(std::sqrt(6 / pi) * s * sq);
+  // the order RTI files (RTIBuilder, RTIViewer) use
+  out[1] = static_cast<float>(std::sqrt(6 / pi) * c * sq);
   out[2] = static_cast<float>(std::sqrt(3 / (2 * pi)) * (-1 + 2 * ct));
-  out[3] = static_cast<float>(std::sqrt(6 / pi) * c * sq);
+  out[3] = static_cast<float>(std::sqrt(6 / pi) * s * sq);
   if (order < 3) return;
-  out[4] = static_cast<float>(std::sqrt(30 / pi) * std::sin(2 * phi) * (-ct + ct * ct));
-  out[5] = static_cast<float>(std::sqrt(30 / pi) * s * sq * (-1 + 2 * ct));
+  out[4] = static_cast<float>(std::sqrt(30 / pi) * std::cos(2 * phi) * (-ct + ct * ct));
+  out[5] = static_cast<float>(std::sqrt(30 / pi) * c * (-1 + 2 * ct) * sq);
   out[6] = static_cast<float>(std::sqrt(5 / (2 * pi)) * (1 - 6 * ct + 6 * ct * ct));
-  out[7] = static_cast<float>(std::sqrt(30 / pi) * c * sq * (-1 + 2 * ct));
-  out[8] = static_cast<float>(std::sqrt(30 / pi) * std::cos(2 * phi) * (-ct + ct * ct));
+  out[7] = static_cast<float>(std::sqrt(30 / pi) * (-1 + 2 * ct) * sq * s);
+  out[8] = static_cast<float>(std::sqrt(30 / pi) * std::sin(2 * phi) * (-ct + ct * ct));
 }
 
 void ptm_basis(const cv::Vec3d& direction, float* out) {

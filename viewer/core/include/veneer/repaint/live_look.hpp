@@ -88,7 +88,7 @@ class LiveLook {
   // The light in `frame` (8-bit BGR, sRGB unless options().light.srgb is
   // off), whose pixel map_source_to_frame * (x, y, 1) shows the map's source
   // pixel (x, y) (registration and the live geometry). Never fails on a
-  // frame: one one lamp does not explain comes back with explained = false.
+  // frame: one that one lamp does not explain comes back with explained = false.
   LiveLight estimate_light(const cv::Mat& frame, const cv::Matx23d& map_source_to_frame) const;
 
   // The destination-sized 8-bit BGR picture of `frame` at `light`: mapped

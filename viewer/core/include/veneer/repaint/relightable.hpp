@@ -8,14 +8,15 @@
 // per-pixel coefficients fitted by ridge-regularised least squares over the
 // captured lamps; r_i(p) what the fit leaves of the photo under captured lamp
 // i, and w_i(l) a narrow Gaussian radial basis over the lamps' directions
-// interpolating it (exact at a captured lamp, 0 far from all of them). On cat
-// and buddha, leave one lamp out (tools/prototypes/live/README.md, the
-// livelook.py measure): HSH order 3 + 5 deg residual 0.0770, HSH 3 alone
-// 0.0792, PTM 0.0795, Lambert on normals 0.0793, exact radial basis 0.0889. The model is what the live view (live_look.hpp) shades the
-// destination with at a light the rig never captured; it carries what the
-// photos hold (cast shadows, gloss), not only Lambert on normals. Which basis
-// is the default was chosen by leave-one-lamp-out on real pairs
-// (tools/prototypes/live/README.md).
+// interpolating it (exact at a captured lamp, 0 far from all of them).
+//
+// The model is what the live view (live_look.hpp) shades the destination with
+// at a light the rig never captured; it carries what the photos hold (cast
+// shadows, gloss), not only Lambert on normals. The default was chosen by
+// leaving one lamp out on the real cat and buddha, scored as livelook.py
+// scores the live view (tools/prototypes/live/README.md): HSH order 3 + a
+// 5 deg residual 0.0770, HSH 3 alone 0.0792, PTM 0.0795, Lambert on normals
+// 0.0793, an exact radial basis over the lamps 0.0889.
 //
 // The hemispherical-harmonics basis (hsh_basis) is also what an .rti export
 // writes; fit_coefficients is that fit, reusable on its own.
@@ -38,7 +39,7 @@ Expected<RelightBasis> parse_relight_basis(std::string_view name);
 
 // The hemispherical harmonics of `order` (1..3) at unit direction `l` (z toward
 // the camera; l.z <= 0 is clamped to the horizon): order^2 values into `out`,
-// the basis of the RTI format's HSH (Gautron et al. 2004).
+// the basis of the RTI format's HSH (Gautron et al. 2004) in its files' order.
 void hsh_basis(const cv::Vec3d& l, int order, float* out);
 // The PTM basis at `l`: lu^2, lv^2, lu lv, lu, lv, 1 (6 values).
 void ptm_basis(const cv::Vec3d& l, float* out);
@@ -53,11 +54,12 @@ struct RelightableOptions {
   Status check() const;
 };
 
-// Per pixel of `mask`, the coefficients c_k of `photos` (CV_32FC1 or CV_32FC3;
-// the grey is fitted) over `directions` (unit, one per photo) in the basis of
-// `terms` functions given per lamp by `basis` (lamps x terms, CV_32FC1):
-// CV_32FC(terms), 0 outside the mask. Fails on sizes that do not fit or fewer
-// lamps than terms without a ridge.
+// Per pixel of `mask`, the coefficients c_k of `photos` (the grey of CV_32FC3;
+// for one channel, pass that channel's CV_32FC1 photos) in the basis of
+// `terms` functions given per lamp by `basis` (lamps x terms, CV_32FC1; e.g.
+// hsh_basis of each lamp's direction), the ridge times the normal equations'
+// mean diagonal: CV_32FC(terms), 0 outside the mask. Fails on sizes that do
+// not fit, more than 64 terms, or fewer lamps than terms without a ridge.
 Expected<cv::Mat> fit_coefficients(const std::vector<cv::Mat>& photos, const cv::Mat& mask, const cv::Mat& basis,
                                    double ridge, const Progress& progress = {});
 
