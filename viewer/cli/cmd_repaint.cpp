@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -23,6 +24,7 @@
 #include "veneer/io/imageset.hpp"
 #include "veneer/pipeline/transfer.hpp"
 #include "veneer/repaint/live.hpp"
+#include "veneer/repaint/live_look.hpp"
 #include "veneer/repaint/live_session.hpp"
 #include "veneer/repaint/track.hpp"
 #include "veneer/sim/motion.hpp"
@@ -34,6 +36,7 @@ using namespace veneer;
 
 struct RepaintArgs {
   std::string src, dst, map, video, out;
+  std::string look = "shaded";
   bool no_track = false, overlay = false;
   int blend = -1;
   double min_correlation = repaint::TrackOptions{}.min_correlation;
@@ -65,7 +68,21 @@ struct FrameSource {
   }
 };
 
+nlohmann::json light_json(const repaint::LiveLight& l) {
+  nlohmann::json j = {{"direction", {l.direction[0], l.direction[1], l.direction[2]}},
+                      {"colour", {l.colour[0], l.colour[1], l.colour[2]}},
+                      {"intensity", l.intensity},
+                      {"ambient", l.ambient},
+                      {"residual", l.residual},
+                      {"explained", l.explained},
+                      {"fallback", l.fallback}};
+  if (l.position_m) j["position_m"] = {(*l.position_m)[0], (*l.position_m)[1], (*l.position_m)[2]};
+  return j;
+}
+
 int run_repaint(const RepaintArgs& a) {
+  auto look = repaint::parse_look(a.look);
+  if (!look) return report.usage("--look: " + look.message());
   // the video first: a missing input is the most likely mistake
   FrameSource frames;
   std::optional<sim::MotionTruth> truth;
@@ -114,25 +131,40 @@ int run_repaint(const RepaintArgs& a) {
   // Frames are blended as the transfer's pictures were (its metrics.json), as `veneer rig live` does.
   if (a.blend >= 0) options.blend = a.blend;
   std::shared_ptr<const match::fast::BlendPlan> plan;
+  std::optional<pipeline::PreparedPair> pair;
+  if (options.blend > 0 || *look == repaint::Look::shaded) {
+    auto prepared = pipeline::prepare_pair(*dst, *src, options);
+    if (!prepared) return report.fail(prepared.message());
+    pair = std::move(*prepared);
+  }
   if (options.blend > 0) {
-    auto pair = pipeline::prepare_pair(*dst, *src, options);
-    if (!pair) return report.fail(pair.message());
     auto made = pipeline::blend_plan_for(*pair, options, *map);
     if (!made) return report.fail(made.message());
     plan = *made;
+  }
+  // the shaded look: the still look of this map, and what the live frames are painted with at their light
+  std::shared_ptr<const repaint::LiveLook> live_look;
+  double look_s = 0;
+  if (*look == repaint::Look::shaded) {
+    const auto t0 = std::chrono::steady_clock::now();
+    auto made = pipeline::live_look(*pair, options, *map);
+    if (!made) return report.fail("the shaded look: " + made.message());
+    live_look = *made;
+    look_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }
   repaint::TrackOptions track_options;
   track_options.min_correlation = a.min_correlation;
   if (auto st = track_options.check(); !st) return report.usage("--min-correlation: " + st.message());
   // tracking, repaint, outline and the live view's framing: what the viewer's Live tab runs
-  repaint::LiveSession session(src->images, still_mask, *map, source_size, backdrop, plan, track_options);
+  repaint::LiveSession session(src->images, still_mask, *map, source_size, live_look, backdrop, plan, track_options);
+  session.set_look(*look);
   session.set_smooth(true);  // offline: bilinear, no frame budget
 
   cv::VideoWriter writer;
-  const fs::path mp4 = report.path("repainted.mp4");
+  fs::path mp4;  // in the output folder, once it is made (the first frame)
   nlohmann::json per_frame = nlohmann::json::array();
   std::vector<double> ms, errors;
-  int lost = 0, count = 0;
+  int lost = 0, count = 0, fallbacks = 0;
   cv::Mat frame;
   while (frames.next(&frame)) {
     const auto t0 = std::chrono::steady_clock::now();
@@ -141,6 +173,7 @@ int run_repaint(const RepaintArgs& a) {
     if (!live) return report.fail("frame " + std::to_string(count) + ": " + live.message());
     if (count == 0) {
       if (auto st = report.folder(a.out); !st) return report.fail(st.message());
+      mp4 = report.path("repainted.mp4");
       if (!session.geometry()->same) std::cout << "live view: " << session.geometry()->describe() << "\n";
     }
     repaint::TrackResult r;
@@ -161,7 +194,14 @@ int run_repaint(const RepaintArgs& a) {
     }
     if (count == 0) writer.open(mp4.string(), cv::VideoWriter::fourcc('m', 'p', '4', 'v'), 30.0, out.size());
     if (writer.isOpened()) writer.write(out);
-    nlohmann::json f = {{"file", name}, {"ms", elapsed}, {"lost", r.lost}, {"correlation", r.correlation}};
+    nlohmann::json f = {{"file", name}, {"ms", elapsed}, {"lost", r.lost}, {"correlation", r.correlation},
+                        {"look", repaint::look_name(live->look)}};
+    if (live->light) {
+      f["light"] = light_json(*live->light);
+      f["light_ms"] = live->light_ms;
+      f["shade_ms"] = live->shade_ms;
+      fallbacks += !live->light->explained;
+    }
     const auto& e = r.still_to_frame;
     f["still_to_frame"] = {{e(0, 0), e(0, 1), e(0, 2)}, {e(1, 0), e(1, 1), e(1, 2)}};
     if (truth && static_cast<size_t>(count) < truth->truth.size() && !r.lost) {
@@ -178,6 +218,9 @@ int run_repaint(const RepaintArgs& a) {
   nlohmann::json doc = {{"frames", count},
                            {"lost", lost},
                            {"tracking", !a.no_track},
+                           {"look", a.look},
+                           {"look_setup_s", look_s},
+                           {"light_not_explained", fallbacks},
                            {"blend_px", plan ? options.blend : 0},
                            {"method", a.no_track ? "none (the stills' pose)" : "ECC affine, coarse to fine, seeded from the previous frame"},
                            {"ms_per_frame", {{"median", percentile(ms, 0.5)}, {"p95", percentile(ms, 0.95)}}},
@@ -222,6 +265,10 @@ VENEER_ARGS_COMMAND(repaint, RepaintArgs,
   cmd->add_option("--blend", args->blend,
                   "blend the chunks' seams over this radius, 0..16 px (default: as the transfer did, its metrics.json)");
   cmd->add_flag("--no-track", args->no_track, "look frames up at the stills' pose (the old live view)");
+  cmd->add_option("--look", args->look,
+                  "shaded: each frame painted as the still look at the light estimated in it (the default); copy: "
+                  "the frame's pixels copied through the map")
+      ->capture_default_str();
   cmd->add_option("--min-correlation", args->min_correlation, "ECC correlation below this marks a frame lost (0..1)")
       ->capture_default_str();
   return [args] { return run_repaint(*args); };

@@ -195,6 +195,10 @@ VENEER_COMMAND(rig) {
                                      "metrics.json says, else 0.1; needs --dst)")
                         ->check(CLI::Range(0.0, 2.0));
   live->add_flag("--sweep", *live_sweep, "simulated rig: move the hand-held lamp round the source while recording");
+  auto live_look = std::make_shared<std::string>("shaded");
+  auto* live_look_opt = live->add_option("--look", *live_look,
+                   "with --map: shaded (each frame painted as the still look at the light estimated in it; needs "
+                   "--dst, the default when it is given) | copy (the frame's pixels copied through the map)");
   auto live_no_track = std::make_shared<bool>(false);
   live->add_flag("--no-track", *live_no_track,
                  "with --map: look frames up at the stills' pose (the old live view) instead of registering each "
@@ -400,12 +404,28 @@ VENEER_COMMAND(rig) {
         }
         // the source's size as the map saw it (scaled like the transfer's)
         repainter.emplace(*map, match::scaled_size(src->size, options.scale), backdrop, plan);
+        auto look = repaint::parse_look(*live_look);
+        if (!look) return fail("live", "--look: " + look.message(), 2);
+        std::shared_ptr<const repaint::LiveLook> shaded;
+        if (*look == repaint::Look::shaded && dst && !*live_no_track) {
+          // the still look of this map, and what each frame is painted with at its light
+          std::cout << "preparing the shaded look ..." << std::endl;
+          auto pair = pipeline::prepare_pair(*dst, *src, options);
+          if (!pair) return fail("live", pair.message());
+          auto made = pipeline::live_look(*pair, options, *map);
+          if (!made) return fail("live", "the shaded look: " + made.message());
+          shaded = *made;
+        } else if (*look == repaint::Look::shaded && live_look_opt->count()) {
+          return fail("live", "--look shaded needs --dst (the destination's photos and normals) and tracking", 2);
+        }
         if (!*live_no_track) {
           auto mask = match::object_mask(*src, false);
           if (!mask) return fail("live", "source: " + mask.message());
           still_mask = *mask;
           if (still_mask.size() != src->size) cv::resize(still_mask, still_mask, src->size, 0, 0, cv::INTER_NEAREST);
-          session.emplace(src->images, still_mask, *map, match::scaled_size(src->size, options.scale), backdrop, plan);
+          session.emplace(src->images, still_mask, *map, match::scaled_size(src->size, options.scale), shaded, backdrop,
+                          plan);
+          session->set_look(shaded ? repaint::Look::shaded : repaint::Look::copy);
         }
       }
       std::error_code ec;
@@ -445,9 +465,16 @@ VENEER_COMMAND(rig) {
               cv::Point2f centre(0, 0);
               for (const auto& p : lf->outline) centre += p / static_cast<float>(lf->outline.size());
               std::printf("frame %d: %s, ECC %.3f, outline of %zu points about (%.1f, %.1f) px, %.1f ms track + "
-                          "%.1f ms repaint\n",
+                          "%.1f ms repaint (%s)\n",
                           saved, lf->lost ? "LOST - hold still / recapture" : "tracked", lf->quality,
-                          lf->outline.size(), centre.x, centre.y, lf->track_ms, lf->repaint_ms);
+                          lf->outline.size(), centre.x, centre.y, lf->track_ms, lf->repaint_ms,
+                          repaint::look_name(lf->look));
+              if (lf->light) {
+                const auto& l = *lf->light;
+                std::printf("  light (%.3f, %.3f, %.3f), intensity %.3f, ambient %.4f, residual %.3f%s%s\n",
+                            l.direction[0], l.direction[1], l.direction[2], l.intensity, l.ambient, l.residual,
+                            l.explained ? "" : ", one lamp does not explain it: ", l.fallback.c_str());
+              }
               std::fflush(stdout);
               char align[32];
               std::snprintf(align, sizeof align, "align_%04d.png", saved);

@@ -2,6 +2,7 @@
 // truth look -- the destination's shape rendered in the source's material.
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <numeric>
 #include <atomic>
 #include <vector>
@@ -139,7 +140,7 @@ TEST(ShadedLook, DemoPairTextureWholeAndShadingRight) {
   std::printf("shaded: shading %.4f (linear copy %.4f, %.3fx), coherence %.3f, coverage %.4f of the truth, "
               "%.4f of the segmentation, texture %.3f\n",
               e_shaded, e_floor, e_shaded / e_floor, q.coherence, q.coverage, seen.coverage, texture);
-  EXPECT_LE(e_shaded, 1.10 * e_floor);
+  EXPECT_LE(e_shaded, 0.62 * e_floor);  // measured 0.554x (issue 40: it asserted 1.10x)
   EXPECT_GE(q.coherence, 0.85);
   EXPECT_GE(seen.coverage, 0.995);
   EXPECT_GT(texture, 0.5);
@@ -162,7 +163,7 @@ TEST(ShadedLook, GlossySourceHighlightsFollowTheDestinationsNormals) {
   auto result = pipeline::transfer(*pair, shaded);
   ASSERT_TRUE(result) << result.message();
   ASSERT_TRUE(result->look);
-  EXPECT_GE(result->look->source_exponent(), 32);  // the sphere's lobe is sharp (shininess 80)
+  EXPECT_EQ(result->look->source_exponent(), 64);  // the sphere's lobe is sharp (shininess 80); measured 64
   pipeline::TransferOptions copy = shaded;
   copy.look = repaint::Look::copy;
   auto copied = pipeline::transfer(*pair, copy, result->map);
@@ -203,8 +204,10 @@ TEST(ShadedLook, GlossFitFindsTheSpheresLobe) {
   for (const io::Light& l : s->lights) lamps.push_back(l.direction);
   auto g = repaint::fit_gloss(s->images, s->truth.normals, s->truth.mask, lamps);
   ASSERT_TRUE(g) << g.message();
-  EXPECT_GE(g->exponent, 32);
-  EXPECT_LE(g->exponent, 128);
+  std::printf("the sphere's lobe: exponent %.0f (shininess 80; tried %s)\n", g->exponent, "4, 8, ..., 128");
+  // of the exponents tried (powers of 2), 64 is the one nearest the true 80 in log (128 is 1.6x off);
+  // measured 64 (issue 40: it accepted 32..128)
+  EXPECT_EQ(g->exponent, 64);
   // the diffuse albedo is the sphere's red (0.70, 0.07, 0.05 as R, G, B), highlights passed by
   const cv::Scalar albedo = cv::mean(g->albedo, s->truth.mask);
   EXPECT_GT(albedo[2], 4 * albedo[0]);

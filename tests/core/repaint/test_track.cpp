@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -273,6 +274,38 @@ TEST(RepaintCommand, SimulatedMotionRepaintedWithReport) {
   EXPECT_LT(report.at("align_error_px").at("p95").get<double>(), 2.0);
   EXPECT_EQ(report.at("per_frame").size(), 12u);
   EXPECT_EQ(report.at("blend_px"), 2);  // as the transfer blended (its metrics.json)
+  // the shaded look by default (issue 40): each frame's light, found near the hand lamp's direction
+  EXPECT_EQ(report.at("look"), "shaded");
+  {
+    std::ifstream motion_in(dir.path / "video/motion.json");
+    const auto motion = nlohmann::json::parse(motion_in);
+    for (size_t i = 0; i < 12; ++i) {
+      const auto& f = report.at("per_frame").at(i);
+      EXPECT_EQ(f.at("look"), "shaded") << "frame " << i;
+      ASSERT_TRUE(f.contains("light")) << "frame " << i;
+      EXPECT_TRUE(f.at("light").at("explained").get<bool>()) << "frame " << i;
+      const auto& lamp = motion.at("frames").at(i).at("lamp_m");
+      cv::Vec3d truth(lamp[0].get<double>(), lamp[1].get<double>(), lamp[2].get<double>());
+      const auto& dir = f.at("light").at("direction");
+      const cv::Vec3d found(dir[0].get<double>(), dir[1].get<double>(), dir[2].get<double>());
+      const double deg = std::acos(std::clamp(found.dot(truth / cv::norm(truth)), -1.0, 1.0)) * 180 / CV_PI;
+      EXPECT_LT(deg, 2.0) << "frame " << i;  // measured 0.1-1.0 deg (256x170, moving)
+    }
+  }
+  {  // --look copy: the pixel copy, no light
+    auto [c_out, c_rc] = run_veneer("repaint --src " + d + "/src --dst " + d + "/dst --map " + d + "/map --video " +
+                                    d + "/video --out " + d + "/copy --look copy");
+    ASSERT_EQ(c_rc, 0) << c_out;
+    std::ifstream c_in(dir.path / "copy/report.json");
+    const auto copy = nlohmann::json::parse(c_in);
+    EXPECT_EQ(copy.at("look"), "copy");
+    EXPECT_EQ(copy.at("per_frame").at(0).at("look"), "copy");
+    EXPECT_FALSE(copy.at("per_frame").at(0).contains("light"));
+    auto [bad_out, bad_rc] = run_veneer("repaint --src " + d + "/src --dst " + d + "/dst --map " + d + "/map --video " +
+                                        d + "/video --out " + d + "/bad --look glossy");
+    EXPECT_NE(bad_rc, 0);
+    EXPECT_NE(bad_out.find("glossy"), std::string::npos) << bad_out;
+  }
 
   // issue 27's own check: 30 px and 5 deg over 60 frames under a sweeping lamp,
   // with and without tracking

@@ -27,6 +27,8 @@ M = {
     'hsh3r.05+rbf2': basis_plus_rbf(lambda L: hsh(L, 3), 5e-2, 2),
     'hsh3r.05+rbf3': basis_plus_rbf(lambda L: hsh(L, 3), 5e-2, 3),
     'hsh3r.05+rbf5': basis_plus_rbf(lambda L: hsh(L, 3), 5e-2, 5),
+    'hsh3r.05+rbf8': basis_plus_rbf(lambda L: hsh(L, 3), 5e-2, 8),
+    'hsh3r.05+rbf12': basis_plus_rbf(lambda L: hsh(L, 3), 5e-2, 12),
     'ptm+rbf3': basis_plus_rbf(ptm, 1e-3, 3),
     'hsh2r.01+rbf3': basis_plus_rbf(lambda L: hsh(L, 2), 1e-2, 3),
 }

@@ -51,14 +51,14 @@ def hsh(L, order):
     sq = np.sqrt(np.maximum(ct - ct * ct, 0))
     pi = np.pi
     b = [1 / np.sqrt(2 * pi) * np.ones_like(phi)]
-    if order > 1:
-        b += [np.sqrt(6 / pi) * s * sq, np.sqrt(3 / (2 * pi)) * (-1 + 2 * ct), np.sqrt(6 / pi) * c * sq]
+    if order > 1:  # in the order RTI files use (the numbers do not depend on it)
+        b += [np.sqrt(6 / pi) * c * sq, np.sqrt(3 / (2 * pi)) * (-1 + 2 * ct), np.sqrt(6 / pi) * s * sq]
     if order > 2:
-        b += [np.sqrt(30 / pi) * np.sin(2 * phi) * (-ct + ct * ct),
-              np.sqrt(30 / pi) * s * sq * (-1 + 2 * ct),
-              np.sqrt(5 / (2 * pi)) * (1 - 6 * ct + 6 * ct * ct),
+        b += [np.sqrt(30 / pi) * np.cos(2 * phi) * (-ct + ct * ct),
               np.sqrt(30 / pi) * c * sq * (-1 + 2 * ct),
-              np.sqrt(30 / pi) * np.cos(2 * phi) * (-ct + ct * ct)]
+              np.sqrt(5 / (2 * pi)) * (1 - 6 * ct + 6 * ct * ct),
+              np.sqrt(30 / pi) * s * sq * (-1 + 2 * ct),
+              np.sqrt(30 / pi) * np.sin(2 * phi) * (-ct + ct * ct)]
     return np.stack(b, 1)
 
 

@@ -188,6 +188,29 @@ Expected<std::shared_ptr<const repaint::ShadedLook>> shaded_look(const PreparedP
   return std::shared_ptr<const repaint::ShadedLook>(std::make_shared<const repaint::ShadedLook>(std::move(*look)));
 }
 
+Expected<std::shared_ptr<const repaint::LiveLook>> live_look(const PreparedPair& pair, const TransferOptions& options,
+                                                             const Map& map,
+                                                             std::shared_ptr<const repaint::ShadedLook> still,
+                                                             const repaint::LiveLookOptions& live_options,
+                                                             const Progress& progress) {
+  if (!still) {
+    auto made = shaded_look(pair, options, map, progress.part(0.0, 0.6));
+    if (!made) return made.error();
+    still = *made;
+  }
+  std::vector<cv::Vec3d> dst_lamps, src_lamps, positions;
+  for (const io::Light& l : pair.destination.lights) dst_lamps.push_back(l.direction);
+  for (const io::Light& l : pair.source.lights) {
+    src_lamps.push_back(l.direction);
+    if (l.position_m) positions.push_back(*l.position_m);
+  }
+  if (positions.size() != src_lamps.size()) positions.clear();  // distant lamps, or not every one placed
+  auto live = repaint::LiveLook::make(*still, {pair.dst.view, dst_lamps}, {pair.src.view, src_lamps}, map, positions,
+                                      live_options, progress.part(0.6, 1.0));
+  if (!live) return live.error();
+  return std::shared_ptr<const repaint::LiveLook>(std::make_shared<const repaint::LiveLook>(std::move(*live)));
+}
+
 namespace {
 
 // transfer() of a prepared pair, from `given` when not null (else the map is

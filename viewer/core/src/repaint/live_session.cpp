@@ -128,9 +128,23 @@ LiveSession::LiveSession(const std::vector<cv::Mat>& photos, const cv::Mat& mask
   if (!mask.empty()) cv::findContours(mask.clone(), contours_, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_SIMPLE);
 }
 
+LiveSession::LiveSession(const std::vector<cv::Mat>& photos, const cv::Mat& mask, const Map& map,
+                         cv::Size source_size, std::shared_ptr<const LiveLook> live_look, const cv::Mat& backdrop,
+                         std::shared_ptr<const fast::BlendPlan> blend, const TrackOptions& options)
+    : LiveSession(photos, mask, map, source_size, backdrop, std::move(blend), options) {
+  live_look_ = std::move(live_look);
+  if (live_look_ && !backdrop_.empty() && backdrop_.size() != live_look_->destination_size())
+    cv::resize(backdrop_, look_backdrop_, live_look_->destination_size(), 0, 0, cv::INTER_AREA);
+  else
+    look_backdrop_ = backdrop_;
+}
+
 void LiveSession::reset() {
   geometry_.reset();
   tracker_.reset();
+  last_good_.reset();
+  held_ = 0;
+  exposure_.reset();
 }
 
 Status LiveSession::fix_geometry(const cv::Mat& frame) {
@@ -168,7 +182,34 @@ LiveFrame LiveSession::finish(const cv::Mat& frame, const TrackResult& r, double
   } else {
     const auto& e = r.still_to_frame;
     const cv::Matx33d m = cv::Matx33d(e(0, 0), e(0, 1), e(0, 2), e(1, 0), e(1, 1), e(1, 2), 0, 0, 1) * map_to_still_;
-    out.repainted = repainter_.apply(frame, cv::Matx23d(m(0, 0), m(0, 1), m(0, 2), m(1, 0), m(1, 1), m(1, 2)));
+    const cv::Matx23d source_to_frame(m(0, 0), m(0, 1), m(0, 2), m(1, 0), m(1, 1), m(1, 2));
+    bool painted = false;
+    if (look_ == Look::shaded && live_look_) {
+      LiveLight light = live_look_->estimate_light(frame, source_to_frame);
+      out.light_ms = ms_since(t0);
+      const LiveLight* use = nullptr;
+      if (light.explained) {
+        last_good_ = light;
+        held_ = 0;
+        use = &light;
+      } else if (last_good_ && held_ < live_look_->options().light.hold_frames) {
+        ++held_;
+        light.fallback = "held the last good light";
+        use = &*last_good_;
+      } else {
+        light.fallback = "pixel copy";
+      }
+      if (use) {
+        const auto t1 = std::chrono::steady_clock::now();
+        if (!exposure_) exposure_ = live_look_->exposure_for(*use);
+        out.repainted = live_look_->paint(frame, source_to_frame, *use, look_backdrop_, *exposure_);
+        out.shade_ms = ms_since(t1);
+        out.look = Look::shaded;
+        painted = true;
+      }
+      out.light = std::move(light);
+    }
+    if (!painted) out.repainted = repainter_.apply(frame, source_to_frame);
   }
   out.repaint_ms = ms_since(t0);
   size_t longest = 0;

@@ -122,7 +122,7 @@ cv::Mat diffuse_median(const std::vector<cv::Mat>& photos, const cv::Mat& normal
   return out;
 }
 
-constexpr float kRatioFloor = 1e-4f;  // Dd and its median are kept above this (linear units)
+constexpr float kRatioFloor = ShadedLook::ratio_floor();  // Dd and its median are kept above this (linear units)
 
 }  // namespace
 

@@ -18,6 +18,7 @@
 #include "veneer/match/map_file.hpp"
 #include "veneer/match/matcher.hpp"
 #include "veneer/match/object.hpp"
+#include "veneer/repaint/live_look.hpp"
 #include "veneer/repaint/look.hpp"
 #include "veneer/repaint/repaint.hpp"
 #include "veneer/util/expected.hpp"
@@ -126,6 +127,15 @@ Expected<std::shared_ptr<const fast::BlendPlan>> blend_plan_for(const PreparedPa
 Expected<std::shared_ptr<const repaint::ShadedLook>> shaded_look(const PreparedPair& pair,
                                                                  const TransferOptions& options, const Map& map,
                                                                  const Progress& progress = {});
+// What the live view paints each frame with at its light (repaint/live_look.hpp,
+// issue 40): the live look of `map` for the pair, made from `still` (the
+// shaded look of this map, e.g. TransferResult::look; computed when null)
+// and the pair's lamps (the source's positions when every lamp has one).
+// Fails as ShadedLook::make and LiveLook::make do; "cancelled" on progress.
+Expected<std::shared_ptr<const repaint::LiveLook>> live_look(
+    const PreparedPair& pair, const TransferOptions& options, const Map& map,
+    std::shared_ptr<const repaint::ShadedLook> still = nullptr,
+    const repaint::LiveLookOptions& live_options = {}, const Progress& progress = {});
 // The options a transfer folder's metrics.json records (write_transfer), for
 // redoing its pictures the same way -- TransferOptions' defaults for any it
 // leaves out. Fails, naming the file and the key, when the file cannot be

@@ -61,7 +61,10 @@ struct LiveFrame {
   double track_ms = 0, repaint_ms = 0;
   Look look = Look::copy;           // what `repainted` shows: the shaded look at the frame's light, or the
                                     // pixel copy (the copy look, no LiveLook, a lost frame, or the fallback)
-  std::optional<LiveLight> light;   // the light estimated in the frame (shaded look, frame not lost)
+  std::optional<LiveLight> light;   // the light estimated in the frame (shaded look, frame not lost); when
+                                    // one lamp does not explain it, `light->fallback` says what was painted:
+                                    // "held the last good light" (for LightEstimateOptions::hold_frames
+                                    // frames) or "pixel copy"
   double light_ms = 0, shade_ms = 0;  // of repaint_ms: the light estimate, and the painting at it
 };
 
@@ -117,9 +120,11 @@ class LiveSession {
   std::vector<std::vector<cv::Point>> contours_;
   std::optional<LiveGeometry> geometry_;
   std::shared_ptr<const LiveLook> live_look_;
+  cv::Mat look_backdrop_;                // backdrop_ at the destination's size
   Look look_ = Look::shaded;
   std::optional<LiveLight> last_good_;   // the last light one lamp explained
   int held_ = 0;                         // frames the last good light has been held for
+  std::optional<double> exposure_;       // the painted look's, fixed on the first painted frame (LiveLook::exposure_for)
 };
 
 // The backdrop dimmed and red with "LOST - hold still / recapture".

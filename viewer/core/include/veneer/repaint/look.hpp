@@ -100,6 +100,16 @@ class ShadedLook {
   // Seams the feathering found (neighbour pairs whose matches do not continue each other).
   size_t seams() const { return seams_; }
 
+  // What the live look (live_look.hpp) shades with, per destination pixel:
+  const cv::Mat& map_xy() const { return xy_; }                      // the map (CV_32FC2)
+  const cv::Mat& shading_median() const { return shading_median_; }  // Dd + ratio_floor() (CV_32FC1)
+  const cv::Mat& destination_gloss_weight() const { return destination_weight_; }  // k_d, may be empty
+  const cv::Mat& source_gloss_weight() const { return source_weight_; }  // k_s(m(p)), may be empty
+  const cv::Mat& destination_normals() const { return normals_; }
+  const cv::Mat& model_median() const { return model_median_; }      // median of max(0, n_d.l) (CV_32FC1)
+  float headroom() const { return headroom_; }
+  static constexpr float ratio_floor() { return 1e-4f; }  // added to a lamp's grey shading and to Dd
+
  private:
   cv::Mat xy_;                   // the map's source coordinates (CV_32FC2)
   cv::Mat texture_;              // T

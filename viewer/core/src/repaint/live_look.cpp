@@ -1,0 +1,591 @@
+// The live view's shaded look (live_look.hpp).
+#include "veneer/repaint/live_look.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <numeric>
+
+#include <opencv2/core/utility.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "veneer/repaint/gloss.hpp"
+
+namespace veneer::repaint {
+
+Status LightEstimateOptions::check() const {
+  if (samples < 100 || samples > 100000)
+    return make_error("light estimate: samples " + std::to_string(samples) + " is outside 100..100000");
+  if (iterations < 1 || iterations > 20)
+    return make_error("light estimate: iterations " + std::to_string(iterations) + " is outside 1..20");
+  if (!(max_residual > 0 && max_residual <= 10))
+    return make_error("light estimate: max_residual " + std::to_string(max_residual) + " is outside (0, 10]");
+  if (hold_frames < 0 || hold_frames > 100000)
+    return make_error("light estimate: hold_frames " + std::to_string(hold_frames) + " is outside 0..100000");
+  return {};
+}
+
+Status LiveLookOptions::check() const {
+  if (auto s = model.check(); !s) return s;
+  if (auto s = light.check(); !s) return s;
+  if (!(change_dead_zone >= 0 && change_dead_zone <= 5))
+    return make_error("live look: change_dead_zone " + std::to_string(change_dead_zone) + " is outside [0, 5]");
+  if (!(change_clip >= 1 && change_clip <= 100))
+    return make_error("live look: change_clip " + std::to_string(change_clip) + " is outside [1, 100]");
+  return {};
+}
+
+// Per mapped destination pixel, compact (index i), and the light estimate's samples.
+struct LiveLookData {
+  cv::Size dsize;
+  std::vector<int> pixel;            // y * width + x
+  cv::Mat dcoef, scoef;              // terms x N (CV_32FC1, a plane per term): the destination's model, the
+                                     // source's at m(p)
+  // one record per pixel, read in one stream per frame
+  struct Pixel {
+    cv::Vec3f texture;    // T
+    cv::Vec3f normal;     // n_d
+    float inv_median;     // 1 / (Dd + floor)
+    float inv_model;      // 1 / (median of max(0, n_d.l) + 0.05): the headroom's Lambert ratio; T times it ~ the
+                          // albedo (the ambient's share)
+    float source_gloss;   // k_s(m(p))
+  };
+  struct Source {
+    cv::Vec2f xy;         // the map's source coordinates
+    cv::Vec3f chroma;     // the source's albedo per channel over its grey, at m(p)
+    float albedo;         // the source's grey albedo at m(p)
+  };
+  std::vector<Pixel> px;
+  std::vector<Source> src;
+  bool any_gloss = false;
+  float headroom = 2;
+  double source_exponent = 32;
+  RelightableModel dmodel, smodel;   // for their weights (coefficients dropped; kept compact above)
+  // the light estimate's samples: source pixels, their normals, albedo (per channel) and the source's model
+  std::vector<cv::Vec2f> sample_xy;
+  std::vector<cv::Vec3f> sample_n, sample_rho;
+  cv::Mat sample_coef;               // samples x terms (CV_32FC1)
+  std::vector<cv::Vec3d> source_positions;
+  std::array<float, 256> to_linear{};
+  std::vector<uchar> to_srgb;        // linear [0, 1] in kSrgbSteps steps -> 8-bit
+  bool srgb = true;
+};
+
+namespace {
+
+constexpr int kSrgbSteps = 16384;
+constexpr float kModelFloor = 0.05f;  // as ShadedLook::shade's Lambert ratio
+
+float srgb_decode(float v) { return v <= 0.04045f ? v / 12.92f : std::pow((v + 0.055f) / 1.055f, 2.4f); }
+float srgb_encode(float v) {
+  v = std::clamp(v, 0.f, 1.f);
+  return v <= 0.0031308f ? 12.92f * v : 1.055f * std::pow(v, 1 / 2.4f) - 0.055f;
+}
+
+inline float grey(const cv::Vec3f& v) { return (v[0] + v[1] + v[2]) / 3.f; }
+
+// the diffuse albedo per channel at (x, y): the median over the lamps that light it of I / (n.l)
+cv::Vec3f albedo_at(const ObjectView& v, const std::vector<cv::Vec3f>& lamps, int x, int y, std::vector<float>& buf) {
+  const cv::Vec3f n = v.normals.at<cv::Vec3f>(y, x);
+  cv::Vec3f out(0, 0, 0);
+  for (int c = 0; c < 3; ++c) {
+    buf.clear();
+    for (size_t i = 0; i < lamps.size(); ++i) {
+      const float nl = n.dot(lamps[i]);
+      if (nl > 0.1f) buf.push_back(v.images[i].at<cv::Vec3f>(y, x)[c] / nl);
+    }
+    if (buf.empty()) continue;
+    std::nth_element(buf.begin(), buf.begin() + buf.size() / 2, buf.end());
+    out[c] = buf[buf.size() / 2];
+  }
+  return out;
+}
+
+// the weights of `model` at `l`, with the indices whose weight matters (the
+// residual's radial basis is 0 far from the captured lamps)
+struct Active {
+  std::vector<float> w;
+  std::vector<int> at;
+};
+Active active_weights(const RelightableModel& model, const cv::Vec3d& l) {
+  Active a;
+  const std::vector<float> w = model.weights(l);
+  for (int k = 0; k < static_cast<int>(w.size()); ++k)
+    if (k < model.basis_terms() || std::abs(w[k]) > 1e-4f) a.w.push_back(w[k]), a.at.push_back(k);
+  return a;
+}
+
+inline float dot_active(const float* c, const Active& a) {
+  float s = 0;
+  for (size_t k = 0; k < a.at.size(); ++k) s += c[a.at[k]] * a.w[k];
+  return s;
+}
+
+constexpr uchar kClipped = 250;  // a frame value at or above this may be clipped: it says nothing of the light
+
+inline bool clipped(const cv::Vec3b& v) { return v[0] >= kClipped || v[1] >= kClipped || v[2] >= kClipped; }
+
+// x^k for a whole k >= 1, by squaring
+inline float whole_power(float x, int k) {
+  float r = 1.f;
+  while (k > 0) {
+    if (k & 1) r *= x;
+    x *= x;
+    k >>= 1;
+  }
+  return r;
+}
+
+// the same for pixel i of planes (terms x pixels)
+inline float dot_column(const cv::Mat& planes, int i, const Active& a) {
+  float s = 0;
+  for (size_t k = 0; k < a.at.size(); ++k) s += planes.at<float>(a.at[k], i) * a.w[k];
+  return s;
+}
+
+// Bilinear sample of an 8-bit BGR frame at (x, y), linear; false outside or clipped.
+inline bool sample_frame(const cv::Mat& frame, const std::array<float, 256>& lin, float x, float y, cv::Vec3f* out) {
+  if (!(x >= 0 && y >= 0 && x <= frame.cols - 1 && y <= frame.rows - 1)) return false;
+  const int x0 = std::min(static_cast<int>(x), frame.cols - 2 < 0 ? 0 : frame.cols - 2);
+  const int y0 = std::min(static_cast<int>(y), frame.rows - 2 < 0 ? 0 : frame.rows - 2);
+  const int x1 = std::min(x0 + 1, frame.cols - 1), y1 = std::min(y0 + 1, frame.rows - 1);
+  const float fx = x - x0, fy = y - y0;
+  const cv::Vec3b a = frame.at<cv::Vec3b>(y0, x0), b = frame.at<cv::Vec3b>(y0, x1);
+  const cv::Vec3b c = frame.at<cv::Vec3b>(y1, x0), d = frame.at<cv::Vec3b>(y1, x1);
+  if (clipped(a) || clipped(b) || clipped(c) || clipped(d)) return false;
+  for (int k = 0; k < 3; ++k)
+    (*out)[k] = (1 - fy) * ((1 - fx) * lin[a[k]] + fx * lin[b[k]]) + fy * ((1 - fx) * lin[c[k]] + fx * lin[d[k]]);
+  return true;
+}
+
+// Nearest-pixel sample, linear; false outside or clipped.
+inline bool nearest_frame(const cv::Mat& frame, const std::array<float, 256>& lin, float x, float y, cv::Vec3f* out) {
+  const int xi = static_cast<int>(x + 0.5f), yi = static_cast<int>(y + 0.5f);
+  if (x < -0.5f || y < -0.5f || xi >= frame.cols || yi >= frame.rows) return false;
+  const cv::Vec3b a = frame.at<cv::Vec3b>(yi, xi);
+  if (clipped(a)) return false;
+  *out = cv::Vec3f(lin[a[0]], lin[a[1]], lin[a[2]]);
+  return true;
+}
+
+// a direction turned by small angles about x and y (radians)
+cv::Vec3d turned(const cv::Vec3d& l, double ax, double ay) {
+  cv::Vec3d d(l[0] + ay * l[2], l[1] + ax * l[2], l[2] - ay * l[0] - ax * l[1]);
+  return d / std::max(1e-12, cv::norm(d));
+}
+
+}  // namespace
+
+Expected<LiveLook> LiveLook::make(const ShadedLook& look, const LookSide& destination, const LookSide& source,
+                                  const Map& map, const std::vector<cv::Vec3d>& source_positions,
+                                  const LiveLookOptions& options, const Progress& progress) {
+  if (auto s = options.check(); !s) return s.error();
+  const ObjectView& dv = destination.view;
+  const ObjectView& sv = source.view;
+  const cv::Size dsize = dv.mask.size(), ssize = sv.mask.size();
+  if (look.map_xy().size() != dsize || map.xy.size() != dsize || look.texture().size() != dsize)
+    return make_error("live look: the still look, the map and the destination's view differ in size");
+  if (dv.images.size() != destination.lamps.size() || sv.images.size() != source.lamps.size())
+    return make_error("live look: lamps and photos differ in number");
+  if (sv.normals.type() != CV_32FC3 || sv.normals.size() != ssize || dv.normals.type() != CV_32FC3)
+    return make_error("live look: the views' normals must be CV_32FC3 of their masks' size");
+  for (const cv::Mat& p : sv.images)
+    if (p.type() != CV_32FC3 || p.size() != ssize) return make_error("live look: the source's photos must be CV_32FC3");
+  for (const cv::Mat& p : dv.images)
+    if (p.type() != CV_32FC3 || p.size() != dsize)
+      return make_error("live look: the destination's photos must be CV_32FC3");
+  if (!source_positions.empty() && source_positions.size() != source.lamps.size())
+    return make_error("live look: " + std::to_string(source_positions.size()) + " lamp positions for " +
+                      std::to_string(source.lamps.size()) + " lamps");
+  auto data = std::make_shared<LiveLookData>();
+  LiveLookData& d = *data;
+  d.dsize = dsize;
+  d.headroom = look.headroom();
+  d.source_exponent = look.source_exponent();
+  d.source_positions = source_positions;
+  d.srgb = options.light.srgb;
+
+  // the destination's diffuse grey photos (its own gloss off, as the still look's ratio takes it off)
+  std::vector<cv::Vec3f> dl, sl;
+  for (const cv::Vec3d& l : destination.lamps) dl.emplace_back(l / std::max(1e-12, cv::norm(l)));
+  for (const cv::Vec3d& l : source.lamps) sl.emplace_back(l / std::max(1e-12, cv::norm(l)));
+  std::vector<cv::Mat> diffuse(dv.images.size());
+  const cv::Mat& kd = look.destination_gloss_weight();
+  for (size_t i = 0; i < dv.images.size(); ++i) {
+    diffuse[i] = cv::Mat(dsize, CV_32FC1);
+    const cv::Vec3f h = half_vector(destination.lamps[i]);
+    diffuse[i].forEach<float>([&](float& v, const int* at) {
+      const float g = grey(dv.images[i].at<cv::Vec3f>(at[0], at[1]));
+      const float k = kd.empty() ? 0.f : kd.at<float>(at[0], at[1]);
+      const float s = k > 0 ? k * Gloss::lobe(dv.normals.at<cv::Vec3f>(at[0], at[1]), dl[i], h,
+                                              look.destination_exponent())
+                            : 0.f;
+      v = std::max(g - s, 0.f);
+    });
+  }
+  auto dm = RelightableModel::fit(diffuse, dv.mask, destination.lamps, options.model, progress.part(0.0, 0.4));
+  if (!dm) return make_error("live look: the destination's " + dm.message());
+  auto sm = RelightableModel::fit(sv.images, sv.mask, source.lamps, options.model, progress.part(0.4, 0.8));
+  if (!sm) return make_error("live look: the source's " + sm.message());
+  if (progress.cancelled()) return make_error("live look: cancelled");
+
+  // compact per mapped destination pixel
+  const cv::Mat& xy = map.xy;
+  for (int y = 0; y < dsize.height; ++y)
+    for (int x = 0; x < dsize.width; ++x)
+      if (xy.at<cv::Vec2f>(y, x)[0] >= 0) d.pixel.push_back(y * dsize.width + x);
+  const int n = static_cast<int>(d.pixel.size());
+  const int td = dm->terms(), ts = sm->terms();
+  d.dcoef = cv::Mat(td, n, CV_32FC1);
+  d.scoef = cv::Mat(ts, n, CV_32FC1);
+  d.px.assign(n, {});
+  d.src.assign(n, {});
+  const cv::Mat& ks = look.source_gloss_weight();
+  cv::parallel_for_(cv::Range(0, n), [&](const cv::Range& r) {
+    std::vector<float> buf;
+    for (int i = r.start; i < r.end; ++i) {
+      const int x = d.pixel[i] % dsize.width, y = d.pixel[i] / dsize.width;
+      const cv::Vec2f m = xy.at<cv::Vec2f>(y, x);
+      LiveLookData::Pixel& e = d.px[i];
+      LiveLookData::Source& f = d.src[i];
+      f.xy = m;
+      const int sx = std::clamp(static_cast<int>(std::lround(m[0])), 0, ssize.width - 1);
+      const int sy = std::clamp(static_cast<int>(std::lround(m[1])), 0, ssize.height - 1);
+      const float* dc = dm->coefficients().ptr<float>(y) + x * td;
+      const float* sc = sm->coefficients().ptr<float>(sy) + sx * ts;
+      for (int k = 0; k < td; ++k) d.dcoef.at<float>(k, i) = dc[k];
+      for (int k = 0; k < ts; ++k) d.scoef.at<float>(k, i) = sc[k];
+      e.texture = look.texture().at<cv::Vec3f>(y, x);
+      e.inv_median = 1.f / look.shading_median().at<float>(y, x);
+      e.normal = dv.normals.at<cv::Vec3f>(y, x);
+      e.inv_model = 1.f / (look.model_median().at<float>(y, x) + kModelFloor);
+      e.source_gloss = ks.empty() ? 0.f : ks.at<float>(y, x);
+      const cv::Vec3f a = albedo_at(sv, sl, sx, sy, buf);
+      const float g = grey(a);
+      f.albedo = g;
+      f.chroma = g > 1e-6f ? a / g : cv::Vec3f(1, 1, 1);
+    }
+  });
+  // the light estimate's samples: source object pixels on a regular grid
+  std::vector<cv::Point> object;
+  cv::findNonZero(sv.mask, object);
+  if (object.size() < 50) return make_error("live look: the source's mask holds fewer than 50 pixels");
+  const size_t want = static_cast<size_t>(options.light.samples);
+  const double stride = std::max(1.0, static_cast<double>(object.size()) / want);
+  std::vector<float> buf;
+  for (double k = 0; k < object.size(); k += stride) {
+    const cv::Point p = object[static_cast<size_t>(k)];
+    const cv::Vec3f nn = sv.normals.at<cv::Vec3f>(p);
+    if (cv::norm(nn) < 0.5) continue;
+    const cv::Vec3f a = albedo_at(sv, sl, p.x, p.y, buf);
+    if (grey(a) <= 0) continue;
+    d.sample_xy.emplace_back(static_cast<float>(p.x), static_cast<float>(p.y));
+    d.sample_n.push_back(nn);
+    d.sample_rho.push_back(a);
+  }
+  d.sample_coef = cv::Mat(static_cast<int>(d.sample_xy.size()), ts, CV_32FC1);
+  for (size_t i = 0; i < d.sample_xy.size(); ++i)
+    std::copy_n(sm->coefficients().ptr<float>(static_cast<int>(d.sample_xy[i][1])) +
+                    static_cast<int>(d.sample_xy[i][0]) * ts,
+                ts, d.sample_coef.ptr<float>(static_cast<int>(i)));
+  if (d.sample_xy.size() < 50) return make_error("live look: fewer than 50 lit source pixels to estimate light on");
+  for (const auto& e : d.px) d.any_gloss = d.any_gloss || e.source_gloss > 0;
+  d.dmodel = std::move(*dm);
+  d.smodel = std::move(*sm);
+  d.dmodel.drop_coefficients();
+  d.smodel.drop_coefficients();
+  for (int v = 0; v < 256; ++v) d.to_linear[v] = d.srgb ? srgb_decode(v / 255.f) : v / 255.f;
+  d.to_srgb.resize(kSrgbSteps + 1);
+  for (int i = 0; i <= kSrgbSteps; ++i) {
+    const float v = static_cast<float>(i) / kSrgbSteps;
+    d.to_srgb[i] = cv::saturate_cast<uchar>(255.f * (d.srgb ? srgb_encode(v) : v));
+  }
+  progress.report(1.0, "live look");
+  LiveLook out;
+  out.options_ = options;
+  out.size_ = dsize;
+  out.data_ = std::move(data);
+  return out;
+}
+
+LiveLight LiveLook::estimate_light(const cv::Mat& frame, const cv::Matx23d& a) const {
+  const LiveLookData& d = *data_;
+  LiveLight light;
+  light.explained = false;
+  // the frame at each sample, linear
+  const size_t n = d.sample_xy.size();
+  std::vector<cv::Vec3f> I(n);
+  std::vector<uchar> ok(n, 0);
+  size_t inside = 0;
+  for (size_t j = 0; j < n; ++j) {
+    const cv::Vec2f q = d.sample_xy[j];
+    const float fx = static_cast<float>(a(0, 0) * q[0] + a(0, 1) * q[1] + a(0, 2));
+    const float fy = static_cast<float>(a(1, 0) * q[0] + a(1, 1) * q[1] + a(1, 2));
+    ok[j] = frame.type() == CV_8UC3 && sample_frame(frame, d.to_linear, fx, fy, &I[j]);
+    inside += ok[j];
+  }
+  if (inside < 30) {
+    light.residual = 1;
+    light.fallback = "the object is out of the frame";
+    return light;
+  }
+  // 1. Lambert, reweighted: g = rho (n.L + amb), on the samples the lamp lights
+  cv::Vec3d L(0, 0, 1);
+  double amb = 0;
+  std::vector<double> w(n, 1.0);
+  for (int it = 0; it < options_.light.iterations; ++it) {
+    cv::Matx44d A = cv::Matx44d::zeros();
+    cv::Vec4d b(0, 0, 0, 0);
+    const cv::Vec3d dir = L / std::max(1e-12, cv::norm(L));
+    for (size_t j = 0; j < n; ++j) {
+      if (!ok[j] || w[j] <= 0) continue;
+      const cv::Vec3d nn = d.sample_n[j];
+      if (it > 0 && nn.dot(dir) < 0.1) continue;  // attached shadow: outside the linear model
+      const double rho = grey(d.sample_rho[j]);
+      const cv::Vec4d row(rho * nn[0], rho * nn[1], rho * nn[2], rho);
+      A += w[j] * row * row.t();
+      b += w[j] * grey(I[j]) * row;
+    }
+    cv::Vec4d x;
+    if (!cv::solve(A, b, x, cv::DECOMP_SVD)) break;
+    L = {x[0], x[1], x[2]};
+    amb = x[3];
+    if (cv::norm(L) < 1e-9) break;
+    // Cauchy weights on the relative residual: cast shadows and highlights count little
+    std::vector<double> r;
+    r.reserve(n);
+    for (size_t j = 0; j < n; ++j) {
+      if (!ok[j]) continue;
+      const double rho = grey(d.sample_rho[j]);
+      const double p = rho * (std::max(0.0, cv::Vec3d(d.sample_n[j]).dot(L)) + amb);
+      r.push_back(std::abs(grey(I[j]) - p) / std::max(p, 1e-3 * cv::norm(L) * rho + 1e-6));
+    }
+    std::vector<double> sorted = r;
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    const double scale = std::max(0.02, 2.5 * 1.4826 * sorted[sorted.size() / 2]);
+    for (size_t j = 0, k = 0; j < n; ++j) {
+      if (!ok[j]) continue;
+      const double e = r[k++] / scale;
+      w[j] = 1.0 / (1.0 + e * e);
+    }
+  }
+  const double strength = cv::norm(L);
+  if (!(strength > 1e-9) || !std::isfinite(strength)) {
+    light.residual = 1;
+    light.fallback = "no light found";
+    return light;
+  }
+  cv::Vec3d dir = L / strength;
+  if (dir[2] < 0) {
+    light.residual = 1;
+    light.fallback = "the light found is behind the object";
+    return light;
+  }
+  // 2. The source's own model at that direction (its cast shadows and gloss in
+  // it) fitted to the frame as s S(l) + amb rho; the direction refined by
+  // trying small turns; its residual says whether one lamp explains the frame.
+  auto model_fit = [&](const cv::Vec3d& l, double* s_out, double* a_out) {
+    const Active act = active_weights(d.smodel, l);
+    double saa = 0, sab = 0, sbb = 0, sya = 0, syb = 0, syy = 0, count = 0;
+    for (size_t j = 0; j < n; ++j) {
+      if (!ok[j]) continue;
+      const double p = std::max(0.f, dot_active(d.sample_coef.ptr<float>(static_cast<int>(j)), act));
+      const double rho = grey(d.sample_rho[j]);
+      const double y = grey(I[j]);
+      saa += p * p, sab += p * rho, sbb += rho * rho, sya += y * p, syb += y * rho, syy += y * y, count += 1;
+    }
+    const double det = saa * sbb - sab * sab;
+    double s = det > 1e-18 ? (sya * sbb - syb * sab) / det : sya / std::max(saa, 1e-18);
+    double am = det > 1e-18 ? (syb * saa - sya * sab) / det : 0;
+    if (am < 0) am = 0, s = sya / std::max(saa, 1e-18);
+    const double sse = syy - 2 * s * sya - 2 * am * syb + s * s * saa + 2 * s * am * sab + am * am * sbb;
+    const double mean_y = std::sqrt(syy / std::max(count, 1.0));  // RMS brightness: the scale of the residual
+    *s_out = s, *a_out = am;
+    return std::sqrt(std::max(sse, 0.0) / std::max(count, 1.0)) / std::max(mean_y, 1e-9);
+  };
+  double s = 0, am = 0;
+  double best = model_fit(dir, &s, &am);
+  for (double step_deg : {4.0, 2.0, 1.0}) {
+    const double step = step_deg * CV_PI / 180;
+    for (int round = 0; round < 3; ++round) {
+      bool moved = false;
+      for (const auto& [ax, ay] : {std::pair{step, 0.0}, {-step, 0.0}, {0.0, step}, {0.0, -step}}) {
+        const cv::Vec3d t = turned(dir, ax, ay);
+        if (t[2] < 0.05) continue;
+        double st = 0, at = 0;
+        const double e = model_fit(t, &st, &at);
+        if (e < best) best = e, dir = t, s = st, am = at, moved = true;
+      }
+      if (!moved) break;
+    }
+  }
+  light.direction = dir;
+  light.residual = best;
+  // colour: per channel the frame against the grey prediction times the source's chroma
+  const Active act = active_weights(d.smodel, dir);
+  cv::Vec3d num(0, 0, 0), den(0, 0, 0);
+  for (size_t j = 0; j < n; ++j) {
+    if (!ok[j]) continue;
+    const double p = s * std::max(0.f, dot_active(d.sample_coef.ptr<float>(static_cast<int>(j)), act)) +
+                     am * grey(d.sample_rho[j]);
+    const double g = grey(d.sample_rho[j]);
+    if (g <= 0 || p <= 0) continue;
+    for (int c = 0; c < 3; ++c) {
+      const double pc = p * d.sample_rho[j][c] / g;
+      num[c] += I[j][c] * pc, den[c] += pc * pc;
+    }
+  }
+  cv::Vec3d colour(1, 1, 1);
+  for (int c = 0; c < 3; ++c) colour[c] = den[c] > 0 ? num[c] / den[c] : 1.0;
+  const double mean_colour = (colour[0] + colour[1] + colour[2]) / 3;
+  if (mean_colour > 1e-9) colour /= mean_colour;
+  // BGR in memory -> r, g, b in the report
+  light.colour = {colour[2], colour[1], colour[0]};
+  light.intensity = s;
+  if (!d.source_positions.empty() && dir[2] > 0.05) {
+    double z = 0;
+    for (const cv::Vec3d& p : d.source_positions) z += p[2];
+    z /= static_cast<double>(d.source_positions.size());
+    light.position_m = dir * (z / dir[2]);
+  }
+  light.explained = s > 0 && best <= options_.light.max_residual;
+  return light;
+}
+
+double LiveLook::exposure_for(const LiveLight& light, double percentile, double white) const {
+  const LiveLookData& d = *data_;
+  const cv::Vec3d& l = light.direction;
+  const Active wd = active_weights(d.dmodel, l);
+  const cv::Vec3f lf(static_cast<float>(l[0]), static_cast<float>(l[1]), static_cast<float>(l[2]));
+  const cv::Vec3f h = half_vector(l);
+  const float s = static_cast<float>(light.intensity), am = static_cast<float>(light.ambient);
+  const float cmax = static_cast<float>(std::max({light.colour[0], light.colour[1], light.colour[2]}));
+  std::vector<float> v;
+  const size_t step = std::max<size_t>(1, d.pixel.size() / 4000);
+  for (size_t i = 0; i < d.pixel.size(); i += step) {
+    const float S = std::max(dot_column(d.dcoef, static_cast<int>(i), wd), 0.f) + ShadedLook::ratio_floor();
+    const LiveLookData::Pixel& e = d.px[i];
+    const float nl = std::max(0.f, e.normal.dot(lf));
+    const float cap = std::max(2.f, d.headroom * (nl + kModelFloor) * e.inv_model);
+    const float ratio = std::min(S * e.inv_median, cap);
+    const float gloss = e.source_gloss > 0 ? e.source_gloss * Gloss::lobe(e.normal, lf, h, d.source_exponent) : 0.f;
+    const float top = std::max({e.texture[0], e.texture[1], e.texture[2]});
+    v.push_back(cmax * (top * (s * ratio + am * e.inv_model) + s * gloss));
+  }
+  if (v.empty()) return 1.0;
+  const size_t k = std::min(v.size() - 1, static_cast<size_t>(percentile * (v.size() - 1)));
+  std::nth_element(v.begin(), v.begin() + static_cast<long>(k), v.end());
+  return v[k] > white ? white / v[k] : 1.0;
+}
+
+cv::Mat LiveLook::paint(const cv::Mat& frame, const cv::Matx23d& a, const LiveLight& light,
+                        const cv::Mat& backdrop, double exposure) const {
+  const LiveLookData& d = *data_;
+  cv::Mat out;
+  if (!backdrop.empty() && backdrop.size() == d.dsize && backdrop.type() == CV_8UC3)
+    out = backdrop.clone();
+  else
+    out = cv::Mat(d.dsize, CV_8UC3, cv::Scalar::all(0));
+  const cv::Vec3d& l = light.direction;
+  const Active wd = active_weights(d.dmodel, l), ws = active_weights(d.smodel, l);
+  const cv::Vec3f lf(static_cast<float>(l[0]), static_cast<float>(l[1]), static_cast<float>(l[2]));
+  const cv::Vec3f h = half_vector(l);
+  const float s = static_cast<float>(light.intensity), am = static_cast<float>(light.ambient);
+  // r, g, b -> BGR, times the exposure
+  const cv::Vec3f colour = static_cast<float>(exposure) *
+                           cv::Vec3f(static_cast<float>(light.colour[2]), static_cast<float>(light.colour[1]),
+                                     static_cast<float>(light.colour[0]));
+  const cv::Vec3f frame_colour = colour / static_cast<float>(std::max(exposure, 1e-9));
+  const float lo = static_cast<float>(std::exp(options_.change_dead_zone));
+  const float clip = static_cast<float>(options_.change_clip);
+  const bool change = frame.type() == CV_8UC3 && !frame.empty();
+  const float floor = ShadedLook::ratio_floor();
+  // the lobe below a ten-thousandth of its peak is left out (no pow for most pixels)
+  const float gloss_from = static_cast<float>(std::pow(1e-4, 1.0 / std::max(1.0, d.source_exponent)));
+  const float alpha = static_cast<float>(d.source_exponent);
+  // the fitted exponents are whole (4..128 by default): by squaring, not pow
+  const int whole_alpha = d.source_exponent == std::floor(d.source_exponent) && d.source_exponent >= 1 &&
+                                  d.source_exponent <= 1024
+                              ? static_cast<int>(d.source_exponent)
+                              : 0;
+  const float ax = static_cast<float>(a(0, 0)), bx = static_cast<float>(a(0, 1)), cx = static_cast<float>(a(0, 2));
+  const float ay = static_cast<float>(a(1, 0)), by = static_cast<float>(a(1, 1)), cy = static_cast<float>(a(1, 2));
+  const float pred_floor = 1e-4f * std::max(s, 1e-6f);
+  const int n = static_cast<int>(d.pixel.size());
+  uchar* base = out.ptr<uchar>();  // continuous: clone() and create() make it so
+  // the dot products as sums of planes (terms x pixels, one row per term): vectorised over the pixels
+  auto shade_planes = [](const cv::Mat& planes, const Active& w, int from, int count, float* into) {
+    std::fill(into, into + count, 0.f);
+    for (size_t k = 0; k < w.at.size(); ++k) {
+      const float* p = planes.ptr<float>(w.at[k]) + from;
+      const float wk = w.w[k];
+      for (int i = 0; i < count; ++i) into[i] += wk * p[i];
+    }
+  };
+  cv::parallel_for_(cv::Range(0, (n + 4095) / 4096), [&](const cv::Range& blocks) {
+    std::vector<float> S(4096), P(4096);
+    for (int block = blocks.start; block < blocks.end; ++block) {
+      const int from = block * 4096, count = std::min(4096, n - from);
+      shade_planes(d.dcoef, wd, from, count, S.data());
+      if (change) shade_planes(d.scoef, ws, from, count, P.data());
+      for (int j = 0; j < count; ++j) {
+        const int i = from + j;
+        const LiveLookData::Pixel& e = d.px[i];
+        const float nl = std::max(0.f, e.normal.dot(lf));
+        // as ShadedLook::shade: at most `headroom` x the Lambert model's ratio (and 2)
+        const float cap = std::max(2.f, d.headroom * (nl + kModelFloor) * e.inv_model);
+        const float ratio = std::min((std::max(S[j], 0.f) + floor) * e.inv_median, cap);
+        float gloss = 0.f;
+        if (d.any_gloss && e.source_gloss > 0 && nl > 0) {
+          const float nh = e.normal.dot(h);
+          if (nh > gloss_from) gloss = e.source_gloss * (whole_alpha > 0 ? whole_power(nh, whole_alpha) : std::pow(nh, alpha));
+        }
+        const cv::Vec3f& t = e.texture;
+        const float lit = s * ratio + am * e.inv_model;
+        cv::Vec3f v(colour[0] * (t[0] * lit + s * gloss), colour[1] * (t[1] * lit + s * gloss),
+                    colour[2] * (t[2] * lit + s * gloss));
+        if (change) {
+          const LiveLookData::Source& f = d.src[i];
+          const cv::Vec2f q = f.xy;
+          cv::Vec3f g;
+          const float pred = s * std::max(P[j], 0.f) + am * f.albedo;
+          if (pred > pred_floor && nearest_frame(frame, d.to_linear, ax * q[0] + bx * q[1] + cx,
+                                                 ay * q[0] + by * q[1] + cy, &g)) {
+            for (int c = 0; c < 3; ++c) {
+              const float pc = pred * f.chroma[c] * frame_colour[c];
+              float k = g[c] / std::max(pc, 1e-6f);
+              // within the dead zone the model's own error: 1; beyond it what changed, clipped
+              k = k > lo ? k / lo : (k * lo < 1.f ? k * lo : 1.f);
+              v[c] *= std::clamp(k, 1.f / clip, clip);
+            }
+          }
+        }
+        uchar* o = base + static_cast<size_t>(d.pixel[i]) * 3;
+        for (int c = 0; c < 3; ++c) o[c] = d.to_srgb[static_cast<int>(std::clamp(v[c], 0.f, 1.f) * kSrgbSteps + 0.5f)];
+      }
+    }
+  });
+  return out;
+}
+
+cv::Mat LiveLook::paint_linear(const cv::Vec3d& direction) const {
+  const LiveLookData& d = *data_;
+  cv::Mat out(d.dsize, CV_32FC3, cv::Scalar::all(0));
+  const cv::Vec3d l = direction / std::max(1e-12, cv::norm(direction));
+  const Active wd = active_weights(d.dmodel, l);
+  const cv::Vec3f lf(static_cast<float>(l[0]), static_cast<float>(l[1]), static_cast<float>(l[2]));
+  const cv::Vec3f h = half_vector(l);
+  const float floor = ShadedLook::ratio_floor();
+  for (size_t i = 0; i < d.pixel.size(); ++i) {
+    const float S = std::max(dot_column(d.dcoef, static_cast<int>(i), wd), 0.f) + floor;
+    const LiveLookData::Pixel& e = d.px[i];
+    const float nl = std::max(0.f, e.normal.dot(lf));
+    const float cap = std::max(2.f, d.headroom * (nl + kModelFloor) * e.inv_model);
+    const float ratio = std::min(S * e.inv_median, cap);
+    const float gloss = e.source_gloss > 0 ? e.source_gloss * Gloss::lobe(e.normal, lf, h, d.source_exponent) : 0.f;
+    out.at<cv::Vec3f>(d.pixel[i] / d.dsize.width, d.pixel[i] % d.dsize.width) = e.texture * ratio + cv::Vec3f::all(gloss);
+  }
+  return out;
+}
+
+}  // namespace veneer::repaint
