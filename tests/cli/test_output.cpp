@@ -131,7 +131,7 @@ TEST_F(CliOutput, TransferWritesARelightableFileAndReportsItsResidual) {
 
   auto bad = veneer("transfer --dst dst --src src --out out2 --rti x.ptm --rti-format xyz", dir_);
   EXPECT_EQ(bad.code, 2);
-  EXPECT_EQ(bad.err, "veneer transfer: --rti-format must be lrgb or rgb, got \"xyz\"\n");
+  EXPECT_EQ(bad.err, "veneer transfer: --rti-format must be lrgb (or ptm), rgb or hsh, got \"xyz\"\n");
   EXPECT_FALSE(fs::exists(dir_ / "out2"));
 }
 

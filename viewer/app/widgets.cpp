@@ -11,6 +11,7 @@
 #include <algorithm>
 
 #include "veneer/io/image_io.hpp"
+#include "veneer/pipeline/prepare.hpp"
 
 namespace veneer::app {
 
@@ -18,7 +19,16 @@ cv::Mat picture_of(const cv::Mat& linear) { return linear.empty() ? cv::Mat() : 
 
 void gui_work(const std::function<void()>& f) { tbb::this_task_arena::isolate(f); }
 
+// The pool is made after the engine's statics its jobs use (the result
+// cache's pending writes, and with them the log's registry), so that at exit
+// it is destroyed first: its destructor waits for a job still running (a
+// set's normals being prepared when the window closed), and the cache writes
+// that job started are then joined by the pending writes' own destructor.
+// Made the other way round, such a job wrote to a destroyed registry
+// (app/Viewer tests crashed at exit, 1 run in 3).
 QThreadPool* job_pool() {
+  static const bool engine_first = (static_cast<void>(pipeline::finish_cache_writes()), true);
+  (void)engine_first;
   static QThreadPool pool;
   static const bool sized = [] {
     // jobs spend their time in TBB's loops or on the disk: more jobs than cores may wait side by side
