@@ -55,8 +55,8 @@ struct PsOptions {
                                    // fits the rest best is dropped and the pixel solved again when the rest
                                    // then fit at least 4x better and the fit without it predicts it brighter
                                    // by more than this fraction of the pixel's brightest sample [0, 1);
-                                   // 0 = off. The rig twin's bull at 256x170 (camera optics): normals 8.3 ->
-                                   // ~4 degrees off the truth
+                                   // 0 = off. The rig twin's bull at 256x170 (camera optics): normals 8.33 ->
+                                   // 6.98 degrees off the truth (mean), 43.7 -> 35.0 at the 95th percentile
   float diffuse_chroma = 0.25f;    // robust: a pixel whose colour is at least this far from grey
                                    // (|sum over its samples of colour - grey| / sum of grey) is solved on
                                    // that off-grey part alone, which a glossy dielectric's highlight (the
