@@ -49,6 +49,8 @@ Status PsOptions::check() const {
   if (!(saturation > 0.f && saturation <= 1.f))
     return make_error("saturation must be in (0, 1], got " + std::to_string(saturation));
   if (!(min_signal >= 0.f)) return make_error("min_signal must be >= 0, got " + std::to_string(min_signal));
+  if (!(penumbra_fraction >= 0.f && penumbra_fraction < 1.f))
+    return make_error("penumbra_fraction must be in [0, 1), got " + std::to_string(penumbra_fraction));
   if (!(outlier_fraction >= 0.f && outlier_fraction < 1.f))
     return make_error("outlier_fraction must be in [0, 1), got " + std::to_string(outlier_fraction));
   if (!(diffuse_chroma >= 0.f && diffuse_chroma <= 2.f))
@@ -132,7 +134,7 @@ void fill_from_neighbours(cv::Mat& normals, const cv::Mat& mask, const cv::Mat& 
 Setup setup_for(const PsOptions& o, int n, cv::Size size) {
   return Setup{.n = n, .width = size.width, .height = size.height, .robust = o.robust,
                .shadow_fraction = o.shadow_fraction, .saturation = o.saturation, .min_signal = o.min_signal,
-               .outlier_fraction = o.outlier_fraction, .diffuse_chroma = o.robust ? o.diffuse_chroma : 0.f};
+               .outlier_fraction = o.outlier_fraction, .penumbra_fraction = o.penumbra_fraction, .diffuse_chroma = o.robust ? o.diffuse_chroma : 0.f};
 }
 
 }  // namespace

@@ -155,6 +155,76 @@ VENEER_IVDEP
   }
 }
 
+
+// Partial shadows (PsOptions::penumbra_fraction): per pixel with 5+ kept
+// samples, the fits leaving out one sample each, from the normal equations
+// (A - e e^T) g = b - y e, their residual over the rest being
+// sum(y^2) - y^2 - g . (b - y e). The sample whose leaving out fits the rest
+// best is marked in best_i (its lamp index; -1 = none) when the rest then fit
+// 4x better than all together and it lies darker than the fit without it
+// predicts by more than penumbra_fraction of the pixel's brightest sample; its
+// pixel's K goes down by one. Returns how many pixels drop a sample.
+int drop_penumbrae(const Setup& s, Scratch& b, int count, float* best_i) {
+  const int n = s.n;
+  const size_t cap = size_t(b.cap);
+  int drops = 0;
+  auto solve3 = [](const double a[6], const double r[3], double g[3]) {
+    const double c00 = a[3] * a[5] - a[4] * a[4], c01 = a[2] * a[4] - a[1] * a[5], c02 = a[1] * a[4] - a[2] * a[3];
+    const double c11 = a[0] * a[5] - a[2] * a[2], c12 = a[1] * a[2] - a[0] * a[4], c22 = a[0] * a[3] - a[1] * a[1];
+    const double det = a[0] * c00 + a[1] * c01 + a[2] * c02;
+    const double tr = (a[0] + a[3] + a[5]) / 3;
+    if (!(tr > 0) || !(det > 1e-5 * tr * tr * tr)) return false;
+    g[0] = (c00 * r[0] + c01 * r[1] + c02 * r[2]) / det;
+    g[1] = (c01 * r[0] + c11 * r[1] + c12 * r[2]) / det;
+    g[2] = (c02 * r[0] + c12 * r[1] + c22 * r[2]) / det;
+    return true;
+  };
+  double e[kMaxNearLights][3], yv[kMaxNearLights];
+  int lamp[kMaxNearLights];
+  for (int k = 0; k < count; ++k) {
+    if (!(b.K[k] >= 5.f) || !(b.a[k] > 0.f) || b.ok[k] == 0.f) continue;
+    double a[6] = {}, r[3] = {}, syy = 0;
+    int m = 0;
+    for (int i = 0; i < n; ++i) {
+      if (b.W[size_t(i) * cap + k] == 0.f) continue;
+      double* ei = e[m];
+      for (int c = 0; c < 3; ++c) ei[c] = s.near ? b.V[(size_t(i) * 3 + c) * cap + k] : s.dir[i * 3 + c];
+      const double y = b.Y[size_t(i) * cap + k];
+      a[0] += ei[0] * ei[0], a[1] += ei[0] * ei[1], a[2] += ei[0] * ei[2];
+      a[3] += ei[1] * ei[1], a[4] += ei[1] * ei[2], a[5] += ei[2] * ei[2];
+      r[0] += y * ei[0], r[1] += y * ei[1], r[2] += y * ei[2];
+      syy += y * y;
+      yv[m] = y;
+      lamp[m++] = i;
+    }
+    double g[3];
+    if (m < 5 || !solve3(a, r, g)) continue;
+    const double all = syy - (g[0] * r[0] + g[1] * r[1] + g[2] * r[2]);
+    double best = all, dark = 0;
+    int pick = -1;
+    for (int j = 0; j < m; ++j) {
+      const double* ej = e[j];
+      const double y = yv[j];
+      const double aj[6] = {a[0] - ej[0] * ej[0], a[1] - ej[0] * ej[1], a[2] - ej[0] * ej[2],
+                            a[3] - ej[1] * ej[1], a[4] - ej[1] * ej[2], a[5] - ej[2] * ej[2]};
+      const double rj[3] = {r[0] - y * ej[0], r[1] - y * ej[1], r[2] - y * ej[2]};
+      double gj[3];
+      if (!solve3(aj, rj, gj)) continue;
+      const double rest = syy - y * y - (gj[0] * rj[0] + gj[1] * rj[1] + gj[2] * rj[2]);
+      if (rest < best) {
+        best = rest;
+        pick = j;
+        dark = gj[0] * ej[0] + gj[1] * ej[1] + gj[2] * ej[2] - y;
+      }
+    }
+    if (pick < 0 || !(best * 4 < all) || !(dark > s.penumbra_fraction * b.M[k])) continue;
+    best_i[k] = float(lamp[pick]);
+    b.K[k] -= 1.f;
+    ++drops;
+  }
+  return drops;
+}
+
 }  // namespace
 
 void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, const float* z,
@@ -422,32 +492,39 @@ VENEER_IVDEP
       ga[k] = sig ? len : 0.f;
       okv[k] = sig ? okv[k] : 0.f;
     }
-    if (pass == 1 || !s.robust || !(s.outlier_fraction > 0.f)) break;
-    // Outliers: the sample farthest from the first fit (a specular highlight,
-    // a cast shadow) is dropped when it is off by more than outlier_fraction of
-    // the pixel's brightest sample and 4+ samples remain; then solve again.
-    float* __restrict best = b.den.data();
-    float* __restrict best_i = b.acc.data();  // the normal equations are rebuilt in the next pass
-    std::fill(best, best + count, 0.f);
+    const bool outliers = s.outlier_fraction > 0.f, penumbrae = s.penumbra_fraction > 0.f && n <= kMaxNearLights;
+    if (pass == 1 || !s.robust || !(outliers || penumbrae)) break;
+    // The normal equations are rebuilt in the next pass (near, many lamps) or
+    // not used (the distant model's patterns): acc's first lanes are free.
+    float* __restrict best_i = b.acc.data();
     std::fill(best_i, best_i + count, -1.f);
-    for (int i = 0; i < n; ++i) {
-      const float* __restrict yy = b.Y.data() + size_t(i) * cap;
-      const float* __restrict w = b.W.data() + size_t(i) * cap;
-      for_each_shading(s, b, i, count, [&](int k, float sh) {
-        const float r = std::abs(yy[k] - ga[k] * sh) * w[k];
-        const bool sel = r > best[k];
-        best[k] = sel ? r : best[k];
-        best_i[k] = sel ? float(i) : best_i[k];
-      });
-    }
-    int drops = 0;
-    const float of = s.outlier_fraction;
-    for (int k = 0; k < count; ++k) {
-      // Dark pixels (brightest sample < 0.2) need an absolute 0.02 of full scale: sensor noise.
-      const bool drop = (best[k] > of * std::max(M[k], 0.2f)) & (K[k] >= 4.f) & (ga[k] > 0.f);
-      best_i[k] = drop ? best_i[k] : -1.f;
-      K[k] -= drop ? 1.f : 0.f;
-      drops += drop;
+    int drops = penumbrae ? drop_penumbrae(s, b, count, best_i) : 0;
+    if (outliers) {
+      // Outliers: the sample farthest from the first fit (a specular highlight,
+      // a cast shadow) is dropped when it is off by more than outlier_fraction of
+      // the pixel's brightest sample and 4+ samples remain; then solve again.
+      float* __restrict best = b.den.data();
+      float* __restrict far_i = b.acc.data() + cap;
+      std::fill(best, best + count, 0.f);
+      std::fill(far_i, far_i + count, -1.f);
+      for (int i = 0; i < n; ++i) {
+        const float* __restrict yy = b.Y.data() + size_t(i) * cap;
+        const float* __restrict w = b.W.data() + size_t(i) * cap;
+        for_each_shading(s, b, i, count, [&](int k, float sh) {
+          const float r = std::abs(yy[k] - ga[k] * sh) * w[k];
+          const bool sel = r > best[k];
+          best[k] = sel ? r : best[k];
+          far_i[k] = sel ? float(i) : far_i[k];
+        });
+      }
+      const float of = s.outlier_fraction;
+      for (int k = 0; k < count; ++k) {
+        // Dark pixels (brightest sample < 0.2) need an absolute 0.02 of full scale: sensor noise.
+        const bool drop = (best_i[k] < 0.f) & (best[k] > of * std::max(M[k], 0.2f)) & (K[k] >= 4.f) & (ga[k] > 0.f);
+        best_i[k] = drop ? far_i[k] : best_i[k];
+        K[k] -= drop ? 1.f : 0.f;
+        drops += drop;
+      }
     }
     if (drops == 0) break;
     for (int i = 0; i < n; ++i) {

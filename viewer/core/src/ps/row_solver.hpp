@@ -27,6 +27,7 @@ struct Setup {
   bool near = false;
   bool robust = true;
   float shadow_fraction = 0.1f, saturation = 0.98f, min_signal = 1e-3f, outlier_fraction = 0.0f;
+  float penumbra_fraction = 0.0f;  // see PsOptions::penumbra_fraction
   float diffuse_chroma = 0.0f;   // see PsOptions::diffuse_chroma
   std::vector<float> dir{};      // n*3 distant directions
   std::vector<float> pos{};      // n*3 lamp positions (near)

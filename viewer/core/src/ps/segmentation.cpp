@@ -442,7 +442,18 @@ SupportRemoval drop_supports(cv::Mat& mask, const cv::Mat& normals, const Suppor
     dropped |= near_support & near_outside & mask;
   }
   if (cv::countNonZero(dropped) > o.max_support_fraction * total) return out;
-  // 5. Touched by the rest along a small part of its outline?
+  // 5. Touched by what stands on it along a small part of its outline? What
+  //    stands on it is the largest part of the rest (8-connected): bits of the
+  //    mask the support alone touches (an end face too small to be a plane,
+  //    pixels of its top in the penumbrae of cast shadows, which the lens
+  //    blurs) go with it in step 6 and are no contact.
+  cv::Mat kept = mask & ~dropped;
+  cv::Mat cl, stats, cent;
+  const int n = cv::connectedComponentsWithStats(kept, cl, stats, cent, 8, CV_32S);
+  int best = 0;
+  for (int l = 1; l < n; ++l)
+    if (best == 0 || stats.at<int>(l, cv::CC_STAT_AREA) > stats.at<int>(best, cv::CC_STAT_AREA)) best = l;
+  if (best == 0) return out;
   int outline = 0, contact = 0;
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
@@ -452,7 +463,7 @@ SupportRemoval drop_supports(cv::Mat& mask, const cv::Mat& normals, const Suppor
         const int qx = x + d.x, qy = y + d.y;
         if (qx < 0 || qy < 0 || qx >= W || qy >= H || !dropped.at<uint8_t>(qy, qx)) {
           edge = true;
-          if (qx >= 0 && qy >= 0 && qx < W && qy < H && mask.at<uint8_t>(qy, qx)) touch = true;
+          if (qx >= 0 && qy >= 0 && qx < W && qy < H && cl.at<int>(qy, qx) == best) touch = true;
         }
       }
       outline += edge;
@@ -460,13 +471,6 @@ SupportRemoval drop_supports(cv::Mat& mask, const cv::Mat& normals, const Suppor
     }
   if (outline == 0 || contact > o.max_contact_fraction * outline) return out;
   // 6. Drop it; keep the largest remaining part.
-  cv::Mat kept = mask & ~dropped;
-  cv::Mat cl, stats, cent;
-  const int n = cv::connectedComponentsWithStats(kept, cl, stats, cent, 8, CV_32S);
-  int best = 0;
-  for (int l = 1; l < n; ++l)
-    if (best == 0 || stats.at<int>(l, cv::CC_STAT_AREA) > stats.at<int>(best, cv::CC_STAT_AREA)) best = l;
-  if (best == 0) return out;
   const int remaining = stats.at<int>(best, cv::CC_STAT_AREA);
   if (remaining < (1.0 - o.max_support_fraction) * total * 0.8) return out;  // that was not a base
   kept = cl == best;
