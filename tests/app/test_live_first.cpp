@@ -124,6 +124,10 @@ TEST(LiveFirst, GoesLiveOnTheLiveSizeMapThenSwapsInTheFullResolution) {
   const int frames = w.live().framesShown();
   ASSERT_TRUE(wait_for([&] { return w.live().framesShown() >= frames + 2; }, 30000));
   EXPECT_EQ(w.live().lastRepaintedFrame().size(), cv::Size(512, 340));
+  // the full-resolution session paints the live look too (issue 40)
+  ASSERT_NE(w.session().live_session, nullptr);
+  EXPECT_TRUE(w.session().live_session->has_live_look());
+  EXPECT_EQ(w.live().lastPaintedLook(), veneer::repaint::Look::shaded);
   w.findChild<QPushButton*>("liveToggle")->setChecked(false);
 
   // the same map as `veneer transfer` makes from the folders

@@ -199,13 +199,34 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
   const int mapped = cv::countNonZero(xy[0] >= 0);
   EXPECT_GT(mapped, 200);
 
-  // Live frames repainted through the map, checked against the map applied by hand.
+  // Live frames repainted through the map: under the default look painted
+  // shaded at the light estimated in each frame (issue 40), under the copy
+  // look the frame's pixels, checked against the map applied by hand.
   w.showTab("Live");
+  ASSERT_NE(w.session().live_session, nullptr);
+  EXPECT_TRUE(w.session().live_session->has_live_look()) << w.status().lastMessage().toStdString();
+  EXPECT_EQ(w.live().look(), veneer::repaint::Look::shaded) << "the live view paints the look by default";
   child<QPushButton>(w, "liveToggle")->setChecked(true);
   ASSERT_TRUE(wait_for([&] { return w.live().framesShown() >= 3 && !w.live().lastRepaintedFrame().empty(); }, 20000))
       << w.status().lastMessage().toStdString();
+  EXPECT_EQ(w.live().lastPaintedLook(), veneer::repaint::Look::shaded);
+  ASSERT_TRUE(w.live().lightDial().light().has_value()) << w.live().lightDial().text().toStdString();
+  const veneer::repaint::LiveLight frame_light = *w.live().lightDial().light();
+  EXPECT_TRUE(frame_light.explained) << "residual " << frame_light.residual;
+  EXPECT_GT(frame_light.intensity, 0);
+  EXPECT_NEAR(cv::norm(frame_light.direction), 1.0, 1e-6);
+  EXPECT_GT(frame_light.direction[2], 0) << "the lamp is in front of the object";
+  const cv::Mat shaded_frame = w.live().lastFrame().clone(), shaded_shown = w.live().lastRepaintedFrame().clone();
+  // then the copy: the selector switches the frames that follow
+  child<QComboBox>(w, "liveLook")->setCurrentText("copy");
+  const int seen_shaded = w.live().framesShown();
+  ASSERT_TRUE(wait_for([&] {
+    return w.live().framesShown() >= seen_shaded + 2 && w.live().lastPaintedLook() == veneer::repaint::Look::copy;
+  }, 20000)) << w.status().lastMessage().toStdString();
+  EXPECT_FALSE(w.live().lightDial().light().has_value()) << "the copy look estimates no light";
   const cv::Mat frame = w.live().lastFrame().clone(), shown = w.live().lastRepaintedFrame().clone();
   ASSERT_EQ(shown.size(), map.xy.size());
+  ASSERT_EQ(shaded_shown.size(), map.xy.size());
   // The pictures are blended by default, and so are the live frames: each
   // mapped pixel the weighted sum of the frame (at the source's size) over
   // the blend's terms. The live repaint registers each frame to the stills
@@ -216,8 +237,8 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
   ASSERT_NE(plan, nullptr) << "blended by default";
   cv::Mat at_source;
   cv::resize(frame, at_source, w.session().result->source_size, 0, 0, cv::INTER_AREA);
-  // Mean difference of the shown frame from the map applied to `src` by hand.
-  auto mean_difference = [&](const cv::Mat& src, int* checked) {
+  // Mean difference of `shown` from the map applied to `src` by hand.
+  auto mean_difference_of = [&](const cv::Mat& shown, const cv::Mat& src, int* checked) {
     double sum = 0;
     for (size_t i = 0; i < plan->pixels.size(); ++i) {
       cv::Vec3f want(0, 0, 0);
@@ -231,6 +252,7 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
     }
     return *checked ? sum / *checked : 1e9;
   };
+  auto mean_difference = [&](const cv::Mat& src, int* checked) { return mean_difference_of(shown, src, checked); };
   int checked = 0, checked_moved = 0;
   const double right = mean_difference(at_source, &checked);
   // The peer: the same lookup of the frame moved by 3 px, as a wrong registration would give.
@@ -241,6 +263,14 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
   EXPECT_GT(checked, 200);
   EXPECT_EQ(checked, mapped);
   EXPECT_LT(right, 0.5 * wrong) << "mean difference " << right << " levels; a lookup 3 px off: " << wrong;
+  // The shaded frame is not its frame's copy: the destination's shading at the frame's light, not the source's.
+  cv::Mat shaded_at_source;
+  cv::resize(shaded_frame, shaded_at_source, w.session().result->source_size, 0, 0, cv::INTER_AREA);
+  int checked_shaded = 0;
+  const double shaded_vs_copy = mean_difference_of(shaded_shown, shaded_at_source, &checked_shaded);
+  std::printf("live frame vs the copy by hand: copy look %.1f levels, shaded look %.1f (lookup 3 px off %.1f)\n",
+              right, shaded_vs_copy, wrong);
+  EXPECT_GT(shaded_vs_copy, 2 * right) << "the shaded look paints the copy";
   // (measured: 12 levels against 27; the registration of this 256x170
   // orange under the sweeping hand lamp is off by a few tenths of a pixel,
   // which the dimpled peel shows)

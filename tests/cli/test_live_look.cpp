@@ -77,4 +77,60 @@ TEST(LiveLookCli, SimulateRepaintEvalAndHshExport) {
   fs::remove_all(dir);
 }
 
+// Issue 40's measure, small (tools/prototypes/live/simlive.sh runs it at 1024x680, 24 frames): the bull
+// <- the orange, 6 frames of the spiral path, the live look (default map, shaded) against the pixel copy
+// through the exact-nearest-normal map (linear, copy look), both scored by `veneer eval --live` against the
+// truth frames, texture as look.py measures it (--map, --src), the light against light_path.json.
+// Measured here (256x170, scale 2.5): live 0.168, copy 0.151 (ratio 1.11; the goal of 0.7 is not met on
+// the simulated pair, see simlive.sh), texture_corr min 0.20 (mean 0.39), light median 1.6 deg (max 4.5).
+// The bounds guard what is, with room for the machine's noise.
+TEST(LiveLookCli, SimulatedSequenceLiveAgainstCopy) {
+  const fs::path dir = fs::temp_directory_path() / ("veneer-cli-simlive-" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  const std::string common = " --size 256x170 --scale 2.5 --overwrite";
+  ASSERT_EQ(run("simulate --scene bull --role destination --out " + (dir / "dst").string() + common), 0);
+  ASSERT_EQ(run("simulate --scene orange --role source --out " + (dir / "src").string() + common), 0);
+  const std::string seq = (dir / "seq").string();
+  ASSERT_EQ(run("simulate --scene bull --material orange --light-path spiral --frames 6 --out " + seq + common), 0);
+  const std::string pair = " --dst " + (dir / "dst").string() + " --src " + (dir / "src").string();
+  const std::string src = (dir / "src").string();
+  ASSERT_EQ(run("transfer --no-cache --out " + (dir / "t_default").string() + pair), 0);
+  ASSERT_EQ(run("repaint" + pair + " --map " + (dir / "t_default").string() + " --video " + seq + " --out " +
+                (dir / "live").string()),
+            0);
+  ASSERT_EQ(run("transfer --no-cache --method linear --look copy --out " + (dir / "t_linear").string() + pair), 0);
+  ASSERT_EQ(run("repaint --look copy" + pair + " --map " + (dir / "t_linear").string() + " --video " + seq +
+                " --out " + (dir / "copy").string()),
+            0);
+  ASSERT_EQ(run("eval --live " + (dir / "live").string() + " --truth " + seq + " --map " +
+                (dir / "t_default").string() + " --src " + src),
+            0);
+  ASSERT_EQ(run("eval --live " + (dir / "copy").string() + " --truth " + seq + " --map " +
+                (dir / "t_linear").string() + " --src " + src),
+            0);
+  EXPECT_EQ(run("eval --live " + (dir / "live").string() + " --truth " + seq + " --map " +
+                (dir / "t_default").string()),
+            2);  // --map without --src
+  const auto live = read_json(dir / "live" / "live_look.json");
+  const auto copy = read_json(dir / "copy" / "live_look.json");
+  ASSERT_TRUE(live.is_object() && copy.is_object());
+  ASSERT_EQ(live["frames"].size(), 6u);
+  EXPECT_TRUE(live["mean"]["texture_from_source"].get<bool>());
+  const double live_mean = live["mean"]["shading_mean"].get<double>();
+  const double copy_mean = copy["mean"]["shading_mean"].get<double>();
+  const double ratio = live_mean / copy_mean;
+  const double texture_min = live["mean"]["texture_corr_min"].get<double>();
+  const double texture_mean = live["mean"]["texture_corr"].get<double>();
+  const double light_median = live["mean"]["light_angle_median_deg"].get<double>();
+  std::printf("simulated sequence: live %.4f, copy %.4f, ratio %.3f; texture_corr min %.3f mean %.3f; light median "
+              "%.2f deg\n",
+              live_mean, copy_mean, ratio, texture_min, texture_mean, light_median);
+  EXPECT_LT(ratio, 1.3) << "measured 1.11";
+  EXPECT_GT(texture_min, 0.1) << "measured 0.20";
+  EXPECT_GT(texture_mean, 0.3) << "measured 0.39";
+  EXPECT_LT(light_median, 3.0) << "measured 1.6 deg; the goal";
+  for (const auto& f : live["frames"]) EXPECT_FALSE(f["light_angle_deg"].is_null()) << "every frame has its light";
+  fs::remove_all(dir);
+}
+
 }  // namespace

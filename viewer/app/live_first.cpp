@@ -11,6 +11,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "live_first.hpp"
+#include "live_tab.hpp"
 #include "qt_convert.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/pipeline/prepare.hpp"
@@ -33,6 +34,7 @@ struct FullResolution {
   std::shared_ptr<veneer::repaint::Relighter> relighter;
   QImage relit, relit_source;  // the relight views for `light`, made by the job
   QString error;
+  QString live_note;  // why the live session paints the copy only ("" = the look)
 };
 
 std::shared_ptr<LoadedSet> loaded_from(const QString& folder, const veneer::io::ImageSet& set) {
@@ -114,9 +116,9 @@ void LiveFirstJob::maybeStart() {
         out.result_image = to_qimage(out.result_picture);
         out.dst = loaded_from(dst_folder, pair->destination);
         out.src = loaded_from(src_folder, pair->source);
-        out.session = std::make_shared<veneer::repaint::LiveSession>(out.src->set.images, pair->src.view.mask,
-                                                                   out.result->map, out.result->source_size,
-                                                                   out.dst->median_picture, out.result->blend);
+        // the live look of the full-resolution map too: the Live tab keeps painting the shaded look
+        out.session = make_live_session(*pair, o, *out.result, out.src->set.images, pair->src.view.mask,
+                                        out.dst->median_picture, &out.live_note, progress.part(0.9, 1.0));
         // the Look tab's normals, albedo and mask views: the pair's
         for (auto [l, o] : {std::pair{out.dst.get(), &pair->dst}, std::pair{out.src.get(), &pair->src}}) {
           veneer::ps::PsResult ps;
@@ -160,6 +162,7 @@ void LiveFirstJob::maybeStart() {
       if (out.relighter) self->session_.relighter = out.relighter;
       self->session_.live_session = out.session;
       self->session_.live_refusal.clear();
+      if (!out.live_note.isEmpty()) self->session_.message(out.live_note, true);
       ++self->swaps_;
       self->label_->setText(tr("full resolution: %1x%2 map in use")
                                      .arg(out.result->map.xy.cols)

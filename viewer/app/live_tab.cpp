@@ -18,6 +18,23 @@
 
 namespace veneer::app {
 
+std::shared_ptr<veneer::repaint::LiveSession> make_live_session(
+    const veneer::pipeline::PreparedPair& pair, const veneer::pipeline::TransferOptions& options,
+    const veneer::pipeline::TransferResult& result, const std::vector<cv::Mat>& source_photos,
+    const cv::Mat& still_mask, const cv::Mat& backdrop, QString* note, const veneer::Progress& progress) {
+  cv::Mat mask = still_mask;
+  if (!source_photos.empty() && mask.size() != source_photos.front().size())
+    cv::resize(still_mask, mask, source_photos.front().size(), 0, 0, cv::INTER_NEAREST);
+  std::shared_ptr<const veneer::repaint::LiveLook> live_look;
+  auto made = veneer::pipeline::live_look(pair, options, result.map, result.look, {}, progress);
+  if (made)
+    live_look = *made;
+  else if (note)
+    *note = LiveTab::tr("the live view paints the copy only: the shaded look: %1").arg(qs(made.message()));
+  return std::make_shared<veneer::repaint::LiveSession>(source_photos, mask, result.map, result.source_size, live_look,
+                                                        backdrop, result.blend);
+}
+
 LiveTab::LiveTab(Session& session, QWidget* parent) : QWidget(parent), session_(session) {
   live_pool_.setMaxThreadCount(1);
   live_pool_.setExpiryTimeout(-1);  // the live view's thread stays while the window lives

@@ -23,6 +23,19 @@ class QPushButton;
 
 namespace veneer::app {
 
+// The live session for a transfer's result, as `veneer repaint --video` makes
+// it: the source's stills `source_photos` (the set loaded; `still_mask` the
+// object there, resized to them when needed), the result's map, blend and
+// source size, `backdrop` where nothing is mapped, and the live look of the
+// map (pipeline::live_look, from the result's still look when it has one), so
+// frames are painted shaded unless the Live tab's selector says copy. When the
+// live look cannot be made the session paints the copy only and `*note` (when
+// given) says why. Heavy (the live look): run off the GUI thread.
+std::shared_ptr<veneer::repaint::LiveSession> make_live_session(
+    const veneer::pipeline::PreparedPair& pair, const veneer::pipeline::TransferOptions& options,
+    const veneer::pipeline::TransferResult& result, const std::vector<cv::Mat>& source_photos,
+    const cv::Mat& still_mask, const cv::Mat& backdrop, QString* note = nullptr, const veneer::Progress& progress = {});
+
 class LiveTab : public QWidget {
   Q_OBJECT
  public:

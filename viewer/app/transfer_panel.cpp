@@ -21,6 +21,7 @@
 #include "veneer/pipeline/live.hpp"
 #include "veneer/pipeline/prepare.hpp"
 #include "veneer/ps/segmentation.hpp"
+#include "live_tab.hpp"
 #include "widgets.hpp"
 
 namespace veneer::app {
@@ -304,6 +305,7 @@ void TransferPanel::startTransfer() {
   pending_prepared_.reset();
   pending_key_ = key;
   pending_session_.reset();
+  pending_live_note_.clear();
   pending_result_picture_ = cv::Mat();
   pending_result_image_ = QImage();
   pending_relit_ = pending_relit_source_ = cv::Mat();
@@ -375,13 +377,17 @@ void TransferPanel::startTransfer() {
     // what showing the result needs, made here rather than on the GUI thread
     pending_result_picture_ = picture_of(pending_result_->repainted_median);
     pending_result_image_ = to_qimage(pending_result_picture_);
-    {  // the live session: the source's stills (full size) and its object there
-      cv::Mat still_mask = pair->src.view.mask;
-      if (still_mask.size() != src->set.size)
-        cv::resize(pair->src.view.mask, still_mask, src->set.size, 0, 0, cv::INTER_NEAREST);
-      pending_session_ = std::make_shared<veneer::repaint::LiveSession>(
-          src->set.images, still_mask, pending_result_->map, pending_result_->source_size, dst->median_picture,
-          pending_result_->blend);
+    {  // the live session: the source's stills (full size), its object there, the live look of the map
+      veneer::Progress cancel_only;
+      cancel_only.cancel = &cancel_;
+      pending_session_ = make_live_session(*pair, options, *pending_result_, src->set.images, pair->src.view.mask,
+                                           dst->median_picture, &pending_live_note_, cancel_only);
+      if (cancel_) {
+        transfer_error_ = "cancelled";
+        pending_result_.reset();
+        pending_session_.reset();
+        return;
+      }
     }
     if (relighter) {  // same source as last time
       pending_relighter_ = relighter;
@@ -537,6 +543,7 @@ void TransferPanel::onTransferDone() {
   if (pending_session_) {
     session_.live_session = std::move(pending_session_);
     session_.live_refusal.clear();
+    if (!pending_live_note_.isEmpty()) session_.message(pending_live_note_, true);
   }
   pending_session_.reset();
   // the views, the library, the live repaint and the full resolution follow

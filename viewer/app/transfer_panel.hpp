@@ -104,6 +104,7 @@ class TransferPanel : public QGroupBox {
   cv::Mat pending_result_picture_;
   QImage pending_result_image_;
   std::shared_ptr<veneer::repaint::LiveSession> pending_session_;
+  QString pending_live_note_;  // why the live session paints the copy only ("" = it paints the look)
   cv::Mat pending_relit_, pending_relit_source_;
   cv::Vec3d pending_relit_direction_;
   QRect seg_rect_;

@@ -53,14 +53,23 @@ int run_live(const EvalArgs& a) {
   if (a.truth.empty()) return report.usage("--live needs --truth (a `veneer simulate --light-path ... --material SOURCE` folder)");
   if (!std::filesystem::is_directory(a.live)) return report.usage("--live " + a.live + ": no such folder");
   if (!std::filesystem::is_directory(a.truth)) return report.usage("--truth " + a.truth + ": no such folder");
-  auto look = eval::live_look_folders(a.live, a.truth);
+  if (a.map.empty() != a.src.empty())
+    return report.usage("--live: --map and --src go together (the texture from the source through the map, as "
+                        "look.py measures it)");
+  auto look = eval::live_look_folders(a.live, a.truth, a.map, a.src);
   if (!look) return report.fail(look.message());
   std::fputs(look->table().c_str(), stdout);
   const std::filesystem::path out = a.out.empty() ? std::filesystem::path(a.live) / "live_look.json" : std::filesystem::path(a.out);
   if (auto s = report.text(out, look->json() + "\n"); !s) return report.fail(s.message());
   report.line("wrote " + out.string() + ": " + std::to_string(look->frames.size()) + " frames, shading error mean " +
               std::to_string(look->shading_mean) +
-              (look->texture_corr_mean ? ", texture_corr mean " + std::to_string(*look->texture_corr_mean) : ""));
+              (look->texture_corr_mean ? ", texture_corr mean " + std::to_string(*look->texture_corr_mean) +
+                                              (look->texture_from_source ? " (the source through the map)"
+                                                                         : " (against the truth, identity map)")
+                                        : "") +
+              (look->light_angle_median_deg
+                   ? ", light " + std::to_string(*look->light_angle_median_deg) + " deg median off the path's lamp"
+                   : ""));
   return 0;
 }
 
@@ -107,7 +116,9 @@ VENEER_ARGS_COMMAND(eval, veneer::cli::EvalArgs,
                   "table with its mean");
   cmd->add_option("--truth", args->truth,
                   "--live: the sequence's folder from `veneer simulate --light-path ... --material SOURCE` "
-                  "(light_path.json, truth/frame_NNNN.png, truth/mask.png)");
+                  "(light_path.json, truth/frame_NNNN.png, truth/mask.png); with --map (the transfer the frames "
+                  "were repainted through) and --src (its source set) texture_corr is look.py's: the frame's "
+                  "high-pass against the source's median photo's warped through the map");
   return [args] {
     if (!args->live.empty()) return veneer::cli::run_live(*args);
     return args->table ? veneer::cli::run_table(*args) : veneer::cli::run_map(*args);

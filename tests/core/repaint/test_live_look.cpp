@@ -12,6 +12,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "veneer/pipeline/transfer.hpp"
+#include "veneer/repaint/hsh.hpp"
 #include "veneer/repaint/live_look.hpp"
 #include "veneer/repaint/live_session.hpp"
 #include "veneer/repaint/look.hpp"
@@ -155,13 +156,12 @@ TEST(Relightable, RecoversCoefficientsOfPhotosInItsSpan) {
     for (int x = 0; x < size.width; ++x)
       for (int k = 0; k < 9; ++k) truth.ptr<float>(y)[x * 9 + k] = u(rng);
   auto shade = [&](const cv::Vec3d& l) {
-    float b[9];
-    repaint::hsh_basis(l, 3, b);
+    const std::vector<double> b = repaint::hsh_basis(l, 3);
     cv::Mat p(size, CV_32FC1);
     for (int y = 0; y < size.height; ++y)
       for (int x = 0; x < size.width; ++x) {
         float s = 0;
-        for (int k = 0; k < 9; ++k) s += truth.ptr<float>(y)[x * 9 + k] * b[k];
+        for (int k = 0; k < 9; ++k) s += truth.ptr<float>(y)[x * 9 + k] * static_cast<float>(b[k]);
         p.at<float>(y, x) = s;
       }
     return p;
@@ -187,8 +187,8 @@ TEST(Relightable, RecoversCoefficientsOfPhotosInItsSpan) {
   for (size_t i = 0; i < lamps.size(); ++i)
     EXPECT_LT(cv::norm(exact->evaluate(lamps[i]), cv::max(photos[i], 0.f), cv::NORM_INF), 5e-3) << "lamp " << i;
   // the basis in RTI files' order: a lamp in the x-z plane (phi = 0) has no sin(phi) or sin(2 phi) terms
-  float b[9];
-  repaint::hsh_basis(cv::Vec3d(1, 0, 1), 3, b);
+  const std::vector<double> b = repaint::hsh_basis(cv::Vec3d(1, 0, 1), 3);
+  ASSERT_EQ(b.size(), 9u);
   const double ct = std::sqrt(0.5), sq = std::sqrt(ct - ct * ct);
   EXPECT_NEAR(b[0], 1 / std::sqrt(2 * CV_PI), 1e-6);
   EXPECT_NEAR(b[1], std::sqrt(6 / CV_PI) * sq, 1e-6);

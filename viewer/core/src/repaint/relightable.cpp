@@ -1,6 +1,8 @@
 // The relightable model (relightable.hpp).
 #include "veneer/repaint/relightable.hpp"
 
+#include "veneer/repaint/hsh.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <string>
@@ -26,28 +28,6 @@ Status RelightableOptions::check() const {
   return {};
 }
 
-void hsh_basis(const cv::Vec3d& direction, int order, float* out) {
-  const double len = std::max(1e-12, cv::norm(direction));
-  const cv::Vec3d l = direction / len;
-  const double phi = std::atan2(l[1], l[0]);
-  const double ct = std::clamp(l[2], 0.0, 1.0);  // below the horizon: on it
-  const double sq = std::sqrt(std::max(ct - ct * ct, 0.0));
-  const double pi = CV_PI;
-  const double c = std::cos(phi), s = std::sin(phi);
-  out[0] = static_cast<float>(1 / std::sqrt(2 * pi));
-  if (order < 2) return;
-  // the order RTI files (RTIBuilder, RTIViewer) use
-  out[1] = static_cast<float>(std::sqrt(6 / pi) * c * sq);
-  out[2] = static_cast<float>(std::sqrt(3 / (2 * pi)) * (-1 + 2 * ct));
-  out[3] = static_cast<float>(std::sqrt(6 / pi) * s * sq);
-  if (order < 3) return;
-  out[4] = static_cast<float>(std::sqrt(30 / pi) * std::cos(2 * phi) * (-ct + ct * ct));
-  out[5] = static_cast<float>(std::sqrt(30 / pi) * c * (-1 + 2 * ct) * sq);
-  out[6] = static_cast<float>(std::sqrt(5 / (2 * pi)) * (1 - 6 * ct + 6 * ct * ct));
-  out[7] = static_cast<float>(std::sqrt(30 / pi) * (-1 + 2 * ct) * sq * s);
-  out[8] = static_cast<float>(std::sqrt(30 / pi) * std::sin(2 * phi) * (-ct + ct * ct));
-}
-
 void ptm_basis(const cv::Vec3d& direction, float* out) {
   const cv::Vec3d l = direction / std::max(1e-12, cv::norm(direction));
   const float u = static_cast<float>(l[0]), v = static_cast<float>(l[1]);
@@ -55,6 +35,17 @@ void ptm_basis(const cv::Vec3d& direction, float* out) {
 }
 
 namespace {
+
+// The basis' values at `l` into `out` (basis_terms values): HSH through hsh.hpp (one
+// implementation with the .rti export), in float as the coefficients are.
+void basis_at(const RelightableOptions& options, const cv::Vec3d& l, float* out) {
+  if (options.basis == RelightBasis::ptm) {
+    ptm_basis(l, out);
+    return;
+  }
+  const std::vector<double> h = hsh_basis(l, options.order);
+  std::transform(h.begin(), h.end(), out, [](double v) { return static_cast<float>(v); });
+}
 
 // grey of a CV_32FC3 or CV_32FC1 pixel row value
 inline float grey_at(const cv::Mat& m, int y, int x) {
@@ -137,12 +128,7 @@ Expected<RelightableModel> RelightableModel::fit(const std::vector<cv::Mat>& pho
   const int terms = options.basis == RelightBasis::hsh ? options.order * options.order : 6;
   model.basis_terms_ = terms;
   cv::Mat basis(lamps, terms, CV_32FC1);
-  for (int i = 0; i < lamps; ++i) {
-    if (options.basis == RelightBasis::hsh)
-      hsh_basis(directions[i], options.order, basis.ptr<float>(i));
-    else
-      ptm_basis(directions[i], basis.ptr<float>(i));
-  }
+  for (int i = 0; i < lamps; ++i) basis_at(options, directions[i], basis.ptr<float>(i));
   auto c = fit_coefficients(photos, mask, basis, options.ridge, progress.part(0.0, 0.8));
   if (!c) return c.error();
   model.terms_ = terms;
@@ -188,10 +174,7 @@ Expected<RelightableModel> RelightableModel::fit(const std::vector<cv::Mat>& pho
 
 std::vector<float> RelightableModel::weights(const cv::Vec3d& l) const {
   std::vector<float> w(terms(), 0.f);
-  if (options_.basis == RelightBasis::hsh)
-    hsh_basis(l, options_.order, w.data());
-  else
-    ptm_basis(l, w.data());
+  basis_at(options_, l, w.data());
   if (kernel_inverse_.empty()) return w;
   const int lamps = static_cast<int>(lamps_.size());
   const double sigma = options_.residual_deg * CV_PI / 180.0;

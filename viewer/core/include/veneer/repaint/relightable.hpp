@@ -18,8 +18,9 @@
 // 5 deg residual 0.0770, HSH 3 alone 0.0792, PTM 0.0795, Lambert on normals
 // 0.0793, an exact radial basis over the lamps 0.0889.
 //
-// The hemispherical-harmonics basis (hsh_basis) is also what an .rti export
-// writes; fit_coefficients is that fit, reusable on its own.
+// The hemispherical-harmonics basis is hsh.hpp's (hsh_basis), the one an
+// .rti export writes; fit_coefficients is a ridge-regularised fit in any
+// basis, reusable on its own.
 #include <string_view>
 #include <vector>
 
@@ -37,10 +38,6 @@ enum class RelightBasis {
 const char* relight_basis_name(RelightBasis basis);
 Expected<RelightBasis> parse_relight_basis(std::string_view name);
 
-// The hemispherical harmonics of `order` (1..3) at unit direction `l` (z toward
-// the camera; l.z <= 0 is clamped to the horizon): order^2 values into `out`,
-// the basis of the RTI format's HSH (Gautron et al. 2004) in its files' order.
-void hsh_basis(const cv::Vec3d& l, int order, float* out);
 // The PTM basis at `l`: lu^2, lv^2, lu lv, lu, lv, 1 (6 values).
 void ptm_basis(const cv::Vec3d& l, float* out);
 
