@@ -185,28 +185,41 @@ cv::Mat median_image(const std::vector<cv::Mat>& gray, const cv::Mat& mask) {
   return out;
 }
 
-Expected<ShadingError> shading_error(const std::vector<cv::Mat>& result, const std::vector<cv::Mat>& reference,
-                                     const cv::Mat& mask) {
+// Checks a result against its reference (one picture per lamp, one size) and
+// fills `in` with what every shading measure compares: the pictures as
+// readable grey (`r`, `d`, which `in` points at), the mask, the medians and
+// maxima over the lamps and the medians' logs (only where compared).
+Status prepare_shading(const std::vector<cv::Mat>& result, const std::vector<cv::Mat>& reference, const cv::Mat& mask,
+                       std::vector<cv::Mat>& r, std::vector<cv::Mat>& d, ShadingInputs& in) {
   if (result.size() != reference.size())
     return make_error(std::to_string(result.size()) + " result pictures for " + std::to_string(reference.size()) +
                       " lamps");
   if (result.empty()) return make_error("no lamp to compare");
   const cv::Size size = reference[0].size();
-  if (Status s = check_images(reference, size, "reference photo"); !s) return s.error();
-  if (Status s = check_images(result, size, "result picture"); !s) return s.error();
+  if (Status s = check_images(reference, size, "reference photo"); !s) return s;
+  if (Status s = check_images(result, size, "result picture"); !s) return s;
   Status status;
-  ShadingInputs in;
   in.mask = object_mask(mask, size, status);
-  if (!status) return status.error();
-  const std::vector<cv::Mat> r = readable(result), d = readable(reference);
+  if (!status) return status;
+  r = readable(result);
+  d = readable(reference);
   in.result = &r;
   in.reference = &d;
-  in.rm = median_image(r, in.mask);  // only where compared
+  in.rm = median_image(r, in.mask);
   in.dm = median_image(d, in.mask);
   in.log_rm = log_of(in.rm, in.mask);
   in.log_dm = log_of(in.dm, in.mask);
   in.rx = max_image(r, in.mask);
   in.dx = max_image(d, in.mask);
+  return Status::success();
+}
+
+Expected<ShadingError> shading_error(const std::vector<cv::Mat>& result, const std::vector<cv::Mat>& reference,
+                                     const cv::Mat& mask) {
+  std::vector<cv::Mat> r, d;
+  ShadingInputs in;
+  if (Status s = prepare_shading(result, reference, mask, r, d, in); !s) return s.error();
+  const cv::Size size = reference[0].size();
 
   const int stripes = std::min(size.height, 16);
   auto stripe_rows = [&](int s) { return std::pair(size.height * s / stripes, size.height * (s + 1) / stripes); };
@@ -277,26 +290,10 @@ Expected<ShadingError> shading_error(const std::vector<cv::Mat>& result, const s
 
 Expected<std::vector<ShadingError>> shading_error_per_lamp(const std::vector<cv::Mat>& result,
                                                           const std::vector<cv::Mat>& reference, const cv::Mat& mask) {
-  if (result.size() != reference.size())
-    return make_error(std::to_string(result.size()) + " result pictures for " + std::to_string(reference.size()) +
-                      " lamps");
-  if (result.empty()) return make_error("no lamp to compare");
-  const cv::Size size = reference[0].size();
-  if (Status s = check_images(reference, size, "reference photo"); !s) return s.error();
-  if (Status s = check_images(result, size, "result picture"); !s) return s.error();
-  Status status;
+  std::vector<cv::Mat> r, d;
   ShadingInputs in;
-  in.mask = object_mask(mask, size, status);
-  if (!status) return status.error();
-  const std::vector<cv::Mat> r = readable(result), d = readable(reference);
-  in.result = &r;
-  in.reference = &d;
-  in.rm = median_image(r, in.mask);
-  in.dm = median_image(d, in.mask);
-  in.log_rm = log_of(in.rm, in.mask);
-  in.log_dm = log_of(in.dm, in.mask);
-  in.rx = max_image(r, in.mask);
-  in.dx = max_image(d, in.mask);
+  if (Status s = prepare_shading(result, reference, mask, r, d, in); !s) return s.error();
+  const cv::Size size = reference[0].size();
   // One lamp at a time: its errors are one picture's lit pixels, few enough to hold.
   std::vector<ShadingError> out(result.size());
   cv::parallel_for_(cv::Range(0, static_cast<int>(result.size())), [&](const cv::Range& lamps) {
