@@ -437,3 +437,93 @@ TEST(LiveLook, WhatChangesOnTheSourceComesThrough) {
   EXPECT_GT(inside, 0.45);
   EXPECT_NEAR(rest, 1.0, 0.01);
 }
+
+namespace {
+
+// A Lambert sphere (grey albedo 0.6, distant lamps) filling most of a 200x200
+// picture, photographed under `lamps`: its view (true normals) and photos.
+struct Sphere {
+  match::ObjectView view;
+  std::vector<cv::Vec3d> lamps;
+};
+
+Sphere lambert_sphere(const std::vector<cv::Vec3d>& lamps, double noise) {
+  Sphere s;
+  s.lamps = lamps;
+  const int size = 200;
+  const double r = 90;
+  s.view.mask = cv::Mat(size, size, CV_8UC1, cv::Scalar(0));
+  s.view.normals = cv::Mat(size, size, CV_32FC3, cv::Scalar::all(0));
+  for (int y = 0; y < size; ++y)
+    for (int x = 0; x < size; ++x) {
+      const double u = (x - size / 2 + 0.5) / r, v = -(y - size / 2 + 0.5) / r;  // rig frame: y up
+      if (u * u + v * v >= 0.98) continue;
+      s.view.mask.at<uchar>(y, x) = 255;
+      s.view.normals.at<cv::Vec3f>(y, x) = cv::Vec3f(static_cast<float>(u), static_cast<float>(v),
+                                                     static_cast<float>(std::sqrt(1 - u * u - v * v)));
+    }
+  std::mt19937 rng(7);
+  std::normal_distribution<float> g(0.f, static_cast<float>(noise));
+  for (const cv::Vec3d& l : lamps) {
+    cv::Mat p(size, size, CV_32FC3, cv::Scalar::all(0));
+    for (int y = 0; y < size; ++y)
+      for (int x = 0; x < size; ++x)
+        if (s.view.mask.at<uchar>(y, x)) {
+          const float v = 0.6f * std::max(0.f, s.view.normals.at<cv::Vec3f>(y, x).dot(cv::Vec3f(l))) + g(rng);
+          p.at<cv::Vec3f>(y, x) = cv::Vec3f::all(std::max(v, 0.f));
+        }
+    s.view.images.push_back(p);
+  }
+  return s;
+}
+
+}  // namespace
+
+// Lamps all on one cone (the simulated rig's ring: 7 lamps 25 deg off the
+// camera's axis): the relightable model cannot tell how the shading changes
+// with the lamp's elevation, so a light off the cone is shaded as the model at
+// the cone's elevation (same azimuth) times the Lambert ratio on the
+// destination's normals. On a Lambert sphere (noise 0.005), against
+// max(0, n.l) at lights 5 to 50 deg off the axis, look.py's measure (the live
+// look's paint_linear): on and inside the cone (within the lamps' hull) the
+// model alone, unchanged (5 / 15 / 25.2 deg: 0.026 / 0.027 / 0.015); outside
+// it (35 / 45 / 50 deg) measured 0.019 / 0.024 / 0.026 where the model alone
+// gives 0.058 / 0.201 / 0.305.
+TEST(LiveLook, ExtrapolatesOffTheLampsCone) {
+  std::vector<cv::Vec3d> lamps;
+  const double cone = 25.2 * CV_PI / 180;
+  for (int i = 0; i < 7; ++i) {
+    const double phi = 2 * CV_PI * i / 8;  // the rig's ring: 8 sockets, 7 lamps
+    lamps.emplace_back(std::sin(cone) * std::sin(phi), std::sin(cone) * std::cos(phi), std::cos(cone));
+  }
+  const Sphere s = lambert_sphere(lamps, 0.005);
+  const match::Map map = identity_map(s.view.mask);
+  auto look = repaint::ShadedLook::make({s.view, lamps}, {s.view, lamps}, map);
+  ASSERT_TRUE(look) << look.message();
+  repaint::LiveLookOptions on, off;
+  off.extrapolate = false;
+  auto live_on = repaint::LiveLook::make(*look, {s.view, lamps}, {s.view, lamps}, map, {}, on);
+  auto live_off = repaint::LiveLook::make(*look, {s.view, lamps}, {s.view, lamps}, map, {}, off);
+  ASSERT_TRUE(live_on && live_off);
+  double worst_on = 0, worst_off = 0, inside = 0;
+  for (double deg : {5.0, 15.0, 25.2, 35.0, 45.0, 50.0}) {
+    const double t = deg * CV_PI / 180, phi = 0.3;  // between two lamps' azimuths
+    const cv::Vec3d l(std::sin(t) * std::sin(phi), std::sin(t) * std::cos(phi), std::cos(t));
+    cv::Mat truth(s.view.mask.size(), CV_32FC1, cv::Scalar(0));
+    truth.forEach<float>([&](float& v, const int* at) {
+      v = std::max(0.f, s.view.normals.at<cv::Vec3f>(at[0], at[1]).dot(cv::Vec3f(l)));
+    });
+    const cv::Mat top = cv::Mat(truth.size(), CV_32FC1, cv::Scalar(1));
+    const double e_on = log_ratio_error(grey_of(live_on->paint_linear(l)), truth, s.view.mask, top);
+    const double e_off = log_ratio_error(grey_of(live_off->paint_linear(l)), truth, s.view.mask, top);
+    std::printf("light %.1f deg off the axis: extrapolated %.4f, the model alone %.4f\n", deg, e_on, e_off);
+    if (deg <= 25.2) {  // on the lamps' cone and inside it (within their hull): the model alone
+      inside = std::max(inside, std::abs(e_on - e_off));
+      continue;
+    }
+    worst_on = std::max(worst_on, e_on), worst_off = std::max(worst_off, e_off);
+  }
+  EXPECT_LT(inside, 1e-4) << "within the lamps' cone the model alone";
+  EXPECT_LT(worst_on, 0.04);              // measured 0.026 (50 deg)
+  EXPECT_GT(worst_off, 4 * worst_on);     // measured 0.305, 11.6x
+}

@@ -70,6 +70,17 @@ struct LiveLookOptions {
   double change_dead_zone = 0.25;  // |log(frame / source's prediction)| below this is the model's own error and
                                    // is dropped; beyond it the change comes through, [0, 5]; default 0.25
   double change_clip = 2.0;      // what comes through clipped to [1/x, x], [1, 100]; default 2
+  bool extrapolate = true;       // lamps on a ring (a ring rig's): a light farther off the camera's axis than
+                                 // the ring is shaded as each side's model at the ring's angle l' (same azimuth)
+                                 // times the Lambert ratio (n.l + e) / (n.l' + e) on that side's normals; inside
+                                 // the ring the model alone. Default on. Measured on the simulated ring sequence
+                                 // (simlive.sh, 1024x680 x 24): live/copy 1.33 -> 1.13 (see live_look.cpp)
+  double extrapolate_floor = 0.02;  // e above, (0, 1]; default 0.02 (simlive.sh 512x340 x 12: 0.005 1.08,
+                                    // 0.02 1.09, 0.05 1.13, 0.1 1.16, 0.2 1.19)
+  double extrapolate_ring_deg = 5;  // the lamps are a ring when their angles off the axis are within this of each
+                                    // other, [0, 90]; default 5 (lamps spread over the hemisphere, as DiLiGenT's,
+                                    // are left to the model: extrapolated by elevation alone, livelook_all.sh
+                                    // measured 0.70x the copy against 0.69x)
   Status check() const;
 };
 
