@@ -70,6 +70,32 @@ Quantiser make_quantiser(float lo, float hi) {
   return q;
 }
 
+// The residual's figures from what both exporters gather while they check
+// what the file stores: per lamp the squared errors' sum (`lamp_sq`), the
+// |error| histogram 0.01 level a bin (`hist`), the photos' squared
+// spread, over `per_lamp` samples a lamp (pixels x 3 channels).
+constexpr int kBins = 25600;  // |error| histogram, 0.01 level per bin
+void summarise_residual(const std::vector<double>& lamp_sq, const std::vector<long long>& hist, double spread_sq,
+                        double per_lamp, RtiFit& fit) {
+  const double n = static_cast<double>(lamp_sq.size());
+  double total_sq = 0;
+  for (double s : lamp_sq) {
+    fit.rms_per_lamp.push_back(std::sqrt(s / per_lamp));
+    total_sq += s;
+  }
+  fit.rms = std::sqrt(total_sq / (per_lamp * n));
+  fit.photo_spread = std::sqrt(spread_sq / (per_lamp * n));
+  const long long want = static_cast<long long>(std::ceil(0.99 * per_lamp * n));
+  long long seen = 0;
+  for (int b = 0; b <= kBins; ++b) {
+    seen += hist[static_cast<size_t>(b)];
+    if (seen >= want) {
+      fit.p99 = (b + 1) / 100.0;
+      break;
+    }
+  }
+}
+
 }  // namespace
 
 const char* ptm_format_name(PtmFormat f) { return f == PtmFormat::rgb ? "PTM_FORMAT_RGB" : "PTM_FORMAT_LRGB"; }
@@ -261,7 +287,6 @@ Expected<RtiFit> export_ptm(const std::vector<cv::Mat>& photos, const std::vecto
   progress.report(0.8, "fitting PTM");
 
   // The residual of what the file stores, and the photos' own spread.
-  constexpr int kBins = 25600;  // |error| histogram, 0.01 level per bin
   std::vector<double> lamp_sq(n, 0.0);
   std::vector<long long> hist(kBins + 1, 0);
   double spread_sq = 0;
@@ -286,22 +311,7 @@ Expected<RtiFit> export_ptm(const std::vector<cv::Mat>& photos, const std::vecto
       }
     }
   const double per_lamp = static_cast<double>(pixels) * 3;
-  double total_sq = 0;
-  for (double s : lamp_sq) {
-    fit.rms_per_lamp.push_back(std::sqrt(s / per_lamp));
-    total_sq += s;
-  }
-  fit.rms = std::sqrt(total_sq / (per_lamp * static_cast<double>(n)));
-  fit.photo_spread = std::sqrt(spread_sq / (per_lamp * static_cast<double>(n)));
-  const long long want = static_cast<long long>(std::ceil(0.99 * per_lamp * static_cast<double>(n)));
-  long long seen = 0;
-  for (int b = 0; b <= kBins; ++b) {
-    seen += hist[static_cast<size_t>(b)];
-    if (seen >= want) {
-      fit.p99 = (b + 1) / 100.0;
-      break;
-    }
-  }
+  summarise_residual(lamp_sq, hist, spread_sq, per_lamp, fit);
 
   // The file: five header lines, then the bytes, rows bottom to top.
   std::string out = "PTM_1.2\n" + std::string(ptm_format_name(options.format)) + "\n" + std::to_string(w) + " " +
@@ -399,7 +409,6 @@ Expected<RtiFit> export_hsh(const std::vector<cv::Mat>& photos, const std::vecto
   // The residual of what the file stores, and the photos' own spread, in 8-bit levels.
   std::vector<std::vector<double>> lamp_basis;
   for (const auto& d : directions) lamp_basis.push_back(hsh_basis(d, order));
-  constexpr int kBins = 25600;  // |error| histogram, 0.01 level per bin
   std::vector<double> lamp_sq(n, 0.0);
   std::vector<long long> hist(kBins + 1, 0);
   double spread_sq = 0;
@@ -423,22 +432,7 @@ Expected<RtiFit> export_hsh(const std::vector<cv::Mat>& photos, const std::vecto
         }
       }
   const double per_lamp = static_cast<double>(w) * h * 3;
-  double total_sq = 0;
-  for (double s : lamp_sq) {
-    fit.rms_per_lamp.push_back(std::sqrt(s / per_lamp));
-    total_sq += s;
-  }
-  fit.rms = std::sqrt(total_sq / (per_lamp * static_cast<double>(n)));
-  fit.photo_spread = std::sqrt(spread_sq / (per_lamp * static_cast<double>(n)));
-  const long long want = static_cast<long long>(std::ceil(0.99 * per_lamp * static_cast<double>(n)));
-  long long seen = 0;
-  for (int b = 0; b <= kBins; ++b) {
-    seen += hist[static_cast<size_t>(b)];
-    if (seen >= want) {
-      fit.p99 = (b + 1) / 100.0;
-      break;
-    }
-  }
+  summarise_residual(lamp_sq, hist, spread_sq, per_lamp, fit);
   progress.report(0.9, "fitting HSH");
 
   std::string out = "#HSH1.2\n3\n" + std::to_string(w) + " " + std::to_string(h) + " 3\n" + std::to_string(terms) + " 2 1\n";
