@@ -528,16 +528,29 @@ LiveLight LiveLook::estimate_light(const cv::Mat& frame, const cv::Matx23d& a) c
   return light;
 }
 
+namespace {
+// The destination's side of a light `l` (unit), what exposure_for, paint and
+// paint_linear each shade with: the direction its model supports (`ls`, the
+// ring's at the same azimuth when `l` lies beyond the ring), whether that
+// differs (`ext`), the model's weights there, the directions and the half
+// vector in float, and the Lambert ratio's floor.
+struct DestinationLight {
+  cv::Vec3d ls;
+  bool ext;
+  Active wd;
+  cv::Vec3f lf, lsf, h;
+  float ef;
+};
+DestinationLight destination_light(const LiveLookData& d, const cv::Vec3d& l) {
+  const cv::Vec3d ls = supported(d.dspan, l);
+  return {ls, ls != l, active_weights(d.dmodel, ls), to_f(l), to_f(ls), half_vector(l), d.dspan.floor};
+}
+}  // namespace
+
 double LiveLook::exposure_for(const LiveLight& light, double percentile, double white) const {
   const LiveLookData& d = *data_;
   const cv::Vec3d& l = light.direction;
-  const cv::Vec3d ls = supported(d.dspan, l);
-  const bool ext = ls != l;
-  const Active wd = active_weights(d.dmodel, ls);
-  const cv::Vec3f lf(static_cast<float>(l[0]), static_cast<float>(l[1]), static_cast<float>(l[2]));
-  const cv::Vec3f lsf(static_cast<float>(ls[0]), static_cast<float>(ls[1]), static_cast<float>(ls[2]));
-  const float ef = d.dspan.floor;
-  const cv::Vec3f h = half_vector(l);
+  const auto& [ls, ext, wd, lf, lsf, h, ef] = destination_light(d, l);
   const float s = static_cast<float>(light.intensity), am = static_cast<float>(light.ambient);
   const float cmax = static_cast<float>(std::max({light.colour[0], light.colour[1], light.colour[2]}));
   std::vector<float> v;
@@ -569,16 +582,11 @@ cv::Mat LiveLook::paint(const cv::Mat& frame, const cv::Matx23d& a, const LiveLi
   else
     out = cv::Mat(d.dsize, CV_8UC3, cv::Scalar::all(0));
   const cv::Vec3d& l = light.direction;
-  const cv::Vec3d ls = supported(d.dspan, l);
-  const bool ext = ls != l;
+  const auto& [ls, ext, wd, lf, lsf, h, ef] = destination_light(d, l);
   const cv::Vec3d lss = supported(d.sspan, l);
   const bool sext = lss != l;
   const cv::Vec3f lssf = to_f(lss);
-  const Active wd = active_weights(d.dmodel, ls), ws = active_weights(d.smodel, lss);
-  const cv::Vec3f lf(static_cast<float>(l[0]), static_cast<float>(l[1]), static_cast<float>(l[2]));
-  const cv::Vec3f lsf(static_cast<float>(ls[0]), static_cast<float>(ls[1]), static_cast<float>(ls[2]));
-  const float ef = d.dspan.floor;
-  const cv::Vec3f h = half_vector(l);
+  const Active ws = active_weights(d.smodel, lss);
   const float s = static_cast<float>(light.intensity), am = static_cast<float>(light.ambient);
   // r, g, b -> BGR, times the exposure
   const cv::Vec3f colour = static_cast<float>(exposure) *
@@ -665,13 +673,7 @@ cv::Mat LiveLook::paint_linear(const cv::Vec3d& direction) const {
   const LiveLookData& d = *data_;
   cv::Mat out(d.dsize, CV_32FC3, cv::Scalar::all(0));
   const cv::Vec3d l = direction / std::max(1e-12, cv::norm(direction));
-  const cv::Vec3d ls = supported(d.dspan, l);
-  const bool ext = ls != l;
-  const Active wd = active_weights(d.dmodel, ls);
-  const cv::Vec3f lf(static_cast<float>(l[0]), static_cast<float>(l[1]), static_cast<float>(l[2]));
-  const cv::Vec3f lsf(static_cast<float>(ls[0]), static_cast<float>(ls[1]), static_cast<float>(ls[2]));
-  const float ef = d.dspan.floor;
-  const cv::Vec3f h = half_vector(l);
+  const auto& [ls, ext, wd, lf, lsf, h, ef] = destination_light(d, l);
   const float floor = ShadedLook::ratio_floor();
   for (size_t i = 0; i < d.pixel.size(); ++i) {
     const LiveLookData::Pixel& e = d.px[i];
