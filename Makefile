@@ -6,6 +6,9 @@
 #   make bench    build the benchmarks (target benches) and run them, printing their tables
 #   make buildtime  a cold build (no compiler cache) in build-time/: wall time of make demo's and
 #                 make test's targets, the load beside them, the slowest translation units
+#   make soak     SOAK_CAPTURES (default 1000) captures and as many pulls against veneerd --simulate with
+#                 injected faults (SOAK_FAULTS, a fault-plan SPEC; default: every fault); writes
+#                 soak-out/report.json and soak-out/soak.png (not part of make test; a short run is)
 #   make asan     address/undefined-sanitizer build + tests in build-asan/
 #   make fuzz     build the libFuzzer targets with clang and run each briefly
 #   make package  Debian packages into build-package/: veneerd (arm64, cross-built, and amd64),
@@ -19,8 +22,10 @@ CMAKE_ARGS ?=
 FUZZ_SECONDS ?= 30
 
 PACKAGE_OUT ?= build-package
+SOAK_CAPTURES ?= 1000
+SOAK_FAULTS ?=
 
-.PHONY: all deps configure build demo test bench buildtime asan fuzz package package-deps package-test clean
+.PHONY: all deps configure build demo test bench soak buildtime asan fuzz package package-deps package-test clean
 
 all: deps
 	@$(MAKE) --no-print-directory build
@@ -53,6 +58,11 @@ bench: deps
 	cmake --build $(BUILD) -j $(JOBS) --target benches
 	tools/bench.sh $(BUILD)
 
+soak: deps
+	@$(MAKE) --no-print-directory configure
+	cmake --build $(BUILD) -j $(JOBS) --target veneer_soak
+	$(BUILD)/tests/veneer_soak --captures $(SOAK_CAPTURES) --out soak-out $(if $(SOAK_FAULTS),--faults '$(SOAK_FAULTS)')
+
 buildtime: deps
 	tools/buildtime.sh build-time $(JOBS)
 
@@ -80,4 +90,4 @@ package-test: package-deps
 	tools/package/test.sh $(PACKAGE_OUT)
 
 clean:
-	rm -rf $(BUILD) build-asan build-fuzz build-time demo-out $(PACKAGE_OUT)
+	rm -rf $(BUILD) build-asan build-fuzz build-time demo-out soak-out $(PACKAGE_OUT)

@@ -15,6 +15,7 @@
 #include "veneer/util/log.hpp"
 #include "veneer/util/token_file.hpp"
 #include "veneerd/devices/registry.hpp"
+#include "veneerd/sim/fault_plan.hpp"
 #include "veneerd/sim/simulated_camera.hpp"
 #include "veneerd/sim/simulated_rig.hpp"
 
@@ -80,6 +81,12 @@ veneer::Expected<std::unique_ptr<Daemon>> Daemon::create(const DaemonOptions& o)
   std::unique_ptr<Daemon> d(new Daemon());
   register_simulated_devices();
   register_hardware_devices();
+  if (!o.faults.empty()) {
+    if (!o.simulate) return make_error("--faults: only the simulated rig (--simulate) takes injected faults");
+    auto plan = FaultPlan::parse(o.faults);
+    if (!plan) return plan.error();
+    d->faults_ = std::make_shared<FaultPlan>(std::move(*plan));
+  }
 
   if (o.simulate) {
     SimulatedRigOptions so;
@@ -100,6 +107,11 @@ veneer::Expected<std::unique_ptr<Daemon>> Daemon::create(const DaemonOptions& o)
     so.noise_sigma = o.noise_sigma;
     so.latency_ms = o.hue_latency_ms;
     so.rate_limits = o.hue_rate_limits;
+    if (o.hue_light_rate > 0) so.light_rate = o.hue_light_rate;
+    if (o.hue_apply_delay_ms >= 0) {
+      so.apply_delay_ms = o.hue_apply_delay_ms;
+      so.settle_ms = o.hue_apply_delay_ms + 30;
+    }
     auto sim = SimulatedRig::start(so);
     if (!sim) return make_error("simulated rig: " + sim.message());
     d->sim_ = std::move(*sim);
@@ -134,6 +146,19 @@ veneer::Expected<std::unique_ptr<Daemon>> Daemon::create(const DaemonOptions& o)
   auto store = Store::open(c.store);
   if (!store) return store.error();
   d->store_ = std::move(*store);
+  if (d->faults_) {
+    std::shared_ptr<FaultPlan> plan = d->faults_;
+    d->store_->set_write_faults([plan](const fs::path&) {
+      WriteFault f;
+      if (plan->draw(Fault::store_slow)) f.delay = std::chrono::milliseconds(plan->sizes().store_slow_ms);
+      if (plan->draw(Fault::store_enospc)) {
+        f.error = ENOSPC;
+      } else if (plan->draw(Fault::store_eio)) {
+        f.error = EIO;
+      }
+      return f;
+    });
+  }
   auto token = ensure_token(c.token_path());
   if (!token) return token.error();
   d->token_ = *token;
@@ -147,6 +172,11 @@ veneer::Expected<std::unique_ptr<Daemon>> Daemon::create(const DaemonOptions& o)
   if (!camera) return camera.error();
   dev.camera = std::move(*camera);
   d->camera_ = dev.camera.get();
+  if (d->faults_) {
+    d->sim_->bridge().set_fault_plan(d->faults_);
+    if (auto* sc = as_simulated(d->camera_)) sc->set_fault_plan(d->faults_);
+    VLOG_WARN("Rig", "simulated rig with injected faults: {}", d->faults_->spec());
+  }
   if (c.trigger.backend != "none") {
     auto trigger = build(reg.triggers, "trigger", c.trigger);
     if (!trigger) return trigger.error();
@@ -260,6 +290,10 @@ void Daemon::stop() {
   advertiser_.reset();
   if (rig_) rig_->stop();
   if (server_) server_->stop();
+  if (faults_ && !faults_reported_) {
+    faults_reported_ = true;
+    VLOG_INFO("Rig", "injected faults: {}", faults_->counts_json());
+  }
 }
 
 uint16_t Daemon::port() const { return server_ ? server_->port() : 0; }

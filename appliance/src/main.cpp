@@ -81,6 +81,14 @@ int main(int argc, char** argv) {
   app.add_option("--noise", o.noise_sigma, "simulated rig: sensor noise (fraction of full scale)")->capture_default_str();
   app.add_option("--hue-latency-ms", o.hue_latency_ms, "simulated rig: bridge emulator latency per request [ms]")
       ->capture_default_str();
+  app.add_option("--faults", o.faults,
+                 "simulated rig: inject faults, a SPEC such as bridge.503=0.02,camera.gone=0.01,store.eio=0.01,seed=7 "
+                 "(appliance/include/veneerd/sim/fault_plan.hpp lists them)");
+  app.add_option("--hue-light-rate", o.hue_light_rate,
+                 "simulated rig: light commands per second the lamps allow themselves (default Hue's 8; up to 50 "
+                 "with --no-rate-limits)");
+  app.add_option("--hue-apply-delay-ms", o.hue_apply_delay_ms,
+                 "simulated rig: a lamp change shows this long after the bridge's ack (default 50) [ms]");
   bool no_limits = false;
   app.add_flag("--no-rate-limits", no_limits, "simulated rig: the bridge emulator does not enforce Hue's rate limits");
   app.add_option("--listen", listen, "address to serve the API on, host:port (default 127.0.0.1:7878)");

@@ -7,6 +7,7 @@
 #include <cstring>
 #include <ctime>
 #include <fstream>
+#include <thread>
 
 #include <fcntl.h>
 #include <sys/file.h>
@@ -256,10 +257,6 @@ veneer::Status Store::save(const veneer::io::ImageSet& set) {
 
 namespace {
 
-veneer::Status write_encoded(const fs::path& file, const veneer::Expected<std::string>& bytes) {
-  if (!bytes) return make_error(file.string() + ": " + bytes.message());
-  return veneer::io::write_file_synced(file, *bytes);
-}
 
 std::string light_png(int index) {
   char buf[32];
@@ -268,6 +265,26 @@ std::string light_png(int index) {
 }
 
 }  // namespace
+
+veneer::Status Store::write_file(const fs::path& file, std::string_view bytes) const {
+  if (write_faults_) {
+    const WriteFault f = write_faults_(file);
+    if (f.delay.count() > 0) std::this_thread::sleep_for(f.delay);
+    if (f.error != 0) {
+      // What a failing card leaves: part of the file, then the error.
+      const size_t half = bytes.size() / 2;
+      (void)veneer::io::write_file_synced(file, bytes.substr(0, half));
+      return make_error(file.string() + ": write failed after " + std::to_string(half) + " bytes: " +
+                        std::strerror(f.error) + " (injected fault)");
+    }
+  }
+  return veneer::io::write_file_synced(file, bytes);
+}
+
+veneer::Status SetWriter::write_encoded(const fs::path& file, const veneer::Expected<std::string>& bytes) {
+  if (!bytes) return make_error(file.string() + ": " + bytes.message());
+  return store_.write_file(file, *bytes);
+}
 
 veneer::Expected<std::unique_ptr<SetWriter>> Store::begin(const std::string& id, bool truth) {
   if (!valid_set_id(id)) return make_error("cannot store a set under the id '" + id + "'");
@@ -318,13 +335,13 @@ veneer::Status SetWriter::add_frame(int k, const cv::Mat& photo, const veneer::i
     if (auto s = write_encoded(png, veneer::io::encode_png16(photo)); !s) return fail(s);
   } else {
     const std::string file = k == 0 ? "ambient." + developed.extension : light_png(index).substr(0, 9) + developed.extension;
-    if (auto s = veneer::io::write_file_synced(tmp_ / file, developed.bytes); !s) return fail(s);
+    if (auto s = store_.write_file(tmp_ / file, developed.bytes); !s) return fail(s);
     developed_name = {developed.extension, "1"};
   }
   veneer::io::ImageSet::RawFile name;
   if (!raw.bytes.empty()) {
     const std::string file = k == 0 ? "ambient." + raw.extension : light_png(index).substr(0, 9) + raw.extension;
-    if (auto s = veneer::io::write_file_synced(tmp_ / file, raw.bytes); !s) return fail(s);
+    if (auto s = store_.write_file(tmp_ / file, raw.bytes); !s) return fail(s);
     name.extension = raw.extension;
     name.bytes = "1";  // manifest_json names a RAW file where its bytes are not empty
   }
@@ -366,7 +383,7 @@ veneer::Status SetWriter::commit(veneer::io::ImageSet& set) {
     if (!fs::create_directory(truth, ec))
       return fail(make_error(truth.string() + ": cannot create folder: " + ec.message()));
     if (!t.normals.empty()) {
-      if (auto s = veneer::io::write_file_synced(truth / "normals.pfm", veneer::io::encode_pfm(t.normals, true)); !s) return fail(s);
+      if (auto s = store_.write_file(truth / "normals.pfm", veneer::io::encode_pfm(t.normals, true)); !s) return fail(s);
     }
     t.normals.release();
     if (!t.mask.empty()) {
@@ -378,7 +395,7 @@ veneer::Status SetWriter::commit(veneer::io::ImageSet& set) {
     }
     t.albedo.release();
     if (!t.depth.empty()) {
-      if (auto s = veneer::io::write_file_synced(truth / "depth.pfm", veneer::io::encode_pfm(t.depth, true)); !s) return fail(s);
+      if (auto s = store_.write_file(truth / "depth.pfm", veneer::io::encode_pfm(t.depth, true)); !s) return fail(s);
     }
     t.depth.release();
     if (auto s = veneer::io::sync_folder(truth); !s) return fail(s);
@@ -403,7 +420,7 @@ veneer::Status SetWriter::commit(veneer::io::ImageSet& set) {
     named.ambient_raw = ambient_raw_;
     named.ambient_developed = ambient_developed_;
   }
-  if (auto s = veneer::io::write_file_synced(tmp_ / "set.json", veneer::io::manifest_json(named)); !s) return fail(s);
+  if (auto s = store_.write_file(tmp_ / "set.json", veneer::io::manifest_json(named)); !s) return fail(s);
   if (auto s = veneer::io::sync_folder(tmp_); !s) return fail(s);
   const fs::path folder = store_.root() / id_;
   if (::renameat2(AT_FDCWD, tmp_.c_str(), AT_FDCWD, folder.c_str(), RENAME_NOREPLACE) != 0) {
@@ -441,7 +458,7 @@ veneer::Status Store::remove(const std::string& id) {
   if (ec) return make_error("cannot delete set " + id + ": cannot create " + trash.string() + ": " + ec.message());
   // An older deletion of the same id makes way (only the newest is restorable).
   fs::remove_all(trash / id, ec);
-  const std::time_t now = std::time(nullptr);
+  const std::time_t now = veneer::wall_now();
   {
     std::ofstream stamp(trash / (id + ".deleted"));
     stamp << static_cast<long long>(now) << "\n";
@@ -510,7 +527,7 @@ veneer::Status Store::restore(const std::string& id) {
 
 int Store::purge_trash(uint64_t need_bytes) {
   auto log = veneer::log::get("Store");
-  const std::time_t now = std::time(nullptr);
+  const std::time_t now = veneer::wall_now();
   std::vector<std::pair<std::time_t, std::string>> entries;  // oldest first after the sort
   std::error_code ec;
   for (const auto& entry : fs::directory_iterator(trash_folder(), ec)) {

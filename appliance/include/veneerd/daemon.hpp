@@ -21,6 +21,7 @@ namespace veneerd {
 
 class SimulatedRig;
 class SimulatedCamera;
+class FaultPlan;
 
 struct DaemonOptions {
   bool simulate = false;
@@ -38,6 +39,14 @@ struct DaemonOptions {
   double noise_sigma = 0.002;
   int hue_latency_ms = 5;                 // emulator's per-request latency
   bool hue_rate_limits = true;
+  // Quicker lamps for long runs (the soak): the lamps' own pace [commands/s]
+  // (0 = Hue's 8/s; above 10 wants hue_rate_limits off) and the emulator's
+  // delay before a change shows (-1 = 50 ms; the lamps settle 30 ms longer).
+  double hue_light_rate = 0;
+  int hue_apply_delay_ms = -1;
+  // Faults the simulated devices and the store take (veneerd/sim/fault_plan.hpp
+  // SPEC, e.g. "bridge.503=0.02,camera.gone=0.01,store.eio=0.01,seed=7"); empty = none.
+  std::string faults;
   // Advertise the API as _veneer._tcp (DNS-SD, through avahi-daemon) when it
   // listens beyond loopback. Without avahi-daemon: one log line, no failure.
   bool advertise = true;
@@ -68,11 +77,15 @@ class Daemon {
   // The simulated devices (null for a real rig).
   SimulatedRig* simulated() { return sim_.get(); }
   SimulatedCamera* simulated_camera();
+  // The fault plan the simulated rig runs with (null without --faults).
+  std::shared_ptr<FaultPlan> faults() { return faults_; }
 
  private:
   Daemon() = default;
   Config config_;
   std::string token_;
+  std::shared_ptr<FaultPlan> faults_;
+  bool faults_reported_ = false;
   std::unique_ptr<SimulatedRig> sim_;
   std::unique_ptr<Store> store_;
   std::unique_ptr<Rig> rig_;

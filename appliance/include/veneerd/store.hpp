@@ -5,11 +5,13 @@
 // renamed into place, so after a crash or power cut a set is either all there
 // or not at all; opening the store removes leftover temporary folders and
 // lists what is stored.
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
 #include <mutex>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <opencv2/core.hpp>
@@ -31,6 +33,12 @@ struct StoredSet {
   bool has_truth = false;
   uint64_t bytes = 0;
   std::string deleted;  // sets in the trash: when it was deleted (UTC, ISO 8601)
+};
+
+// A fault a file write of a set takes (the simulated rig's fault plan, tests).
+struct WriteFault {
+  int error = 0;                       // errno the write fails with, after half the file is written; 0 = none
+  std::chrono::milliseconds delay{0};  // the write takes this much longer (a slow card)
 };
 
 // Set ids are file names: 1..96 of [A-Za-z0-9._-], not starting with '.'.
@@ -81,7 +89,16 @@ class Store {
   void set_trash_keep(double seconds) { trash_keep_s_ = seconds; }
   std::filesystem::path trash_folder() const { return root_ / ".trash"; }
 
+  // Faults for the files of the sets being written (SetWriter): `hook` is
+  // asked before each file is written. Set before the first capture; empty = none.
+  void set_write_faults(std::function<WriteFault(const std::filesystem::path& file)> hook) {
+    write_faults_ = std::move(hook);
+  }
+
  private:
+  // A file of a set being written (fsynced), through the write faults.
+  veneer::Status write_file(const std::filesystem::path& file, std::string_view bytes) const;
+  std::function<WriteFault(const std::filesystem::path&)> write_faults_;
   friend class SetWriter;
   explicit Store(std::filesystem::path root, int lock_fd);
   veneer::Expected<StoredSet> scan_one(const std::string& id) const;
@@ -121,6 +138,7 @@ class SetWriter {
   friend class Store;
   SetWriter(Store& store, std::string id, std::filesystem::path tmp, bool truth)
       : store_(store), id_(std::move(id)), tmp_(std::move(tmp)), truth_(truth) {}
+  veneer::Status write_encoded(const std::filesystem::path& file, const veneer::Expected<std::string>& bytes);
   Store& store_;
   std::string id_;
   std::filesystem::path tmp_;  // removed by the destructor unless committed

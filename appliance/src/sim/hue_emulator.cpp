@@ -18,6 +18,7 @@
 #include <cstring>
 #include <deque>
 #include <list>
+#include <map>
 #include <mutex>
 #include <set>
 #include <thread>
@@ -25,6 +26,7 @@
 #include <nlohmann/json.hpp>
 
 #include "veneer/util/log.hpp"
+#include "veneerd/sim/fault_plan.hpp"
 
 namespace veneerd {
 
@@ -177,6 +179,8 @@ struct HueBridgeEmulator::Impl {
   int fail_count = 0, fail_status = 503;
   int hue_error_count = 0, hue_error_type = 901;
   int drop_count = 0;
+  std::shared_ptr<FaultPlan> faults;  // drawn per request (fault_plan.hpp); null = none
+  std::map<std::string, Clock::time_point> unreachable_until;  // lamps a lamp.unreachable fault took away
   struct Interference {
     int after = 0;  // light commands still to come before it
     std::string id;
@@ -218,6 +222,14 @@ struct HueBridgeEmulator::Impl {
 
   // Caller holds `mutex`.
   void apply_due(Clock::time_point now) {
+    for (auto it = unreachable_until.begin(); it != unreachable_until.end();) {
+      if (it->second > now) {
+        ++it;
+        continue;
+      }
+      if (LampSlot* l = find_lamp(it->first)) l->applied.reachable = true;
+      it = unreachable_until.erase(it);
+    }
     for (auto& lamp : lamps) {
       while (!lamp.pending.empty() && lamp.pending.front().apply_at <= now) {
         bool reachable = lamp.applied.reachable;
@@ -495,14 +507,29 @@ struct HueBridgeEmulator::Impl {
       std::lock_guard lock(mutex);
       ++counters.requests;
       counters.max_in_flight_seen = std::max<uint64_t>(counters.max_in_flight_seen, now_in_flight);
+      int injected_status = 0;
       if (fail_count > 0) {
         --fail_count;
+        injected_status = fail_status;
+      } else if (faults && faults->draw(Fault::bridge_503)) {
+        injected_status = 503;
+      } else if (faults && faults->draw(Fault::bridge_429)) {
+        injected_status = 429;
+      }
+      if (injected_status != 0) {
         ++counters.injected;
         HttpResponse r;
-        r.status = fail_status;
+        r.status = injected_status;
         r.content_type = "text/plain";
-        r.body = std::string(http_reason(fail_status)) + " (injected)";
+        r.body = std::string(http_reason(injected_status)) + " (injected)";
         return r;
+      }
+      if (faults && !lamps.empty() && faults->draw(Fault::lamp_unreachable)) {
+        // A lamp out of reach (switched off at the wall, out of Zigbee range) for a while.
+        LampSlot& l = lamps[faults->pick(Fault::lamp_unreachable, static_cast<uint32_t>(lamps.size()))];
+        l.applied.reachable = false;
+        unreachable_until[l.id] = arrival + std::chrono::milliseconds(faults->sizes().lamp_unreachable_ms);
+        ++counters.injected;
       }
       if (enforce && now_in_flight > options.max_in_flight) {
         ++counters.refused_busy;
@@ -523,6 +550,10 @@ struct HueBridgeEmulator::Impl {
         window.push_back(arrival);  // reserved now; released below if the command is not accepted
       }
       wait = latency;
+      if (faults && faults->draw(Fault::bridge_timeout)) {
+        wait += std::chrono::milliseconds(faults->sizes().bridge_timeout_ms);
+        ++counters.injected;
+      }
     }
     sleep_interruptible(wait);
     std::lock_guard lock(mutex);
@@ -573,8 +604,8 @@ struct HueBridgeEmulator::Impl {
         bool drop = false;
         {
           std::lock_guard lock(mutex);
-          if (drop_count > 0) {
-            --drop_count;
+          if (drop_count > 0 || (faults && faults->draw(Fault::bridge_drop))) {
+            if (drop_count > 0) --drop_count;
             ++counters.requests;
             ++counters.dropped;
             drop = true;
@@ -776,6 +807,11 @@ void HueBridgeEmulator::hue_error_next(int count, int type) {
   std::lock_guard lock(impl_->mutex);
   impl_->hue_error_count = count;
   impl_->hue_error_type = type;
+}
+
+void HueBridgeEmulator::set_fault_plan(std::shared_ptr<FaultPlan> plan) {
+  std::lock_guard lock(impl_->mutex);
+  impl_->faults = std::move(plan);
 }
 
 void HueBridgeEmulator::drop_next(int count) {

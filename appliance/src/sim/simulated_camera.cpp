@@ -4,9 +4,12 @@
 #include <algorithm>
 #include <cmath>
 #include <array>
+#include <chrono>
+#include <condition_variable>
 #include <map>
 #include <mutex>
 #include <optional>
+#include <thread>
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -16,10 +19,13 @@
 #include "veneer/io/dng.hpp"
 
 #include "veneer/util/log.hpp"
+#include "veneer/util/utc_time.hpp"
+#include "veneerd/sim/fault_plan.hpp"
 
 namespace veneerd {
 
 using json = nlohmann::json;
+using Clock = std::chrono::steady_clock;
 
 namespace {
 
@@ -256,6 +262,12 @@ struct SimulatedCamera::Impl {
   bool connected = true;
   uint64_t shots = 0;
   uint64_t fail_at = 0;  // shot number that fails; 0 = none
+  std::shared_ptr<FaultPlan> faults;  // camera.gone, clock.step drawn per shot; null = none
+  // A camera.gone fault plugs the camera in again from this thread.
+  std::thread replug;
+  std::condition_variable replug_cv;
+  Clock::time_point replug_at{};
+  bool replug_pending = false, closing = false;
   uint64_t previews = 0;
   std::vector<veneer::sim::Lamp> last_lamps;
   // Scenes keep their G-buffer for one size: stills and live view use separate
@@ -299,7 +311,49 @@ struct SimulatedCamera::Impl {
 };
 
 SimulatedCamera::SimulatedCamera(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
-SimulatedCamera::~SimulatedCamera() = default;
+SimulatedCamera::~SimulatedCamera() {
+  {
+    std::lock_guard lock(impl_->mutex);
+    impl_->closing = true;
+  }
+  impl_->replug_cv.notify_all();
+  if (impl_->replug.joinable()) impl_->replug.join();
+}
+
+void SimulatedCamera::set_fault_plan(std::shared_ptr<FaultPlan> plan) {
+  std::lock_guard lock(impl_->mutex);
+  impl_->faults = std::move(plan);
+}
+
+void SimulatedCamera::unplug_for(std::chrono::milliseconds gone) {
+  {
+    std::lock_guard lock(impl_->mutex);
+    impl_->replug_at = Clock::now() + gone;
+    impl_->replug_pending = true;
+    if (!impl_->replug.joinable()) {
+      impl_->replug = std::thread([this] {
+        std::unique_lock lock(impl_->mutex);
+        for (;;) {
+          if (impl_->closing) return;
+          if (!impl_->replug_pending) {
+            impl_->replug_cv.wait(lock);
+            continue;
+          }
+          if (Clock::now() < impl_->replug_at) {
+            impl_->replug_cv.wait_until(lock, impl_->replug_at);
+            continue;
+          }
+          impl_->replug_pending = false;
+          lock.unlock();
+          reconnect();
+          lock.lock();
+        }
+      });
+    }
+  }
+  impl_->replug_cv.notify_all();
+  disconnect();
+}
 
 veneer::Expected<std::unique_ptr<SimulatedCamera>> SimulatedCamera::create(const SimulatedCameraOptions& options) {
   if (auto st = options.check(); !st) return st.error();
@@ -356,6 +410,29 @@ veneer::Expected<Still> SimulatedCamera::capture() {
   veneer::sim::RenderOptions r;
   std::string scene_name;
   uint64_t shot = 0;
+  std::chrono::milliseconds unplugging{0};
+  uint64_t next_shot = 0;
+  {
+    std::lock_guard lock(impl_->mutex);
+    if (!impl_->connected) return veneer::make_error("simulated camera: not connected (unplugged)");
+    if (impl_->faults && impl_->faults->draw(Fault::clock_step)) {
+      // NTP stepping the clock: the wall clock jumps, the steady clock goes on.
+      const long long step = impl_->faults->sizes().clock_step_s;
+      veneer::step_wall_clock(impl_->faults->pick(Fault::clock_step, 2) ? step : -step);
+      VLOG_WARN(kLog, "the wall clock stepped (injected fault): now {}", veneer::utc_now());
+    }
+    if (impl_->faults && impl_->faults->draw(Fault::camera_gone)) {
+      const auto gone = std::chrono::milliseconds(impl_->faults->sizes().camera_gone_ms);
+      // unplug_for takes the mutex and calls the connection callback: not under it.
+      unplugging = gone;
+      next_shot = impl_->shots + 1;
+    }
+  }
+  if (unplugging.count() > 0) {
+    VLOG_WARN(kLog, "simulated camera: unplugged before shot {} for {} ms (injected fault: USB drop)", next_shot,
+              unplugging.count());
+    unplug_for(unplugging);
+  }
   {
     std::lock_guard lock(impl_->mutex);
     if (!impl_->connected) return veneer::make_error("simulated camera: not connected (unplugged)");

@@ -62,6 +62,7 @@ json SimulatedRig::lamps_config() const {
   o.lamps = context_.lamp_ids;
   o.group = std::string(1, '1');  // the emulator's "Ring" room holds exactly the ring lamps
   o.settle_ms = options_.settle_ms;
+  o.light_rate = options_.light_rate;
   o.timeout_ms = options_.timeout_ms;
   return o.to_json();
 }

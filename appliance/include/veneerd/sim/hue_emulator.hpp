@@ -33,6 +33,8 @@
 
 namespace veneerd {
 
+class FaultPlan;
+
 struct HueEmulatorOptions {
   int lamps = 7;                     // lamps "1".."N", named "Ring 1".."Ring N"
   std::string key = "veneer-sim";    // the one whitelisted user
@@ -105,6 +107,10 @@ class HueBridgeEmulator {
   void drop_next(int count);
   // Closes every open connection now (keep-alive sockets included).
   void drop_connections();
+  // Faults drawn per request from `plan` (bridge.429, bridge.503,
+  // bridge.timeout, bridge.drop, lamp.unreachable; fault_plan.hpp), besides
+  // the ones above; null = none.
+  void set_fault_plan(std::shared_ptr<FaultPlan> plan);
 
   HueEmulatorCounters counters() const;
   void reset_counters();

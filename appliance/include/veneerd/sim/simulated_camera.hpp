@@ -12,6 +12,7 @@
 // Exposure: gain = (shutter / (1/30 s)) * (8 / f-number)^2 * (ISO / 100), so
 // 1/30 s, f/8, ISO 100 is the simulator's well-exposed shot (gain 1).
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -28,6 +29,8 @@
 #include "veneerd/hw/hue_lamps.hpp"
 
 namespace veneerd {
+
+class FaultPlan;
 
 struct SimulatedCameraOptions {
   hw::HueLampsOptions bridge;            // where to read the lamps from (settle/pacing unused)
@@ -90,6 +93,10 @@ class SimulatedCamera : public Camera {
   // Unplug / plug the camera; fires on_connection_change.
   void disconnect();
   void reconnect();
+  // Unplugs the camera now and plugs it in again `gone` later (a USB drop).
+  void unplug_for(std::chrono::milliseconds gone);
+  // Faults drawn per shot from `plan` (camera.gone, clock.step; fault_plan.hpp); null = none.
+  void set_fault_plan(std::shared_ptr<FaultPlan> plan);
 
   // What the camera has done and would do.
   uint64_t shots() const;                          // captures so far

@@ -50,6 +50,7 @@ struct SimulatedRigOptions {
   int latency_ms = 5;                  // emulator: per-request latency
   bool rate_limits = true;             // emulator enforces 10 light/s, 1 group/s, 3 in flight
   int settle_ms = 80;                  // lamps wait this after the ack (covers apply_delay_ms)
+  double light_rate = 8.0;             // light commands per second the lamps allow themselves (HueLampsOptions)
   int timeout_ms = 2000;               // per Hue command, retries included
   std::string host = "127.0.0.1";      // emulator listen address
   uint16_t port = 0;                   // 0 = any free port

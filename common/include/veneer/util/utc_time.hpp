@@ -12,7 +12,14 @@ inline constexpr const char* kIsoUtc = "%Y-%m-%dT%H:%M:%SZ";
 
 // `t` in UTC, formatted by std::strftime's `format` (at most 31 characters out).
 std::string utc_time(std::time_t t, const char* format = kIsoUtc);
-// The current time, likewise.
+// The current time (wall_now()), likewise.
 std::string utc_now(const char* format = kIsoUtc);
+
+// The wall clock as this process reads it: the system's, plus the steps the
+// simulated rig's fault plan makes (clock.step, as NTP stepping the clock
+// would); std::time(nullptr) when nothing stepped it.
+std::time_t wall_now();
+// Steps wall_now() by `seconds` (forward or back) for this process.
+void step_wall_clock(long long seconds);
 
 }  // namespace veneer
