@@ -95,6 +95,10 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
     std::lock_guard lock(stats_mutex);
     ++(stats.*field);
   }
+  void add(uint64_t ServerStats::*field, uint64_t n) {
+    std::lock_guard lock(stats_mutex);
+    stats.*field += n;
+  }
 };
 
 // One client connection. Lives on the I/O thread.
@@ -574,6 +578,7 @@ class Session : public std::enable_shared_from_this<Session> {
         close();
         return;
       }
+      srv_.add(&ServerStats::chunk_bytes, want);
       f.offset += want;
       if (h.last) {
         ++f.index;

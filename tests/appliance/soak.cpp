@@ -337,6 +337,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> unnamed, problems, stored_ids;
   json rss = json::array(), fds = json::array(), threads = json::array(), store_bytes = json::array();
   bool store_equal_always = true;
+  double waited_s = 0;  // waiting for the rig to be ready after a refusal
   uint64_t last_sets_bytes = 0, last_disk_bytes = 0;
   std::vector<std::thread> stalls;
   auto note = [&](const std::string& what) {
@@ -394,6 +395,15 @@ int main(int argc, char** argv) {
         ++half_sets;
         note("capture " + id + " refused (" + reason + ") but its folder is in the store");
       }
+      // As a user would: wait until the rig is ready again (the camera back
+      // on USB, the lamps given back) rather than be refused for the same cause.
+      const auto wait_from = Clock::now();
+      while (Clock::now() - wait_from < std::chrono::seconds(15)) {
+        auto st = client->status();
+        if (st && st->ready && !st->holds_lamps && !st->capturing) break;
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      }
+      waited_s += std::chrono::duration<double>(Clock::now() - wait_from).count();
     }
     for (const auto& t : leftover_temporaries(store)) {
       ++leftovers;
@@ -576,6 +586,7 @@ int main(int argc, char** argv) {
   report["faults_injected"] = injected;
   report["frame_size"] = size;
   report["seconds"] = seconds;
+  report["seconds_waiting_for_ready"] = waited_s;
   report["problems"] = problems;
   std::ofstream(out / "report.json") << report.dump(1) << "\n";
   plot(report, out / "soak.png");

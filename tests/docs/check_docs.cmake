@@ -17,11 +17,11 @@ if(NOT EXISTS ${SOURCE}/ARCHITECTURE.md)
 endif()
 file(READ ${SOURCE}/ARCHITECTURE.md arch)
 
-# Top-level folders (hidden ones, build outputs and the demo's output left out).
+# Top-level folders (hidden ones, build outputs and the demo's and soak's outputs left out).
 file(GLOB entries RELATIVE ${SOURCE} ${SOURCE}/*)
 set(folders "")
 foreach(e ${entries})
-  if(IS_DIRECTORY ${SOURCE}/${e} AND NOT e MATCHES "^(\\.|build|demo-out)")
+  if(IS_DIRECTORY ${SOURCE}/${e} AND NOT e MATCHES "^(\\.|build|demo-out|soak-out)")
     list(APPEND folders ${e})
   endif()
 endforeach()

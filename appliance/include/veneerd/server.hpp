@@ -37,6 +37,7 @@ struct ServerStats {
   uint64_t protocol_errors = 0;
   uint64_t wrong_tokens = 0;
   uint64_t memory_releases = 0;
+  uint64_t chunk_bytes = 0;  // file bytes put into image chunks (fetch_images, fetch_preview)
 };
 
 class Server {
