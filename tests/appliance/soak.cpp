@@ -233,7 +233,7 @@ void plot(const json& report, const fs::path& file) {
     cv::rectangle(img, box, cv::Scalar(160, 160, 160));
     double lo = v.empty() ? 0 : *std::min_element(v.begin(), v.end());
     double hi = v.empty() ? 1 : *std::max_element(v.begin(), v.end());
-    if (p < 3) lo = 0;  // memory, fds, threads from 0: flat reads flat
+    if (p == 1 || p == 2) lo = 0;  // descriptors and threads from 0: flat reads flat; RSS zoomed to its range
     if (hi - lo < 1e-9) hi = lo + 1;
     hi += (hi - lo) * 0.05;
     char text[160];
@@ -546,6 +546,12 @@ int main(int argc, char** argv) {
       const auto at = line.find("injected faults: ");
       if (at != std::string::npos) injected = json::parse(line.substr(at + 17), nullptr, false);
     }
+  }
+  if (!injected.is_object()) injected = json::object();
+  for (veneerd::Fault f : {veneerd::Fault::client_vanish, veneerd::Fault::client_stall}) {  // drawn here, not by the daemon
+    if (!plan->has(f)) continue;
+    const auto c = plan->count(f);
+    injected[veneerd::fault_name(f)] = {{"opportunities", c.opportunities}, {"taken", c.taken}};
   }
 
   json report;

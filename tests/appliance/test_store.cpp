@@ -288,3 +288,48 @@ TEST(Store, AFrameByFrameSetNotCommittedOrShortOfAFrameLeavesNothing) {
   std::sort(left.begin(), left.end());
   EXPECT_EQ(left, (std::vector<std::string>{".lock"})) << "no temporary folder left";
 }
+
+// The store's write faults (the simulated rig's store.enospc, store.eio,
+// store.slow): a write that fails half-way fails the set with the error named,
+// and the half-written file goes with the temporary folder.
+TEST(Store, AWriteFaultFailsTheSetByNameAndLeavesNothing) {
+  fs::path root = rigtest::temp_dir("write-faults");
+  auto store = veneerd::Store::open(root);
+  ASSERT_TRUE(store) << store.message();
+  int writes = 0;
+  (*store)->set_write_faults([&](const fs::path&) {
+    veneerd::WriteFault f;
+    if (++writes == 3) f.error = EIO;
+    if (writes == 5) f.error = ENOSPC;
+    if (writes == 1) f.delay = std::chrono::milliseconds(30);
+    return f;
+  });
+  veneer::io::ImageSet s = full_set("eio");
+  for (const char* id : {"eio", "enospc"}) {
+    auto writer = (*store)->begin(id);
+    ASSERT_TRUE(writer) << writer.message();
+    veneer::Status result;
+    int k = 0;
+    const auto t0 = std::chrono::steady_clock::now();
+    for (; k < 4 && result; ++k) {
+      result = k == 0 ? (*writer)->add_frame(0, s.ambient, s.ambient_raw, 4)
+                      : (*writer)->add_frame(k, s.images[k - 1], s.raw[k - 1], 4);
+    }
+    if (std::string(id) == "eio") {
+      EXPECT_GE(std::chrono::steady_clock::now() - t0, std::chrono::milliseconds(30)) << "the slow write";
+    }
+    ASSERT_FALSE(result) << id << ": a write failed";
+    const std::string errno_text = std::string(id) == "eio" ? "Input/output error" : "No space left on device";
+    EXPECT_NE(result.message().find(errno_text), std::string::npos) << result.message();
+    EXPECT_NE(result.message().find("no set stored"), std::string::npos) << result.message();
+    // The half-written file is there until the writer goes.
+    bool partial = false;
+    for (const auto& e : fs::recursive_directory_iterator(root))
+      partial = partial || e.path().parent_path().filename().string().rfind("." + std::string(id) + ".capture-", 0) == 0;
+    EXPECT_TRUE(partial) << "the failing write left part of its file in the temporary folder";
+  }
+  EXPECT_TRUE((*store)->list().empty());
+  std::vector<std::string> left;
+  for (const auto& e : fs::directory_iterator(root)) left.push_back(e.path().filename().string());
+  EXPECT_EQ(left, (std::vector<std::string>{".lock"})) << "no temporary folder left";
+}
