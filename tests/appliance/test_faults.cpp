@@ -333,6 +333,7 @@ TEST(Faults, AnInterruptedPullKeepsOnlyWholeFilesAndItsResumeFetchesOnlyTheRest)
     const std::string name = "cut" + std::to_string(static_cast<int>(cut * 100));
     const fs::path out = rig.dir / name;
     const fs::path staging = rig.dir / ("." + name + ".pull-" + id);
+    double arrived = 0;  // the fraction of the set's bytes the client had when it hung up
     {  // a client of its own, closed from another thread once `cut` of the set has arrived
       auto c = veneer::rig::Client::connect({"127.0.0.1", rig.daemon->port()}, rig.daemon->token());
       ASSERT_TRUE(c) << c.message();
@@ -341,6 +342,7 @@ TEST(Faults, AnInterruptedPullKeepsOnlyWholeFilesAndItsResumeFetchesOnlyTheRest)
       std::thread closer;
       veneer::Progress progress;
       progress.on_progress = [&](double f, const std::string&) {
+        arrived = std::max(arrived, f);
         if (f > cut && !closed.exchange(true)) {
           closer = std::thread([raw] { raw->close(); });
           const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
@@ -373,6 +375,15 @@ TEST(Faults, AnInterruptedPullKeepsOnlyWholeFilesAndItsResumeFetchesOnlyTheRest)
     ASSERT_TRUE(rig.client->pull(id, out, true, false));
     const uint64_t sent = rig.daemon->server().stats().chunk_bytes - before;
     EXPECT_EQ(sent, missing) << kept_files << " files (" << kept << " bytes) of " << total << " were kept";
+    // Beyond the bytes the client never had, the resume re-sends set.json and
+    // the one file the hang-up cut (resuming is by whole files): never more.
+    const uint64_t had = static_cast<uint64_t>(arrived * static_cast<double>(total));
+    const uint64_t never_had = total - std::min(had, total);
+    EXPECT_LE(sent, never_had + size_of["set.json"] + largest);
+    std::printf("hung up at %.2f: the client had %llu of %llu bytes; the resume sent %llu (%llu it never had, %llu again)\n",
+                arrived, static_cast<unsigned long long>(had), static_cast<unsigned long long>(total),
+                static_cast<unsigned long long>(sent), static_cast<unsigned long long>(never_had),
+                static_cast<unsigned long long>(sent > never_had ? sent - never_had : 0));
     if (cut > 0.5) {
       EXPECT_LT(sent, total) << "a pull cut past half way resumes";
     }
