@@ -122,13 +122,24 @@ veneer::Expected<Request> decode(const pb::ClientMessage& m) {
         return make_error("fetch_images.skip_files: " + std::to_string(f.skip_files_size()) +
                           " files is more than the limit of " + std::to_string(kMaxSkipFiles));
       }
-      FetchImagesReq req{f.set_id(), f.include_truth(), *chunk, {}};
+      FetchImagesReq req{f.set_id(), f.include_truth(), *chunk, {}, {}};
       for (const auto& name : f.skip_files()) {
         if (name.empty() || name.size() > kMaxSkipFileChars || !printable(name)) {
           return make_error("fetch_images.skip_files: each must be a file name of 1.." +
                             std::to_string(kMaxSkipFileChars) + " printable characters");
         }
         req.skip_files.push_back(name);
+      }
+      if (static_cast<size_t>(f.resume_from_size()) > kMaxSkipFiles) {
+        return make_error("fetch_images.resume_from: " + std::to_string(f.resume_from_size()) +
+                          " files is more than the limit of " + std::to_string(kMaxSkipFiles));
+      }
+      for (const auto& from : f.resume_from()) {
+        if (from.file().empty() || from.file().size() > kMaxSkipFileChars || !printable(from.file())) {
+          return make_error("fetch_images.resume_from: each file must be a name of 1.." +
+                            std::to_string(kMaxSkipFileChars) + " printable characters");
+        }
+        req.resume_from.push_back({from.file(), from.offset(), from.crc32()});
       }
       r.body = std::move(req);
       return r;

@@ -4,6 +4,7 @@
 #include <cstdio>
 
 #include "veneer/io/dng.hpp"
+#include "veneer/io/file_crc.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
 
@@ -31,6 +32,20 @@ veneer::Expected<std::vector<ServedFile>> set_files(const Store& store, const st
     out.push_back({rel, folder / rel, 0, size, {}});
   }
   return out;
+}
+
+std::vector<api::ResumeFrom> resume_files(std::vector<ServedFile>& files, const std::vector<api::ResumeFrom>& from) {
+  std::vector<api::ResumeFrom> honoured;
+  for (auto& f : files) {
+    if (f.rel == "set.json" || !f.bytes.empty() || f.source.empty()) continue;
+    auto it = std::find_if(from.begin(), from.end(), [&](const api::ResumeFrom& r) { return r.file == f.rel; });
+    if (it == from.end() || it->offset == 0 || it->offset > f.size) continue;
+    auto crc = veneer::io::file_crc32(f.source, f.offset, it->offset);
+    if (!crc || *crc != it->crc32) continue;  // not the rig's bytes (or unreadable): sent whole
+    f.start = it->offset;
+    honoured.push_back(*it);
+  }
+  return honoured;
 }
 
 veneer::Expected<std::vector<ServedFile>> preview_files(const Store& store, const std::string& id) {

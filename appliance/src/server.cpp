@@ -497,7 +497,8 @@ class Session : public std::enable_shared_from_this<Session> {
       respond(id, files.error());
       return;
     }
-    start_download("fetch_images", id, f.set_id, f.chunk_size, std::move(*files), skipped);
+    const auto resumed = resume_files(*files, f.resume_from);
+    start_download("fetch_images", id, f.set_id, f.chunk_size, std::move(*files), skipped, resumed);
   }
 
   void on(uint64_t id, api::FetchPreviewReq& f) {
@@ -514,7 +515,8 @@ class Session : public std::enable_shared_from_this<Session> {
   }
 
   void start_download(const char* what, uint64_t id, const std::string& set_id, size_t chunk,
-                      std::vector<ServedFile> files, const std::vector<std::string>& skipped) {
+                      std::vector<ServedFile> files, const std::vector<std::string>& skipped,
+                      const std::vector<api::ResumeFrom>& resumed = {}) {
     // Open every file now: a set deleted mid-download still downloads whole.
     auto fetch = std::make_unique<Fetch>();
     fetch->request_id = id;
@@ -522,16 +524,16 @@ class Session : public std::enable_shared_from_this<Session> {
     fetch->chunk = chunk;
     uint64_t total = 0;
     for (auto& file : files) {
-      FetchFile f{file.rel, nullptr, file.size, std::make_shared<std::string>(std::move(file.bytes))};
+      FetchFile f{file.rel, nullptr, file.size, std::make_shared<std::string>(std::move(file.bytes)), file.start};
       if (!file.source.empty()) {
         f.in = std::make_unique<std::ifstream>(file.source, std::ios::binary);
-        if (*f.in) f.in->seekg(static_cast<std::streamoff>(file.offset));
+        if (*f.in) f.in->seekg(static_cast<std::streamoff>(file.offset + file.start));
         if (!*f.in) {
           respond(id, veneer::make_error(std::string(what) + ": cannot read " + set_id + "/" + file.rel));
           return;
         }
       }
-      total += file.size;
+      total += file.size - file.start;
       fetch->files.push_back(std::move(f));
     }
     pb::RigMessage m;
@@ -542,9 +544,16 @@ class Session : public std::enable_shared_from_this<Session> {
     started->set_set_id(set_id);
     for (const auto& f : fetch->files) started->add_files(f.rel);
     for (const auto& s : skipped) started->add_skipped_files(s);
+    for (const auto& from : resumed) {
+      auto* r2 = started->add_resumed();
+      r2->set_file(from.file);
+      r2->set_offset(from.offset);
+      r2->set_crc32(from.crc32);
+    }
     started->set_total_bytes(total);
     send(m);
     VLOG_INFO("Server", "{}: {} of {} ({} files, {} bytes) started", peer_, what, set_id, fetch->files.size(), total);
+    if (!fetch->files.empty()) fetch->offset = fetch->files.front().start;
     fetch_ = std::move(fetch);
     pump_fetch();
   }
@@ -582,7 +591,7 @@ class Session : public std::enable_shared_from_this<Session> {
       f.offset += want;
       if (h.last) {
         ++f.index;
-        f.offset = 0;
+        f.offset = f.index < f.files.size() ? f.files[f.index].start : 0;
       }
       if (h.end_of_set) {
         VLOG_INFO("Server", "{}: download of {} sent", peer_, f.set_id);
@@ -652,6 +661,7 @@ class Session : public std::enable_shared_from_this<Session> {
     std::unique_ptr<std::ifstream> in;  // positioned at the range's start; null: `made` is the content
     uint64_t size = 0;
     std::shared_ptr<std::string> made;
+    uint64_t start = 0;  // the first byte sent (a resumed file)
   };
   struct Fetch {
     uint64_t request_id = 0;

@@ -311,6 +311,11 @@ std::string bytes_of(const fs::path& file) {
 // final name -- in the destination or the staging folder -- is the rig's,
 // byte for byte (none shorter), and the resume makes the rig send exactly
 // the bytes of the files not kept whole: none it already delivered whole.
+// An interrupted pull keeps, under final names, only whole files equal to the
+// rig's, and the start of the file it was cut in as <rel>.part (a prefix of
+// the rig's bytes); its resume makes the rig send exactly the bytes the client
+// lacks: the files it does not hold, and the rest of each .part. A .part whose
+// bytes are not the rig's (here: one byte changed) is sent again whole.
 TEST(Faults, AnInterruptedPullKeepsOnlyWholeFilesAndItsResumeFetchesOnlyTheRest) {
   InProcessRig rig("resume", {640, 424});
   ASSERT_TRUE(rig.client);
@@ -355,12 +360,30 @@ TEST(Faults, AnInterruptedPullKeepsOnlyWholeFilesAndItsResumeFetchesOnlyTheRest)
     }
     EXPECT_FALSE(fs::exists(out)) << "no set at the destination before it is whole";
     ASSERT_TRUE(fs::is_directory(staging));
-    // Every file under a final name is the rig's, whole: same size, same bytes.
+    // Every file under a final name is the rig's, whole: same size, same
+    // bytes; every .part is the start of a rig's file.
     uint64_t kept = 0;
-    int kept_files = 0;
+    int kept_files = 0, parts = 0;
+    std::string spoiled;  // the .part this round changes a byte of
     for (const auto& rel : files_under(staging)) {
-      EXPECT_FALSE(is_part(rel)) << rel << ": a partial file kept";
-      if (is_part(rel)) continue;
+      if (is_part(rel)) {
+        const std::string name = rel.substr(0, rel.size() - 5);
+        ASSERT_TRUE(size_of.count(name)) << rel << ": the start of no file of the rig's set";
+        const std::string part = bytes_of(staging / rel), whole = bytes_of(rig_set / name);
+        EXPECT_LE(part.size(), whole.size()) << rel;
+        EXPECT_TRUE(whole.compare(0, part.size(), part) == 0) << rel << ": not the start of the rig's " << name;
+        ++parts;
+        if (name == "set.json") continue;  // sent whole with every pull
+        if (cut == 0.55 && !part.empty()) {
+          spoiled = name;  // not the rig's bytes any more: the rig must send the file whole
+          std::string changed = part;
+          changed[changed.size() / 2] = static_cast<char>(changed[changed.size() / 2] ^ 0x5a);
+          std::ofstream(staging / rel, std::ios::binary | std::ios::trunc) << changed;
+        } else {
+          kept += part.size();
+        }
+        continue;
+      }
       ASSERT_TRUE(size_of.count(rel)) << rel << ": not a file of the rig's set";
       EXPECT_EQ(fs::file_size(staging / rel), size_of[rel]) << rel << ": not the rig's size";
       EXPECT_TRUE(bytes_of(staging / rel) == bytes_of(rig_set / rel)) << rel << ": not the rig's bytes";
@@ -372,18 +395,26 @@ TEST(Faults, AnInterruptedPullKeepsOnlyWholeFilesAndItsResumeFetchesOnlyTheRest)
     // The resume: the rig sends the files not kept whole, and nothing else.
     const uint64_t missing = total - kept;
     const uint64_t before = rig.daemon->server().stats().chunk_bytes;
-    ASSERT_TRUE(rig.client->pull(id, out, true, false));
+    const veneer::Status resumed = rig.client->pull(id, out, true, false);
+    ASSERT_TRUE(resumed) << resumed.message();
     const uint64_t sent = rig.daemon->server().stats().chunk_bytes - before;
-    EXPECT_EQ(sent, missing) << kept_files << " files (" << kept << " bytes) of " << total << " were kept";
-    // Beyond the bytes the client never had, the resume re-sends set.json and
-    // the one file the hang-up cut (resuming is by whole files): never more.
+    EXPECT_EQ(sent, missing) << kept_files << " whole files and " << parts << " starts (" << kept << " bytes) of "
+                             << total << " were kept";
+    // Beyond the bytes the client never had, the resume re-sends set.json
+    // (and, where a .part was spoiled, that file's start): never more.
     const uint64_t had = static_cast<uint64_t>(arrived * static_cast<double>(total));
     const uint64_t never_had = total - std::min(had, total);
-    EXPECT_LE(sent, never_had + size_of["set.json"] + largest);
-    std::printf("hung up at %.2f: the client had %llu of %llu bytes; the resume sent %llu (%llu it never had, %llu again)\n",
-                arrived, static_cast<unsigned long long>(had), static_cast<unsigned long long>(total),
+    const uint64_t spoiled_bytes = spoiled.empty() ? 0 : size_of[spoiled];
+    EXPECT_LE(sent, never_had + size_of["set.json"] + spoiled_bytes);
+    if (cut == 0.55) {
+      EXPECT_FALSE(spoiled.empty()) << "the hang-up left the start of a file";
+    }
+    std::printf("hung up at %.2f: the client had %llu of %llu bytes (%d starts of files); the resume sent %llu "
+                "(%llu it never had, %llu again%s)\n",
+                arrived, static_cast<unsigned long long>(had), static_cast<unsigned long long>(total), parts,
                 static_cast<unsigned long long>(sent), static_cast<unsigned long long>(never_had),
-                static_cast<unsigned long long>(sent > never_had ? sent - never_had : 0));
+                static_cast<unsigned long long>(sent > never_had ? sent - never_had : 0),
+                spoiled.empty() ? "" : (", " + spoiled + " spoiled").c_str());
     if (cut > 0.5) {
       EXPECT_LT(sent, total) << "a pull cut past half way resumes";
     }

@@ -3,6 +3,7 @@
 // embedded preview as a reduced set; an older set its photos at full size;
 // a resumed fetch leaves out what the client holds.
 #include <gtest/gtest.h>
+#include <zlib.h>
 
 #include <fstream>
 
@@ -129,6 +130,39 @@ TEST(Preview, AResumedFetchLeavesOutWhatTheClientHoldsButNotSetJson) {
   EXPECT_EQ(names, (std::vector<std::string>{"set.json", "light_00.png", "light_02.png", "ambient.png"}));
   EXPECT_EQ(skipped, (std::vector<std::string>{"light_01.png"}));
   EXPECT_FALSE(veneerd::preview_files(**store, "nope"));
+  fs::remove_all(root);
+}
+
+// A resumed file is sent from the client's offset only when the CRC-32 of the
+// rig's own first bytes is the client's (computed here with zlib's CRC-32 of
+// the bytes read back); otherwise, and for set.json and offsets past the end,
+// whole.
+TEST(Preview, AResumedFetchContinuesAFileOnlyWhenItsStartIsTheRigs) {
+  fs::path root = rigtest::temp_dir("preview-resume");
+  auto store = veneerd::Store::open(root / "store");
+  ASSERT_TRUE(store) << store.message();
+  ASSERT_TRUE((*store)->save(noisy_set("s", {64, 48})));
+  auto files = veneerd::set_files(**store, "s", false, {});
+  ASSERT_TRUE(files) << files.message();
+  auto bytes_of = [&](const std::string& rel) {
+    std::ifstream in(root / "store" / "s" / rel, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  const std::string l0 = bytes_of("light_00.png"), l1 = bytes_of("light_01.png"), js = bytes_of("set.json");
+  ASSERT_GT(l0.size(), 100u);
+  auto crc = [](const std::string& b, size_t n) {
+    return static_cast<uint32_t>(::crc32(0, reinterpret_cast<const Bytef*>(b.data()), static_cast<uInt>(n)));
+  };
+  std::vector<veneerd::api::ResumeFrom> from = {
+      {"light_00.png", 100, crc(l0, 100)},                    // the rig's start: resumed
+      {"light_01.png", 50, crc(l1, 50) ^ 1u},                 // not the rig's bytes: whole
+      {"light_02.png", l0.size() * 100, 0},                   // past the end: whole
+      {"set.json", 10, crc(js, 10)},                          // set.json: always whole
+      {"not-in-the-set.png", 10, 0}};
+  auto honoured = veneerd::resume_files(*files, from);
+  ASSERT_EQ(honoured.size(), 1u);
+  EXPECT_EQ(honoured[0].file, "light_00.png");
+  for (const auto& f : *files) EXPECT_EQ(f.start, f.rel == "light_00.png" ? 100u : 0u) << f.rel;
   fs::remove_all(root);
 }
 

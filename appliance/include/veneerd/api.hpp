@@ -26,11 +26,17 @@ struct Hello { uint32_t protocol_version = 0; std::string token; std::string cli
 struct StatusReq {};
 struct ListSetsReq { bool trash = false; };
 struct GetManifestReq { std::string set_id; };
+struct ResumeFrom {
+  std::string file;
+  uint64_t offset = 0;
+  uint32_t crc32 = 0;  // of the file's first `offset` bytes (veneer::io::crc32)
+};
 struct FetchImagesReq {
   std::string set_id;
   bool include_truth = false;
   size_t chunk_size = 0;
   std::vector<std::string> skip_files;  // files the client holds whole (a resumed pull)
+  std::vector<ResumeFrom> resume_from;  // files the client holds the start of (a resumed pull)
 };
 struct DeleteSetReq { std::string set_id; };
 struct CaptureReq { CaptureRequest capture; };

@@ -229,6 +229,7 @@ struct Client::Impl {
     fs::path temp;
     std::map<std::string, uint64_t> expected;  // file -> size, from FetchStarted
     std::map<std::string, uint64_t> received;  // file -> bytes written
+    std::map<std::string, uint64_t> resume_at;  // file -> the offset the rig may resume it from (its .part's size)
     std::string current;
     int fd = -1;
     uint64_t total = 0, got = 0;
@@ -428,16 +429,25 @@ struct Client::Impl {
     if (rel != d->current) {
       if (d->fd >= 0) return fail("the rig switched files before finishing " + d->current);
       if (d->received.count(rel)) return fail("the rig sent " + rel + " twice");
-      if (c.offset() != 0) return fail(rel + ": first chunk at offset " + std::to_string(c.offset()));
       // Into <rel>.part, renamed to <rel> once whole: a resumed pull takes
-      // every file without the suffix as complete.
+      // every file without the suffix as complete, and continues a .part
+      // from its end when the rig agrees its bytes are the rig's (a file's
+      // first chunk is at 0, or at the offset asked in resume_from; the
+      // chunks may arrive before FetchStarted is read).
+      const auto resume = d->resume_at.find(rel);
+      const uint64_t from = c.offset();
+      if (from != 0 && (resume == d->resume_at.end() || resume->second != from))
+        return fail(rel + ": first chunk at offset " + std::to_string(from) + ", which was not asked");
       fs::path target = d->temp / (rel + ".part");
       std::error_code ec;
       fs::create_directories(target.parent_path(), ec);
-      d->fd = ::open(target.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+      d->fd = ::open(target.c_str(), O_WRONLY | O_CREAT | (from == 0 ? O_TRUNC : 0) | O_CLOEXEC, 0644);
       if (d->fd < 0) return fail(target.string() + ": cannot create: " + std::strerror(errno));
+      if (from > 0 && (::ftruncate(d->fd, static_cast<off_t>(from)) != 0 ||
+                       ::lseek(d->fd, static_cast<off_t>(from), SEEK_SET) != static_cast<off_t>(from)))
+        return fail(target.string() + ": cannot continue at byte " + std::to_string(from) + ": " + std::strerror(errno));
       d->current = rel;
-      d->received[rel] = 0;
+      d->received[rel] = from;
     }
     if (c.offset() != d->received[rel]) return fail(rel + ": chunk at offset " + std::to_string(c.offset()) + ", expected " + std::to_string(d->received[rel]));
     const std::string& data = c.data();
@@ -570,26 +580,27 @@ Expected<std::string> Client::manifest(const std::string& set_id) {
 }
 
 Expected<Client::Fetched> Client::fetch_into(const std::string& set_id, bool preview, bool include_truth,
-                                             const std::vector<std::string>& skip, const fs::path& dir,
+                                             const std::vector<std::string>& skip,
+                                             const std::vector<Partial>& partial, const fs::path& dir,
                                              const Progress& progress) {
   Impl& d = *impl_;
   auto dl = std::make_shared<Impl::Download>();
   dl->temp = dir;
   dl->progress = &progress;
-  auto abandon = [&] {  // the file being written goes; those written whole stay (a pull resumes from them)
+  auto abandon = [&] {  // what was written stays: files whole, the one being written as its .part (a pull resumes from them)
     std::lock_guard lock(d.mutex);
     dl->abandoned = true;
-    if (dl->fd >= 0) ::close(dl->fd);
-    dl->fd = -1;
-    if (!dl->current.empty()) {
-      std::error_code ec;
-      fs::remove(dl->temp / (dl->current + ".part"), ec);
+    if (dl->fd >= 0) {
+      ::fdatasync(dl->fd);
+      ::close(dl->fd);
     }
+    dl->fd = -1;
   };
 
   const uint64_t id = d.next_id++;
   {
     std::lock_guard lock(d.mutex);
+    for (const auto& p : partial) dl->resume_at[p.file] = p.size;
     d.downloads[id] = dl;
   }
   struct Unregister {
@@ -609,6 +620,12 @@ Expected<Client::Fetched> Client::fetch_into(const std::string& set_id, bool pre
     f->set_set_id(set_id);
     f->set_include_truth(include_truth);
     for (const auto& s : skip) f->add_skip_files(s);
+    for (const auto& p : partial) {
+      auto* r = f->add_resume_from();
+      r->set_file(p.file);
+      r->set_offset(p.size);
+      r->set_crc32(p.crc32);
+    }
   }
   auto r = d.request(m, id);
   if (!r) {
@@ -623,6 +640,15 @@ Expected<Client::Fetched> Client::fetch_into(const std::string& set_id, bool pre
       out.files.push_back(file);
     }
     out.skipped.assign(r->fetch().skipped_files().begin(), r->fetch().skipped_files().end());
+    for (const auto& from : r->fetch().resumed()) {
+      // Only a resume the client asked for, from where its .part ends.
+      auto asked = std::find_if(partial.begin(), partial.end(), [&](const Partial& p) { return p.file == from.file(); });
+      if (asked == partial.end() || asked->size != from.offset() || asked->crc32 != from.crc32()) {
+        dl->error = "the rig resumed " + from.file() + " from byte " + std::to_string(from.offset()) + ", which was not asked";
+        break;
+      }
+      out.resumed.push_back(from.file());
+    }
     dl->total = r->fetch().total_bytes();
   }
 

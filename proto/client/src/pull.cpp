@@ -11,6 +11,7 @@
 #include <sys/file.h>
 #include <unistd.h>
 
+#include "veneer/io/file_crc.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
 #include "veneer/rig/client.hpp"
@@ -67,24 +68,46 @@ Status place(const fs::path& from, const fs::path& to) {
   return {};
 }
 
-// The files under `dir` that arrived whole (no ".part"), relative; partial
-// ones are removed.
-std::vector<std::string> whole_files(const fs::path& dir) {
-  std::vector<std::string> out;
-  std::vector<fs::path> partial;
+// What an interrupted pull left under `dir`: the files that arrived whole (no
+// ".part"), relative, and the starts of those cut mid-way (<rel>.part: its
+// size and CRC-32). Empty or unreadable .part files are removed.
+struct Held {
+  std::vector<std::string> whole;
+  std::vector<Client::Partial> partial;
+};
+Held held_files(const fs::path& dir) {
+  Held out;
   std::error_code ec;
   for (auto it = fs::recursive_directory_iterator(dir, ec); !ec && it != fs::recursive_directory_iterator();
        it.increment(ec)) {
     if (!it->is_regular_file(ec)) continue;
     const fs::path rel = fs::relative(it->path(), dir, ec);
     if (rel.extension() == ".part") {
-      partial.push_back(it->path());
+      std::error_code sec;
+      const uint64_t size = fs::file_size(it->path(), sec);
+      auto crc = sec || size == 0 ? Expected<uint32_t>(make_error("empty")) : io::file_crc32(it->path(), 0, size);
+      if (crc) {
+        std::string name = rel.generic_string();
+        name.resize(name.size() - 5);  // without ".part"
+        out.partial.push_back({name, size, *crc});
+      } else {
+        fs::remove(it->path(), sec);
+      }
     } else if (rel.filename().string().front() != '.') {
-      out.push_back(rel.generic_string());
+      out.whole.push_back(rel.generic_string());
     }
   }
-  for (const auto& p : partial) fs::remove(p, ec);
   return out;
+}
+
+// Removes the .part files left under `dir` (files the rig no longer sends).
+void remove_partial(const fs::path& dir) {
+  std::error_code ec;
+  std::vector<fs::path> stale;
+  for (auto it = fs::recursive_directory_iterator(dir, ec); !ec && it != fs::recursive_directory_iterator();
+       it.increment(ec))
+    if (it->is_regular_file(ec) && it->path().extension() == ".part") stale.push_back(it->path());
+  for (const auto& p : stale) fs::remove(p, ec);
 }
 
 // An exclusive lock on a folder for this pull (another process pulling the
@@ -138,7 +161,7 @@ Status Client::pull_preview(const std::string& set_id, const fs::path& folder, b
   const fs::path temp = parent / name;
   fs::create_directories(temp, ec);
   if (ec) return make_error(temp.string() + ": cannot create: " + ec.message());
-  auto fetched = fetch_into(set_id, true, false, {}, temp, progress);
+  auto fetched = fetch_into(set_id, true, false, {}, {}, temp, progress);
   Status placed = fetched ? place(temp, target) : Status(fetched.error());
   if (!placed) {
     fs::remove_all(temp, ec);
@@ -183,18 +206,26 @@ Status Client::pull_set(const std::string& set_id, const fs::path& folder, const
   if (ec) return make_error(staging.string() + ": cannot create: " + ec.message());
   FolderLock lock(staging);
   if (!lock.held()) return make_error("pull " + set_id + ": another pull into " + target.string() + " is running");
-  std::vector<std::string> have = whole_files(staging);
+  Held held = held_files(staging);
+  std::vector<std::string>& have = held.whole;
   have.erase(std::remove(have.begin(), have.end(), "set.json"), have.end());
-  if (!have.empty()) progress.report(o.live_first ? 0.05 : 0.0, "resuming: " + std::to_string(have.size()) + " files already here");
+  held.partial.erase(std::remove_if(held.partial.begin(), held.partial.end(),
+                                    [](const Client::Partial& p) { return p.file == "set.json"; }),
+                     held.partial.end());
+  if (!have.empty() || !held.partial.empty()) {
+    progress.report(o.live_first ? 0.05 : 0.0, "resuming: " + std::to_string(have.size()) + " files and the start of " +
+                                                   std::to_string(held.partial.size()) + " already here");
+  }
   part.on_progress = [&progress, &o](double f, const std::string& stage) {
     progress.report(o.live_first ? 0.05 + 0.95 * f : f, stage);
   };
-  auto fetched = fetch_into(set_id, false, o.include_truth, have, staging, part);
+  auto fetched = fetch_into(set_id, false, o.include_truth, have, held.partial, staging, part);
   if (!fetched) {
     // What arrived whole stays for the next pull of this set into this folder.
     if (fetched.message().find("no set '") != std::string::npos || fetched.message() == "cancelled") fs::remove_all(staging, ec);
     return make_error("pull " + set_id + ": " + fetched.message());
   }
+  remove_partial(staging);  // starts of files the rig did not send again
   // Every file the rig listed is here, and so is everything set.json names.
   for (const auto& f : fetched->skipped) {
     if (!fs::is_regular_file(staging / f, ec)) return make_error("pull " + set_id + ": " + f + " is missing");

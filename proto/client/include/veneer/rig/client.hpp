@@ -237,6 +237,13 @@ class Client {
 
   void close();
 
+  // The start of a file an interrupted pull left as <rel>.part: its size and
+  // the CRC-32 of its bytes (FetchImagesRequest.resume_from).
+  struct Partial {
+    std::string file;
+    uint64_t size = 0;
+    uint32_t crc32 = 0;
+  };
   struct Impl;  // public so the reader in client.cpp can name it
 
  private:
@@ -245,12 +252,15 @@ class Client {
   struct Fetched {
     std::vector<std::string> files;    // sent, in order
     std::vector<std::string> skipped;  // left out (the client had them)
+    std::vector<std::string> resumed;  // sent from where the client's <rel>.part ended
   };
   // One fetch_images (preview = false) or fetch_preview download into `dir`,
-  // each file written as <rel>.part and renamed to <rel> when whole.
+  // each file written as <rel>.part and renamed to <rel> when whole; the files
+  // in `partial` continue their <rel>.part when the rig resumes them. An
+  // interrupted download keeps every <rel>.part it wrote.
   Expected<Fetched> fetch_into(const std::string& set_id, bool preview, bool include_truth,
-                               const std::vector<std::string>& skip, const std::filesystem::path& dir,
-                               const Progress& progress);
+                               const std::vector<std::string>& skip, const std::vector<Partial>& partial,
+                               const std::filesystem::path& dir, const Progress& progress);
   std::unique_ptr<Impl> impl_;
 };
 
