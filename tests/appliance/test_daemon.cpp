@@ -211,7 +211,9 @@ TEST(Daemon, TheRigsBullHasItsNormalsAndItsPlinthIsLeftOut) {
   std::printf("rig's bull: normals %.2f deg mean, %.2f p95 off the truth (%d pixels)\n", err.mean_deg, err.p95_deg,
               err.pixels);
   EXPECT_GT(err.pixels, 1800);
-  EXPECT_LT(err.mean_deg, 7.5);  // measured 6.98 (8.33 before)
+  // measured 7.83 with our MHC, io::RawOptions' one default since issue 42 (6.98 with LibRaw's DCB, the io
+  // default before; 8.33 before the penumbra fix): at 256x170 MHC's 5x5 filters cost the small bull 0.85 deg
+  EXPECT_LT(err.mean_deg, 8.2);
   EXPECT_LT(err.p95_deg, 38.0);  // measured 34.95 (43.68 before)
 
   // The transfer leaves the plinth out: what the segmentation sees beyond the

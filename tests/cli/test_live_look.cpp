@@ -59,6 +59,12 @@ TEST(LiveLookCli, SimulateRepaintEvalAndHshExport) {
 
   ASSERT_EQ(run("repaint" + pair + " --map " + (dir / "tr").string() + " --video " + seq + " --out " + (dir / "rep").string()), 0);
   ASSERT_EQ(run("eval --live " + (dir / "rep").string() + " --truth " + seq), 0);
+  // the video written through the video module (viewer/cli/video/) reads back through it: a video file as --video
+  ASSERT_GT(fs::file_size(dir / "rep" / "repainted.mp4"), 0u);
+  ASSERT_EQ(run("repaint" + pair + " --map " + (dir / "tr").string() + " --video " +
+                (dir / "rep" / "repainted.mp4").string() + " --no-track --out " + (dir / "rep_mp4").string()),
+            0);
+  EXPECT_EQ(read_json(dir / "rep_mp4" / "report.json")["frames"], 5);
   const auto look = read_json(dir / "rep" / "live_look.json");
   ASSERT_TRUE(look.is_object());
   ASSERT_EQ(look["frames"].size(), 5u);

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <memory>
 #include <optional>
 #include <sstream>
 #include <string>
@@ -15,11 +16,11 @@
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
-#include <opencv2/videoio.hpp>
 
 #include "command.hpp"
 #include "inputs.hpp"
 #include "output.hpp"
+#include "video/video.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
 #include "veneer/pipeline/transfer.hpp"
@@ -53,10 +54,11 @@ double percentile(std::vector<double> v, double p) {
 }
 
 // The frames of a folder (its motion.json's order when present, else the
-// images sorted by name) or of a video file, read lazily through `next`.
+// images sorted by name) or of a video file (through the video module,
+// loaded only here), read lazily through `next`.
 struct FrameSource {
   std::vector<fs::path> files;
-  cv::VideoCapture capture;
+  std::unique_ptr<cli::video::Reader> capture;
   size_t index = 0;
   bool next(cv::Mat* frame) {
     if (!files.empty()) {
@@ -64,7 +66,7 @@ struct FrameSource {
       *frame = cv::imread(files[index++].string(), cv::IMREAD_COLOR);
       return !frame->empty();
     }
-    return capture.isOpened() && capture.read(*frame) && !frame->empty();
+    return capture && capture->read(frame);
   }
 };
 
@@ -103,8 +105,10 @@ int run_repaint(const RepaintArgs& a) {
       std::sort(frames.files.begin(), frames.files.end());
     }
     if (frames.files.empty()) return report.usage("--video " + a.video + ": the folder holds no frames (PNG or JPEG)");
-  } else if (!frames.capture.open(a.video)) {
-    return report.usage("--video " + a.video + ": OpenCV cannot read it as a video");
+  } else {
+    auto reader = cli::video::open_reader(a.video);
+    if (!reader) return report.usage("--video " + reader.message());
+    frames.capture = std::move(*reader);
   }
 
   const fs::path map_file = cli::map_file(a.map);
@@ -160,7 +164,7 @@ int run_repaint(const RepaintArgs& a) {
   session.set_look(*look);
   session.set_smooth(true);  // offline: bilinear, no frame budget
 
-  cv::VideoWriter writer;
+  std::unique_ptr<cli::video::Writer> writer;
   fs::path mp4;  // in the output folder, once it is made (the first frame)
   nlohmann::json per_frame = nlohmann::json::array();
   std::vector<double> ms, errors;
@@ -192,8 +196,13 @@ int run_repaint(const RepaintArgs& a) {
         return report.fail(st.message());
       std::snprintf(name, sizeof name, "frame_%04d.png", count);
     }
-    if (count == 0) writer.open(mp4.string(), cv::VideoWriter::fourcc('m', 'p', '4', 'v'), 30.0, out.size());
-    if (writer.isOpened()) writer.write(out);
+    if (count == 0) {
+      // the frames (PNG) are the result; the video beside them is a convenience, left out when it cannot be made
+      auto opened = cli::video::open_writer(mp4.string(), 30.0, out.cols, out.rows);
+      if (opened) writer = std::move(*opened);
+      else std::cerr << "veneer repaint: no repainted.mp4: " << opened.message() << "\n";
+    }
+    if (writer) writer->write(out);
     nlohmann::json f = {{"file", name}, {"ms", elapsed}, {"lost", r.lost}, {"correlation", r.correlation},
                         {"look", repaint::look_name(live->look)}};
     if (live->light) {
@@ -214,7 +223,7 @@ int run_repaint(const RepaintArgs& a) {
     ++count;
   }
   if (count == 0) return report.fail("--video " + a.video + ": no frame could be read");
-  writer.release();
+  if (writer) writer->close();
   nlohmann::json doc = {{"frames", count},
                            {"lost", lost},
                            {"tracking", !a.no_track},

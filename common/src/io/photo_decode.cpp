@@ -98,7 +98,10 @@ Expected<cv::Mat> decode_photo(std::string_view bytes, const Frame& frame, const
   const std::string name = frame.file.string();
   if (frame.raw) {
     kind = {raw_options.half_size ? "raw-half" : "raw", 16};
-    return decode_raw_linear(bytes, raw_options, name);
+    auto photo = decode_raw(bytes, raw_options, name);
+    if (!photo) return photo.error();
+    kind.camera_to_srgb = photo->camera_to_srgb;
+    return std::move(photo->image);
   }
   if (has_tiff_magic(bytes)) return decode_tiff(bytes, name, frame.srgb8, kind);
   auto image = decode_linear_image(bytes, name);
@@ -115,7 +118,9 @@ std::string describe_photos(const PhotoKind& photo, bool srgb8, const RawOptions
   if (kind == "raw" || kind == "raw-half")
     return "camera RAW through LibRaw " + raw_decoder_version() + " (" + (raw_options.half_size ? "half size" : "full size, ") +
            (raw_options.half_size ? "" : demosaic_name(raw_options.demosaic) + std::string(" demosaic")) +
-           "; black level subtracted, as-shot white balance, linear sRGB primaries, gamma 1)";
+           "; black level subtracted, as-shot white balance, " +
+           (raw_options.camera_space ? "the camera's primaries (its colour matrix kept aside)" : "linear sRGB primaries") +
+           ", gamma 1)";
   if (kind == "jpeg") return "8-bit JPEG, sRGB: linearised through the inverse sRGB curve";
   if ((kind == "png" || kind == "tiff") && photo.bits <= 8) {
     const std::string what = kind == "png" ? "8-bit PNG" : "8-bit TIFF";

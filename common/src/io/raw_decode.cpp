@@ -1,6 +1,7 @@
 // RAW decoding through LibRaw (raw.hpp). The only file that sees LibRaw.
 #include <algorithm>
 #include <cctype>
+#include <cmath>
 #include <memory>
 #include <optional>
 
@@ -129,7 +130,34 @@ bool is_raw_file_name(const std::string& file_name) {
   return std::any_of(std::begin(kRaw), std::end(kRaw), [&](const char* r) { return ext == r; });
 }
 
+bool is_identity(const cv::Matx33f& m) {
+  for (int r = 0; r < 3; ++r)
+    for (int c = 0; c < 3; ++c)
+      if (std::abs(m(r, c) - (r == c ? 1.f : 0.f)) > 1e-4f) return false;
+  return true;
+}
+
+void apply_colour_matrix(cv::Mat& photo, const cv::Matx33f& m) {
+  if (photo.empty() || is_identity(m)) return;
+  CV_Assert(photo.type() == CV_32FC3);
+  cv::parallel_for_(cv::Range(0, photo.rows), [&](const cv::Range& rows) {
+    for (int y = rows.start; y < rows.end; ++y) {
+      float* p = photo.ptr<float>(y);
+      for (int x = 0; x < photo.cols; ++x, p += 3) {
+        const float b = p[0], g = p[1], r = p[2];
+        for (int k = 0; k < 3; ++k) p[k] = std::clamp(m(k, 0) * b + m(k, 1) * g + m(k, 2) * r, 0.f, 1.f);
+      }
+    }
+  });
+}
+
 Expected<cv::Mat> decode_raw_linear(std::string_view bytes, const RawOptions& options, const std::string& name) {
+  auto photo = decode_raw(bytes, options, name);
+  if (!photo) return photo.error();
+  return std::move(photo->image);
+}
+
+Expected<RawPhoto> decode_raw(std::string_view bytes, const RawOptions& options, const std::string& name) {
   if (Status s = options.check(); !s) return make_error(name + ": " + s.message());
   if (bytes.empty()) return make_error(name + ": empty file");
   // LibRaw is large (hundreds of kB of state): on the heap, one per call, so
@@ -142,7 +170,7 @@ Expected<cv::Mat> decode_raw_linear(std::string_view bytes, const RawOptions& op
   p.no_auto_bright = 1;
   p.use_camera_wb = 1;  // the white balance the camera recorded (DNG: AsShotNeutral)
   p.use_auto_wb = 0;
-  p.output_color = 1;  // sRGB primaries, linear
+  p.output_color = options.camera_space ? 0 : 1;  // the camera's RGB, or sRGB primaries; linear
   p.highlight = 0;     // clip at the white level
   // LibRaw's default (0.75) takes a frame's own data maximum as its white
   // level when that lies between 75 % and 100 % of the real one: each photo
@@ -164,8 +192,21 @@ Expected<cv::Mat> decode_raw_linear(std::string_view bytes, const RawOptions& op
     return make_error(name + ": only Bayer (RGB colour filter array) RAW files are supported");
   r = raw->unpack();
   if (r != LIBRAW_SUCCESS) return make_error(name + ": cannot unpack RAW data (" + libraw_error(r) + ")");
+  RawPhoto photo;
+  // camera RGB -> linear sRGB as LibRaw applies it (out_cam = rgb_cam for sRGB; none for a raw-colour file),
+  // turned to act on BGR pixels
+  if (options.camera_space && !raw->imgdata.rawdata.ioparams.raw_color)
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 3; ++c) photo.camera_to_srgb(2 - r, 2 - c) = raw->imgdata.color.rgb_cam[r][c];
   if (options.demosaic == Demosaic::mhc && !options.half_size) {
-    if (auto mosaic = mosaic_of(*raw)) return detail::demosaic_mhc(*mosaic);
+    if (auto mosaic = mosaic_of(*raw)) {
+      if (options.camera_space) {
+        for (int r = 0; r < 3; ++r)
+          for (int c = 0; c < 3; ++c) mosaic->rgb_cam[r][c] = r == c ? 1.f : 0.f;
+      }
+      photo.image = detail::demosaic_mhc(*mosaic);
+      return photo;
+    }
     p.user_qual = find_demosaic(Demosaic::ahd)->user_qual;  // a layout only LibRaw's pipeline takes
   }
   r = raw->dcraw_process();
@@ -188,7 +229,8 @@ Expected<cv::Mat> decode_raw_linear(std::string_view bytes, const RawOptions& op
       o[3 * x + 2] = s[3 * x + 0] * k;
     }
   }
-  return out;
+  photo.image = std::move(out);
+  return photo;
 }
 
 Expected<cv::Mat> read_raw_linear(const std::filesystem::path& file, const RawOptions& options) {

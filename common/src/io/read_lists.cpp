@@ -33,6 +33,7 @@ Status load_photos(const std::vector<fs::path>& files, bool srgb8, const ReadOpt
   if (Status s = check_same_sizes(files, set.images); !s) return s;
   set.size = set.images[0].size();
   note_photo_kinds(set, kinds, srgb8, options.raw);
+  settle_camera_space(set, kinds);
   return Status::success();
 }
 

@@ -115,6 +115,7 @@ Expected<ImageSet> read_veneer(const fs::path& folder, const ReadOptions& option
   }
   set.images = std::move(decoded);
   note_photo_kinds(set, kinds, false, options.raw);
+  settle_camera_space(set, kinds);
 
   // Developed photos must have set.json's size; RAW photos define it.
   const cv::Size photo_size = set.images.front().size();

@@ -137,6 +137,39 @@ void note_photo_kinds(ImageSet& set, const std::vector<PhotoKind>& kinds, bool s
   set.photos_read = std::to_string(kinds.size()) + " files: " + describe_photos(first, srgb8, raw_options);
 }
 
+void settle_camera_space(ImageSet& set, const std::vector<PhotoKind>& kinds) {
+  set.camera_to_srgb = cv::Matx33f::eye();
+  if (kinds.empty()) return;
+  const cv::Matx33f first = kinds.front().camera_to_srgb;
+  bool same = true;
+  for (const auto& k : kinds) same = same && cv::norm(k.camera_to_srgb - first, cv::NORM_INF) <= 1e-6;
+  if (same) {
+    set.camera_to_srgb = first;
+    return;
+  }
+  tbb::parallel_for(size_t(0), kinds.size(), [&](size_t i) {
+    cv::Mat& m = i < set.images.size() ? set.images[i] : set.ambient;
+    apply_colour_matrix(m, kinds[i].camera_to_srgb);
+  });
+}
+
+}  // namespace veneer::io::detail
+
+namespace veneer::io {
+
+void to_colour_managed(ImageSet& set) {
+  if (is_identity(set.camera_to_srgb)) return;
+  const size_t n = set.images.size() + (set.ambient.empty() ? 0 : 1);
+  tbb::parallel_for(size_t(0), n, [&](size_t i) {
+    apply_colour_matrix(i < set.images.size() ? set.images[i] : set.ambient, set.camera_to_srgb);
+  });
+  set.camera_to_srgb = cv::Matx33f::eye();
+}
+
+}  // namespace veneer::io
+
+namespace veneer::io::detail {
+
 Expected<bool> all_raw_by_name(const std::vector<fs::path>& files) {
   size_t raw = 0;
   for (const auto& f : files) raw += is_raw_file_name(f.filename().string()) ? 1 : 0;

@@ -58,6 +58,7 @@ struct Frame {
 struct PhotoKind {
   std::string kind;
   int bits = 0;
+  cv::Matx33f camera_to_srgb = cv::Matx33f::eye();  // RAW read in the camera's space (RawPhoto)
 };
 
 // Decodes one photo file's bytes into CV_32FC3 BGR, linear, 1.0 = full scale.
@@ -78,6 +79,10 @@ Status decode_frames(const std::vector<Frame>& frames, const RawOptions& raw_opt
                      const std::string& stage, std::vector<cv::Mat>& out, std::vector<PhotoKind>* kinds = nullptr);
 // The set's photos_from and photos_read from the kinds decode_frames found.
 void note_photo_kinds(ImageSet& set, const std::vector<PhotoKind>& kinds, bool srgb8, const RawOptions& raw_options);
+// The set's camera_to_srgb from its frames' (`kinds`: the images', then the
+// ambient's when the set has one): the one matrix they share, or, when they
+// differ (frames from two cameras), each frame made sRGB with its own.
+void settle_camera_space(ImageSet& set, const std::vector<PhotoKind>& kinds);
 Status check_size(const std::filesystem::path& file, const cv::Mat& image, cv::Size expected, const std::string& why);
 Status check_same_sizes(const std::vector<std::filesystem::path>& files, const std::vector<cv::Mat>& images);
 // The first existing file among folder/<stem>.<ext> for the given extensions.

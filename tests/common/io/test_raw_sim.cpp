@@ -66,7 +66,7 @@ double mean_angle_deg(const cv::Mat& normals, const io::Truth& truth) {
 
 // Every photo of a DNG set decodes to the render within 1 %: exactly (to the
 // 14-bit quantization) at the channel each pixel measured, and in full RGB
-// too: the simulator's camera optics (sim::RenderOptions::camera_optics)
+// too (1.5 % with the default MHC, 1 % with LibRaw's DCB): the simulator's camera optics (sim::RenderOptions::camera_optics)
 // band-limit the image as a real sensor's filter does, so demosaicing can
 // interpolate the missing colours. (Point-sampled, the orange's pixel-scale
 // texture left them 3.2 % off.)
@@ -93,7 +93,15 @@ TEST(RawSim, DngSetDecodesToTheLinearRender) {
     std::printf("%s: DNG -> RAW path (%s) vs the render, worst photo: %.3f %% measured channel, %.2f %% full RGB\n",
                 scene.c_str(), io::demosaic_name(io::RawOptions{}.demosaic), 100 * worst_measured, 100 * worst_rgb);
     EXPECT_LT(worst_measured, 0.01);
-    EXPECT_LT(worst_rgb, 0.01);
+    // the default (MHC, issue 42) measured 0.67 % (bull) and 1.30 % (orange: its pixel-scale texture);
+    // LibRaw's DCB, the default before, stays within 1 %
+    EXPECT_LT(worst_rgb, 0.015);
+    io::ReadOptions dcb;
+    dcb.raw.demosaic = io::Demosaic::dcb;
+    auto by_dcb = io::read_set(dir / "set", dcb);
+    ASSERT_TRUE(by_dcb) << by_dcb.message();
+    for (size_t i = 0; i < rendered.images.size(); ++i)
+      EXPECT_LT(relative_error(by_dcb->images[i], rendered.images[i], object), 0.01) << "DCB, photo " << i;
 
     // The developed photos (PNG) when asked, and a set without RAW files.
     io::ReadOptions developed;

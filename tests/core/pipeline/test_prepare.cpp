@@ -7,6 +7,8 @@
 
 #include "test_util.hpp"
 #include "veneer/io/cache.hpp"
+#include "veneer/io/dng.hpp"
+#include "veneer/io/raw.hpp"
 #include "veneer/pipeline/prepare.hpp"
 #include "veneer/pipeline/transfer.hpp"
 #include "veneer/sim/simulator.hpp"
@@ -24,6 +26,44 @@ void write_simulated(const std::filesystem::path& folder, const std::string& sce
   auto set = sim::simulate_set(scene, o, io::Role::destination);
   ASSERT_TRUE(set) << set.message();
   ASSERT_TRUE(io::write_set(*set, folder));
+}
+
+// One demosaic by default everywhere (issue 42): the io library's RawOptions,
+// every read_set without options and the product's prepare options (the CLI,
+// the viewer) all decode RAW with our MHC; a caller that builds its own
+// options cannot get another by accident. The read through the defaults is
+// MHC's bit for bit and differs from DCB's (what the io default was).
+TEST(Prepare, OneDefaultDemosaicEverywhere) {
+  const pipeline::PrepareOptions product = pipeline::default_prepare_options();
+  EXPECT_EQ(io::RawOptions{}.demosaic, io::Demosaic::mhc);
+  EXPECT_EQ(product.read.raw.demosaic, io::Demosaic::mhc);
+  EXPECT_EQ(io::ReadOptions{}.raw.demosaic, product.read.raw.demosaic);
+  EXPECT_EQ(pipeline::PrepareOptions{}.read.raw.demosaic, product.read.raw.demosaic);
+  EXPECT_EQ(io::RawOptions{}.half_size, product.read.raw.half_size);
+  EXPECT_EQ(io::ReadOptions{}.photos, product.read.photos);
+
+  Scratch dir;
+  sim::RenderOptions o;
+  o.size = {256, 170};
+  o.noise_sigma = 0.005;
+  o.scale = 2.5;
+  o.camera_optics();
+  auto set = sim::simulate_set("orange", o, io::Role::destination);
+  ASSERT_TRUE(set) << set.message();
+  ASSERT_TRUE(io::add_dng_raw_files(*set));
+  ASSERT_TRUE(io::write_set(*set, dir / "orange"));
+  auto by_default = io::read_set(dir / "orange");
+  ASSERT_TRUE(by_default) << by_default.message();
+  ASSERT_EQ(by_default->photos_from, "raw");
+  auto read_as = [&](io::Demosaic d) {
+    io::ReadOptions r;
+    r.raw.demosaic = d;
+    auto s = io::read_set(dir / "orange", r);
+    EXPECT_TRUE(s) << s.message();
+    return s ? s->images[0] : cv::Mat();
+  };
+  EXPECT_EQ(cv::norm(by_default->images[0], read_as(io::Demosaic::mhc), cv::NORM_INF), 0.0);
+  EXPECT_GT(cv::norm(by_default->images[0], read_as(io::Demosaic::dcb), cv::NORM_INF), 0.0);
 }
 
 TEST(Cache, SecondPreparationIsAHitWithTheSameResults) {

@@ -84,6 +84,11 @@ struct ImageSet {
   // set made in memory; not written to set.json.
   std::string layout;
   std::string photos_read;
+  // Photos read from RAW with RawOptions::camera_space are in the camera's
+  // linear RGB (white-balanced, before its colour matrix: what photometric
+  // stereo solves in); this matrix (on BGR pixels) makes them linear sRGB,
+  // and to_colour_managed applies it. Identity for photos in sRGB.
+  cv::Matx33f camera_to_srgb = cv::Matx33f::eye();
   // Camera RAW files to keep beside the photos (write_set writes raw[i] as
   // light_NN.<extension> and names it in set.json's images[i].raw; the
   // ambient's as ambient.<extension>). Empty = none. read_set does not fill
@@ -109,6 +114,11 @@ struct ImageSet {
   };
   std::optional<PreviewOf> preview_of;
 };
+
+// Makes a set read in the camera's space (ImageSet::camera_to_srgb) linear
+// sRGB: its photos and ambient frame in place (frames in parallel), and the
+// matrix the identity. Nothing for a set already in sRGB.
+void to_colour_managed(ImageSet& set);
 
 // veneer:   set.json + light_NN.png (+ ambient.png, mask.png, truth/)
 // diligent: filenames.txt, light_directions.txt, optional light_intensities.txt and mask.png

@@ -70,6 +70,7 @@ std::string salt_of(const io::ReadOptions& read, double scale, bool truth_normal
                    {"photos", io::photo_source_name(read.photos)},
                    {"half_size", read.raw.half_size},
                    {"demosaic", io::demosaic_name(read.raw.demosaic)},
+                   {"normals_from", "camera space"},  // RAW (issue 42)
                    {"scale", scale},
                    {"truth_normals", truth_normals},
                    {"libraw", io::raw_decoder_version()}};
@@ -320,11 +321,9 @@ cv::Mat median_minus_ambient(const std::vector<cv::Mat>& photos, const cv::Mat* 
 cv::Mat median_of(const std::vector<cv::Mat>& photos) { return median_minus_ambient(photos, nullptr); }
 
 PrepareOptions default_prepare_options() {
-  PrepareOptions o;
-  o.read.photos = io::PhotoSource::automatic;
-  o.read.raw.demosaic = io::Demosaic::mhc;
-  o.read.raw.half_size = false;
-  return o;
+  // the defaults are the options' own (io::RawOptions: MHC, full size; io::ReadOptions: RAW where present),
+  // so a caller that builds its own options reads as the CLI does
+  return PrepareOptions{};
 }
 
 Status PrepareOptions::check() const {
@@ -410,6 +409,7 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
   auto t0 = Clock::now();
   io::ReadOptions read = options.read;
   read.load_truth_appearance = false;  // the truth's albedo and depth: a transfer measures with neither
+  read.raw.camera_space = true;        // RAW: normals in the camera's space, sRGB after them (below)
   auto set = io::read_set(folder, read, sub_progress(progress, 0.0, 0.6));
   if (!set) return set.error();
   p.set = std::move(set).value();
@@ -435,6 +435,15 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
     if (!result) return make_error("set " + p.set.id + ": photometric stereo: " + result.message());
     solved = std::move(result).value();
     p.object.normals_seconds = since(t0);
+  }
+  // The photos colour-managed for the matcher and the pictures (a no-op unless a RAW file's colour matrix
+  // was kept aside for photometric stereo, issue 42), the albedo with them.
+  if (!io::is_identity(p.set.camera_to_srgb)) {
+    if (solved && !solved->albedo.empty()) {
+      cv::transform(solved->albedo, solved->albedo, p.set.camera_to_srgb);
+      solved->albedo = cv::max(solved->albedo, 0.0);
+    }
+    io::to_colour_managed(p.set);
   }
   // The photos as the matcher and the repaint use them: ambient removed, in
   // place, in the median's pass (read_set made every frame the set's size);

@@ -30,9 +30,10 @@ struct PrepareOptions {
 // How the product reads and prepares sets by default -- what `veneer
 // transfer` starts from before its flags, and what the viewer prepares its
 // pairs with, so both give one answer: RAW where every photo has one,
-// demosaiced by our MHC (io::Demosaic::mhc: ~20x faster than LibRaw's DCB,
-// the io library's default, at normals as good on the simulator's 5600x3750
+// demosaiced by our MHC (io::Demosaic::mhc, io::RawOptions' default: ~20x
+// faster than LibRaw's DCB at normals as good on the simulator's 5600x3750
 // pair, issue 34: 4.18 vs 4.51 deg mean), full size, the result cache on.
+// These are the options structs' own defaults: PrepareOptions{} is the same.
 PrepareOptions default_prepare_options();
 
 // What happened to one set, for metrics.json.

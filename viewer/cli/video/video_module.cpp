@@ -1,0 +1,49 @@
+// libveneer_video.so: OpenCV videoio behind video_module.hpp's table.
+#include "video_module.hpp"
+
+#include <opencv2/videoio.hpp>
+
+namespace {
+
+using namespace veneer::cli::video;
+
+class CaptureReader final : public Reader {
+ public:
+  cv::VideoCapture capture;
+  bool read(cv::Mat* frame) override { return capture.isOpened() && capture.read(*frame) && !frame->empty(); }
+};
+
+class FileWriter final : public Writer {
+ public:
+  cv::VideoWriter writer;
+  bool write(const cv::Mat& frame) override {
+    if (!writer.isOpened()) return false;
+    writer.write(frame);
+    return true;
+  }
+  void close() override { writer.release(); }
+};
+
+Reader* open_reader(const char* path) {
+  auto r = new CaptureReader;
+  if (!r->capture.open(path)) {
+    delete r;
+    return nullptr;
+  }
+  return r;
+}
+
+Writer* open_writer(const char* path, double fps, int width, int height) {
+  auto w = new FileWriter;
+  if (!w->writer.open(path, cv::VideoWriter::fourcc('m', 'p', '4', 'v'), fps, cv::Size(width, height))) {
+    delete w;
+    return nullptr;
+  }
+  return w;
+}
+
+const ModuleTable table{kModuleVersion, &open_reader, &open_writer};
+
+}  // namespace
+
+extern "C" __attribute__((visibility("default"))) const ModuleTable* veneer_video_module() { return &table; }
