@@ -151,13 +151,28 @@ struct Matcher {
   float coherence = 0.05f;  // cost of each 4-neighbour whose match lies more than 1.5 px away
   std::vector<cv::Point2i> match;  // per destination pixel (size.area()), (-1,-1) = none
   std::vector<float> cost;         // patch cost (no coherence part)
+  // The motion's linear part (source step per destination step): the patch
+  // is sampled through it on the source, so a copy at half or twice the size,
+  // or turned, compares sample for sample; identity until a motion is guessed.
+  cv::Matx22f linear = cv::Matx22f::eye();
+  std::array<cv::Point, 17> source_offsets = kOffsets;
+
+  void set_linear(const cv::Matx22f& l) {
+    linear = l;
+    for (size_t k = 0; k < kOffsets.size(); ++k) source_offsets[k] = step(kOffsets[k]);
+  }
+  // Where a destination step `o` lands on the source, to the nearest pixel.
+  cv::Point step(cv::Point o) const {
+    const cv::Vec2f v = linear * cv::Vec2f(static_cast<float>(o.x), static_cast<float>(o.y));
+    return {static_cast<int>(std::lround(v[0])), static_cast<int>(std::lround(v[1]))};
+  }
 
   float patch_cost(int px, int py, int qx, int qy) const {
     float total = 0, wsum = 0;
     for (size_t k = 0; k < kOffsets.size(); ++k) {
       const int dx = px + kOffsets[k].x, dy = py + kOffsets[k].y;
       if (!d.valid(dx, dy)) continue;
-      const int sx = qx + kOffsets[k].x, sy = qy + kOffsets[k].y;
+      const int sx = qx + source_offsets[k].x, sy = qy + source_offsets[k].y;
       wsum += kWeights[k];
       if (!s.valid(sx, sy)) {
         total += kWeights[k] * kOffObject;
@@ -168,7 +183,7 @@ struct Matcher {
     return wsum > 0 ? total / wsum : 0.0f;
   }
   // Neighbours whose current match does not continue (qx, qy): more than
-  // one pixel off the neighbour's own step (a uniform scale of 0.5..1.5 stays within it).
+  // one pixel off the neighbour's own step through `linear`.
   float incoherence(int px, int py, int qx, int qy) const {
     int broken = 0;
     for (const cv::Point o : {cv::Point(1, 0), cv::Point(-1, 0), cv::Point(0, 1), cv::Point(0, -1)}) {
@@ -176,8 +191,9 @@ struct Matcher {
       if (!d.valid(nx, ny)) continue;
       const cv::Point2i m = match[static_cast<size_t>(ny) * d.size.width + nx];
       if (m.x < 0) continue;
-      const int ex = m.x - qx - o.x, ey = m.y - qy - o.y;
-      if (ex * ex + ey * ey > 1) ++broken;
+      const float ex = m.x - qx - (linear(0, 0) * o.x + linear(0, 1) * o.y);
+      const float ey = m.y - qy - (linear(1, 0) * o.x + linear(1, 1) * o.y);
+      if (ex * ex + ey * ey > 1.01f) ++broken;
     }
     return coherence * broken;
   }
@@ -281,6 +297,136 @@ cv::Mat global_motion(const Level& d, const std::vector<cv::Point2i>& match, uns
   return share >= min_share ? A : cv::Mat();
 }
 
+cv::Matx22f linear_part(const cv::Mat& motion) {
+  return {static_cast<float>(motion.at<double>(0, 0)), static_cast<float>(motion.at<double>(0, 1)),
+          static_cast<float>(motion.at<double>(1, 0)), static_cast<float>(motion.at<double>(1, 1))};
+}
+
+// A guess of the object's motion from the masks: source = motion x destination.
+struct MotionGuess {
+  cv::Matx22f linear;  // scale and turn
+  cv::Mat motion;      // 2x3 CV_64F: the linear part about the masks' centroids
+};
+
+// The guesses, likeliest first: the scale from the masks' areas (a crop
+// biases it; the patches tolerate a fifth off), unturned; turned by the
+// difference of the masks' principal axes (both ways) when both are
+// elongated; unscaled; then turns in eighths (the patch compares up to a
+// sixteenth of a turn off).
+std::vector<MotionGuess> guess_motions(const Level& d, const Level& s) {
+  struct Shape {
+    double area = 0, cx = 0, cy = 0, axis = 0, elongation = 0;
+  };
+  auto shape_of = [](const Level& l) {
+    Shape sh;
+    double mx = 0, my = 0;
+    for (const cv::Point p : l.pixels) {
+      mx += p.x;
+      my += p.y;
+    }
+    sh.area = static_cast<double>(l.pixels.size());
+    if (sh.area == 0) return sh;
+    sh.cx = mx / sh.area;
+    sh.cy = my / sh.area;
+    double m20 = 0, m02 = 0, m11 = 0;
+    for (const cv::Point p : l.pixels) {
+      const double dx = p.x - sh.cx, dy = p.y - sh.cy;
+      m20 += dx * dx;
+      m02 += dy * dy;
+      m11 += dx * dy;
+    }
+    sh.axis = 0.5 * std::atan2(2 * m11, m20 - m02);
+    sh.elongation = m20 + m02 > 0 ? std::hypot(m20 - m02, 2 * m11) / (m20 + m02) : 0.0;
+    return sh;
+  };
+  const Shape a = shape_of(d), b = shape_of(s);
+  const double area_scale = a.area > 0 && b.area > 0 ? std::sqrt(b.area / a.area) : 1.0;
+  std::vector<std::pair<double, double>> tried;  // (scale, turn [rad])
+  std::vector<MotionGuess> out;
+  auto add = [&](double scale, double turn) {
+    turn = std::remainder(turn, 2 * CV_PI);
+    for (const auto& [sc, tn] : tried)
+      if (std::abs(sc / scale - 1) < 0.1 && std::abs(std::remainder(tn - turn, 2 * CV_PI)) < 10 * CV_PI / 180) return;
+    tried.emplace_back(scale, turn);
+    const double c = scale * std::cos(turn), sn = scale * std::sin(turn);
+    MotionGuess g;
+    g.linear = cv::Matx22f(static_cast<float>(c), static_cast<float>(-sn), static_cast<float>(sn), static_cast<float>(c));
+    g.motion = (cv::Mat_<double>(2, 3) << c, -sn, b.cx - (c * a.cx - sn * a.cy), sn, c, b.cy - (sn * a.cx + c * a.cy));
+    out.push_back(g);
+  };
+  add(area_scale, 0);
+  if (a.elongation > 0.15 && b.elongation > 0.15) {
+    add(area_scale, b.axis - a.axis);
+    add(area_scale, b.axis - a.axis + CV_PI);
+  }
+  add(1.0, 0);
+  for (int q = 1; q < 8; ++q) add(area_scale, q * CV_PI / 4);
+  return out;
+}
+
+// How much the pixels' features vary over two pixels (the median squared
+// difference): the texture and relief a motion can be seen by; near 0 on a
+// flat, uniform object.
+// At the coarsest level (noise averaged away): a sphere filling it varies by
+// ~1e-2, a flat uniform object under 0.5 % noise by ~3e-5.
+constexpr double kLittleStructure = 1e-4;
+double structure(const Level& l) {
+  std::vector<double> v;
+  const size_t step = std::max<size_t>(1, l.pixels.size() / 5000);
+  for (size_t i = 0; i < l.pixels.size(); i += step) {
+    const cv::Point p = l.pixels[i];
+    if (l.valid(p.x + 2, p.y)) v.push_back(sq_dist(l.at(p.x, p.y), l.at(p.x + 2, p.y), l.stride));
+    if (l.valid(p.x, p.y + 2)) v.push_back(sq_dist(l.at(p.x, p.y), l.at(p.x, p.y + 2), l.stride));
+  }
+  if (v.empty()) return 0;
+  std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+  return v[v.size() / 2];
+}
+
+// Said when an object's features hardly vary (too little texture or relief
+// for any motion to be seen by), else "".
+std::string featureless(const Level& d, const Level& s) {
+  const double a = structure(d), b = structure(s);
+  if (std::min(a, b) >= kLittleStructure) return "";
+  char buf[200];
+  std::snprintf(buf, sizeof buf, "the %s shows too little texture or relief to be placed (its features vary by %.4f over 2 px, under %.4f): ",
+                a <= b ? "destination" : "source", std::min(a, b), kLittleStructure);
+  return buf;
+}
+
+// "0.62-1.6x": the scales the guesses span.
+std::string scale_range(const std::vector<MotionGuess>& guesses) {
+  double lo = 1e9, hi = 0;
+  for (const auto& g : guesses) {
+    const double sc = std::sqrt(std::abs(g.linear(0, 0) * g.linear(1, 1) - g.linear(0, 1) * g.linear(1, 0)));
+    lo = std::min(lo, sc);
+    hi = std::max(hi, sc);
+  }
+  char buf[64];
+  if (hi / lo < 1.05)
+    std::snprintf(buf, sizeof buf, "%.2gx", 1 / lo);
+  else
+    std::snprintf(buf, sizeof buf, "%.2g-%.2gx", 1 / hi, 1 / lo);
+  return buf;
+}
+
+// The median angle [deg] between a pixel's normal and its right-hand
+// neighbour's: the normals' noise (and fine relief) at this size.
+double roughness_deg(const Level& l) {
+  std::vector<double> a;
+  const size_t step = std::max<size_t>(1, l.pixels.size() / 20000);
+  for (size_t i = 0; i < l.pixels.size(); i += step) {
+    const cv::Point p = l.pixels[i];
+    if (!l.valid(p.x + 1, p.y)) continue;
+    const cv::Vec3f n = l.normals.at<cv::Vec3f>(p), m = l.normals.at<cv::Vec3f>(p.y, p.x + 1);
+    if (n.dot(n) < 0.25f || m.dot(m) < 0.25f) continue;
+    a.push_back(std::acos(std::clamp(static_cast<double>(n.dot(m)), -1.0, 1.0)) * 180.0 / CV_PI);
+  }
+  if (a.empty()) return 0;
+  std::nth_element(a.begin(), a.begin() + a.size() / 2, a.end());
+  return a[a.size() / 2];
+}
+
 // `coarse` (2x3 at 1/scale) at full size, refitted by least squares to the
 // matches within 3 px of it when at least a third of them are; else empty.
 cv::Mat refit_motion(const Level& d, const std::vector<cv::Point2i>& match, const cv::Mat& coarse, double scale) {
@@ -339,10 +485,98 @@ bool motion_keeps_normals(const Level& d, const Level& s, const cv::Mat& motion,
     return *mid;
   };
   const double m = median(by_motion), n = median(by_seed);
+  // Noisy normals (a dark or grainy set) differ by their noise even where
+  // the motion is right: the allowance grows with it.
+  const double rd = roughness_deg(d), rs = roughness_deg(s);
+  const double noise = std::sqrt((rd * rd + rs * rs) / 2);
+  const double allowed = std::max({4.0, 3.0 * n, 1.5 * noise});
   if (why)
     *why = "the motion keeps the normals to " + std::to_string(m) + " deg (median), the nearest normal to " +
-           std::to_string(n);
-  return m <= std::max(4.0, 3.0 * n);
+           std::to_string(n) + ", noise " + std::to_string(noise) + ", allowed " + std::to_string(allowed);
+  return m <= allowed;
+}
+
+// The motion checked against the data, unbiased by itself: for a sample of
+// destination pixels, the patch's best position within `radius` px of where
+// the motion puts it (to a tenth of a pixel by a parabola through the costs),
+// kept where that best stands out of its window; the affine fitted to those
+// by RANSAC (1 px). The search's own matches lean towards the motion that
+// guided them (it is taken where it fits about as well), so a scale a few
+// percent off at the coarsest size would otherwise stay so. Returns `motion`
+// when too few positions agree.
+cv::Mat polish_motion(Matcher& m, const cv::Mat& motion, unsigned seed, int rounds = 2, int radius = 2) {
+  cv::Mat A = motion.clone();
+  const Level& d = m.d;
+  const Level& s = m.s;
+  const int side = 2 * radius + 1;
+  for (int round = 0; round < rounds; ++round) {
+    m.set_linear(linear_part(A));
+    const size_t step = std::max<size_t>(1, d.pixels.size() / 1500);
+    const size_t n = (d.pixels.size() + step - 1) / step;
+    std::vector<cv::Point2f> from(n, cv::Point2f(-1, -1)), to(n);
+    std::vector<float> distinct(n, -1.0f);
+    const double* a = A.ptr<double>(0);
+    const double* b = A.ptr<double>(1);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 64), [&](const tbb::blocked_range<size_t>& r) {
+      std::vector<float> c(static_cast<size_t>(side * side));
+      for (size_t i = r.begin(); i != r.end(); ++i) {
+        const cv::Point p = d.pixels[i * step];
+        const double tx = a[0] * p.x + a[1] * p.y + a[2], ty = b[0] * p.x + b[1] * p.y + b[2];
+        const int cx = static_cast<int>(std::lround(tx)), cy = static_cast<int>(std::lround(ty));
+        float best = 1e30f, sum = 0;
+        int bx = 0, by = 0, valid = 0;
+        bool complete = true;
+        for (int oy = -radius; oy <= radius && complete; ++oy)
+          for (int ox = -radius; ox <= radius; ++ox) {
+            if (!s.valid(cx + ox, cy + oy)) {
+              complete = false;
+              break;
+            }
+            const float v = m.patch_cost(p.x, p.y, cx + ox, cy + oy);
+            c[static_cast<size_t>((oy + radius) * side + ox + radius)] = v;
+            sum += v;
+            ++valid;
+            if (v < best) {
+              best = v;
+              bx = ox;
+              by = oy;
+            }
+          }
+        if (!complete || std::abs(bx) == radius || std::abs(by) == radius) continue;
+        auto at = [&](int ox, int oy) { return c[static_cast<size_t>((oy + radius) * side + ox + radius)]; };
+        auto vertex = [](float l, float c0, float r) {
+          const float den = l - 2 * c0 + r;
+          return den > 1e-12f ? std::clamp(0.5f * (l - r) / den, -0.5f, 0.5f) : 0.0f;
+        };
+        const float fx = static_cast<float>(cx + bx) + vertex(at(bx - 1, by), best, at(bx + 1, by));
+        const float fy = static_cast<float>(cy + by) + vertex(at(bx, by - 1), best, at(bx, by + 1));
+        from[i] = cv::Point2f(static_cast<float>(p.x), static_cast<float>(p.y));
+        to[i] = cv::Point2f(fx, fy);
+        distinct[i] = sum / valid - best;
+      }
+    });
+    // The half of the positions that stand out most (texture, relief); flat
+    // patches' minima wander in their window.
+    std::vector<float> sorted;
+    for (float v : distinct)
+      if (v > 0) sorted.push_back(v);
+    if (sorted.size() < 60) break;
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    const float cut = sorted[sorted.size() / 2];
+    std::vector<cv::Point2f> f2, t2;
+    for (size_t i = 0; i < n; ++i)
+      if (distinct[i] >= cut) {
+        f2.push_back(from[i]);
+        t2.push_back(to[i]);
+      }
+    cv::setRNGSeed(static_cast<int>(seed) + 17 * round);
+    std::vector<uchar> inliers;
+    cv::Mat R = cv::estimateAffine2D(f2, t2, inliers, cv::RANSAC, 1.0, 500, 0.995, 10);
+    if (R.empty() || std::count(inliers.begin(), inliers.end(), 1) * 3 < static_cast<long>(f2.size())) break;
+    A = R;
+  }
+  m.set_linear(linear_part(A));
+  return A;
 }
 
 // Two different objects: `coherent` on the normals (StyleBlit-style chunks of
@@ -396,110 +630,161 @@ Expected<Map> run_combined(const ObjectView& destination, const ObjectView& sour
     };
     tbb::parallel_invoke([&] { make(destination, d); }, [&] { make(source, s); });
     if (s.pixels.empty()) return make_error("combined: the source has no object pixels with normals");
-    Matcher m{d, s, coherence, {}, {}};
-    m.match.assign(static_cast<size_t>(d.size.area()), cv::Point2i(-1, -1));
-    m.cost.assign(static_cast<size_t>(d.size.area()), 0.0f);
     const std::vector<cv::Point2i> seed = seed_by_normal(d, s);
-    // Start: the coarser level's match, scaled up, or the seed.
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, d.pixels.size(), 2048), [&](const tbb::blocked_range<size_t>& r) {
-      for (size_t i = r.begin(); i != r.end(); ++i) {
-        const cv::Point p = d.pixels[i];
-        const size_t at = static_cast<size_t>(p.y) * d.size.width + p.x;
-        cv::Point2i best = seed[at];
-        float best_cost = s.valid(best.x, best.y) ? m.patch_cost(p.x, p.y, best.x, best.y) : 1e30f;
-        if (!previous.empty()) {
-          const int cx = std::min(p.x / 2, previous_size.width - 1), cy = std::min(p.y / 2, previous_size.height - 1);
-          const cv::Point2i c = previous[static_cast<size_t>(cy) * previous_size.width + cx];
-          if (c.x >= 0) {
-            const int qx = 2 * c.x + (p.x - 2 * cx), qy = 2 * c.y + (p.y - 2 * cy);
+    // Start: the coarser level's match, scaled up, or the seed; and the
+    // object's motion (`guide`, 2x3 at this level's scale) where its patch
+    // fits about as well.
+    auto initialise = [&](Matcher& m, const cv::Mat& guide) {
+      m.match.assign(static_cast<size_t>(d.size.area()), cv::Point2i(-1, -1));
+      m.cost.assign(static_cast<size_t>(d.size.area()), 0.0f);
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, d.pixels.size(), 2048), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i != r.end(); ++i) {
+          const cv::Point p = d.pixels[i];
+          const size_t at = static_cast<size_t>(p.y) * d.size.width + p.x;
+          cv::Point2i best = seed[at];
+          float best_cost = s.valid(best.x, best.y) ? m.patch_cost(p.x, p.y, best.x, best.y) : 1e30f;
+          if (!previous.empty()) {
+            const int cx = std::min(p.x / 2, previous_size.width - 1), cy = std::min(p.y / 2, previous_size.height - 1);
+            const cv::Point2i c = previous[static_cast<size_t>(cy) * previous_size.width + cx];
+            if (c.x >= 0) {
+              const cv::Point o = m.step({p.x - 2 * cx, p.y - 2 * cy});
+              const int qx = 2 * c.x + o.x, qy = 2 * c.y + o.y;
+              if (s.valid(qx, qy)) {
+                const float pc = m.patch_cost(p.x, p.y, qx, qy);
+                if (pc < best_cost) {
+                  best = {qx, qy};
+                  best_cost = pc;
+                }
+              }
+            }
+          }
+          if (!guide.empty()) {
+            const double* A = guide.ptr<double>(0);
+            const double* B = guide.ptr<double>(1);
+            const int qx = static_cast<int>(std::lround(A[0] * p.x + A[1] * p.y + A[2]));
+            const int qy = static_cast<int>(std::lround(B[0] * p.x + B[1] * p.y + B[2]));
             if (s.valid(qx, qy)) {
               const float pc = m.patch_cost(p.x, p.y, qx, qy);
-              if (pc < best_cost) {
+              if (pc <= 1.5f * best_cost + 1e-3f) {
                 best = {qx, qy};
                 best_cost = pc;
               }
             }
           }
-        }
-        if (!level_motion.empty()) {
-          // The object's motion found on the coarser level, at this level's scale.
-          const double* A = level_motion.ptr<double>(0);
-          const double* B = level_motion.ptr<double>(1);
-          const int qx = static_cast<int>(std::lround(A[0] * p.x + A[1] * p.y + A[2] * 2.0));
-          const int qy = static_cast<int>(std::lround(B[0] * p.x + B[1] * p.y + B[2] * 2.0));
-          if (s.valid(qx, qy)) {
-            const float pc = m.patch_cost(p.x, p.y, qx, qy);
-            if (pc <= 1.5f * best_cost + 1e-3f) {
-              best = {qx, qy};
-              best_cost = pc;
-            }
-          }
-        }
-        m.match[at] = best;
-        m.cost[at] = best_cost;
-      }
-    });
-    // Search radius: the whole source at the coarsest level, a few pixels below it.
-    const int max_radius = lv == levels - 1 ? std::max(s.size.width, s.size.height) : 4;
-    const int bands = std::max(1, std::min(64, d.box.height / 16));
-    const int level_iterations = lv == levels - 1 ? iterations : std::min(iterations, 2);
-    for (int it = 0; it < level_iterations; ++it) {
-      if (progress.cancelled()) return make_error("cancelled during combined");
-      const bool forward = it % 2 == 0;
-      tbb::parallel_for(0, bands, [&](int band) {
-        std::mt19937 rng(options.seed * 7919u + static_cast<unsigned>(lv * 131 + it * 17 + band));
-        const int y0 = d.box.y + d.box.height * band / bands, y1 = d.box.y + d.box.height * (band + 1) / bands;
-        const int x0 = d.box.x, x1 = d.box.x + d.box.width;
-        const int step = forward ? 1 : -1;
-        for (int y = forward ? y0 : y1 - 1; forward ? y < y1 : y >= y0; y += step) {
-          for (int x = forward ? x0 : x1 - 1; forward ? x < x1 : x >= x0; x += step) {
-            if (!d.valid(x, y)) continue;
-            const size_t at = static_cast<size_t>(y) * d.size.width + x;
-            cv::Point2i best = m.match[at];
-            float best_patch = m.cost[at];
-            float best_total = m.total(x, y, best.x, best.y, best_patch);
-            // Propagation from the neighbours already visited.
-            for (const cv::Point o : {cv::Point(-step, 0), cv::Point(0, -step)}) {
-              const int nx = x + o.x, ny = y + o.y;
-              if (!d.valid(nx, ny)) continue;
-              const cv::Point2i q = m.match[static_cast<size_t>(ny) * d.size.width + nx];
-              if (q.x < 0) continue;
-              m.try_candidate(x, y, q.x - o.x, q.y - o.y, best, best_patch, best_total);
-            }
-            // The seed, and random search around the best.
-            const cv::Point2i sd = seed[at];
-            if (sd.x >= 0) m.try_candidate(x, y, sd.x, sd.y, best, best_patch, best_total);
-            for (int r = max_radius; r >= 1; r /= 2) {
-              std::uniform_int_distribution<int> u(-r, r);
-              m.try_candidate(x, y, best.x + u(rng), best.y + u(rng), best, best_patch, best_total);
-            }
-            m.match[at] = best;
-            m.cost[at] = best_patch;
-          }
+          m.match[at] = best;
+          m.cost[at] = best_cost;
         }
       });
-      progress.report((levels - 1 - lv + (it + 1.0) / level_iterations) / levels, "combined");
-    }
+    };
+    // PatchMatch: propagation (through the motion's linear part), the seed,
+    // random search around the best within `max_radius`.
+    auto search = [&](Matcher& m, int level_iterations, int max_radius, unsigned salt, int first = 0) {
+      const int bands = std::max(1, std::min(64, d.box.height / 16));
+      for (int it = first; it < level_iterations; ++it) {
+        if (progress.cancelled()) return false;
+        const bool forward = it % 2 == 0;
+        const int step = forward ? 1 : -1;
+        const cv::Point back_x = m.step({-step, 0}), back_y = m.step({0, -step});
+        tbb::parallel_for(0, bands, [&](int band) {
+          std::mt19937 rng(options.seed * 7919u + static_cast<unsigned>(lv * 131 + it * 17 + band) + salt * 104729u);
+          const int y0 = d.box.y + d.box.height * band / bands, y1 = d.box.y + d.box.height * (band + 1) / bands;
+          const int x0 = d.box.x, x1 = d.box.x + d.box.width;
+          for (int y = forward ? y0 : y1 - 1; forward ? y < y1 : y >= y0; y += step) {
+            for (int x = forward ? x0 : x1 - 1; forward ? x < x1 : x >= x0; x += step) {
+              if (!d.valid(x, y)) continue;
+              const size_t at = static_cast<size_t>(y) * d.size.width + x;
+              cv::Point2i best = m.match[at];
+              float best_patch = m.cost[at];
+              float best_total = m.total(x, y, best.x, best.y, best_patch);
+              // Propagation from the neighbours already visited.
+              for (int k = 0; k < 2; ++k) {
+                const cv::Point o = k == 0 ? cv::Point(-step, 0) : cv::Point(0, -step);
+                const cv::Point so = k == 0 ? back_x : back_y;
+                const int nx = x + o.x, ny = y + o.y;
+                if (!d.valid(nx, ny)) continue;
+                const cv::Point2i q = m.match[static_cast<size_t>(ny) * d.size.width + nx];
+                if (q.x < 0) continue;
+                m.try_candidate(x, y, q.x - so.x, q.y - so.y, best, best_patch, best_total);
+              }
+              // The seed, and random search around the best.
+              const cv::Point2i sd = seed[at];
+              if (sd.x >= 0) m.try_candidate(x, y, sd.x, sd.y, best, best_patch, best_total);
+              for (int r = max_radius; r >= 1; r /= 2) {
+                std::uniform_int_distribution<int> u(-r, r);
+                m.try_candidate(x, y, best.x + u(rng), best.y + u(rng), best, best_patch, best_total);
+              }
+              m.match[at] = best;
+              m.cost[at] = best_patch;
+            }
+          }
+        });
+        progress.report((levels - 1 - lv + (it + 1.0) / level_iterations) / levels, "combined");
+      }
+      return true;
+    };
+    Matcher m{d, s, coherence, {}, {}};
     if (lv == levels - 1) {
       // Is the destination the source moved (scaled, turned, cropped)? Then
       // the finer levels follow that motion; else the objects differ, and
       // coherent chunks of the nearest normals serve better than patches
       // (whose shapes differ between objects).
+      // Patches compare only at about the right scale and turn, so the search
+      // runs under each guess of the motion the masks give (their areas'
+      // ratio, their principal axes, quarter turns), the likeliest first,
+      // until one is followed by half the matches; the best is kept.
       // At this size a scaled and turned copy's integer matches are coarse:
       // a motion a third of them follow is taken as a guess here; the full
       // size decides (a majority follows it there, and it keeps the normals).
-      double share = 0;
-      level_motion = global_motion(d, m.match, options.seed, &share, 0.35);
+      // An object whose features hardly vary (flat and of one colour) can be
+      // placed anywhere: no motion is sought, and the note says why.
+      if (const std::string flat = featureless(d, s); !flat.empty())
+        return different_objects(destination, source, options, progress,
+                                 flat.substr(0, flat.size() - 2) + ": no motion sought");
+      const std::vector<MotionGuess> guesses = guess_motions(d, s);
+      // Each guess is screened by one pass of the search; the best (or the
+      // first a majority follows) gets the remaining passes.
+      const int radius = std::max(s.size.width, s.size.height);
+      double best_share = -1;
+      size_t best_guess = 0;
+      for (size_t g = 0; g < guesses.size(); ++g) {
+        Matcher trial{d, s, coherence, {}, {}};
+        trial.set_linear(guesses[g].linear);
+        initialise(trial, guesses[g].motion);
+        if (!search(trial, 1, radius, static_cast<unsigned>(g))) return make_error("cancelled during combined");
+        double share = 0;
+        global_motion(d, trial.match, options.seed, &share, 0.35);
+        if (share > best_share) {
+          best_share = share;
+          best_guess = g;
+          m.match = std::move(trial.match);
+          m.cost = std::move(trial.cost);
+          m.set_linear(trial.linear);
+        }
+        if (share >= 0.5) break;
+      }
+      if (!search(m, iterations, radius, static_cast<unsigned>(best_guess), 1))
+        return make_error("cancelled during combined");
+      level_motion = global_motion(d, m.match, options.seed, &best_share, 0.35);
       if (level_motion.empty())
         return different_objects(destination, source, options, progress,
-                                 "no motion at 1/" + std::to_string(1 << lv) + " size: the best follows " +
-                                     std::to_string(static_cast<int>(100 * share)) + " % of the matches (35 % needed)");
-    } else if (lv > 0 && !level_motion.empty()) {
-      cv::Mat up = level_motion.clone();
-      up.at<double>(0, 2) *= 2.0;
-      up.at<double>(1, 2) *= 2.0;
-      cv::Mat refit = refit_motion(d, m.match, up, 1.0);
-      level_motion = refit.empty() ? up : refit;
+                                 "no one motion (scale " + scale_range(guesses) +
+                                     ", turned, cropped; " + std::to_string(guesses.size()) +
+                                     " guesses from the masks) moves the destination onto the source: at 1/" +
+                                     std::to_string(1 << lv) + " size the best is followed by " +
+                                     std::to_string(static_cast<int>(100 * best_share)) +
+                                     " % of the matches (35 % needed)");
+      m.set_linear(linear_part(level_motion));
+    } else {
+      m.set_linear(linear_part(level_motion));
+      cv::Mat guide = level_motion.clone();
+      guide.at<double>(0, 2) *= 2.0;
+      guide.at<double>(1, 2) *= 2.0;
+      initialise(m, guide);
+      if (!search(m, std::min(iterations, 2), 4, 0)) return make_error("cancelled during combined");
+      if (lv > 0) {
+        cv::Mat refit = refit_motion(d, m.match, guide, 1.0);
+        level_motion = polish_motion(m, refit.empty() ? guide : refit, options.seed, 1);
+      }
     }
     if (lv == 0) {
       // One motion for the whole object (the destination is the source moved,
@@ -521,9 +806,11 @@ Expected<Map> run_combined(const ObjectView& destination, const ObjectView& sour
         return different_objects(destination, source, options, progress,
                                  "the motion found at 1/" + std::to_string(1 << (levels - 1)) +
                                      " size is not followed at full size");
+      motion = polish_motion(m, motion, options.seed);
       std::string why;
       if (!motion_keeps_normals(d, s, motion, seed, &why))
         return different_objects(destination, source, options, progress, why + ": not one object moved");
+      m.set_linear(linear_part(motion));
       if (!motion.empty()) {
         const double a = motion.at<double>(0, 0), b = motion.at<double>(0, 1), c = motion.at<double>(0, 2);
         const double e = motion.at<double>(1, 0), f = motion.at<double>(1, 1), g = motion.at<double>(1, 2);
