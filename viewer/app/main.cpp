@@ -29,9 +29,12 @@ int main(int argc, char** argv) {
   o.destination = parser.value(dst);
   o.source = parser.value(src);
   o.workdir = parser.value(workdir);
-  o.fingerprint = parser.value(fingerprint);
+  // With the rig's fingerprint given, the window connects with it (else with the pinned one, or asks).
+  const bool pinned_here = parser.isSet(fingerprint) && !o.rig.isEmpty();
+  if (pinned_here) o.rig.clear();
   veneer::app::MainWindow window(o);
   window.show();
+  if (pinned_here) window.rigPanel().connectToRig(parser.value(rig), o.token_file, parser.value(fingerprint));
   if (parser.isSet(compute)) window.transfer().startTransfer();
   return app.exec();
 }
