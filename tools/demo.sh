@@ -23,7 +23,7 @@ step() { printf '\n== %s\n' "$*"; }
 port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
 store="$out/rig-store"
 step "starting the simulated rig on 127.0.0.1:$port (store $store)"
-# The API is TLS 1.3: the rig's certificate (made now, in its store) is pinned
+# The API is TLS 1.3: the rig's certificate (made now, beside its store) is pinned
 # by its fingerprint, in a known-rigs file of the demo's own (not ~/.config).
 fingerprint=$("$bin/veneerd" --fingerprint --simulate --store "$store" 2>/dev/null)
 export VENEER_KNOWN_RIGS="$out/known_rigs"

@@ -171,6 +171,15 @@ Status write_file_atomically(const fs::path& file, const std::string& bytes, uns
 Expected<Identity> ensure_identity(const fs::path& key_file, const fs::path& cert_file, const std::string& common_name) {
   Identity id{key_file, cert_file, "", false};
   std::error_code ec;
+  // The folders made for the identity are the owner's alone.
+  for (const auto& file : {key_file, cert_file}) {
+    const fs::path dir = file.parent_path();
+    if (!dir.empty() && !fs::exists(dir, ec)) {
+      fs::create_directories(dir, ec);
+      if (ec) return make_error(dir.string() + ": cannot create: " + ec.message());
+      fs::permissions(dir, fs::perms::owner_all, fs::perm_options::replace, ec);
+    }
+  }
   const bool have_key = fs::exists(key_file, ec);
   const bool have_cert = fs::exists(cert_file, ec);
   if (have_cert && !have_key) {

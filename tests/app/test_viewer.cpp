@@ -868,7 +868,7 @@ TEST(Viewer, TheRigIsPinnedAtFirstUseAndAChangedCertificateRefused) {
   QTemporaryDir dir;
   SimulatedRig rig;
   ASSERT_TRUE(rig.started()) << rig.log().toStdString();
-  auto fp = veneer::tls::fingerprint_of_cert_file((rig.store() + "/tls-cert.pem").toStdString());
+  auto fp = veneer::tls::fingerprint_of_cert_file((rig.store() + ".tls/cert.pem").toStdString());
   ASSERT_TRUE(fp) << fp.message();
   MainWindow w({QString(), QString(), QString(), QString(), dir.path()});
   const QString known = dir.path() + "/known_rigs";

@@ -187,9 +187,10 @@ inline RunResult run(const std::string& command) {
 
 inline std::string veneer_cli() { return VENEER_BIN_DIR "/veneer"; }
 
-// The fingerprint of the rig's certificate in `store` ("" when there is none).
+// The fingerprint of the certificate of the rig with store `store` (kept in
+// <store>.tls/; "" when there is none).
 inline std::string rig_fingerprint(const fs::path& store) {
-  auto fp = veneer::tls::fingerprint_of_cert_file(store / "tls-cert.pem");
+  auto fp = veneer::tls::fingerprint_of_cert_file(store.string() + ".tls/cert.pem");
   return fp ? *fp : std::string();
 }
 

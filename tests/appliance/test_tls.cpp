@@ -296,7 +296,7 @@ TEST(Tls, PlainTcpOnlyWhenConfiguredAndSaidSo) {
   ASSERT_TRUE(d && d->port()) << (d ? d->log() : "");
   auto token = veneer::rig::read_token_file(store / "token");
   ASSERT_TRUE(token);
-  EXPECT_FALSE(fs::exists(store / "tls-key.pem")) << "no key is made for a plain rig";
+  EXPECT_FALSE(fs::exists(store.string() + ".tls")) << "no key is made for a plain rig";
   veneer::rig::ConnectOptions o;
   o.plain_tcp = true;
   auto c = veneer::rig::Client::connect({"127.0.0.1", d->port()}, *token, o);

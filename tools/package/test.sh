@@ -123,7 +123,7 @@ rig_capture() {
   cp "$token" "$amd64/tmp/token-$who"
   # (a capture under qemu-user takes minutes: --timeout)
   # The API is TLS 1.3: the rig's certificate is pinned by its fingerprint (read here from its store).
-  local cert="$1/var/lib/veneer/sets/tls-cert.pem" fp
+  local cert="$1/var/lib/veneer/sets.tls/cert.pem" fp
   if ! wait_file "$cert"; then bad "$who: veneerd made no TLS certificate ($cert)"; return 1; fi
   fp=$(openssl x509 -in "$cert" -noout -fingerprint -sha256 | cut -d= -f2)
   local rig=(--rig "127.0.0.1:$port" --token-file "/tmp/token-$who" --timeout 900 --fingerprint "$fp"

@@ -34,7 +34,7 @@ MainWindow::MainWindow(const Options& options, QWidget* parent) : QMainWindow(pa
 
   if (!options.destination.isEmpty()) flow_->loadLocalSet(options.destination, veneer::io::Role::destination);
   if (!options.source.isEmpty()) flow_->loadLocalSet(options.source, veneer::io::Role::source);
-  if (!options.rig.isEmpty()) rig_panel_->connectToRig(options.rig, options.token_file, options.fingerprint);
+  if (!options.rig.isEmpty()) rig_panel_->connectToRig(options.rig, options.token_file);
 }
 
 MainWindow::~MainWindow() {

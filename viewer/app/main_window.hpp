@@ -39,7 +39,6 @@ class MainWindow : public QMainWindow {
     QString token_file;  // the rig's token file
     QString destination, source;  // local sets to load at start
     QString workdir;     // where pulled sets go (default: the app's data folder)
-    QString fingerprint; // the rig's certificate fingerprint (empty: pinned, or asked at first use)
   };
   explicit MainWindow(const Options& options, QWidget* parent = nullptr);
   ~MainWindow() override;
