@@ -392,12 +392,14 @@ struct Client::Impl {
         finish("bad data from the rig: " + in.error());
         return;
       }
+      bool closed_now = false;
       {  // once closed (close() from another thread), nothing more is delivered, even what is already read
         std::lock_guard lock(mutex);
-        if (closed) {
-          finish(why);
-          return;
-        }
+        closed_now = closed;
+      }
+      if (closed_now) {
+        finish(why);
+        return;
       }
       dispatch(m, why);
     }

@@ -3,7 +3,7 @@
 // proto/README.md "Finding rigs"): service type _veneer._tcp on the API port,
 // instance name = the rig's name, TXT record
 //   name=<rig name>  version=<veneerd version>  proto=<protocol version>
-//   transport=tls1.3 fingerprint=<certificate fingerprint>   (or transport=tcp in plain mode)
+//   transport=tls1.3 certfp=<certificate fingerprint>   (or transport=tcp in plain mode)
 #include <cstdint>
 #include <map>
 #include <string>
