@@ -23,13 +23,18 @@ step() { printf '\n== %s\n' "$*"; }
 port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
 store="$out/rig-store"
 step "starting the simulated rig on 127.0.0.1:$port (store $store)"
+# The API is TLS 1.3: the rig's certificate (made now, beside its store) is pinned
+# by its fingerprint, in a known-rigs file of the demo's own (not ~/.config).
+fingerprint=$("$bin/veneerd" --fingerprint --simulate --store "$store" 2>/dev/null)
+export VENEER_KNOWN_RIGS="$out/known_rigs"
+echo "rig certificate fingerprint (SHA-256): $fingerprint"
 "$bin/veneerd" --simulate --scenes bull,orange --listen "127.0.0.1:$port" --store "$store" \
   --size "$size" > "$out/veneerd.log" 2>&1 &
 rig_pid=$!
 cleanup() { kill "$rig_pid" 2>/dev/null || true; wait "$rig_pid" 2>/dev/null || true; }
 trap cleanup EXIT
 for _ in $(seq 100); do [ -f "$store/token" ] && break; sleep 0.1; done
-rig=(--rig "127.0.0.1:$port" --token-file "$store/token")
+rig=(--rig "127.0.0.1:$port" --token-file "$store/token" --fingerprint "$fingerprint")
 "$bin/veneer" rig status "${rig[@]}"
 
 step "button press 1: capture the destination (bull)"
@@ -64,7 +69,7 @@ if [ -n "${DISPLAY:-}" ] && [ ! -x "$bin/veneer-viewer" ]; then
 fi
 if [ -n "${DISPLAY:-}" ] && [ -x "$bin/veneer-viewer" ]; then
   step "opening veneer-viewer on the simulated rig (close the window to end the demo)"
-  "$bin/veneer-viewer" --rig "127.0.0.1:$port" --token-file "$store/token" \
+  "$bin/veneer-viewer" --rig "127.0.0.1:$port" --token-file "$store/token" --fingerprint "$fingerprint" \
     --dst "$out/destination" --src "$out/source" || true
 fi
 step "done: pictures in $out"

@@ -112,8 +112,8 @@ veneer::Status parse_listen(const std::string& text, std::string& host, uint16_t
 veneer::Expected<Config> parse_config(const json& doc, const std::string& origin) {
   Reader r{origin};
   if (!doc.is_object()) return r.bad("(top level)", "an object", doc);
-  static const char* known[] = {"name", "listen", "store", "token_file", "lamps", "camera",
-                                "trigger", "led", "gpio", "capture"};
+  static const char* known[] = {"name", "listen", "store", "token_file", "tls_key_file", "tls_cert_file",
+                                "plain_tcp", "lamps", "camera", "trigger", "led", "gpio", "capture"};
   for (const auto& [key, value] : doc.items()) {
     bool ok = false;
     for (const char* k : known) ok = ok || key == k;
@@ -132,6 +132,16 @@ veneer::Expected<Config> parse_config(const json& doc, const std::string& origin
   text.clear();
   if (auto s = r.string(doc, "token_file", "token_file", text); !s) return s.error();
   if (!text.empty()) c.token_file = text;
+  text.clear();
+  if (auto s = r.string(doc, "tls_key_file", "tls_key_file", text); !s) return s.error();
+  if (!text.empty()) c.tls_key_file = text;
+  text.clear();
+  if (auto s = r.string(doc, "tls_cert_file", "tls_cert_file", text); !s) return s.error();
+  if (!text.empty()) c.tls_cert_file = text;
+  if (doc.contains("plain_tcp")) {
+    if (!doc.at("plain_tcp").is_boolean()) return r.bad("plain_tcp", "true or false", doc.at("plain_tcp"));
+    c.plain_tcp = doc.at("plain_tcp").get<bool>();
+  }
 
   if (auto s = r.device(doc, "lamps", c.lamps); !s) return s.error();
   if (auto s = r.device(doc, "camera", c.camera); !s) return s.error();

@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include "veneer/proto/discovery.hpp"
+#include "veneer/proto/tls.hpp"
 #include "veneer/sim/simulator.hpp"
 #include "veneer/util/log.hpp"
 #include "veneer/util/token_file.hpp"
@@ -61,6 +62,22 @@ veneer::Expected<std::string> ensure_token(const fs::path& file) {
   }
   VLOG_INFO("Server", "new access token written to {}", file.string());
   return token;
+}
+
+veneer::Expected<std::string> ensure_tls_identity(const Config& c) {
+  auto id = veneer::tls::ensure_identity(c.tls_key_path(), c.tls_cert_path(), c.name);
+  if (!id) return make_error("TLS identity: " + id.message());
+  if (id->created) {
+    VLOG_INFO("Server", "new TLS key and self-signed certificate written to {} and {}", c.tls_key_path().string(),
+              c.tls_cert_path().string());
+  } else {
+    struct stat st {};
+    if (::stat(c.tls_key_path().c_str(), &st) == 0 && (st.st_mode & 077) != 0) {
+      VLOG_WARN("Server", "{} is readable by others (mode {:o}); it should be 0600", c.tls_key_path().string(),
+                st.st_mode & 0777);
+    }
+  }
+  return id->fingerprint;
 }
 
 namespace {
@@ -141,6 +158,7 @@ veneer::Expected<std::unique_ptr<Daemon>> Daemon::create(const DaemonOptions& o)
   }
   if (!o.store.empty()) c.store = o.store;
   if (!o.token_file.empty()) c.token_file = o.token_file;
+  if (o.plain_tcp) c.plain_tcp = true;
   d->advertise_ = o.advertise;
 
   auto store = Store::open(c.store);
@@ -162,6 +180,11 @@ veneer::Expected<std::unique_ptr<Daemon>> Daemon::create(const DaemonOptions& o)
   auto token = ensure_token(c.token_path());
   if (!token) return token.error();
   d->token_ = *token;
+  if (!c.plain_tcp) {
+    auto fp = ensure_tls_identity(c);
+    if (!fp) return fp.error();
+    d->fingerprint_ = *fp;
+  }
 
   auto& reg = DeviceRegistry::instance();
   RigDevices dev;
@@ -247,6 +270,9 @@ veneer::Expected<std::unique_ptr<Daemon>> Daemon::create(const DaemonOptions& o)
   so.host = c.listen_host;
   so.port = c.listen_port;
   so.token = d->token_;
+  so.plain_tcp = c.plain_tcp;
+  so.tls_key_file = c.tls_key_path().string();
+  so.tls_cert_file = c.tls_cert_path().string();
   d->server_ = std::make_unique<Server>(*d->rig_, so);
   return d;
 }
@@ -257,6 +283,12 @@ bool loopback_only(const std::string& host) {
 
 veneer::Status Daemon::start() {
   if (auto s = server_->start(); !s) return s;
+  if (config_.plain_tcp) {
+    VLOG_WARN("Server", "the API is served in PLAIN TCP (configured so): no encryption, the access token and every "
+              "photo readable on the network; clients connect with --plain-tcp");
+  } else {
+    VLOG_INFO("Server", "TLS 1.3; certificate fingerprint (SHA-256) {}", fingerprint_);
+  }
   rig_->start();
   if (!advertise_) {
   } else if (loopback_only(config_.listen_host)) {
@@ -270,7 +302,7 @@ veneer::Status Daemon::start() {
     ad.name = config_.name;
     ad.type = veneer::wire::kServiceType;
     ad.port = port();
-    ad.txt = veneer::wire::rig_txt(config_.name, veneer::wire::software_version());
+    ad.txt = veneer::wire::rig_txt(config_.name, veneer::wire::software_version(), fingerprint_);
     ad.reach = *reach;
     auto a = veneer::dnssd::Advertiser::start(ad);
     if (a) {

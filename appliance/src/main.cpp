@@ -2,6 +2,7 @@
 //   veneerd --simulate [--scenes bull,stone] [--listen 127.0.0.1:7878] [--store DIR] [--size 1024x680]
 //   veneerd --config /etc/veneer/veneerd.json
 //   veneerd --check-hardware [--config FILE]
+//   veneerd --fingerprint [--config FILE | --store DIR]   (the TLS certificate's fingerprint; made if missing)
 //   veneerd ptpip-twin --bridge HOST:PORT --key KEY --lamps 1,2,3   (a PTP/IP camera twin)
 #include <csignal>
 #include <cstdio>
@@ -94,6 +95,13 @@ int main(int argc, char** argv) {
   app.add_option("--listen", listen, "address to serve the API on, host:port (default 127.0.0.1:7878)");
   app.add_option("--store", store, "folder for the captured sets (and the token)");
   app.add_option("--token-file", token_file, "access token file (default <store>/token, created 0600)");
+  bool fingerprint = false;
+  app.add_flag("--fingerprint", fingerprint,
+               "print the fingerprint (SHA-256) of the rig's TLS certificate and exit (the key and certificate are "
+               "made in the store on first use)");
+  app.add_flag("--plain-tcp", o.plain_tcp,
+               "serve the API in plain TCP, without TLS: the token and every photo readable on the network (also "
+               "\"plain_tcp\": true in the config)");
   bool no_advertise = false;
   app.add_flag("--no-advertise", no_advertise, "do not advertise the API on the LAN as _veneer._tcp (DNS-SD)");
   app.add_option("--log", log_spec, "log levels, e.g. 'debug' or 'Camera=debug,Lamps=warn'");
@@ -122,6 +130,21 @@ int main(int argc, char** argv) {
 #else
     return fail("--check-hardware: this build has no hardware back-ends", 2);
 #endif
+  }
+  if (fingerprint) {
+    veneerd::Config c;
+    if (!config.empty()) {
+      auto loaded = veneerd::load_config(config);
+      if (!loaded) return fail(loaded.message());
+      c = std::move(*loaded);
+    } else if (o.simulate) {
+      c.name = "veneer-simulated-rig";
+    }
+    if (!store.empty()) c.store = store;
+    auto fp = veneerd::ensure_tls_identity(c);
+    if (!fp) return fail(fp.message());
+    std::printf("%s\n", fp->c_str());
+    return 0;
   }
   if (!o.simulate && config.empty()) return fail("give --simulate or --config FILE (see --help)", 2);
   o.config_file = config;
@@ -157,6 +180,11 @@ int main(int argc, char** argv) {
   const auto& c = (*daemon)->config();
   std::printf("veneerd: listening on %s:%u, store %s, token %s\n", c.listen_host.c_str(),
               static_cast<unsigned>((*daemon)->port()), c.store.c_str(), c.token_path().c_str());
+  if (c.plain_tcp) {
+    std::printf("veneerd: PLAIN TCP (configured so): the API is not encrypted\n");
+  } else {
+    std::printf("veneerd: TLS 1.3, certificate fingerprint (SHA-256) %s\n", (*daemon)->fingerprint().c_str());
+  }
   std::fflush(stdout);
 
   // systemd (Type=notify, WatchdogSec): ready now, then a ping at half the

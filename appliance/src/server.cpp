@@ -11,6 +11,8 @@
 #include <thread>
 
 #include <asio.hpp>
+#include <asio/ssl.hpp>
+#include <openssl/ssl.h>
 #if defined(__GLIBC__)
 #include <malloc.h>
 #endif
@@ -65,6 +67,7 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   Rig& rig;
   ServerOptions opt;
   asio::io_context io;
+  asio::ssl::context ssl_ctx{asio::ssl::context::tls_server};  // TLS 1.3 only, the rig's certificate (unused in plain TCP)
   tcp::acceptor acceptor{io};
   std::thread thread;
   uint16_t bound_port = 0;
@@ -105,17 +108,18 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
 class Session : public std::enable_shared_from_this<Session> {
  public:
   Session(Server::Impl& server, tcp::socket socket)
-      : srv_(server), sock_(std::move(socket)), hello_timer_(server.io), close_timer_(server.io),
-        turn_timer_(server.io) {
+      : srv_(server), stream_(std::move(socket), server.ssl_ctx), tls_(!server.opt.plain_tcp),
+        hello_timer_(server.io), close_timer_(server.io), turn_timer_(server.io) {
     std::error_code ec;
-    auto ep = sock_.remote_endpoint(ec);
+    auto ep = sock().remote_endpoint(ec);
     peer_ = ec ? "?" : ep.address().to_string() + ":" + std::to_string(ep.port());
     peer_key_ = ec ? "?" : AuthThrottle::peer_key(ep.address().to_string());
-    sock_.set_option(tcp::no_delay(true), ec);
+    sock().set_option(tcp::no_delay(true), ec);
   }
 
   void start() {
     auto self = shared_from_this();
+    // The hello's 10 s run from the TCP connection: a TLS handshake that does not end counts against them.
     hello_timer_.expires_after(std::chrono::duration_cast<Clock::duration>(
         std::chrono::duration<double>(srv_.opt.hello_timeout_s)));
     hello_timer_.async_wait([self](std::error_code ec) {
@@ -124,7 +128,21 @@ class Session : public std::enable_shared_from_this<Session> {
         self->close();
       }
     });
-    read();
+    if (!tls_) {
+      read();
+      return;
+    }
+    stream_.async_handshake(asio::ssl::stream_base::server, [self](std::error_code ec) {
+      if (self->closed_) return;
+      if (ec) {
+        // Not TLS 1.3 (an old client, a plain-TCP client, a scanner): closed without a word.
+        VLOG_DEBUG("Server", "{}: TLS handshake failed: {}", self->peer_, ec.message());
+        self->srv_.count(&ServerStats::tls_handshake_failures);
+        self->close();
+        return;
+      }
+      self->read();
+    });
   }
 
   const std::string& peer() const { return peer_; }
@@ -186,8 +204,8 @@ class Session : public std::enable_shared_from_this<Session> {
     hello_timer_.cancel();
     close_timer_.cancel();
     turn_timer_.cancel();
-    sock_.shutdown(tcp::socket::shutdown_both, ec);
-    sock_.close(ec);
+    sock().shutdown(tcp::socket::shutdown_both, ec);
+    sock().close(ec);
     const bool held_much = queued_ > (64u << 10) || fetch_ || live_fps_ > 0 || sent_bytes_ > (4u << 20);
     queue_.clear();
     queued_ = 0;
@@ -233,9 +251,11 @@ class Session : public std::enable_shared_from_this<Session> {
     if (queue_.empty()) close();
   }
 
+  tcp::socket& sock() { return stream_.next_layer(); }
+
   void read() {
     auto self = shared_from_this();
-    sock_.async_read_some(asio::buffer(rbuf_), [self](std::error_code ec, size_t n) {
+    auto done = [self](std::error_code ec, size_t n) {
       if (self->closed_) return;
       if (ec) {
         self->close();
@@ -243,7 +263,12 @@ class Session : public std::enable_shared_from_this<Session> {
       }
       self->in_.feed(self->rbuf_.data(), n);
       self->serve_buffered();
-    });
+    };
+    if (tls_) {
+      stream_.async_read_some(asio::buffer(rbuf_), std::move(done));
+    } else {
+      sock().async_read_some(asio::buffer(rbuf_), std::move(done));
+    }
   }
 
   // Serves the whole messages received, in order, then reads on; while a
@@ -273,7 +298,7 @@ class Session : public std::enable_shared_from_this<Session> {
     writing_ = true;
     auto self = shared_from_this();
     auto bytes = queue_.front();
-    asio::async_write(sock_, asio::buffer(*bytes), [self, bytes](std::error_code ec, size_t) {
+    auto done = [self, bytes](std::error_code ec, size_t) {
       self->writing_ = false;
       if (self->closed_) return;
       if (ec) {
@@ -289,7 +314,12 @@ class Session : public std::enable_shared_from_this<Session> {
       }
       self->pump_fetch();
       self->write();
-    });
+    };
+    if (tls_) {
+      asio::async_write(stream_, asio::buffer(*bytes), std::move(done));
+    } else {
+      asio::async_write(sock(), asio::buffer(*bytes), std::move(done));
+    }
   }
 
   // ---- requests
@@ -456,6 +486,7 @@ class Session : public std::enable_shared_from_this<Session> {
     // Events are numbered and sent on this thread: every event up to this seq
     // was sent before this status, every later one comes after it.
     s.set_event_seq(srv_.event_seq);
+    s.set_plain_tcp(srv_.opt.plain_tcp);
   }
 
   void on(uint64_t id, api::StatusReq&) { send_status(id); }
@@ -673,7 +704,8 @@ class Session : public std::enable_shared_from_this<Session> {
   };
 
   Server::Impl& srv_;
-  tcp::socket sock_;
+  asio::ssl::stream<tcp::socket> stream_;  // in plain TCP only its socket is used
+  const bool tls_;
   asio::steady_timer hello_timer_;
   asio::steady_timer close_timer_;
   asio::steady_timer turn_timer_;  // a hello waiting for its turn (AuthThrottle)
@@ -828,6 +860,19 @@ Server::~Server() { stop(); }
 veneer::Status Server::start() {
   quiet_protobuf_log();
   std::error_code ec;
+  if (!impl_->opt.plain_tcp) {
+    // TLS 1.3 and nothing older; no session tickets (every connection shows
+    // the certificate, so a client always sees the fingerprint it pins).
+    SSL_CTX* ctx = impl_->ssl_ctx.native_handle();
+    SSL_CTX_set_min_proto_version(ctx, TLS1_3_VERSION);
+    SSL_CTX_set_max_proto_version(ctx, TLS1_3_VERSION);
+    SSL_CTX_set_num_tickets(ctx, 0);
+    SSL_CTX_set_session_cache_mode(ctx, SSL_SESS_CACHE_OFF);
+    impl_->ssl_ctx.use_certificate_chain_file(impl_->opt.tls_cert_file, ec);
+    if (ec) return veneer::make_error("TLS certificate " + impl_->opt.tls_cert_file + ": " + ec.message());
+    impl_->ssl_ctx.use_private_key_file(impl_->opt.tls_key_file, asio::ssl::context::pem, ec);
+    if (ec) return veneer::make_error("TLS key " + impl_->opt.tls_key_file + ": " + ec.message());
+  }
   auto address = asio::ip::make_address(impl_->opt.host, ec);
   if (ec) return veneer::make_error("listen address '" + impl_->opt.host + "': " + ec.message());
   tcp::endpoint ep(address, impl_->opt.port);
@@ -860,7 +905,8 @@ veneer::Status Server::start() {
       }
     }
   });
-  VLOG_INFO("Server", "listening on {}:{}", impl_->opt.host, impl_->bound_port);
+  VLOG_INFO("Server", "listening on {}:{} ({})", impl_->opt.host, impl_->bound_port,
+            impl_->opt.plain_tcp ? "PLAIN TCP, not encrypted: configured so" : "TLS 1.3");
   return {};
 }
 

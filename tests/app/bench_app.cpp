@@ -25,6 +25,7 @@
 #include "main_window.hpp"
 #include "rig_link.hpp"
 #include "wait_for.hpp"
+#include <QTemporaryDir>
 #include "veneer/io/image_io.hpp"
 #include "veneer/pipeline/transfer.hpp"
 #include "veneer/repaint/live.hpp"
@@ -87,6 +88,9 @@ class TracingApp : public QApplication {
 int main(int argc, char** argv) {
   if (qEnvironmentVariableIsEmpty("QT_QPA_PLATFORM")) qputenv("QT_QPA_PLATFORM", "offscreen");
   TracingApp app(argc, argv);
+  QTemporaryDir known;  // the simulated rigs are pinned here, their first use answered yes
+  qputenv("VENEER_KNOWN_RIGS", (known.path() + "/known_rigs").toUtf8());
+  veneer::app::RigLink::setDefaultPinAsker([](const QString&, const QString&) { return true; });
   const cv::Size size(1024, 680);
 
   // 1. Repaint through a map: a real map (destination bull, source orange, truth normals).

@@ -12,6 +12,7 @@
 #include <QDate>
 #include <QDir>
 #include <QSpinBox>
+#include <QFile>
 #include <QFileInfo>
 #include <QLabel>
 #include <QMessageBox>
@@ -36,6 +37,8 @@
 #include <opencv2/imgproc.hpp>
 
 #include "main_window.hpp"
+#include "rig_link.hpp"
+#include "veneer/proto/tls.hpp"
 #include "widgets.hpp"
 #include "wait_for.hpp"
 #include "veneer/pipeline/transfer.hpp"
@@ -58,6 +61,8 @@ class SimulatedRig {
  public:
   SimulatedRig() {
     store_ = dir_.path() + "/store";
+    // A new rig, a new certificate, maybe on a port an earlier rig of this test had: no pin of before holds.
+    if (!qEnvironmentVariableIsEmpty("VENEER_KNOWN_RIGS")) QFile::remove(qEnvironmentVariable("VENEER_KNOWN_RIGS"));
     process_.setProcessChannelMode(QProcess::MergedChannels);
     // Port 0: the daemon picks a free port and says which on its first line.
     process_.start(VENEER_BIN_DIR "/veneerd", {"--simulate", "--scenes", "bull,orange", "--size", "256x170",
@@ -79,6 +84,7 @@ class SimulatedRig {
   bool started() const { return started_; }
   QString endpoint() const { return QString("127.0.0.1:%1").arg(port_); }
   QString token_file() const { return store_ + "/token"; }
+  QString store() const { return store_; }
   QString log() { return output_ + QString::fromUtf8(process_.readAll()); }
 
  private:
@@ -855,6 +861,63 @@ TEST(Viewer, ALoadedSetsPictureIsMadeByTheLoader) {
   EXPECT_EQ(d->median_image.pixel(128, 85), qRgb(bgr[2], bgr[1], bgr[0]));
 }
 
+// Issue 43: the first use asks to compare the fingerprint (a "no" refuses the
+// rig, a "yes" pins it in the known-rigs file); a changed certificate is
+// refused with both fingerprints named, without asking.
+TEST(Viewer, TheRigIsPinnedAtFirstUseAndAChangedCertificateRefused) {
+  QTemporaryDir dir;
+  SimulatedRig rig;
+  ASSERT_TRUE(rig.started()) << rig.log().toStdString();
+  auto fp = veneer::tls::fingerprint_of_cert_file((rig.store() + ".tls/cert.pem").toStdString());
+  ASSERT_TRUE(fp) << fp.message();
+  MainWindow w({QString(), QString(), QString(), QString(), dir.path()});
+  const QString known = dir.path() + "/known_rigs";
+  w.rig().setKnownRigsFile(known);
+  w.rig().setAutoReconnect(false);
+  QStringList asked;
+  bool answer = false;
+  w.rig().setPinAsker([&](const QString& rig_name, const QString& seen) {
+    asked << rig_name + " " + seen;
+    return answer;
+  });
+  w.rigPanel().connectToRig(rig.endpoint(), rig.token_file());
+  ASSERT_TRUE(wait_for([&] { return w.status().lastMessage().contains("cannot connect"); }, 10000))
+      << w.status().lastMessage().toStdString();
+  EXPECT_TRUE(w.status().lastMessage().contains("not accepted")) << w.status().lastMessage().toStdString();
+  ASSERT_EQ(asked.size(), 1);
+  EXPECT_EQ(asked[0], rig.endpoint() + " " + QString::fromStdString(*fp));
+  EXPECT_FALSE(QFile::exists(known));
+
+  answer = true;
+  w.rigPanel().connectToRig(rig.endpoint(), rig.token_file());
+  ASSERT_TRUE(wait_for([&] { return w.rig().isConnected(); }, 10000)) << w.status().lastMessage().toStdString();
+  EXPECT_EQ(asked.size(), 2);
+  EXPECT_EQ(w.rig().fingerprint().toStdString(), *fp);
+  auto pinned = veneer::tls::known_fingerprint(known.toStdString(), rig.endpoint().toStdString());
+  ASSERT_TRUE(pinned) << pinned.message();
+  EXPECT_EQ(*pinned, *fp);
+
+  // Known now: connecting again asks nothing.
+  w.rig().disconnectFromRig();
+  w.rigPanel().connectToRig(rig.endpoint(), rig.token_file());
+  ASSERT_TRUE(wait_for([&] { return w.rig().isConnected(); }, 10000)) << w.status().lastMessage().toStdString();
+  EXPECT_EQ(asked.size(), 2);
+
+  // Another certificate than the pinned one (as a rig impersonated on the LAN would show).
+  w.rig().disconnectFromRig();
+  const std::string other = "AA:BB:CC:DD:EE:FF:00:11:22:33:44:55:66:77:88:99:AA:BB:CC:DD:EE:FF:00:11:22:33:44:55:66:77:88:99";
+  ASSERT_TRUE(veneer::tls::remember_fingerprint(known.toStdString(), rig.endpoint().toStdString(), other).ok());
+  w.rigPanel().connectToRig(rig.endpoint(), rig.token_file());
+  ASSERT_TRUE(wait_for([&] { return w.status().lastMessage().contains("cannot connect"); }, 10000))
+      << w.status().lastMessage().toStdString();
+  const std::string msg = w.status().lastMessage().toStdString();
+  EXPECT_NE(msg.find("not the pinned one"), std::string::npos) << msg;
+  EXPECT_NE(msg.find(other), std::string::npos) << msg;
+  EXPECT_NE(msg.find(*fp), std::string::npos) << msg;
+  EXPECT_EQ(asked.size(), 2);
+  EXPECT_FALSE(w.rig().isConnected());
+}
+
 TEST(Viewer, BadInputGivesClearMessages) {
   QTemporaryDir dir;
   MainWindow w({QString(), QString(), QString(), QString(), dir.path()});
@@ -1305,6 +1368,11 @@ int main(int argc, char** argv) {
   if (qEnvironmentVariableIsEmpty("QT_QPA_PLATFORM")) qputenv("QT_QPA_PLATFORM", "offscreen");
   QApplication app(argc, argv);
   QApplication::setOrganizationName("veneer-tests");
+  // The rigs these tests start are pinned in a file of their own (never the
+  // user's), their first use answered yes (the pin test installs its own asker).
+  QTemporaryDir known;
+  qputenv("VENEER_KNOWN_RIGS", (known.path() + "/known_rigs").toUtf8());
+  veneer::app::RigLink::setDefaultPinAsker([](const QString&, const QString&) { return true; });
   ::testing::InitGoogleTest(&argc, argv);
   return RUN_ALL_TESTS();
 }

@@ -19,6 +19,11 @@
 //     set's bytes by kind (the camera twin's JPEG + lossless DNG per frame)
 //     and the time to pull it on loopback: live first (the preview set in
 //     place, then the whole) against a plain pull.
+//  5. TLS 1.3 against plain TCP (issue 43), the real veneerd binary twice on
+//     copies of one store (one serving TLS, one --plain-tcp), in the same run:
+//     pull throughput of a 1024x680 set on loopback (median of alternating
+//     rounds) and the daemon's CPU per pulled MB; live-view frames per second
+//     at 30 fps asked. `bench_rig --tls` runs this section alone.
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -334,11 +339,123 @@ static int bench_capture_peak(const fs::path& dir) {
   return 0;
 }
 
+// 5. TLS against plain TCP, in the same run (see the header).
+static int bench_tls(const fs::path& dir) {
+  const char* env = std::getenv("VENEER_BENCH_TLS_SIZE");
+  const std::string size = env && *env ? env : "1024x680";
+  const int rounds = static_cast<int>(env_number("VENEER_BENCH_TLS_ROUNDS", 5));
+  fs::path tls_store = dir / "tls-store", plain_store = dir / "plain-store";
+  const std::vector<std::string> common = {"--size", size, "--log", "warn"};
+  auto tls_rig = rigtest::DaemonProcess::start(tls_store, common);
+  if (!tls_rig || tls_rig->port() == 0) {
+    std::fprintf(stderr, "bench_rig: veneerd did not start: %s\n", tls_rig ? tls_rig->log().c_str() : "");
+    return 1;
+  }
+  auto token = veneer::rig::read_token_file(tls_store / "token");
+  if (!token) return 1;
+  veneer::rig::ConnectOptions to;
+  to.fingerprint = rigtest::rig_fingerprint(tls_store);
+  auto tls_client = veneer::rig::Client::connect({"127.0.0.1", tls_rig->port()}, *token, to);
+  if (!tls_client) {
+    std::fprintf(stderr, "bench_rig: %s\n", tls_client.message().c_str());
+    return 1;
+  }
+  auto id = (*tls_client)->capture();
+  if (!id) return 1;
+  auto done = (*tls_client)->wait_event([&](const veneer::rig::Event& e) {
+    return e.set_id == *id && (e.kind == Kind::set_stored || e.kind == Kind::capture_failed);
+  }, 600);
+  if (!done || done->kind != Kind::set_stored) {
+    std::fprintf(stderr, "bench_rig: capture for the TLS bench failed\n");
+    return 1;
+  }
+  // The same set served in plain TCP by a second daemon on a copy of the store.
+  fs::create_directories(plain_store);
+  fs::copy(tls_store / *id, plain_store / *id, fs::copy_options::recursive);
+  fs::copy_file(tls_store / "token", plain_store / "token");
+  auto plain_extra = common;
+  plain_extra.push_back("--plain-tcp");
+  auto plain_rig = rigtest::DaemonProcess::start(plain_store, plain_extra);
+  if (!plain_rig || plain_rig->port() == 0) return 1;
+  veneer::rig::ConnectOptions po;
+  po.plain_tcp = true;
+  auto plain_client = veneer::rig::Client::connect({"127.0.0.1", plain_rig->port()}, *token, po);
+  if (!plain_client) {
+    std::fprintf(stderr, "bench_rig: %s\n", plain_client.message().c_str());
+    return 1;
+  }
+  uint64_t set_bytes = 0;
+  for (const auto& e : fs::recursive_directory_iterator(tls_store / *id)) {
+    if (e.is_regular_file()) set_bytes += e.file_size();
+  }
+  struct Side {
+    veneer::rig::Client* client;
+    rigtest::DaemonProcess* rig;
+    std::vector<double> mb_s, cpu_ms_per_mb;
+    double fps = 0;
+  };
+  Side sides[2] = {{tls_client->get(), tls_rig.get(), {}, {}, 0}, {plain_client->get(), plain_rig.get(), {}, {}, 0}};
+  for (int round = 0; round < rounds; ++round) {
+    for (int k = 0; k < 2; ++k) {
+      Side& side = sides[round % 2 == 0 ? k : 1 - k];  // alternating which goes first
+      const fs::path out = dir / "tls-pull";
+      fs::remove_all(out);
+      const double cpu0 = side.rig->cpu_seconds();
+      const auto t0 = Clock::now();
+      if (auto s = side.client->pull(*id, out, true); !s) {
+        std::fprintf(stderr, "bench_rig: pull: %s\n", s.message().c_str());
+        return 1;
+      }
+      const double t = secs(Clock::now() - t0);
+      side.mb_s.push_back(set_bytes / 1e6 / t);
+      side.cpu_ms_per_mb.push_back((side.rig->cpu_seconds() - cpu0) * 1000 / (set_bytes / 1e6));
+      fs::remove_all(out);
+    }
+  }
+  // Live view: 30 fps asked, 4 s each, one rig at a time.
+  for (auto& side : sides) {
+    std::atomic<int> frames{0};
+    side.client->on_live_frame = [&](const veneer::rig::LiveFrame&) { ++frames; };
+    (void)side.client->start_live_view(30);
+    std::this_thread::sleep_for(std::chrono::milliseconds(700));
+    frames = 0;
+    const auto t0 = Clock::now();
+    std::this_thread::sleep_for(std::chrono::seconds(4));
+    side.fps = frames.load() / secs(Clock::now() - t0);
+    (void)side.client->stop_live_view();
+    side.client->on_live_frame = nullptr;
+  }
+  auto median = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return v[v.size() / 2];
+  };
+  const double tls_mb = median(sides[0].mb_s), plain_mb = median(sides[1].mb_s);
+  std::printf("\n### TLS 1.3 against plain TCP on loopback (issue 43; one %s set with truth/, %.1f MB; median of %d "
+              "alternating pulls each; two veneerd processes, same set)\n\n",
+              size.c_str(), set_bytes / 1e6, rounds);
+  std::printf("| measure | TLS 1.3 | plain TCP (peer) | TLS / plain |\n|---|---|---|---|\n");
+  std::printf("| **pull throughput (MB/s)** | %.0f | %.0f | **%.0f %%** (goal >= 80 %%) |\n", tls_mb, plain_mb,
+              plain_mb > 0 ? 100 * tls_mb / plain_mb : 0.0);
+  std::printf("| veneerd CPU per pulled MB (ms) | %.2f | %.2f | %.2f |\n", median(sides[0].cpu_ms_per_mb),
+              median(sides[1].cpu_ms_per_mb),
+              median(sides[1].cpu_ms_per_mb) > 0 ? median(sides[0].cpu_ms_per_mb) / median(sides[1].cpu_ms_per_mb) : 0.0);
+  std::printf("| **live view (fps, 30 asked)** | %.1f | %.1f | **%.0f %%** |\n", sides[0].fps, sides[1].fps,
+              sides[1].fps > 0 ? 100 * sides[0].fps / sides[1].fps : 0.0);
+  tls_client->reset();
+  plain_client->reset();
+  return 0;
+}
+
 int main(int argc, char** argv) {
   veneer::log::set_levels("warn");
   fs::path dir = rigtest::temp_dir("bench");
   if (argc > 1 && std::string(argv[1]) == "--memory") {  // section 3 alone
     int rc = bench_daemon_memory(dir);
+    fs::remove_all(dir);
+    return rc;
+  }
+  if (argc > 1 && std::string(argv[1]) == "--tls") {  // section 5 alone
+    int rc = bench_tls(dir);
     fs::remove_all(dir);
     return rc;
   }
@@ -488,6 +605,7 @@ int main(int argc, char** argv) {
   client->reset();
   daemon->reset();
   int rc = bench_daemon_memory(dir);
+  if (rc == 0) rc = bench_tls(dir);
   if (rc == 0) rc = bench_capture_peak(dir);
   fs::remove_all(dir);
   return rc;

@@ -21,7 +21,10 @@
 #include <thread>
 #include <vector>
 
+#include <openssl/ssl.h>
+
 #include "veneer/proto/framing.hpp"
+#include "veneer/proto/tls.hpp"
 #include "veneer/v1/rig.pb.h"
 
 namespace rigtest {
@@ -184,12 +187,29 @@ inline RunResult run(const std::string& command) {
 
 inline std::string veneer_cli() { return VENEER_BIN_DIR "/veneer"; }
 
-// A raw TCP connection speaking (or mis-speaking) the protocol.
+// The fingerprint of the certificate of the rig with store `store` (kept in
+// <store>.tls/; "" when there is none).
+inline std::string rig_fingerprint(const fs::path& store) {
+  auto fp = veneer::tls::fingerprint_of_cert_file(store.string() + ".tls/cert.pem");
+  return fp ? *fp : std::string();
+}
+
+// `veneer rig` arguments for the rig at `address` with its store `store`:
+// the token file, the certificate's fingerprint and a known-rigs file beside
+// the store (never the user's own).
+inline std::string cli_rig_args(const std::string& address, const fs::path& store) {
+  return " rig --rig " + address + " --token-file " + (store / "token").string() + " --fingerprint " +
+         rig_fingerprint(store) + " --known-rigs " + (store.parent_path() / "known_rigs").string();
+}
+
+// A raw connection speaking (or mis-speaking) the protocol: inside TLS 1.3
+// (the rig's default; the certificate is not checked here) or, with
+// tls = false, in plain TCP (a rig started --plain-tcp).
 class RawConnection {
  public:
   // `from`: the local loopback address to connect from (127.0.0.<from>; 0 =
   // the kernel's choice), so one test can play several peers.
-  explicit RawConnection(uint16_t port, int from = 0) {
+  explicit RawConnection(uint16_t port, int from = 0, bool tls = true) {
     fd_ = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
     if (from > 0) {
       sockaddr_in local{};
@@ -208,15 +228,32 @@ class RawConnection {
     if (::connect(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) {
       ::close(fd_);
       fd_ = -1;
+      return;
     }
+    if (!tls) return;
+    ::signal(SIGPIPE, SIG_IGN);  // SSL_write to a peer that closed: an error, not the end of the test
+    static SSL_CTX* ctx = [] {
+      SSL_CTX* c = SSL_CTX_new(TLS_client_method());
+      SSL_CTX_set_min_proto_version(c, TLS1_3_VERSION);
+      return c;
+    }();
+    ssl_ = SSL_new(ctx);
+    SSL_set_fd(ssl_, fd_);
+    if (SSL_connect(ssl_) != 1) close();
   }
   ~RawConnection() { close(); }
+  RawConnection(const RawConnection&) = delete;
+  RawConnection& operator=(const RawConnection&) = delete;
   bool ok() const { return fd_ >= 0; }
   void close() {
+    if (ssl_) SSL_free(ssl_);
+    ssl_ = nullptr;
     if (fd_ >= 0) ::close(fd_);
     fd_ = -1;
   }
   bool send_bytes(const std::string& bytes) {
+    if (fd_ < 0) return false;
+    if (ssl_) return bytes.empty() || SSL_write(ssl_, bytes.data(), static_cast<int>(bytes.size())) == static_cast<int>(bytes.size());
     return ::send(fd_, bytes.data(), bytes.size(), MSG_NOSIGNAL) == static_cast<ssize_t>(bytes.size());
   }
   bool send(const veneer::v1::ClientMessage& m) { return send_bytes(veneer::wire::encode_delimited(m)); }
@@ -239,10 +276,9 @@ class RawConnection {
       if (r != veneer::wire::ReadResult::need_more) return std::nullopt;  // broken, or not UTF-8
       auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
       if (left.count() <= 0 || fd_ < 0) return std::nullopt;
-      pollfd p{fd_, POLLIN, 0};
-      if (::poll(&p, 1, static_cast<int>(left.count())) <= 0) return std::nullopt;
+      if (!readable(static_cast<int>(left.count()))) return std::nullopt;
       char buf[65536];
-      ssize_t n = ::recv(fd_, buf, sizeof buf, 0);
+      ssize_t n = receive(buf, sizeof buf);
       if (n <= 0) {
         closed_ = true;
         return std::nullopt;
@@ -261,17 +297,31 @@ class RawConnection {
   bool closed_by_peer(double timeout_s = 5) {
     auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
     while (!closed_ && std::chrono::steady_clock::now() < deadline) {
-      pollfd p{fd_, POLLIN, 0};
-      if (::poll(&p, 1, 100) <= 0) continue;
+      if (fd_ < 0) return true;
+      if (!readable(100)) continue;
       char buf[65536];
-      ssize_t n = ::recv(fd_, buf, sizeof buf, 0);
+      ssize_t n = receive(buf, sizeof buf);
       if (n <= 0) closed_ = true;
     }
     return closed_;
   }
 
  private:
+  // Whether a read would not block (TLS: bytes already decrypted count).
+  bool readable(int timeout_ms) {
+    if (ssl_ && SSL_pending(ssl_) > 0) return true;
+    pollfd p{fd_, POLLIN, 0};
+    return ::poll(&p, 1, timeout_ms) > 0;
+  }
+  // One read: bytes, 0 at the end of the stream, < 0 on an error.
+  ssize_t receive(char* buf, size_t size) {
+    if (!ssl_) return ::recv(fd_, buf, size, 0);
+    int n = SSL_read(ssl_, buf, static_cast<int>(size));
+    return n > 0 ? n : (SSL_get_error(ssl_, n) == SSL_ERROR_ZERO_RETURN ? 0 : -1);
+  }
+
   int fd_ = -1;
+  SSL* ssl_ = nullptr;
   bool closed_ = false;
   veneer::wire::FrameBuffer in_;
 };

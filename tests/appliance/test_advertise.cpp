@@ -317,8 +317,12 @@ class Advertise : public ::testing::Test {
           seen.clear();
           auto found = veneer::dnssd::browse(veneer::wire::kServiceType, 500);
           if (!found) return false;
-          for (const auto& s : *found)
-            if (s.name == daemon_->advertised_name()) seen.insert({s.interface, s.ipv6, s.address, s.port});
+          for (const auto& s : *found) {
+            if (s.name != daemon_->advertised_name()) continue;
+            seen.insert({s.interface, s.ipv6, s.address, s.port});
+            // The record carries the certificate's fingerprint (to show beside the first-use question).
+            EXPECT_EQ(veneer::wire::parse_rig_txt(s.txt).fingerprint, daemon_->fingerprint());
+          }
           return !seen.empty();
         },
         8s);
@@ -353,6 +357,7 @@ class Advertise : public ::testing::Test {
       veneer::rig::ConnectOptions co;
       co.connect_timeout_s = 2;
       co.request_timeout_s = 2;
+      co.fingerprint = daemon_->fingerprint();  // beyond loopback a rig is pinned
       auto c = veneer::rig::Client::connect({s.address, s.port}, daemon_->token(), co);
       EXPECT_TRUE(c) << who << " resolved the rig to " << endpoint(s) << " on " << s.interface
                      << ", which does not answer: " << c.message();

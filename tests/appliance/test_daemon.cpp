@@ -32,7 +32,7 @@ namespace {
 const std::vector<std::string> kSmall = {"--size", "256x170", "--noise", "0"};
 
 std::string rig_args(const DaemonProcess& d, const fs::path& store) {
-  return " rig --rig " + d.address() + " --token-file " + (store / "token").string();
+  return rigtest::cli_rig_args(d.address(), store);
 }
 
 std::unique_ptr<veneer::rig::Client> connect(const DaemonProcess& d, const fs::path& store) {

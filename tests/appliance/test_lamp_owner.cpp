@@ -276,8 +276,7 @@ TEST(LampOwner, AWrongKeyIsNamedWithTheFixAndTheRigIsNotReady) {
       << s->lamps_problem;
   EXPECT_NE(d->log().find("NOT ready"), std::string::npos) << d->log();
   // The CLI says so too.
-  auto out = rigtest::run(rigtest::veneer_cli() + " rig --rig " + d->address() + " --token-file " +
-                          (store / "token").string() + " status");
+  auto out = rigtest::run(rigtest::veneer_cli() + rigtest::cli_rig_args(d->address(), store) + " status");
   EXPECT_NE(out.out.find("NOT READY"), std::string::npos) << out.out;
   EXPECT_NE(out.out.find("veneerd hue pair"), std::string::npos) << out.out;
   fs::remove_all(dir);

@@ -56,7 +56,7 @@ sysroot="$out/roots/sysroot-arm64"
 sysroot_packages="libc6-dev,libstdc++-12-dev,dpkg-dev,libopencv-core-dev,libopencv-imgproc-dev,\
 libopencv-imgcodecs-dev,libopencv-videoio-dev,libtbb-dev,libspdlog-dev,libfmt-dev,libprotobuf-dev,\
 libcurl4-openssl-dev,libgphoto2-dev,libusb-1.0-0-dev,libgpiod-dev,libsystemd-dev,libavahi-client-dev,\
-libraw-dev,libdeflate-dev,nlohmann-json3-dev,libcli11-dev,libasio-dev"
+libraw-dev,libdeflate-dev,nlohmann-json3-dev,libcli11-dev,libasio-dev,libssl-dev"
 step "arm64 root for cross-building ($sysroot)"
 ensure_root arm64 "$sysroot" "$sysroot_packages"
 # Its absolute symlinks (libm.so -> /lib/aarch64-linux-gnu/libm.so.6, the

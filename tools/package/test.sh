@@ -122,7 +122,12 @@ rig_capture() {
   if ! wait_file "$token"; then bad "$who: veneerd --simulate did not start (no $token)"; return 1; fi
   cp "$token" "$amd64/tmp/token-$who"
   # (a capture under qemu-user takes minutes: --timeout)
-  local rig=(--rig "127.0.0.1:$port" --token-file "/tmp/token-$who" --timeout 900) status
+  # The API is TLS 1.3: the rig's certificate is pinned by its fingerprint (read here from its store).
+  local cert="$1/var/lib/veneer/sets.tls/cert.pem" fp
+  if ! wait_file "$cert"; then bad "$who: veneerd made no TLS certificate ($cert)"; return 1; fi
+  fp=$(openssl x509 -in "$cert" -noout -fingerprint -sha256 | cut -d= -f2)
+  local rig=(--rig "127.0.0.1:$port" --token-file "/tmp/token-$who" --timeout 900 --fingerprint "$fp"
+             --known-rigs "/tmp/known-rigs-$who") status
   status=$(in_root "$amd64" veneer rig status "${rig[@]}" 2>&1) && ok "$who: veneer rig status: $(echo "$status" | head -1)" \
     || { bad "$who: veneer rig status: $status"; return 1; }
   in_root "$amd64" veneer rig press "${rig[@]}" --wait > "$out/test-$who-press.log" 2>&1 \

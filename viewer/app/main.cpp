@@ -16,11 +16,12 @@ int main(int argc, char** argv) {
   parser.addVersionOption();
   QCommandLineOption rig("rig", "rig to connect to at start (host:port)", "host:port");
   QCommandLineOption token("token-file", "the rig's access token file", "file");
+  QCommandLineOption fingerprint("fingerprint", "the rig's certificate fingerprint (`veneerd --fingerprint`)", "hex");
   QCommandLineOption dst("dst", "destination image set to load", "folder");
   QCommandLineOption src("src", "source image set to load", "folder");
   QCommandLineOption workdir("workdir", "where pulled sets are kept", "folder");
   QCommandLineOption compute("compute", "compute the transfer once both sets are loaded");
-  parser.addOptions({rig, token, dst, src, workdir, compute});
+  parser.addOptions({rig, token, fingerprint, dst, src, workdir, compute});
   parser.process(app);
   veneer::app::MainWindow::Options o;
   o.rig = parser.value(rig);
@@ -28,8 +29,12 @@ int main(int argc, char** argv) {
   o.destination = parser.value(dst);
   o.source = parser.value(src);
   o.workdir = parser.value(workdir);
+  // With the rig's fingerprint given, the window connects with it (else with the pinned one, or asks).
+  const bool pinned_here = parser.isSet(fingerprint) && !o.rig.isEmpty();
+  if (pinned_here) o.rig.clear();
   veneer::app::MainWindow window(o);
   window.show();
+  if (pinned_here) window.rigPanel().connectToRig(parser.value(rig), o.token_file, parser.value(fingerprint));
   if (parser.isSet(compute)) window.transfer().startTransfer();
   return app.exec();
 }

@@ -1,9 +1,36 @@
 #include "rig_link.hpp"
 
 #include <QPointer>
+
+#include "veneer/proto/tls.hpp"
 #include <QtConcurrent/QtConcurrentRun>
 
 namespace veneer::app {
+
+namespace {
+RigLink::PinAsker& default_pin_asker() {
+  static RigLink::PinAsker ask;
+  return ask;
+}
+}  // namespace
+
+void RigLink::setDefaultPinAsker(PinAsker ask) { default_pin_asker() = std::move(ask); }
+bool RigLink::hasDefaultPinAsker() { return static_cast<bool>(default_pin_asker()); }
+
+QString RigLink::knownRigsFile() const {
+  return known_rigs_.isEmpty() ? qs(veneer::tls::default_known_rigs_file().string()) : known_rigs_;
+}
+
+QString RigLink::fingerprint() const {
+  auto c = client();
+  return c ? qs(c->fingerprint()) : QString();
+}
+
+bool RigLink::askPin(const QString& rig, const QString& fingerprint) {
+  if (pin_asker_) return pin_asker_(rig, fingerprint);
+  if (default_pin_asker()) return default_pin_asker()(rig, fingerprint);
+  return false;
+}
 
 RigLink::RigLink(QObject* parent) : QObject(parent) {
   qRegisterMetaType<veneer::rig::Event>();
@@ -44,10 +71,11 @@ RigLink::ClientPtr RigLink::client() const {
   return client_;
 }
 
-void RigLink::connectTo(const QString& endpoint, const QString& token) {
+void RigLink::connectTo(const QString& endpoint, const QString& token, const QString& fingerprint) {
   disconnectFromRig();
   endpoint_ = endpoint;
   token_ = token;
+  fingerprint_ = fingerprint;
   wanted_ = true;
   tryConnect();
 }
@@ -67,11 +95,27 @@ void RigLink::tryConnect() {
   connecting_ = true;
   const int gen = generation_;
   const std::string endpoint = endpoint_.toStdString(), token = token_.toStdString();
+  veneer::rig::ConnectOptions options;
+  options.client_name = "veneer-viewer";
+  options.connect_timeout_s = 3.0;
+  options.request_timeout_s = 30.0;
+  options.fingerprint = fingerprint_.toStdString();
+  options.known_rigs = knownRigsFile().toStdString();
+  options.trust_loopback = false;  // a person looks at this rig: pinned wherever it is
   QPointer<RigLink> self(this);
-  (void)QtConcurrent::run([self, gen, endpoint, token] {
+  // First use: the question goes to the GUI thread, the connecting worker waits for the answer.
+  options.confirm_first_use = [self](const std::string& rig, const std::string& seen) {
+    bool yes = false;
+    if (!self) return false;
+    QMetaObject::invokeMethod(
+        self.data(), [&yes, self, rig, seen] { yes = self && self->askPin(qs(rig), qs(seen)); },
+        Qt::BlockingQueuedConnection);
+    return yes;
+  };
+  (void)QtConcurrent::run([self, gen, endpoint, token, options] {
     auto ep = veneer::rig::Endpoint::parse(endpoint);
     veneer::Expected<std::unique_ptr<veneer::rig::Client>> result =
-        ep ? veneer::rig::Client::connect(*ep, token, {"veneer-viewer", 3.0, 30.0})
+        ep ? veneer::rig::Client::connect(*ep, token, options)
            : veneer::Expected<std::unique_ptr<veneer::rig::Client>>(ep.error());
     std::shared_ptr<veneer::rig::Client> client;
     QString message;
@@ -94,7 +138,8 @@ void RigLink::tryConnect() {
             // A wrong token or a bad address will not fix itself; a rig that is
             // down or a network drop might.
             const bool permanent = message.contains("token", Qt::CaseInsensitive) ||
-                                   message.contains("address", Qt::CaseInsensitive);
+                                   message.contains("address", Qt::CaseInsensitive) ||
+                                   message.contains("fingerprint", Qt::CaseInsensitive);
             if (self->auto_reconnect_ && !permanent) self->reconnect_timer_.start();
             return;
           }

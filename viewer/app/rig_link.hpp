@@ -2,6 +2,9 @@
 // The viewer's link to a rig: wraps the Qt-free veneer::rig::Client, runs its
 // blocking requests on worker threads and hands every answer, event and live
 // frame to the GUI thread as a signal. Reconnects by itself after a drop.
+// The connection is TLS 1.3 with the rig's certificate pinned (known-rigs
+// file): at a rig's first use the pin asker (a dialog, RigPanel's) shows the
+// fingerprint to compare; a changed certificate is refused, never asked about.
 #include <atomic>
 #include <functional>
 #include <memory>
@@ -26,8 +29,23 @@ class RigLink : public QObject {
   QString endpoint() const { return endpoint_; }
   const veneer::rig::RigStatus& lastStatus() const { return status_; }
 
-  // Connects (in the background); `token` is the rig's access token.
-  void connectTo(const QString& endpoint, const QString& token);
+  // Connects (in the background); `token` is the rig's access token;
+  // `fingerprint` (optional) the rig's certificate's, as `veneerd --fingerprint` prints it.
+  void connectTo(const QString& endpoint, const QString& token, const QString& fingerprint = {});
+
+  // Asked on the GUI thread at a rig's first use (no fingerprint given or
+  // pinned): show `fingerprint` to compare; true pins it, false refuses the rig.
+  using PinAsker = std::function<bool(const QString& rig, const QString& fingerprint)>;
+  void setPinAsker(PinAsker ask) { pin_asker_ = std::move(ask); }
+  // The asker of every link that has none of its own (tests answer here; the
+  // windows' RigPanel installs its dialog only when this is unset).
+  static void setDefaultPinAsker(PinAsker ask);
+  static bool hasDefaultPinAsker();
+  // The known-rigs file (default: veneer::tls::default_known_rigs_file()).
+  void setKnownRigsFile(const QString& file) { known_rigs_ = file; }
+  QString knownRigsFile() const;
+  // The connected rig's certificate fingerprint ("" in plain TCP or unconnected).
+  QString fingerprint() const;
   void disconnectFromRig();
   void setAutoReconnect(bool on) { auto_reconnect_ = on; }
 
@@ -82,7 +100,9 @@ class RigLink : public QObject {
 
   mutable std::mutex mutex_;
   ClientPtr client_;
-  QString endpoint_, token_;
+  bool askPin(const QString& rig, const QString& fingerprint);
+  QString endpoint_, token_, fingerprint_, known_rigs_;
+  PinAsker pin_asker_;
   bool wanted_ = false, auto_reconnect_ = true, connecting_ = false;
   int generation_ = 0;
   QTimer reconnect_timer_;

@@ -8,6 +8,7 @@
 #include <QHBoxLayout>
 #include <QLabel>
 #include <QLineEdit>
+#include <QMessageBox>
 #include <QPushButton>
 
 #include "widgets.hpp"
@@ -55,9 +56,23 @@ RigPanel::RigPanel(Session& session, QWidget* parent)
   connect(&rig, &RigLink::statusUpdated, this, [this](veneer::rig::RigStatus) { updateStatusLine(); });
   connect(&rig, &RigLink::failed, this, [this](QString what, QString msg) { session_.message(what + ": " + msg, true); });
   connect(&rig, &RigLink::rigEvent, this, &RigPanel::onRigEvent);
+  // A rig's first use: the person compares the fingerprint with the rig's own.
+  if (!RigLink::hasDefaultPinAsker()) {
+    rig.setPinAsker([this](const QString& rig_name, const QString& fingerprint) {
+      QMessageBox box(QMessageBox::Question, tr("New rig"),
+                      tr("The rig at %1 is not known yet. Its certificate fingerprint (SHA-256) is\n\n%2\n\n"
+                         "Compare it with what `veneerd --fingerprint` prints on the rig (or its log). Connect and "
+                         "remember this rig only if they are the same.")
+                          .arg(rig_name, fingerprint),
+                      QMessageBox::Yes | QMessageBox::No, this);
+      box.setDefaultButton(QMessageBox::No);
+      box.setTextInteractionFlags(Qt::TextSelectableByMouse);
+      return box.exec() == QMessageBox::Yes;
+    });
+  }
 }
 
-void RigPanel::connectToRig(const QString& endpoint, const QString& token_file) {
+void RigPanel::connectToRig(const QString& endpoint, const QString& token_file, const QString& fingerprint) {
   rig_edit_->setText(endpoint);
   token_edit_->setText(token_file);
   if (token_file.isEmpty()) {
@@ -71,7 +86,7 @@ void RigPanel::connectToRig(const QString& endpoint, const QString& token_file) 
   }
   settings_.setValue("rig/token_file", token_file);
   session_.message(tr("connecting to %1…").arg(endpoint));
-  session_.rig.connectTo(endpoint, qs(*token));
+  session_.rig.connectTo(endpoint, qs(*token), fingerprint);
 }
 
 void RigPanel::rememberRig(const QString& endpoint) {
@@ -102,7 +117,11 @@ void RigPanel::updateStatusLine() {
                              .arg(s.you_control ? tr("you control")
                                                 : (s.controller_taken ? tr("another client controls") : tr("free")))
                              .arg(s.sets_stored));
-  status_label_->setToolTip(tr("camera: %1").arg(s.camera_connected ? qs(s.camera_model) : tr("missing")));
+  if (s.plain_tcp) status_label_->setText(status_label_->text() + tr(" · PLAIN TCP, not encrypted"));
+  status_label_->setToolTip(tr("camera: %1\nconnection: %2")
+                                .arg(s.camera_connected ? qs(s.camera_model) : tr("missing"),
+                                     s.plain_tcp ? tr("plain TCP (the rig is configured so): not encrypted")
+                                                 : tr("TLS 1.3, certificate fingerprint %1").arg(rig.fingerprint())));
 }
 
 // The camera came or went (the capture, the sets and the lamps have their own panels).

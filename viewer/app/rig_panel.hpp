@@ -18,7 +18,8 @@ class RigPanel : public QGroupBox {
   Q_OBJECT
  public:
   explicit RigPanel(Session& session, QWidget* parent = nullptr);
-  void connectToRig(const QString& endpoint, const QString& token_file);
+  // `fingerprint`: the rig's certificate's, when known (else the pinned one, else the first use asks).
+  void connectToRig(const QString& endpoint, const QString& token_file, const QString& fingerprint = {});
   // The rig's status, for the window's status bar.
   QLabel* statusLabel() const { return status_label_; }
 

@@ -1,6 +1,8 @@
 // veneer rig find|status|capture|press|list|pull|delete|lamps|live|events — the
 // rig client for scripts and tests, against --rig host:port --token-file F
 // (`find` lists the rigs on the LAN through DNS-SD and needs neither).
+// The connection is TLS 1.3 with the rig's certificate pinned by fingerprint:
+// --fingerprint, else the known-rigs file, else a first use asks (stdin).
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -10,6 +12,8 @@
 #include <iostream>
 #include <mutex>
 #include <optional>
+
+#include <unistd.h>
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -22,6 +26,7 @@
 #include "veneer/repaint/live.hpp"
 #include "veneer/repaint/live_session.hpp"
 #include "veneer/repaint/track.hpp"
+#include "veneer/proto/tls.hpp"
 #include "veneer/rig/client.hpp"
 
 namespace veneer::cli {
@@ -31,7 +36,34 @@ struct RigArgs {
   std::string rig = "127.0.0.1:7878";
   std::string token_file = "veneer-sets/token";
   double timeout_s = 120;
+  std::string fingerprint;  // --fingerprint: the rig's certificate must have it
+  std::string known_rigs;   // --known-rigs: empty = tls::default_known_rigs_file()
+  bool plain_tcp = false;   // --plain-tcp
 };
+
+// First use of a rig (no --fingerprint, none known): the fingerprint is shown
+// and the answer read from stdin, a terminal or not ("yes"/"y", or the
+// fingerprint itself, pins it; anything else, or nothing, refuses).
+bool ask_to_pin(const std::string& rig, const std::string& seen) {
+  const bool terminal = ::isatty(0) == 1;
+  std::cerr << "The rig at " << rig << " presents a certificate not seen before, fingerprint (SHA-256)\n  " << seen
+            << "\nCompare it with what `veneerd --fingerprint` prints on the rig (or its log).\n"
+            << "Pin it and connect? [yes/no" << (terminal ? "" : ", read from standard input") << "] " << std::flush;
+  std::string answer;
+  if (!std::getline(std::cin, answer)) {
+    std::cerr << "(no answer)\n";
+    return false;
+  }
+  if (!terminal) std::cerr << answer << "\n";
+  const char* space = " \t\r\n";
+  const auto first = answer.find_first_not_of(space);
+  answer = first == std::string::npos ? "" : answer.substr(first, answer.find_last_not_of(space) - first + 1);
+  std::string lower;
+  for (char c : answer) lower += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (lower == "y" || lower == "yes") return true;
+  auto fp = tls::parse_fingerprint(answer);
+  return fp && *fp == seen;
+}
 
 // Errors as every command reports them (output.hpp): "veneer rig <cmd>: <what>".
 int fail(const std::string& cmd, const std::string& what, int code = 1) {
@@ -47,6 +79,15 @@ Expected<std::unique_ptr<rig::Client>> open_rig(const RigArgs& a) {
   rig::ConnectOptions o;
   o.client_name = "veneer-cli";
   o.request_timeout_s = 30;
+  o.plain_tcp = a.plain_tcp;
+  if (!a.fingerprint.empty()) {
+    auto fp = tls::parse_fingerprint(a.fingerprint);
+    if (!fp) return make_error("--fingerprint: " + fp.message());
+    o.fingerprint = *fp;
+  }
+  o.known_rigs = a.known_rigs.empty() ? tls::default_known_rigs_file() : std::filesystem::path(a.known_rigs);
+  o.trust_loopback = false;  // a person runs this: the rig is pinned wherever it is
+  o.confirm_first_use = ask_to_pin;
   return rig::Client::connect(*endpoint, *token, o);
 }
 
@@ -114,6 +155,15 @@ VENEER_COMMAND(rig) {
   rig_cmd->add_option("--token-file", args->token_file, "the rig's access token file (<store>/token on the rig)")
       ->capture_default_str();
   rig_cmd->add_option("--timeout", args->timeout_s, "seconds to wait for a capture or download")->capture_default_str();
+  rig_cmd->add_option("--fingerprint", args->fingerprint,
+                      "the rig's certificate fingerprint (SHA-256, 64 hex digits, ':' optional; `veneerd "
+                      "--fingerprint` prints it): anything else is refused; pinned in the known-rigs file");
+  rig_cmd->add_option("--known-rigs", args->known_rigs,
+                      "file of pinned rig fingerprints (default $VENEER_KNOWN_RIGS, else "
+                      "$XDG_CONFIG_HOME/veneer/known_rigs, else ~/.config/veneer/known_rigs)");
+  rig_cmd->add_flag("--plain-tcp", args->plain_tcp,
+                    "connect without TLS (only to a rig configured --plain-tcp; the token and photos cross the "
+                    "network in clear)");
 
   auto* find = rig_cmd->add_subcommand("find", "list the rigs on the LAN (DNS-SD _veneer._tcp, through avahi-daemon)");
   auto find_wait = std::make_shared<double>(2.0);
@@ -265,7 +315,11 @@ VENEER_COMMAND(rig) {
                 << "capturing:  " << (s->capturing ? "yes" : "no") << "\n"
                 << "next press: " << io::role_name(s->next_role) << "\n"
                 << "sets:       " << s->sets_stored << " stored, " << human_bytes(s->free_bytes) << " free\n"
-                << "clients:    " << s->clients << (s->controller_taken ? ", one controls the rig" : "") << "\n";
+                << "clients:    " << s->clients << (s->controller_taken ? ", one controls the rig" : "") << "\n"
+                << "connection: "
+                << (s->plain_tcp ? "PLAIN TCP (the rig is configured so): not encrypted"
+                                 : "TLS 1.3, certificate fingerprint " + client.fingerprint())
+                << "\n";
       return 0;
     }
     if (list->parsed()) {

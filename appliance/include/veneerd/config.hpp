@@ -7,6 +7,8 @@
 //   "listen": "0.0.0.0:7878",
 //   "store": "/var/lib/veneer/sets",
 //   "token_file": "/var/lib/veneer/sets/token",     default <store>/token
+//   "tls_key_file": "...", "tls_cert_file": "...",   default <store>.tls/key.pem, <store>.tls/cert.pem
+//   "plain_tcp": false,                              true: the API in clear (no TLS), said in status and log
 //   "lamps": {"backend": "hue", "bridge": "192.168.1.20", "key": "...",
 //             "lamps": ["3","4","5","6","7","8","9"],   Hue ids in ring order
 //             "settle_ms": 150,
@@ -41,6 +43,11 @@ struct Config {
   uint16_t listen_port = 7878;
   std::filesystem::path store = "veneer-sets";
   std::filesystem::path token_file;  // empty = <store>/token
+  // The TLS identity sits beside the store, not in it: the store holds sets
+  // (and the token), and its bytes are the sets' bytes.
+  std::filesystem::path tls_key_file;   // empty = <store>.tls/key.pem (made 0600 at first start, folder 0700)
+  std::filesystem::path tls_cert_file;  // empty = <store>.tls/cert.pem (self-signed, made with the key)
+  bool plain_tcp = false;               // serve the API without TLS (only when configured so)
   DeviceConfig lamps{"hue", nlohmann::json::object()};
   DeviceConfig camera{"simulated", nlohmann::json::object()};
   DeviceConfig trigger{"simulated", nlohmann::json::object()};
@@ -52,6 +59,9 @@ struct Config {
   double ambient_warning = 0.05;           // ambient mean (fraction of full scale) that warns
 
   std::filesystem::path token_path() const { return token_file.empty() ? store / "token" : token_file; }
+  std::filesystem::path tls_dir() const { return store.string() + ".tls"; }
+  std::filesystem::path tls_key_path() const { return tls_key_file.empty() ? tls_dir() / "key.pem" : tls_key_file; }
+  std::filesystem::path tls_cert_path() const { return tls_cert_file.empty() ? tls_dir() / "cert.pem" : tls_cert_file; }
 };
 
 // "host:port", "host" (port 7878) or ":port" (all interfaces).

@@ -30,6 +30,7 @@ struct DaemonOptions {
   std::string listen;                     // "host:port"
   std::filesystem::path store;
   std::filesystem::path token_file;
+  bool plain_tcp = false;                 // serve the API in plain TCP (also "plain_tcp" in the config)
   // Simulated rig:
   std::vector<std::string> scenes{"bull", "stone"};
   cv::Size size{1024, 680};               // still size [px]
@@ -55,6 +56,9 @@ struct DaemonOptions {
 // Reads the token from `file`, creating it (32 random bytes as hex, mode 0600)
 // when it does not exist.
 veneer::Expected<std::string> ensure_token(const std::filesystem::path& file);
+// The rig's TLS identity (key and certificate, made at first start, 0600):
+// its fingerprint. For `veneerd --fingerprint`.
+veneer::Expected<std::string> ensure_tls_identity(const Config& config);
 // Reads a token file (whitespace trimmed).
 veneer::Expected<std::string> read_token(const std::filesystem::path& file);
 
@@ -70,6 +74,8 @@ class Daemon {
   // The DNS-SD name the rig advertises under ("" when it does not advertise).
   std::string advertised_name() const;
   const std::string& token() const { return token_; }
+  // The certificate's fingerprint (veneer/proto/tls.hpp); "" in plain TCP.
+  const std::string& fingerprint() const { return fingerprint_; }
   const Config& config() const { return config_; }
   Rig& rig() { return *rig_; }
   Store& store() { return *store_; }
@@ -86,6 +92,7 @@ class Daemon {
   std::string token_;
   std::shared_ptr<FaultPlan> faults_;
   bool faults_reported_ = false;
+  std::string fingerprint_;
   std::unique_ptr<SimulatedRig> sim_;
   std::unique_ptr<Store> store_;
   std::unique_ptr<Rig> rig_;

@@ -20,6 +20,12 @@ struct ServerOptions {
   std::string host = "127.0.0.1";
   uint16_t port = 7878;              // 0 = any free port (see Server::port())
   std::string token;                 // the access token clients must present
+  // TLS 1.3 (proto/README.md, "Encryption and pinning"): the rig's PEM key and
+  // self-signed certificate (veneer/proto/tls.hpp makes them). plain_tcp: no
+  // TLS at all, the API in clear (only when configured so; said in the status).
+  std::string tls_key_file;
+  std::string tls_cert_file;
+  bool plain_tcp = false;
   size_t max_queue_bytes = 32u << 20;   // a connection's send queue limit; beyond it the client is dropped
   size_t live_queue_bytes = 1u << 20;   // live frames are skipped while more than this waits to be sent
   size_t fetch_queue_bytes = 1u << 20;  // image chunks are read while less than this waits
@@ -38,6 +44,7 @@ struct ServerStats {
   uint64_t wrong_tokens = 0;
   uint64_t memory_releases = 0;
   uint64_t chunk_bytes = 0;  // file bytes put into image chunks (fetch_images, fetch_preview)
+  uint64_t tls_handshake_failures = 0;
 };
 
 class Server {

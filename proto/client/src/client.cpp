@@ -16,8 +16,12 @@
 #include <unistd.h>
 
 #include <asio.hpp>
+#include <asio/ssl.hpp>
+#include <openssl/ssl.h>
+#include <openssl/x509.h>
 
 #include "veneer/proto/framing.hpp"
+#include "veneer/proto/tls.hpp"
 #include "veneer/util/log.hpp"
 #include "veneer/util/token_file.hpp"
 #include "veneer/v1/rig.pb.h"
@@ -143,6 +147,7 @@ RigStatus convert(const pb::RigStatus& s) {
   r.next_role = from_wire(s.next_role());
   r.free_bytes = s.free_bytes();
   r.clients = static_cast<int>(s.clients());
+  r.plain_tcp = s.plain_tcp();
   return r;
 }
 
@@ -241,10 +246,19 @@ struct Client::Impl {
   };
 
   Client* owner = nullptr;
-  asio::io_context io;
-  tcp::socket sock{io};
+  asio::io_context io;  // run by `reader` once connected: every read and write of the connection happens there
+  asio::ssl::context ssl_ctx{asio::ssl::context::tls_client};
+  asio::ssl::stream<tcp::socket> stream{io, ssl_ctx};  // in plain TCP only its socket is used
+  bool tls = true;
+  std::string fingerprint;  // the rig's certificate's (empty in plain TCP)
   std::thread reader;
-  std::mutex write_mutex;
+
+  // I/O thread only:
+  std::deque<std::string> out_queue;
+  bool writing = false;
+  veneer::wire::FrameBuffer in;
+  std::array<char, 64 * 1024> buf;
+  std::string end_reason = "connection closed by the rig";  // what an end of stream means (a refusal seen sets it)
 
   std::mutex mutex;  // guards everything below
   std::condition_variable cv;
@@ -259,6 +273,8 @@ struct Client::Impl {
 
   ~Impl() { shutdown("client closed"); }
 
+  tcp::socket& sock() { return stream.next_layer(); }
+
   void shutdown(const std::string& why) {
     {
       std::lock_guard lock(mutex);
@@ -268,19 +284,54 @@ struct Client::Impl {
       }
     }
     std::error_code ec;
-    sock.shutdown(tcp::socket::shutdown_both, ec);
-    if (reader.joinable() && reader.get_id() != std::this_thread::get_id()) reader.join();
-    sock.close(ec);
+    if (reader.joinable() && reader.get_id() != std::this_thread::get_id()) {
+      // The socket belongs to the I/O thread: closed there, which ends its read and its run.
+      asio::post(io, [this] {
+        std::error_code e;
+        sock().shutdown(tcp::socket::shutdown_both, e);
+        sock().close(e);
+      });
+      reader.join();
+    } else {
+      sock().shutdown(tcp::socket::shutdown_both, ec);  // on the I/O thread (a callback closed the client), or never started
+    }
+    sock().close(ec);
     cv.notify_all();
   }
 
+  // Queues a message for the I/O thread to write; a write that fails closes
+  // the connection, which every waiting request then reports.
   Status send(const pb::ClientMessage& m) {
     std::string bytes = veneer::wire::encode_delimited(m);
-    std::lock_guard lock(write_mutex);
-    std::error_code ec;
-    asio::write(sock, asio::buffer(bytes), ec);
-    if (ec) return make_error("rig connection: " + ec.message());
+    {
+      std::lock_guard lock(mutex);
+      if (closed) return make_error("rig connection closed: " + close_reason);
+    }
+    asio::post(io, [this, b = std::move(bytes)]() mutable {
+      out_queue.push_back(std::move(b));
+      write_next();
+    });
     return {};
+  }
+
+  void write_next() {
+    if (writing || out_queue.empty()) return;
+    writing = true;
+    auto done = [this](std::error_code ec, size_t) {
+      writing = false;
+      if (ec) {
+        std::error_code e;
+        sock().close(e);  // the read then ends with the reason
+        return;
+      }
+      out_queue.pop_front();
+      write_next();
+    };
+    if (tls) {
+      asio::async_write(stream, asio::buffer(out_queue.front()), std::move(done));
+    } else {
+      asio::async_write(sock(), asio::buffer(out_queue.front()), std::move(done));
+    }
   }
 
   // Sends a request and waits for its response.
@@ -312,57 +363,68 @@ struct Client::Impl {
     return std::move(*response);
   }
 
-  void read_loop() {
-    veneer::wire::FrameBuffer in;
-    std::array<char, 64 * 1024> buf;
-    std::string why = "connection closed by the rig";
-    for (;;) {
-      std::error_code ec;
-      size_t n = sock.read_some(asio::buffer(buf), ec);
-      if (ec) {
-        if (ec != asio::error::eof) why = "connection lost: " + ec.message();
-        break;
-      }
-      in.feed(buf.data(), n);
-      bool broken = false;
-      for (;;) {
-        pb::RigMessage m;
-        auto r = in.next(m);
-        if (r == veneer::wire::ReadResult::need_more) break;
-        if (r == veneer::wire::ReadResult::invalid) {
-          why = "bad data from the rig: " + in.invalid().field + " is not valid UTF-8";
-          broken = true;
-          break;
-        }
-        if (r == veneer::wire::ReadResult::error) {
-          why = "bad data from the rig: " + in.error();
-          broken = true;
-          break;
-        }
-        {  // once closed (close() from another thread), nothing more is delivered, even what is already read
-          std::lock_guard lock(mutex);
-          if (closed) {
-            broken = true;
-            break;
-          }
-        }
-        dispatch(m, why);
-      }
-      if (broken) break;
+  // The read loop, as asio handlers on the I/O thread.
+  void start_read() {
+    auto done = [this](std::error_code ec, size_t n) { on_read(ec, n); };
+    if (tls) {
+      stream.async_read_some(asio::buffer(buf), std::move(done));
+    } else {
+      sock().async_read_some(asio::buffer(buf), std::move(done));
     }
-    std::function<void(const std::string&)> notify;
+  }
+
+  void on_read(std::error_code ec, size_t n) {
+    std::string& why = end_reason;
+    if (ec) {
+      // A TCP end without TLS's close_notify is how the rig closes too: the messages read were whole and authenticated.
+      finish(ec != asio::error::eof && ec != asio::ssl::error::stream_truncated ? "connection lost: " + ec.message() : why);
+      return;
+    }
+    in.feed(buf.data(), n);
+    for (;;) {
+      pb::RigMessage m;
+      auto r = in.next(m);
+      if (r == veneer::wire::ReadResult::need_more) break;
+      if (r == veneer::wire::ReadResult::invalid) {
+        finish("bad data from the rig: " + in.invalid().field + " is not valid UTF-8");
+        return;
+      }
+      if (r == veneer::wire::ReadResult::error) {
+        finish("bad data from the rig: " + in.error());
+        return;
+      }
+      bool closed_now = false;
+      {  // once closed (close() from another thread), nothing more is delivered, even what is already read
+        std::lock_guard lock(mutex);
+        closed_now = closed;
+      }
+      if (closed_now) {
+        finish(why);
+        return;
+      }
+      dispatch(m, why);
+    }
+    start_read();
+  }
+
+  // The connection ended (on the I/O thread): waiters are told why, once.
+  void finish(const std::string& why) {
+    std::error_code ec;
+    sock().close(ec);
+    std::string reason;
     {
       std::lock_guard lock(mutex);
       if (!closed) {
         closed = true;
         close_reason = why;
       }
+      reason = close_reason;
       for (auto& [id, d] : downloads) {
         if (!d->done && d->error.empty()) d->error = "rig connection closed during the download: " + close_reason;
       }
     }
     cv.notify_all();
-    if (owner->on_disconnect) owner->on_disconnect(why);
+    if (owner->on_disconnect) owner->on_disconnect(reason);
   }
 
   void dispatch(pb::RigMessage& m, std::string& why) {
@@ -497,36 +559,155 @@ void Client::close() {
   if (impl_) impl_->shutdown("client closed");
 }
 
+std::string Endpoint::pin_name() const {
+  return (host.find(':') != std::string::npos ? "[" + host + "]" : host) + ":" + std::to_string(port);
+}
+
+namespace {
+
+// The rig's certificate, as seen in the handshake: its fingerprint ("" if none was sent).
+std::string peer_fingerprint(SSL* ssl) {
+  X509* cert = SSL_get1_peer_certificate(ssl);
+  if (!cert) return "";
+  std::string fp;
+  int n = i2d_X509(cert, nullptr);
+  if (n > 0) {
+    std::string der(static_cast<size_t>(n), '\0');
+    auto* p = reinterpret_cast<unsigned char*>(der.data());
+    i2d_X509(cert, &p);
+    fp = tls::fingerprint_of_der(reinterpret_cast<const unsigned char*>(der.data()), der.size());
+  }
+  X509_free(cert);
+  return fp;
+}
+
+}  // namespace
+
+// Whether `seen` is the rig's pinned fingerprint (proto/README.md, "Pinning"):
+// the fingerprint given, else the known-rigs file's, else the first use's
+// answer. Nothing has been sent to the rig yet.
+Status Client::check_pin(const Endpoint& endpoint, const std::string& seen, bool loopback) {
+  const ConnectOptions& o = impl_->options;
+  const std::string rig = endpoint.pin_name();
+  const std::string where = "rig " + endpoint.str();
+  if (seen.empty()) return make_error(where + ": the rig sent no certificate");
+  std::string expected, source;
+  if (!o.fingerprint.empty()) {
+    auto fp = tls::parse_fingerprint(o.fingerprint);
+    if (!fp) return make_error(where + ": " + fp.message());
+    expected = *fp;
+    source = "the fingerprint given";
+  }
+  std::string known;
+  if (!o.known_rigs.empty()) {
+    auto k = tls::known_fingerprint(o.known_rigs, rig);
+    if (!k) return make_error(where + ": " + k.message());
+    known = *k;
+    if (expected.empty() && !known.empty()) {
+      expected = known;
+      source = "pinned in " + o.known_rigs.string();
+    }
+  }
+  if (!expected.empty()) {
+    if (expected != seen) {
+      return make_error(where + ": the rig's certificate is not the pinned one: expected fingerprint " + expected +
+                        " (" + source + "), the rig presented " + seen +
+                        "; nothing was sent. Someone may be intercepting the connection. If the rig's key was "
+                        "replaced on purpose, check the new fingerprint with `veneerd --fingerprint` on the rig and "
+                        "pin it (veneer rig --fingerprint NEW)");
+    }
+    if (!o.known_rigs.empty() && known != seen) {  // the fingerprint given, checked: pinned from now on
+      if (auto s = tls::remember_fingerprint(o.known_rigs, rig, seen); !s) return make_error(where + ": " + s.message());
+      if (!known.empty()) VLOG_WARN("Rig", "{}: pinned fingerprint replaced by the one given, {}", rig, seen);
+    }
+    return {};
+  }
+  if (o.confirm_first_use) {
+    if (!o.confirm_first_use(rig, seen)) {
+      return make_error(where + ": certificate fingerprint " + seen + " not accepted; nothing was sent");
+    }
+    if (!o.known_rigs.empty()) {
+      if (auto s = tls::remember_fingerprint(o.known_rigs, rig, seen); !s) return make_error(where + ": " + s.message());
+    }
+    return {};
+  }
+  if (loopback && o.trust_loopback) return {};
+  return make_error(where + ": certificate fingerprint " + seen +
+                    " is not pinned (no fingerprint given, none known for " + rig +
+                    "); compare it with `veneerd --fingerprint` on the rig and pass it; nothing was sent");
+}
+
 Expected<std::unique_ptr<Client>> Client::connect(const Endpoint& endpoint, const std::string& token,
                                                   const ConnectOptions& options) {
   std::unique_ptr<Client> client(new Client());
   Impl& d = *client->impl_;
   d.options = options;
+  d.tls = !options.plain_tcp;
+  const auto timeout = std::chrono::duration_cast<std::chrono::milliseconds>(
+      std::chrono::duration<double>(options.connect_timeout_s));
   std::error_code ec;
   tcp::resolver resolver(d.io);
   auto results = resolver.resolve(endpoint.host, std::to_string(endpoint.port), ec);
   if (ec) return make_error("rig " + endpoint.str() + ": cannot resolve: " + ec.message());
   std::error_code connect_ec = asio::error::timed_out;
-  asio::async_connect(d.sock, results, [&](std::error_code e, const tcp::endpoint&) { connect_ec = e; });
-  d.io.run_for(std::chrono::duration_cast<std::chrono::milliseconds>(
-      std::chrono::duration<double>(options.connect_timeout_s)));
+  asio::async_connect(d.sock(), results, [&](std::error_code e, const tcp::endpoint&) { connect_ec = e; });
+  d.io.run_for(timeout);
   if (connect_ec) {
-    d.sock.close(ec);
+    d.sock().close(ec);
     return make_error("rig " + endpoint.str() + ": cannot connect: " + connect_ec.message());
   }
-  d.sock.set_option(tcp::no_delay(true), ec);
-  d.reader = std::thread([&d] { d.read_loop(); });
+  d.sock().set_option(tcp::no_delay(true), ec);
+  const auto remote = d.sock().remote_endpoint(ec);
+  const bool loopback = !ec && remote.address().is_loopback();
 
+  if (d.tls) {
+    // TLS 1.3 only; the certificate is checked by its pinned fingerprint
+    // (check_pin), not by a CA: a rig's certificate is self-signed. No SNI, no ALPN.
+    SSL_CTX* ctx = d.ssl_ctx.native_handle();
+    SSL_CTX_set_min_proto_version(ctx, TLS1_3_VERSION);
+    SSL_CTX_set_max_proto_version(ctx, TLS1_3_VERSION);
+    d.ssl_ctx.set_verify_mode(asio::ssl::verify_none);
+    std::error_code hs_ec = asio::error::timed_out;
+    d.io.restart();
+    d.stream.async_handshake(asio::ssl::stream_base::client, [&](std::error_code e) { hs_ec = e; });
+    d.io.run_for(timeout);
+    if (hs_ec) {
+      d.sock().close(ec);
+      return make_error("rig " + endpoint.str() + ": TLS 1.3 handshake failed: " + hs_ec.message() +
+                        " (a rig configured for plain TCP? then connect with --plain-tcp, knowing that the token "
+                        "and the photos cross the network in clear)");
+    }
+    d.fingerprint = peer_fingerprint(d.stream.native_handle());
+    if (auto s = client->check_pin(endpoint, d.fingerprint, loopback); !s) {
+      d.sock().close(ec);
+      return s.error();
+    }
+  }
+  d.io.restart();
+  d.reader = std::thread([&d] {
+    d.start_read();
+    d.io.run();
+  });
+
+  // The token goes only now: inside the tunnel, to the pinned rig.
   pb::ClientMessage m;
   auto* h = m.mutable_hello();
   h->set_protocol_version(veneer::wire::kProtocolVersion);
   h->set_token(token);
   h->set_client_name(options.client_name);
   auto r = d.request(m);
-  if (!r) return make_error("rig " + endpoint.str() + ": " + r.message());
+  if (!r) {
+    std::string why = r.message();
+    if (!d.tls && why.find("closed by the rig") != std::string::npos) {
+      why += " (a rig serving TLS closes a plain-TCP hello without a word: connect without --plain-tcp)";
+    }
+    return make_error("rig " + endpoint.str() + ": " + why);
+  }
   d.hello = convert(r->status());
   return client;
 }
+
+const std::string& Client::fingerprint() const { return impl_->fingerprint; }
 
 bool Client::connected() const {
   std::lock_guard lock(impl_->mutex);

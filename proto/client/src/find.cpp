@@ -17,6 +17,8 @@ std::string FoundRig::describe() const {
   s += host.empty() ? "no host name" : host;
   if (!version.empty()) s += ", veneerd " + version;
   if (protocol) s += ", protocol " + std::to_string(protocol);
+  if (!fingerprint.empty()) s += ", fingerprint " + fingerprint;
+  if (transport == "tcp") s += ", PLAIN TCP";
   return s + ")";
 }
 
@@ -34,6 +36,8 @@ Expected<std::vector<FoundRig>> find_rigs(int timeout_ms) {
     r.port = s.port;
     r.version = txt.version;
     r.protocol = txt.protocol;
+    r.transport = txt.transport.empty() ? "tcp" : txt.transport;
+    r.fingerprint = txt.fingerprint;
     rigs.push_back(std::move(r));
   }
   std::stable_sort(rigs.begin(), rigs.end(), [](const FoundRig& a, const FoundRig& b) {

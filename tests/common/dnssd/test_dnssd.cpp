@@ -79,11 +79,20 @@ TEST(RigTxt, TheRigsRecordReadsBackThroughTheWireFormat) {
   auto strings = dnssd::txt_strings(txt);
   ASSERT_TRUE(strings) << strings.message();
   EXPECT_EQ(*strings, (std::vector<std::string>{"name=bench rig", "proto=" + std::to_string(wire::kProtocolVersion),
-                                                "version=0.1.0"}));
+                                                "transport=tcp", "version=0.1.0"}));
   auto back = wire::parse_rig_txt(dnssd::parse_txt(*strings));
   EXPECT_EQ(back.name, "bench rig");
   EXPECT_EQ(back.version, "0.1.0");
   EXPECT_EQ(back.protocol, wire::kProtocolVersion);
+  EXPECT_EQ(back.transport, "tcp");
+  EXPECT_EQ(back.fingerprint, "");
+  // A TLS rig (the default) announces its certificate's fingerprint.
+  const std::string fp = "69:7B:EE:D8:1B:05:31:38:2B:41:E9:A3:73:F0:29:D0:60:0D:DA:B2:27:55:A5:6A:B7:54:33:FA:FC:80:BE:19";
+  auto tls_strings = dnssd::txt_strings(wire::rig_txt("bench rig", "0.1.0", fp));
+  ASSERT_TRUE(tls_strings) << tls_strings.message();
+  auto tls_back = wire::parse_rig_txt(dnssd::parse_txt(*tls_strings));
+  EXPECT_EQ(tls_back.transport, "tls1.3");
+  EXPECT_EQ(tls_back.fingerprint, fp);
   EXPECT_EQ(wire::parse_rig_txt({{"proto", "1x"}}).protocol, 0u);
   EXPECT_EQ(std::string(wire::kServiceType), "_veneer._tcp");
   EXPECT_TRUE(dnssd::check_service_type(wire::kServiceType));

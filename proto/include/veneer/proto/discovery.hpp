@@ -3,6 +3,7 @@
 // proto/README.md "Finding rigs"): service type _veneer._tcp on the API port,
 // instance name = the rig's name, TXT record
 //   name=<rig name>  version=<veneerd version>  proto=<protocol version>
+//   transport=tls1.3 certfp=<certificate fingerprint>   (or transport=tcp in plain mode)
 #include <cstdint>
 #include <map>
 #include <string>
@@ -12,13 +13,17 @@ namespace veneer::wire {
 inline constexpr const char* kServiceType = "_veneer._tcp";
 
 // The rig's TXT record as key -> value.
-std::map<std::string, std::string> rig_txt(const std::string& rig_name, const std::string& version);
+// `fingerprint` empty: the rig serves plain TCP (transport=tcp, no fingerprint).
+std::map<std::string, std::string> rig_txt(const std::string& rig_name, const std::string& version,
+                                           const std::string& fingerprint = "");
 
 // What a TXT record says of a rig; fields a rig left out stay empty / 0.
 struct RigTxt {
   std::string name;
   std::string version;
   uint32_t protocol = 0;  // 0: not given or not a number
+  std::string transport;    // "tls1.3", "tcp" ("" from a rig that predates TLS: plain TCP)
+  std::string fingerprint;  // the certificate's, as the rig announces it (unauthenticated: compare, never trust alone)
 };
 RigTxt parse_rig_txt(const std::map<std::string, std::string>& txt);
 

@@ -2,12 +2,16 @@
 // The rig client: talks to veneerd over its protobuf/TCP API (Qt-free; used by
 // the `veneer rig` commands and the desktop viewer).
 //
-//   auto rig = veneer::rig::Client::connect({"127.0.0.1", 7878}, token);
+//   veneer::rig::ConnectOptions o;
+//   o.fingerprint = "AB:CD:...";                 // the rig's, from `veneerd --fingerprint` (or known_rigs)
+//   auto rig = veneer::rig::Client::connect({"192.168.1.20", 7878}, token, o);
 //   if (!rig) fail(rig.message());
 //   (*rig)->on_event = [](const veneer::rig::Event& e) { ... };   // reader thread
 //   auto sets = (*rig)->list_sets();
 //   (*rig)->pull(sets->front().id, "out/dest");
 //
+// The connection is TLS 1.3; the rig's certificate is pinned by its
+// fingerprint (ConnectOptions; proto/README.md, "Encryption and pinning").
 // Requests block until their response arrives (or the timeout); events and
 // live frames are delivered on the client's reader thread through the
 // callbacks, which must return quickly. Set callbacks before issuing requests.
@@ -35,6 +39,8 @@ struct Endpoint {
   // "host:port", "host" or ":port".
   static Expected<Endpoint> parse(const std::string& text);
   std::string str() const { return host + ":" + std::to_string(port); }
+  // How the known-rigs file names this rig: "host:port", "[v6]:port".
+  std::string pin_name() const;
 };
 
 // A rig found on the LAN through DNS-SD (it advertises _veneer._tcp, see
@@ -47,6 +53,8 @@ struct FoundRig {
   uint16_t port = 0;
   std::string version;    // veneerd's version, "" if not advertised
   uint32_t protocol = 0;  // API protocol version, 0 if not advertised
+  std::string transport;    // "tls1.3", or "tcp" for a rig serving plain TCP
+  std::string fingerprint;  // as the rig announces it: to show and compare, never to pin unchecked (DNS-SD is not authenticated)
   // "address:port" ("[v6]:port" for IPv6), ready for Endpoint::parse / --rig.
   std::string endpoint() const;
   // One line for people: "veneer-rig  192.168.1.20:7878  (rig.local, veneerd 0.1.0, protocol 1)".
@@ -92,6 +100,7 @@ struct RigStatus {
   uint64_t free_bytes = 0;
   int clients = 0;
   uint64_t event_seq = 0;            // seq of the last event before this status; the next one is event_seq + 1
+  bool plain_tcp = false;            // the rig serves plain TCP (configured so): no encryption
 };
 
 struct SetSummary {
@@ -158,8 +167,27 @@ struct PullOptions {
 
 struct ConnectOptions {
   std::string client_name = "veneer";
-  double connect_timeout_s = 5;
+  double connect_timeout_s = 5;   // TCP connect, and the TLS handshake again as long
   double request_timeout_s = 30;
+  // --- encryption and pinning (proto/README.md, "Encryption and pinning") ---
+  // The rig's certificate must have this fingerprint (64 hex digits, ':'
+  // optional); on a match it is pinned in known_rigs. Empty: the known_rigs entry.
+  std::string fingerprint;
+  // The known-rigs file (tls::default_known_rigs_file() for the user's);
+  // empty: none is read or written.
+  std::filesystem::path known_rigs;
+  // First use (no fingerprint given or known): asked whether `seen` is the
+  // rig's (the caller shows it to a person); true pins it in known_rigs,
+  // false refuses the rig. Called on the connecting thread, before anything
+  // is sent.
+  std::function<bool(const std::string& rig, const std::string& seen)> confirm_first_use;
+  // With nothing above deciding, a rig reached on a loopback address
+  // (127.0.0.0/8, ::1: the connection never leaves this machine) is taken
+  // unpinned; any other is refused. The CLI and the viewer set it false.
+  bool trust_loopback = true;
+  // Plain TCP, no TLS: only for a rig configured --plain-tcp (the token and
+  // the photos cross the network in clear).
+  bool plain_tcp = false;
 };
 
 class Client {
@@ -178,6 +206,8 @@ class Client {
 
   bool connected() const;
   const RigStatus& hello_status() const;  // the status the rig sent with its hello answer
+  // The fingerprint of the rig's certificate ("" in plain TCP).
+  const std::string& fingerprint() const;
 
   Expected<RigStatus> status();
   Expected<std::vector<SetSummary>> list_sets();
@@ -248,6 +278,7 @@ class Client {
 
  private:
   Client();
+  Status check_pin(const Endpoint& endpoint, const std::string& seen, bool loopback);
   Expected<std::vector<SetSummary>> list(bool trash);
   struct Fetched {
     std::vector<std::string> files;    // sent, in order
