@@ -333,8 +333,12 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
   const fast::BlendGuide guide = blend_guide_of(pair, options);
   const bool guided = !guide.destination.empty();
   const fast::BlendGuide* g = guided ? &guide : nullptr;
-  // every photo through the same map: the blend's weights worked out once
-  auto planned = blend_plan_for(pair, options, result.map);
+  // every photo through the same map: the blend's weights worked out once;
+  // not for a shaded look whose pictures are painted later (write_transfer
+  // paints them by the look): at 5600x3750 a plan is up to 25 terms a pixel
+  const bool needs_plan = options.look != repaint::Look::shaded || options.keep_pictures;
+  auto planned = needs_plan ? blend_plan_for(pair, options, result.map)
+                            : Expected<std::shared_ptr<const fast::BlendPlan>>(std::shared_ptr<const fast::BlendPlan>());
   if (!planned) return make_error("repaint: " + planned.message());
   const std::shared_ptr<const fast::BlendPlan> plan = *planned;
   result.blend = plan;

@@ -169,7 +169,8 @@ std::string truth_key(const io::ImageSet& destination, const io::ImageSet& sourc
   k << destination.scene << '|' << source.scene << '|' << destination.size.width << 'x' << destination.size.height
     << '|' << destination.camera.focal_px << '|' << destination.images.size();
   if (!destination.images.empty()) {
-    const cv::Mat& first = destination.images[0];
+    cv::Mat first = destination.images[0];
+    if (first.depth() != CV_32F) first.convertTo(first, CV_32F);  // photos kept as half floats
     k << '|' << cv::sum(first)[0] << '|' << cv::sum(first)[1] << '|' << cv::sum(first)[2];
   }
   for (const auto& light : destination.lights)
