@@ -519,7 +519,13 @@ Expected<pipeline::PreparedPair> prepare_pair(const fs::path& destination, const
   auto prepare_src = [&] { src = prepare_set(source, transfer.scale, transfer.truth_normals, for_src, half(1)); };
   if (options.half_photos) {
     prepare_dst();  // one set's float frames at a time
-    if (dst) prepare_src();
+    if (dst) {
+      // and the destination's cache entry written before the source is
+      // decoded, so that what only the cache needed (albedo, residual) is gone
+      if (!dst->report.checksum.empty()) wait_for_write(dst->report.checksum);
+      dst->albedo.release(), dst->residual.release();
+      prepare_src();
+    }
   } else {
     tbb::parallel_invoke(prepare_dst, prepare_src);
   }

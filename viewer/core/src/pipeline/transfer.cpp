@@ -709,6 +709,10 @@ Status write_transfer(TransferResult& r, PreparedPair&& pair_in, const std::file
   if (r.map.xy.size() != pair_in.dst.view.mask.size())
     return make_error("write_transfer: the map is not the pair's (another size)");
   PreparedPair pair = std::move(pair_in);
+  // nothing here reads the normals (a shaded look holds the destination's)
+  // or the destination's median (the result holds its own)
+  for (PreparedObject* object : {&pair.dst, &pair.src}) object->view.normals.release();
+  pair.destination_median.release();
   // the look's figures need, besides the pictures, what goes next (the truth, every source photo)
   std::optional<detail::LookBegun> begun;
   if (r.look_pending) {
@@ -719,7 +723,6 @@ Status write_transfer(TransferResult& r, PreparedPair&& pair_in, const std::file
   // the pictures need the photos (and the plan made from the rest): the
   // normals and the truth, a photo's bytes each, go before painting starts
   for (io::ImageSet* set : {&pair.destination, &pair.source}) set->truth = io::Truth{};
-  for (PreparedObject* object : {&pair.dst, &pair.src}) object->view.normals.release();
   std::string metrics;
   Status s = write_files(r, &pair, folder, progress, &metrics, std::move(begun));
   if (s) r.metrics_json = std::move(metrics), r.look_pending = false;

@@ -13,6 +13,7 @@
 #include "veneer/eval/look.hpp"
 #include "veneer/eval/metrics.hpp"
 #include "veneer/match/fast.hpp"
+#include "veneer/repaint/gloss.hpp"
 #include "veneer/sim/simulator.hpp"
 
 namespace veneer::pipeline::detail {
@@ -56,6 +57,31 @@ Expected<std::vector<cv::Mat>> grey_pictures(const std::vector<cv::Mat>& kept, c
     if (!painted) return painted.error();
     out.push_back(eval::look_gray(*painted));
   }
+  return out;
+}
+
+// eval::median_image of half-float colour photos (PrepareOptions::half_photos)
+// where `mask` is set, each row widened in turn: no grey copy of the set.
+cv::Mat grey_median(const std::vector<cv::Mat>& photos, const cv::Mat& mask) {
+  const int n = static_cast<int>(photos.size());
+  cv::Mat out(photos[0].size(), CV_32FC1, cv::Scalar(0));
+  cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& rows) {
+    repaint::PhotoRows rows_of(photos);
+    std::vector<float> v(n);
+    for (int y = rows.start; y < rows.end; ++y) {
+      const uchar* m = mask.ptr<uchar>(y);
+      if (cv::countNonZero(mask.row(y)) == 0) continue;
+      const cv::Vec3f* const* p = rows_of.row(y);
+      float* o = out.ptr<float>(y);
+      for (int x = 0; x < out.cols; ++x) {
+        if (!m[x]) continue;
+        for (int i = 0; i < n; ++i) v[i] = (p[i][x][0] + p[i][x][1] + p[i][x][2]) * (1.0f / 3);
+        const int h = n / 2;
+        std::nth_element(v.begin(), v.begin() + h, v.end());
+        o[x] = n % 2 ? v[h] : 0.5f * (v[h] + *std::max_element(v.begin(), v.begin() + h));
+      }
+    }
+  });
   return out;
 }
 
@@ -255,9 +281,10 @@ Expected<LookBegun> look_begin(const PreparedPair& pair, const TransferResult& r
   cv::Mat read(source_photos.empty() ? cv::Size() : source_photos[0].size(), CV_8UC1, cv::Scalar(0));
   mark_read(result.map.xy, read);
   if (floor) read.setTo(255);  // the floor's map reads elsewhere
-  out.source_median = source_photos.empty() || source_photos[0].type() != CV_32FC3
-                          ? eval::median_image(greys(source_photos), read)
-                          : eval::median_image(source_photos, read);
+  out.source_median = source_photos.empty() || source_photos[0].type() == CV_32FC3
+                          ? eval::median_image(source_photos, read)
+                      : source_photos[0].type() == CV_16FC3 ? grey_median(source_photos, read)
+                                                            : eval::median_image(greys(source_photos), read);
   // Without a mask the background, the destination's own photo in the result,
   // dilutes the figures (the bull is 3 % of its frame): the same over the
   // object the transfer repainted.
