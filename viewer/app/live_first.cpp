@@ -1,11 +1,9 @@
 // The full-resolution map is made as `veneer transfer` makes it
 // (pipeline::prepare_pair through the result cache, then the transfer with
-// the options of the map shown; when the sets are wider than the live map,
-// that map refined to full resolution instead of computed again). Everything heavy -- the sets, the pictures,
-// the live session -- is made off the GUI thread; the swap only moves pointers.
-#include <chrono>
-#include <optional>
-
+// the options of the map shown; sets wider than the live view matched at its
+// width and refined to full resolution, as the CLI does). Everything heavy --
+// the sets, the pictures, the live session -- is made off the GUI thread; the
+// swap only moves pointers.
 #include <QLabel>
 #include <QPointer>
 #include <QProgressBar>
@@ -18,7 +16,7 @@
 #include "live_tab.hpp"
 #include "qt_convert.hpp"
 #include "veneer/io/image_io.hpp"
-#include "veneer/match/refine.hpp"
+#include "veneer/io/reduced.hpp"
 #include "veneer/pipeline/prepare.hpp"
 #include "transfer_panel.hpp"
 #include "veneer/ps/photometric_stereo.hpp"
@@ -82,11 +80,9 @@ void LiveFirstJob::maybeStart() {
   const auto options = session_.shown.options;
   const int generation = session_.sets_loaded;
   const cv::Vec3d light = session_.light();
-  // the live map, which the full-resolution one refines (issue 42)
-  const veneer::match::Map live_map = session_.result->map;
   auto cancel = cancel_;
   QPointer<LiveFirstJob> self(this);
-  (void)QtConcurrent::run(job_pool(), [self, dst_folder, src_folder, options, generation, cancel, light, live_map] {
+  (void)QtConcurrent::run(job_pool(), [self, dst_folder, src_folder, options, generation, cancel, light] {
     auto report = [self](double f, const std::string& stage) {
       const QString s = qs(stage);
       if (self)
@@ -106,6 +102,11 @@ void LiveFirstJob::maybeStart() {
     FullResolution out;
     veneer::pipeline::TransferOptions o = options;
     o.keep_pictures = true;
+    // as `veneer transfer` makes it: sets wider than the live view matched at
+    // its width and refined to full resolution (issue 42), so the map shown
+    // is the CLI's (refining the live map itself, made from reduced decodes,
+    // gave another map than the CLI's)
+    o.refine_from_width = veneer::io::ReducedOptions{}.width;
     std::vector<veneer::pipeline::SetReport> reports;
     veneer::pipeline::PrepareOptions prep = veneer::pipeline::default_prepare_options();  // as `veneer transfer`
     auto pair = veneer::pipeline::prepare_pair(dst_folder.toStdString(), src_folder.toStdString(), o, prep, &reports,
@@ -113,23 +114,7 @@ void LiveFirstJob::maybeStart() {
     if (!pair) {
       out.error = qs(pair.message());
     } else {
-      // Refine, don't recompute: when the full destination is wider than the
-      // live map, the live map continued to full resolution by the normals
-      // (match::refine_map); else (a set no wider than the live view) the map
-      // is computed as `veneer transfer` computes it.
-      veneer::Expected<veneer::pipeline::TransferResult> result = veneer::make_error("not run");
-      std::optional<veneer::match::Map> refined;
-      if (!live_map.xy.empty() && live_map.xy.cols < pair->dst.view.mask.cols) {
-        const auto t0 = std::chrono::steady_clock::now();
-        auto r = veneer::match::refine_map(live_map, pair->dst.view, pair->src.view, {}, progress.part(0.6, 0.7));
-        if (r) {
-          r->motion = live_map.motion;
-          refined = std::move(*r);
-          result = veneer::pipeline::transfer(*pair, o, *refined, progress.part(0.7, 0.9));
-          if (result) result->match_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-        }
-      }
-      if (!refined) result = veneer::pipeline::transfer(*pair, o, progress.part(0.6, 0.9));
+      auto result = veneer::pipeline::transfer(*pair, o, progress.part(0.6, 0.9));
       if (!result) {
         out.error = qs(result.message());
       } else {
