@@ -10,7 +10,9 @@
 //  - `veneer transfer` with an empty result cache (a child): every
 //    full-resolution result;
 // with each child's peak RSS and the maps' coverage and coherence from their
-// metrics.json. Prints markdown tables; never fails on a number.
+// metrics.json. The simulator's truth/ folders are set aside (renamed
+// truth.aside for the run, put back after) as a user's sets have none (issue
+// 42); VENEER_BENCH_TRUTH=1 keeps them. Prints markdown tables; never fails on a number.
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -125,6 +127,21 @@ Row run_size(const std::string& exe, int w, int h, const fs::path& dir) {
             .seconds < 0)
       return r;
   }
+  // truth set aside (a user's sets have none), put back when the run ends
+  struct Aside {
+    std::vector<fs::path> moved;
+    ~Aside() {
+      std::error_code ec;
+      for (const auto& t : moved) fs::rename(t.parent_path() / "truth.aside", t, ec);
+    }
+  } aside;
+  if (!std::getenv("VENEER_BENCH_TRUTH") || std::string(std::getenv("VENEER_BENCH_TRUTH")) != "1")
+    for (const fs::path& set : {dst, src}) {
+      std::error_code ec;
+      if (!fs::exists(set / "truth")) continue;
+      fs::rename(set / "truth", set / "truth.aside", ec);
+      if (!ec) aside.moved.push_back(set / "truth");
+    }
   std::vector<std::string> files = raw_files(dst), more = raw_files(src);
   files.insert(files.end(), more.begin(), more.end());
   r.raw_files = static_cast<int>(files.size());
@@ -215,7 +232,9 @@ int main(int argc, char** argv) {
   for (const Row& r : rows)
     std::printf("| %s | %.1f / %.1f | %.1f / %.1f | %+.1f | %+.1f |\n", r.size.c_str(), r.live_cov, r.full_cov,
                 r.live_coh, r.full_coh, r.live_cov - r.full_cov, r.live_coh - r.full_coh);
-  std::printf("\nlive = `veneer transfer --live` (default --live-width 1280: a set no wider keeps its size); all = "
+  std::printf("\nThe sets' truth/ folders set aside (VENEER_BENCH_TRUTH=1 keeps them): metrics' coverage and "
+              "coherence are then against the segmented masks. ");
+  std::printf("live = `veneer transfer --live` (default --live-width 1280: a set no wider keeps its size); all = "
               "`veneer transfer` with an empty result cache (RAW through LibRaw DCB, full resolution); live + all "
               "= what the viewer's flow does one after the other. Peak = the child's own RSS high-water mark.\n");
   return 0;

@@ -1,7 +1,9 @@
 // The full-resolution map is made as `veneer transfer` makes it
 // (pipeline::prepare_pair through the result cache, then the transfer with
-// the options of the map shown). Everything heavy -- the sets, the pictures,
-// the live session -- is made off the GUI thread; the swap only moves pointers.
+// the options of the map shown; sets wider than the live view matched at its
+// width and refined to full resolution, as the CLI does). Everything heavy --
+// the sets, the pictures, the live session -- is made off the GUI thread; the
+// swap only moves pointers.
 #include <QLabel>
 #include <QPointer>
 #include <QProgressBar>
@@ -14,6 +16,7 @@
 #include "live_tab.hpp"
 #include "qt_convert.hpp"
 #include "veneer/io/image_io.hpp"
+#include "veneer/io/reduced.hpp"
 #include "veneer/pipeline/prepare.hpp"
 #include "transfer_panel.hpp"
 #include "veneer/ps/photometric_stereo.hpp"
@@ -99,6 +102,11 @@ void LiveFirstJob::maybeStart() {
     FullResolution out;
     veneer::pipeline::TransferOptions o = options;
     o.keep_pictures = true;
+    // as `veneer transfer` makes it: sets wider than the live view matched at
+    // its width and refined to full resolution (issue 42), so the map shown
+    // is the CLI's (refining the live map itself, made from reduced decodes,
+    // gave another map than the CLI's)
+    o.refine_from_width = veneer::io::ReducedOptions{}.width;
     std::vector<veneer::pipeline::SetReport> reports;
     veneer::pipeline::PrepareOptions prep = veneer::pipeline::default_prepare_options();  // as `veneer transfer`
     auto pair = veneer::pipeline::prepare_pair(dst_folder.toStdString(), src_folder.toStdString(), o, prep, &reports,

@@ -126,6 +126,10 @@ int run(const TransferArgs& a) {
   options.scale = a.scale;
   options.look_floor = a.look_floor;
   options.keep_pictures = false;  // painted and written one at a time (write_transfer with the pair)
+  options.look_when_written = true;  // and the look measured from them then, each painted once
+  // the full-resolution map refined from one made at the live view's width
+  // (issue 42: refine, don't recompute); a set no wider is matched as it is
+  options.refine_from_width = io::ReducedOptions{}.width;
   if (auto s = options.check(); !s) return report.usage(s.message());
   repaint::RtiExportOptions rti_options;
   std::optional<repaint::HshExportOptions> hsh_options;
@@ -149,6 +153,7 @@ int run(const TransferArgs& a) {
   prep.read.raw.demosaic = *demosaic;
   prep.read.raw.half_size = a.raw_half;
   prep.cache.enabled = !a.no_cache;
+  prep.half_photos = true;  // photos in half floats, one set's float frames at a time (issue 42: memory)
   prep.cache.dir = a.cache_dir;
   if (!(a.cache_size_gb > 0)) return report.usage("--cache-size-gb must be > 0");
   prep.cache.max_bytes = static_cast<uint64_t>(a.cache_size_gb * (1ull << 30));

@@ -237,6 +237,18 @@ void start_write(const io::ResultCache& cache, const std::string& key, const Pre
 
 }  // namespace
 
+namespace {
+// Each photo as half floats in place (PrepareOptions::half_photos), one at a time.
+void to_half(std::vector<cv::Mat>& photos) {
+  for (cv::Mat& photo : photos) {
+    if (photo.depth() != CV_32F) continue;
+    cv::Mat half;
+    photo.convertTo(half, CV_MAKETYPE(CV_16F, photo.channels()));
+    photo = half;
+  }
+}
+}  // namespace
+
 Status finish_cache_writes() {
   std::map<std::string, Pending> all;
   {
@@ -385,6 +397,7 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
         const cv::Size size = p.object.view.normals.size();
         if (size != p.set.size) match::scale_set(p.set, static_cast<double>(size.width) / p.set.size.width);
         if (p.set.size == size) {
+          if (options.half_photos) to_half(p.object.view.images);
           p.set.images = p.object.view.images;  // shared pixels, ambient already removed
           p.set.ambient.release();
           for (const auto& light : p.set.lights) p.object.view.lamps.push_back(light.lamp_id);
@@ -471,6 +484,7 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
   }
   p.report.normals_s = p.object.segment_seconds + p.object.normals_seconds;
   p.set.ambient.release();
+  if (options.half_photos) to_half(p.set.images);
   p.object.view.images = p.set.images;
   for (const auto& light : p.set.lights) p.object.view.lamps.push_back(light.lamp_id);
   if (p.object.view.lamps.size() != p.object.view.images.size()) p.object.view.lamps.clear();
@@ -510,9 +524,20 @@ Expected<pipeline::PreparedPair> prepare_pair(const fs::path& destination, const
   PrepareOptions for_dst = options, for_src = options;
   for_dst.mask = options.destination_mask;
   for_src.mask = options.source_mask;
-  tbb::parallel_invoke(
-      [&] { dst = prepare_set(destination, transfer.scale, transfer.truth_normals, for_dst, half(0)); },
-      [&] { src = prepare_set(source, transfer.scale, transfer.truth_normals, for_src, half(1)); });
+  auto prepare_dst = [&] { dst = prepare_set(destination, transfer.scale, transfer.truth_normals, for_dst, half(0)); };
+  auto prepare_src = [&] { src = prepare_set(source, transfer.scale, transfer.truth_normals, for_src, half(1)); };
+  if (options.half_photos) {
+    prepare_dst();  // one set's float frames at a time
+    if (dst) {
+      // and the destination's cache entry written before the source is
+      // decoded, so that what only the cache needed (albedo, residual) is gone
+      if (!dst->report.checksum.empty()) wait_for_write(dst->report.checksum);
+      dst->albedo.release(), dst->residual.release();
+      prepare_src();
+    }
+  } else {
+    tbb::parallel_invoke(prepare_dst, prepare_src);
+  }
   if (!dst) return make_error("destination: " + dst.message());
   if (!src) return make_error("source: " + src.message());
   pipeline::PreparedPair pair;

@@ -16,10 +16,12 @@
 #include <opencv2/imgproc.hpp>
 #include <tbb/parallel_for.h>
 
+#include "veneer/eval/look.hpp"
 #include "veneer/eval/metrics.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/match/fast.hpp"
 #include "veneer/match/map_file.hpp"
+#include "veneer/match/refine.hpp"
 #include "veneer/ps/photometric_stereo.hpp"
 #include "veneer/ps/segmentation.hpp"
 #include "veneer/repaint/repaint.hpp"
@@ -69,6 +71,47 @@ nlohmann::json quality_json(const Quality& q) {
   return j;
 }
 
+// A photo as CV_32F: itself when it is, else widened (photos kept as half
+// floats, PrepareOptions::half_photos).
+cv::Mat as_float(const cv::Mat& photo) {
+  if (photo.empty() || photo.depth() == CV_32F) return photo;
+  cv::Mat out;
+  photo.convertTo(out, CV_32F);
+  return out;
+}
+
+// `view` at `size` with float photos, for the matcher: normals averaged and
+// made unit again, the mask where most of a pixel is object, each photo
+// widened and reduced one at a time. At its own size only the photos change.
+match::ObjectView float_view(const match::ObjectView& view, cv::Size size) {
+  match::ObjectView out;
+  out.lamps = view.lamps;
+  const bool same = size == view.mask.size();
+  if (same) {
+    out.normals = view.normals;
+    out.mask = view.mask;
+  } else {
+    cv::resize(view.normals, out.normals, size, 0, 0, cv::INTER_AREA);
+    cv::Mat mask;
+    cv::resize(view.mask, mask, size, 0, 0, cv::INTER_AREA);
+    out.mask = mask > 127;
+    out.normals.forEach<cv::Vec3f>([&](cv::Vec3f& n, const int* at) {
+      const float l = static_cast<float>(cv::norm(n));
+      n = out.mask.at<uchar>(at[0], at[1]) && l > 1e-6f ? n / l : cv::Vec3f(0, 0, 0);
+    });
+  }
+  for (const cv::Mat& photo : view.images) {
+    cv::Mat f = as_float(photo);
+    if (!same) cv::resize(f, f, size, 0, 0, cv::INTER_AREA);
+    out.images.push_back(f);
+  }
+  return out;
+}
+
+bool float_photos(const match::ObjectView& view) {
+  return std::all_of(view.images.begin(), view.images.end(), [](const cv::Mat& m) { return m.depth() == CV_32F; });
+}
+
 }  // namespace
 
 Status TransferOptions::check() const {
@@ -77,6 +120,8 @@ Status TransferOptions::check() const {
   if (blend < 0 || blend > 16) return make_error("blend radius must be in 0..16 px, got " + std::to_string(blend));
   if (!(blend_guide >= 0 && blend_guide <= 2))
     return make_error("blend_guide must be in [0, 2] (|dn|; 0 = off), got " + std::to_string(blend_guide));
+  if (refine_from_width != 0 && (refine_from_width < 64 || refine_from_width > 8192))
+    return make_error("refine_from_width must be 0 (off) or 64..8192 px, got " + std::to_string(refine_from_width));
   if (look == repaint::Look::shaded) return look_options.check();
   return {};
 }
@@ -130,6 +175,7 @@ void for_each_option(Options& t, F&& f) {
   f("coherent_smooth", m.coherent_smooth), f("coherent_sweeps", m.coherent_sweeps);
   f("coherent_guide", m.coherent_guide), f("fast", m.fast), f("seed", m.seed), f("truth_normals", t.truth_normals);
   f("scale", t.scale), f("blend", t.blend), f("blend_guide", t.blend_guide);
+  f("refine_from_width", t.refine_from_width);
   auto& l = t.look_options;
   f("look_normal_smoothing", l.normal_smoothing), f("look_seam_feather", l.seam_feather);
   f("look_source_gloss", l.source_gloss), f("look_destination_gloss", l.destination_gloss);
@@ -234,6 +280,8 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
 
   auto t0 = Clock::now();
   TransferResult result;
+  std::optional<double> made_at_coherence;  // the map's coherence where it was made, when refined
+  cv::Size made_at;
   if (given) {
     const cv::Size want = dst->view.mask.size();
     if (given->xy.size() != want || given->xy.type() != CV_32FC2 || given->distance.size() != want)
@@ -244,8 +292,35 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
     result.map_given = true;
     timings["match_s"] = 0.0;
     timings["map_given"] = true;
+  } else if (options.refine_from_width > 0 && dst->view.mask.cols > options.refine_from_width) {
+    // Refine, don't recompute (issue 42): the map made at a working width,
+    // then continued to full resolution by the normals.
+    const double k = static_cast<double>(options.refine_from_width) / dst->view.mask.cols;
+    auto reduced = [k](cv::Size s) {
+      return cv::Size(std::max(1, static_cast<int>(std::lround(s.width * k))),
+                      std::max(1, static_cast<int>(std::lround(s.height * k))));
+    };
+    const match::ObjectView coarse_dst = float_view(dst->view, reduced(dst->view.mask.size()));
+    const match::ObjectView coarse_src = float_view(src->view, reduced(src->view.mask.size()));
+    auto coarse = compute_map(coarse_dst, coarse_src, options.match, sub_progress(progress, 0.0, 0.6));
+    if (!coarse) return coarse.error();
+    auto refined = match::refine_map(*coarse, dst->view, src->view, {}, sub_progress(progress, 0.6, 0.85));
+    if (!refined) return refined.error();
+    refined->motion = coarse->motion;
+    timings["match_s"] = since(t0);
+    timings["match_made_at"] = {coarse_dst.mask.cols, coarse_dst.mask.rows};
+    result.map = std::move(*refined);
+    // the coherence of the map as it was made (at full resolution each pixel
+    // picks its nearest normal around the continued match: a chunk's pixels
+    // no longer continue each other exactly, though it is the same chunk)
+    made_at_coherence = eval::evaluate(*coarse, coarse_dst.mask, coarse_src.mask).coherence;
+    made_at = coarse_dst.mask.size();
   } else {
-    auto map = compute_map(dst->view, src->view, options.match, sub_progress(progress, 0.0, 0.85));
+    auto map = float_photos(dst->view) && float_photos(src->view)
+                   ? compute_map(dst->view, src->view, options.match, sub_progress(progress, 0.0, 0.85))
+                   : compute_map(float_view(dst->view, dst->view.mask.size()),
+                                 float_view(src->view, src->view.mask.size()), options.match,
+                                 sub_progress(progress, 0.0, 0.85));
     if (!map) return map.error();
     timings["match_s"] = since(t0);
     result.map = std::move(*map);
@@ -258,14 +333,18 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
   const fast::BlendGuide guide = blend_guide_of(pair, options);
   const bool guided = !guide.destination.empty();
   const fast::BlendGuide* g = guided ? &guide : nullptr;
-  // every photo through the same map: the blend's weights worked out once
-  auto planned = blend_plan_for(pair, options, result.map);
+  // every photo through the same map: the blend's weights worked out once;
+  // not for a shaded look whose pictures are painted later (write_transfer
+  // paints them by the look): at 5600x3750 a plan is up to 25 terms a pixel
+  const bool needs_plan = options.look != repaint::Look::shaded || options.keep_pictures;
+  auto planned = needs_plan ? blend_plan_for(pair, options, result.map)
+                            : Expected<std::shared_ptr<const fast::BlendPlan>>(std::shared_ptr<const fast::BlendPlan>());
   if (!planned) return make_error("repaint: " + planned.message());
   const std::shared_ptr<const fast::BlendPlan> plan = *planned;
   result.blend = plan;
   auto paint = [&](const cv::Mat& photo, const cv::Mat& backdrop) -> Expected<cv::Mat> {
-    if (!plan) return repaint::repaint(result.map, photo, backdrop);
-    return repaint_planned(*plan, photo, backdrop);
+    if (!plan) return repaint::repaint(result.map, as_float(photo), as_float(backdrop));
+    return repaint_planned(*plan, as_float(photo), as_float(backdrop));
   };
   if (options.look == repaint::Look::shaded) {
     auto look = shaded_look(pair, options, result.map, sub_progress(progress, 0.85, 0.9));
@@ -322,6 +401,7 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
         j["relight_error"] = relit.message();
       }
     }
+    if (made_at_coherence) q.coherence = *made_at_coherence;
     result.quality = q;
     j["quality"] = quality_json(q);
     j["quality"]["measured_against"] = "truth (simulated sets)";
@@ -332,11 +412,18 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
     // stereo normals at the matches.
     t0 = Clock::now();
     Quality q = evaluate(result.map, dst->view.mask, src->view.mask, dst->view.normals, src->view.normals);
+    if (made_at_coherence) q.coherence = *made_at_coherence;
     j["quality"] = quality_json(q);
     j["quality"]["measured_against"] = "segmentation masks and photometric-stereo normals (no truth)";
     timings["quality_s"] = since(t0);
   }
-  {
+  if (made_at_coherence)
+    j["quality"]["coherence_measured_at"] = {{"size", {made_at.width, made_at.height}},
+                                             {"means", "the map's coherence where it was made, before "
+                                                       "match::refine_map continued it to full resolution"}};
+  if (options.look_when_written && !options.keep_pictures && !options.look_floor) {
+    result.look_pending = true;  // write_transfer(result, pair) measures it while it paints
+  } else {
     // The look (eval/look.hpp): shading per lamp and texture, beside coverage and coherence.
     const nlohmann::json& qj = j["quality"];
     auto look = detail::look_block(pair, options, result, paint, qj.value("coverage", 0.0), qj.value("coherence", 0.0),
@@ -482,7 +569,9 @@ namespace {
 // write_transfer's files; with `pair`, the per-lamp pictures are painted from
 // its photos one at a time (each into its destination photo, then released).
 Status write_files(const TransferResult& r, PreparedPair* pair, const std::filesystem::path& folder,
-                   const Progress& progress) {
+                   const Progress& progress, std::string* metrics_out = nullptr,
+                   std::optional<detail::LookBegun> begun = std::nullopt) {
+  std::string metrics = r.metrics_json;
   std::error_code ec;
   std::filesystem::create_directories(folder, ec);
   if (ec) return make_error("cannot create " + folder.string() + ": " + ec.message());
@@ -523,11 +612,16 @@ Status write_files(const TransferResult& r, PreparedPair* pair, const std::files
   // The pictures painted from the pair's photos: one after another (each
   // painting and encoding is parallel within), so one is in memory at a time.
   std::vector<std::function<Status()>> painted;
+  // the look measured from the pictures as they are painted (look_pending):
+  // each picture and its destination photo kept in grey, 1/3 of their bytes
+  std::vector<cv::Mat> picture_greys, own_greys;
+  if (!pair) begun.reset();
   if (pair) {
     const size_t lamps = r.look ? pair->dst.view.images.size()
                                 : std::min(pair->src.view.images.size(), pair->dst.view.images.size());
     for (size_t i = 0; i < lamps; ++i) {
-      painted.push_back([&r, pair, &folder, i]() -> Status {
+      if (begun) picture_greys.emplace_back(), own_greys.emplace_back();
+      painted.push_back([&r, pair, &folder, i, &begun, &picture_greys, &own_greys]() -> Status {
         cv::Mat& backdrop = pair->dst.view.images[i];
         const cv::Mat& photo = pair->src.view.images[i];
         cv::Mat out;
@@ -536,10 +630,16 @@ Status write_files(const TransferResult& r, PreparedPair* pair, const std::files
           if (!shaded) return make_error("repaint: " + shaded.message());
           out = std::move(*shaded);
         } else if (r.blend) {
-          out = backdrop;  // painted in place: the photo is released next
-          if (auto s = fast::apply_blend(*r.blend, photo, out); !s) return make_error("repaint: " + s.message());
+          out = as_float(backdrop);  // painted in place: the photo is released next
+          if (auto s = fast::apply_blend(*r.blend, as_float(photo), out); !s)
+            return make_error("repaint: " + s.message());
         } else {
-          out = repaint::repaint(r.map, photo, backdrop);
+          out = repaint::repaint(r.map, as_float(photo), as_float(backdrop));
+        }
+        if (begun) {
+          picture_greys[i] = eval::look_gray(out);
+          const bool own = i < pair->destination.images.size() && !pair->destination.images[i].empty();
+          own_greys[i] = eval::look_gray(own ? pair->destination.images[i] : backdrop);
         }
         // this lamp's photos are done with: every copy of them goes
         pair->dst.view.images[i].release();
@@ -568,6 +668,20 @@ Status write_files(const TransferResult& r, PreparedPair* pair, const std::files
     written[files.size() + i] = progress.cancelled() ? cancelled : painted[i]();
     one_done();
   }
+  if (begun && !progress.cancelled()) {
+    bool painted_all = true;
+    for (size_t i = 0; i < painted.size(); ++i) painted_all = painted_all && written[files.size() + i].ok();
+    if (painted_all) {
+      nlohmann::json j = nlohmann::json::parse(metrics, nullptr, false);
+      const nlohmann::json q = j.is_object() && j.contains("quality") ? j["quality"] : nlohmann::json::object();
+      auto look = detail::look_end(*begun, picture_greys, own_greys, r.repainted_median, r.map.xy,
+                                   q.value("coverage", 0.0), q.value("coherence", 0.0));
+      if (look) j["look"] = std::move(*look);
+      else j["look_error"] = look.message();
+      metrics = j.dump(2);
+    }
+    picture_greys.clear(), own_greys.clear(), begun.reset();
+  }
   tbb::parallel_for(size_t(0), files.size(), [&](size_t i) {
     // a cancel stops the files not yet begun; those being encoded finish
     // (each is whole under its own name or absent, never half-written)
@@ -579,7 +693,8 @@ Status write_files(const TransferResult& r, PreparedPair* pair, const std::files
     if (!s) return s;  // the first by file order, whatever finished first
   }
   if (auto s = io::sync_folder(folder); !s) return s;
-  return io::write_file_atomic(folder / "metrics.json", r.metrics_json + "\n");
+  if (metrics_out) *metrics_out = metrics;
+  return io::write_file_atomic(folder / "metrics.json", metrics + "\n");
 }
 
 }  // namespace
@@ -588,17 +703,30 @@ Status write_transfer(const TransferResult& r, const std::filesystem::path& fold
   return write_files(r, nullptr, folder, progress);
 }
 
-Status write_transfer(const TransferResult& r, PreparedPair&& pair_in, const std::filesystem::path& folder,
+Status write_transfer(TransferResult& r, PreparedPair&& pair_in, const std::filesystem::path& folder,
                       const Progress& progress) {
   if (!r.repainted.empty()) return make_error("write_transfer: the result already holds its pictures");
   if (r.map.xy.size() != pair_in.dst.view.mask.size())
     return make_error("write_transfer: the map is not the pair's (another size)");
   PreparedPair pair = std::move(pair_in);
+  // nothing here reads the normals (a shaded look holds the destination's)
+  // or the destination's median (the result holds its own)
+  for (PreparedObject* object : {&pair.dst, &pair.src}) object->view.normals.release();
+  pair.destination_median.release();
+  // the look's figures need, besides the pictures, what goes next (the truth, every source photo)
+  std::optional<detail::LookBegun> begun;
+  if (r.look_pending) {
+    auto b = detail::look_begin(pair, r, false, progress.part(0.0, 0.0));
+    if (!b) return make_error("the look: " + b.message());
+    begun = std::move(*b);
+  }
   // the pictures need the photos (and the plan made from the rest): the
   // normals and the truth, a photo's bytes each, go before painting starts
   for (io::ImageSet* set : {&pair.destination, &pair.source}) set->truth = io::Truth{};
-  for (PreparedObject* object : {&pair.dst, &pair.src}) object->view.normals.release();
-  return write_files(r, &pair, folder, progress);
+  std::string metrics;
+  Status s = write_files(r, &pair, folder, progress, &metrics, std::move(begun));
+  if (s) r.metrics_json = std::move(metrics), r.look_pending = false;
+  return s;
 }
 
 }  // namespace veneer::pipeline

@@ -13,6 +13,7 @@
 #include "veneer/eval/look.hpp"
 #include "veneer/eval/metrics.hpp"
 #include "veneer/match/fast.hpp"
+#include "veneer/repaint/gloss.hpp"
 #include "veneer/sim/simulator.hpp"
 
 namespace veneer::pipeline::detail {
@@ -56,6 +57,31 @@ Expected<std::vector<cv::Mat>> grey_pictures(const std::vector<cv::Mat>& kept, c
     if (!painted) return painted.error();
     out.push_back(eval::look_gray(*painted));
   }
+  return out;
+}
+
+// eval::median_image of half-float colour photos (PrepareOptions::half_photos)
+// where `mask` is set, each row widened in turn: no grey copy of the set.
+cv::Mat grey_median(const std::vector<cv::Mat>& photos, const cv::Mat& mask) {
+  const int n = static_cast<int>(photos.size());
+  cv::Mat out(photos[0].size(), CV_32FC1, cv::Scalar(0));
+  cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& rows) {
+    repaint::PhotoRows rows_of(photos);
+    std::vector<float> v(n);
+    for (int y = rows.start; y < rows.end; ++y) {
+      const uchar* m = mask.ptr<uchar>(y);
+      if (cv::countNonZero(mask.row(y)) == 0) continue;
+      const cv::Vec3f* const* p = rows_of.row(y);
+      float* o = out.ptr<float>(y);
+      for (int x = 0; x < out.cols; ++x) {
+        if (!m[x]) continue;
+        for (int i = 0; i < n; ++i) v[i] = (p[i][x][0] + p[i][x][1] + p[i][x][2]) * (1.0f / 3);
+        const int h = n / 2;
+        std::nth_element(v.begin(), v.begin() + h, v.end());
+        o[x] = n % 2 ? v[h] : 0.5f * (v[h] + *std::max_element(v.begin(), v.begin() + h));
+      }
+    }
+  });
   return out;
 }
 
@@ -169,7 +195,8 @@ std::string truth_key(const io::ImageSet& destination, const io::ImageSet& sourc
   k << destination.scene << '|' << source.scene << '|' << destination.size.width << 'x' << destination.size.height
     << '|' << destination.camera.focal_px << '|' << destination.images.size();
   if (!destination.images.empty()) {
-    const cv::Mat& first = destination.images[0];
+    cv::Mat first = destination.images[0];
+    if (first.depth() != CV_32F) first.convertTo(first, CV_32F);  // photos kept as half floats
     k << '|' << cv::sum(first)[0] << '|' << cv::sum(first)[1] << '|' << cv::sum(first)[2];
   }
   for (const auto& light : destination.lights)
@@ -219,24 +246,24 @@ Expected<Scored> score(const std::vector<cv::Mat>& pictures, const cv::Mat& medi
 
 }  // namespace
 
-Expected<nlohmann::json> look_block(const PreparedPair& pair, const TransferOptions& options,
-                                    const TransferResult& result, const Paint& paint, double coverage,
-                                    double coherence, const Progress& progress) {
+Expected<LookBegun> look_begin(const PreparedPair& pair, const TransferResult& result, bool floor,
+                               const Progress& progress) {
   const auto t0 = Clock::now();
-  nlohmann::json j;
+  LookBegun out;
+  nlohmann::json& j = out.json;
   // look.py's mask: the destination's mask.png when it has one, else every pixel
   const cv::Mat& mask = pair.destination.mask;
   const bool masked = !mask.empty() && mask.size() == pair.dst.view.mask.size();
-  // the set's photos as look.py reads them (an ambient frame not taken off),
-  // made grey by each use and let go (a grey copy of a set is 1/3 of its frames)
-  std::vector<cv::Mat> truth;
-  std::vector<const std::vector<cv::Mat>*> references{&pair.destination.images};
+  if (masked) out.mask = mask;
   std::string reference = "the destination's own photos";
-  if (!pair.destination.scene.empty() && !pair.source.scene.empty()) {
-    auto rendered = cached_truth_look(pair.destination, pair.source, progress.part(0.0, 0.4));
+  // The truth look is the simulator's truth: rendered for sets that carry
+  // theirs (truth/), not for sets whose truth was set aside -- those are
+  // scored as a user's sets are (at 5600x3750 its render was 25 s).
+  if (!pair.destination.scene.empty() && !pair.source.scene.empty() && pair.destination.truth.present() &&
+      pair.source.truth.present()) {
+    auto rendered = cached_truth_look(pair.destination, pair.source, progress);
     if (rendered) {
-      truth = std::move(rendered->photos);
-      references.insert(references.begin(), &truth);
+      out.truth = std::move(rendered->photos);
       reference = "the truth look: " + pair.destination.scene + " in " + pair.source.scene +
                   "'s material (veneer simulate --scene " + pair.destination.scene + " --material " +
                   pair.source.scene + ", same size and lamps, noise " + std::to_string(rendered->noise) +
@@ -253,29 +280,80 @@ Expected<nlohmann::json> look_block(const PreparedPair& pair, const TransferOpti
   const auto& source_photos = pair.src.view.images;
   cv::Mat read(source_photos.empty() ? cv::Size() : source_photos[0].size(), CV_8UC1, cv::Scalar(0));
   mark_read(result.map.xy, read);
-  if (options.look_floor) read.setTo(255);  // the floor's map reads elsewhere
-  const cv::Mat source_median = source_photos.empty() || source_photos[0].type() != CV_32FC3
-                                    ? eval::median_image(greys(source_photos), read)
-                                    : eval::median_image(source_photos, read);
-  auto pictures = grey_pictures(result.repainted, pair, paint, result.look.get());
-  if (!pictures) return pictures.error();
-  auto scored = score(*pictures, result.repainted_median, references, masked ? mask : cv::Mat(), source_median,
-                      result.map.xy);
-  if (!scored) return scored.error();
-  j.update(scored->json);
+  if (floor) read.setTo(255);  // the floor's map reads elsewhere
+  out.source_median = source_photos.empty() || source_photos[0].type() == CV_32FC3
+                          ? eval::median_image(source_photos, read)
+                      : source_photos[0].type() == CV_16FC3 ? grey_median(source_photos, read)
+                                                            : eval::median_image(greys(source_photos), read);
   // Without a mask the background, the destination's own photo in the result,
   // dilutes the figures (the bull is 3 % of its frame): the same over the
   // object the transfer repainted.
   const bool truth_masks = pair.destination.truth.present() && pair.source.truth.present();
-  const cv::Mat& object = truth_masks ? pair.destination.truth.mask : pair.dst.view.mask;
+  out.object = truth_masks ? pair.destination.truth.mask : pair.dst.view.mask;
+  out.object_name = truth_masks ? "the destination's truth mask" : "the destination's object (segmented)";
+  out.seconds = since(t0);
+  return out;
+}
+
+namespace {
+struct Ended {
+  nlohmann::json json;
+  std::vector<const std::vector<cv::Mat>*> references;
+  Scored scored;
   std::optional<Scored> on_object;
-  if (!masked) {
-    auto o = score(*pictures, result.repainted_median, references, object, source_median, result.map.xy);
+};
+Expected<Ended> end_scored(const LookBegun& begun, const std::vector<cv::Mat>& pictures,
+                           const std::vector<cv::Mat>& own, const cv::Mat& repainted_median, const cv::Mat& map_xy) {
+  Ended e;
+  e.json = begun.json;
+  e.references = {&own};
+  if (!begun.truth.empty()) e.references.insert(e.references.begin(), &begun.truth);
+  auto scored = score(pictures, repainted_median, e.references, begun.mask, begun.source_median, map_xy);
+  if (!scored) return scored.error();
+  e.scored = std::move(*scored);
+  e.json.update(e.scored.json);
+  if (begun.mask.empty()) {
+    auto o = score(pictures, repainted_median, e.references, begun.object, begun.source_median, map_xy);
     if (!o) return o.error();
-    on_object = std::move(*o);
-    j["object"] = on_object->json;
-    j["object"]["mask"] = truth_masks ? "the destination's truth mask" : "the destination's object (segmented)";
+    e.on_object = std::move(*o);
+    e.json["object"] = e.on_object->json;
+    e.json["object"]["mask"] = begun.object_name;
   }
+  return e;
+}
+}  // namespace
+
+Expected<nlohmann::json> look_end(const LookBegun& begun, const std::vector<cv::Mat>& pictures,
+                                  const std::vector<cv::Mat>& own, const cv::Mat& repainted_median,
+                                  const cv::Mat& map_xy, double coverage, double coherence) {
+  const auto t0 = Clock::now();
+  auto e = end_scored(begun, pictures, own, repainted_median, map_xy);
+  if (!e) return e.error();
+  e->json["coverage"] = coverage;
+  e->json["coherence"] = coherence;
+  e->json["look_s"] = begun.seconds + since(t0);
+  return std::move(e->json);
+}
+
+Expected<nlohmann::json> look_block(const PreparedPair& pair, const TransferOptions& options,
+                                    const TransferResult& result, const Paint& paint, double coverage,
+                                    double coherence, const Progress& progress) {
+  const auto t0 = Clock::now();
+  auto begun = look_begin(pair, result, options.look_floor, progress.part(0.0, 0.4));
+  if (!begun) return begun.error();
+  auto pictures = grey_pictures(result.repainted, pair, paint, result.look.get());
+  if (!pictures) return pictures.error();
+  auto ended = end_scored(*begun, *pictures, pair.destination.images, result.repainted_median, result.map.xy);
+  if (!ended) return ended.error();
+  nlohmann::json& j = ended->json;
+  const auto& references = ended->references;
+  const auto& scored = ended->scored;
+  const auto& on_object = ended->on_object;
+  const cv::Mat& source_median = begun->source_median;
+  const cv::Mat& object = begun->object;
+  const cv::Mat& mask = begun->mask;
+  const bool masked = !mask.empty();
+  const bool truth_masks = pair.destination.truth.present() && pair.source.truth.present();
   j["coverage"] = coverage;
   j["coherence"] = coherence;
   j["look_s"] = since(t0);
@@ -315,7 +393,7 @@ Expected<nlohmann::json> look_block(const PreparedPair& pair, const TransferOpti
       j["floor"]["object"] = o->json;
       if (o->shading > 0) j["object"]["shading_vs_floor"] = on_object->shading / o->shading;
     }
-    if (floor->shading > 0) j["shading_vs_floor"] = scored->shading / floor->shading;
+    if (floor->shading > 0) j["shading_vs_floor"] = scored.shading / floor->shading;
   }
   return j;
 }

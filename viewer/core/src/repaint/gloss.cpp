@@ -61,6 +61,26 @@ cv::Mat masked_blur(const cv::Mat& image, const cv::Mat& mask, double sigma) {
   return out;
 }
 
+bool readable_photo(const cv::Mat& photo) { return photo.type() == CV_32FC3 || photo.type() == CV_16FC3; }
+
+PhotoRows::PhotoRows(const std::vector<cv::Mat>& photos)
+    : photos_(photos), buffers_(photos.size()), rows_(photos.size(), nullptr) {}
+
+const cv::Vec3f* const* PhotoRows::row(int y) {
+  for (size_t i = 0; i < photos_.size(); ++i) {
+    const cv::Mat& p = photos_[i];
+    if (p.type() == CV_32FC3) {
+      rows_[i] = p.ptr<cv::Vec3f>(y);
+      continue;
+    }
+    buffers_[i].resize(static_cast<size_t>(p.cols));
+    cv::Mat wide(1, p.cols, CV_32FC3, buffers_[i].data());
+    p.row(y).convertTo(wide, CV_32F);
+    rows_[i] = buffers_[i].data();
+  }
+  return rows_.data();
+}
+
 Expected<Gloss> fit_gloss(const std::vector<cv::Mat>& photos, const cv::Mat& normals, const cv::Mat& mask,
                           const std::vector<cv::Vec3d>& directions, const GlossOptions& options,
                           const Progress& progress) {
@@ -72,8 +92,8 @@ Expected<Gloss> fit_gloss(const std::vector<cv::Mat>& photos, const cv::Mat& nor
   if (normals.type() != CV_32FC3 || mask.type() != CV_8UC1 || normals.size() != mask.size())
     return make_error("gloss: the normals must be CV_32FC3 and the mask CV_8UC1 of their size");
   for (const cv::Mat& p : photos)
-    if (p.type() != CV_32FC3 || p.size() != mask.size())
-      return make_error("gloss: every photo must be CV_32FC3 of the normals' size");
+    if (!readable_photo(p) || p.size() != mask.size())
+      return make_error("gloss: every photo must be CV_32FC3 (or CV_16FC3) of the normals' size");
   const int lamps = static_cast<int>(photos.size()), rows = mask.rows, cols = mask.cols;
   std::vector<cv::Vec3f> l(lamps), h(lamps);
   for (int i = 0; i < lamps; ++i) {
@@ -99,9 +119,12 @@ Expected<Gloss> fit_gloss(const std::vector<cv::Mat>& photos, const cv::Mat& nor
   for (int pass = 0; pass < 3; ++pass) {
     cv::parallel_for_(cv::Range(0, rows), [&](const cv::Range& range) {
       std::vector<float> ratio(lamps), res(lamps), c(lamps), s(lamps);
+      PhotoRows rows_of(photos);
       for (int y = range.start; y < range.end; ++y) {
         if (progress.cancelled()) return;
         const uchar* m = mask.ptr<uchar>(y);
+        if (cv::countNonZero(mask.row(y)) == 0) continue;
+        const cv::Vec3f* const* row = rows_of.row(y);
         const auto* n = normals.ptr<cv::Vec3f>(y);
         auto* albedo = out.albedo.ptr<cv::Vec3f>(y);
         for (int x = 0; x < cols; ++x) {
@@ -112,7 +135,7 @@ Expected<Gloss> fit_gloss(const std::vector<cv::Mat>& photos, const cv::Mat& nor
             for (int ch = 0; ch < 3; ++ch) {
               int k = 0;
               for (int i = 0; i < lamps; ++i)
-                if (c[i] > lit) ratio[k++] = photos[i].ptr<cv::Vec3f>(y)[x][ch] / c[i];
+                if (c[i] > lit) ratio[k++] = row[i][x][ch] / c[i];
               if (k == 0) continue;
               std::nth_element(ratio.begin(), ratio.begin() + k / 2, ratio.begin() + k);
               float med = ratio[k / 2];
@@ -124,7 +147,7 @@ Expected<Gloss> fit_gloss(const std::vector<cv::Mat>& photos, const cv::Mat& nor
           const cv::Vec3f rho = albedo[x];
           const float grey_rho = (rho[0] + rho[1] + rho[2]) / 3.f;
           for (int i = 0; i < lamps; ++i) {
-            const cv::Vec3f& p = photos[i].ptr<cv::Vec3f>(y)[x];
+            const cv::Vec3f& p = row[i][x];
             res[i] = (p[0] + p[1] + p[2]) / 3.f - grey_rho * c[i];
           }
           for (int a = pass == 2 ? best : 0; a < (pass == 2 ? best + 1 : alphas); ++a) {

@@ -43,8 +43,8 @@ Status check_side(const LookSide& side, const char* name) {
   if (v.mask.type() != CV_8UC1 || v.normals.type() != CV_32FC3 || v.normals.size() != v.mask.size())
     return make_error(who + "normals (CV_32FC3) and mask (CV_8UC1) do not fit each other");
   for (const cv::Mat& p : v.images)
-    if (p.type() != CV_32FC3 || p.size() != v.mask.size())
-      return make_error(who + "photos must be CV_32FC3 of the mask's size");
+    if (!readable_photo(p) || p.size() != v.mask.size())
+      return make_error(who + "photos must be CV_32FC3 (or CV_16FC3) of the mask's size");
   if (side.lamps.size() != v.images.size())
     return make_error(who + std::to_string(side.lamps.size()) + " lamp directions for " +
                       std::to_string(v.images.size()) + " photos");
@@ -98,14 +98,17 @@ cv::Mat diffuse_median(const std::vector<cv::Mat>& photos, const cv::Mat& normal
   cv::Mat out(photos[0].size(), grey ? CV_32FC1 : CV_32FC3, cv::Scalar::all(0));
   cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& r) {
     std::vector<float> v(3 * n);
-    for (int y = r.start; y < r.end; ++y)
+    PhotoRows rows_of(photos);
+    for (int y = r.start; y < r.end; ++y) {
+      if (cv::countNonZero(used.row(y)) == 0) continue;
+      const cv::Vec3f* const* row = rows_of.row(y);
       for (int x = 0; x < out.cols; ++x) {
         if (!used.at<uchar>(y, x)) continue;
         const float k = weight.empty() ? 0.f : weight.at<float>(y, x);
         const cv::Vec3f nn = normals.at<cv::Vec3f>(y, x);
         for (int i = 0; i < n; ++i) {
           const float s = k > 0 ? k * Gloss::lobe(nn, l[i], h[i], exponent) : 0.f;
-          const cv::Vec3f p = photos[i].at<cv::Vec3f>(y, x);
+          const cv::Vec3f p = row[i][x];
           if (grey)
             v[i] = std::max((p[0] + p[1] + p[2]) / 3.f - s, floor);
           else
@@ -118,6 +121,7 @@ cv::Mat diffuse_median(const std::vector<cv::Mat>& photos, const cv::Mat& normal
         cv::Vec3f& o = out.at<cv::Vec3f>(y, x);
         for (int c = 0; c < 3; ++c) o[c] = median_of(&v[c * n], n);
       }
+    }
   });
   return out;
 }
@@ -255,13 +259,15 @@ cv::Vec3f ShadedLook::shade(int x, int y, size_t lamp, const cv::Vec3f& d) const
 Expected<cv::Mat> ShadedLook::paint(size_t lamp, const cv::Mat& photo) const {
   if (lamp >= lamp_.size())
     return make_error("look: lamp " + std::to_string(lamp) + " of " + std::to_string(lamp_.size()));
-  if (photo.type() != CV_32FC3 || photo.size() != xy_.size())
-    return make_error("look: the destination photo must be CV_32FC3 of the map's size");
-  cv::Mat out = photo.clone();
+  if (!readable_photo(photo) || photo.size() != xy_.size())
+    return make_error("look: the destination photo must be CV_32FC3 (or CV_16FC3) of the map's size");
+  cv::Mat out;
+  if (photo.type() == CV_32FC3) out = photo.clone();
+  else photo.convertTo(out, CV_32F);
   cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& r) {
     for (int y = r.start; y < r.end; ++y)
       for (int x = 0; x < out.cols; ++x)
-        if (xy_.at<cv::Vec2f>(y, x)[0] >= 0) out.at<cv::Vec3f>(y, x) = shade(x, y, lamp, photo.at<cv::Vec3f>(y, x));
+        if (xy_.at<cv::Vec2f>(y, x)[0] >= 0) out.at<cv::Vec3f>(y, x) = shade(x, y, lamp, out.at<cv::Vec3f>(y, x));
   });
   return out;
 }
@@ -271,23 +277,26 @@ Expected<cv::Mat> ShadedLook::median(const std::vector<cv::Mat>& photos) const {
     return make_error("look: " + std::to_string(photos.size()) + " photos for " + std::to_string(lamp_.size()) +
                       " lamps");
   for (const cv::Mat& p : photos)
-    if (p.type() != CV_32FC3 || p.size() != xy_.size())
-      return make_error("look: the destination photos must be CV_32FC3 of the map's size");
+    if (!readable_photo(p) || p.size() != xy_.size())
+      return make_error("look: the destination photos must be CV_32FC3 (or CV_16FC3) of the map's size");
   const int n = static_cast<int>(photos.size());
   cv::Mat out(xy_.size(), CV_32FC3);
   cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& r) {
     std::vector<float> v(3 * n);
-    for (int y = r.start; y < r.end; ++y)
+    PhotoRows rows_of(photos);
+    for (int y = r.start; y < r.end; ++y) {
+      const cv::Vec3f* const* row = rows_of.row(y);
       for (int x = 0; x < out.cols; ++x) {
         const bool mapped = xy_.at<cv::Vec2f>(y, x)[0] >= 0;
         for (int i = 0; i < n; ++i) {
-          const cv::Vec3f d = photos[i].at<cv::Vec3f>(y, x);
+          const cv::Vec3f d = row[i][x];
           const cv::Vec3f p = mapped ? shade(x, y, static_cast<size_t>(i), d) : d;
           for (int c = 0; c < 3; ++c) v[c * n + i] = p[c];
         }
         cv::Vec3f& o = out.at<cv::Vec3f>(y, x);
         for (int c = 0; c < 3; ++c) o[c] = median_of(&v[c * n], n);
       }
+    }
   });
   return out;
 }

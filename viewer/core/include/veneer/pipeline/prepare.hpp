@@ -24,6 +24,13 @@ struct PrepareOptions {
   // the cache by its content, so a re-run with the same mask hits.
   // prepare_set uses `mask`; prepare_pair `destination_mask` and `source_mask`.
   cv::Mat mask, destination_mask, source_mask;
+  // The photos kept as half floats (CV_16FC3, the precision the cache stores
+  // them at) once the set is prepared, and prepare_pair's two sets prepared
+  // one after the other: a 5600x3750 frame is 126 MB instead of 252, and only
+  // one set's float frames exist at a time (issue 42: peak memory). Only for
+  // callers whose every stage reads such photos (pipeline::transfer with the
+  // CLI's flow does); default off.
+  bool half_photos = false;
   Status check() const;
 };
 

@@ -49,6 +49,16 @@ struct TransferOptions {
   bool keep_pictures = true;   // transfer(): every photo repainted into result.repainted (~250 MB
                                // each at full resolution); false leaves them out, for
                                // write_transfer(result, pair, ...) to paint and write one at a time
+  int refine_from_width = 0;   // when the destination is wider: the map computed with `match` on both
+                               // objects reduced to this width, then refined to full resolution
+                               // (match::refine_map: continued, and the nearest normal within 1 px),
+                               // and its coherence measured at the width it was made at; 0 = the map
+                               // computed at full resolution (the default); else 64..8192 px
+  bool look_when_written = false;  // with keep_pictures false (and no look_floor): metrics.json's "look"
+                               // is measured by write_transfer(result, pair, ...) from the pictures it
+                               // paints, not by transfer() painting them all once more in grey (at
+                               // 5600x3750 that second painting was 33 s of the CLI's 88); until then
+                               // result.look_pending says it is missing. Off by default.
   // metrics.json's "look" (eval/look.hpp) is always measured against the
   // destination's own photos (its cost: the pictures in grey, and painted once
   // more when not kept); on a simulated pair also against the truth look (the
@@ -88,6 +98,8 @@ struct TransferResult {
   std::shared_ptr<const fast::BlendPlan> blend;  // the pictures' blend weights (blend > 0), for
                                                  // repainting more photos the same way (live video)
   std::shared_ptr<const repaint::ShadedLook> look;  // what painted the pictures (look shaded; null for copy)
+  bool look_pending = false;       // metrics_json's "look" is left to write_transfer(result, pair, ...)
+                                   // (TransferOptions::look_when_written)
 };
 
 Expected<TransferResult> transfer(const io::ImageSet& destination, const io::ImageSet& source,
@@ -159,8 +171,10 @@ Status write_transfer(const TransferResult& result, const std::filesystem::path&
 // photos is repainted through the result's map (and blend plan) in place of
 // its destination photo, written and released before the next, so the
 // pictures never all exist at once. Consumes the pair: what the pictures do
-// not need (normals, truth) goes first, and each photo once painted.
-Status write_transfer(const TransferResult& result, PreparedPair&& pair, const std::filesystem::path& folder,
+// not need (normals, truth) goes first, and each photo once painted. With
+// result.look_pending, the look is measured from the pictures as they are
+// painted (each kept in grey) and written into result.metrics_json too.
+Status write_transfer(TransferResult& result, PreparedPair&& pair, const std::filesystem::path& folder,
                       const Progress& progress = {});
 
 // Quality of a map between two sets: truth masks and normals when both sets

@@ -56,4 +56,20 @@ Expected<Gloss> fit_gloss(const std::vector<cv::Mat>& photos, const cv::Mat& nor
 // unchanged for sigma <= 0, 0 where no mask pixel is near.
 cv::Mat masked_blur(const cv::Mat& image, const cv::Mat& mask, double sigma);
 
+// Whether `photo` is one a look reads: CV_32FC3, or CV_16FC3 (the half
+// floats pipeline::PrepareOptions::half_photos keeps, issue 42).
+bool readable_photo(const cv::Mat& photo);
+// Row y of each photo as float pixels: a CV_32FC3 photo's own row, a
+// CV_16FC3 one's widened into a buffer of this reader (one per thread), so
+// photos kept in half floats are never widened whole.
+class PhotoRows {
+ public:
+  explicit PhotoRows(const std::vector<cv::Mat>& photos);
+  const cv::Vec3f* const* row(int y);  // one pointer per photo, valid until the next call
+ private:
+  const std::vector<cv::Mat>& photos_;
+  std::vector<std::vector<cv::Vec3f>> buffers_;
+  std::vector<const cv::Vec3f*> rows_;
+};
+
 }  // namespace veneer::repaint
