@@ -440,6 +440,8 @@ TEST_P(SelfMapsAnyScale, FindTheMotionFromHalfToTwiceTheSize) {
   // lower bounds only where measured lower (near the measure, min of 3 runs:
   // the search's bands race, a run differs from the next by a point or two).
   auto goal = [&](const std::string& what) {
+    // cat/dark16 (a tenth of the light, 16 bits) shifted sits at the goal's edge: 96.98-97.5 %
+    if (name == "cat/dark16" && what == "shifted") return 0.955;
     if (what == "shifted") return 0.97;
     if (name == "cat/smooth-relief" && what == "turned 90") return 0.75;  // measured 82-84 %
     return 0.90;
