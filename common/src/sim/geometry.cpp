@@ -327,7 +327,7 @@ double hit_cup(const Primitive& p, const V3& o, const V3& d, double t_min, doubl
     return kMiss;
   }
   if (std::abs(dy) > 1e-18) {
-    auto radial2 = [&](double t) { V3 q = op + dp * t; return dot(q, q); };
+    auto radial2 = [op = op, dp = dp](double t) { V3 q = op + dp * t; return dot(q, q); };  // copies: clang 14 (make fuzz) captures no structured bindings
     if (dy < 0) {
       double t = (L - oy) / dy;  // rim, from above
       double r2 = radial2(t);
