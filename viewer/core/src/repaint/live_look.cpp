@@ -582,7 +582,12 @@ cv::Mat LiveLook::paint(const cv::Mat& frame, const cv::Matx23d& a, const LiveLi
   else
     out = cv::Mat(d.dsize, CV_8UC3, cv::Scalar::all(0));
   const cv::Vec3d& l = light.direction;
-  const auto& [ls, ext, wd, lf, lsf, h, ef] = destination_light(d, l);
+  // named, not bound: clang 14 (make fuzz) cannot capture structured bindings in the lambdas below
+  const DestinationLight dl = destination_light(d, l);
+  const bool ext = dl.ext;
+  const Active& wd = dl.wd;
+  const cv::Vec3f &lf = dl.lf, &lsf = dl.lsf, &h = dl.h;
+  const float ef = dl.ef;
   const cv::Vec3d lss = supported(d.sspan, l);
   const bool sext = lss != l;
   const cv::Vec3f lssf = to_f(lss);
