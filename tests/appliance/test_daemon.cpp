@@ -180,22 +180,28 @@ TEST(Daemon, TwoPressesStoreTwoSetsThatPullWithTheRenderedPixelsAndTrueNormals) 
 // the 95th percentile; 6.98 / 35.0 with ps::PsOptions::penumbra_fraction);
 // the plinth's top was then too broken up for the base removal, which kept
 // it (2772 pixels mapped, the plinth orange). Now the plinth is left out.
-TEST(Daemon, TheRigsBullHasItsNormalsAndItsPlinthIsLeftOut) {
-  fs::path dir = rigtest::temp_dir("plinth");
-  fs::path store = dir / "store";
-  auto d = DaemonProcess::start(store, {"--scenes", "bull,orange", "--size", "256x170"});
-  ASSERT_TRUE(d && d->port() != 0) << (d ? d->log() : "no process");
-  const std::string rig = rigtest::veneer_cli() + rig_args(*d, store);
-  for (int i = 0; i < 2; ++i) ASSERT_EQ(run(rig + " press --wait").code, 0) << d->log();
+// Two presses of the rig's button (destination, then source), both sets
+// pulled through the CLI into `dst` and `src`.
+void press_twice_and_pull(const DaemonProcess& d, const fs::path& store, const fs::path& dst, const fs::path& src) {
+  const std::string rig = rigtest::veneer_cli() + rig_args(d, store);
+  for (int i = 0; i < 2; ++i) ASSERT_EQ(run(rig + " press --wait").code, 0) << d.log();
   auto list = run(rig + " list");
   std::vector<std::string> ids;
   std::istringstream lines(list.out);
   for (std::string line; std::getline(lines, line);)
     if (!line.empty()) ids.push_back(line.substr(0, line.find(' ')));
   ASSERT_EQ(ids.size(), 2u) << list.out;
-  const fs::path dst = dir / "dst", src = dir / "src", tr = dir / "transfer";
   ASSERT_EQ(run(rig + " pull " + ids[0] + " --out " + dst.string()).code, 0);
   ASSERT_EQ(run(rig + " pull " + ids[1] + " --out " + src.string()).code, 0);
+}
+
+TEST(Daemon, TheRigsBullHasItsNormalsAndItsPlinthIsLeftOut) {
+  fs::path dir = rigtest::temp_dir("plinth");
+  fs::path store = dir / "store";
+  auto d = DaemonProcess::start(store, {"--scenes", "bull,orange", "--size", "256x170"});
+  ASSERT_TRUE(d && d->port() != 0) << (d ? d->log() : "no process");
+  const fs::path dst = dir / "dst", src = dir / "src", tr = dir / "transfer";
+  ASSERT_NO_FATAL_FAILURE(press_twice_and_pull(*d, store, dst, src));
 
   // Photometric stereo as `veneer normals` runs it (RAW, segmented, robust, near lamps).
   auto set = veneer::io::read_set(dst);
@@ -245,17 +251,9 @@ TEST(Daemon, LiveFramesThroughAMapAreBlendedAsTheStills) {
   fs::path store = dir / "store";
   auto d = DaemonProcess::start(store, kSmall);
   ASSERT_TRUE(d && d->port() != 0) << (d ? d->log() : "no process");
-  const std::string rig = rigtest::veneer_cli() + rig_args(*d, store);
-  for (int i = 0; i < 2; ++i) ASSERT_EQ(run(rig + " press --wait").code, 0) << d->log();
-  auto list = run(rig + " list");
-  std::vector<std::string> ids;
-  std::istringstream lines(list.out);
-  for (std::string line; std::getline(lines, line);)
-    if (!line.empty()) ids.push_back(line.substr(0, line.find(' ')));
-  ASSERT_EQ(ids.size(), 2u) << list.out;
   const fs::path dst = dir / "dst", src = dir / "src", tr = dir / "transfer";
-  ASSERT_EQ(run(rig + " pull " + ids[0] + " --out " + dst.string()).code, 0);
-  ASSERT_EQ(run(rig + " pull " + ids[1] + " --out " + src.string()).code, 0);
+  ASSERT_NO_FATAL_FAILURE(press_twice_and_pull(*d, store, dst, src));
+  const std::string rig = rigtest::veneer_cli() + rig_args(*d, store);
   auto t = run(rigtest::veneer_cli() + " transfer --dst " + dst.string() + " --src " + src.string() +
                " --method coherent --blend 3 --out " + tr.string());
   ASSERT_EQ(t.code, 0) << t.out;
