@@ -90,4 +90,4 @@ package-test: package-deps
 	tools/package/test.sh $(PACKAGE_OUT)
 
 clean:
-	rm -rf $(BUILD) build-asan build-fuzz build-time demo-out soak-out $(PACKAGE_OUT)
+	rm -rf $(BUILD) build-asan build-fuzz build-time demo-out soak-out fuzz-out $(PACKAGE_OUT)

@@ -437,13 +437,13 @@ TEST_P(SelfMapsAnyScale, FindTheMotionFromHalfToTwiceTheSize) {
   MatchOptions o;
   o.method = Method::combined;
   // Goals: 90 % within 2 px at any scale or turn, 97 % within 1.5 px shifted;
-  // lower bounds only where measured lower (near the measure, min of 3 runs:
-  // the search's bands race, a run differs from the next by a point or two).
+  // lower bounds only where measured lower, just under the measure (the search
+  // is deterministic: the same map on every run, whatever the thread count).
   auto goal = [&](const std::string& what) {
-    // cat/dark16 (a tenth of the light, 16 bits) shifted sits at the goal's edge: 96.98-97.5 %
-    if (name == "cat/dark16" && what == "shifted") return 0.955;
+    // cat/dark16 (a tenth of the light, 16 bits) shifted sits at the goal's edge: 96.9 %
+    if (name == "cat/dark16" && what == "shifted") return 0.965;
     if (what == "shifted") return 0.97;
-    if (name == "cat/smooth-relief" && what == "turned 90") return 0.75;  // measured 82-84 %
+    if (name == "cat/smooth-relief" && what == "turned 90") return 0.83;  // measured 84.8 %
     return 0.90;
   };
   auto run = [&](const std::string& what, double tolerance, const io::ImageSet& moved,

@@ -685,7 +685,12 @@ Expected<Map> run_combined(const ObjectView& destination, const ObjectView& sour
         const bool forward = it % 2 == 0;
         const int step = forward ? 1 : -1;
         const cv::Point back_x = m.step({-step, 0}), back_y = m.step({0, -step});
-        tbb::parallel_for(0, bands, [&](int band) {
+        // Bands side by side share a row edge (propagation and coherence read
+        // the row beyond it): the even bands run first, then the odd, so each
+        // reads a finished neighbour and the result does not depend on which
+        // thread got where first (the same map on every run and machine).
+        for (int parity = 0; parity < 2; ++parity) tbb::parallel_for(0, (bands + 1 - parity) / 2, [&](int half) {
+          const int band = 2 * half + parity;
           std::mt19937 rng(options.seed * 7919u + static_cast<unsigned>(lv * 131 + it * 17 + band) + salt * 104729u);
           const int y0 = d.box.y + d.box.height * band / bands, y1 = d.box.y + d.box.height * (band + 1) / bands;
           const int x0 = d.box.x, x1 = d.box.x + d.box.width;
