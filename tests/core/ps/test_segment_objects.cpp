@@ -57,8 +57,10 @@ TEST(SegmentObjects, TheBullWithoutItsPlinthWithItsShadowedLegsAndTail) {
   std::printf("bull: missed %.2f %%, extra %.2f %%, base %d px on %d faces\n", 100 * o.missed, 100 * o.extra,
               base.removed_pixels, base.planes);
   EXPECT_GT(base.removed_pixels, 1000);
-  EXPECT_LT(o.missed, 0.02);
-  EXPECT_LT(o.extra, 0.03);  // specks of the plinth in the legs' shadows at most
+  // measured 0.92 % (was 1.96 % before the dim outline was kept and the
+  // hooves' and legs' pixels beside the plinth went back to the bull)
+  EXPECT_LT(o.missed, 0.012);
+  EXPECT_LT(o.extra, 0.03);  // specks of the plinth in the legs' shadows at most (measured 1.21 %)
 }
 
 // Through a camera's optics (the rig twin's: a lens-blurred crease between
@@ -73,12 +75,13 @@ TEST(SegmentObjects, ThePlinthThroughACamerasOpticsSeamsAndRimIncluded) {
   std::printf("bull through optics: missed %.2f %%, extra %.2f %%, base %d px on %d faces\n", 100 * o.missed,
               100 * o.extra, base.removed_pixels, base.planes);
   EXPECT_GT(base.removed_pixels, 1000);
-  EXPECT_LT(o.missed, 0.03);
+  EXPECT_LT(o.missed, 0.006);  // measured 0.34 % (0.83 % before the legs' pixels beside the plinth stayed)
   // The truth is where the object covers half a pixel or more; the contrast
   // threshold also keeps the outline's mixed pixels (a ring of ~1 px: 4-7 %
   // of objects this small, see below), and a patch of the plinth in the hind
   // legs' shadow (no lamp lights it: its normals are filled from the legs')
-  // stays with them: 9.5 % in all. Before the seams were crossed, no base
+  // stays with them: 9.8 % in all (9.4 % before the mixed pixels where a
+  // hoof meets the plinth went to the side whose normal they share). Before the seams were crossed, no base
   // was found here at all.
   EXPECT_LT(o.extra, 0.11);
 }
@@ -144,6 +147,11 @@ TEST(SegmentObjects, BadContrastOptions) {
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.message().find("contrast"), std::string::npos) << r.message();
   EXPECT_EQ(parse_segment_method("contrast").value(), SegmentMethod::contrast);
+  so = {};
+  so.outline_sigmas = -1;
+  r = segment(set, so);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.message().find("outline_sigmas"), std::string::npos) << r.message();
 }
 
 }  // namespace

@@ -36,6 +36,8 @@ Status SegmentOptions::check() const {
   if (!(contrast_low > 1 && contrast_high >= contrast_low && contrast_high < 1e3))
     return make_error("contrast thresholds must satisfy 1 < low <= high, got " + std::to_string(contrast_low) + " and " +
                       std::to_string(contrast_high));
+  if (!(outline_sigmas >= 0 && outline_sigmas <= 100))
+    return make_error("outline_sigmas must be in [0, 100], got " + std::to_string(outline_sigmas));
   return Status::success();
 }
 
@@ -163,6 +165,48 @@ double otsu(const cv::Mat& img) {
   return std::exp(lo + (best_i + 1) / sc);  // object: value >= threshold
 }
 
+// The outline the thresholds miss: each pixel beside the object (an
+// 8-neighbour) whose brightest-lamp value stands above the backdrop around it
+// by `sigmas` times that backdrop's spread (median and MAD of the pixels 2-3 px
+// away that are neither object nor beside it) and lies at least halfway from
+// it to the object's pixels next to it. The dim outline of a dark part seen
+// at a grazing angle, a thin horn's tip the opening took, a pixel the object
+// covers half of are kept; the backdrop's noise and the lens's fringe (less
+// than half the object) are not.
+cv::Mat with_outline(const cv::Mat& mask, const cv::Mat& bright, double sigmas) {
+  cv::Mat near;
+  cv::dilate(mask, near, cv::Mat());
+  const cv::Mat ring = near & ~mask;
+  cv::Mat out = mask.clone();
+  const int W = mask.cols, H = mask.rows, r = 3;
+  std::vector<float> backdrop, spread;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      if (!ring.at<uint8_t>(y, x)) continue;
+      backdrop.clear();
+      float object = 0;
+      int n_object = 0;
+      for (int qy = std::max(0, y - r); qy <= std::min(H - 1, y + r); ++qy)
+        for (int qx = std::max(0, x - r); qx <= std::min(W - 1, x + r); ++qx) {
+          const float v = bright.at<float>(qy, qx);
+          if (mask.at<uint8_t>(qy, qx)) {
+            if (std::abs(qx - x) <= 1 && std::abs(qy - y) <= 1) object += v, ++n_object;
+          } else if (!ring.at<uint8_t>(qy, qx)) {
+            backdrop.push_back(v);
+          }
+        }
+      if (backdrop.size() < 5 || n_object == 0) continue;
+      const float level = percentile(backdrop, 0.5);
+      spread.clear();
+      for (const float v : backdrop) spread.push_back(std::abs(v - level));
+      const float sigma = 1.4826f * percentile(spread, 0.5);
+      const float b = bright.at<float>(y, x);
+      if (b > level + static_cast<float>(sigmas) * sigma && b >= 0.5f * (object / n_object + level))
+        out.at<uint8_t>(y, x) = 255;
+    }
+  return out;
+}
+
 }  // namespace
 
 cv::Mat clean_mask(const cv::Mat& mask_in, const SegmentOptions& options) {
@@ -256,6 +300,15 @@ Expected<Segmentation> segment(const io::ImageSet& set, const SegmentOptions& op
   }
   // A supplied mask is the user's word; cleaning is for thresholded ones.
   if (options.clean && method != SegmentMethod::supplied && method != SegmentMethod::none) mask = clean_mask(mask, options);
+  if (method == SegmentMethod::contrast && options.outline_sigmas > 0) {
+    cv::Mat outlined = with_outline(mask, seg.summed, options.outline_sigmas);
+    if (options.rect) {
+      cv::Mat inside(size, CV_8UC1, cv::Scalar(0));
+      inside(*options.rect & cv::Rect(0, 0, size.width, size.height)).setTo(255);
+      outlined &= inside;
+    }
+    mask |= outlined;
+  }
   seg.object_pixels = cv::countNonZero(mask);
   if (seg.object_pixels == 0)
     return make_error(std::string("segmentation (") + segment_method_name(method) + ") found no object pixels");
@@ -270,6 +323,59 @@ namespace veneer::ps {
 namespace {
 
 inline float dot3(const cv::Vec3f& a, const cv::Vec3f& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+// The contested pixels (CV_8UC1) that go with the support: each side (the
+// support's pixels, the rest of the mask) grows from its own pixels through
+// contested pixels one step (8-neighbours) at a time, and a pixel goes to the
+// side that reaches it first; one both reach in the same step goes to the side
+// whose normal there is nearer its own (the leg's outline just above a
+// plinth's edge to the leg, the plinth's rim against a hoof to the plinth).
+// Pixels neither side reaches go to the support. Works within the contested
+// pixels' bounding box (at full resolution a plinth is a fraction of the frame).
+cv::Mat nearer_to_support(const cv::Mat& contested_full, const cv::Mat& support_full, const cv::Mat& rest_full,
+                          const cv::Mat& normals_full) {
+  cv::Mat out(contested_full.size(), CV_8UC1, cv::Scalar(0));
+  if (cv::countNonZero(contested_full) == 0) return out;
+  const cv::Rect box = (cv::boundingRect(contested_full) + cv::Size(2, 2) - cv::Point(1, 1)) &
+                       cv::Rect(0, 0, contested_full.cols, contested_full.rows);
+  const cv::Mat contested = contested_full(box), support = support_full(box), rest = rest_full(box),
+                normals = normals_full(box);
+  const int W = box.width, H = box.height;
+  cv::Mat owner(box.size(), CV_8UC1, cv::Scalar(0));  // 1 support, 2 rest
+  cv::Mat best[2] = {cv::Mat(box.size(), CV_32F, cv::Scalar(-2)),
+                     cv::Mat(box.size(), CV_32F, cv::Scalar(-2))};  // the nearest normal's cosine per side
+  std::vector<cv::Point> front[2], claimed;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      if (support.at<uint8_t>(y, x)) front[0].push_back({x, y});
+      else if (rest.at<uint8_t>(y, x)) front[1].push_back({x, y});
+    }
+  while (!front[0].empty() || !front[1].empty()) {
+    claimed.clear();
+    for (int side = 0; side < 2; ++side)
+      for (const cv::Point& p : front[side]) {
+        const cv::Vec3f np = normals.at<cv::Vec3f>(p);
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int qx = p.x + dx, qy = p.y + dy;
+            if (qx < 0 || qy < 0 || qx >= W || qy >= H) continue;
+            if (!contested.at<uint8_t>(qy, qx) || owner.at<uint8_t>(qy, qx)) continue;
+            float& b = best[side].at<float>(qy, qx);
+            if (b < -1.5f && best[1 - side].at<float>(qy, qx) < -1.5f) claimed.push_back({qx, qy});
+            b = std::max(b, dot3(np, normals.at<cv::Vec3f>(qy, qx)));
+          }
+      }
+    front[0].clear();
+    front[1].clear();
+    for (const cv::Point& q : claimed) {
+      const int side = best[0].at<float>(q) > best[1].at<float>(q) ? 0 : 1;
+      owner.at<uint8_t>(q) = static_cast<uint8_t>(side + 1);
+      front[side].push_back(q);
+    }
+  }
+  cv::Mat(contested & (owner != 2)).copyTo(out(box));
+  return out;
+}
 
 }  // namespace
 
@@ -429,17 +535,22 @@ SupportRemoval drop_supports(cv::Mat& mask, const cv::Mat& normals, const Suppor
     }
   }
   // 4c. The seams between its faces and pieces (narrower than 2 seam_px) go with it.
+  //     And its rim: the mask's pixels within seam_px of both the support and
+  //     the background (the lens mixes the plinth's edge with the backdrop;
+  //     such pixels fit no face and would stay as an outline of the plinth).
+  //     Both sweep up pixels of what stands on it too (a hoof's corners the
+  //     closing fills, a leg's outline just above the plinth's back edge), so
+  //     each such pixel goes to the side nearer to it: the support's faces or
+  //     the rest of the mask.
   if (seam > 0) {
     cv::Mat closed;
     cv::morphologyEx(dropped, closed, cv::MORPH_CLOSE, near_kernel);
-    dropped = closed & mask;
-    // And its rim: the mask's pixels within seam_px of both the support and
-    // the background (the lens mixes the plinth's edge with the backdrop;
-    // such pixels fit no face and would stay as an outline of the plinth).
+    closed &= mask;
     cv::Mat near_support, near_outside;
-    cv::dilate(dropped, near_support, near_kernel);
+    cv::dilate(closed, near_support, near_kernel);
     cv::dilate(~mask, near_outside, near_kernel);
-    dropped |= near_support & near_outside & mask;
+    const cv::Mat contested = (closed | (near_support & near_outside & mask)) & ~dropped;
+    dropped |= nearer_to_support(contested, dropped, mask & ~dropped & ~contested, normals);
   }
   if (cv::countNonZero(dropped) > o.max_support_fraction * total) return out;
   // 5. Touched by what stands on it along a small part of its outline? What

@@ -8,8 +8,9 @@
 // shadowed under most lamps stays with the body it touches. The thesis
 // threshold (the summed intensity, a given threshold or Otsu's) remains. An optional rectangle limits
 // the object; then the mask is cleaned: specks (small components) removed,
-// small holes filled. A set that supplies its own mask (DiLiGenT mask.png)
-// uses it by default.
+// small holes filled, and (`contrast`) the dim outline beside the object kept
+// where it stands clear of the backdrop around it (`outline_sigmas`). A set
+// that supplies its own mask (DiLiGenT mask.png) uses it by default.
 #include <optional>
 #include <string>
 
@@ -50,6 +51,11 @@ struct SegmentOptions {
   double border_fraction = 0.03;  // band width as a fraction of the frame's smaller side (0, 0.25]
   double contrast_low = 1.5;      // > 1
   double contrast_high = 4.0;     // >= contrast_low
+  // `contrast`, after cleaning: a pixel beside the object joins it when its
+  // brightest-lamp value stands this many robust standard deviations above
+  // the backdrop around it and at least halfway from that backdrop to the
+  // object beside it (a dark part's dim outline, a thin tip) [0, 100]; 0 = off.
+  double outline_sigmas = 3.0;
   Status check() const;
 };
 
@@ -84,6 +90,9 @@ namespace veneer::ps {
 // them along a small part of their outline (legs, a stem, what a shadow hides: at most
 // `max_contact_fraction`), so an object made of flat faces (a stack of
 // bricks, a box) is left whole.
+// Pixels swept up with a support (the seams between its faces, its rim
+// against the backdrop) go back to what stands on it when they are nearer to
+// it, or as near and closer to its normals (a hoof's outline on the plinth).
 struct SupportOptions {
   double plane_deg = 3.0;
   double region_deg = 6.0;
