@@ -345,8 +345,11 @@ cv::Mat nearer_to_support(const cv::Mat& contested_full, const cv::Mat& support_
   cv::Mat best[2] = {cv::Mat(box.size(), CV_32F, cv::Scalar(-2)),
                      cv::Mat(box.size(), CV_32F, cv::Scalar(-2))};  // the nearest normal's cosine per side
   std::vector<cv::Point> front[2], claimed;
+  cv::Mat beside;  // only pixels beside a contested one can claim it
+  cv::dilate(contested, beside, cv::Mat());
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
+      if (!beside.at<uint8_t>(y, x)) continue;
       if (support.at<uint8_t>(y, x)) front[0].push_back({x, y});
       else if (rest.at<uint8_t>(y, x)) front[1].push_back({x, y});
     }
