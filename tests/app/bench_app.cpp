@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <random>
+#include <string>
 #include <vector>
 
 #include <QApplication>
@@ -45,6 +46,17 @@ double cpu_ms() {
   return ts.tv_sec * 1e3 + ts.tv_nsec / 1e6;
 }
 
+// Time the calling thread spent runnable but waiting for a core (ms), from
+// /proc/thread-self/schedstat; -1 when the kernel does not say.
+double runqueue_ms() {
+  FILE* f = std::fopen("/proc/thread-self/schedstat", "r");
+  if (!f) return -1;
+  unsigned long long run = 0, wait = 0;
+  const int n = std::fscanf(f, "%llu %llu", &run, &wait);
+  std::fclose(f);
+  return n == 2 ? wait / 1e6 : -1;
+}
+
 template <class F>
 double median_ms(F f, int runs) {
   std::vector<double> t;
@@ -68,13 +80,15 @@ class TracingApp : public QApplication {
   using QApplication::QApplication;
   bool notify(QObject* receiver, QEvent* event) override {
     if (!trace_ || !g_measuring) return QApplication::notify(receiver, event);
-    const double t = now_ms(), cpu = cpu_ms();
+    const double t = now_ms(), cpu = cpu_ms(), queued = runqueue_ms();
     const int type = event->type();
     const bool r = QApplication::notify(receiver, event);
     const double ms = now_ms() - t;
     if (ms > 30)
-      std::fprintf(stderr, "stall trace (%s): %.1f ms (%.1f ms of GUI-thread CPU) in %s '%s' event %d\n", g_measuring,
-                   ms, cpu_ms() - cpu, receiver->metaObject()->className(),
+      std::fprintf(stderr,
+                   "stall trace (%s): %.1f ms (%.1f ms of GUI-thread CPU, %.1f ms waiting for a core) in %s '%s' "
+                   "event %d\n",
+                   g_measuring, ms, cpu_ms() - cpu, runqueue_ms() - queued, receiver->metaObject()->className(),
                    receiver->objectName().toStdString().c_str(), type);
     return r;
   }
@@ -92,7 +106,18 @@ int main(int argc, char** argv) {
   qputenv("VENEER_KNOWN_RIGS", (known.path() + "/known_rigs").toUtf8());
   veneer::app::RigLink::setDefaultPinAsker([](const QString&, const QString&) { return true; });
   const cv::Size size(1024, 680);
-
+  // VENEER_BENCH_APP_ONLY=live-first: section 4 alone (iterating on it)
+  const bool live_first_only = qEnvironmentVariable("VENEER_BENCH_APP_ONLY") == "live-first";
+  QTemporaryDir dir;
+  // Heartbeat: the longest gap between 10 ms timer ticks is the GUI's worst stall.
+  double last = now_ms(), worst = 0;
+  QTimer beat;
+  QObject::connect(&beat, &QTimer::timeout, [&] {
+    const double t = now_ms();
+    worst = std::max(worst, t - last);
+    last = t;
+  });
+  if (!live_first_only) {
   // 1. Repaint through a map: a real map (destination bull, source orange, truth normals).
   veneer::sim::RenderOptions ro;
   ro.size = size;
@@ -132,7 +157,6 @@ int main(int argc, char** argv) {
   std::printf("| ratio | %.1fx | |\n\n", peer / fast);
 
   // 2. Live view while a transfer computes, against a real simulated rig.
-  QTemporaryDir dir;
   QTcpServer probe;
   probe.listen(QHostAddress::LocalHost, 0);
   const int port = probe.serverPort();
@@ -168,14 +192,6 @@ int main(int argc, char** argv) {
   QTest::qWait(3000);
   const double idle_fps = (w.live().framesShown() - idle_before) * 1000.0 / (now_ms() - idle_t0);
 
-  // Heartbeat: the longest gap between 10 ms timer ticks is the GUI's worst stall.
-  double last = now_ms(), worst = 0;
-  QTimer beat;
-  QObject::connect(&beat, &QTimer::timeout, [&] {
-    const double t = now_ms();
-    worst = std::max(worst, t - last);
-    last = t;
-  });
   // A slow computation: the faithful exhaustive search with 3x3 patches.
   w.findChild<QComboBox*>("method")->setCurrentText("linear");
   w.findChild<QComboBox*>("patch")->setCurrentText("3");
@@ -261,6 +277,7 @@ int main(int argc, char** argv) {
               sync_load / 1000);
   rig.kill();
   rig.waitForFinished(3000);
+  }  // sections 1-3
 
   // 4. Live first (issue 34): from the second set stored on a simulated rig at
   //    5600x3750 (VENEER_BENCH_APP_FULL=WxH to change, =0 to skip) to the first
@@ -314,8 +331,29 @@ int main(int argc, char** argv) {
     return 1;
   }
   double both_loaded = -1, map_ready = -1, first_frame = -1;
+  // With VENEER_BENCH_TRACE set: every change of the flow's state, with its time since the second set was stored.
+  const bool trace = !qEnvironmentVariableIsEmpty("VENEER_BENCH_TRACE");
+  std::string traced;
+  auto trace_state = [&] {
+    if (!trace) return;
+    const auto& s = lw.session();
+    char line[512];
+    std::snprintf(line, sizeof line,
+                  "dst %s src %s result %s computing %d live_session %s refusal '%s' frames %d repainted %dx%d "
+                  "full running %d swaps %d | %s",
+                  s.dst ? (s.dst->live_size ? "live" : "full") : "-", s.src ? (s.src->live_size ? "live" : "full") : "-",
+                  s.result ? "yes" : "no", lw.transfer().computing(), s.live_session ? (s.live_session->ready() ? "ready" : "not ready") : "none",
+                  s.live_refusal.toStdString().c_str(), lw.live().framesShown() > 0 ? 1 : 0,
+                  lw.live().lastRepaintedFrame().cols, lw.live().lastRepaintedFrame().rows, lw.liveFirst().running(),
+                  lw.liveFirst().swaps(), lw.status().lastMessage().toStdString().c_str());
+    if (line != traced) {
+      traced = line;
+      std::fprintf(stderr, "trace %.2f s: %s\n", (now_ms() - second_stored) / 1000, line);
+    }
+  };
   wait_for(
       [&] {
+        trace_state();
         const double t = now_ms();
         if (both_loaded < 0 && lw.session().dst && lw.session().src) both_loaded = t;
         if (map_ready < 0 && lw.session().result && !lw.transfer().computing()) map_ready = t;
@@ -329,8 +367,12 @@ int main(int argc, char** argv) {
   beat.start(10);
   g_measuring = "full resolution behind live";
   const double full_t0 = now_ms();
-  wait_for([&] { return lw.liveFirst().swaps() > 0 || (!lw.liveFirst().running() && now_ms() - full_t0 > 2000); },
-           1800000);
+  wait_for(
+      [&] {
+        trace_state();
+        return lw.liveFirst().swaps() > 0 || (!lw.liveFirst().running() && now_ms() - full_t0 > 2000);
+      },
+      1800000);
   const double full_s = (now_ms() - full_t0) / 1000;
   beat.stop();
   g_measuring = nullptr;

@@ -149,4 +149,60 @@ TEST(LiveFirst, GoesLiveOnTheLiveSizeMapThenSwapsInTheFullResolution) {
   EXPECT_GT(same, 0.99) << "share of map coordinates equal to the CLI's";
 }
 
+// Issue 42: on a rig whose stills are wider than the live width, the live
+// view (1024 px, the simulated camera's) is smaller than the live-size stills
+// (1280 px) and than the full-resolution ones (1536 px). It repaints through
+// the live-size map while the full-resolution job has not begun (held), and
+// through the full-resolution map after the swap; it was refused before
+// ("cannot be related to the stills ... ECC 0.82"), and no frame was ever
+// repainted.
+TEST(LiveFirst, RepaintsThroughTheLiveSizeMapBeforeTheFullResolutionExists) {
+  Rig rig("1536x1024");
+  ASSERT_TRUE(rig.started()) << rig.log().toStdString();
+  QTemporaryDir work;
+  MainWindow w({QString(), QString(), QString(), QString(), work.path()});
+  ASSERT_EQ(w.flow().liveWidth(), 1280);  // the default live width
+  w.liveFirst().setHeld(true);            // the full resolution waits until released below
+  w.resize(1280, 720);
+  w.show();
+  w.findChild<QLineEdit*>("rigAddress")->setText(rig.endpoint());
+  w.findChild<QLineEdit*>("tokenFile")->setText(rig.token_file());
+  QTest::mouseClick(w.findChild<QPushButton*>("connect"), Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { return w.rig().isConnected(); }, 10000)) << w.status().lastMessage().toStdString();
+  QTest::mouseClick(w.findChild<QPushButton*>("captureSource"), Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { return w.session().src != nullptr; }, 60000)) << w.status().lastMessage().toStdString();
+  w.showTab("Live");
+  QTest::mouseClick(w.findChild<QPushButton*>("liveCaptureDestination"), Qt::LeftButton);
+  ASSERT_TRUE(wait_for([&] { return w.session().result != nullptr && !w.transfer().computing(); }, 120000))
+      << w.status().lastMessage().toStdString();
+  ASSERT_TRUE(w.session().dst->live_size);
+  const cv::Size live_map = w.session().result->map.xy.size();
+  EXPECT_EQ(live_map, cv::Size(1280, 853));
+  // repainted frames through the live-size map, the full resolution not begun
+  ASSERT_TRUE(wait_for([&] { return w.live().framesShown() >= 3 && !w.live().lastRepaintedFrame().empty(); }, 30000))
+      << w.status().lastMessage().toStdString() << " / refusal: " << w.session().live_refusal.toStdString();
+  EXPECT_TRUE(w.session().live_refusal.isEmpty()) << w.session().live_refusal.toStdString();
+  EXPECT_LT(w.live().lastFrame().cols, live_map.width);  // the live view is smaller than the stills
+  EXPECT_EQ(w.live().lastRepaintedFrame().size(), live_map);
+  EXPECT_EQ(w.liveFirst().swaps(), 0);
+  EXPECT_TRUE(w.liveFirst().running());
+  ASSERT_NE(w.session().live_session, nullptr);
+  ASSERT_TRUE(w.session().live_session->geometry());
+  EXPECT_NEAR(w.session().live_session->geometry()->scale, 1024.0 / 1280, 0.01)
+      << w.session().live_session->geometry()->describe();
+
+  // released: the full resolution is swapped in and the live view repaints through it
+  w.liveFirst().setHeld(false);
+  ASSERT_TRUE(wait_for([&] { return w.liveFirst().swaps() == 1; }, 240000))
+      << w.status().lastMessage().toStdString() << " / " << w.liveFirst().line().toStdString();
+  const int frames = w.live().framesShown();
+  ASSERT_TRUE(wait_for([&] { return w.live().framesShown() >= frames + 3; }, 30000));
+  EXPECT_TRUE(w.session().live_refusal.isEmpty()) << w.session().live_refusal.toStdString();
+  EXPECT_EQ(w.live().lastRepaintedFrame().size(), cv::Size(1536, 1024));
+  ASSERT_TRUE(w.session().live_session->geometry());
+  EXPECT_NEAR(w.session().live_session->geometry()->scale, 1024.0 / 1536, 0.01)
+      << w.session().live_session->geometry()->describe();
+  w.findChild<QPushButton*>("liveToggle")->setChecked(false);
+}
+
 }  // namespace

@@ -32,6 +32,7 @@ FlowController::FlowController(Session& session, CapturePanel& capture, SetsPane
       library_(library) {
   connect(&capture_, &CapturePanel::setStored, this, &FlowController::setStored);
   connect(&session_.rig, &RigLink::pulled, this, &FlowController::pulled);
+  connect(&transfer_, &TransferPanel::transferEnded, this, &FlowController::computeWaitingNormals);
   connect(&sets_, &SetsPanel::loadRequested, this, &FlowController::loadSetInBackground);
   connect(&library_, &MapLibrary::loadRequested, this,
           [this](const QString& folder, veneer::io::Role role) { loadSetInBackground(folder, role); });
@@ -165,10 +166,13 @@ void FlowController::loadSetInBackground(const QString& folder, std::optional<ve
         return;
       }
       self->session_.setLoaded(r.loaded, role);
-      self->computeNormals(r.loaded);
+      // live first: a live-size set's Look-tab normals wait while its map is made, which is what the
+      // first live frame waits for (they compete for the same cores)
+      self->normals_waiting_.push_back(r.loaded);
       self->session_.message(tr("loaded %1 as the %2").arg(folder, qs(veneer::io::role_name(role))));
       self->session_.status.showStep();
       if (!self->library_.reopenWhenLoaded(folder, role)) self->maybeCompute();
+      if (!r.loaded->live_size || !self->transfer_.computing()) self->computeWaitingNormals();
     });
   });
 }
@@ -226,6 +230,14 @@ void FlowController::computeNormals(std::shared_ptr<LoadedSet> loaded) {
   });
 }
 
+// The Look tab's normals of the sets loaded that wait for them (those still loaded).
+void FlowController::computeWaitingNormals() {
+  auto waiting = std::move(normals_waiting_);
+  normals_waiting_.clear();
+  for (auto& loaded : waiting)
+    if (!loaded->normals && (loaded == session_.dst || loaded == session_.src)) computeNormals(loaded);
+}
+
 // Both sets there: the map, with the settings shown (the defaults unless the
 // user changed them).
 void FlowController::maybeCompute() {
@@ -233,6 +245,12 @@ void FlowController::maybeCompute() {
   // a set changed under the running transfer: once more with both
   if (!transfer_.computing() && session_.result) return;
   transfer_.runOrRerun();
+  // live first: the live view starts while the live-size map is made, so its first repainted frame
+  // follows the map at once (not the rig's start of the stream)
+  if ((session_.dst->live_size || session_.src->live_size) && session_.rig.isConnected() && !live_.isLive()) {
+    emit tabWanted("Live");
+    live_.startLive();
+  }
 }
 
 // A map is shown and a rig is there: the live repaint starts by itself; on a

@@ -7,6 +7,7 @@
 // only chains them. It also loads the sets (for the flow and for the panels).
 #include <map>
 #include <optional>
+#include <vector>
 
 #include <QObject>
 
@@ -49,6 +50,7 @@ class FlowController : public QObject {
   void setStored(const QString& id, veneer::io::Role role);
   void pulled(const QString& id, const QString& folder);
   void computeNormals(std::shared_ptr<LoadedSet> loaded);
+  void computeWaitingNormals();
   void maybeCompute();
 
   Session& session_;
@@ -58,6 +60,7 @@ class FlowController : public QObject {
   LiveTab& live_;
   LiveFirstJob& live_first_;
   MapLibrary& library_;
+  std::vector<std::shared_ptr<LoadedSet>> normals_waiting_;  // loaded sets whose normals wait for their map
   std::map<QString, veneer::io::Role> auto_pulls_;  // rig set id -> role, pulled by the flow
   int live_width_ = 1280;
 };

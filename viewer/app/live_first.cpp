@@ -4,6 +4,9 @@
 // width and refined to full resolution, as the CLI does). Everything heavy --
 // the sets, the pictures, the live session -- is made off the GUI thread; the
 // swap only moves pointers.
+#include <chrono>
+#include <thread>
+
 #include <QLabel>
 #include <QPointer>
 #include <QProgressBar>
@@ -80,9 +83,10 @@ void LiveFirstJob::maybeStart() {
   const auto options = session_.shown.options;
   const int generation = session_.sets_loaded;
   const cv::Vec3d light = session_.light();
-  auto cancel = cancel_;
+  auto cancel = cancel_, held = held_;
   QPointer<LiveFirstJob> self(this);
-  (void)QtConcurrent::run(job_pool(), [self, dst_folder, src_folder, options, generation, cancel, light] {
+  (void)QtConcurrent::run(job_pool(), [self, dst_folder, src_folder, options, generation, cancel, held, light] {
+    while (held->load() && !cancel->load()) std::this_thread::sleep_for(std::chrono::milliseconds(20));
     auto report = [self](double f, const std::string& stage) {
       const QString s = qs(stage);
       if (self)

@@ -28,6 +28,9 @@ class LiveFirstJob : public QObject {
   void cancel() { cancel_->store(true); }
   bool running() const { return running_; }
   int swaps() const { return swaps_; }  // full-resolution maps swapped in
+  // While held, a job waits before it begins (the live-size map stays the
+  // one shown): what a test needs to see the live view before the swap.
+  void setHeld(bool held) { held_->store(held); }
   QString line() const;
 
  signals:
@@ -42,6 +45,7 @@ class LiveFirstJob : public QObject {
   bool running_ = false;
   int swaps_ = 0;
   std::shared_ptr<std::atomic<bool>> cancel_ = std::make_shared<std::atomic<bool>>(false);
+  std::shared_ptr<std::atomic<bool>> held_ = std::make_shared<std::atomic<bool>>(false);
   StepClock step_;
   QLabel* label_ = nullptr;
   QProgressBar* progress_ = nullptr;

@@ -352,8 +352,12 @@ void TransferPanel::startTransfer() {
         live.read.width = std::max(dst->live_width, src->live_width);
         live.destination_mask = prep.destination_mask;
         live.source_mask = prep.source_mask;
-        prepared = veneer::pipeline::prepare_live_pair(dst->folder.toStdString(), src->folder.toStdString(), options,
-                                                       live, nullptr, progress);
+        // both read at this width by the flow (read_set_reduced, as prepare_live_pair reads): not read again
+        if (dst->live_size && src->live_size && dst->live_width == src->live_width)
+          prepared = veneer::pipeline::prepare_live_pair(dst->set, src->set, options, live, nullptr, progress);
+        else
+          prepared = veneer::pipeline::prepare_live_pair(dst->folder.toStdString(), src->folder.toStdString(),
+                                                         options, live, nullptr, progress);
       } else {
         prepared = veneer::pipeline::prepare_pair(dst->folder.toStdString(), src->folder.toStdString(), options,
                                                   prep, nullptr, progress);
@@ -485,6 +489,7 @@ void TransferPanel::adoptPrepared(std::shared_ptr<const veneer::pipeline::Prepar
 
 void TransferPanel::onTransferDone() {
   computing_ = false;
+  emit transferEnded();
   session_.status.step().finish();
   compute_btn_->setEnabled(true);
   cancel_btn_->setEnabled(false);

@@ -58,6 +58,8 @@ class TransferPanel : public QGroupBox {
   std::shared_ptr<const veneer::pipeline::PreparedPair> prepared() const { return prepared_; }
 
  signals:
+  // A transfer ended, shown, failed or cancelled (before resultShown when shown).
+  void transferEnded();
   // A transfer's result is shown now; `relit` and `relit_source` are the
   // relight pictures its worker made for `light` (null when none).
   void resultShown(QImage relit, QImage relit_source, cv::Vec3d light);

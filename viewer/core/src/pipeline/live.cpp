@@ -20,46 +20,77 @@ Status LiveOptions::check() const {
   return Status::success();
 }
 
-Expected<pipeline::PreparedPair> prepare_live_pair(const fs::path& destination, const fs::path& source,
-                                                const pipeline::TransferOptions& transfer, const LiveOptions& options,
-                                                std::vector<SetReport>* reports, const Progress& progress) {
-  if (Status s = transfer.check(); !s) return s.error();
-  if (Status s = options.check(); !s) return s.error();
+namespace {
+
+// The sets read (masks and scale applied in `read`), prepared: normals 60-100 %.
+Expected<pipeline::PreparedPair> prepare_read(io::ImageSet destination, io::ImageSet source,
+                                              const pipeline::TransferOptions& transfer, const LiveOptions& options,
+                                              std::vector<SetReport>& made, std::vector<SetReport>* reports,
+                                              const Progress& progress) {
   pipeline::PreparedPair pair;
   pair.scale = transfer.scale;
   pair.truth_normals = transfer.truth_normals;
-  std::vector<SetReport> made;
-  const fs::path folders[2] = {destination, source};
   const cv::Mat* masks[2] = {&options.destination_mask, &options.source_mask};
+  pair.destination = std::move(destination);
+  pair.source = std::move(source);
   io::ImageSet* sets[2] = {&pair.destination, &pair.source};
   match::PreparedObject* objects[2] = {&pair.dst, &pair.src};
   for (int i = 0; i < 2; ++i) {
-    const char* role = i == 0 ? "destination" : "source";
-    SetReport r;
-    r.folder = folders[i].string();
-    const auto t0 = Clock::now();
-    auto set = io::read_set_reduced(folders[i], options.read, progress.part(0.3 * i, 0.3 * (i + 1)));
-    if (!set) return make_error(std::string(role) + ": " + set.message());
-    r.read_s = since(t0);
-    if (!masks[i]->empty()) cv::resize(*masks[i] > 127, set->mask, set->size, 0, 0, cv::INTER_NEAREST);
-    match::scale_set(*set, transfer.scale);
-    *sets[i] = std::move(*set);
-    r.id = sets[i]->id;
-    r.photos_from = sets[i]->photos_from;
-    made.push_back(r);
+    io::ImageSet& set = *sets[i];
+    if (!masks[i]->empty()) {
+      cv::Mat mask;  // a new picture: a set handed in may share its mask with its owner
+      cv::resize(*masks[i] > 127, mask, set.size, 0, 0, cv::INTER_NEAREST);
+      set.mask = mask;
+    }
+    match::scale_set(set, transfer.scale);
+    made[static_cast<size_t>(i)].id = set.id;
+    made[static_cast<size_t>(i)].photos_from = set.photos_from;
   }
   for (int i = 0; i < 2; ++i) {
     const auto t0 = Clock::now();
     auto object = match::prepare_object(*sets[i], transfer.truth_normals, progress.part(0.6 + 0.2 * i, 0.8 + 0.2 * i));
     if (!object) return make_error(std::string(i == 0 ? "destination" : "source") + ": " + object.message());
     *objects[i] = std::move(*object);
-    made[i].normals_s = since(t0);
-    made[i].total_s = made[i].read_s + made[i].normals_s;
+    made[static_cast<size_t>(i)].normals_s = since(t0);
+    made[static_cast<size_t>(i)].total_s = made[static_cast<size_t>(i)].read_s + made[static_cast<size_t>(i)].normals_s;
   }
   pair.destination_median = repaint::median_photo(pair.dst.view.images);
   pair.source_median = repaint::median_photo(pair.src.view.images);
   if (reports) *reports = std::move(made);
   return pair;
+}
+
+}  // namespace
+
+Expected<pipeline::PreparedPair> prepare_live_pair(const fs::path& destination, const fs::path& source,
+                                                const pipeline::TransferOptions& transfer, const LiveOptions& options,
+                                                std::vector<SetReport>* reports, const Progress& progress) {
+  if (Status s = transfer.check(); !s) return s.error();
+  if (Status s = options.check(); !s) return s.error();
+  std::vector<SetReport> made(2);
+  const fs::path folders[2] = {destination, source};
+  io::ImageSet sets[2];
+  for (int i = 0; i < 2; ++i) {
+    const char* role = i == 0 ? "destination" : "source";
+    made[static_cast<size_t>(i)].folder = folders[i].string();
+    const auto t0 = Clock::now();
+    auto set = io::read_set_reduced(folders[i], options.read, progress.part(0.3 * i, 0.3 * (i + 1)));
+    if (!set) return make_error(std::string(role) + ": " + set.message());
+    made[static_cast<size_t>(i)].read_s = since(t0);
+    sets[i] = std::move(*set);
+  }
+  return prepare_read(std::move(sets[0]), std::move(sets[1]), transfer, options, made, reports, progress);
+}
+
+Expected<pipeline::PreparedPair> prepare_live_pair(io::ImageSet destination, io::ImageSet source,
+                                                const pipeline::TransferOptions& transfer, const LiveOptions& options,
+                                                std::vector<SetReport>* reports, const Progress& progress) {
+  if (Status s = transfer.check(); !s) return s.error();
+  if (Status s = options.check(); !s) return s.error();
+  std::vector<SetReport> made(2);
+  made[0].folder = destination.origin.string();
+  made[1].folder = source.origin.string();
+  return prepare_read(std::move(destination), std::move(source), transfer, options, made, reports, progress);
 }
 
 }  // namespace veneer::pipeline

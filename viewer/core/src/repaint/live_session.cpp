@@ -42,63 +42,51 @@ std::string LiveGeometry::describe() const {
          ", its top left at still pixel (" + fixed(from[0], 1) + ", " + fixed(from[1], 1) + ")";
 }
 
-Expected<LiveGeometry> detect_live_geometry(Tracker& tracker, const cv::Mat& frame, cv::Size still) {
-  LiveGeometry g;
-  g.still = still;
-  g.live = frame.size();
-  if (!tracker.ready()) return make_error("live view: the source's stills gave the tracker nothing to follow");
-  if (frame.size() == still) {
-    tracker.reset();
-    return g;
+namespace {
+
+cv::Matx33d to33(const cv::Matx23d& a) { return {a(0, 0), a(0, 1), a(0, 2), a(1, 0), a(1, 1), a(1, 2), 0, 0, 1}; }
+cv::Matx23d to23(const cv::Matx33d& a) { return {a(0, 0), a(0, 1), a(0, 2), a(1, 0), a(1, 1), a(1, 2)}; }
+
+}  // namespace
+
+// The tracker of a live view `scale` (< 1) times the stills' size: the
+// object's region of the stills in grey, reduced to the live view's pixels,
+// so that ECC compares the frame with a template of its own resolution (its
+// high-pass and pyramid are in frame pixels). On the full-size stills, a
+// 1024 px live view of 5600 px stills (x0.18) was not found at all (ECC
+// 0.03), and of the 1280 px live-size stills (x0.8) fell under the threshold
+// (ECC 0.82, the reduced stills 0.87; simulated orange, issue 42).
+struct LiveSession::Reduced {
+  std::unique_ptr<Tracker> tracker;
+  cv::Matx33d still_to_tracker = cv::Matx33d::eye();  // still pixel -> the reduced stills' pixel
+};
+
+std::shared_ptr<LiveSession::Reduced> LiveSession::reduce_stills(double scale) const {
+  if (photos_.empty() || !(scale > 0 && scale < 1)) return nullptr;
+  const cv::Rect whole(0, 0, still_size_.width, still_size_.height);
+  cv::Rect box = mask_.empty() ? whole : cv::boundingRect(mask_);
+  if (box.area() == 0) box = whole;
+  // the tracker's margin at the reduced size, and a pixel more for the area resize
+  const int grow = static_cast<int>(std::ceil((options_.margin_px + 2) / scale));
+  box = cv::Rect(box.x - grow, box.y - grow, box.width + 2 * grow, box.height + 2 * grow) & whole;
+  const cv::Size small(std::max(1, static_cast<int>(std::lround(box.width * scale))),
+                       std::max(1, static_cast<int>(std::lround(box.height * scale))));
+  const double sx = static_cast<double>(small.width) / box.width, sy = static_cast<double>(small.height) / box.height;
+  std::vector<cv::Mat> reduced(photos_.size());
+  for (size_t i = 0; i < photos_.size(); ++i) {
+    if (photos_[i].size() != still_size_) return nullptr;
+    cv::Mat grey = photos_[i](box);
+    if (grey.channels() == 3) cv::cvtColor(grey, grey, cv::COLOR_BGR2GRAY);
+    cv::resize(grey, reduced[i], small, 0, 0, cv::INTER_AREA);
   }
-  g.same = false;
-  // The framings a camera's live view makes: the stills' full width, or
-  // their full height, centred (a 16:9 view of a 3:2 sensor crops top and bottom).
-  struct Candidate {
-    const char* name;
-    double scale;
-    TrackResult result;
-    double sx = 0, sy = 0;
-  };
-  std::vector<Candidate> candidates;
-  const double by_width = static_cast<double>(frame.cols) / still.width;
-  const double by_height = static_cast<double>(frame.rows) / still.height;
-  candidates.push_back({"full width", by_width, {}});
-  if (std::abs(by_height / by_width - 1) > 0.005) candidates.push_back({"full height", by_height, {}});
-  Candidate* best = nullptr;
-  for (auto& c : candidates) {
-    // the still's centre at the live view's centre
-    const double ox = (frame.cols - 1) / 2.0 - c.scale * (still.width - 1) / 2.0;
-    const double oy = (frame.rows - 1) / 2.0 - c.scale * (still.height - 1) / 2.0;
-    tracker.seed(cv::Matx23d(c.scale, 0, ox, 0, c.scale, oy));
-    // twice on the same frame: the second starts where the first ended
-    c.result = tracker.track(frame);
-    if (!c.result.lost) c.result = tracker.track(frame);
-    const auto& a = c.result.still_to_frame;
-    c.sx = std::hypot(a(0, 0), a(1, 0));
-    c.sy = std::hypot(a(0, 1), a(1, 1));
-    const bool uniform = std::abs(c.sx / c.sy - 1) < 0.03;
-    if (!c.result.lost && uniform && (!best || c.result.correlation > best->result.correlation)) best = &c;
-  }
-  if (!best) {
-    std::string tried;
-    for (const auto& c : candidates) {
-      tried += std::string(tried.empty() ? "" : "; ") + c.name + " (x" + fixed(c.scale, 3) + "): ";
-      tried += c.result.lost ? "not found (ECC " + fixed(c.result.correlation, 2) + ")"
-                             : "x and y scales " + fixed(c.sx, 3) + " / " + fixed(c.sy, 3) + ", not one scale";
-    }
-    tracker.reset();
-    return make_error("the live view " + describe_size(frame.size()) + " cannot be related to the stills " +
-                      describe_size(still) + " by one scale and a crop (" + tried +
-                      "). Make the camera's live view show the object as the stills do (not stretched, the object "
-                      "in view), or capture the stills in the live view's framing");
-  }
-  const auto& a = best->result.still_to_frame;
-  g.scale = std::sqrt(std::abs(a(0, 0) * a(1, 1) - a(0, 1) * a(1, 0)));
-  g.offset = {a(0, 2), a(1, 2)};
-  g.correlation = best->result.correlation;
-  tracker.seed(a);
-  return g;
+  cv::Mat mask;
+  if (!mask_.empty()) cv::resize(mask_(box), mask, small, 0, 0, cv::INTER_NEAREST);
+  auto out = std::make_shared<Reduced>();
+  out->tracker = std::make_unique<Tracker>(reduced, mask, options_);
+  if (!out->tracker->ready()) return nullptr;
+  // pixel centres: reduced = (still - box corner + 0.5) * s - 0.5
+  out->still_to_tracker = cv::Matx33d(sx, 0, (0.5 - box.x) * sx - 0.5, 0, sy, (0.5 - box.y) * sy - 0.5, 0, 0, 1);
+  return out;
 }
 
 cv::Mat lost_picture(const cv::Mat& backdrop, cv::Size size) {
@@ -114,7 +102,11 @@ cv::Mat lost_picture(const cv::Mat& backdrop, cv::Size size) {
 LiveSession::LiveSession(const std::vector<cv::Mat>& photos, const cv::Mat& mask, const Map& map,
                          cv::Size source_size, const cv::Mat& backdrop,
                          std::shared_ptr<const fast::BlendPlan> blend, const TrackOptions& options)
-    : tracker_(photos, mask, options), repainter_(map, source_size, backdrop, std::move(blend)), mask_(mask) {
+    : tracker_(photos, mask, options),
+      repainter_(map, source_size, backdrop, std::move(blend)),
+      mask_(mask),
+      photos_(photos),
+      options_(options) {
   repainter_.set_bilinear(false);  // the live budget (set_smooth)
   still_size_ = photos.empty() ? cv::Size() : photos[0].size();
   // map's source pixels (at source_size) -> still pixels (pixel centres)
@@ -142,15 +134,86 @@ LiveSession::LiveSession(const std::vector<cv::Mat>& photos, const cv::Mat& mask
 void LiveSession::reset() {
   geometry_.reset();
   tracker_.reset();
+  reduced_.reset();
+  still_to_tracker_ = cv::Matx33d::eye();
   last_good_.reset();
   held_ = 0;
   exposure_.reset();
 }
 
+// The live view related to the stills: taken as framed alike at the stills'
+// size; else the framings a camera's live view makes, the stills' full width
+// or their full height, centred (a 16:9 view of a 3:2 sensor crops top and
+// bottom), each refined by the tracker (on the stills reduced to the live
+// view's scale when it is smaller), and the best one that is one scale taken.
 Status LiveSession::fix_geometry(const cv::Mat& frame) {
-  auto g = detect_live_geometry(tracker_, frame, still_size_);
-  if (!g) return g.error();
-  geometry_ = *g;
+  reduced_.reset();
+  still_to_tracker_ = cv::Matx33d::eye();
+  LiveGeometry g;
+  g.still = still_size_;
+  g.live = frame.size();
+  if (!tracker_.ready()) return make_error("live view: the source's stills gave the tracker nothing to follow");
+  if (frame.size() == still_size_) {
+    tracker_.reset();
+    geometry_ = g;
+    return {};
+  }
+  g.same = false;
+  struct Candidate {
+    const char* name;
+    double scale;
+    TrackResult result;  // in still pixels
+    double sx = 0, sy = 0;
+    std::shared_ptr<Reduced> reduced;
+  };
+  std::vector<Candidate> candidates;
+  const double by_width = static_cast<double>(frame.cols) / still_size_.width;
+  const double by_height = static_cast<double>(frame.rows) / still_size_.height;
+  candidates.push_back({"full width", by_width, {}, 0, 0, nullptr});
+  if (std::abs(by_height / by_width - 1) > 0.005) candidates.push_back({"full height", by_height, {}, 0, 0, nullptr});
+  Candidate* best = nullptr;
+  for (auto& c : candidates) {
+    c.reduced = reduce_stills(c.scale);
+    Tracker& tracker = c.reduced ? *c.reduced->tracker : tracker_;
+    const cv::Matx33d to_tracker = c.reduced ? c.reduced->still_to_tracker : cv::Matx33d::eye();
+    // the still's centre at the live view's centre
+    const double ox = (frame.cols - 1) / 2.0 - c.scale * (still_size_.width - 1) / 2.0;
+    const double oy = (frame.rows - 1) / 2.0 - c.scale * (still_size_.height - 1) / 2.0;
+    tracker.seed(to23(cv::Matx33d(c.scale, 0, ox, 0, c.scale, oy, 0, 0, 1) * to_tracker.inv()));
+    // twice on the same frame: the second starts where the first ended
+    c.result = tracker.track(frame);
+    if (!c.result.lost) c.result = tracker.track(frame);
+    c.result.still_to_frame = to23(to33(c.result.still_to_frame) * to_tracker);
+    const auto& a = c.result.still_to_frame;
+    c.sx = std::hypot(a(0, 0), a(1, 0));
+    c.sy = std::hypot(a(0, 1), a(1, 1));
+    const bool uniform = std::abs(c.sx / c.sy - 1) < 0.03;
+    if (!c.result.lost && uniform && (!best || c.result.correlation > best->result.correlation)) best = &c;
+  }
+  if (!best) {
+    std::string tried;
+    for (const auto& c : candidates) {
+      tried += std::string(tried.empty() ? "" : "; ") + c.name + " (x" + fixed(c.scale, 3) + "): ";
+      tried += c.result.lost ? "not found (ECC " + fixed(c.result.correlation, 2) + ")"
+                             : "x and y scales " + fixed(c.sx, 3) + " / " + fixed(c.sy, 3) + ", not one scale";
+    }
+    tracker_.reset();
+    return make_error("the live view " + describe_size(frame.size()) + " cannot be related to the stills " +
+                      describe_size(still_size_) + " by one scale and a crop (" + tried +
+                      "). Make the camera's live view show the object as the stills do (not stretched, the object "
+                      "in view), or capture the stills in the live view's framing");
+  }
+  const auto& a = best->result.still_to_frame;
+  g.scale = std::sqrt(std::abs(a(0, 0) * a(1, 1) - a(0, 1) * a(1, 0)));
+  g.offset = {a(0, 2), a(1, 2)};
+  g.correlation = best->result.correlation;
+  if (best->reduced) {  // left seeded by its own estimate
+    reduced_ = best->reduced;
+    still_to_tracker_ = reduced_->still_to_tracker;
+  } else {
+    tracker_.seed(a);
+  }
+  geometry_ = g;
   return {};
 }
 
@@ -244,7 +307,8 @@ Expected<LiveFrame> LiveSession::run(const cv::Mat& input, bool track) {
     return finish(*frame, r, 0.0);
   }
   const auto t0 = std::chrono::steady_clock::now();
-  const TrackResult r = tracker_.track(*frame);
+  TrackResult r = (reduced_ ? *reduced_->tracker : tracker_).track(*frame);
+  r.still_to_frame = to23(to33(r.still_to_frame) * still_to_tracker_);  // in still pixels
   return finish(*frame, r, ms_since(t0));
 }
 

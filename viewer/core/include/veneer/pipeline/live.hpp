@@ -33,5 +33,12 @@ Expected<pipeline::PreparedPair> prepare_live_pair(const std::filesystem::path& 
                                                 const pipeline::TransferOptions& transfer, const LiveOptions& options,
                                                 std::vector<SetReport>* reports = nullptr,
                                                 const Progress& progress = {});
+// The same from the two sets already read by io::read_set_reduced with
+// options.read (the viewer's flow reads them so to show them): not read
+// again. Progress: normals 60-100 %.
+Expected<pipeline::PreparedPair> prepare_live_pair(io::ImageSet destination, io::ImageSet source,
+                                                const pipeline::TransferOptions& transfer, const LiveOptions& options,
+                                                std::vector<SetReport>* reports = nullptr,
+                                                const Progress& progress = {});
 
 }  // namespace veneer::pipeline

@@ -12,7 +12,9 @@
 // camera makes (the stills' full width or full height, centred) are each
 // refined by the tracker's ECC on the object, and one is taken only when the
 // estimate is uniform (x and y scales within 3 %) and correlates; otherwise
-// the session refuses, naming both geometries.
+// the session refuses, naming both geometries. A live view smaller than the
+// stills (a camera's 1024 px live view of 21 Mpx stills) is tracked on the
+// stills reduced to its scale, so ECC compares pictures of one resolution.
 #include <memory>
 #include <optional>
 #include <string>
@@ -46,10 +48,6 @@ struct LiveGeometry {
 
 // "1024x680 (3:2)"
 std::string describe_size(cv::Size size);
-
-// Relates `frame` (8-bit BGR of any size) to the stills the tracker was made
-// from (`still_size`): see above. `tracker` is left seeded with the estimate.
-Expected<LiveGeometry> detect_live_geometry(Tracker& tracker, const cv::Mat& frame, cv::Size still_size);
 
 struct LiveFrame {
   cv::Mat repainted;                // destination-sized 8-bit BGR: the frame through the map, or the
@@ -109,11 +107,19 @@ class LiveSession {
 
  private:
   Expected<LiveFrame> run(const cv::Mat& frame, bool track);
+  // Relates the first frame to the stills (see above); a live view smaller
+  // than the stills is tracked on the stills reduced to its scale.
   Status fix_geometry(const cv::Mat& frame);
+  struct Reduced;
+  std::shared_ptr<Reduced> reduce_stills(double scale) const;  // null when it gives the tracker nothing
   LiveFrame finish(const cv::Mat& frame, const TrackResult& r, double track_ms);
   Tracker tracker_;
   LiveRepainter repainter_;
   cv::Mat mask_;
+  std::vector<cv::Mat> photos_;  // the stills (shared, not copied): reduced for a smaller live view
+  TrackOptions options_;
+  std::shared_ptr<Reduced> reduced_;                       // the tracker used when the live view is smaller
+  cv::Matx33d still_to_tracker_ = cv::Matx33d::eye();      // still pixel -> the pixel of the tracker used
   cv::Size still_size_;
   cv::Matx33d map_to_still_;
   cv::Mat backdrop_;
