@@ -206,6 +206,7 @@ TEST(CameraSpace, HalfFramesGiveTheFloatFramesNormals) {
 
     pipeline::PrepareOptions options = pipeline::default_prepare_options();
     options.cache.enabled = false;
+    options.half_frames = false;  // the oracle: float frames
     auto as_float = pipeline::prepare_set(dir / "pi", 1.0, false, options);
     ASSERT_TRUE(as_float) << as_float.message();
     options.half_photos = true;
@@ -214,6 +215,18 @@ TEST(CameraSpace, HalfFramesGiveTheFloatFramesNormals) {
     ASSERT_EQ(as_half->set.photos_from, "raw");
     ASSERT_EQ(as_half->object.view.images.size(), as_float->object.view.images.size());
     for (const cv::Mat& photo : as_half->object.view.images) EXPECT_EQ(photo.type(), CV_16FC3);
+    // half frames with float photos (the viewer's, default_prepare_options): the half path's, widened
+    options.half_photos = false;
+    options.half_frames = true;
+    auto widened = pipeline::prepare_set(dir / "pi", 1.0, false, options);
+    ASSERT_TRUE(widened) << widened.message();
+    EXPECT_EQ(cv::norm(widened->object.view.normals, as_half->object.view.normals, cv::NORM_INF), 0.0);
+    for (size_t i = 0; i < widened->object.view.images.size(); ++i) {
+      ASSERT_EQ(widened->object.view.images[i].type(), CV_32FC3);
+      cv::Mat wide;
+      as_half->object.view.images[i].convertTo(wide, CV_32F);
+      EXPECT_EQ(cv::norm(widened->object.view.images[i], wide, cv::NORM_INF), 0.0);
+    }
 
     // the same object: the masks differ in a few pixels at most
     cv::Mat differ;

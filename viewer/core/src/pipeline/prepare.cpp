@@ -369,7 +369,9 @@ cv::Mat median_of(const std::vector<cv::Mat>& photos) { return median_minus_ambi
 PrepareOptions default_prepare_options() {
   // the defaults are the options' own (io::RawOptions: MHC, full size; io::ReadOptions: RAW where present),
   // so a caller that builds its own options reads as the CLI does
-  return PrepareOptions{};
+  PrepareOptions o;
+  o.half_frames = true;  // the viewer (float photos) and `veneer transfer` (half photos) solve alike
+  return o;
 }
 
 Status PrepareOptions::check() const {
@@ -404,7 +406,7 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
   io::ReadOptions read = options.read;
   // half_photos: the frames in half floats from their decoding on (issue 42: a set's frames are never
   // all float at once); segmentation, photometric stereo and the median read them a row at a time
-  if (options.half_photos) read.half_floats = true;
+  if (options.half_photos || options.half_frames) read.half_floats = true;
   if (cacheable) {
     auto sum = io::set_checksum(folder, salt_of(read, scale, truth_normals, options.mask));
     if (!sum) return sum.error();
@@ -527,6 +529,11 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
   p.report.normals_s = p.object.segment_seconds + p.object.normals_seconds;
   p.set.ambient.release();
   if (options.half_photos) to_half(p.set.images);
+  if (!options.half_photos && read.half_floats) {
+    // half frames, float photos (half_frames): widened once prepared, one at a time
+    for (cv::Mat& photo : p.set.images) photo.convertTo(photo, CV_32FC3);
+    if (p.median.depth() == CV_16F) p.median.convertTo(p.median, CV_32FC3);
+  }
   p.object.view.images = p.set.images;
   for (const auto& light : p.set.lights) p.object.view.lamps.push_back(light.lamp_id);
   if (p.object.view.lamps.size() != p.object.view.images.size()) p.object.view.lamps.clear();

@@ -35,6 +35,12 @@ struct PrepareOptions {
   // them apart. Only for callers whose every stage reads such photos
   // (pipeline::transfer with the CLI's flow does); default off.
   bool half_photos = false;
+  // The frames decoded to half floats as half_photos decodes them, the photos
+  // and the median handed on widened to float once prepared: the normals and
+  // the map of a caller that keeps float photos (the viewer) are those of
+  // `veneer transfer`, and they share cache entries. default_prepare_options()
+  // turns it on; half_photos implies it. Default off: float frames.
+  bool half_frames = false;
   Status check() const;
 };
 
@@ -44,7 +50,8 @@ struct PrepareOptions {
 // demosaiced by our MHC (io::Demosaic::mhc, io::RawOptions' default: ~20x
 // faster than LibRaw's DCB at normals as good on the simulator's 5600x3750
 // pair, issue 34: 4.18 vs 4.51 deg mean), full size, the result cache on.
-// These are the options structs' own defaults: PrepareOptions{} is the same.
+// These are the options structs' own defaults (PrepareOptions{} is the same)
+// but for half_frames, on here: the CLI and the viewer solve from half frames.
 PrepareOptions default_prepare_options();
 
 // What happened to one set, for metrics.json.
