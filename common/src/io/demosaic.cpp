@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <vector>
 
+#include <opencv2/core/hal/hal.hpp>
 #include <opencv2/core/utility.hpp>
 
 #include "veneer/io/big_buffers.hpp"
@@ -54,19 +55,21 @@ cv::Mat linear_mosaic(const Mosaic& m) {
 
 }  // namespace
 
-cv::Mat demosaic_mhc(const Mosaic& m) {
+cv::Mat demosaic_mhc(const Mosaic& m, bool half) {
   const cv::Mat padded = linear_mosaic(m);
   const size_t st = padded.step1();
   cv::Mat out;
   out.allocator = prefault_allocator();
-  out.create(m.height, m.width, CV_32FC3);
+  out.create(m.height, m.width, half ? CV_16FC3 : CV_32FC3);
   bool identity = true;
   for (int r = 0; r < 3; ++r)
     for (int c = 0; c < 3; ++c) identity = identity && m.rgb_cam[r][c] == (r == c ? 1.f : 0.f);
   cv::parallel_for_(cv::Range(0, m.height), [&](const cv::Range& rows) {
+    std::vector<float> row_buffer(half ? size_t(m.width) * 3 : 0);  // a half row is made as float first
     for (int y = rows.start; y < rows.end; ++y) {
       const float* p = padded.ptr<float>(y + kPad) + kPad;
-      float* o = out.ptr<float>(y);
+      float* const row = half ? row_buffer.data() : out.ptr<float>(y);
+      float* o = row;
       for (int x = 0; x < m.width; ++x, p += 1, o += 3) {
         const int own = m.cfa[(y & 1) * 2 + (x & 1)];
         // the filters, each / 8 (the paper's Figure 2)
@@ -101,6 +104,7 @@ cv::Mat demosaic_mhc(const Mosaic& m) {
         o[1] = std::clamp(rgb[1], 0.f, 1.f);
         o[2] = std::clamp(rgb[0], 0.f, 1.f);
       }
+      if (half) cv::hal::cvt32f16f(row, out.ptr<cv::float16_t>(y), m.width * 3);
     }
   });
   return out;

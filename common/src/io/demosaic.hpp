@@ -30,7 +30,8 @@ bool is_bayer(const std::array<int, 4>& cfa);
 // white-balanced, clipped to [0, 1], the two missing colours of each pixel
 // interpolated by Malvar, He and Cutler's gradient-corrected linear filters
 // (ICASSP 2004; 5x5, about AHD's quality at a bilinear's cost), then the
-// camera-to-sRGB matrix, clipped to [0, 1]. Rows run in parallel.
-cv::Mat demosaic_mhc(const Mosaic& mosaic);
+// camera-to-sRGB matrix, clipped to [0, 1]. Rows run in parallel. With
+// `half`, CV_16FC3: each row narrowed as it is made (no float frame).
+cv::Mat demosaic_mhc(const Mosaic& mosaic, bool half = false);
 
 }  // namespace veneer::io::detail

@@ -74,7 +74,11 @@ Status validate(const ImageSet& set) {
       return make_error(lw + ": " + e);
     if (l.position_m && !finite3(*l.position_m)) return make_error(lw + ": position_m " + fmt_vec(*l.position_m) + " is not finite");
     const cv::Mat& im = set.images[i];
-    if (im.type() != CV_32FC3) return make_error("image " + std::to_string(i) + ": expected CV_32FC3 (linear BGR)");
+    // float, or half floats (ReadOptions::half_floats): every photo of a set alike
+    if (im.type() != CV_32FC3 && im.type() != CV_16FC3)
+      return make_error("image " + std::to_string(i) + ": expected CV_32FC3 or CV_16FC3 (linear BGR)");
+    if (im.type() != set.images[0].type())
+      return make_error("image " + std::to_string(i) + ": of another type than image 0 (float and half floats mixed)");
     if (im.size() != set.size)
       return make_error("image " + std::to_string(i) + ": is " + size_text(im.size()) + " but the set is " + size_text(set.size));
   }
@@ -95,7 +99,7 @@ Status validate(const ImageSet& set) {
     if (raw_problem(r)) return make_error("a RAW file's extension must be 1-8 letters or digits");
   }
   if (raw_problem(set.ambient_raw)) return make_error("the ambient RAW file's extension must be 1-8 letters or digits");
-  if (Status s = check(set.ambient, CV_32FC3, "ambient", "CV_32FC3"); !s) return s;
+  if (Status s = check(set.ambient, set.images[0].type(), "ambient", "the photos' type"); !s) return s;
   if (Status s = check(set.mask, CV_8UC1, "mask", "CV_8UC1"); !s) return s;
   if (Status s = check(set.truth.normals, CV_32FC3, "truth normals", "CV_32FC3 (x, y, z)"); !s) return s;
   if (Status s = check(set.truth.mask, CV_8UC1, "truth mask", "CV_8UC1"); !s) return s;

@@ -93,16 +93,9 @@ void srgb_to_linear_inplace(cv::Mat& image) {
   }
 }
 
-Expected<cv::Mat> decode_photo(std::string_view bytes, const Frame& frame, const RawOptions& raw_options,
-                               PhotoKind& kind) {
+namespace {
+Expected<cv::Mat> decode_photo_float(std::string_view bytes, const Frame& frame, PhotoKind& kind) {
   const std::string name = frame.file.string();
-  if (frame.raw) {
-    kind = {raw_options.half_size ? "raw-half" : "raw", 16};
-    auto photo = decode_raw(bytes, raw_options, name);
-    if (!photo) return photo.error();
-    kind.camera_to_srgb = photo->camera_to_srgb;
-    return std::move(photo->image);
-  }
   if (has_tiff_magic(bytes)) return decode_tiff(bytes, name, frame.srgb8, kind);
   auto image = decode_linear_image(bytes, name);
   if (!image) return image;
@@ -110,6 +103,23 @@ Expected<cv::Mat> decode_photo(std::string_view bytes, const Frame& frame, const
   if (kind.kind == "png") kind.bits = png_bit_depth(bytes);
   if (kind.kind == "pfm") kind.bits = 32;
   if (kind.kind == "png" && kind.bits <= 8 && frame.srgb8) srgb_to_linear_inplace(*image);
+  return image;
+}
+}  // namespace
+
+Expected<cv::Mat> decode_photo(std::string_view bytes, const Frame& frame, const RawOptions& raw_options, bool half,
+                               PhotoKind& kind) {
+  if (frame.raw) {
+    kind = {raw_options.half_size ? "raw-half" : "raw", 16};
+    RawOptions options = raw_options;
+    options.half_floats = half;
+    auto photo = decode_raw(bytes, options, frame.file.string());
+    if (!photo) return photo.error();
+    kind.camera_to_srgb = photo->camera_to_srgb;
+    return std::move(photo->image);
+  }
+  auto image = decode_photo_float(bytes, frame, kind);
+  if (image && half) image->convertTo(*image, CV_MAKETYPE(CV_16F, image->channels()));
   return image;
 }
 

@@ -4,8 +4,10 @@
 #include <cmath>
 #include <memory>
 #include <optional>
+#include <vector>
 
 #include <libraw/libraw.h>
+#include <opencv2/core/hal/hal.hpp>
 
 #include "demosaic.hpp"
 #include "veneer/io/image_io.hpp"
@@ -139,14 +141,19 @@ bool is_identity(const cv::Matx33f& m) {
 
 void apply_colour_matrix(cv::Mat& photo, const cv::Matx33f& m) {
   if (photo.empty() || is_identity(m)) return;
-  CV_Assert(photo.type() == CV_32FC3);
+  CV_Assert(photo.type() == CV_32FC3 || photo.type() == CV_16FC3);
+  const bool half = photo.depth() == CV_16F;
+  const int values = photo.cols * 3;
   cv::parallel_for_(cv::Range(0, photo.rows), [&](const cv::Range& rows) {
+    std::vector<float> wide(half ? size_t(values) : 0);  // a half row widened, transformed, narrowed
     for (int y = rows.start; y < rows.end; ++y) {
-      float* p = photo.ptr<float>(y);
+      if (half) cv::hal::cvt16f32f(photo.ptr<cv::float16_t>(y), wide.data(), values);
+      float* p = half ? wide.data() : photo.ptr<float>(y);
       for (int x = 0; x < photo.cols; ++x, p += 3) {
         const float b = p[0], g = p[1], r = p[2];
         for (int k = 0; k < 3; ++k) p[k] = std::clamp(m(k, 0) * b + m(k, 1) * g + m(k, 2) * r, 0.f, 1.f);
       }
+      if (half) cv::hal::cvt32f16f(wide.data(), photo.ptr<cv::float16_t>(y), values);
     }
   });
 }
@@ -204,7 +211,7 @@ Expected<RawPhoto> decode_raw(std::string_view bytes, const RawOptions& options,
         for (int r = 0; r < 3; ++r)
           for (int c = 0; c < 3; ++c) mosaic->rgb_cam[r][c] = r == c ? 1.f : 0.f;
       }
-      photo.image = detail::demosaic_mhc(*mosaic);
+      photo.image = detail::demosaic_mhc(*mosaic, options.half_floats);
       return photo;
     }
     p.user_qual = find_demosaic(Demosaic::ahd)->user_qual;  // a layout only LibRaw's pipeline takes
@@ -216,18 +223,20 @@ Expected<RawPhoto> decode_raw(std::string_view bytes, const RawOptions& options,
   if (!img || err != LIBRAW_SUCCESS) return make_error(name + ": cannot make an image from RAW data (" + libraw_error(err) + ")");
   if (img->type != LIBRAW_IMAGE_BITMAP || img->bits != 16 || img->colors != 3 || img->width == 0 || img->height == 0)
     return make_error(name + ": LibRaw returned an unexpected image layout");
-  // RGB 16-bit interleaved (native byte order) -> BGR float, 1.0 = white level.
+  // RGB 16-bit interleaved (native byte order) -> BGR float (or half, a row at a time), 1.0 = white level.
   cv::Mat rgb16(img->height, img->width, CV_16UC3, img->data);
-  cv::Mat out(rgb16.size(), CV_32FC3);
+  cv::Mat out(rgb16.size(), options.half_floats ? CV_16FC3 : CV_32FC3);
+  std::vector<float> row(options.half_floats ? size_t(rgb16.cols) * 3 : 0);
   constexpr float k = 1.0f / 65535.0f;
   for (int y = 0; y < rgb16.rows; ++y) {
     const uint16_t* s = rgb16.ptr<uint16_t>(y);
-    float* o = out.ptr<float>(y);
+    float* o = options.half_floats ? row.data() : out.ptr<float>(y);
     for (int x = 0; x < rgb16.cols; ++x) {
       o[3 * x + 0] = s[3 * x + 2] * k;
       o[3 * x + 1] = s[3 * x + 1] * k;
       o[3 * x + 2] = s[3 * x + 0] * k;
     }
+    if (options.half_floats) cv::hal::cvt32f16f(o, out.ptr<cv::float16_t>(y), rgb16.cols * 3);
   }
   photo.image = std::move(out);
   return photo;

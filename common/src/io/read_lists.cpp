@@ -29,7 +29,9 @@ Status load_photos(const std::vector<fs::path>& files, bool srgb8, const ReadOpt
   std::vector<Frame> frames;
   for (const auto& f : files) frames.push_back({f, *raw, srgb8});
   std::vector<PhotoKind> kinds;
-  if (Status s = decode_frames(frames, options.raw, progress, "reading " + set.id, set.images, &kinds); !s) return s;
+  if (Status s = decode_frames(frames, options.raw, options.half_floats, progress, "reading " + set.id, set.images, &kinds);
+      !s)
+    return s;
   if (Status s = check_same_sizes(files, set.images); !s) return s;
   set.size = set.images[0].size();
   note_photo_kinds(set, kinds, srgb8, options.raw);
@@ -136,6 +138,7 @@ Expected<ImageSet> read_thesis(const fs::path& folder, const ReadOptions& option
     if (!a) return a.error();
     if (Status s = check_size(f, *a, set.size, why); !s) return s.error();
     set.ambient = std::move(a).value();
+    if (options.half_floats) set.ambient.convertTo(set.ambient, CV_16FC3);  // as the photos
   }
   if (fs::path f = find_with_ext(folder, "mask", {".pgm", ".png", ".ppm"}); !f.empty()) {
     auto m = read_mask(f);

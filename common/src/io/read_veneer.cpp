@@ -108,7 +108,7 @@ Expected<ImageSet> read_veneer(const fs::path& folder, const ReadOptions& option
   std::vector<cv::Mat> decoded;
   std::vector<PhotoKind> kinds;
   const std::string stage = "reading " + (set.id.empty() ? folder.filename().string() : set.id);
-  if (Status s = decode_frames(frames, options.raw, progress, stage, decoded, &kinds); !s) return s.error();
+  if (Status s = decode_frames(frames, options.raw, options.half_floats, progress, stage, decoded, &kinds); !s) return s.error();
   if (!manifest->ambient_file.empty()) {
     set.ambient = std::move(decoded.back());
     decoded.pop_back();

@@ -109,8 +109,9 @@ Status for_each_parallel(size_t n, const Progress& progress, const std::string& 
   return Status::success();
 }
 
-Status decode_frames(const std::vector<Frame>& frames, const RawOptions& raw_options, const Progress& progress,
-                     const std::string& stage, std::vector<cv::Mat>& out, std::vector<PhotoKind>* kinds) {
+Status decode_frames(const std::vector<Frame>& frames, const RawOptions& raw_options, bool half,
+                     const Progress& progress, const std::string& stage, std::vector<cv::Mat>& out,
+                     std::vector<PhotoKind>* kinds) {
   out.assign(frames.size(), cv::Mat());
   if (kinds) kinds->assign(frames.size(), PhotoKind{});
   return for_each_parallel(frames.size(), progress, stage, [&](size_t i) -> Status {
@@ -118,7 +119,7 @@ Status decode_frames(const std::vector<Frame>& frames, const RawOptions& raw_opt
     auto mapped = detail::MappedFile::open(f.file);  // read in place: no copy, no fresh pages
     if (!mapped) return mapped.error();
     PhotoKind kind;
-    Expected<cv::Mat> image = decode_photo(mapped->bytes(), f, raw_options, kind);
+    Expected<cv::Mat> image = decode_photo(mapped->bytes(), f, raw_options, half, kind);
     if (!image) return image.error();
     out[i] = std::move(image).value();
     if (kinds) (*kinds)[i] = kind;

@@ -61,8 +61,9 @@ struct PhotoKind {
   cv::Matx33f camera_to_srgb = cv::Matx33f::eye();  // RAW read in the camera's space (RawPhoto)
 };
 
-// Decodes one photo file's bytes into CV_32FC3 BGR, linear, 1.0 = full scale.
-Expected<cv::Mat> decode_photo(std::string_view bytes, const Frame& frame, const RawOptions& raw_options,
+// Decodes one photo file's bytes into CV_32FC3 BGR, linear, 1.0 = full scale
+// (CV_16FC3 with `half`: a RAW file's rows narrowed as they are demosaiced).
+Expected<cv::Mat> decode_photo(std::string_view bytes, const Frame& frame, const RawOptions& raw_options, bool half,
                                PhotoKind& kind);
 // 8-bit sRGB code values held as v / 255 in a float image -> linear, in place.
 void srgb_to_linear_inplace(cv::Mat& image);
@@ -72,11 +73,13 @@ std::string describe_photos(const PhotoKind& kind, bool srgb8, const RawOptions&
 Expected<bool> all_raw_by_name(const std::vector<std::filesystem::path>& files);
 
 // Decodes `frames` in parallel (one task per file, each file read and decoded
-// once) into CV_32FC3; `kinds` gets each file's kind ("raw", "png", ...). The
-// first error wins by list order, so the message does not depend on thread
-// timing. Progress is reported from the worker threads under a lock.
-Status decode_frames(const std::vector<Frame>& frames, const RawOptions& raw_options, const Progress& progress,
-                     const std::string& stage, std::vector<cv::Mat>& out, std::vector<PhotoKind>* kinds = nullptr);
+// once) into CV_32FC3 (CV_16FC3 with `half`, ReadOptions::half_floats);
+// `kinds` gets each file's kind ("raw", "png", ...). The first error wins by
+// list order, so the message does not depend on thread timing. Progress is
+// reported from the worker threads under a lock.
+Status decode_frames(const std::vector<Frame>& frames, const RawOptions& raw_options, bool half,
+                     const Progress& progress, const std::string& stage, std::vector<cv::Mat>& out,
+                     std::vector<PhotoKind>* kinds = nullptr);
 // The set's photos_from and photos_read from the kinds decode_frames found.
 void note_photo_kinds(ImageSet& set, const std::vector<PhotoKind>& kinds, bool srgb8, const RawOptions& raw_options);
 // The set's camera_to_srgb from its frames' (`kinds`: the images', then the

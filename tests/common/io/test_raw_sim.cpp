@@ -4,6 +4,8 @@
 // from the render itself (issue 29's "what must show").
 #include <cmath>
 #include <cstdio>
+#include <utility>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -119,6 +121,44 @@ TEST(RawSim, DngSetDecodesToTheLinearRender) {
     auto refused = io::read_set(dir / "plain", want_raw);
     ASSERT_FALSE(refused);
     EXPECT_NE(refused.message().find("RAW"), std::string::npos) << refused.message();
+  }
+}
+
+// Read in half floats (ReadOptions::half_floats, issue 42), every photo and
+// the ambient frame is the float read rounded to half floats, bit for bit:
+// RAW through our MHC (each row narrowed as it is demosaiced), RAW through
+// LibRaw's own pipeline (DCB), and the developed PNGs. The oracle is the
+// float read, converted whole by OpenCV.
+TEST(RawSim, HalfFloatReadIsTheFloatReadRounded) {
+  io::ImageSet rendered = simulated("orange", 0.002, {256, 170});
+  ASSERT_FALSE(rendered.images.empty());
+  ASSERT_FALSE(rendered.ambient.empty());
+  ASSERT_TRUE(io::add_dng_raw_files(rendered));
+  Scratch dir;
+  ASSERT_TRUE(io::write_set(rendered, dir / "set"));
+  io::ReadOptions dcb, developed;
+  dcb.raw.demosaic = io::Demosaic::dcb;
+  developed.photos = io::PhotoSource::developed;
+  for (const auto& [name, options] : {std::pair{"mhc", io::ReadOptions{}}, {"dcb", dcb}, {"png", developed}}) {
+    SCOPED_TRACE(name);
+    auto as_float = io::read_set(dir / "set", options);
+    ASSERT_TRUE(as_float) << as_float.message();
+    io::ReadOptions half = options;
+    half.half_floats = true;
+    auto as_half = io::read_set(dir / "set", half);
+    ASSERT_TRUE(as_half) << as_half.message();
+    ASSERT_EQ(as_half->images.size(), as_float->images.size());
+    std::vector<std::pair<cv::Mat, cv::Mat>> frames{{as_half->ambient, as_float->ambient}};
+    for (size_t i = 0; i < as_half->images.size(); ++i) frames.emplace_back(as_half->images[i], as_float->images[i]);
+    for (const auto& [h, f] : frames) {
+      ASSERT_EQ(h.type(), CV_16FC3);
+      ASSERT_EQ(f.type(), CV_32FC3);
+      cv::Mat rounded, wide_h, wide_rounded;
+      f.convertTo(rounded, CV_16FC3);
+      h.convertTo(wide_h, CV_32F);
+      rounded.convertTo(wide_rounded, CV_32F);
+      EXPECT_EQ(cv::norm(wide_h, wide_rounded, cv::NORM_INF), 0.0);
+    }
   }
 }
 

@@ -3,7 +3,8 @@
 //
 // In memory:
 //  - photos (images, ambient) are CV_32FC3, linear, OpenCV's BGR channel order,
-//    scaled so that the full 16-bit range (65535) is 1.0;
+//    scaled so that the full 16-bit range (65535) is 1.0; read with
+//    ReadOptions::half_floats they are CV_16FC3 (all of a set's alike);
 //  - normals are CV_32FC3 with channel 0 = x, 1 = y, 2 = z in the rig frame
 //    (x right, y up, z toward the camera), (0,0,0) outside the object;
 //  - masks are CV_8UC1, 255 = object, 0 = background;
@@ -156,6 +157,10 @@ struct ReadOptions {
   RawOptions raw;                           // how RAW files are decoded (half size, demosaic), in every layout
   bool load_photos = true;                  // veneer sets: false reads the manifest, mask and truth only
                                             // (images left empty; for results taken from a cache)
+  bool half_floats = false;                 // the photos and the ambient frame as CV_16FC3 (half floats,
+                                            // the precision the result cache stores photos at), each made
+                                            // so as it is decoded: a set's frames are never all float at
+                                            // once (issue 42: peak memory). Default off: CV_32FC3
   Status check() const;
 };
 

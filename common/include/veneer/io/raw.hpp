@@ -36,10 +36,13 @@ struct RawOptions {
                                       // (the matrix amplifies and correlates the sensor's noise: normals 1.2x
                                       // worse in mean on the Pi's DNGs, issue 42). decode_raw returns the
                                       // matrix that makes such a photo linear sRGB. Default off: linear sRGB
+  bool half_floats = false;           // the photo as CV_16FC3 (half floats, as the result cache stores
+                                      // photos): written so as it is demosaiced, never whole as float
+                                      // (issue 42: a 5600x3750 frame is 126 MB instead of 252). Default off
   Status check() const;
 };
 
-// A RAW photo as decoded: CV_32FC3 BGR, 1.0 = white, in linear sRGB, or in
+// A RAW photo as decoded: CV_32FC3 BGR (CV_16FC3 with RawOptions::half_floats), 1.0 = white, in linear sRGB, or in
 // the camera's space with RawOptions::camera_space; camera_to_srgb (on BGR
 // pixels, as cv::transform takes it) makes the latter linear sRGB
 // (apply_colour_matrix). Identity for a photo already in sRGB, and for
@@ -61,7 +64,7 @@ Expected<RawPhoto> decode_raw(std::string_view bytes, const RawOptions& options,
 // True when `m` is the identity within 1e-4 per element (a DNG's matrix of an sRGB camera, through
 // LibRaw's XYZ round trip, is off by ~1e-6; 1e-4 moves a pixel by less than a 14-bit count).
 bool is_identity(const cv::Matx33f& m);
-// photo = clip(m x photo, 0, 1) per pixel, in place, rows in parallel (CV_32FC3 BGR);
+// photo = clip(m x photo, 0, 1) per pixel, in place, rows in parallel (CV_32FC3 or CV_16FC3 BGR);
 // nothing when `m` is the identity. As LibRaw and our MHC clip after their matrix.
 void apply_colour_matrix(cv::Mat& photo, const cv::Matx33f& m);
 

@@ -27,7 +27,15 @@ void scale_set(io::ImageSet& set, double scale) {
   if (scale == 1.0) return;
   const cv::Size size = scaled_size(set.size, scale);
   auto area = [&](cv::Mat& m) {
-    if (!m.empty()) cv::resize(m, m, size, 0, 0, cv::INTER_AREA);
+    if (m.empty()) return;
+    if (m.depth() != CV_16F) {
+      cv::resize(m, m, size, 0, 0, cv::INTER_AREA);
+      return;
+    }
+    cv::Mat wide;  // half floats (io::ReadOptions::half_floats): resized as float, one frame at a time
+    m.convertTo(wide, CV_MAKETYPE(CV_32F, m.channels()));
+    cv::resize(wide, wide, size, 0, 0, cv::INTER_AREA);
+    wide.convertTo(m, m.type());
   };
   auto nearest = [&](cv::Mat& m) {
     if (!m.empty()) cv::resize(m, m, size, 0, 0, cv::INTER_NEAREST);

@@ -18,6 +18,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <opencv2/core/hal/hal.hpp>
 #include <opencv2/imgproc.hpp>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
@@ -65,6 +66,8 @@ std::string mask_digest(const cv::Mat& mask) {
 }
 
 std::string salt_of(const io::ReadOptions& read, double scale, bool truth_normals, const cv::Mat& mask) {
+  // frames decoded to half floats give normals a little apart from float frames' (measured in
+  // tests/core/pipeline/test_camera_space.cpp): keyed apart; float frames keep the key they always had
   nlohmann::json j{{"mask", mask.empty() ? std::string("segmented") : mask_digest(mask)},
                    {"version", kCacheVersion},
                    {"photos", io::photo_source_name(read.photos)},
@@ -74,6 +77,7 @@ std::string salt_of(const io::ReadOptions& read, double scale, bool truth_normal
                    {"scale", scale},
                    {"truth_normals", truth_normals},
                    {"libraw", io::raw_decoder_version()}};
+  if (read.half_floats) j["frames"] = "half floats";
   return j.dump();
 }
 
@@ -266,19 +270,33 @@ Status finish_cache_writes() {
 namespace {
 // The median of `photos` per sample; with `ambient`, first each photo minus
 // the ambient frame, clamped at 0, written back in place, in the same pass
-// (one read of every photo instead of three: subtract, clamp, median).
+// (one read of every photo instead of three: subtract, clamp, median). The
+// photos (and the ambient frame) are float or, all alike, half floats
+// (io::ReadOptions::half_floats): those are widened a few hundred samples at
+// a time and written back narrowed, and the median is half floats too.
 cv::Mat median_minus_ambient(const std::vector<cv::Mat>& photos, const cv::Mat* ambient) {
   if (photos.empty()) return {};
   const int n = static_cast<int>(photos.size());
+  const bool half = photos[0].depth() == CV_16F;
   if (n > 32) {
-    if (ambient) {
-      for (const cv::Mat& im : photos) {
-        cv::Mat m = im;  // shares the pixels: in place
-        cv::subtract(m, *ambient, m);
+    std::vector<cv::Mat> wide;  // half floats: widened whole here (more than 32 lamps only)
+    cv::Mat a;
+    if (ambient && half) ambient->convertTo(a, CV_32FC3);
+    else if (ambient) a = *ambient;
+    for (const cv::Mat& im : photos) {
+      cv::Mat m = im;  // shares the pixels: in place
+      if (half) im.convertTo(m, CV_32FC3);
+      if (ambient) {
+        cv::subtract(m, a, m);
         cv::max(m, 0.0, m);
+        cv::Mat same = im;  // shares the pixels: written back in place
+        if (half) m.convertTo(same, CV_16FC3);
       }
+      wide.push_back(m);
     }
-    return repaint::median_photo(photos);
+    cv::Mat median = repaint::median_photo(wide);
+    if (half) median.convertTo(median, CV_16FC3);
+    return median;
   }
   // An odd-even transposition network (n rounds of compare-exchanges of
   // neighbours) sorts each sample's n values; run on 256 samples at once,
@@ -287,16 +305,31 @@ cv::Mat median_minus_ambient(const std::vector<cv::Mat>& photos, const cv::Mat* 
   std::vector<std::pair<int, int>> network;
   for (int round = 0; round < n; ++round)
     for (int i = round % 2; i + 1 < n; i += 2) network.emplace_back(i, i + 1);
-  cv::Mat out = io::big_mat(photos[0].size(), CV_32FC3);
+  cv::Mat out = io::big_mat(photos[0].size(), half ? CV_16FC3 : CV_32FC3);
   const int width = out.cols * 3;
   constexpr int kLanes = 256;
   cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& rows) {
-    std::vector<float> v(size_t(n) * kLanes);
+    std::vector<float> v(size_t(n) * kLanes), wide_ambient(half ? kLanes : 0), row(half ? width : 0);
     for (int y = rows.start; y < rows.end; ++y) {
-      float* o = out.ptr<float>(y);
+      float* o = half ? row.data() : out.ptr<float>(y);  // a half median's row is made as float first
       for (int x0 = 0; x0 < width; x0 += kLanes) {
         const int lanes = std::min(kLanes, width - x0);
-        if (ambient) {
+        if (half) {
+          const float* a = nullptr;
+          if (ambient) {
+            cv::hal::cvt16f32f(ambient->ptr<cv::float16_t>(y) + x0, wide_ambient.data(), lanes);
+            a = wide_ambient.data();
+          }
+          for (int i = 0; i < n; ++i) {
+            auto* p = const_cast<cv::float16_t*>(photos[i].ptr<cv::float16_t>(y)) + x0;
+            float* d = &v[size_t(i) * kLanes];
+            cv::hal::cvt16f32f(p, d, lanes);
+            if (a) {
+              for (int k = 0; k < lanes; ++k) d[k] = std::max(d[k] - a[k], 0.0f);
+              cv::hal::cvt32f16f(d, p, lanes);
+            }
+          }
+        } else if (ambient) {
           const float* a = ambient->ptr<float>(y) + x0;
           for (int i = 0; i < n; ++i) {
             float* p = const_cast<float*>(photos[i].ptr<float>(y)) + x0;
@@ -324,6 +357,7 @@ cv::Mat median_minus_ambient(const std::vector<cv::Mat>& photos, const cv::Mat* 
           for (int k = 0; k < lanes; ++k) o[x0 + k] = 0.5f * (mid[k] + below[k]);
         }
       }
+      if (half) cv::hal::cvt32f16f(o, out.ptr<cv::float16_t>(y), width);
     }
   });
   return out;
@@ -335,7 +369,9 @@ cv::Mat median_of(const std::vector<cv::Mat>& photos) { return median_minus_ambi
 PrepareOptions default_prepare_options() {
   // the defaults are the options' own (io::RawOptions: MHC, full size; io::ReadOptions: RAW where present),
   // so a caller that builds its own options reads as the CLI does
-  return PrepareOptions{};
+  PrepareOptions o;
+  o.half_frames = true;  // the viewer (float photos) and `veneer transfer` (half photos) solve alike
+  return o;
 }
 
 Status PrepareOptions::check() const {
@@ -367,8 +403,12 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
   io::ResultCache cache(options.cache);
   const bool cacheable = options.cache.enabled && fs::exists(folder / "set.json");
   std::string key;
+  io::ReadOptions read = options.read;
+  // half_photos: the frames in half floats from their decoding on (issue 42: a set's frames are never
+  // all float at once); segmentation, photometric stereo and the median read them a row at a time
+  if (options.half_photos || options.half_frames) read.half_floats = true;
   if (cacheable) {
-    auto sum = io::set_checksum(folder, salt_of(options.read, scale, truth_normals, options.mask));
+    auto sum = io::set_checksum(folder, salt_of(read, scale, truth_normals, options.mask));
     if (!sum) return sum.error();
     key = *sum;
     p.report.checksum = key;
@@ -397,7 +437,12 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
         const cv::Size size = p.object.view.normals.size();
         if (size != p.set.size) match::scale_set(p.set, static_cast<double>(size.width) / p.set.size.width);
         if (p.set.size == size) {
-          if (options.half_photos) to_half(p.object.view.images);
+          if (options.half_photos) {
+            to_half(p.object.view.images);
+            std::vector<cv::Mat> median{p.median};
+            to_half(median);  // as a miss makes it
+            p.median = median[0];
+          }
           p.set.images = p.object.view.images;  // shared pixels, ambient already removed
           p.set.ambient.release();
           for (const auto& light : p.set.lights) p.object.view.lamps.push_back(light.lamp_id);
@@ -420,7 +465,6 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
 
   // Miss: decode every frame once, in parallel; solve; store.
   auto t0 = Clock::now();
-  io::ReadOptions read = options.read;
   read.load_truth_appearance = false;  // the truth's albedo and depth: a transfer measures with neither
   read.raw.camera_space = true;        // RAW: normals in the camera's space, sRGB after them (below)
   auto set = io::read_set(folder, read, sub_progress(progress, 0.0, 0.6));
@@ -485,6 +529,11 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
   p.report.normals_s = p.object.segment_seconds + p.object.normals_seconds;
   p.set.ambient.release();
   if (options.half_photos) to_half(p.set.images);
+  if (!options.half_photos && read.half_floats) {
+    // half frames, float photos (half_frames): widened once prepared, one at a time
+    for (cv::Mat& photo : p.set.images) photo.convertTo(photo, CV_32FC3);
+    if (p.median.depth() == CV_16F) p.median.convertTo(p.median, CV_32FC3);
+  }
   p.object.view.images = p.set.images;
   for (const auto& light : p.set.lights) p.object.view.lamps.push_back(light.lamp_id);
   if (p.object.view.lamps.size() != p.object.view.images.size()) p.object.view.lamps.clear();

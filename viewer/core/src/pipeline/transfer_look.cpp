@@ -85,6 +85,14 @@ cv::Mat grey_median(const std::vector<cv::Mat>& photos, const cv::Mat& mask) {
   return out;
 }
 
+// A photo as float: itself, or widened from half floats.
+cv::Mat widened(const cv::Mat& photo) {
+  if (photo.empty() || photo.depth() != CV_16F) return photo;
+  cv::Mat out;
+  photo.convertTo(out, CV_32F);
+  return out;
+}
+
 std::vector<cv::Mat> greys(const std::vector<cv::Mat>& photos) {
   std::vector<cv::Mat> out(photos.size());
   cv::parallel_for_(cv::Range(0, static_cast<int>(photos.size())), [&](const cv::Range& r) {
@@ -369,7 +377,9 @@ Expected<nlohmann::json> look_block(const PreparedPair& pair, const TransferOpti
     auto plan = blend_plan_for(pair, options, *map);
     if (!plan) return make_error("floor: " + plan.message());
     const std::shared_ptr<const fast::BlendPlan> floor_plan = *plan;
-    const Paint copy = [&](const cv::Mat& photo, const cv::Mat& backdrop) -> Expected<cv::Mat> {
+    const Paint copy = [&](const cv::Mat& photo_in, const cv::Mat& backdrop_in) -> Expected<cv::Mat> {
+      // photos kept in half floats (PrepareOptions::half_photos) are widened for the copy, one at a time
+      const cv::Mat photo = widened(photo_in), backdrop = widened(backdrop_in);
       if (!floor_plan) return repaint::repaint(*map, photo, backdrop);
       return repaint::repaint_planned(*floor_plan, photo, backdrop);
     };

@@ -116,6 +116,13 @@ bool integrable_gauge(const PsResult& r, const std::vector<cv::Vec3d>& recorded,
   return true;
 }
 
+// A photo's pixel as float, whether the photo is float or half floats (io::ReadOptions::half_floats).
+cv::Vec3f pixel_at(const cv::Mat& photo, int y, int x) {
+  if (photo.depth() == CV_32F) return photo.at<cv::Vec3f>(y, x);
+  const cv::float16_t* p = photo.ptr<cv::float16_t>(y) + size_t(x) * 3;
+  return {float(p[0]), float(p[1]), float(p[2])};
+}
+
 // One round of light refinement (see PsOptions::refine_lights): each lamp's
 // vector (intensity x direction) fitted to the grey photos given the solved
 // normals and albedo, over the reliable pixels that lamp lights clearly
@@ -152,10 +159,10 @@ bool refine_round(const io::ImageSet& set, const PsResult& r, const PsOptions& o
       p.b = cv::Vec3d(nr[x][0], nr[x][1], nr[x][2]) * rho;
       p.peak = 0;
       for (int i = 0; i < n; ++i) {
-        const cv::Vec3f v = set.images[i].at<cv::Vec3f>(y, x);
+        const cv::Vec3f v = pixel_at(set.images[i], y, x);
         float g = (v[0] + v[1] + v[2]) / 3.f;
         if (amb) {
-          const cv::Vec3f a = set.ambient.at<cv::Vec3f>(y, x);
+          const cv::Vec3f a = pixel_at(set.ambient, y, x);
           g -= (a[0] + a[1] + a[2]) / 3.f;
         }
         p.peak = std::max(p.peak, g);

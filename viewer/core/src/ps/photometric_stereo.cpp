@@ -150,9 +150,13 @@ Status solve_once(const io::ImageSet& set, const cv::Mat& mask_in, const PsOptio
                       std::to_string(set.lights.size()) + " lights");
   const cv::Size size = set.images[0].size();
   if (size.width <= 0 || size.height <= 0) return make_error("the set's images are empty");
+  // float photos, or half floats (io::ReadOptions::half_floats), every one alike
+  const int type = set.images[0].type();
+  if (type != CV_32FC3 && type != CV_16FC3)
+    return make_error("image 0 is not CV_32FC3 or CV_16FC3 (linear float or half-float BGR)");
   for (int i = 0; i < n; ++i) {
     const cv::Mat& im = set.images[i];
-    if (im.type() != CV_32FC3) return make_error("image " + std::to_string(i) + " is not CV_32FC3 (linear float BGR)");
+    if (im.type() != type) return make_error("image " + std::to_string(i) + " is not of image 0's type");
     if (im.size() != size)
       return make_error("image " + std::to_string(i) + " is " + std::to_string(im.cols) + "x" +
                         std::to_string(im.rows) + ", image 0 is " + std::to_string(size.width) + "x" +
@@ -242,22 +246,27 @@ Status solve_once(const io::ImageSet& set, const cv::Mat& mask_in, const PsOptio
         for (int i = 0; i < n; ++i) s.pinv[size_t(r) * n + i] = static_cast<float>(P.at<double>(r, i));
     }
   }
-  s.images.resize(n);
+  const bool half = type == CV_16FC3;
+  if (half) s.half_images.resize(n);
+  else s.images.resize(n);
   std::vector<cv::Mat> holders;  // continuous copies when needed
+  holders.reserve(n);
   for (int i = 0; i < n; ++i) {
-    if (set.images[i].isContinuous()) {
-      s.images[i] = set.images[i].ptr<float>();
-    } else {
-      holders.push_back(set.images[i].clone());
-      s.images[i] = holders.back().ptr<float>();
+    const cv::Mat* im = &set.images[i];
+    if (!im->isContinuous()) {
+      holders.push_back(im->clone());
+      im = &holders.back();
     }
+    if (half) s.half_images[i] = im->ptr<cv::float16_t>();
+    else s.images[i] = im->ptr<float>();
   }
   cv::Mat ambient;
   if (options.subtract_ambient && !set.ambient.empty()) {
-    if (set.ambient.type() != CV_32FC3 || set.ambient.size() != size)
+    if (set.ambient.type() != type || set.ambient.size() != size)
       return make_error("the ambient frame does not match the images (type or size)");
     ambient = set.ambient.isContinuous() ? set.ambient : set.ambient.clone();
-    s.ambient = ambient.ptr<float>();
+    if (half) s.half_ambient = ambient.ptr<cv::float16_t>();
+    else s.ambient = ambient.ptr<float>();
   }
 
   result.model_used = model;

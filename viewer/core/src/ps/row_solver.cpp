@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <vector>
 
+#include <opencv2/core/hal/hal.hpp>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -96,6 +97,17 @@ struct LoadArgs {
   float e0, e1, e2, satv;
   float *cb, *cg, *cr, *yy, *st, *M;
 };
+
+// `count` pixels from `src` (half floats, every `step`-th pixel) as float
+// pixels side by side in `out`.
+void widen_pixels(const cv::float16_t* src, int step, int count, float* out) {
+  if (step == 1) {
+    cv::hal::cvt16f32f(src, out, count * 3);
+    return;
+  }
+  for (int k = 0; k < count; ++k)
+    for (int c = 0; c < 3; ++c) out[k * 3 + c] = float(src[size_t(k) * step * 3 + c]);
+}
 
 // One lamp's row into structure-of-arrays form: ambient removed, divided by the
 // lamp colour, grey, saturation flag; running maximum of grey.
@@ -235,13 +247,29 @@ void solve_row(const Setup& s, Scratch& b, int y, int x0, int step, int count, c
   // 1. load, normalise by lamp colour, grey, saturation.
   float* __restrict M = b.M.data();
   std::fill(M, M + count, 0.f);
+  const bool half = !s.half_images.empty();
+  const float* half_amb = nullptr;  // the ambient row widened once for every lamp
+  if (half && s.half_ambient) {
+    widen_pixels(s.half_ambient + row_off + size_t(x0) * 3, step, count, b.wide_ambient.data());
+    half_amb = b.wide_ambient.data();
+  }
   for (int i = 0; i < n; ++i) {
-    const float* src = s.images[i] + row_off + size_t(x0) * 3;
-    const float* amb = s.ambient ? s.ambient + row_off + size_t(x0) * 3 : nullptr;
-    LoadArgs a{src, amb, step, count, s.inv_e[i * 3], s.inv_e[i * 3 + 1], s.inv_e[i * 3 + 2], s.saturation,
+    const float* src;
+    const float* amb;
+    int load_step = step;
+    if (half) {
+      widen_pixels(s.half_images[i] + row_off + size_t(x0) * 3, step, count, b.wide.data());
+      src = b.wide.data();
+      amb = half_amb;
+      load_step = 1;  // widened pixels lie side by side
+    } else {
+      src = s.images[i] + row_off + size_t(x0) * 3;
+      amb = s.ambient ? s.ambient + row_off + size_t(x0) * 3 : nullptr;
+    }
+    LoadArgs a{src, amb, load_step, count, s.inv_e[i * 3], s.inv_e[i * 3 + 1], s.inv_e[i * 3 + 2], s.saturation,
                b.C.data() + (size_t(i) * 3 + 0) * cap, b.C.data() + (size_t(i) * 3 + 1) * cap,
                b.C.data() + (size_t(i) * 3 + 2) * cap, b.Y.data() + size_t(i) * cap, b.sat.data() + size_t(i) * cap, M};
-    if (step == 1) {
+    if (load_step == 1) {
       amb ? load_light<1, true>(a) : load_light<1, false>(a);
     } else {
       amb ? load_light<0, true>(a) : load_light<0, false>(a);

@@ -41,6 +41,10 @@ struct Setup {
   uint32_t full = 0;
   std::vector<const float*> images{};  // n, continuous CV_32FC3
   const float* ambient = nullptr;
+  // Or the photos in half floats (continuous CV_16FC3, io::ReadOptions::half_floats): then these are
+  // set, images and ambient are not, and each row is widened as it is loaded.
+  std::vector<const cv::float16_t*> half_images{};
+  const cv::float16_t* half_ambient = nullptr;
 };
 
 // Pseudo-inverse of the rows of `dir` selected by `pattern`: (L^T L)^-1 L^T,
@@ -58,6 +62,7 @@ struct Scratch {
   std::vector<float> M, K, a, nx, ny, nz, ok, den, px, py, pz;
   std::vector<uint32_t> pat;
   std::vector<float> sat;  // n*cap: 1 where a channel is saturated
+  std::vector<float> wide, wide_ambient;  // 3*cap: a half-float row's pixels widened (Setup::half_images)
   void resize(int n_, int cap_) {
     n = n_;
     cap = cap_;
@@ -69,6 +74,8 @@ struct Scratch {
     for (auto* v : {&M, &K, &a, &nx, &ny, &nz, &ok, &den, &px, &py, &pz}) v->assign(cap, 0.f);
     pat.assign(cap, 0);
     sat.assign(size_t(n) * cap, 0.f);
+    wide.assign(size_t(3) * cap, 0.f);
+    wide_ambient.assign(size_t(3) * cap, 0.f);
   }
 };
 // Output pointers for one row of `count` pixels.

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <vector>
 
+#include <opencv2/core/hal/hal.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "veneer/util/enum_names.hpp"
@@ -43,13 +44,38 @@ Status SegmentOptions::check() const {
 
 namespace {
 
+// Row y of `photo` (CV_32FC3, or CV_16FC3: io::ReadOptions::half_floats) as
+// float pixels: its own row, or widened into `buffer`.
+const cv::Vec3f* float_row(const cv::Mat& photo, int y, std::vector<cv::Vec3f>& buffer) {
+  if (photo.depth() == CV_32F) return photo.ptr<cv::Vec3f>(y);
+  buffer.resize(static_cast<size_t>(photo.cols));
+  cv::hal::cvt16f32f(photo.ptr<cv::float16_t>(y), &buffer[0][0], photo.cols * 3);
+  return buffer.data();
+}
+
 // Mean grey intensity over the lamps, ambient removed.
 cv::Mat summed_intensity(const io::ImageSet& set, bool subtract_ambient) {
   const cv::Size size = set.images[0].size();
   cv::Mat acc(size, CV_32FC3, cv::Scalar::all(0));
-  for (const cv::Mat& im : set.images) cv::add(acc, im, acc);
-  if (subtract_ambient && !set.ambient.empty() && set.ambient.size() == size && set.ambient.type() == CV_32FC3)
-    cv::scaleAdd(set.ambient, -double(set.images.size()), acc, acc);
+  const bool half = set.images[0].depth() == CV_16F;
+  for (const cv::Mat& im : set.images) {
+    if (!half) {
+      cv::add(acc, im, acc);
+      continue;
+    }
+    std::vector<cv::Vec3f> wide;  // half floats: added a row at a time
+    for (int y = 0; y < size.height; ++y) {
+      const cv::Vec3f* p = float_row(im, y, wide);
+      cv::Vec3f* a = acc.ptr<cv::Vec3f>(y);
+      for (int x = 0; x < size.width; ++x) a[x] += p[x];
+    }
+  }
+  if (subtract_ambient && !set.ambient.empty() && set.ambient.size() == size &&
+      set.ambient.type() == set.images[0].type()) {
+    cv::Mat ambient = set.ambient;
+    if (half) ambient.convertTo(ambient, CV_32FC3);
+    cv::scaleAdd(ambient, -double(set.images.size()), acc, acc);
+  }
   cv::Mat grey(size, CV_32FC1);
   const float s = 1.f / (3.f * set.images.size());
   for (int y = 0; y < size.height; ++y) {
@@ -64,13 +90,15 @@ cv::Mat summed_intensity(const io::ImageSet& set, bool subtract_ambient) {
 cv::Mat brightest_intensity(const io::ImageSet& set, bool subtract_ambient) {
   const cv::Size size = set.images[0].size();
   cv::Mat out(size, CV_32FC1, cv::Scalar(0));
-  const bool amb = subtract_ambient && !set.ambient.empty() && set.ambient.size() == size && set.ambient.type() == CV_32FC3;
+  const bool amb = subtract_ambient && !set.ambient.empty() && set.ambient.size() == size &&
+                   set.ambient.type() == set.images[0].type();
   cv::parallel_for_(cv::Range(0, size.height), [&](const cv::Range& rows) {
+    std::vector<cv::Vec3f> ambient_row, photo_row;  // half floats widened a row at a time
     for (int y = rows.start; y < rows.end; ++y) {
       float* o = out.ptr<float>(y);
-      const cv::Vec3f* a = amb ? set.ambient.ptr<cv::Vec3f>(y) : nullptr;
+      const cv::Vec3f* a = amb ? float_row(set.ambient, y, ambient_row) : nullptr;
       for (const cv::Mat& im : set.images) {
-        const cv::Vec3f* p = im.ptr<cv::Vec3f>(y);
+        const cv::Vec3f* p = float_row(im, y, photo_row);
         for (int x = 0; x < size.width; ++x) {
           float g = p[x][0] + p[x][1] + p[x][2];
           if (a) g -= a[x][0] + a[x][1] + a[x][2];
@@ -253,7 +281,8 @@ Expected<Segmentation> segment(const io::ImageSet& set, const SegmentOptions& op
   if (set.images.empty()) return make_error("the set has no images to segment");
   const cv::Size size = set.images[0].size();
   for (size_t i = 0; i < set.images.size(); ++i)
-    if (set.images[i].size() != size || set.images[i].type() != CV_32FC3)
+    if (set.images[i].size() != size || set.images[i].type() != set.images[0].type() ||
+        (set.images[i].type() != CV_32FC3 && set.images[i].type() != CV_16FC3))
       return make_error("image " + std::to_string(i) + " differs in size or type from image 0");
   Segmentation seg;
   SegmentMethod method = options.method;

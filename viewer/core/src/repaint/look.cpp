@@ -165,6 +165,13 @@ Expected<ShadedLook> ShadedLook::make(const LookSide& dst, const LookSide& src, 
   }
   if (progress.cancelled()) return make_error("look cancelled");
   progress.report(0.6, "shading");
+  // the coarse shading of each side first, while little else is held (the normals' blur was the look's
+  // peak at 5600x3750, issue 42)
+  const float e = static_cast<float>(options.shading_floor), top = static_cast<float>(options.max_correction);
+  cv::Mat shade_d = median_shading(coarse_normals(dst.view.normals, dst.view.mask, options.normal_smoothing),
+                                   dst.lamps);
+  cv::Mat shade_s = median_shading(coarse_normals(src.view.normals, src.view.mask, options.normal_smoothing),
+                                   src.lamps);
   // the pixels each side needs: the mapped ones and the sources they map to
   cv::Mat mapped(dsize, CV_8UC1, cv::Scalar(0)), sourced(ssize, CV_8UC1, cv::Scalar(0));
   for (int y = 0; y < dsize.height; ++y)
@@ -180,14 +187,10 @@ Expected<ShadedLook> ShadedLook::make(const LookSide& dst, const LookSide& src, 
                          kRatioFloor;
   look.model_median_ = median_shading(dst.view.normals, dst.lamps);
   look.headroom_ = static_cast<float>(options.ratio_headroom);
-  const cv::Mat source_diffuse =
+  mapped.release();
+  cv::Mat source_diffuse =
       diffuse_median(src.view.images, src.view.normals, source_weight, src.lamps, look.source_exponent_, 0.f, false,
                      options.seam_feather > 0 ? src.view.mask : sourced);  // the seams read the matches' neighbours
-  const float e = static_cast<float>(options.shading_floor), top = static_cast<float>(options.max_correction);
-  const cv::Mat shade_d = median_shading(coarse_normals(dst.view.normals, dst.view.mask, options.normal_smoothing),
-                                         dst.lamps);
-  const cv::Mat shade_s = median_shading(coarse_normals(src.view.normals, src.view.mask, options.normal_smoothing),
-                                         src.lamps);
   // T through the map (nearest source pixel)
   look.texture_ = cv::Mat(dsize, CV_32FC3, cv::Scalar::all(0));
   if (!source_weight.empty()) look.source_weight_ = cv::Mat(dsize, CV_32FC1, cv::Scalar(0));
@@ -204,6 +207,7 @@ Expected<ShadedLook> ShadedLook::make(const LookSide& dst, const LookSide& src, 
         if (!source_weight.empty()) look.source_weight_.at<float>(y, x) = source_weight.at<float>(sy, sx);
       }
   });
+  source_weight.release();
   if (options.seam_feather > 0) {
     // log's floor: a hundredth of the source's mean (linear units), so a dark
     // pixel's noise does not make a step of the seams' targets
@@ -213,25 +217,19 @@ Expected<ShadedLook> ShadedLook::make(const LookSide& dst, const LookSide& src, 
     auto log_of = [tiny](const cv::Vec3f& v) {
       return cv::Vec3f(std::log(std::max(v[0], tiny)), std::log(std::max(v[1], tiny)), std::log(std::max(v[2], tiny)));
     };
-    cv::Mat log_texture(dsize, CV_32FC3, cv::Scalar::all(0)), destination_field(dsize, CV_32FC1);
-    cv::Mat source_field(ssize, CV_32FC3);
+    cv::Mat destination_field(dsize, CV_32FC1), source_field(ssize, CV_32FC3);
     source_field.forEach<cv::Vec3f>([&](cv::Vec3f& v, const int* at) {
       v = log_of(source_diffuse.at<cv::Vec3f>(at[0], at[1])) -
           cv::Vec3f::all(std::log(shade_s.at<float>(at[0], at[1]) + e));
     });
     destination_field.forEach<float>([&](float& v, const int* at) { v = std::log(shade_d.at<float>(at[0], at[1]) + e); });
-    log_texture.forEach<cv::Vec3f>([&](cv::Vec3f& v, const int* at) {
-      if (map.xy.at<cv::Vec2f>(at[0], at[1])[0] >= 0) v = log_of(look.texture_.at<cv::Vec3f>(at[0], at[1]));
-    });
-    detail::SeamInputs in{log_texture,       map.xy, source_field, src.view.mask, destination_field,
+    // what the seams do not read goes before they are solved (issue 42: at 5600x3750 the solve was
+    // the look's peak)
+    source_diffuse.release(), shade_d.release(), shade_s.release(), sourced.release();
+    detail::SeamInputs in{tiny,          map.xy, source_field, src.view.mask, destination_field,
                           options.seam_feather, options.seam_iterations};
-    auto solved = detail::feather_seams(in, look.seams_, progress.part(0.7, 1.0));
-    if (!solved) return make_error("look: " + solved.message());
-    look.texture_.forEach<cv::Vec3f>([&](cv::Vec3f& t, const int* at) {
-      if (map.xy.at<cv::Vec2f>(at[0], at[1])[0] < 0) return;
-      const cv::Vec3f u = solved->at<cv::Vec3f>(at[0], at[1]), u0 = log_texture.at<cv::Vec3f>(at[0], at[1]);
-      for (int c = 0; c < 3; ++c) t[c] *= std::exp(u[c] - u0[c]);
-    });
+    if (auto solved = detail::feather_seams(in, look.texture_, look.seams_, progress.part(0.7, 1.0)); !solved)
+      return make_error("look: " + solved.message());
   }
   progress.report(1.0, "shading");
   return look;

@@ -24,13 +24,23 @@ struct PrepareOptions {
   // the cache by its content, so a re-run with the same mask hits.
   // prepare_set uses `mask`; prepare_pair `destination_mask` and `source_mask`.
   cv::Mat mask, destination_mask, source_mask;
-  // The photos kept as half floats (CV_16FC3, the precision the cache stores
-  // them at) once the set is prepared, and prepare_pair's two sets prepared
-  // one after the other: a 5600x3750 frame is 126 MB instead of 252, and only
-  // one set's float frames exist at a time (issue 42: peak memory). Only for
-  // callers whose every stage reads such photos (pipeline::transfer with the
-  // CLI's flow does); default off.
+  // The frames as half floats (CV_16FC3, the precision the cache stores
+  // photos at) from their decoding on (io::ReadOptions::half_floats):
+  // segmentation, photometric stereo and the median widen a row at a time,
+  // and the photos and the median handed on are half floats; prepare_pair's
+  // two sets are prepared one after the other. A 5600x3750 frame is 126 MB
+  // instead of 252, and no set's frames are ever all float (issue 42: peak
+  // memory). The normals differ from float frames' by a few hundredths of a
+  // degree (tests/core/pipeline/test_camera_space.cpp), so the cache keys
+  // them apart. Only for callers whose every stage reads such photos
+  // (pipeline::transfer with the CLI's flow does); default off.
   bool half_photos = false;
+  // The frames decoded to half floats as half_photos decodes them, the photos
+  // and the median handed on widened to float once prepared: the normals and
+  // the map of a caller that keeps float photos (the viewer) are those of
+  // `veneer transfer`, and they share cache entries. default_prepare_options()
+  // turns it on; half_photos implies it. Default off: float frames.
+  bool half_frames = false;
   Status check() const;
 };
 
@@ -40,7 +50,8 @@ struct PrepareOptions {
 // demosaiced by our MHC (io::Demosaic::mhc, io::RawOptions' default: ~20x
 // faster than LibRaw's DCB at normals as good on the simulator's 5600x3750
 // pair, issue 34: 4.18 vs 4.51 deg mean), full size, the result cache on.
-// These are the options structs' own defaults: PrepareOptions{} is the same.
+// These are the options structs' own defaults (PrepareOptions{} is the same)
+// but for half_frames, on here: the CLI and the viewer solve from half frames.
 PrepareOptions default_prepare_options();
 
 // What happened to one set, for metrics.json.
@@ -81,7 +92,8 @@ Expected<pipeline::PreparedPair> prepare_pair(const std::filesystem::path& desti
 Status finish_cache_writes();
 
 // The per-pixel, per-channel median of same-sized CV_32FC3 photos, equal to
-// repaint::median_photo's (the mean of the two middle values for an even count).
+// repaint::median_photo's (the mean of the two middle values for an even count);
+// of CV_16FC3 photos (half_photos) it is CV_16FC3, the float median rounded.
 cv::Mat median_of(const std::vector<cv::Mat>& photos);
 
 // The reports as JSON ({"destination": {...}, "source": {...}} when two).

@@ -113,7 +113,8 @@ Expected<TransferResult> transfer(const io::ImageSet& destination, const io::Ima
 struct PreparedPair {
   io::ImageSet destination, source;  // as scaled
   PreparedObject dst, src;
-  cv::Mat destination_median, source_median;  // per-pixel medians of the photos
+  cv::Mat destination_median, source_median;  // per-pixel medians of the photos (of their type: half
+                                              // floats from prepare_pair with PrepareOptions::half_photos)
   double scale = 1.0;
   bool truth_normals = false;
 };
@@ -171,7 +172,8 @@ Status write_transfer(const TransferResult& result, const std::filesystem::path&
 // photos is repainted through the result's map (and blend plan) in place of
 // its destination photo, written and released before the next, so the
 // pictures never all exist at once. Consumes the pair: what the pictures do
-// not need (normals, truth) goes first, and each photo once painted. With
+// not need (normals, truth) goes first, and each photo once painted; once
+// every picture is painted, result.look is released too. With
 // result.look_pending, the look is measured from the pictures as they are
 // painted (each kept in grey) and written into result.metrics_json too.
 Status write_transfer(TransferResult& result, PreparedPair&& pair, const std::filesystem::path& folder,

@@ -106,7 +106,8 @@ struct PsResult {
 };
 
 // Solves normals for the pixels of `mask` (CV_8UC1 of set.size; empty = every
-// pixel). Fails with a message for: fewer than 3 lights, degenerate light
+// pixel). The photos are float or half floats (io::ReadOptions::half_floats:
+// each row widened as it is loaded, no float copy). Fails with a message for: fewer than 3 lights, degenerate light
 // directions (rank < 3), an empty mask, a mask of the wrong size, near mode
 // without lamp positions/focal length, bad options, cancellation.
 Expected<PsResult> photometric_stereo(const io::ImageSet& set, const cv::Mat& mask, const PsOptions& options = {},
