@@ -4,6 +4,7 @@
 
 #include "main_window.hpp"
 #include "veneer/util/cpu_check.hpp"
+#include "veneer/util/large_buffers.hpp"
 
 int main(int argc, char** argv) {
   QApplication app(argc, argv);

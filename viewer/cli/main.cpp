@@ -8,6 +8,7 @@
 
 #include "command.hpp"
 #include "veneer/util/cpu_check.hpp"
+#include "veneer/util/large_buffers.hpp"
 #include "veneer/util/log.hpp"
 
 namespace veneer::cli {
