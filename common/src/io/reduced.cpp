@@ -53,6 +53,7 @@ class RawPeek : public LibRaw {
 // A LibRaw instance opened on `bytes` (LibRaw's state is large: on the heap).
 Expected<std::unique_ptr<RawPeek>> open_raw(std::string_view bytes, const std::string& name) {
   if (bytes.empty()) return make_error(name + ": empty file");
+  if (Status s = check_raw_structure(bytes, name); !s) return s.error();
   auto raw = std::make_unique<RawPeek>();
   int r = raw->open_buffer(const_cast<char*>(bytes.data()), bytes.size());
   if (r != LIBRAW_SUCCESS)

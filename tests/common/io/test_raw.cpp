@@ -76,6 +76,35 @@ TEST(Raw, DamagedFilesAreRefusedWithTheirName) {
   EXPECT_FALSE(io::decode_raw_linear("II*\0garbage", {}, "x.dng"));
 }
 
+// LibRaw 0.20 reads on past a directory that runs off the file's end and can
+// crash (fuzz_raw_decode found a 300-byte DNG: tests/fuzz/corpus/raw_decode/
+// truncated-ifd-libraw-crash.dng, replayed by fuzz/raw_decode-corpus). Such a
+// file is refused before LibRaw sees it, naming the file and the directory.
+TEST(Raw, ADirectoryRunningPastTheEndIsRefusedBeforeLibRawReadsIt) {
+  auto dng = io::encode_dng(ramp({32, 16}));
+  ASSERT_TRUE(dng);
+  EXPECT_TRUE(io::check_raw_structure(*dng, "whole.dng"));
+  const uint32_t ifd0 = static_cast<uint8_t>((*dng)[4]) | static_cast<uint8_t>((*dng)[5]) << 8 |
+                        static_cast<uint8_t>((*dng)[6]) << 16 | static_cast<uint32_t>(static_cast<uint8_t>((*dng)[7])) << 24;
+  ASSERT_EQ(dng->substr(0, 4), std::string("II*\0", 4));  // encode_dng writes little-endian TIFF
+  ASSERT_LT(ifd0 + 20, dng->size());
+  // Cut inside the first directory's table.
+  const std::string cut = dng->substr(0, ifd0 + 20);
+  auto r = io::decode_raw_linear(cut, {}, "cut.dng");
+  ASSERT_FALSE(r);
+  EXPECT_NE(r.message().find("cut.dng: not a whole RAW file"), std::string::npos) << r.message();
+  EXPECT_NE(r.message().find("byte " + std::to_string(ifd0)), std::string::npos) << r.message();
+  EXPECT_FALSE(io::raw_preview_jpeg(cut, "cut.dng"));
+  // A directory claiming 65535 entries.
+  std::string swollen = *dng;
+  swollen[ifd0] = swollen[ifd0 + 1] = static_cast<char>(0xff);
+  auto s = io::decode_raw_linear(swollen, {}, "swollen.dng");
+  ASSERT_FALSE(s);
+  EXPECT_NE(s.message().find("65535 entries"), std::string::npos) << s.message();
+  // Not TIFF: left to LibRaw.
+  EXPECT_TRUE(io::check_raw_structure("FUJIFILMCCD-RAW 0201", "x.raf"));
+}
+
 TEST(Raw, FileNamesAndOptions) {
   EXPECT_TRUE(io::is_raw_file_name("IMG_0001.CR2"));
   EXPECT_TRUE(io::is_raw_file_name("light_00.dng"));

@@ -68,6 +68,13 @@ bool is_identity(const cv::Matx33f& m);
 // nothing when `m` is the identity. As LibRaw and our MHC clip after their matrix.
 void apply_colour_matrix(cv::Mat& photo, const cv::Matx33f& m);
 
+// A TIFF-based RAW (DNG, NEF, CR2, ARW...) is refused, with the reason, when
+// its image directories or their values run past the end of the file: a file
+// cut short in copying, or made to harm. LibRaw 0.20 (Debian 12) reads on
+// past such ends and can crash (a 300-byte DNG found by fuzz_raw_decode).
+// Every LibRaw open in veneer checks this first. Other containers pass.
+Status check_raw_structure(std::string_view bytes, const std::string& name);
+
 // The JPEG thumbnail/preview LibRaw finds in a RAW file (unpack_thumb, the
 // mosaic left undecoded): its bytes as stored. An error when the file has
 // none or it is not a JPEG.
