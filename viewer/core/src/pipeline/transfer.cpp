@@ -251,7 +251,9 @@ Expected<std::shared_ptr<const repaint::LiveLook>> live_look(const PreparedPair&
     if (l.position_m) positions.push_back(*l.position_m);
   }
   if (positions.size() != src_lamps.size()) positions.clear();  // distant lamps, or not every one placed
-  auto live = repaint::LiveLook::make(*still, {pair.dst.view, dst_lamps}, {pair.src.view, src_lamps}, map, positions,
+  const io::CameraInfo& sc = pair.source.camera;
+  const cv::Vec3d source_camera = sc.focal_px > 0 ? cv::Vec3d(sc.focal_px, sc.cx, sc.cy) : cv::Vec3d(0, 0, 0);
+  auto live = repaint::LiveLook::make(*still, {pair.dst.view, dst_lamps}, {pair.src.view, src_lamps, source_camera}, map, positions,
                                       live_options, progress.part(0.6, 1.0));
   if (!live) return live.error();
   return std::shared_ptr<const repaint::LiveLook>(std::make_shared<const repaint::LiveLook>(std::move(*live)));

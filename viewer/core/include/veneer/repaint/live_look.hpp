@@ -106,12 +106,6 @@ class LiveLook {
   // pixels painted as above, times `exposure`, the others `backdrop` (or black).
   cv::Mat paint(const cv::Mat& frame, const cv::Matx23d& map_source_to_frame, const LiveLight& light,
                 const cv::Mat& backdrop, double exposure = 1.0) const;
-  // The exposure at which the painted destination's `percentile` (of its
-  // mapped pixels' brightest channel, on a subsample) is `white` of full
-  // scale at `light`, at most 1: the destination may reflect more than the
-  // frame's source did, and the frame's exposure would clip it. LiveSession
-  // fixes it on a session's first painted frame (no flicker after).
-  double exposure_for(const LiveLight& light, double percentile = 0.99, double white = 0.9) const;
 
   // The look at a captured lamp (unit direction, intensity 1, no ambient,
   // no change from the frame): linear CV_32FC3 in the stills' units, for

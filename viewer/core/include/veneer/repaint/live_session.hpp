@@ -130,7 +130,6 @@ class LiveSession {
   Look look_ = Look::shaded;
   std::optional<LiveLight> last_good_;   // the last light one lamp explained
   int held_ = 0;                         // frames the last good light has been held for
-  std::optional<double> exposure_;       // the painted look's, fixed on the first painted frame (LiveLook::exposure_for)
 };
 
 // The backdrop dimmed and red with "LOST - hold still / recapture".

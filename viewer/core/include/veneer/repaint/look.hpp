@@ -76,6 +76,9 @@ struct LookOptions {
 struct LookSide {
   const ObjectView& view;
   const std::vector<cv::Vec3d>& lamps;
+  cv::Vec3d camera{0, 0, 0};  // the camera's focal length and principal point at the view's scale (focal_px, cx,
+                              // cy; 0 = not known): with the lamps' positions the live light is fitted as a lamp at
+                              // a place (live_look.hpp)
 };
 
 class ShadedLook {
