@@ -312,12 +312,30 @@ TEST(LiveLook, TwoLampsOrAHandAreNotExplained) {
               "%.3f; max_residual %.3f\n",
               one.residual, angle_deg(one.direction, lamps[a]), two.residual, covered.residual,
               repaint::LightEstimateOptions{}.max_residual);
+  // the same lamp with the frame exposed 1.3x: its lit side clipped (as the demo's live view clips half the
+  // orange), judged with the clipped samples as lower bounds
+  const cv::Mat bright = as_frame(s.set.images[a], 1.3f);
+  double clipped_share = 0;
+  for (int y = 0; y < bright.rows; ++y)
+    for (int x = 0; x < bright.cols; ++x)
+      if (s.view.mask.at<uchar>(y, x)) {
+        const cv::Vec3b v = bright.at<cv::Vec3b>(y, x);
+        clipped_share += std::max({v[0], v[1], v[2]}) >= 250;
+      }
+  clipped_share /= std::max(1, cv::countNonZero(s.view.mask));
+  const repaint::LiveLight overexposed = s.live->estimate_light(bright, still);
+  std::printf("one lamp exposed 1.3x (%.0f %% of the object clipped): residual %.3f, %.1f deg off\n", 100 * clipped_share,
+              overexposed.residual, angle_deg(overexposed.direction, lamps[a]));
+  EXPECT_GT(clipped_share, 0.2);
   EXPECT_TRUE(one.explained);
-  EXPECT_LT(one.residual, 0.05);  // measured 0.009
-  // measured 0.199: explained as one lamp between them at the default 0.25 (for a matte object both lamps
-  // light most of, that is what it is), but twenty times a single lamp's
-  EXPECT_GT(two.residual, 5 * one.residual);
-  EXPECT_GT(two.residual, 0.15);
+  EXPECT_LT(one.residual, 0.05);  // measured 0.004
+  EXPECT_TRUE(overexposed.explained);
+  EXPECT_LT(overexposed.residual, 0.1);
+  // two lamps 140 deg apart: measured 0.283 with the clipped samples counted (0.199 before), above the
+  // fallback (0.25) and seventy times a single lamp's
+  EXPECT_GT(two.residual, 10 * one.residual);
+  EXPECT_GT(two.residual, 0.25);
+  EXPECT_FALSE(two.explained);
   EXPECT_FALSE(covered.explained);  // measured 0.602
 
   repaint::LiveSession session(s.set.images, s.view.mask, s.map, s.view.mask.size(), s.live);
