@@ -14,6 +14,8 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "veneer/io/image_io.hpp"
+#include "veneer/repaint/repaint.hpp"
 #include "widgets.hpp"
 
 namespace veneer::app {
@@ -31,8 +33,13 @@ std::shared_ptr<veneer::repaint::LiveSession> make_live_session(
     live_look = *made;
   else if (note)
     *note = LiveTab::tr("the live view paints the copy only: the shaded look: %1").arg(qs(made.message()));
+  // the destination's photos at the map's scale lit by the lamp that lights each pixel second most, as
+  // `veneer repaint --video` paints them (no lamp's shadow frozen around the object); `backdrop` when the
+  // pair holds no photos
+  const cv::Mat lit = pair.dst.view.images.empty() ? backdrop
+                                                   : veneer::io::tonemap_picture(veneer::repaint::lit_photo(pair.dst.view.images));
   return std::make_shared<veneer::repaint::LiveSession>(source_photos, mask, result.map, result.source_size, live_look,
-                                                        backdrop, result.blend);
+                                                        lit, result.blend);
 }
 
 LiveTab::LiveTab(Session& session, QWidget* parent) : QWidget(parent), session_(session) {

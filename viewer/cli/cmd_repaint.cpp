@@ -125,7 +125,7 @@ int run_repaint(const RepaintArgs& a) {
   auto dst = io::read_set(a.dst);
   if (!dst) return report.fail(dst.message());
   if (!fs::exists(map_file.parent_path() / "metrics.json")) options.scale = pipeline::map_scale(*map, *dst);
-  const cv::Mat backdrop = io::tonemap_picture(repaint::median_photo(dst->images));
+  const cv::Mat backdrop = io::tonemap_picture(repaint::lit_photo(dst->images));
   auto mask = match::object_mask(*src, false);
   if (!mask) return report.fail("source: " + mask.message());
   cv::Mat still_mask = *mask;

@@ -430,7 +430,7 @@ VENEER_COMMAND(rig) {
         if (!live_dst->empty()) {
           auto d = io::read_set(*live_dst);
           if (!d) return fail("live", d.message());
-          backdrop = io::tonemap_picture(repaint::median_photo(d->images));
+          backdrop = io::tonemap_picture(repaint::lit_photo(d->images));
           // a bare map.pfm: its scale from its width against the destination's
           if (!std::filesystem::exists(metrics)) options.scale = pipeline::map_scale(*map, *d);
           dst = std::move(*d);

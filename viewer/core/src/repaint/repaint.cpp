@@ -27,6 +27,27 @@ cv::Mat median_photo(const std::vector<cv::Mat>& photos) {
   return out;
 }
 
+cv::Mat lit_photo(const std::vector<cv::Mat>& photos) {
+  if (photos.empty()) return {};
+  cv::Mat out(photos[0].size(), CV_32FC3);
+  const int n = static_cast<int>(photos.size());
+  cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& rows) {
+    for (int y = rows.start; y < rows.end; ++y)
+      for (int x = 0; x < out.cols; ++x) {
+        int first = -1, second = -1;
+        float g1 = -1, g2 = -1;
+        for (int i = 0; i < n; ++i) {
+          const cv::Vec3f v = photos[i].at<cv::Vec3f>(y, x);
+          const float g = v[0] + v[1] + v[2];
+          if (g > g1) second = first, g2 = g1, first = i, g1 = g;
+          else if (g > g2) second = i, g2 = g;
+        }
+        out.at<cv::Vec3f>(y, x) = photos[second >= 0 ? second : first].at<cv::Vec3f>(y, x);
+      }
+  });
+  return out;
+}
+
 cv::Mat repaint(const Map& map, const cv::Mat& photo, const cv::Mat& backdrop) {
   cv::Mat out = backdrop.empty() ? cv::Mat(map.xy.size(), CV_32FC3, cv::Scalar::all(0)) : backdrop.clone();
   for (int y = 0; y < map.xy.rows; ++y)

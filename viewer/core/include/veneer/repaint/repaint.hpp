@@ -15,6 +15,11 @@ using match::Map;
 namespace fast = match::fast;
 
 cv::Mat median_photo(const std::vector<cv::Mat>& photos);  // per-pixel, per-channel median
+// The live view's backdrop: per pixel the photo that lights it second most (grey; the brightest when there
+// is one photo), so no lamp's shadow stays in it -- the median photo keeps every shadow most lamps cast
+// (behind the object, under it), which then stood still around the object while the live lamp moved
+// (issue 47) -- and a highlight of one lamp does not either. Linear CV_32FC3.
+cv::Mat lit_photo(const std::vector<cv::Mat>& photos);
 // The destination `backdrop` with the source's `photo` pasted through `map`
 // (linear BGR CV_32FC3; backdrop may be empty = black).
 cv::Mat repaint(const Map& map, const cv::Mat& photo, const cv::Mat& backdrop = {});
