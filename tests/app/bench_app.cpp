@@ -25,6 +25,7 @@
 
 #include "main_window.hpp"
 #include "rig_link.hpp"
+#include "scratch_home.hpp"
 #include "wait_for.hpp"
 #include <QTemporaryDir>
 #include "veneer/io/image_io.hpp"
@@ -101,6 +102,8 @@ class TracingApp : public QApplication {
 
 int main(int argc, char** argv) {
   if (qEnvironmentVariableIsEmpty("QT_QPA_PLATFORM")) qputenv("QT_QPA_PLATFORM", "offscreen");
+  QTemporaryDir xdg;
+  veneer::test::use_scratch_xdg_folders(xdg);
   TracingApp app(argc, argv);
   QTemporaryDir known;  // the simulated rigs are pinned here, their first use answered yes
   qputenv("VENEER_KNOWN_RIGS", (known.path() + "/known_rigs").toUtf8());

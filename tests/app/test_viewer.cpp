@@ -38,6 +38,7 @@
 
 #include "main_window.hpp"
 #include "rig_link.hpp"
+#include "scratch_home.hpp"
 #include "veneer/proto/tls.hpp"
 #include "widgets.hpp"
 #include "wait_for.hpp"
@@ -1366,8 +1367,11 @@ TEST(Viewer, LiveLookSelectorAndLightOverlay) {
 
 int main(int argc, char** argv) {
   if (qEnvironmentVariableIsEmpty("QT_QPA_PLATFORM")) qputenv("QT_QPA_PLATFORM", "offscreen");
+  QTemporaryDir xdg;
+  veneer::test::use_scratch_xdg_folders(xdg);
   QApplication app(argc, argv);
   QApplication::setOrganizationName("veneer-tests");
+  QApplication::setApplicationName("veneer-viewer");
   // The rigs these tests start are pinned in a file of their own (never the
   // user's), their first use answered yes (the pin test installs its own asker).
   QTemporaryDir known;

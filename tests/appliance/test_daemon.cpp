@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <functional>
 #include <fstream>
 
 #include <opencv2/imgcodecs.hpp>
@@ -573,10 +574,13 @@ TEST(Daemon, ATooLongClientNameIsRefusedSayingSoWithTheLimit) {
 }
 
 // 1,000 wrong tokens from 100 addresses (127.0.0.2..101, ten each, all at
-// once): the daemon spends under 1 s of CPU on them and logs a handful of
-// lines; each address is slowed (its last tries wait their turn, up to 1 s
-// apart), and a client with the right token is served meanwhile.
-TEST(Daemon, AThousandWrongTokensCostUnderASecondOfCpuAndAFewLogLines) {
+// once): the daemon spends on them about what it spends on as many hellos
+// with the right token (measured first, the same way, from 127.0.0.102..201:
+// a CPU time asserted alone breaks under a sanitizer or on a loaded machine)
+// and logs a handful of lines; each address is slowed (its last tries wait
+// their turn, up to 1 s apart), and a client with the right token is served
+// meanwhile.
+TEST(Daemon, AThousandWrongTokensCostWhatAsManyRightOnesDoAndAFewLogLines) {
   fs::path dir = rigtest::temp_dir("wrong");
   fs::path store = dir / "store";
   auto d = DaemonProcess::start(store, kSmall);
@@ -588,48 +592,62 @@ TEST(Daemon, AThousandWrongTokensCostUnderASecondOfCpuAndAFewLogLines) {
     if (!probe.ok()) GTEST_SKIP() << "cannot connect from 127.0.0.2";
   }
   std::this_thread::sleep_for(std::chrono::seconds(1));  // the daemon's start is done
-  const size_t log_before = count_lines(d->full_log());
-  const double cpu_before = d->cpu_seconds();
   constexpr int kAddresses = 100, kEach = 10;
-  std::atomic<int> refused{0}, other{0};
-  std::vector<double> per_address_s(kAddresses);
-  auto t0 = std::chrono::steady_clock::now();
-  std::vector<std::thread> attackers;
-  for (int a = 0; a < kAddresses; ++a) {
-    attackers.emplace_back([&, a] {
-      auto start = std::chrono::steady_clock::now();
-      for (int i = 0; i < kEach; ++i) {
-        rigtest::RawConnection c(d->port(), 2 + a);
-        std::string guess("not-the-token-");
-        guess.append(std::to_string(i));
-        c.send(hello_message(guess, "guess"));
-        auto r = c.next_response(1, 20);
-        if (r && !r->ok() && r->error().find("wrong access token") != std::string::npos) {
-          ++refused;
-        } else {
-          ++other;
+  // kAddresses x kEach hellos, all at once from 127.0.0.<first>.., the i-th of
+  // an address with token_of(i): how many were answered as `expected`, and
+  // the seconds each address took.
+  auto burst = [&](int first, const std::function<std::string(int)>& token_of, const std::string& expected,
+                   std::vector<double>& per_address_s) {
+    std::atomic<int> answered{0};
+    per_address_s.assign(kAddresses, 0.0);
+    std::vector<std::thread> peers;
+    for (int a = 0; a < kAddresses; ++a) {
+      peers.emplace_back([&, a] {
+        auto start = std::chrono::steady_clock::now();
+        for (int i = 0; i < kEach; ++i) {
+          rigtest::RawConnection c(d->port(), first + a);
+          c.send(hello_message(token_of(i), "guess"));
+          auto r = c.next_response(1, 20);
+          if (r && (expected.empty() ? r->ok() : !r->ok() && r->error().find(expected) != std::string::npos))
+            ++answered;
         }
-      }
-      per_address_s[static_cast<size_t>(a)] =
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    });
-  }
+        per_address_s[static_cast<size_t>(a)] =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      });
+    }
+    for (auto& t : peers) t.join();
+    return answered.load();
+  };
+  std::vector<double> per_address_s;
+  double cpu_before = d->cpu_seconds();
+  const int welcomed = burst(2 + kAddresses, [&](int) { return *token; }, "", per_address_s);
+  const double cpu_right = d->cpu_seconds() - cpu_before;
+  EXPECT_EQ(welcomed, kAddresses * kEach);
+
+  const size_t log_before = count_lines(d->full_log());
+  cpu_before = d->cpu_seconds();
+  auto t0 = std::chrono::steady_clock::now();
+  std::thread attack([&] {
+    const int refused = burst(2, [](int i) { return "not-the-token-" + std::to_string(i); }, "wrong access token",
+                              per_address_s);
+    EXPECT_EQ(refused, kAddresses * kEach);
+  });
   // Meanwhile the right token from another address is answered at once.
   std::this_thread::sleep_for(std::chrono::milliseconds(500));
   auto good_start = std::chrono::steady_clock::now();
   auto good = connect(*d, store);
   const double good_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - good_start).count();
-  for (auto& t : attackers) t.join();
+  attack.join();
   const double attack_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const double cpu = d->cpu_seconds() - cpu_before;
   ASSERT_TRUE(good);
   EXPECT_LT(good_s, 1.0);
-  EXPECT_EQ(refused.load(), kAddresses * kEach);
-  EXPECT_EQ(other.load(), 0);
   // 3 answers at once, then turns 0.1, 0.2, 0.4, 0.8, 1, 1, 1 s apart (4.5 s).
   EXPECT_GE(*std::min_element(per_address_s.begin(), per_address_s.end()), 4.4);
   EXPECT_LT(attack_s, 30.0);
-  EXPECT_LT(cpu, 1.0) << "daemon CPU for 1000 wrong tokens";
+  // Measured (Release, load 3.3-4.3): the wrong ones cost 1.07-1.11 times the right ones' CPU (0.41-0.52 s).
+  EXPECT_LT(cpu, 1.5 * cpu_right) << "daemon CPU for 1000 wrong tokens " << cpu << " s, for 1000 right ones "
+                                  << cpu_right << " s";
   // The burst's summary comes once it has been quiet for 5 s.
   std::this_thread::sleep_for(std::chrono::seconds(6));
   std::string log = d->full_log();
@@ -638,8 +656,9 @@ TEST(Daemon, AThousandWrongTokensCostUnderASecondOfCpuAndAFewLogLines) {
   std::string added = log.substr(pos);
   EXPECT_LE(count_lines(added), 5u) << added;
   EXPECT_NE(added.find("1000 attempts"), std::string::npos) << added;
-  std::printf("1000 wrong tokens: %.2f s of daemon CPU, %zu log lines, %.1f s for the attack; right token answered in "
-              "%.3f s meanwhile\n%s", cpu, count_lines(added), attack_s, good_s, added.c_str());
+  std::printf("1000 wrong tokens: %.2f s of daemon CPU (1000 right ones: %.2f s, ratio %.2f), %zu log lines, %.1f s "
+              "for the attack; right token answered in %.3f s meanwhile\n%s",
+              cpu, cpu_right, cpu / cpu_right, count_lines(added), attack_s, good_s, added.c_str());
   EXPECT_TRUE(d->alive());
   fs::remove_all(dir);
 }

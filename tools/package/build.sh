@@ -43,7 +43,8 @@ buildflags() {
   get() { (cd "$src" && DEB_HOST_ARCH="$arch" DEB_BUILD_MAINT_OPTIONS=hardening=+all dpkg-buildflags --get "$1"); }
   local cflags; cflags="$(get CPPFLAGS) $(get CXXFLAGS | sed -e 's/\(^\| \)-g\( \|$\)/ /' -e 's/\(^\| \)-O2\( \|$\)/ /')"
   printf '%s\n' "-DCMAKE_C_FLAGS=$cflags" "-DCMAKE_CXX_FLAGS=$cflags" \
-    "-DCMAKE_EXE_LINKER_FLAGS=$(get LDFLAGS)" "-DCMAKE_SHARED_LINKER_FLAGS=$(get LDFLAGS)"
+    "-DCMAKE_EXE_LINKER_FLAGS=$(get LDFLAGS)" "-DCMAKE_SHARED_LINKER_FLAGS=$(get LDFLAGS)" \
+    "-DCMAKE_MODULE_LINKER_FLAGS=$(get LDFLAGS)"  # (the video module, libveneer_video.so, is a MODULE)
 }
 mapfile -t flags_arm64 < <(buildflags arm64)
 mapfile -t flags_amd64 < <(buildflags amd64)
@@ -142,14 +143,36 @@ shlibs() {
   echo "${line#shlibs:Depends=}"
 }
 
-# deb PACKAGE ARCH DIR BINARY...: control files, strip, build, into $out.
-deb() {
-  local pkg="$1" arch="$2" dir="$3"; shift 3
-  local strip=strip rel s
+# elf_files DIR: every ELF object the staged tree holds (programs, and modules
+# such as <libdir>/veneer/libveneer_video.so), relative to DIR, one a line.
+elf_files() {
+  local dir="$1" rel
+  (cd "$dir" && find . -path ./DEBIAN -prune -o -type f -printf '%P\n' | sort) | while IFS= read -r rel; do
+    if [ "$(head -c 4 "$dir/$rel" | od -An -c | tr -d ' ')" = '177ELF' ]; then echo "$rel"; fi
+  done
+}
+
+# strip_elf ARCH DIR: strips every ELF object in the staged tree, as Debian
+# ships them (dh_strip: --strip-unneeded, no .comment or .note); a module
+# listed nowhere is stripped too (issue 49: libveneer_video.so was not).
+strip_elf() {
+  local arch="$1" dir="$2" strip=strip rel
   [ "$arch" = arm64 ] && strip=aarch64-linux-gnu-strip
-  for rel in "$@"; do $strip --strip-unneeded --remove-section=.comment --remove-section=.note "$dir/$rel"; done
+  elf_files "$dir" | while IFS= read -r rel; do
+    $strip --strip-unneeded --remove-section=.comment --remove-section=.note "$dir/$rel"
+  done
+}
+
+# deb PACKAGE ARCH DIR: control files, strip, build, into $out. Every ELF
+# object of the tree is stripped and goes to dpkg-shlibdeps.
+deb() {
+  local pkg="$1" arch="$2" dir="$3"
+  local s elf=()
+  strip_elf "$arch" "$dir"
+  mapfile -t elf < <(elf_files "$dir")
+  [ "${#elf[@]}" -gt 0 ] || { echo "package: $pkg: no program in $dir" >&2; exit 1; }
   mkdir -p "$dir/DEBIAN"  # (dpkg-shlibdeps finds the package's root by it)
-  local depends; depends=$(shlibs "$arch" "$dir" "$@")
+  local depends; depends=$(shlibs "$arch" "$dir" "${elf[@]}")
   local size; size=$(du -k -s --apparent-size --exclude=DEBIAN "$dir" | cut -f1)
   sed -e "s|@VERSION@|$version|" -e "s|@ARCH@|$arch|" -e "s|@MAINTAINER@|$maintainer|" \
       -e "s|@SIZE@|$size|" -e "s|@SHLIBS@|$depends|" "$here/debian/$pkg.control" > "$dir/DEBIAN/control"
@@ -179,17 +202,17 @@ for arch in arm64 amd64; do
   chmod 0644 "$dir/etc/veneer/veneerd.json"
   manpage "$dir" veneerd "$out/build-amd64-daemon/bin/veneerd" "Veneer capture rig daemon"
   docs veneerd "$dir"
-  deb veneerd "$arch" "$dir" usr/bin/veneerd
+  deb veneerd "$arch" "$dir"
 done
 dir=$(stage veneer amd64 "$out/build-amd64" cli)
 manpage "$dir" veneer "$out/build-amd64/bin/veneer" "Veneer appearance transfer, command line"
 docs veneer "$dir"
-deb veneer amd64 "$dir" usr/bin/veneer
+deb veneer amd64 "$dir"
 dir=$(stage veneer-viewer amd64 "$out/build-amd64" viewer)
 desktop-file-validate "$dir/usr/share/applications/veneer-viewer.desktop"
 manpage "$dir" veneer-viewer "$out/build-amd64/bin/veneer-viewer" "Veneer appearance transfer, desktop viewer"
 docs veneer-viewer "$dir"
-deb veneer-viewer amd64 "$dir" usr/bin/veneer-viewer
+deb veneer-viewer amd64 "$dir"
 
 step "lintian"
 # --fail-on error,warning: an unexplained warning fails the build; the

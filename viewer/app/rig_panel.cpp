@@ -16,7 +16,7 @@
 namespace veneer::app {
 
 RigPanel::RigPanel(Session& session, QWidget* parent)
-    : QGroupBox(tr("Rig"), parent), session_(session), settings_("veneer", "veneer-viewer") {
+    : QGroupBox(tr("Rig"), parent), session_(session) {
   auto* form = new QFormLayout(this);
   rig_edit_ = named<QLineEdit>("rigAddress", settings_.value("rig/last", "127.0.0.1:7878").toString());
   token_edit_ = named<QLineEdit>("tokenFile", settings_.value("rig/token_file").toString());

@@ -29,7 +29,7 @@ class RigPanel : public QGroupBox {
   void onRigEvent(const veneer::rig::Event& e);
 
   Session& session_;
-  QSettings settings_;
+  QSettings settings_;  // the application's (veneer/veneer-viewer.conf; the tests' under their own names)
   QLineEdit *rig_edit_ = nullptr, *token_edit_ = nullptr;
   QComboBox* recent_ = nullptr;
   QPushButton* connect_btn_ = nullptr;

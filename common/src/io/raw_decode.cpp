@@ -10,6 +10,7 @@
 #include <opencv2/core/hal/hal.hpp>
 
 #include "demosaic.hpp"
+#include "tiff.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/raw.hpp"
 
@@ -160,45 +161,37 @@ void apply_colour_matrix(cv::Mat& photo, const cv::Matx33f& m) {
 
 Status check_raw_structure(std::string_view bytes, const std::string& name) {
   const size_t size = bytes.size();
-  if (size < 8) return Status::success();
-  const bool little = bytes[0] == 'I' && bytes[1] == 'I', big = bytes[0] == 'M' && bytes[1] == 'M';
-  if (!little && !big) return Status::success();
-  auto u8 = [&](size_t at) { return static_cast<uint32_t>(static_cast<uint8_t>(bytes[at])); };
-  auto u16 = [&](size_t at) { return little ? u8(at) | u8(at + 1) << 8 : u8(at) << 8 | u8(at + 1); };
-  auto u32 = [&](size_t at) {
-    return little ? u16(at) | u16(at + 2) << 16 : u16(at) << 16 | u16(at + 2);
-  };
-  if (u16(2) != 42) return Status::success();  // not TIFF (e.g. a CR3, RAF or ORF header): LibRaw judges
+  detail::Tiff tiff(bytes);
+  uint32_t first = 0;
+  if (tiff.header(first) != detail::Tiff::Header::tiff) return Status::success();  // not TIFF (e.g. a CR3, RAF or ORF header): LibRaw judges
   auto bad = [&](const std::string& why) { return make_error(name + ": not a whole RAW file: " + why); };
-  // Bytes per value of TIFF's field types 1..13 (0: unknown, not checked).
-  static constexpr uint32_t kTypeBytes[14] = {0, 1, 1, 2, 4, 8, 1, 1, 2, 4, 8, 4, 8, 4};
-  std::vector<uint32_t> queue{u32(4)}, seen;
+  std::vector<uint32_t> queue{first}, seen;  // depth first: each directory's SubIFDs, then the next
   while (!queue.empty()) {
     const uint32_t at = queue.back();
     queue.pop_back();
     if (at == 0 || std::find(seen.begin(), seen.end(), at) != seen.end()) continue;
     if (seen.size() >= 64) return bad("more than 64 image directories");
     seen.push_back(at);
-    if (static_cast<uint64_t>(at) + 2 > size) return bad("an image directory at byte " + std::to_string(at) + " lies past its end (" + std::to_string(size) + " bytes)");
-    const uint32_t entries = u16(at);
-    const uint64_t end = static_cast<uint64_t>(at) + 2 + 12ull * entries;
-    if (end + 4 > size)
-      return bad("the image directory at byte " + std::to_string(at) + " (" + std::to_string(entries) +
-                 " entries) runs past its end (" + std::to_string(size) + " bytes)");
-    for (uint32_t k = 0; k < entries; ++k) {
-      const size_t e = at + 2 + 12 * static_cast<size_t>(k);
-      const uint32_t tag = u16(e), type = u16(e + 2), count = u32(e + 4);
-      const uint64_t bytes_needed = type < 14 ? static_cast<uint64_t>(kTypeBytes[type]) * count : 0;
-      if (bytes_needed > 4 && static_cast<uint64_t>(u32(e + 8)) + bytes_needed > size)
-        return bad("tag " + std::to_string(tag) + "'s " + std::to_string(count) + " values at byte " +
-                   std::to_string(u32(e + 8)) + " run past its end (" + std::to_string(size) + " bytes)");
-      if (tag == 0x14a && (type == 4 || type == 13)) {  // SubIFDs: the full-size image of most DNGs
-        if (count == 1) queue.push_back(u32(e + 8));
-        else if (count <= 64)
-          for (uint32_t i = 0; i < count; ++i) queue.push_back(u32(u32(e + 8) + 4 * static_cast<size_t>(i)));
-      }
+    detail::TiffDirectory d;
+    unsigned entries = 0;
+    switch (tiff.directory(at, d, &entries)) {
+      case detail::Tiff::Read::ok: break;
+      case detail::Tiff::Read::count_outside:
+        return bad("an image directory at byte " + std::to_string(at) + " lies past its end (" + std::to_string(size) + " bytes)");
+      case detail::Tiff::Read::entries_out_of_range:  // (any count is in range here)
+      case detail::Tiff::Read::table_outside:
+        return bad("the image directory at byte " + std::to_string(at) + " (" + std::to_string(entries) +
+                   " entries) runs past its end (" + std::to_string(size) + " bytes)");
     }
-    queue.push_back(u32(static_cast<size_t>(end)));  // the next directory
+    for (const detail::TiffEntry& e : d.entries) {
+      const uint64_t bytes_needed = detail::Tiff::value_bytes(e);
+      if (bytes_needed > 4 && static_cast<uint64_t>(e.offset) + bytes_needed > size)
+        return bad("tag " + std::to_string(e.tag) + "'s " + std::to_string(e.count) + " values at byte " +
+                   std::to_string(e.offset) + " run past its end (" + std::to_string(size) + " bytes)");
+      if (e.tag == 0x14a && (e.type == 4 || e.type == 13) && e.count <= 64)  // SubIFDs: the full-size image of most DNGs
+        for (uint32_t i = 0; i < e.count; ++i) queue.push_back(tiff.value(e, i));
+    }
+    queue.push_back(d.next);
   }
   return Status::success();
 }

@@ -68,7 +68,9 @@ TEST(Prepare, OneDefaultDemosaicEverywhere) {
 
 TEST(Cache, SecondPreparationIsAHitWithTheSameResults) {
   Scratch dir;
-  ::setenv("XDG_CACHE_HOME", (dir / "xdg").c_str(), 1);  // never the user's cache
+  const char* before = std::getenv("XDG_CACHE_HOME");  // the test run's (never the user's), put back below
+  const std::string previous = before ? before : "";
+  ::setenv("XDG_CACHE_HOME", (dir / "xdg").c_str(), 1);
   EXPECT_EQ(io::default_cache_dir(), dir / "xdg" / "veneer");
   write_simulated(dir / "bull", "bull");
   pipeline::PrepareOptions options;
@@ -106,7 +108,8 @@ TEST(Cache, SecondPreparationIsAHitWithTheSameResults) {
   auto off = pipeline::prepare_set(dir / "bull", 1.0, false, options);
   ASSERT_TRUE(off);
   EXPECT_TRUE(off->report.checksum.empty());
-  ::unsetenv("XDG_CACHE_HOME");
+  if (before) ::setenv("XDG_CACHE_HOME", previous.c_str(), 1);
+  else ::unsetenv("XDG_CACHE_HOME");
 }
 
 // A mask drawn by hand is part of the key: the same mask again is a hit with

@@ -2,6 +2,7 @@
 #include "video_module.hpp"
 
 #include <opencv2/videoio.hpp>
+#include <opencv2/videoio/registry.hpp>
 
 namespace {
 
@@ -24,13 +25,19 @@ class FileWriter final : public Writer {
   void close() override { writer.release(); }
 };
 
+// A file is tried with each backend that reads files, in OpenCV's order of
+// preference (as cv::CAP_ANY tries them), but gPhoto2's: that one takes a
+// name for a camera, and looking for it enumerates the USB bus through
+// libgphoto2 and libusb, whose device list is never freed (issue 49: 5,007
+// allocations leaked on every file no other backend could read).
 Reader* open_reader(const char* path) {
   auto r = new CaptureReader;
-  if (!r->capture.open(path)) {
-    delete r;
-    return nullptr;
+  for (const cv::VideoCaptureAPIs api : cv::videoio_registry::getStreamBackends()) {
+    if (api == cv::CAP_GPHOTO2) continue;
+    if (r->capture.open(path, api)) return r;
   }
-  return r;
+  delete r;
+  return nullptr;
 }
 
 Writer* open_writer(const char* path, double fps, int width, int height) {
