@@ -531,30 +531,38 @@ void Rig::set_live_fps(double fps) {
   {
     std::lock_guard lock(live_mutex_);
     live_fps_ = fps;
+    ++live_plan_;
   }
   live_cv_.notify_all();
 }
 
+// The camera's next frame is due one period of the fastest current watcher
+// after the last one was due, and is planned again whenever the rate changes:
+// a watcher that comes or goes is served at the new rate at once (a 10 fps
+// watcher arriving just after a 0.1 fps one left does not wait out the slow
+// one's 10 s period).
 void Rig::live_loop() {
   using Clock = std::chrono::steady_clock;
-  auto next = Clock::now();
+  Clock::time_point last{};  // when the last frame was due (the epoch: none yet)
   for (;;) {
-    double fps = 0;
+    Clock::time_point due;
     {
       std::unique_lock lock(live_mutex_);
-      live_cv_.wait(lock, [&] { return stopping_ || live_fps_ > 0; });
-      if (stopping_) return;
-      fps = live_fps_;
+      for (;;) {
+        live_cv_.wait(lock, [&] { return stopping_ || live_fps_ > 0; });
+        if (stopping_) return;
+        const auto period =
+            std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / live_fps_));
+        due = last + period;
+        const auto now = Clock::now();
+        if (due < now - period) due = now;  // fell behind (or the rate rose): now, but do not burst
+        const uint64_t plan = live_plan_;
+        if (!live_cv_.wait_until(lock, due, [&] { return stopping_.load() || live_plan_ != plan; })) break;
+        if (stopping_) return;
+        // The rate changed while waiting: plan the frame again.
+      }
     }
-    const auto period = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(1.0 / fps));
-    auto now = Clock::now();
-    if (next < now - period) next = now;  // fell behind: do not burst
-    {
-      std::unique_lock lock(live_mutex_);
-      live_cv_.wait_until(lock, next, [&] { return stopping_.load(); });
-      if (stopping_) return;
-    }
-    next += period;
+    last = due;
     std::unique_lock cam(camera_mutex_, std::try_to_lock);
     if (!cam.owns_lock() || !dev_.camera) continue;  // a capture holds the camera
     auto jpeg = dev_.camera->preview();

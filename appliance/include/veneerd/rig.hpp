@@ -198,6 +198,7 @@ class Rig {
   std::mutex live_mutex_;
   std::condition_variable live_cv_;
   double live_fps_ = 0;
+  uint64_t live_plan_ = 0;  // bumped by every set_live_fps: the live thread plans its next frame again
   uint64_t live_seq_ = 0;
   std::thread live_;
 };

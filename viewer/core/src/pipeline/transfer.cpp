@@ -318,8 +318,13 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
     made_at_coherence = eval::evaluate(*coarse, coarse_dst.mask, coarse_src.mask).coherence;
     made_at = coarse_dst.mask.size();
   } else {
-    auto map = float_photos(dst->view) && float_photos(src->view)
-                   ? compute_map(dst->view, src->view, options.match, sub_progress(progress, 0.0, 0.85))
+    // Half-float photos are widened for the matcher only when it reads them as
+    // float (the intensities feature): matching normals reads no photo, and
+    // `combined` widens the ones it reads as it reads them (issue 48: widening
+    // every photo took most of the fast engine's FLANN map on the demo pair).
+    const bool widen = options.match.feature == match::Feature::intensities &&
+                       !(float_photos(dst->view) && float_photos(src->view));
+    auto map = !widen ? compute_map(dst->view, src->view, options.match, sub_progress(progress, 0.0, 0.85))
                    : compute_map(float_view(dst->view, dst->view.mask.size()),
                                  float_view(src->view, src->view.mask.size()), options.match,
                                  sub_progress(progress, 0.0, 0.85));

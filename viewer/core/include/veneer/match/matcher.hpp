@@ -23,7 +23,8 @@ Expected<Feature> parse_feature(const std::string&);
 struct ObjectView {
   cv::Mat normals;              // CV_32FC3 x,y,z (rig frame)
   cv::Mat mask;                 // CV_8UC1, 255 = object; only these pixels take part
-  std::vector<cv::Mat> images;  // CV_32FC3 BGR, one per lamp (intensity feature, repaint)
+  std::vector<cv::Mat> images;  // CV_32FC3 BGR, one per lamp (intensity feature, `combined`, repaint);
+                                // `combined` also reads CV_16FC3 (half floats, widened as it reads them)
   std::vector<std::string> lamps;  // optional lamp ids, one per image: when both views give them,
                                    // the intensity feature requires the same lamps in the same order
 };

@@ -6,6 +6,7 @@
 #include <array>
 #include <atomic>
 #include <cmath>
+#include <memory>
 #include <string>
 #include <random>
 #include <vector>
@@ -14,6 +15,7 @@
 #include <opencv2/imgproc.hpp>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
+#include <tbb/task_arena.h>
 
 #include "veneer/match/fast.hpp"
 
@@ -48,6 +50,14 @@ struct Weights {
   float lum = 0.02f;      // log of the mean grey (albedo x shading)
 };
 
+// A photo's pixel as float: the photos are CV_32FC3 or half floats
+// (CV_16FC3, io::ReadOptions::half_floats), which widen exactly.
+inline cv::Vec3f photo_at(const cv::Mat& photo, int y, int x) {
+  if (photo.depth() == CV_32F) return photo.at<cv::Vec3f>(y, x);
+  const cv::float16_t* h = photo.ptr<cv::float16_t>(y) + 3 * x;
+  return {static_cast<float>(h[0]), static_cast<float>(h[1]), static_cast<float>(h[2])};
+}
+
 // The pixel's features: normal, shading pattern, chroma, log luminance.
 Level make_level(const cv::Mat& normals, const cv::Mat& mask, const std::vector<cv::Mat>& images,
                  const Weights& w) {
@@ -77,7 +87,7 @@ Level make_level(const cv::Mat& normals, const cv::Mat& mask, const std::vector<
       cv::Vec3f mean(0, 0, 0);
       double norm = 0;
       for (int j = 0; j < lamps; ++j) {
-        const cv::Vec3f c = images[j].at<cv::Vec3f>(y, x);
+        const cv::Vec3f c = photo_at(images[j], y, x);
         mean += c;
         grey[j] = std::max(0.0f, (c[0] + c[1] + c[2]) / 3.0f);
         norm += static_cast<double>(grey[j]) * grey[j];
@@ -112,18 +122,47 @@ Pyramid::Inputs downscaled(const ObjectView& v, int i) {
   Pyramid::Inputs in;
   const int f = 1 << i;
   const cv::Size small((v.normals.cols + f - 1) / f, (v.normals.rows + f - 1) / f);
-  cv::resize(v.normals, in.normals, small, 0, 0, cv::INTER_AREA);
+  cv::Mat mf;
+  v.mask.convertTo(mf, CV_32F, 1.0 / 255);
+  cv::resize(mf, mf, small, 0, 0, cv::INTER_AREA);
+  in.mask = mf > 0.5;
+  // The normals and photos are read on the object alone: when the level
+  // divides the frame exactly, only the blocks under the reduced mask's box
+  // are reduced, the rest left 0 (issue 48: reducing whole photos was a third
+  // of the demo pair's map). Each reduced pixel is its own block's mean, so
+  // the values are the whole frame's to the bit for 3 channels (not for 1:
+  // OpenCV's 2x2 SIMD path sums in another order; test
+  // core/CombinedPhotos.AreaReducedPartsAreTheWholeFramesToTheBit). A
+  // half-float photo is widened (the part reduced, into one buffer for all),
+  // then reduced as a float one is.
+  const cv::Rect box = cv::boundingRect(in.mask);
+  const bool crop = v.normals.cols % f == 0 && v.normals.rows % f == 0 && box.area() > 0;
+  const cv::Rect from = crop ? cv::Rect(box.x * f, box.y * f, box.width * f, box.height * f)
+                             : cv::Rect(0, 0, v.normals.cols, v.normals.rows);
+  cv::Mat wide;
+  auto reduce = [&](const cv::Mat& full) {  // CV_32FC3 or CV_16FC3 (run_combined checks)
+    cv::Mat part = full(from), out;
+    if (part.depth() != CV_32F) {
+      part.convertTo(wide, CV_32F);
+      part = wide;
+    }
+    if (!crop) {
+      cv::resize(part, out, small, 0, 0, cv::INTER_AREA);
+      return out;
+    }
+    out = cv::Mat(small, CV_32FC3, cv::Scalar::all(0));
+    cv::Mat inside = out(box);
+    cv::resize(part, inside, box.size(), 0, 0, cv::INTER_AREA);
+    return out;
+  };
+  in.normals = reduce(v.normals);
   for (auto it = in.normals.begin<cv::Vec3f>(); it != in.normals.end<cv::Vec3f>(); ++it) {
     cv::Vec3f& n = *it;
     const float len = std::sqrt(n.dot(n));
     if (len > 1e-6f) n /= len;
   }
-  cv::Mat mf;
-  v.mask.convertTo(mf, CV_32F, 1.0 / 255);
-  cv::resize(mf, mf, small, 0, 0, cv::INTER_AREA);
-  in.mask = mf > 0.5;
-  in.images.resize(v.images.size());
-  for (size_t j = 0; j < v.images.size(); ++j) cv::resize(v.images[j], in.images[j], small, 0, 0, cv::INTER_AREA);
+  in.images.reserve(v.images.size());
+  for (const cv::Mat& photo : v.images) in.images.push_back(reduce(photo));
   return in;
 }
 
@@ -199,10 +238,41 @@ struct Matcher {
   }
   float total(int px, int py, int qx, int qy, float patch) const { return patch + incoherence(px, py, qx, qy); }
 
-  // Tries (qx, qy) for p; keeps it when better.
-  inline void try_candidate(int px, int py, int qx, int qy, cv::Point2i& best, float& best_patch, float& best_total) const {
+  // The weight of p's patch samples on the destination object: patch_cost's divisor.
+  float patch_weight(int px, int py) const {
+    float wsum = 0;
+    for (size_t k = 0; k < kOffsets.size(); ++k)
+      if (d.valid(px + kOffsets[k].x, py + kOffsets[k].y)) wsum += kWeights[k];
+    return wsum;
+  }
+  // patch_cost (its divisor `wsum` given), or `limit` as soon as the samples
+  // summed so far show the whole cost would not be below it (each sample adds
+  // >= 0, and the 1e-4 margin covers the rounding): a hopeless candidate's
+  // other samples are not summed, and a comparison with `limit` comes out as
+  // with patch_cost's value, to the bit.
+  float patch_cost_within(int px, int py, int qx, int qy, float wsum, float limit) const {
+    if (!(wsum > 0)) return 0.0f;
+    const float stop = limit * wsum * 1.0001f;
+    float total = 0;
+    for (size_t k = 0; k < kOffsets.size(); ++k) {
+      const int dx = px + kOffsets[k].x, dy = py + kOffsets[k].y;
+      if (!d.valid(dx, dy)) continue;
+      const int sx = qx + source_offsets[k].x, sy = qy + source_offsets[k].y;
+      if (!s.valid(sx, sy)) {
+        total += kWeights[k] * kOffObject;
+      } else {
+        total += kWeights[k] * sq_dist(d.at(dx, dy), s.at(sx, sy), d.stride);
+      }
+      if (total > stop) return limit;
+    }
+    return total / wsum;
+  }
+
+  // Tries (qx, qy) for p (its patch_weight `wsum`); keeps it when better.
+  inline void try_candidate(int px, int py, float wsum, int qx, int qy, cv::Point2i& best, float& best_patch,
+                            float& best_total) const {
     if (!s.valid(qx, qy) || (qx == best.x && qy == best.y)) return;
-    const float pc = patch_cost(px, py, qx, qy);
+    const float pc = patch_cost_within(px, py, qx, qy, wsum, best_total);
     if (pc >= best_total) return;  // the coherence part is >= 0
     const float t = total(px, py, qx, qy, pc);
     if (t < best_total) {
@@ -606,6 +676,11 @@ Expected<Map> run_combined(const ObjectView& destination, const ObjectView& sour
     return make_error("combined: both objects need their photos under the same lamps (" +
                       std::to_string(destination.images.size()) + " and " + std::to_string(source.images.size()) +
                       " given)");
+  for (const ObjectView* v : {&destination, &source})
+    for (const cv::Mat& photo : v->images)
+      if ((photo.type() != CV_32FC3 && photo.type() != CV_16FC3) || photo.size() != v->mask.size())
+        return make_error(std::string("combined: the ") + (v == &destination ? "destination" : "source") +
+                          "'s photos must be CV_32FC3 or CV_16FC3 of the mask's size");
   Weights w;
   const float coherence = 0.05f;  // per broken 4-neighbour, in the units of a squared normal difference
   // Levels: halve until the smaller object's bounding side is about 48 px.
@@ -678,7 +753,8 @@ Expected<Map> run_combined(const ObjectView& destination, const ObjectView& sour
     };
     // PatchMatch: propagation (through the motion's linear part), the seed,
     // random search around the best within `max_radius`.
-    auto search = [&](Matcher& m, int level_iterations, int max_radius, unsigned salt, int first = 0) {
+    auto search = [&](Matcher& m, int level_iterations, int max_radius, unsigned salt, int first = 0,
+                      bool report = true) {
       const int bands = std::max(1, std::min(64, d.box.height / 16));
       for (int it = first; it < level_iterations; ++it) {
         if (progress.cancelled()) return false;
@@ -701,6 +777,7 @@ Expected<Map> run_combined(const ObjectView& destination, const ObjectView& sour
               cv::Point2i best = m.match[at];
               float best_patch = m.cost[at];
               float best_total = m.total(x, y, best.x, best.y, best_patch);
+              const float wsum = m.patch_weight(x, y);
               // Propagation from the neighbours already visited.
               for (int k = 0; k < 2; ++k) {
                 const cv::Point o = k == 0 ? cv::Point(-step, 0) : cv::Point(0, -step);
@@ -709,21 +786,21 @@ Expected<Map> run_combined(const ObjectView& destination, const ObjectView& sour
                 if (!d.valid(nx, ny)) continue;
                 const cv::Point2i q = m.match[static_cast<size_t>(ny) * d.size.width + nx];
                 if (q.x < 0) continue;
-                m.try_candidate(x, y, q.x - so.x, q.y - so.y, best, best_patch, best_total);
+                m.try_candidate(x, y, wsum, q.x - so.x, q.y - so.y, best, best_patch, best_total);
               }
               // The seed, and random search around the best.
               const cv::Point2i sd = seed[at];
-              if (sd.x >= 0) m.try_candidate(x, y, sd.x, sd.y, best, best_patch, best_total);
+              if (sd.x >= 0) m.try_candidate(x, y, wsum, sd.x, sd.y, best, best_patch, best_total);
               for (int r = max_radius; r >= 1; r /= 2) {
                 std::uniform_int_distribution<int> u(-r, r);
-                m.try_candidate(x, y, best.x + u(rng), best.y + u(rng), best, best_patch, best_total);
+                m.try_candidate(x, y, wsum, best.x + u(rng), best.y + u(rng), best, best_patch, best_total);
               }
               m.match[at] = best;
               m.cost[at] = best_patch;
             }
           }
         });
-        progress.report((levels - 1 - lv + (it + 1.0) / level_iterations) / levels, "combined");
+        if (report) progress.report((levels - 1 - lv + (it + 1.0) / level_iterations) / levels, "combined");
       }
       return true;
     };
@@ -747,25 +824,48 @@ Expected<Map> run_combined(const ObjectView& destination, const ObjectView& sour
                                  flat.substr(0, flat.size() - 2) + ": no motion sought");
       const std::vector<MotionGuess> guesses = guess_motions(d, s);
       // Each guess is screened by one pass of the search; the best (or the
-      // first a majority follows) gets the remaining passes.
+      // first a majority follows) gets the remaining passes. A pass at this
+      // size is too small to keep both cores busy, so the guesses are
+      // screened as many at a time as there are threads (each from its own
+      // seeds, taken in order: the same choice as one at a time; issue 48).
       const int radius = std::max(s.size.width, s.size.height);
       double best_share = -1;
       size_t best_guess = 0;
-      for (size_t g = 0; g < guesses.size(); ++g) {
-        Matcher trial{d, s, coherence, {}, {}};
-        trial.set_linear(guesses[g].linear);
-        initialise(trial, guesses[g].motion);
-        if (!search(trial, 1, radius, static_cast<unsigned>(g))) return make_error("cancelled during combined");
+      struct Screened {
+        std::unique_ptr<Matcher> trial;
         double share = 0;
-        global_motion(d, trial.match, options.seed, &share, 0.35);
-        if (share > best_share) {
-          best_share = share;
-          best_guess = g;
-          m.match = std::move(trial.match);
-          m.cost = std::move(trial.cost);
-          m.set_linear(trial.linear);
+        bool ok = false;
+      };
+      const size_t at_once = static_cast<size_t>(std::max(1, tbb::this_task_arena::max_concurrency()));
+      bool decided = false;
+      for (size_t first = 0; first < guesses.size() && !decided; first += at_once) {
+        const size_t last = std::min(guesses.size(), first + at_once);
+        std::vector<Screened> screened(last - first);
+        tbb::parallel_for(first, last, [&](size_t g) {
+          Screened& sc = screened[g - first];
+          sc.trial = std::make_unique<Matcher>(Matcher{d, s, coherence, {}, {}});
+          sc.trial->set_linear(guesses[g].linear);
+          initialise(*sc.trial, guesses[g].motion);
+          if (!search(*sc.trial, 1, radius, static_cast<unsigned>(g), 0, false)) return;
+          global_motion(d, sc.trial->match, options.seed, &sc.share, 0.35);
+          sc.ok = true;
+        });
+        for (size_t g = first; g < last; ++g) {
+          Screened& sc = screened[g - first];
+          if (!sc.ok) return make_error("cancelled during combined");
+          if (sc.share > best_share) {
+            best_share = sc.share;
+            best_guess = g;
+            m.match = std::move(sc.trial->match);
+            m.cost = std::move(sc.trial->cost);
+            m.set_linear(sc.trial->linear);
+          }
+          if (sc.share >= 0.5) {
+            decided = true;
+            break;
+          }
         }
-        if (share >= 0.5) break;
+        progress.report((static_cast<double>(last) / guesses.size() / iterations) / levels, "combined");
       }
       if (!search(m, iterations, radius, static_cast<unsigned>(best_guess), 1))
         return make_error("cancelled during combined");
