@@ -444,7 +444,9 @@ Expected<RtiFit> export_hsh(const std::vector<cv::Mat>& photos, const std::vecto
   std::memcpy(dst, bias.data(), sizeof(float) * bias.size());
   dst += sizeof(float) * bias.size();
   const size_t row = static_cast<size_t>(w) * 3 * static_cast<size_t>(terms);
-  for (int y = h - 1; y >= 0; --y, dst += row) std::memcpy(dst, &bytes[static_cast<size_t>(y) * row], row);
+  // rows top to bottom: RTIViewer (Hsh::loadData) shows file row j as image row j from the top, and Relight
+  // (LRti::loadHSH) reads and writes them so; a PTM's rows go the other way (export_ptm)
+  for (int y = 0; y < h; ++y, dst += row) std::memcpy(dst, &bytes[static_cast<size_t>(y) * row], row);
   if (progress.cancelled()) return make_error(name + ": cancelled");
   if (Status s = io::write_file_atomic(file, out); !s) return s.error();
   progress.report(1.0, "fitting HSH");
