@@ -63,6 +63,10 @@ struct RtiFit {
   std::string json() const;            // {"format", "width", "height", "exposure", "rms", "rms_per_lamp", ...}
 };
 
+// The automatic exposure gain: 1 / the 99.5th percentile of the photos'
+// samples (linear BGR CV_32FC3), 1 when they are all black.
+double rti_auto_exposure(const std::vector<cv::Mat>& photos);
+
 // The photo as a PTM holds it: linear BGR times `exposure`, through the sRGB
 // curve, scaled to 0..255 (CV_32FC3 BGR).
 cv::Mat ptm_display(const cv::Mat& linear_bgr, double exposure);
