@@ -2,7 +2,8 @@
 #   make          install what is missing (tools/install-deps), build into build/ (programs in build/bin/)
 #   make demo     install what is missing, build the programs the demo runs (veneerd, veneer),
 #                 run the main job on the simulated rig (and veneer-viewer, if built, with a display)
-#   make test     install what is missing, build everything but the benchmarks, run every test (CTest)
+#   make test     install what is missing (and tools/debian-packages-test.txt: headless Chromium for the
+#                 web page's test), build everything but the benchmarks, run every test (CTest)
 #   make bench    build the benchmarks (target benches) and run them, printing their tables
 #   make buildtime  a cold build (no compiler cache) in build-time/: wall time of make demo's and
 #                 make test's targets, the load beside them, the slowest translation units
@@ -25,13 +26,17 @@ PACKAGE_OUT ?= build-package
 SOAK_CAPTURES ?= 1000
 SOAK_FAULTS ?=
 
-.PHONY: all deps configure build demo test bench soak buildtime asan fuzz package package-deps package-test clean
+.PHONY: all deps test-deps configure build demo test bench soak buildtime asan fuzz package package-deps package-test clean
 
 all: deps
 	@$(MAKE) --no-print-directory build
 
 deps:
 	@tools/install-deps
+
+# What only the tests need (tools/debian-packages-test.txt: Chromium); `make demo` does not install it.
+test-deps:
+	@tools/install-test-deps
 
 $(BUILD)/build.ninja:
 	@cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=$(BUILD_TYPE) $(CMAKE_ARGS) || { \
@@ -49,7 +54,7 @@ demo: deps
 	cmake --build $(BUILD) -j $(JOBS) --target veneerd veneer
 	tools/demo.sh $(BUILD)
 
-test: deps
+test: deps test-deps
 	@$(MAKE) --no-print-directory build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS) --timeout 600
 

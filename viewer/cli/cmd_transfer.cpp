@@ -9,6 +9,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "command.hpp"
+#include "inputs.hpp"
 #include "output.hpp"
 #include "veneer/io/image_io.hpp"
 #include "veneer/io/imageset.hpp"
@@ -17,6 +18,7 @@
 #include "veneer/pipeline/transfer.hpp"
 #include "veneer/repaint/hsh.hpp"
 #include "veneer/repaint/rti_export.hpp"
+#include "veneer/repaint/web_export.hpp"
 
 namespace veneer::cli {
 namespace {
@@ -47,6 +49,9 @@ struct TransferArgs {
   // the repainted destination as a relightable file (repaint/rti_export.hpp)
   std::string rti, rti_format = "lrgb";
   int hsh_order = 0;  // --rti-format hsh: 0 = automatic (HshExportOptions)
+  // the repainted destination as a web page (repaint/web_export.hpp)
+  std::string web;
+  int web_size = repaint::WebExportOptions{}.max_side;
   // live first (pipeline/live.hpp): only the map at the live view's size
   bool live = false, live_no_truth = false;
   int live_width = io::ReducedOptions{}.width;
@@ -56,18 +61,10 @@ struct TransferArgs {
 ::veneer::cli::Output report{"transfer"};
 
 // The repainted photos a transfer folder holds (result_light_NN.png, linear
-// 16-bit) fitted into a PTM under the destination's lamp directions.
-Expected<repaint::RtiFit> export_rti(const std::string& folder, const std::vector<cv::Vec3d>& directions,
+// 16-bit) fitted into a PTM or HSH under the destination's lamp directions.
+Expected<repaint::RtiFit> export_rti(const std::vector<cv::Mat>& photos, const std::vector<cv::Vec3d>& directions,
                                      const std::string& file, const repaint::RtiExportOptions& options,
                                      const std::optional<repaint::HshExportOptions>& hsh) {
-  std::vector<cv::Mat> photos;
-  for (size_t i = 0; i < directions.size(); ++i) {
-    char name[48];
-    std::snprintf(name, sizeof name, "result_light_%02zu.png", i);
-    auto photo = io::read_linear_image(std::filesystem::path(folder) / name);
-    if (!photo) return photo.error();
-    photos.push_back(std::move(photo).value());
-  }
   if (hsh) return repaint::export_hsh(photos, directions, file, *hsh);
   return repaint::export_ptm(photos, directions, file, options);
 }
@@ -141,7 +138,14 @@ int run(const TransferArgs& a) {
   } else if (a.rti_format != "lrgb" && a.rti_format != "ptm") {
     return report.usage("--rti-format must be lrgb (or ptm), rgb or hsh, got \"" + a.rti_format + "\"");
   }
-  if (a.hsh_order != 0 && !hsh_options) return report.usage("--hsh-order goes with --rti-format hsh");
+  if (a.hsh_order != 0 && !hsh_options && a.web.empty())
+    return report.usage("--hsh-order goes with --rti-format hsh or --web");
+  repaint::WebExportOptions web_options;
+  web_options.max_side = a.web_size;
+  web_options.order = a.hsh_order;
+  if (auto s = web_options.check(); !s) return report.usage("--web-size: " + s.message());
+  if (!a.web.empty())
+    if (auto s = repaint::check_web_folder(a.web); !s) return report.usage("--web: " + s.message());
 
   const auto t_wall = std::chrono::steady_clock::now();
   pipeline::PrepareOptions prep = pipeline::default_prepare_options();
@@ -192,24 +196,40 @@ int run(const TransferArgs& a) {
   }
   if (!pair) return report.fail(pair.message());
   // an HSH order the destination's lamps cannot determine fails now, not after the transfer
-  if (hsh_options && hsh_options->order > 0 &&
-      static_cast<size_t>(repaint::hsh_terms(hsh_options->order)) > pair->destination.lights.size())
-    return report.usage("--hsh-order " + std::to_string(hsh_options->order) + " has " +
-                        std::to_string(repaint::hsh_terms(hsh_options->order)) + " coefficients per colour, the destination has " +
+  if (a.hsh_order > 0 && static_cast<size_t>(repaint::hsh_terms(a.hsh_order)) > pair->destination.lights.size())
+    return report.usage("--hsh-order " + std::to_string(a.hsh_order) + " has " +
+                        std::to_string(repaint::hsh_terms(a.hsh_order)) + " coefficients per colour, the destination has " +
                         std::to_string(pair->destination.lights.size()) + " lamps (at least as many are needed; 0 = automatic)");
   auto result = pipeline::transfer(*pair, options, matching);
   if (!result) return report.fail(result.message());
   std::vector<cv::Vec3d> lamp_directions;
   for (const io::Light& l : pair->destination.lights) lamp_directions.push_back(l.direction);
+  // the names the web page shows: the destination object's and the source's (its material)
+  web_options.object = pair->destination.object.empty() ? std::filesystem::path(a.dst).filename().string()
+                                                        : pair->destination.object;
+  web_options.material = pair->source.object.empty() ? std::filesystem::path(a.src).filename().string()
+                                                     : pair->source.object;
   Progress writing;
   writing.on_progress = [&bar](double f, const std::string& stage) { bar.update(0.95 + 0.04 * f, stage); };
   if (auto s = pipeline::write_transfer(*result, std::move(*pair), a.out, writing); !s) return report.fail(s.message());
   std::optional<repaint::RtiFit> rti;
-  if (!a.rti.empty()) {
-    bar.update(0.99, "fitting the relightable file");
-    auto fit = export_rti(a.out, lamp_directions, a.rti, rti_options, hsh_options);
-    if (!fit) return report.fail(fit.message());
-    rti = *fit;
+  std::optional<repaint::WebExport> web;
+  if (!a.rti.empty() || !a.web.empty()) {
+    // read once: at full size for the file, else reduced to the page's size as read
+    auto photos = read_result_photos(a.out, lamp_directions.size(), a.rti.empty() ? a.web_size : 0);
+    if (!photos) return report.fail(photos.message());
+    if (!a.rti.empty()) {
+      bar.update(0.99, "fitting the relightable file");
+      auto fit = export_rti(*photos, lamp_directions, a.rti, rti_options, hsh_options);
+      if (!fit) return report.fail(fit.message());
+      rti = *fit;
+    }
+    if (!a.web.empty()) {
+      bar.update(0.99, "writing the web page");
+      auto page = repaint::export_web(*photos, lamp_directions, a.web, web_options);
+      if (!page) return report.fail(page.message());
+      web = *page;
+    }
   }
   bar.update(0.99, "storing the sets' results in the cache");
   const Status cached = pipeline::finish_cache_writes();  // not fatal: the next run recomputes
@@ -236,6 +256,10 @@ int run(const TransferArgs& a) {
       metrics["rti"] = nlohmann::json::parse(rti->json());
       metrics["rti"]["file"] = a.rti;
     }
+    if (web) {
+      metrics["web"] = nlohmann::json::parse(web->json());
+      metrics["web"]["folder"] = a.web;
+    }
     metrics["timings"]["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_wall).count();
     if (auto s = report.folder(a.out); !s) return report.fail(s.message());  // made by write_transfer
     if (auto s = report.json("metrics.json", metrics); !s) return report.fail(s.message());
@@ -251,6 +275,10 @@ int run(const TransferArgs& a) {
     std::printf("  relightable file %s (%s, exposure %.3g): residual %.2f levels RMS, p99 %.2f (the photos spread %.2f)\n",
                 a.rti.c_str(), rti->format_label().c_str(), rti->exposure, rti->rms, rti->p99,
                 rti->photo_spread);
+  if (web)
+    std::printf("  web page %s/index.html: the look %dx%d, HSH %d terms, %.2f MB in all (send the whole folder; it "
+                "opens by double click, with no network)\n",
+                a.web.c_str(), web->size.width, web->size.height, web->terms, web->folder_bytes / 1e6);
   if (a.scale < 1)
     std::printf("  computed at %.2fx (--scale): the map and the pictures are %dx%d, smaller than the sets\n", a.scale,
                 result->map.xy.cols, result->map.xy.rows);
@@ -352,8 +380,17 @@ VENEER_ARGS_COMMAND(transfer, veneer::cli::TransferArgs,
                   "'ptm') | rgb (a PTM, a polynomial per colour) | hsh (an HSH .rti: hemispherical harmonics per "
                   "colour, --hsh-order)");
   cmd->add_option("--hsh-order", args->hsh_order,
-                  "--rti-format hsh: 1, 2 or 3 (1, 4 or 9 coefficients per colour; at least as many lamps as "
+                  "--rti-format hsh and --web: 1, 2 or 3 (1, 4 or 9 coefficients per colour; at least as many lamps as "
                   "coefficients); 0 = automatic, the highest the lamps determine (7 lamps: 2)")
+      ->capture_default_str();
+  cmd->add_option("--web", args->web,
+                  "also write the repainted destination as a web page into this folder: index.html opens by "
+                  "double click in a browser with no network, dragging moves the light; the look is the HSH fit "
+                  "of the repainted photos (--hsh-order) in Relight's web layout (info.json, plane_K.jpg: "
+                  "OpenLIME and Relight open the folder too)");
+  cmd->add_option("--web-size", args->web_size,
+                  "--web: the look's longer side at most this many px, reduced by area averaging; 0 = full size "
+                  "(default 2048: a phone's screen, every WebGL device's textures, a few MB)")
       ->capture_default_str();
   cmd->add_flag("--no-cache", args->no_cache, "neither read nor write the per-set result cache");
   cmd->add_option("--cache-dir", args->cache_dir, "result cache folder (default $XDG_CACHE_HOME/veneer or ~/.cache/veneer)");

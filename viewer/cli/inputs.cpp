@@ -1,6 +1,12 @@
 #include "inputs.hpp"
 
+#include <cstdio>
+
+#include <opencv2/imgproc.hpp>
+
+#include "veneer/io/image_io.hpp"
 #include "veneer/match/map_file.hpp"
+#include "veneer/repaint/web_export.hpp"
 
 namespace veneer::cli {
 
@@ -25,6 +31,25 @@ void add_map_inputs(CLI::App* cmd, std::string& dst, std::string& src, std::stri
                          cmd->add_option("--src", src, "source image set"),
                          cmd->add_option("--map", map, "transfer output folder (or its map.pfm)")})
     o->required(required);
+}
+
+Expected<std::vector<cv::Mat>> read_result_photos(const std::filesystem::path& folder, size_t lamps, int max_side) {
+  std::vector<cv::Mat> photos;
+  for (size_t i = 0; i < lamps; ++i) {
+    char name[48];
+    std::snprintf(name, sizeof name, "result_light_%02zu.png", i);
+    auto photo = io::read_linear_image(folder / name);
+    if (!photo) return photo.error();
+    const cv::Size to = repaint::web_size(photo->size(), max_side);
+    if (to == photo->size()) {
+      photos.push_back(std::move(photo).value());
+    } else {
+      cv::Mat small;
+      cv::resize(*photo, small, to, 0, 0, cv::INTER_AREA);
+      photos.push_back(small);
+    }
+  }
+  return photos;
 }
 
 }  // namespace veneer::cli

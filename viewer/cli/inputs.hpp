@@ -25,4 +25,9 @@ Expected<MapInputs> read_map_inputs(const std::string& dst, const std::string& s
 // --dst, --src and --map into those strings, required or not.
 void add_map_inputs(CLI::App* cmd, std::string& dst, std::string& src, std::string& map, bool required);
 
+// The repainted photos a transfer folder holds, result_light_00.png ...
+// (linear 16-bit) for `lamps` lamps, as linear BGR CV_32FC3; each reduced to
+// fit `max_side` px as it is read (repaint::web_size; 0 = full size).
+Expected<std::vector<cv::Mat>> read_result_photos(const std::filesystem::path& folder, size_t lamps, int max_side = 0);
+
 }  // namespace veneer::cli

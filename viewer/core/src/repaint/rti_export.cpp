@@ -33,8 +33,10 @@ std::array<double, kTerms> basis(const cv::Vec3d& d) {
   return {u * u, v * v, u * v, u, v, 1.0};
 }
 
+}  // namespace
+
 // The 99.5th percentile of the photos' samples (every 7th, enough for a percentile).
-double auto_exposure(const std::vector<cv::Mat>& photos) {
+double rti_auto_exposure(const std::vector<cv::Mat>& photos) {
   std::vector<float> samples;
   for (const cv::Mat& p : photos) {
     const size_t n = p.total() * 3;
@@ -46,6 +48,8 @@ double auto_exposure(const std::vector<cv::Mat>& photos) {
   std::nth_element(samples.begin(), samples.begin() + static_cast<long>(k), samples.end());
   return samples[k] > 1e-6f ? 1.0 / samples[k] : 1.0;
 }
+
+namespace {
 
 // One term's byte encoding: value = (byte - bias) * scale over [lo, hi] (which holds 0).
 struct Quantiser {
@@ -170,7 +174,7 @@ Expected<RtiFit> export_ptm(const std::vector<cv::Mat>& photos, const std::vecto
   RtiFit fit;
   fit.size = size;
   fit.format = options.format;
-  fit.exposure = options.exposure > 0 ? options.exposure : auto_exposure(photos);
+  fit.exposure = options.exposure > 0 ? options.exposure : rti_auto_exposure(photos);
   progress.report(0.0, "fitting PTM");
 
   // The least-squares solve shared by every pixel: coefficients = P * values.
@@ -358,7 +362,7 @@ Expected<RtiFit> export_hsh(const std::vector<cv::Mat>& photos, const std::vecto
   RtiFit fit;
   fit.size = photos[0].size();
   fit.hsh_order = order;
-  fit.exposure = options.exposure > 0 ? options.exposure : auto_exposure(photos);
+  fit.exposure = options.exposure > 0 ? options.exposure : rti_auto_exposure(photos);
   progress.report(0.0, "fitting HSH");
   // the photos as the file shows them, 0..1 (BGR)
   const size_t n = photos.size();
@@ -444,7 +448,9 @@ Expected<RtiFit> export_hsh(const std::vector<cv::Mat>& photos, const std::vecto
   std::memcpy(dst, bias.data(), sizeof(float) * bias.size());
   dst += sizeof(float) * bias.size();
   const size_t row = static_cast<size_t>(w) * 3 * static_cast<size_t>(terms);
-  for (int y = h - 1; y >= 0; --y, dst += row) std::memcpy(dst, &bytes[static_cast<size_t>(y) * row], row);
+  // rows top to bottom: RTIViewer (Hsh::loadData) shows file row j as image row j from the top, and Relight
+  // (LRti::loadHSH) reads and writes them so; a PTM's rows go the other way (export_ptm)
+  for (int y = 0; y < h; ++y, dst += row) std::memcpy(dst, &bytes[static_cast<size_t>(y) * row], row);
   if (progress.cancelled()) return make_error(name + ": cancelled");
   if (Status s = io::write_file_atomic(file, out); !s) return s.error();
   progress.report(1.0, "fitting HSH");

@@ -63,6 +63,10 @@ struct RtiFit {
   std::string json() const;            // {"format", "width", "height", "exposure", "rms", "rms_per_lamp", ...}
 };
 
+// The automatic exposure gain: 1 / the 99.5th percentile of the photos'
+// samples (linear BGR CV_32FC3), 1 when they are all black.
+double rti_auto_exposure(const std::vector<cv::Mat>& photos);
+
 // The photo as a PTM holds it: linear BGR times `exposure`, through the sRGB
 // curve, scaled to 0..255 (CV_32FC3 BGR).
 cv::Mat ptm_display(const cv::Mat& linear_bgr, double exposure);
@@ -83,7 +87,8 @@ Expected<RtiFit> export_ptm(const std::vector<cv::Mat>& photos, const std::vecto
 //   "#HSH1.2\n", "3\n" (the file type: HSH), "<width> <height> 3\n" (3
 //   colours), "<terms> 2 1\n" (terms per colour, the basis type, 1 byte per
 //   coefficient); then terms float32 scales and terms float32 biases
-//   (little-endian); then the bytes, rows bottom to top, per pixel R, G, B
+//   (little-endian); then the bytes, rows top to bottom (file row j is the image's row j from the top, as
+//   RTIViewer's Hsh::loadData and Relight's LRti::loadHSH read it; a PTM's go bottom to top), per pixel R, G, B
 //   each with its terms in hsh_basis's order: coefficient = byte / 255 *
 //   scale[k] + bias[k]. A viewer shows clamp(sum_k coefficient_k H_k(light),
 //   0, 1) * 255. One scale and bias per term over every pixel and colour.
