@@ -786,7 +786,7 @@ TEST(Viewer, CancelledComputationLeavesUiUsable) {
 }
 
 // Exports cancelled leave nothing behind: not the results folder, not its
-// temporary sibling, not the video or its temporary. The export is held in
+// temporary sibling, not the video or its temporary, not the web page or its. The export is held in
 // the job pool's queue behind a gate until the cancel is in, so the cancel
 // always comes before the first file (core/Transfer.WritingStopsBetweenFiles
 // WhenCancelled shows the stop between files); uncancelled, the same exports
@@ -832,6 +832,19 @@ TEST(Viewer, CancelledExportsLeaveNoHalfWrittenFile) {
   ASSERT_TRUE(wait_for([&] { return !w.exports().exporting(); }, 60000));
   EXPECT_EQ(QDir(dir.path()).entryList({"*.avi", ".*.avi"}, QDir::Files | QDir::Hidden), QStringList{"sweep.avi"});
   EXPECT_GT(QFileInfo(video).size(), 1000);
+
+  // the web page of the look (issue 50): cancelled, no folder and no temporary; else the page whole
+  const QString web = dir.path() + "/web";
+  held_then_cancelled([&] { w.exports().exportWebPageTo(web); });
+  EXPECT_TRUE(w.status().lastMessage().contains("cancelled")) << w.status().lastMessage().toStdString();
+  EXPECT_FALSE(QFileInfo::exists(web));
+  EXPECT_EQ(QDir(dir.path()).entryList({".web.*"}, QDir::Dirs | QDir::Hidden), QStringList()) << "no temporary";
+  w.exports().exportWebPageTo(web);
+  ASSERT_TRUE(wait_for([&] { return !w.exports().exporting(); }, 60000));
+  EXPECT_TRUE(w.status().lastMessage().contains("web page written")) << w.status().lastMessage().toStdString();
+  for (const char* f : {"index.html", "look.js", "info.json", "still.jpg", "plane_0.jpg"})
+    EXPECT_TRUE(QFileInfo::exists(web + "/" + f)) << f;
+  EXPECT_EQ(QDir(dir.path()).entryList({".web.*"}, QDir::Dirs | QDir::Hidden), QStringList()) << "no temporary";
 }
 
 // A set loaded in the background comes with the picture the views show and

@@ -10,9 +10,11 @@
 #include <QPointer>
 #include <QtConcurrent/QtConcurrentRun>
 
+#include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 
 #include "veneer/io/image_io.hpp"
+#include "veneer/repaint/web_export.hpp"
 #include "widgets.hpp"
 
 namespace veneer::app {
@@ -129,6 +131,45 @@ void ExportActions::exportResultsTo(const QString& dir) {
            return {};
          },
          tr("results written to %1").arg(dir));
+}
+
+void ExportActions::exportWebPage() {
+  if (!haveResult()) return;
+  const QString dir = QFileDialog::getSaveFileName(window_, tr("Web page of the look (a new folder)"), "look",
+                                                   QString(), nullptr, QFileDialog::ShowDirsOnly);
+  if (!dir.isEmpty()) exportWebPageTo(dir);
+}
+
+void ExportActions::exportWebPageTo(const QString& dir) {
+  if (!haveResult()) return;
+  if (!session_.dst || !session_.src) return session_.message(tr("nothing to export: load both sets first"), true);
+  auto result = session_.result;
+  std::vector<cv::Vec3d> directions;
+  for (const veneer::io::Light& l : session_.dst->set.lights) directions.push_back(l.direction);
+  veneer::repaint::WebExportOptions options;
+  options.object = session_.dst->set.object.empty() ? QFileInfo(session_.dst->folder).fileName().toStdString()
+                                                     : session_.dst->set.object;
+  options.material = session_.src->set.object.empty() ? QFileInfo(session_.src->folder).fileName().toStdString()
+                                                        : session_.src->set.object;
+  if (auto s = veneer::repaint::check_web_folder(dir.toStdString()); !s) return session_.message(qs(s.message()), true);
+  runJob("export-web", tr("writing the web page into %1").arg(dir),
+         [result, directions, options, dir](const veneer::Progress& p) -> veneer::Status {
+           if (result->repainted.size() != directions.size())
+             return veneer::make_error("the result holds " + std::to_string(result->repainted.size()) +
+                                       " repainted photos for " + std::to_string(directions.size()) + " lamps");
+           std::vector<cv::Mat> photos;  // the page's size first, in float (the fit's input)
+           for (const cv::Mat& r : result->repainted) {
+             cv::Mat f = r;
+             if (f.depth() != CV_32F) r.convertTo(f, CV_32F);
+             cv::Mat small;
+             cv::resize(f, small, veneer::repaint::web_size(f.size(), options.max_side), 0, 0, cv::INTER_AREA);
+             photos.push_back(small);
+           }
+           auto page = veneer::repaint::export_web(photos, directions, dir.toStdString(), options, p);
+           if (!page) return page.error();
+           return {};
+         },
+         tr("web page written to %1/index.html: send the whole folder").arg(dir));
 }
 
 void ExportActions::exportRelightVideo() {

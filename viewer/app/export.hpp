@@ -1,5 +1,6 @@
 #pragma once
-// The exports: the map, the result pictures and the relight sweep video, each
+// The exports: the map, the result pictures, the relight sweep video and the
+// web page of the look (veneer transfer --web's), each
 // a job off the GUI thread told in the status line, cancellable there, and
 // written whole or not at all.
 #include <atomic>
@@ -24,10 +25,13 @@ class ExportActions : public QObject {
   void exportMap();
   void exportResults();
   void exportRelightVideo();
+  void exportWebPage();
   // Without a dialog.
   void exportMapTo(const QString& dir);
   void exportResultsTo(const QString& dir);
   void exportRelightVideoTo(const QString& file);
+  // The web page of the look (repaint/web_export.hpp) into `dir` (a new or empty folder, or a page written before).
+  void exportWebPageTo(const QString& dir);
   bool exporting() const { return job_running_; }
   void cancel() { job_cancel_ = true; }
 

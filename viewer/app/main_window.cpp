@@ -92,6 +92,7 @@ void MainWindow::buildMenus() {
   exp->addAction(tr("Map (map.pfm, map.png)…"), exports_, &ExportActions::exportMap);
   exp->addAction(tr("Result pictures…"), exports_, &ExportActions::exportResults);
   exp->addAction(tr("Relight sweep video…"), exports_, &ExportActions::exportRelightVideo);
+  exp->addAction(tr("Web page (relights in any browser)…"), exports_, &ExportActions::exportWebPage);
   exp->addAction(tr("Masks drawn by hand (for veneer transfer --dst-mask)…"), this, [this] {
     const QString dir = QFileDialog::getExistingDirectory(this, tr("Write the masks into"));
     if (!dir.isEmpty()) segmentation_->exportMasksTo(dir);
