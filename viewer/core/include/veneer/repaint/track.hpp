@@ -12,8 +12,12 @@
 // to each frame as the best linear mix of the set's photos (one per lamp;
 // Lambertian shading under any lamp is close to such a mix), solved by least
 // squares on the object's pixels at the last estimate. Without relighting,
-// the shading's shift drags an affine ECC off by many pixels. A frame whose
-// correlation stays low is reported lost rather than guessed.
+// the shading's shift drags an affine ECC off by many pixels. A lamp far
+// beyond the stills' lamps leaves part of the object in shadow, which no mix
+// of the photos makes (a mix cannot clamp at zero): the relight, ECC and the
+// correlation count only the pixels the frame lights, those with no shadow
+// within the high-pass's reach (issue 47). A frame whose correlation stays
+// low is reported lost rather than guessed.
 #include <opencv2/core.hpp>
 
 #include "veneer/util/expected.hpp"
@@ -49,12 +53,22 @@ struct TrackOptions {
                                   // orange the shading left over after relighting otherwise drags the estimate
                                   // (12 frames, 256x170 at scale 2.5: 24 px median error without, 0.5 px with)
   bool frames_srgb = true;        // 8-bit frames are sRGB-encoded (a live view, PNG/JPEG): linearised first
+  double lit_fraction = 0.03;     // only what the frame lights counts (issue 47): a frame pixel weighs 0 when a
+                                  // pixel within twice the high-pass's sigma is darker than this fraction of the
+                                  // object's bright level (the 90th percentile of its pixels in the frame), 1 at
+                                  // twice the fraction, between linearly; 0 = every pixel weighs 1 (the tracker
+                                  // before issue 47). 0..0.5. Measured on issue 47's light paths (lightpath.sh
+                                  // sequences, 1024x680, 24 frames, track.cpp's note), with the relight per
+                                  // level: 0.03 / 0.1 lose 1 / 3 frames of the cup-dots' arc; 0.1 also lost
+                                  // the small orange's last spiral frame (256x170 x2.5, 48 deg: 0.73-0.80)
   Status check() const;
 };
 
 struct TrackResult {
   cv::Matx23d still_to_frame = cv::Matx23d(1, 0, 0, 0, 1, 0);  // still pixel -> frame pixel
-  double correlation = 0;  // ECC's at the finest level (1 = same picture up to gain/offset)
+  double correlation = 0;  // ECC's at the finest level (1 = same picture up to gain/offset), over the
+                           // pixels the frame lights (TrackOptions::lit_fraction)
+  double lit = 1;          // the share of the object's region the frame lights (ECC's weights, 0..1)
   bool lost = false;       // registration failed or doubtful: still_to_frame is the last good estimate
 };
 
@@ -83,13 +97,16 @@ class Tracker {
   };
   // Relights the template to `frame_linear` (finest level) at the estimate
   // `w` (finest crop -> frame level pixels): weights_ by least squares.
-  void relight(const cv::Mat& frame_linear, const cv::Matx23d& w);
+  // `lit`: the frame's weights at the finest level (empty: all 1).
+  void relight(const cv::Mat& frame_linear, const cv::Mat& lit, const cv::Matx23d& w);
   // Inverse-compositional ECC at one level: refines `w` (crop -> frame
-  // pixels at this level) on the high-passed frame; false when it failed.
-  bool align(const Level& level, const cv::Mat& frame_hp, int iterations, cv::Matx23d& w) const;
+  // pixels at this level) on the high-passed frame, each pixel weighted by
+  // `lit` (the frame's weights at this level; empty: all 1); false when it failed.
+  bool align(const Level& level, const cv::Mat& frame_hp, const cv::Mat& lit, int iterations, cv::Matx23d& w) const;
   // ECC's correlation of the template at `w` with the high-passed frame over
-  // every pixel of the object's region (the figure the thresholds are for).
-  double correlation(const cv::Mat& frame_hp, const cv::Matx23d& w) const;
+  // every pixel of the object's region (the figure the thresholds are for),
+  // weighted by `lit`; `lit_share` gets the weights' mean.
+  double correlation(const cv::Mat& frame_hp, const cv::Mat& lit, const cv::Matx23d& w, double* lit_share) const;
   TrackOptions options_;
   cv::Rect crop_;                 // object's region in the still (full size)
   cv::Mat crop_mask_;             // the object's mask inside crop_
