@@ -46,8 +46,9 @@ dst_id=$(awk 'NR==1{print $1}' "$out/sets.txt")
 src_id=$(awk 'NR==2{print $1}' "$out/sets.txt")
 
 step "pulling both sets"
-"$bin/veneer" rig pull "$dst_id" --out "$out/destination" "${rig[@]}"
-"$bin/veneer" rig pull "$src_id" --out "$out/source" "${rig[@]}"
+# --truth: the simulated rig's truth/, for the quality the steps below print (a user's pull has none)
+"$bin/veneer" rig pull "$dst_id" --truth --out "$out/destination" "${rig[@]}"
+"$bin/veneer" rig pull "$src_id" --truth --out "$out/source" "${rig[@]}"
 
 step "photometric stereo"
 "$bin/veneer" normals "$out/destination" --out "$out/destination-normals"

@@ -287,7 +287,7 @@ int main(int argc, char** argv) {
   //    live repainted frame, the automatic flow doing everything; then the
   //    full-resolution map made behind it and swapped in, with the GUI's
   //    longest stall meanwhile. The rig API has no reduced pull on this
-  //    branch: the flow pulls the whole sets (PNG + DNG + truth) and reads
+  //    branch: the flow pulls the whole sets (JPEG + DNG; no truth/ since issue 48) and reads
   //    them small (reduced decodes), so the pull is part of the time.
   cv::Size full(5600, 3750);
   if (const char* env = std::getenv("VENEER_BENCH_APP_FULL")) {

@@ -180,6 +180,14 @@ TEST(Viewer, CaptureByButtonAndUiPullTransferAndLive) {
         << w.status().lastMessage().toStdString();
   }
   EXPECT_TRUE(roles[0] != roles[1]) << "one destination and one source";
+  // A user's pull leaves the simulated rig's truth/ on the rig (issue 48).
+  int pulled = 0;
+  for (const auto& e : std::filesystem::directory_iterator((work.path() + "/sets").toStdString())) {
+    if (!std::filesystem::exists(e.path() / "set.json")) continue;
+    ++pulled;
+    EXPECT_FALSE(std::filesystem::exists(e.path() / "truth")) << e.path();
+  }
+  EXPECT_EQ(pulled, 2);
   for (int i = 0; i < 2; ++i) {
     select_item(tree, local->child(i));
     const bool is_source = local->child(i)->text(1) == "source";
@@ -1115,6 +1123,7 @@ BlendCheck check_blend(MainWindow& w, int radius) {
 // A simulated rig's destination (bull) and source (orange) captured and
 // computed by the one flow, as in workflow.*; false (with a failure) when not.
 ::testing::AssertionResult capture_pair_by_flow(MainWindow& w, SimulatedRig& rig) {
+  w.rig().setPullTruth(true);  // expect_one_answer reads the sets' truth
   w.rigPanel().connectToRig(rig.endpoint(), rig.token_file());
   if (!wait_for([&] { return w.rig().isConnected(); }, 10000))
     return ::testing::AssertionFailure() << "not connected: " << w.status().lastMessage().toStdString();

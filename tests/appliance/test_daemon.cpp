@@ -109,7 +109,7 @@ TEST(Daemon, TwoPressesStoreTwoSetsThatPullWithTheRenderedPixelsAndTrueNormals) 
   const std::vector<std::string> scenes = {"bull", "stone"};
   for (int s = 0; s < 2; ++s) {
     fs::path out = dir / ("pulled-" + std::to_string(s));
-    auto pull = run(rig + " pull " + ids[s] + " --out " + out.string());
+    auto pull = run(rig + " pull " + ids[s] + " --truth --out " + out.string());
     ASSERT_EQ(pull.code, 0) << pull.out;
     // The camera's RAW files came with the photos; the photos are compared here.
     EXPECT_TRUE(fs::exists(out / "light_06.dng")) << "no RAW file pulled";
@@ -122,6 +122,12 @@ TEST(Daemon, TwoPressesStoreTwoSetsThatPullWithTheRenderedPixelsAndTrueNormals) 
     ASSERT_EQ(set->images.size(), 7u);
     ASSERT_TRUE(set->truth.present());
     ASSERT_FALSE(set->ambient.empty());
+    // Without --truth (a user's pull) the simulator's truth/ stays on the rig.
+    const fs::path users = dir / ("users-" + std::to_string(s));
+    auto plain = run(rig + " pull " + ids[s] + " --out " + users.string());
+    ASSERT_EQ(plain.code, 0) << plain.out;
+    EXPECT_TRUE(fs::exists(users / "set.json"));
+    EXPECT_FALSE(fs::exists(users / "truth")) << "truth/ is pulled only with --truth";
 
     veneer::sim::RenderOptions o;
     o.size = {256, 170};
@@ -192,8 +198,8 @@ void press_twice_and_pull(const DaemonProcess& d, const fs::path& store, const f
   for (std::string line; std::getline(lines, line);)
     if (!line.empty()) ids.push_back(line.substr(0, line.find(' ')));
   ASSERT_EQ(ids.size(), 2u) << list.out;
-  ASSERT_EQ(run(rig + " pull " + ids[0] + " --out " + dst.string()).code, 0);
-  ASSERT_EQ(run(rig + " pull " + ids[1] + " --out " + src.string()).code, 0);
+  ASSERT_EQ(run(rig + " pull " + ids[0] + " --truth --out " + dst.string()).code, 0);
+  ASSERT_EQ(run(rig + " pull " + ids[1] + " --truth --out " + src.string()).code, 0);
 }
 
 TEST(Daemon, TheRigsBullHasItsNormalsAndItsPlinthIsLeftOut) {

@@ -269,9 +269,14 @@ TEST(Faults, ClientVanishingDuringADownloadHarmsNobody) {
     EXPECT_EQ(full->images.size(), 7u);
     EXPECT_FALSE(fs::exists(rig.dir / (".live.pull-" + id)));
   }
-  // The rig keeps serving: a full download by the first client works.
+  // The rig keeps serving: a full download by the first client works; a
+  // user's pull leaves the simulator's truth/ out, one that asks has it.
+  const fs::path users = rig.dir / "users";
+  ASSERT_TRUE(rig.client->pull(id, users));
+  EXPECT_TRUE(fs::exists(users / "set.json"));
+  EXPECT_FALSE(fs::exists(users / "truth")) << "truth/ is pulled only when asked for";
   fs::path out = rig.dir / "whole";
-  ASSERT_TRUE(rig.client->pull(id, out));
+  ASSERT_TRUE(rig.client->pull(id, out, true));
   auto set = veneer::io::read_set(out);
   ASSERT_TRUE(set) << set.message();
   EXPECT_EQ(set->images.size(), 7u);

@@ -92,6 +92,7 @@ TEST(LiveFirst, ThePreviewSetIsInPlaceAndReadableBeforeTheFullFilesWhichReplaceI
   const fs::path out = dir / "pulled" / "dest";
   veneer::rig::PullOptions o;
   o.live_first = true;
+  o.include_truth = true;  // the full set's truth is checked below
   int previews = 0;
   std::optional<veneer::io::ImageSet> preview;
   std::vector<std::string> in_folder;  // what the folder held when the preview was announced

@@ -196,7 +196,8 @@ void capture_and_pull_through_a_proxy(bool plain, Recorded& r) {
   id = id.substr(0, id.find('\n'));
   ASSERT_FALSE(id.empty()) << capture.out;
   const fs::path out = dir / "pulled";
-  auto pull = run(rig + " pull " + id + " --out " + out.string());
+  // --truth: the set then holds PNG (truth/), DNG (TIFF) and JPEG, the kinds searched for below
+  auto pull = run(rig + " pull " + id + " --truth --out " + out.string());
   ASSERT_EQ(pull.code, 0) << pull.out << d->log();
   EXPECT_GE(proxy.connections(), 2);
   r.token = *veneer::rig::read_token_file(store / "token");

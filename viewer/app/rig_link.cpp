@@ -311,10 +311,11 @@ void RigLink::pull(const QString& id, const QString& folder) {
   QPointer<RigLink> self(this);
   const std::string sid = id.toStdString(), dir = folder.toStdString();
   auto cancel = pull_cancel_;
+  const bool truth = pull_truth_;
   ++pulls_running_;
   run(
       tr("pull %1").arg(id),
-      [self, id, sid, dir, cancel](veneer::rig::Client& c) {
+      [self, id, sid, dir, cancel, truth](veneer::rig::Client& c) {
         struct Done {  // counted down however the pull ends
           QPointer<RigLink> self;
           ~Done() {
@@ -330,7 +331,7 @@ void RigLink::pull(const QString& id, const QString& folder) {
             if (self) emit self->pullProgress(id, f);
           });
         };
-        return c.pull(sid, dir, true, true, progress);
+        return c.pull(sid, dir, truth, true, progress);
       },
       [this, id, folder] { emit pulled(id, folder); });
 }

@@ -63,6 +63,9 @@ class RigLink : public QObject {
   void listTrash();
   void restoreSet(const QString& id);
   void pull(const QString& id, const QString& folder);
+  // Whether pulls bring the simulated rig's truth/ too (for the tests that
+  // measure against it; a user's sets have none). Default off.
+  void setPullTruth(bool on) { pull_truth_ = on; }
   void cancelPulls();  // the pulls running stop (their temporary folders go)
   bool pulling() const { return pulls_running_ > 0; }
 
@@ -116,6 +119,7 @@ class RigLink : public QObject {
   std::shared_ptr<LiveSlot> live_slot_ = std::make_shared<LiveSlot>();
   std::shared_ptr<std::atomic<bool>> pull_cancel_ = std::make_shared<std::atomic<bool>>(false);
   int pulls_running_ = 0;
+  bool pull_truth_ = false;
 };
 
 }  // namespace veneer::app

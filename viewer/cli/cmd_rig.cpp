@@ -194,11 +194,13 @@ VENEER_COMMAND(rig) {
   auto* pull = rig_cmd->add_subcommand("pull", "download a set as a veneer-set/1 folder");
   auto set_id = std::make_shared<std::string>();
   auto out = std::make_shared<std::string>();
+  auto truth = std::make_shared<bool>(false);
   auto no_truth = std::make_shared<bool>(false);
   auto force = std::make_shared<bool>(false);
   pull->add_option("SET", *set_id, "set id (see `veneer rig list`)")->required();
   pull->add_option("--out", *out, "folder to create")->required();
-  pull->add_flag("--no-truth", *no_truth, "leave out truth/ of simulated sets");
+  pull->add_flag("--truth", *truth, "also pull truth/ of simulated sets (for tests and quality measures)");
+  pull->add_flag("--no-truth", *no_truth, "leave out truth/ of simulated sets (the default)");
   pull->add_flag("--force", *force, "replace --out if it exists");
   auto live_first = std::make_shared<bool>(false);
   auto preview_only = std::make_shared<bool>(false);
@@ -376,7 +378,7 @@ VENEER_COMMAND(rig) {
         return 0;
       }
       rig::PullOptions o;
-      o.include_truth = !*no_truth;
+      o.include_truth = *truth && !*no_truth;
       o.overwrite = *force;
       o.live_first = *live_first;
       o.on_preview = [](const std::filesystem::path& f) { std::cout << "preview: " << f.string() << std::endl; };

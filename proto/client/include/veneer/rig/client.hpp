@@ -157,7 +157,10 @@ struct CaptureOptions {
 
 // How pull_set fetches a set (see Client::pull_set).
 struct PullOptions {
-  bool include_truth = true;  // truth/ of simulated sets, when present
+  // truth/ of simulated sets, when present: only for tests and quality
+  // measures that ask for it (issue 48: a user's sets never have it, and the
+  // simulator's is as large as the photos); default off.
+  bool include_truth = false;
   bool overwrite = false;     // replace whatever `folder` holds (this set's own preview is always completed)
   bool live_first = false;    // the preview set first (put in place, then on_preview), then the full files
   // live_first: called on the pulling thread once the preview set is in place
@@ -212,9 +215,9 @@ class Client {
   Expected<RigStatus> status();
   Expected<std::vector<SetSummary>> list_sets();
   Expected<std::string> manifest(const std::string& set_id);  // set.json text
-  // Downloads a set into `folder` as a veneer-set/1 folder (with truth/ when
-  // asked and present): pull_set with {include_truth, overwrite}.
-  Status pull(const std::string& set_id, const std::filesystem::path& folder, bool include_truth = true,
+  // Downloads a set into `folder` as a veneer-set/1 folder (with truth/ only
+  // when asked and present): pull_set with {include_truth, overwrite}.
+  Status pull(const std::string& set_id, const std::filesystem::path& folder, bool include_truth = false,
               bool overwrite = false, const Progress& progress = {});
 
   // --- live first (proto/README.md, "Live first") ---------------------------
