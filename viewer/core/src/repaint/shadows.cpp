@@ -27,6 +27,8 @@ Status ShadowOptions::check() const {
     return make_error("shadows: min_visibility " + std::to_string(min_visibility) + " is outside [0, 1]");
   if (!(observed_window_deg >= 0 && observed_window_deg <= 180))
     return make_error("shadows: observed_window_deg " + std::to_string(observed_window_deg) + " is outside [0, 180]");
+  if (!(observed_reach_deg >= 0 && observed_reach_deg <= 180))
+    return make_error("shadows: observed_reach_deg " + std::to_string(observed_reach_deg) + " is outside [0, 180]");
   if (!(observed_below_deg >= 0 && observed_below_deg <= 90))
     return make_error("shadows: observed_below_deg " + std::to_string(observed_below_deg) + " is outside [0, 90]");
   if (!(observed_margin_deg >= 0 && observed_margin_deg <= 30))
@@ -529,7 +531,7 @@ Status ShadowMap::observe(const std::vector<cv::Vec3d>& lamps, const std::vector
     for (size_t i = 0; i < lamps.size(); ++i)
       if (has[i]) d[i] = std::abs(std::remainder(360.0 * k / k_all - az[i], 360.0)), nearest = std::min(nearest, d[i]);
     for (size_t i = 0; i < lamps.size(); ++i)
-      if (d[i] <= std::min(nearest + window, 90.0)) info[i].ks.push_back(k);
+      if (d[i] <= std::min(nearest + window, options_.observed_reach_deg)) info[i].ks.push_back(k);
   }
   for (cv::Mat& p : planes_) p = p.clone();  // a copy of this map (sharing the planes) keeps its own
   const bool height_field = options_.observed_below_deg >= 90;
