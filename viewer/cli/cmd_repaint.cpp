@@ -38,7 +38,7 @@ using namespace veneer;
 struct RepaintArgs {
   std::string src, dst, map, video, out;
   std::string look = "shaded";
-  bool no_track = false, overlay = false;
+  bool no_track = false, overlay = false, no_shadows = false;
   int blend = -1;
   double min_correlation = repaint::TrackOptions{}.min_correlation;
 };
@@ -151,7 +151,9 @@ int run_repaint(const RepaintArgs& a) {
   double look_s = 0;
   if (*look == repaint::Look::shaded) {
     const auto t0 = std::chrono::steady_clock::now();
-    auto made = pipeline::live_look(*pair, options, *map);
+    repaint::LiveLookOptions live_options;
+    live_options.shadows = !a.no_shadows;
+    auto made = pipeline::live_look(*pair, options, *map, nullptr, live_options);
     if (!made) return report.fail("the shaded look: " + made.message());
     live_look = *made;
     look_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -274,6 +276,8 @@ VENEER_ARGS_COMMAND(repaint, RepaintArgs,
   cmd->add_option("--blend", args->blend,
                   "blend the chunks' seams over this radius, 0..16 px (default: as the transfer did, its metrics.json)");
   cmd->add_flag("--no-track", args->no_track, "look frames up at the stills' pose (the old live view)");
+  cmd->add_flag("--no-shadows", args->no_shadows,
+                "shaded look: the destination's cast shadows only as its photos hold them, not the light's own");
   cmd->add_option("--look", args->look,
                   "shaded: each frame painted as the still look at the light estimated in it (the default); copy: "
                   "the frame's pixels copied through the map")

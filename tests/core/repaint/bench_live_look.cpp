@@ -8,6 +8,8 @@
 // frame's total (process() wall) -- median and p95 -- and the copy's paint and
 // total. One core: cv::setNumThreads(1); the machine is shared. Below the
 // table, the painting alone at a fixed light (the frame's change carried or not).
+// Each size with the light's own cast shadows (LiveLookOptions::shadows, issue
+// 47) on, then off; setup s: the still look and the live look's making.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -42,10 +44,10 @@ int main() {
   using namespace veneer;
   std::printf("## Live frame with the shaded look vs the pixel copy, orange x2.5, shift=30:0,rotate=5,lamp=sweep, "
               "20 frames\n\n");
-  std::printf("| size | threads | object px | track ms median | p95 | light ms median | p95 | shade ms median | p95 "
+  std::printf("| size | shadows | threads | object px | track ms median | p95 | light ms median | p95 | shade ms median | p95 "
               "| total ms median | p95 | copy paint ms median | copy total ms median | p95 | light deg off median | "
               "setup s |\n");
-  std::printf("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
+  std::printf("|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n");
   const int default_threads = cv::getNumThreads();
   std::string notes;
   for (const cv::Size size : {cv::Size(1024, 680), cv::Size(1920, 1280)}) {
@@ -78,12 +80,17 @@ int main() {
       std::printf("| %dx%d | %s |\n", size.width, size.height, still.message().c_str());
       continue;
     }
-    auto live = repaint::LiveLook::make(*still, {view, lamps}, {view, lamps}, map);
+    const double still_s = ms_since(t0) / 1000;
+    for (const bool shadows : {true, false}) {  // the light's own cast shadows (issue 47) on, then off
+    const auto t3 = Clock::now();
+    repaint::LiveLookOptions live_options;
+    live_options.shadows = shadows;
+    auto live = repaint::LiveLook::make(*still, {view, lamps}, {view, lamps}, map, {}, live_options);
     if (!live) {
       std::printf("| %dx%d | %s |\n", size.width, size.height, live.message().c_str());
       continue;
     }
-    const double setup_s = ms_since(t0) / 1000;
+    const double setup_s = still_s + ms_since(t3) / 1000;
     auto look = std::make_shared<const repaint::LiveLook>(std::move(*live));
     for (int threads : {1, default_threads}) {
       cv::setNumThreads(threads);
@@ -123,19 +130,20 @@ int main() {
         }
         char note[160];
         std::snprintf(note, sizeof note,
-                      "- %dx%d, %d thread(s): the painting alone at a fixed light, median of 20: without a frame "
-                      "%.2f ms, with one (its change carried) %.2f ms\n",
-                      size.width, size.height, threads, pct(a1, 0.5), pct(a2, 0.5));
+                      "- %dx%d, %d thread(s), shadows %s: the painting alone at a fixed light, median of 20: "
+                      "without a frame %.2f ms, with one (its change carried) %.2f ms\n",
+                      size.width, size.height, threads, shadows ? "on" : "off", pct(a1, 0.5), pct(a2, 0.5));
         notes += note;
       }
-      std::printf("| %dx%d | %d | %d | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | "
+      std::printf("| %dx%d | %s | %d | %d | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | %.2f | "
                   "%.2f | %.1f |\n",
-                  size.width, size.height, threads, cv::countNonZero(mask), pct(track, 0.5), pct(track, 0.95),
+                  size.width, size.height, shadows ? "on" : "off", threads, cv::countNonZero(mask), pct(track, 0.5), pct(track, 0.95),
                   pct(light, 0.5), pct(light, 0.95), pct(shade, 0.5), pct(shade, 0.95), pct(total, 0.5),
                   pct(total, 0.95), pct(copy_paint, 0.5), pct(copy_total, 0.5), pct(copy_total, 0.95), pct(off, 0.5),
                   setup_s);
     }
     cv::setNumThreads(default_threads);
+    }
   }
   std::printf("\n%s", notes.c_str());
   return 0;

@@ -381,6 +381,12 @@ TEST(LiveLook, AtACapturedLampEqualsTheStillLook) {
   cv::Mat top(mask.size(), CV_32FC1, cv::Scalar(0));
   for (const cv::Mat& p : result->repainted) top = cv::max(top, grey_of(p));
   const auto lamps = directions(pair->source);
+  // without the light's own shadows (issue 47) the model at a captured lamp is the photo's shading exactly
+  repaint::LiveLookOptions no_shadows;
+  no_shadows.shadows = false;
+  auto exact = repaint::LiveLook::make(*result->look, {pair->dst.view, directions(pair->destination)},
+                                       {pair->src.view, directions(pair->source)}, result->map, {}, no_shadows);
+  ASSERT_TRUE(exact) << exact.message();
   double worst = 0;
   for (size_t l = 0; l < lamps.size(); ++l) {
     repaint::LiveSession session(pair->src.view.images, pair->src.view.mask, result->map, pair->src.view.mask.size(),
@@ -394,12 +400,18 @@ TEST(LiveLook, AtACapturedLampEqualsTheStillLook) {
     // and the model alone, at the lamp's own direction
     const double e0 = log_ratio_error(grey_of(shared->paint_linear(lamps[l])), grey_of(result->repainted[l]), mapped,
                                       top);
-    std::printf("lamp %zu: live %.4f (light %.2f deg off, residual %.3f), the model at the lamp %.4f\n", l, e,
-                angle_deg(f->light->direction, lamps[l]), f->light->residual, e0);
-    EXPECT_LT(e0, 0.01) << "lamp " << l;
+    const double e1 = log_ratio_error(grey_of(exact->paint_linear(lamps[l])), grey_of(result->repainted[l]), mapped,
+                                      top);
+    std::printf("lamp %zu: live %.4f (light %.2f deg off, residual %.3f), the model at the lamp %.4f (without the "
+                "light's own shadows %.4f)\n",
+                l, e, angle_deg(f->light->direction, lamps[l]), f->light->residual, e0, e1);
+    EXPECT_LT(e1, 0.01) << "lamp " << l;
+    // with them, the photo's cast shadows come from the horizons (softened, a floor of 0.03) and the fit
+    // without them: measured 0.017-0.027
+    EXPECT_LT(e0, 0.035) << "lamp " << l;
     worst = std::max(worst, e);
   }
-  EXPECT_LT(worst, 0.05);  // the acceptance bound; measured 0.036
+  EXPECT_LT(worst, 0.05);  // the acceptance bound; measured 0.036 without the light's own shadows, 0.047 with
 }
 
 // `--look copy`: a session with the live look told to copy paints exactly
@@ -546,4 +558,72 @@ TEST(LiveLook, ExtrapolatesOffTheLampsCone) {
   EXPECT_LT(inside, 1e-4) << "within the lamps' cone the model alone";
   EXPECT_LT(worst_on, 0.04);              // measured 0.026 (50 deg)
   EXPECT_GT(worst_off, 4 * worst_on);     // measured 0.305, 11.6x
+}
+
+// The light's own cast shadows (issue 47): at a light the rig never had (60 deg off the axis, from the right),
+// the bull's pixels in its cast shadow that the captured lamp beside it (25 deg off the axis, the same azimuth)
+// lit (the simulator's oracle: rendered with and without cast shadows) are painted dark with the shadows on, lit without them; the pixels it lights keep
+// their brightness.
+TEST(LiveLook, PaintsTheLightsCastShadowWhereTheCapturedLampsLitIt) {
+  const Self s = self_look("bull");
+  ASSERT_TRUE(s.live && s.look);
+  const auto lamps = directions(s.set);
+  repaint::LiveLookOptions off;
+  off.shadows = false;
+  auto unshadowed = repaint::LiveLook::make(*s.look, {s.view, lamps}, {s.view, lamps}, s.map, {}, off);
+  ASSERT_TRUE(unshadowed) << unshadowed.message();
+  const double t = 60 * CV_PI / 180;
+  const cv::Vec3d l(std::sin(t), 0, std::cos(t));
+  auto scene = sim::make_scene("bull", small());
+  ASSERT_TRUE(scene);
+  sim::RenderOptions clean = small(), open = small();
+  clean.noise_sigma = open.noise_sigma = 0;
+  open.cast_shadows = false;
+  auto grey3 = [](const cv::Vec3f& v) { return (v[0] + v[1] + v[2]) / 3; };
+  auto shadow_of = [&](const cv::Vec3d& position, cv::Mat* facing) {
+    const sim::Lamp lamp{position};
+    const cv::Mat a = sim::render(**scene, {lamp}, clean), b = sim::render(**scene, {lamp}, open);
+    cv::Mat out(a.size(), CV_8UC1, cv::Scalar(0));
+    if (facing) *facing = cv::Mat(a.size(), CV_8UC1, cv::Scalar(0));
+    const cv::Vec3f d = cv::normalize(cv::Vec3f(static_cast<float>(position[0]), static_cast<float>(position[1]),
+                                                static_cast<float>(position[2])));
+    for (int y = 0; y < a.rows; ++y)
+      for (int x = 0; x < a.cols; ++x) {
+        if (!s.view.mask.at<uchar>(y, x) || s.view.normals.at<cv::Vec3f>(y, x).dot(d) <= 0.2f) continue;
+        const float ga = grey3(a.at<cv::Vec3f>(y, x)), gb = grey3(b.at<cv::Vec3f>(y, x));
+        if (gb <= 1e-4f) continue;
+        if (facing) facing->at<uchar>(y, x) = ga >= 0.9f * gb ? 255 : 0;
+        if (ga < 0.35f * gb) out.at<uchar>(y, x) = 255;
+      }
+    return out;
+  };
+  cv::Mat lit_here;
+  const cv::Mat here = shadow_of(l * 1.1, &lit_here);
+  // the captured lamp beside it (the rig's right lamp, 25 deg off the axis, the same azimuth)
+  const cv::Mat captured = shadow_of(sim::thesis_rig()[2].position_m, nullptr);
+  const cv::Mat with = grey_of(s.live->paint_linear(l)), without = grey_of(unshadowed->paint_linear(l));
+  std::vector<double> shadowed, lit;
+  for (int y = 0; y < here.rows; ++y)
+    for (int x = 0; x < here.cols; ++x) {
+      const float b = without.at<float>(y, x);
+      if (b <= 1e-4f) continue;
+      if (here.at<uchar>(y, x) && !captured.at<uchar>(y, x)) shadowed.push_back(with.at<float>(y, x) / b);
+      if (lit_here.at<uchar>(y, x)) lit.push_back(with.at<float>(y, x) / b);
+    }
+  ASSERT_GT(shadowed.size(), 500u);  // 1036 at 512x340
+  auto median = [](std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + static_cast<long>(v.size() / 2), v.end());
+    return v[v.size() / 2];
+  };
+  const double in_shadow = median(shadowed), in_light = median(lit);
+  long dark = 0;
+  for (double r : shadowed) dark += r < 0.5;
+  std::printf("%zu px in the new light's cast shadow, lit by the captured lamp: painted at %.3f of the look "
+              "without shadows (median; %.0f %% below half); the lit pixels at %.3f\n",
+              shadowed.size(), in_shadow, 100.0 * dark / shadowed.size(), in_light);
+  // measured: 0.031, 66 % below half, the lit 1.000. The heights from the normals miss depth steps the normals do
+  // not show: from the left (the far legs behind the near ones) the same test gives 1.0 (19 % below half)
+  EXPECT_LT(in_shadow, 0.1);
+  EXPECT_GT(static_cast<double>(dark) / shadowed.size(), 0.55);
+  EXPECT_GT(in_light, 0.95);
 }

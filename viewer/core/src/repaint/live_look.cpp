@@ -36,6 +36,7 @@ Status LiveLookOptions::check() const {
     return make_error("live look: extrapolate_floor " + std::to_string(extrapolate_floor) + " is outside (0, 1]");
   if (!(extrapolate_ring_deg >= 0 && extrapolate_ring_deg <= 90))
     return make_error("live look: extrapolate_ring_deg " + std::to_string(extrapolate_ring_deg) + " is outside [0, 90]");
+  if (auto s = shadow.check(); !s) return make_error("live look: " + s.message());
   return {};
 }
 
@@ -66,6 +67,7 @@ struct LiveLookData {
   float headroom = 2;
   double source_exponent = 32;
   RelightableModel dmodel, smodel;   // for their weights (coefficients dropped; kept compact above)
+  PixelHorizons dshadow;             // LiveLookOptions::shadows: the destination's horizons, per mapped pixel
   // where a side's model is extrapolated (LiveLookOptions::extrapolate): its lamps on a ring, a light farther off
   // the camera's axis than the ring is evaluated at the ring's angle (same azimuth) times the Lambert ratio
   struct Span {
@@ -384,7 +386,25 @@ Expected<LiveLook> LiveLook::make(const ShadedLook& look, const LookSide& destin
       v = std::max(g - s, 0.f);
     });
   }
-  auto dm = RelightableModel::fit(diffuse, dv.mask, destination.lamps, options.model, progress.part(0.0, 0.4));
+  // the destination's cast shadows: horizons of its normals told its photos' shadows, and the model fitted
+  // without them (a shadowed sample replaced by its albedo x n.l), so that at any light its shading is the
+  // unshadowed model times the visibility there
+  std::optional<ShadowMap> shadows;
+  if (options.shadows) {
+    auto seen = photo_shadows(diffuse, dv.normals, dv.mask, destination.lamps);
+    if (!seen) return make_error("live look: the destination's " + seen.message());
+    auto made = ShadowMap::make(dv.normals, dv.mask, options.shadow, progress.part(0.0, 0.1));
+    if (!made) return make_error("live look: the destination's " + made.message());
+    if (auto s = made->observe(destination.lamps, seen->shadowed, seen->lit); !s)
+      return make_error("live look: the destination's " + s.message());
+    shadows = std::move(*made);
+    for (size_t i = 0; i < diffuse.size(); ++i)
+      diffuse[i].forEach<float>([&](float& v, const int* at) {
+        if (seen->shadowed[i].at<uchar>(at[0], at[1]))
+          v = seen->albedo.at<float>(at[0], at[1]) * std::max(0.f, dv.normals.at<cv::Vec3f>(at[0], at[1]).dot(dl[i]));
+      });
+  }
+  auto dm = RelightableModel::fit(diffuse, dv.mask, destination.lamps, options.model, progress.part(0.1, 0.4));
   if (!dm) return make_error("live look: the destination's " + dm.message());
   auto sm = RelightableModel::fit(sv.images, sv.mask, source.lamps, options.model, progress.part(0.4, 0.8));
   if (!sm) return make_error("live look: the source's " + sm.message());
@@ -396,6 +416,7 @@ Expected<LiveLook> LiveLook::make(const ShadedLook& look, const LookSide& destin
     for (int x = 0; x < dsize.width; ++x)
       if (xy.at<cv::Vec2f>(y, x)[0] >= 0) d.pixel.push_back(y * dsize.width + x);
   const int n = static_cast<int>(d.pixel.size());
+  if (shadows) d.dshadow = shadows->at(d.pixel);
   const int td = dm->terms(), ts = sm->terms();
   d.dcoef = cv::Mat(td, n, CV_32FC1);
   d.scoef = cv::Mat(ts, n, CV_32FC1);
@@ -778,10 +799,11 @@ cv::Mat LiveLook::paint(const cv::Mat& frame, const cv::Matx23d& a, const LiveLi
     }
   };
   cv::parallel_for_(cv::Range(0, (n + 4095) / 4096), [&](const cv::Range& blocks) {
-    std::vector<float> S(4096), P(4096);
+    std::vector<float> S(4096), P(4096), V(4096, 1.f);
     for (int block = blocks.start; block < blocks.end; ++block) {
       const int from = block * 4096, count = std::min(4096, n - from);
       shade_planes(d.dcoef, wd, from, count, S.data());
+      if (!d.dshadow.empty()) d.dshadow.visibility(l, from, count, V.data());  // the light's cast shadows
       if (change) shade_planes(d.scoef, ws, from, count, P.data());
       for (int j = 0; j < count; ++j) {
         const int i = from + j;
@@ -791,11 +813,12 @@ cv::Mat LiveLook::paint(const cv::Mat& frame, const cv::Matx23d& a, const LiveLi
         if (ext) S[j] = std::max(S[j], 0.f) * (nl + ef) / (std::max(0.f, e.normal.dot(lsf)) + ef);
         // as ShadedLook::shade: at most `headroom` x the Lambert model's ratio (and 2)
         const float cap = std::max(2.f, d.headroom * (nl + kModelFloor) * e.inv_model);
-        const float ratio = std::min((std::max(S[j], 0.f) + floor) * e.inv_median, cap);
+        const float ratio = std::min((std::max(S[j], 0.f) * V[j] + floor) * e.inv_median, cap);
         float gloss = 0.f;
-        if (d.any_gloss && e.source_gloss > 0 && nl > 0) {
+        if (d.any_gloss && e.source_gloss > 0 && nl > 0 && V[j] > 0) {
           const float nh = e.normal.dot(h);
-          if (nh > gloss_from) gloss = e.source_gloss * (whole_alpha > 0 ? whole_power(nh, whole_alpha) : std::pow(nh, alpha));
+          if (nh > gloss_from)
+            gloss = V[j] * e.source_gloss * (whole_alpha > 0 ? whole_power(nh, whole_alpha) : std::pow(nh, alpha));
         }
         const cv::Vec3f& t = e.texture;
         const float lit = s * ratio + am * e.inv_model;
@@ -833,15 +856,18 @@ cv::Mat LiveLook::paint_linear(const cv::Vec3d& direction) const {
   const cv::Vec3d l = direction / std::max(1e-12, cv::norm(direction));
   const auto& [ls, ext, wd, lf, lsf, h, ef] = destination_light(d, l);
   const float floor = ShadedLook::ratio_floor();
+  const std::vector<float> seen =
+      d.dshadow.empty() ? std::vector<float>(d.pixel.size(), 1.f) : d.dshadow.visibility(l);  // the cast shadows
   for (size_t i = 0; i < d.pixel.size(); ++i) {
     const LiveLookData::Pixel& e = d.px[i];
     const float nl = std::max(0.f, e.normal.dot(lf));
     float S = std::max(dot_column(d.dcoef, static_cast<int>(i), wd), 0.f);
     if (ext) S *= (nl + ef) / (std::max(0.f, e.normal.dot(lsf)) + ef);
-    S += floor;
+    S = S * seen[i] + floor;
     const float cap = std::max(2.f, d.headroom * (nl + kModelFloor) * e.inv_model);
     const float ratio = std::min(S * e.inv_median, cap);
-    const float gloss = e.source_gloss > 0 ? e.source_gloss * Gloss::lobe(e.normal, lf, h, d.source_exponent) : 0.f;
+    const float gloss =
+        e.source_gloss > 0 ? seen[i] * e.source_gloss * Gloss::lobe(e.normal, lf, h, d.source_exponent) : 0.f;
     out.at<cv::Vec3f>(d.pixel[i] / d.dsize.width, d.pixel[i] % d.dsize.width) = e.texture * ratio + cv::Vec3f::all(gloss);
   }
   return out;

@@ -28,6 +28,7 @@
 
 #include "veneer/repaint/look.hpp"
 #include "veneer/repaint/relightable.hpp"
+#include "veneer/repaint/shadows.hpp"
 #include "veneer/util/expected.hpp"
 #include "veneer/util/progress.hpp"
 
@@ -81,6 +82,12 @@ struct LiveLookOptions {
                                     // other, [0, 90]; default 5 (lamps spread over the hemisphere, as DiLiGenT's,
                                     // are left to the model: extrapolated by elevation alone, livelook_all.sh
                                     // measured 0.70x the copy against 0.69x)
+  bool shadows = true;           // the light's own cast shadows on the destination (issue 47, shadows.hpp): its
+                                 // model fitted on its photos with their cast shadows taken out (each shadowed
+                                 // sample replaced by its albedo x n.l), its shading times the visibility at the
+                                 // light, from horizons of its normals' heights told the photos' shadows; off =
+                                 // the captured lamps' shadows as the photos hold them. Default on
+  ShadowOptions shadow;          // those horizons
   Status check() const;
 };
 
