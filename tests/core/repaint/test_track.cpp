@@ -157,11 +157,20 @@ PathRun track_path(const SideLamp& s, const repaint::TrackOptions& options, cons
   return run;
 }
 
+// Counting only what the frame lights (TrackOptions::lit_fraction) is off by default: on the viewer's
+// simulated live view (no backdrop lit, half the orange clipped) it weighed the outline out and the copy look's
+// registration went 3 px off (app/Viewer.CaptureByButtonAndUiPullTransferAndLive); on here, at 0.03.
+repaint::TrackOptions side_lamp_options() {
+  repaint::TrackOptions o;
+  o.lit_fraction = 0.03;
+  return o;
+}
+
 TEST(Track, ALampFarToTheSideKeepsTheObjectRegistered) {
   for (const char* path : {"arc,radius=0.9,height=0.3", "circle,radius=0.97,height=0.26"}) {
     SideLamp s = side_lamp("stone", path, 8);
     for (const auto& l : s.seq.lights) EXPECT_GT(off_axis_deg(l), 70) << path;
-    const PathRun now = track_path(s, {});
+    const PathRun now = track_path(s, side_lamp_options());
     EXPECT_EQ(now.lost, 0) << path;
     EXPECT_LT(percentile(now.errors, 0.5), 0.3) << path;
     EXPECT_LT(percentile(now.errors, 1.0), 0.6) << path;
@@ -181,7 +190,7 @@ TEST(Track, AMovingObjectUnderASideLampIsFollowed) {
     r.at<double>(1, 2) -= 1.0 * i;
     truth.push_back(cv::Matx23d(r));
   }
-  const PathRun run = track_path(s, {}, truth);
+  const PathRun run = track_path(s, side_lamp_options(), truth);
   EXPECT_EQ(run.lost, 0);
   EXPECT_LT(percentile(run.errors, 0.5), 0.3);
   EXPECT_LT(percentile(run.errors, 1.0), 0.6);

@@ -53,14 +53,18 @@ struct TrackOptions {
                                   // orange the shading left over after relighting otherwise drags the estimate
                                   // (12 frames, 256x170 at scale 2.5: 24 px median error without, 0.5 px with)
   bool frames_srgb = true;        // 8-bit frames are sRGB-encoded (a live view, PNG/JPEG): linearised first
-  double lit_fraction = 0.03;     // only what the frame lights counts (issue 47): a frame pixel weighs 0 when a
+  double lit_fraction = 0.0;      // only what the frame lights counts (issue 47): a frame pixel weighs 0 when a
                                   // pixel within twice the high-pass's sigma is darker than this fraction of the
                                   // object's bright level (the 90th percentile of its pixels in the frame), 1 at
                                   // twice the fraction, between linearly; 0 = every pixel weighs 1 (the tracker
                                   // before issue 47). 0..0.5. Measured on issue 47's light paths (lightpath.sh
                                   // sequences, 1024x680, 24 frames, track.cpp's note), with the relight per
                                   // level: 0.03 / 0.1 lose 1 / 3 frames of the cup-dots' arc; 0.1 also lost
-                                  // the small orange's last spiral frame (256x170 x2.5, 48 deg: 0.73-0.80)
+                                  // the small orange's last spiral frame (256x170 x2.5, 48 deg: 0.73-0.80).
+                                  // Default 0 (off): on the viewer's simulated live view (a black backdrop,
+                                  // half the orange clipped) 0.03 weighed the outline out and registration
+                                  // went 3 px off (app/Viewer.CaptureByButtonAndUiPullTransferAndLive); the
+                                  // darkness should count only where the stills are lit (open, issue 47)
   Status check() const;
 };
 
