@@ -51,12 +51,16 @@ struct ShadowOptions {
   double observed_window_deg = 5;   // ShadowMap::observe: a captured lamp's shadow (or light) holds for lights
                                     // whose azimuth is at most this much farther from it than from the nearest
                                     // lamp's (and within 90 degrees), [0, 180]; default 5
-  double observed_reach_deg = 30;   // ShadowMap::observe: and at most this far from the lamp's azimuth, [0, 180];
-                                    // default 30. Measured (lightpath.sh orange spiral 24): at 90 (across the
-                                    // rig's empty bottom socket) on the lamp's cast shadows live/copy 0.50, but
-                                    // shading with one exposure 0.95x, its worst frame 1.24x, shading_seq 1.18x;
-                                    // at 30: 0.56, 0.88x, 1.09x, 1.06x (without the shadows: 0.62, 0.98x, 1.13x,
-                                    // 1.06x)
+  double observed_reach_deg = 15;   // ShadowMap::observe: and at most this far from the lamp's azimuth, [0, 180];
+                                    // default 15. Measured (lightpath.sh orange spiral 24, on the helper's
+                                    // branch): at 90 (across the rig's empty bottom socket) on the lamp's cast
+                                    // shadows live/copy 0.50, but shading with one exposure 0.95x, its worst frame
+                                    // 1.24x; at 30: 0.56, 0.88x, 1.09x (without the shadows: 0.62, 0.98x, 1.13x).
+                                    // On merged main (frame-exposed, the light as a place), shading / worst frame /
+                                    // cast shadows: 30: spiral 0.91x / 1.22x / 0.56, circle on the lamps' cone
+                                    // 0.96x / 1.90x (halfway between two lamps a photo's shadow darkened what the
+                                    // light lit); 15: spiral 0.88x / 1.14x / 0.69, circle 0.75x / 1.00x, stone
+                                    // 0.78x -> 0.76x, apple 0.85x -> 0.84x; 5: spiral 0.86x / 1.05x / 0.87
   double observed_below_deg = 90;   // ShadowMap::observe: a photo's shadow holds for lights down to this many degrees
                                     // below its lamp's elevation (then fades out over 10 more), [0, 90]; 90 = a
                                     // height field's (what a lamp's elevation shadows, any lower one does); less
