@@ -134,9 +134,12 @@ TEST(LiveLookCli, SimulatedSequenceLiveAgainstCopy) {
   std::printf("simulated sequence: live %.4f, copy %.4f, ratio %.3f; texture_corr min %.3f mean %.3f; light median "
               "%.2f deg\n",
               live_mean, copy_mean, ratio, texture_min, texture_mean, light_median);
-  EXPECT_LT(ratio, 1.08) << "measured 1.008 (1.11 without extrapolating off the lamps' ring)";
-  EXPECT_GT(texture_min, 0.15) << "measured 0.24";
-  EXPECT_GT(texture_mean, 0.35) << "measured 0.43";
+  EXPECT_LT(ratio, 0.97) << "measured 0.897 (1.008 before the unoccluded median and the wider dead zone; 1.11 "
+                            "without extrapolating off the lamps' ring)";
+  // the frame's own fine detail comes through only beyond the source model's error (change_dead_zone 1.0;
+  // 0.25 before: min 0.24, mean 0.43); the still look's texture carries the rest
+  EXPECT_GT(texture_min, 0.15) << "measured 0.196";
+  EXPECT_GT(texture_mean, 0.24) << "measured 0.282";
   EXPECT_LT(light_median, 4.5) << "measured 3.55 deg at this size (1.91 at 1024x680, the goal of 3 met there)";
   for (const auto& f : live["frames"]) EXPECT_FALSE(f["light_angle_deg"].is_null()) << "every frame has its light";
   fs::remove_all(dir);

@@ -320,7 +320,8 @@ VENEER_ARGS_COMMAND(transfer, veneer::cli::TransferArgs,
   cmd->add_option("--look-smoothing", args->look_smoothing,
                   "--look shaded: the normals smoothed over this Gaussian sigma, px, for the coarse shading moved "
                   "from the source's normals to the destination's, 0..64 (default 4; the source's relief finer "
-                  "than it stays its texture, coarser is re-shaded)");
+                  "than it stays its texture, coarser is re-shaded; 0 re-shades all relief: the source gives only its "
+                  "colour and gloss)");
   cmd->add_option("--look-headroom", args->look_headroom,
                   "--look shaded: a lamp's shading ratio at most this x the Lambert model's, 1..100 (default 2; "
                   "smaller keeps pixels whose median lamp is in a cast shadow from blowing up, at some shading error)");

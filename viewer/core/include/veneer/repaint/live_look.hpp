@@ -68,8 +68,12 @@ struct LightEstimateOptions {
 struct LiveLookOptions {
   RelightableOptions model;      // the relightable model of each side's shading
   LightEstimateOptions light;    // the light estimate
-  double change_dead_zone = 0.25;  // |log(frame / source's prediction)| below this is the model's own error and
-                                   // is dropped; beyond it the change comes through, [0, 5]; default 0.25
+  double change_dead_zone = 1.0;   // |log(frame / source's prediction)| below this is the model's own error and
+                                   // is dropped; beyond it the change (a sticker, a finger's shadow) comes
+                                   // through, [0, 5]. Default 1.0: the source model's per-pixel error reaches
+                                   // well past 0.25 and came through as speckle. Live / copy, 0.25 -> 0.7 ->
+                                   // 1.0 -> 5 (off): real pairs, lamps left out, 0.69 -> 0.66 -> 0.65 -> 0.63;
+                                   // the demo pair's spiral, one exposure, 0.72 -> 0.71 -> 0.70 -> 0.69
   double change_clip = 2.0;      // what comes through clipped to [1/x, x], [1, 100]; default 2
   bool extrapolate = true;       // lamps on a ring (a ring rig's): a light farther off the camera's axis than
                                  // the ring is shaded as each side's model at the ring's angle l' (same azimuth)
