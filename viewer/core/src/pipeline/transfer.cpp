@@ -428,7 +428,9 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
     j["quality"]["coherence_measured_at"] = {{"size", {made_at.width, made_at.height}},
                                              {"means", "the map's coherence where it was made, before "
                                                        "match::refine_map continued it to full resolution"}};
-  if (options.look_when_written && !options.keep_pictures && !options.look_floor) {
+  if (!options.look_figures && !options.look_floor) {
+    // not asked for: nothing measured that is not written (issue 48)
+  } else if (options.look_when_written && !options.keep_pictures && !options.look_floor) {
     result.look_pending = true;  // write_transfer(result, pair) measures it while it paints
   } else {
     // The look (eval/look.hpp): shading per lamp and texture, beside coverage and coherence.

@@ -63,6 +63,9 @@ struct TransferOptions {
   // destination's own photos (its cost: the pictures in grey, and painted once
   // more when not kept); on a simulated pair also against the truth look (the
   // destination's scene rendered in the source's material: one set rendered).
+  bool look_figures = true;    // metrics.json's "look" measured at all; false leaves it out (and its cost:
+                               // at 5600x3750 12 s of `veneer transfer`'s 59, issue 48) -- the CLI's
+                               // default, `veneer transfer --figures` asks for it. look_floor implies it.
   bool look_floor = false;     // also the floor: the `linear` map's pixel copy scored the same way, and
                                // the ratio shading / floor (a second match and repaint)
   Status check() const;
