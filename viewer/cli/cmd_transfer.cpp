@@ -6,7 +6,7 @@
 #include <optional>
 
 #include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
+#include "veneer/io/codecs.hpp"
 
 #include "command.hpp"
 #include "inputs.hpp"
@@ -73,7 +73,7 @@ Expected<repaint::RtiFit> export_rti(const std::vector<cv::Mat>& photos, const s
 // for a file that does not read, has another size than the set, or marks nothing.
 Status read_mask(const std::string& option, const std::string& file, const std::string& folder,
                  const io::ReadOptions& read, cv::Mat& mask) {
-  mask = cv::imread(file, cv::IMREAD_GRAYSCALE);
+  mask = veneer::io::codecs::imread(file, cv::IMREAD_GRAYSCALE);
   if (mask.empty()) return make_error(option + " " + file + ": cannot read it as an image");
   io::ReadOptions manifest = read;
   manifest.load_photos = false;
