@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <functional>
+#include <future>
 #include <mutex>
 #include <optional>
 #include <limits>
@@ -620,8 +621,9 @@ Status write_files(const TransferResult& r, PreparedPair* pair, const std::files
     });
   }
   // The pictures painted from the pair's photos: one after another (each
-  // painting and encoding is parallel within), so one is in memory at a time.
-  std::vector<std::function<Status()>> painted;
+  // painting is parallel within), each encoded and written on its own thread
+  // while the next is painted (issue 48), so at most two are in memory at a time.
+  std::vector<std::function<Expected<cv::Mat>()>> painted;
   // the look measured from the pictures as they are painted (look_pending):
   // each picture and its destination photo kept in grey, 1/3 of their bytes
   std::vector<cv::Mat> picture_greys, own_greys;
@@ -631,7 +633,7 @@ Status write_files(const TransferResult& r, PreparedPair* pair, const std::files
                                 : std::min(pair->src.view.images.size(), pair->dst.view.images.size());
     for (size_t i = 0; i < lamps; ++i) {
       if (begun) picture_greys.emplace_back(), own_greys.emplace_back();
-      painted.push_back([&r, pair, &folder, i, &begun, &picture_greys, &own_greys]() -> Status {
+      painted.push_back([&r, pair, i, &begun, &picture_greys, &own_greys]() -> Expected<cv::Mat> {
         cv::Mat& backdrop = pair->dst.view.images[i];
         const cv::Mat& photo = pair->src.view.images[i];
         cv::Mat out;
@@ -656,9 +658,7 @@ Status write_files(const TransferResult& r, PreparedPair* pair, const std::files
         pair->src.view.images[i].release();
         if (i < pair->destination.images.size()) pair->destination.images[i].release();
         if (i < pair->source.images.size()) pair->source.images[i].release();
-        char name[64];
-        std::snprintf(name, sizeof name, "result_light_%02zu.png", i);
-        return io::write_png16(folder / name, out, io::Sync::later);
+        return out;
       });
     }
   }
@@ -674,9 +674,30 @@ Status write_files(const TransferResult& r, PreparedPair* pair, const std::files
   const Status cancelled = make_error("writing " + folder.string() + " cancelled");
   // the painted ones first: they release the pair's photos, the largest
   // part of what is held, before the other files are made all at once
-  for (size_t i = 0; i < painted.size(); ++i) {
-    written[files.size() + i] = progress.cancelled() ? cancelled : painted[i]();
-    one_done();
+  {
+    std::future<void> writing;  // the picture before, being encoded and written
+    for (size_t i = 0; i < painted.size(); ++i) {
+      const size_t at = files.size() + i;
+      if (progress.cancelled()) {
+        written[at] = cancelled;
+        one_done();
+        continue;
+      }
+      auto picture = painted[i]();
+      if (writing.valid()) writing.get();
+      if (!picture) {
+        written[at] = picture.error();
+        one_done();
+        continue;
+      }
+      writing = std::async(std::launch::async, [&, at, i, out = std::move(*picture)] {
+        char name[64];
+        std::snprintf(name, sizeof name, "result_light_%02zu.png", i);
+        written[at] = io::write_png16(folder / name, out, io::Sync::later);
+        one_done();
+      });
+    }
+    if (writing.valid()) writing.get();
   }
   if (painted_all) painted_all();
   if (begun && !progress.cancelled()) {
