@@ -202,7 +202,8 @@ int run(const TransferArgs& a) {
     return report.usage("--hsh-order " + std::to_string(a.hsh_order) + " has " +
                         std::to_string(repaint::hsh_terms(a.hsh_order)) + " coefficients per colour, the destination has " +
                         std::to_string(pair->destination.lights.size()) + " lamps (at least as many are needed; 0 = automatic)");
-  auto result = pipeline::transfer(*pair, options, matching);
+  // the truth (simulated sets) released once the quality is measured: nothing after reads it (issue 48: memory)
+  auto result = pipeline::transfer_releasing_truth(*pair, options, matching);
   if (!result) return report.fail(result.message());
   std::vector<cv::Vec3d> lamp_directions;
   for (const io::Light& l : pair->destination.lights) lamp_directions.push_back(l.direction);

@@ -265,7 +265,8 @@ namespace {
 // transfer() of a prepared pair, from `given` when not null (else the map is
 // computed); timings' total_s counts from t_all.
 Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferOptions& options, const Map* given,
-                                       const Progress& progress, Clock::time_point t_all) {
+                                       const Progress& progress, Clock::time_point t_all,
+                                       PreparedPair* release_truth = nullptr) {
   if (auto s = options.check(); !s) return s.error();
   if (options.scale != pair.scale || options.truth_normals != pair.truth_normals)
     return make_error("the prepared pair was made with scale " + std::to_string(pair.scale) + " and truth normals " +
@@ -333,6 +334,21 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
     timings["match_s"] = since(t0);
     result.map = std::move(*map);
   }
+  // The quality against the truth measured now, and the truth (both sets'
+  // normals and masks, 0.5 GB at 5600x3750) released before the look is made
+  // (issue 48: held through it, it made the transfer's peak), when the caller
+  // gave the pair up to that and nothing later reads the truth.
+  std::optional<Quality> early_quality;
+  double early_quality_s = 0;
+  if (release_truth && destination.truth.present() && source.truth.present() && !options.look_figures &&
+      !options.look_floor && !relight_measurable(source.scene)) {
+    const auto t_q = Clock::now();
+    early_quality = evaluate(result.map, destination.truth.mask, source.truth.mask, destination.truth.normals,
+                             source.truth.normals);
+    early_quality_s = since(t_q);
+    release_truth->destination.truth = io::Truth{};
+    release_truth->source.truth = io::Truth{};
+  }
   result.match_seconds = timings["match_s"].get<double>();
   result.match_options = options.match;
   result.source_size = source.size;
@@ -395,11 +411,12 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
                    {"map.png, reuse.png, relight_*.png", "8-bit sRGB pictures for viewing"},
                    {"confidence.png", "white = the match fits exactly, black = 4x the median match distance or "
                                       "more, or not mapped"}};
-  if (destination.truth.present() && source.truth.present()) {
+  if (early_quality || (destination.truth.present() && source.truth.present())) {
     t0 = Clock::now();
-    Quality q = evaluate(result.map, destination.truth.mask, source.truth.mask, destination.truth.normals,
-                         source.truth.normals);
-    if (relight_measurable(source.scene)) {
+    Quality q = early_quality ? *early_quality
+                              : evaluate(result.map, destination.truth.mask, source.truth.mask,
+                                         destination.truth.normals, source.truth.normals);
+    if (!early_quality && relight_measurable(source.scene)) {
       auto relit = relight(result.map, destination, source, destination.truth.mask, options.blend, g);
       if (relit) {
         q.psnr_db = relit->psnr_db;
@@ -413,7 +430,7 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
     result.quality = q;
     j["quality"] = quality_json(q);
     j["quality"]["measured_against"] = "truth (simulated sets)";
-    timings["quality_s"] = since(t0);
+    timings["quality_s"] = since(t0) + early_quality_s;
   } else {
     // Real sets: what can be measured without truth -- coverage of the
     // segmented object, coherence, and the agreement of the photometric
@@ -480,6 +497,11 @@ Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOption
 Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOptions& options, const Map& map,
                                   const Progress& progress) {
   return transfer_from(pair, options, &map, progress, Clock::now());
+}
+
+Expected<TransferResult> transfer_releasing_truth(PreparedPair& pair, const TransferOptions& options,
+                                                  const Progress& progress) {
+  return transfer_from(pair, options, nullptr, progress, Clock::now(), &pair);
 }
 
 std::string transfer_options_json(const TransferOptions& options) {
