@@ -12,7 +12,11 @@
 // with each child's peak RSS and the maps' coverage and coherence from their
 // metrics.json. The simulator's truth/ folders are set aside (renamed
 // truth.aside for the run, put back after) as a user's sets have none (issue
-// 42); VENEER_BENCH_TRUTH=1 keeps them. Prints markdown tables; never fails on a number.
+// 42); VENEER_BENCH_TRUTH=1 keeps them. Then the demo pair as `veneer simulate`
+// writes it (16-bit PNGs, no RAW; truth set aside): the whole `veneer
+// transfer` (cold cache) against OpenCV merely reading its photos on one
+// thread, best of three each. Last, issue 48's goals beside what this run
+// measured. Prints markdown tables; never fails on a number.
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -25,9 +29,12 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <nlohmann/json.hpp>
+#include <opencv2/core/utility.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "veneer/io/raw.hpp"
 
@@ -192,6 +199,55 @@ int decode_raw(int argc, char** argv) {
   return 0;
 }
 
+// The demo pair as `veneer simulate` writes it (16-bit PNGs, truth set
+// aside): the whole `veneer transfer` with an empty cache against OpenCV
+// reading the same photos on one thread, the better of three runs each.
+struct Demo {
+  double opencv_s = -1, transfer_s = -1, rss_gib = -1;
+  int frames = 0;
+  std::string load_before, load_after;
+};
+
+Demo run_demo(const fs::path& dir) {
+  Demo d;
+  const fs::path dst = dir / "dst", src = dir / "src";
+  for (const auto& [scene, role, folder] : {std::tuple{"bull", "destination", dst}, std::tuple{"orange", "source", src}})
+    if (run(kVeneer, {"simulate", "--scene", scene, "--role", role, "--size", "1024x680", "--scale", "2.5", "--out",
+                      folder.string()})
+            .seconds < 0)
+      return d;
+  std::vector<std::string> photos;
+  for (const fs::path& set : {dst, src}) {
+    std::error_code ec;
+    fs::rename(set / "truth", set / "truth.aside", ec);
+    for (const auto& e : fs::directory_iterator(set)) {
+      const std::string n = e.path().filename().string();
+      if (e.path().extension() == ".png" && (n.rfind("light_", 0) == 0 || n == "ambient.png"))
+        photos.push_back(e.path().string());
+    }
+  }
+  std::sort(photos.begin(), photos.end());
+  d.frames = static_cast<int>(photos.size());
+  d.load_before = load();
+  for (int round = 0; round < 3; ++round) {
+    cv::setNumThreads(1);
+    const auto t0 = std::chrono::steady_clock::now();
+    for (const auto& f : photos)
+      if (cv::imread(f, cv::IMREAD_UNCHANGED).empty()) std::fprintf(stderr, "imread failed: %s\n", f.c_str());
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    cv::setNumThreads(-1);
+    if (d.opencv_s < 0 || s < d.opencv_s) d.opencv_s = s;
+    const fs::path out = dir / "out", cache = dir / ("cache-" + std::to_string(round));
+    const Child c = run(kVeneer, {"transfer", "--dst", dst.string(), "--src", src.string(), "--out", out.string(),
+                                  "--cache-dir", cache.string()});
+    if (c.seconds > 0 && (d.transfer_s < 0 || c.seconds < d.transfer_s)) d.transfer_s = c.seconds, d.rss_gib = c.rss_gib;
+    fs::remove_all(out);
+    fs::remove_all(cache);
+  }
+  d.load_after = load();
+  return d;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -210,6 +266,12 @@ int main(int argc, char** argv) {
     fs::create_directories(dir);
     rows.push_back(run_size(exe, w, h, dir));
     fs::remove_all(dir);
+  }
+  Demo demo;
+  if (!std::getenv("VENEER_BENCH_DEMO") || std::string(std::getenv("VENEER_BENCH_DEMO")) != "0") {
+    const fs::path dir = root / "demo";
+    fs::create_directories(dir);
+    demo = run_demo(dir);
   }
   fs::remove_all(root);
 
@@ -235,7 +297,39 @@ int main(int argc, char** argv) {
   std::printf("\nThe sets' truth/ folders set aside (VENEER_BENCH_TRUTH=1 keeps them): metrics' coverage and "
               "coherence are then against the segmented masks. ");
   std::printf("live = `veneer transfer --live` (default --live-width 1280: a set no wider keeps its size); all = "
-              "`veneer transfer` with an empty result cache (RAW through LibRaw DCB, full resolution); live + all "
+              "`veneer transfer` with an empty result cache (RAW unpacked by LibRaw, our MHC demosaic, full resolution; the look's figures not asked for); live + all "
               "= what the viewer's flow does one after the other. Peak = the child's own RSS high-water mark.\n");
+
+  if (demo.frames > 0) {
+    std::printf("\n## The demo pair as a user's sets (1024x680 16-bit PNGs, truth/ set aside): the whole `veneer "
+                "transfer` (cold cache) against OpenCV reading its %d photos on one thread, best of three each\n\n",
+                demo.frames);
+    std::printf("| OpenCV imread, 1 thread s | `veneer transfer` s | / OpenCV | peak GiB | load before / after |\n");
+    std::printf("|---:|---:|---:|---:|---|\n");
+    std::printf("| %.3f | %.3f | %.2fx | %.2f | %s / %s |\n", demo.opencv_s, demo.transfer_s,
+                demo.opencv_s > 0 ? demo.transfer_s / demo.opencv_s : 0, demo.rss_gib, demo.load_before.c_str(),
+                demo.load_after.c_str());
+  }
+  // Issue 48's goals beside this run's measures (the peers measured in the same run).
+  std::printf("\n## Issue 48's goals, against the peers measured in this run\n\n");
+  std::printf("| goal | measured | peer | ratio | bound | met |\n|---|---:|---:|---:|---:|---|\n");
+  auto goal = [](const std::string& what, double measured, double peer, double bound) {
+    if (measured < 0 || peer <= 0) {
+      std::printf("| %s | not measured | | | %.2fx | |\n", what.c_str(), bound);
+      return;
+    }
+    const double ratio = measured / peer;
+    std::printf("| %s | %.2f s | %.2f s | %.3fx | %.2fx | %s |\n", what.c_str(), measured, peer, ratio, bound,
+                ratio <= bound ? "yes" : "**no**");
+  };
+  for (const Row& r : rows) {
+    if (r.size == "1024x680") continue;
+    goal("`veneer transfer` " + r.size + ", every result, cold / LibRaw AHD 1 thread", r.full.seconds,
+         r.libraw.seconds, 0.5);
+    goal("`veneer transfer --live` " + r.size + " / LibRaw AHD 1 thread", r.live.seconds, r.libraw.seconds, 0.05);
+    std::printf("| `veneer transfer` %s peak RSS | %.2f GiB | | | 4.00 GiB | %s |\n", r.size.c_str(), r.full.rss_gib,
+                r.full.rss_gib > 0 && r.full.rss_gib <= 4.0 ? "yes" : "**no**");
+  }
+  goal("`veneer transfer` demo pair (PNG) / OpenCV reading its photos, 1 thread", demo.transfer_s, demo.opencv_s, 1.0);
   return 0;
 }

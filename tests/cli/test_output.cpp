@@ -135,4 +135,60 @@ TEST_F(CliOutput, TransferWritesARelightableFileAndReportsItsResidual) {
   EXPECT_FALSE(fs::exists(dir_ / "out2"));
 }
 
+std::string file_text(const fs::path& file) {
+  std::FILE* f = std::fopen(file.c_str(), "rb");
+  if (!f) return {};
+  std::string text;
+  char buf[65536];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, f)) > 0) text.append(buf, n);
+  std::fclose(f);
+  return text;
+}
+
+// Issue 48: nothing computed that is not written. metrics.json's look (the
+// per-lamp shading error, texture_corr) only with --figures, and the pictures
+// the same either way.
+TEST_F(CliOutput, TransferMeasuresTheLookOnlyWithFigures) {
+  ASSERT_EQ(veneer("simulate --scene bull --size 96x64 --out dst --role destination", dir_).code, 0);
+  ASSERT_EQ(veneer("simulate --scene orange --size 96x64 --out src --role source", dir_).code, 0);
+  auto plain = veneer("transfer --dst dst --src src --out plain --no-cache", dir_);
+  ASSERT_EQ(plain.code, 0) << plain.err;
+  auto asked = veneer("transfer --dst dst --src src --out asked --no-cache --figures", dir_);
+  ASSERT_EQ(asked.code, 0) << asked.err;
+  const std::string without = file_text(dir_ / "plain" / "metrics.json"), with = file_text(dir_ / "asked" / "metrics.json");
+  EXPECT_EQ(without.find("\"look\": {"), std::string::npos) << without;
+  EXPECT_NE(without.find("\"quality\""), std::string::npos) << without;
+  EXPECT_NE(with.find("\"look\": {"), std::string::npos) << with;
+  EXPECT_NE(with.find("\"shading_mean\""), std::string::npos) << with;
+  for (const char* name : {"map.pfm", "result_light_00.png", "result_light_06.png", "result_median.png", "reuse.png",
+                           "confidence.png", "map.png"}) {
+    const std::string a = file_text(dir_ / "plain" / name), b = file_text(dir_ / "asked" / name);
+    EXPECT_FALSE(a.empty()) << name;
+    EXPECT_TRUE(a == b) << name << " differs with --figures";
+  }
+}
+
+// Issue 48: `veneer` starts without OpenCV's image codecs (and the ~110
+// libraries they pull in); it opens them when a file needs them.
+TEST_F(CliOutput, VeneerStartsWithoutOpenCVsImageCodecs) {
+  const std::string cmd = "LD_TRACE_LOADED_OBJECTS=1 " VENEER_BIN_DIR "/veneer";
+  FILE* p = ::popen(cmd.c_str(), "r");
+  ASSERT_NE(p, nullptr);
+  std::string libs;
+  char buf[4096];
+  size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) libs.append(buf, n);
+  ::pclose(p);
+  EXPECT_NE(libs.find("libopencv_core"), std::string::npos) << libs;
+  EXPECT_EQ(libs.find("libopencv_imgcodecs"), std::string::npos) << libs;
+  EXPECT_EQ(libs.find("libgdal"), std::string::npos) << libs;
+  // a JPEG set needs them: read through the codecs opened then
+  ASSERT_EQ(veneer("simulate --scene bull --size 96x64 --out dst --role destination --optics --dng", dir_).code, 0);
+  ASSERT_EQ(veneer("simulate --scene orange --size 96x64 --out src --role source --optics --dng", dir_).code, 0);
+  auto t = veneer("transfer --dst dst --src src --out out --no-cache --photos developed", dir_);
+  ASSERT_EQ(t.code, 0) << t.err;
+  EXPECT_NE(t.out.find("photos from jpeg"), std::string::npos) << t.out;
+}
+
 }  // namespace

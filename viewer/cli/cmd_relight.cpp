@@ -3,7 +3,7 @@
 // it, from the transfer's repainted photos, not from the page's files.
 #include <cstdio>
 
-#include <opencv2/imgcodecs.hpp>
+#include "veneer/io/codecs.hpp"
 
 #include "command.hpp"
 #include "inputs.hpp"
@@ -43,7 +43,7 @@ int run(const RelightArgs& a) {
   if (!fit) return report.fail(fit.message());
   const cv::Vec3d d = repaint::web_light(a.light[0], a.light[1]);
   std::vector<uchar> png;
-  if (!cv::imencode(".png", repaint::render_web(*fit, d), png)) return report.fail("the PNG encoder failed");
+  if (!veneer::io::codecs::imencode(".png", repaint::render_web(*fit, d), png)) return report.fail("the PNG encoder failed");
   if (auto s = io::write_file_atomic(a.out, std::string(png.begin(), png.end())); !s) return report.fail(s.message());
   report.line("relit " + a.transfer + " at light (" + std::to_string(d[0]) + ", " + std::to_string(d[1]) + ", " +
               std::to_string(d[2]) + "): " + std::to_string(fit->size.width) + "x" + std::to_string(fit->size.height) +

@@ -14,7 +14,7 @@
 
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
+#include "veneer/io/codecs.hpp"
 #include <opencv2/imgproc.hpp>
 
 #include "command.hpp"
@@ -63,7 +63,7 @@ struct FrameSource {
   bool next(cv::Mat* frame) {
     if (!files.empty()) {
       if (index >= files.size()) return false;
-      *frame = cv::imread(files[index++].string(), cv::IMREAD_COLOR);
+      *frame = veneer::io::codecs::imread(files[index++].string(), cv::IMREAD_COLOR);
       return !frame->empty();
     }
     return capture && capture->read(frame);

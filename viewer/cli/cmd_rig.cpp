@@ -15,7 +15,7 @@
 
 #include <unistd.h>
 
-#include <opencv2/imgcodecs.hpp>
+#include "veneer/io/codecs.hpp"
 #include <opencv2/imgproc.hpp>
 #include <sstream>
 
@@ -500,7 +500,7 @@ VENEER_COMMAND(rig) {
         file.write(reinterpret_cast<const char*>(f.jpeg.data()), static_cast<std::streamsize>(f.jpeg.size()));
         if (!file) error = std::string(name) + ": write failed";
         if (repainter && error.empty()) {
-          const cv::Mat frame = cv::imdecode(f.jpeg, cv::IMREAD_COLOR);
+          const cv::Mat frame = veneer::io::codecs::imdecode(f.jpeg, cv::IMREAD_COLOR);
           std::snprintf(name, sizeof name, "repainted_%04d.png", saved);
           if (frame.empty()) {
             error = "frame " + std::to_string(f.seq) + " is not a JPEG";
@@ -534,12 +534,12 @@ VENEER_COMMAND(rig) {
               std::fflush(stdout);
               char align[32];
               std::snprintf(align, sizeof align, "align_%04d.png", saved);
-              if (!cv::imwrite((std::filesystem::path(*live_out) / name).string(), lf->repainted) ||
-                  !cv::imwrite((std::filesystem::path(*live_out) / align).string(),
+              if (!veneer::io::codecs::imwrite((std::filesystem::path(*live_out) / name).string(), lf->repainted) ||
+                  !veneer::io::codecs::imwrite((std::filesystem::path(*live_out) / align).string(),
                                repaint::alignment_picture(frame, still_mask, r)))
                 error = std::string(name) + ": write failed";
             }
-          } else if (!cv::imwrite((std::filesystem::path(*live_out) / name).string(), repainter->apply(frame))) {
+          } else if (!veneer::io::codecs::imwrite((std::filesystem::path(*live_out) / name).string(), repainter->apply(frame))) {
             error = std::string(name) + ": write failed";
           }
         }

@@ -145,7 +145,8 @@ ResultCache::ResultCache(CacheOptions options) : options_(std::move(options)) {
   dir_ = options_.dir.empty() ? default_cache_dir() : options_.dir;
 }
 
-std::optional<CacheEntry> ResultCache::load(const std::string& key, std::map<std::string, cv::Mat>* mats) const {
+std::optional<CacheEntry> ResultCache::load(const std::string& key, std::map<std::string, cv::Mat>* mats,
+                                            const std::function<bool(const std::string&)>& keep_half) const {
   if (!options_.enabled || !safe_key(key)) return std::nullopt;
   const fs::path entry_dir = dir_ / key;
   std::error_code ec;
@@ -168,7 +169,9 @@ std::optional<CacheEntry> ResultCache::load(const std::string& key, std::map<std
   }
   if (mats) {
     std::vector<Expected<cv::Mat>> read(matrix_files.size(), make_error("not read"));
-    tbb::parallel_for(size_t(0), matrix_files.size(), [&](size_t i) { read[i] = read_mat_file(matrix_files[i]); });
+    tbb::parallel_for(size_t(0), matrix_files.size(), [&](size_t i) {
+      read[i] = read_mat_file(matrix_files[i], keep_half && keep_half(matrix_files[i].filename().string()));
+    });
     for (size_t i = 0; i < read.size(); ++i) {
       if (!read[i]) {
         VLOG_WARN("Cache", "{}, dropping the entry", read[i].message());
@@ -333,7 +336,7 @@ Status write_mat_file(const fs::path& file, const cv::Mat& m, bool half) {
   return Status::success();
 }
 
-Expected<cv::Mat> read_mat_file(const fs::path& file) {
+Expected<cv::Mat> read_mat_file(const fs::path& file, bool keep_half) {
   const std::string name = file.string();
   Fd f{::open(file.c_str(), O_RDONLY | O_CLOEXEC)};
   if (f.fd < 0) return make_error(name + ": cannot open: " + std::strerror(errno));
@@ -349,7 +352,7 @@ Expected<cv::Mat> read_mat_file(const fs::path& file) {
   if (::fstat(f.fd, &st) != 0 || static_cast<size_t>(st.st_size) != sizeof head + pixels)
     return make_error(name + ": size does not match its header");
   const int rows = static_cast<int>(head[1]), cols = static_cast<int>(head[2]);
-  if (depth != CV_16F) {
+  if (depth != CV_16F || keep_half) {
     cv::Mat m = big_mat(rows, cols, type);
     if (!m.empty() && !read_all(f.fd, m.data, pixels)) return make_error(name + ": truncated");
     return m;

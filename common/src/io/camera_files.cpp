@@ -6,7 +6,7 @@
 #include <vector>
 
 #include <opencv2/core/utility.hpp>
-#include <opencv2/imgcodecs.hpp>
+#include "veneer/io/codecs.hpp"
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 
@@ -55,7 +55,7 @@ Expected<std::string> encode_developed_jpeg(const cv::Mat& linear, int quality) 
   if (quality < 1 || quality > 100) return make_error("JPEG quality must be in 1..100");
   std::vector<uchar> bytes;
   try {
-    if (!cv::imencode(".jpg", develop_srgb8(linear), bytes, {cv::IMWRITE_JPEG_QUALITY, quality}))
+    if (!veneer::io::codecs::imencode(".jpg", develop_srgb8(linear), bytes, {cv::IMWRITE_JPEG_QUALITY, quality}))
       return make_error("JPEG: the encoder failed");
   } catch (const cv::Exception& e) {
     return make_error(std::string("JPEG: ") + e.what());

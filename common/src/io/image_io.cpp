@@ -14,7 +14,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include <opencv2/imgcodecs.hpp>
+#include "veneer/io/codecs.hpp"
 #include <opencv2/imgproc.hpp>
 
 #include "file_util.hpp"
@@ -74,7 +74,7 @@ const std::array<float, 256>& srgb_to_linear_lut() {
 Expected<cv::Mat> imdecode_bytes(std::string_view bytes, int flags, const std::string& name, const char* kind) {
   try {
     cv::Mat buffer(1, static_cast<int>(bytes.size()), CV_8UC1, const_cast<char*>(bytes.data()));
-    return cv::imdecode(buffer, flags);
+    return veneer::io::codecs::imdecode(buffer, flags);
   } catch (const cv::Exception& e) {
     return make_error(name + ": cannot decode" + kind + ": " + e.what());
   }
@@ -282,9 +282,11 @@ Status write_file_synced(const fs::path& file, std::string_view bytes) {
 }
 
 Expected<std::string> encode_png8(const cv::Mat& image) {
+  // grey and BGR through libdeflate (png_codec.hpp), the rest through OpenCV
+  if (image.depth() == CV_8U && (image.channels() == 1 || image.channels() == 3)) return detail::encode_png(image, 1);
   std::vector<uchar> buffer;
   try {
-    if (!cv::imencode(".png", image, buffer)) return make_error("PNG encoder failed");
+    if (!veneer::io::codecs::imencode(".png", image, buffer)) return make_error("PNG encoder failed");
   } catch (const cv::Exception& e) {
     return make_error(std::string("PNG encoder failed: ") + e.what());
   }
@@ -516,9 +518,13 @@ cv::Mat tonemap_picture(const cv::Mat& linear, double percentile) {
 Status write_picture(const fs::path& file, const cv::Mat& bgr8, Sync sync) {
   if (bgr8.empty()) return make_error(file.string() + ": cannot write an empty picture");
   if (bgr8.depth() != CV_8U) return make_error(file.string() + ": a picture must be 8-bit");
+  // grey and BGR through libdeflate at its fastest level (png_codec.hpp): no
+  // image codec library opened for a transfer's pictures (issue 48)
+  if (bgr8.channels() == 1 || bgr8.channels() == 3)
+    return write_file_atomic(file, detail::encode_png(bgr8, 1), sync);
   std::vector<uchar> buffer;
   try {
-    if (!cv::imencode(".png", bgr8, buffer)) return make_error(file.string() + ": PNG encoder failed");
+    if (!veneer::io::codecs::imencode(".png", bgr8, buffer)) return make_error(file.string() + ": PNG encoder failed");
   } catch (const cv::Exception& e) {
     return make_error(file.string() + ": PNG encoder failed: " + e.what());
   }

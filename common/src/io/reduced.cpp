@@ -8,11 +8,12 @@
 #include <mutex>
 
 #include <libraw/libraw.h>
-#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgcodecs.hpp>  // the IMREAD_* flags
 #include <opencv2/imgproc.hpp>
 #include <tbb/parallel_for.h>
 
 #include "file_util.hpp"
+#include "jpeg_codec.hpp"
 #include "pixels.hpp"
 #include "set_detail.hpp"
 #include "veneer/io/image_io.hpp"
@@ -232,6 +233,11 @@ Expected<cv::Mat> decode_jpeg_reduced(std::string_view bytes, int factor, const 
     default: return make_error(name + ": JPEG reduction " + std::to_string(factor) + " is not 1, 2, 4 or 8");
   }
   if (!detail::has_jpeg_magic(bytes)) return make_error(name + ": not a JPEG file");
+  // through libjpeg itself where the build has it: no image codec library opened for the live view (issue 48)
+  if (auto direct = detail::decode_jpeg8(bytes, factor, name)) {
+    if (!*direct) return direct->error();
+    return detail::srgb8_to_linear(**direct);
+  }
   auto bgr8 = detail::imdecode_bytes(bytes, flag | cv::IMREAD_IGNORE_ORIENTATION, name, " JPEG");
   if (!bgr8) return bgr8.error();
   if (bgr8->empty() || bgr8->type() != CV_8UC3) return make_error(name + ": corrupt or truncated JPEG (decoder failed)");

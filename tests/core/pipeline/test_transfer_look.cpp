@@ -162,3 +162,45 @@ TEST(TransferLook, TheFloorIsTheLinearMapsCopy) {
 
 }  // namespace
 }  // namespace veneer::pipeline
+
+namespace veneer::pipeline {
+namespace {
+
+// Issue 48: the CLI's transfer measures the quality against the truth right
+// after the map and lets the truth go before the look is made; the result
+// is the one transfer() gives.
+TEST(TransferLook, ReleasingTheTruthEarlyGivesTheSameResult) {
+  const io::ImageSet dst = simulated("bull", io::Role::destination, {0, 0, 0}, 0.005);
+  const io::ImageSet src = simulated("orange", io::Role::source, {0, 0, 0}, 0.005);
+  TransferOptions o = default_transfer_options();
+  o.look_figures = false;
+  auto kept = prepare_pair(dst, src, o);
+  auto given = prepare_pair(dst, src, o);
+  ASSERT_TRUE(kept.ok() && given.ok());
+  auto a = transfer(*kept, o);
+  auto b = transfer_releasing_truth(*given, o);
+  ASSERT_TRUE(a.ok() && b.ok()) << (a.ok() ? b.message() : a.message());
+  EXPECT_TRUE(kept->destination.truth.present());
+  EXPECT_FALSE(given->destination.truth.present());
+  EXPECT_FALSE(given->source.truth.present());
+  ASSERT_TRUE(a->quality && b->quality);
+  EXPECT_EQ(a->quality->coverage, b->quality->coverage);
+  EXPECT_EQ(a->quality->coherence, b->quality->coherence);
+  EXPECT_EQ(a->quality->normal_mean_deg, b->quality->normal_mean_deg);
+  EXPECT_EQ(cv::norm(a->map.xy, b->map.xy, cv::NORM_INF), 0.0);
+  EXPECT_EQ(cv::norm(a->repainted_median, b->repainted_median, cv::NORM_INF), 0.0);
+  const nlohmann::json ja = nlohmann::json::parse(a->metrics_json), jb = nlohmann::json::parse(b->metrics_json);
+  EXPECT_EQ(ja["quality"], jb["quality"]);
+  EXPECT_FALSE(ja.contains("look"));  // not asked for
+  // with the look's figures asked for, the truth stays for them
+  o.look_figures = true;
+  auto again = prepare_pair(dst, src, o);
+  ASSERT_TRUE(again.ok());
+  auto c = transfer_releasing_truth(*again, o);
+  ASSERT_TRUE(c.ok()) << c.message();
+  EXPECT_TRUE(again->destination.truth.present());
+  EXPECT_TRUE(nlohmann::json::parse(c->metrics_json).contains("look"));
+}
+
+}  // namespace
+}  // namespace veneer::pipeline

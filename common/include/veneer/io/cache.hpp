@@ -7,6 +7,7 @@
 // the least recently used entries are evicted beyond a size cap.
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <optional>
 #include <string>
@@ -52,8 +53,10 @@ class ResultCache {
   // The entry stored under `key`, or nullopt (miss, disabled, or damaged: a
   // damaged entry is removed). A hit marks the entry as recently used.
   // With `mats`, the entry's matrix files are read into it (in parallel,
-  // CV_32F where stored as half floats) instead of into the blobs.
-  std::optional<CacheEntry> load(const std::string& key, std::map<std::string, cv::Mat>* mats = nullptr) const;
+  // CV_32F where stored as half floats, but those whose file name
+  // `keep_half` takes, which stay CV_16F as stored: issue 48) instead of into the blobs.
+  std::optional<CacheEntry> load(const std::string& key, std::map<std::string, cv::Mat>* mats = nullptr,
+                                 const std::function<bool(const std::string&)>& keep_half = {}) const;
   // Stores `entry` and `mats` under `key` (temp folder + rename, no fsync: a
   // lost entry is recomputed), then evicts least recently used entries until
   // the cache is within max_bytes.
@@ -79,8 +82,9 @@ class ResultCache {
 std::string encode_mat(const cv::Mat& m, bool half = false);
 Expected<cv::Mat> decode_mat(const std::string& blob, const std::string& name);
 // The same format straight between a Mat and a file, through a small buffer
-// (no copy of the whole matrix); half floats come back as CV_32F.
+// (no copy of the whole matrix); half floats come back as CV_32F, or as
+// stored with `keep_half`.
 Status write_mat_file(const std::filesystem::path& file, const cv::Mat& m, bool half = false);
-Expected<cv::Mat> read_mat_file(const std::filesystem::path& file);
+Expected<cv::Mat> read_mat_file(const std::filesystem::path& file, bool keep_half = false);
 
 }  // namespace veneer::io

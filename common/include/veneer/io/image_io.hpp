@@ -41,7 +41,7 @@ Status write_png16(const std::filesystem::path& file, const cv::Mat& image, Sync
                    PngDeflate deflate = PngDeflate::stored);
 // The PNG bytes of a 1- or 3-channel float image (sets' photos: fast by default).
 Expected<std::string> encode_png16(const cv::Mat& image, PngDeflate deflate = PngDeflate::fast);
-// An 8-bit image's PNG bytes, as OpenCV encodes them (the sets' mask.png).
+// An 8-bit image's PNG bytes (the sets' mask.png): grey and BGR deflated by libdeflate, others by OpenCV.
 Expected<std::string> encode_png8(const cv::Mat& image);
 // Reads an 8- or 16-bit PNG (or PPM/PGM, or a JPEG: see below) as CV_32FC3 BGR scaled to [0,1];
 // grey images are expanded to 3 channels. A PFM photo is read as it is

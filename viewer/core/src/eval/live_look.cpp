@@ -7,7 +7,7 @@
 #include <cstdio>
 
 #include <nlohmann/json.hpp>
-#include <opencv2/imgcodecs.hpp>
+#include "veneer/io/codecs.hpp"
 #include <opencv2/imgproc.hpp>
 
 #include "veneer/io/image_io.hpp"
@@ -150,7 +150,7 @@ Expected<LiveLook> live_look(const std::vector<cv::Mat>& result, const std::vect
 }
 
 Expected<cv::Mat> read_live_picture(const fs::path& file) {
-  const cv::Mat raw = cv::imread(file.string(), cv::IMREAD_UNCHANGED);
+  const cv::Mat raw = veneer::io::codecs::imread(file.string(), cv::IMREAD_UNCHANGED);
   if (raw.empty()) return make_error(file.string() + ": cannot read it as a picture");
   cv::Mat bgr;
   if (raw.channels() == 1) cv::cvtColor(raw, bgr, cv::COLOR_GRAY2BGR);

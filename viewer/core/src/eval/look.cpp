@@ -7,7 +7,7 @@
 #include <mutex>
 #include <sstream>
 
-#include <opencv2/imgcodecs.hpp>
+#include "veneer/io/codecs.hpp"
 #include <opencv2/imgproc.hpp>
 
 #include "veneer/io/image_io.hpp"
@@ -439,7 +439,7 @@ Expected<Look> look_folders(const fs::path& transfer_out, const fs::path& refere
   }
   cv::Mat mask;
   if (fs::exists(reference_set / "mask.png")) {
-    const cv::Mat m = cv::imread((reference_set / "mask.png").string(), cv::IMREAD_GRAYSCALE);
+    const cv::Mat m = veneer::io::codecs::imread((reference_set / "mask.png").string(), cv::IMREAD_GRAYSCALE);
     if (m.empty()) return make_error((reference_set / "mask.png").string() + ": cannot be read");
     mask = m > 127;
   }

@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstring>
+#include <functional>
 
 #include <future>
 #include <map>
@@ -125,8 +126,9 @@ bool from_entry(const io::CacheEntry& e, std::map<std::string, cv::Mat>& mats, P
   if (v.normals.type() != CV_32FC3 || v.mask.type() != CV_8UC1 || v.mask.size() != size || p.median.size() != size)
     return false;
   for (const auto& im : v.images) {
-    if (im.type() != CV_32FC3 || im.size() != size) return false;
+    if ((im.type() != CV_32FC3 && im.type() != CV_16FC3) || im.size() != size) return false;  // half: kept as stored
   }
+  if (p.median.type() != CV_32FC3 && p.median.type() != CV_16FC3) return false;
   p.set.photos_from = meta.value("photos_from", std::string());
   p.object.segment_seconds = meta.value("segment_s", 0.0);
   p.object.normals_seconds = meta.value("normals_s", 0.0);
@@ -420,7 +422,11 @@ Expected<PreparedSet> prepare_set(const fs::path& folder, double scale, bool tru
     progress.report(0.0, "cache " + folder.filename().string());
     wait_for_write(key);
     std::map<std::string, cv::Mat> mats;
-    if (auto entry = cache.load(key, &mats)) {
+    // half photos (and their median) come back as stored, not widened to float and narrowed again (issue 48)
+    const std::function<bool(const std::string&)> keep_half = [&](const std::string& name) {
+      return options.half_photos && (name == "median" || name.rfind("photo_", 0) == 0);
+    };
+    if (auto entry = cache.load(key, &mats, keep_half)) {
       io::ReadOptions meta = options.read;
       meta.load_photos = false;
       meta.load_truth_appearance = false;

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <functional>
+#include <future>
 #include <mutex>
 #include <optional>
 #include <limits>
@@ -264,7 +265,8 @@ namespace {
 // transfer() of a prepared pair, from `given` when not null (else the map is
 // computed); timings' total_s counts from t_all.
 Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferOptions& options, const Map* given,
-                                       const Progress& progress, Clock::time_point t_all) {
+                                       const Progress& progress, Clock::time_point t_all,
+                                       PreparedPair* release_truth = nullptr) {
   if (auto s = options.check(); !s) return s.error();
   if (options.scale != pair.scale || options.truth_normals != pair.truth_normals)
     return make_error("the prepared pair was made with scale " + std::to_string(pair.scale) + " and truth normals " +
@@ -332,6 +334,21 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
     timings["match_s"] = since(t0);
     result.map = std::move(*map);
   }
+  // The quality against the truth measured now, and the truth (both sets'
+  // normals and masks, 0.5 GB at 5600x3750) released before the look is made
+  // (issue 48: held through it, it made the transfer's peak), when the caller
+  // gave the pair up to that and nothing later reads the truth.
+  std::optional<Quality> early_quality;
+  double early_quality_s = 0;
+  if (release_truth && destination.truth.present() && source.truth.present() && !options.look_figures &&
+      !options.look_floor && !relight_measurable(source.scene)) {
+    const auto t_q = Clock::now();
+    early_quality = evaluate(result.map, destination.truth.mask, source.truth.mask, destination.truth.normals,
+                             source.truth.normals);
+    early_quality_s = since(t_q);
+    release_truth->destination.truth = io::Truth{};
+    release_truth->source.truth = io::Truth{};
+  }
   result.match_seconds = timings["match_s"].get<double>();
   result.match_options = options.match;
   result.source_size = source.size;
@@ -394,11 +411,12 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
                    {"map.png, reuse.png, relight_*.png", "8-bit sRGB pictures for viewing"},
                    {"confidence.png", "white = the match fits exactly, black = 4x the median match distance or "
                                       "more, or not mapped"}};
-  if (destination.truth.present() && source.truth.present()) {
+  if (early_quality || (destination.truth.present() && source.truth.present())) {
     t0 = Clock::now();
-    Quality q = evaluate(result.map, destination.truth.mask, source.truth.mask, destination.truth.normals,
-                         source.truth.normals);
-    if (relight_measurable(source.scene)) {
+    Quality q = early_quality ? *early_quality
+                              : evaluate(result.map, destination.truth.mask, source.truth.mask,
+                                         destination.truth.normals, source.truth.normals);
+    if (!early_quality && relight_measurable(source.scene)) {
       auto relit = relight(result.map, destination, source, destination.truth.mask, options.blend, g);
       if (relit) {
         q.psnr_db = relit->psnr_db;
@@ -412,7 +430,7 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
     result.quality = q;
     j["quality"] = quality_json(q);
     j["quality"]["measured_against"] = "truth (simulated sets)";
-    timings["quality_s"] = since(t0);
+    timings["quality_s"] = since(t0) + early_quality_s;
   } else {
     // Real sets: what can be measured without truth -- coverage of the
     // segmented object, coherence, and the agreement of the photometric
@@ -428,7 +446,9 @@ Expected<TransferResult> transfer_from(const PreparedPair& pair, const TransferO
     j["quality"]["coherence_measured_at"] = {{"size", {made_at.width, made_at.height}},
                                              {"means", "the map's coherence where it was made, before "
                                                        "match::refine_map continued it to full resolution"}};
-  if (options.look_when_written && !options.keep_pictures && !options.look_floor) {
+  if (!options.look_figures && !options.look_floor) {
+    // not asked for: nothing measured that is not written (issue 48)
+  } else if (options.look_when_written && !options.keep_pictures && !options.look_floor) {
     result.look_pending = true;  // write_transfer(result, pair) measures it while it paints
   } else {
     // The look (eval/look.hpp): shading per lamp and texture, beside coverage and coherence.
@@ -477,6 +497,11 @@ Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOption
 Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOptions& options, const Map& map,
                                   const Progress& progress) {
   return transfer_from(pair, options, &map, progress, Clock::now());
+}
+
+Expected<TransferResult> transfer_releasing_truth(PreparedPair& pair, const TransferOptions& options,
+                                                  const Progress& progress) {
+  return transfer_from(pair, options, nullptr, progress, Clock::now(), &pair);
 }
 
 std::string transfer_options_json(const TransferOptions& options) {
@@ -618,8 +643,9 @@ Status write_files(const TransferResult& r, PreparedPair* pair, const std::files
     });
   }
   // The pictures painted from the pair's photos: one after another (each
-  // painting and encoding is parallel within), so one is in memory at a time.
-  std::vector<std::function<Status()>> painted;
+  // painting is parallel within), each encoded and written on its own thread
+  // while the next is painted (issue 48), so at most two are in memory at a time.
+  std::vector<std::function<Expected<cv::Mat>()>> painted;
   // the look measured from the pictures as they are painted (look_pending):
   // each picture and its destination photo kept in grey, 1/3 of their bytes
   std::vector<cv::Mat> picture_greys, own_greys;
@@ -629,7 +655,7 @@ Status write_files(const TransferResult& r, PreparedPair* pair, const std::files
                                 : std::min(pair->src.view.images.size(), pair->dst.view.images.size());
     for (size_t i = 0; i < lamps; ++i) {
       if (begun) picture_greys.emplace_back(), own_greys.emplace_back();
-      painted.push_back([&r, pair, &folder, i, &begun, &picture_greys, &own_greys]() -> Status {
+      painted.push_back([&r, pair, i, &begun, &picture_greys, &own_greys]() -> Expected<cv::Mat> {
         cv::Mat& backdrop = pair->dst.view.images[i];
         const cv::Mat& photo = pair->src.view.images[i];
         cv::Mat out;
@@ -654,9 +680,7 @@ Status write_files(const TransferResult& r, PreparedPair* pair, const std::files
         pair->src.view.images[i].release();
         if (i < pair->destination.images.size()) pair->destination.images[i].release();
         if (i < pair->source.images.size()) pair->source.images[i].release();
-        char name[64];
-        std::snprintf(name, sizeof name, "result_light_%02zu.png", i);
-        return io::write_png16(folder / name, out, io::Sync::later);
+        return out;
       });
     }
   }
@@ -672,9 +696,30 @@ Status write_files(const TransferResult& r, PreparedPair* pair, const std::files
   const Status cancelled = make_error("writing " + folder.string() + " cancelled");
   // the painted ones first: they release the pair's photos, the largest
   // part of what is held, before the other files are made all at once
-  for (size_t i = 0; i < painted.size(); ++i) {
-    written[files.size() + i] = progress.cancelled() ? cancelled : painted[i]();
-    one_done();
+  {
+    std::future<void> writing;  // the picture before, being encoded and written
+    for (size_t i = 0; i < painted.size(); ++i) {
+      const size_t at = files.size() + i;
+      if (progress.cancelled()) {
+        written[at] = cancelled;
+        one_done();
+        continue;
+      }
+      auto picture = painted[i]();
+      if (writing.valid()) writing.get();
+      if (!picture) {
+        written[at] = picture.error();
+        one_done();
+        continue;
+      }
+      writing = std::async(std::launch::async, [&, at, i, out = std::move(*picture)] {
+        char name[64];
+        std::snprintf(name, sizeof name, "result_light_%02zu.png", i);
+        written[at] = io::write_png16(folder / name, out, io::Sync::later);
+        one_done();
+      });
+    }
+    if (writing.valid()) writing.get();
   }
   if (painted_all) painted_all();
   if (begun && !progress.cancelled()) {

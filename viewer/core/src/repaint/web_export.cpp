@@ -14,7 +14,7 @@
 
 #include <nlohmann/json.hpp>
 #include <opencv2/core/utility.hpp>
-#include <opencv2/imgcodecs.hpp>
+#include "veneer/io/codecs.hpp"
 #include <opencv2/imgproc.hpp>
 
 #include "veneer/io/image_io.hpp"
@@ -263,7 +263,7 @@ Expected<WebExport> export_web(const std::vector<cv::Mat>& photos, const std::ve
   out.first_light = first_light_of(fit.lamps);
   // the still is a picture like any photo: a plain JPEG (YCbCr, chroma halved) is a fifth of an RGB one
   std::vector<uchar> still;
-  if (!cv::imencode(".jpg", render_web(fit, web_light(out.first_light[0], out.first_light[1])), still,
+  if (!veneer::io::codecs::imencode(".jpg", render_web(fit, web_light(out.first_light[0], out.first_light[1])), still,
                     {cv::IMWRITE_JPEG_QUALITY, options.jpeg_quality}))
     return make_error(name + ": still.jpg: the JPEG encoder failed");
 

@@ -63,6 +63,9 @@ struct TransferOptions {
   // destination's own photos (its cost: the pictures in grey, and painted once
   // more when not kept); on a simulated pair also against the truth look (the
   // destination's scene rendered in the source's material: one set rendered).
+  bool look_figures = true;    // metrics.json's "look" measured at all; false leaves it out (and its cost:
+                               // at 5600x3750 12 s of `veneer transfer`'s 59, issue 48) -- the CLI's
+                               // default, `veneer transfer --figures` asks for it. look_floor implies it.
   bool look_floor = false;     // also the floor: the `linear` map's pixel copy scored the same way, and
                                // the ratio shading / floor (a second match and repaint)
   Status check() const;
@@ -122,6 +125,15 @@ Expected<PreparedPair> prepare_pair(const io::ImageSet& destination, const io::I
                                     const TransferOptions& options, const Progress& progress = {});
 Expected<TransferResult> transfer(const PreparedPair& pair, const TransferOptions& options,
                                   const Progress& progress = {});
+// The same for a pair whose truth the caller gives up (the CLI, which
+// writes the result with write_transfer(result, pair) next): the quality
+// against the truth is measured right after the map and both sets' truth
+// released then, before the look is made (issue 48: at 5600x3750 their
+// normals, 0.5 GB, held through the look made the transfer's peak). Only
+// when nothing later reads the truth (no look_figures, no look_floor, no
+// relighting measure); else it is transfer(pair, ...). The result is the same.
+Expected<TransferResult> transfer_releasing_truth(PreparedPair& pair, const TransferOptions& options,
+                                                  const Progress& progress = {});
 // The rest (repaint, reuse, quality, metrics) from a map already computed
 // for this pair with options.match: what an option that does not change the
 // map (the blend radius) needs, in milliseconds. A map of another size than
