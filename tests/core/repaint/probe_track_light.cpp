@@ -36,13 +36,18 @@ int main(int argc, char** argv) {
     if (eq == std::string::npos) { works.push_back(a); continue; }
     std::string k = a.substr(0, eq);
     double v = std::atof(a.c_str() + eq + 1);
-    if (k == "min") o.min_correlation = v;
+    if (k == "robust") { if (v != 0) o = repaint::light_robust_track_options(); }  // first, then the others
+    else if (k == "min") o.min_correlation = v;
     else if (k == "hp") o.highpass_sigma_px = v;
     else if (k == "region") o.max_region_px = int(v);
     else if (k == "points") o.ecc_points = int(v);
     else if (k == "lit") o.lit_fraction = v;
     else if (k == "iters") o.iterations = int(v);
     else if (k == "rounds") o.relight_rounds = int(v);
+    else if (k == "speck") o.lit_speck_px = int(v);
+    else if (k == "nn") o.nonnegative_relight = v != 0;
+    else if (k == "stlit") o.stills_lit_fraction = v;
+    else if (k == "smin") o.shadow_min_correlation = v;
     else { std::fprintf(stderr, "unknown key %s\n", k.c_str()); return 2; }
   }
   for (const auto& w : works) {

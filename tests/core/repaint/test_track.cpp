@@ -196,6 +196,67 @@ TEST(Track, AMovingObjectUnderASideLampIsFollowed) {
   EXPECT_LT(percentile(run.errors, 1.0), 0.6);
 }
 
+// Issue 47, item 6: a lamp 72 deg off the axis on every frame, the
+// light-robust options (repaint::light_robust_track_options), the glossy
+// sources the lit pixels alone lost (every frame of the orange and the apple
+// at 1024x680) tracked on every frame near the truth (the identity).
+// Measured at 384x256: orange 0.21-0.35 px, apple 0.30-1.17 px (median 0.58).
+TEST(Track, ALampAt72DegreesIsTrackedWithTheLightRobustOptions) {
+  struct Case {
+    const char* scene;
+    double median_px, max_px;
+  };
+  for (const Case& c : {Case{"orange", 0.5, 0.6}, Case{"apple", 0.8, 1.5}}) {
+    SideLamp s = side_lamp(c.scene, "arc,radius=0.9,height=0.3", 8);
+    for (const auto& l : s.seq.lights) {
+      EXPECT_GT(off_axis_deg(l), 70) << c.scene;
+      EXPECT_LT(off_axis_deg(l), 76) << c.scene;
+    }
+    const PathRun run = track_path(s, repaint::light_robust_track_options());
+    EXPECT_EQ(run.lost, 0) << c.scene;
+    EXPECT_LT(percentile(run.errors, 0.5), c.median_px) << c.scene;
+    EXPECT_LT(percentile(run.errors, 1.0), c.max_px) << c.scene;
+  }
+}
+
+// ... and the rule for lost that the lamp cannot trip still sees a cover:
+// the object under the side lamp covered by a hand (a bright, smooth patch
+// over most of it) is lost, and found again when uncovered;
+// the object moved out of the search's reach is lost, not followed wrongly.
+TEST(Track, ACoveredObjectUnderASideLampIsLostAndFoundAgain) {
+  SideLamp s = side_lamp("orange", "arc,radius=0.9,height=0.3", 6);
+  repaint::Tracker tracker(s.source.images, s.source.truth.mask, repaint::light_robust_track_options());
+  ASSERT_TRUE(tracker.ready());
+  const cv::Rect box = cv::boundingRect(s.source.truth.mask);
+  cv::Mat hand(s.seq.frames[0].size(), CV_32FC3);
+  cv::randu(hand, cv::Scalar::all(0), cv::Scalar::all(1));
+  cv::GaussianBlur(hand, hand, cv::Size(), 6);
+  cv::Mat hand8;
+  hand.convertTo(hand8, CV_8UC3, 4 * 180, -2 * 180 + 150);  // skin-bright, smooth, uneven
+  for (size_t i = 0; i < s.seq.frames.size(); ++i) {
+    cv::Mat frame = s.seq.frames[i].clone();
+    const bool covered = i == 2 || i == 3;
+    if (covered) {  // 80 % of the object's box, from the left
+      const cv::Rect cover(box.x - 4, box.y - 4, box.width * 8 / 10 + 4, box.height + 8);
+      hand8(cover).copyTo(frame(cover));
+    }
+    const auto r = tracker.track(frame);
+    std::printf("frame %zu%s: correlation %.3f lit %.2f %s\n", i, covered ? " (covered)" : "", r.correlation, r.lit,
+                r.lost ? "lost" : "tracked");
+    EXPECT_EQ(r.lost, covered) << "frame " << i << " correlation " << r.correlation << " lit " << r.lit;
+    if (!r.lost) {
+      EXPECT_LT(repaint::motion_error_px(r.still_to_frame, cv::Matx23d(1, 0, 0, 0, 1, 0), s.source.truth.mask), 1.0)
+          << "frame " << i;
+    }
+  }
+  // moved 60 px at once (beyond search_px): lost, and the estimate not moved along a wrong way
+  cv::Mat moved;
+  cv::warpAffine(s.seq.frames[5], moved, cv::Mat(cv::Matx23d(1, 0, 60, 0, 1, 0)), s.seq.frames[5].size(),
+                 cv::INTER_LINEAR, cv::BORDER_REPLICATE);
+  const auto r = tracker.track(moved);
+  EXPECT_TRUE(r.lost) << "correlation " << r.correlation << " lit " << r.lit;
+}
+
 TEST(Track, AFrameWithoutTheObjectIsLost) {
   Sequence s = make_sequence("shift=4:0", 2);
   repaint::Tracker tracker(s.source.images, s.source.truth.mask);
