@@ -1,8 +1,9 @@
 # Veneer — the front door.
-#   make          install what is missing (tools/install-deps), build into build/ (programs in build/bin/)
-#   make demo     install what is missing, build the programs the demo runs (veneerd, veneer),
+#   make          install what is missing (tools/install-dev-deps), build into build/ (programs in build/bin/)
+#   make demo     install what is missing of the demo's packages only (tools/debian-packages.txt), build
+#                 only the programs the demo runs (veneerd, veneer; no Qt, no tests configured),
 #                 run the main job on the simulated rig (and veneer-viewer, if built, with a display)
-#   make test     install what is missing (and tools/debian-packages-test.txt: headless Chromium for the
+#   make test     install what is missing (tools/install-test-deps: also headless Chromium for the
 #                 web page's test), build everything but the benchmarks, run every test (CTest)
 #   make bench    build the benchmarks (target benches) and run them, printing their tables
 #   make buildtime  a cold build (no compiler cache) in build-time/: wall time of make demo's and
@@ -26,57 +27,69 @@ PACKAGE_OUT ?= build-package
 SOAK_CAPTURES ?= 1000
 SOAK_FAULTS ?=
 
-.PHONY: all deps test-deps configure build demo test bench soak buildtime asan fuzz package package-deps package-test clean
+.PHONY: all deps dev-deps test-deps configure configure-demo build demo test bench soak buildtime asan fuzz package package-deps package-test clean
 
-all: deps
+all: dev-deps
 	@$(MAKE) --no-print-directory build
 
+# What `make demo` needs (tools/debian-packages.txt): building veneerd and veneer, running the demo.
 deps:
 	@tools/install-deps
-
-# What only the tests need (tools/debian-packages-test.txt: Chromium); `make demo` does not install it.
+# Also the viewer's, the tests' and the fuzz build's (tools/debian-packages-dev.txt): everything but `make demo`.
+dev-deps:
+	@tools/install-dev-deps
+# Also Chromium (tools/debian-packages-test.txt), which only the tests use.
 test-deps:
 	@tools/install-test-deps
 
-$(BUILD)/build.ninja:
-	@cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=$(BUILD_TYPE) $(CMAKE_ARGS) || { \
-	  echo "make: configuring failed; if a library (OpenCV, LibRaw, ...) is missing, run: make deps"; exit 1; }
+# A build folder is configured for everything (the viewer, the tests), but
+# `make demo` configures a new one without them (issue 49: its first picture
+# waits for neither Qt nor GoogleTest to be installed); `make`, `make test`,
+# ... reconfigure such a folder with them, keeping what is built.
+CONFIGURE = cmake -S . -B $(BUILD) -G Ninja -DCMAKE_BUILD_TYPE=$(BUILD_TYPE)
+CONFIGURE_FAILED = { echo "make: configuring failed; if a library (OpenCV, LibRaw, Qt, ...) is missing, run: make dev-deps (make demo: make deps)"; exit 1; }
 
-configure: $(BUILD)/build.ninja
+configure:
+	@if [ ! -f $(BUILD)/build.ninja ] || grep -qE '^VENEER_BUILD_(APP|TESTS):BOOL=OFF' $(BUILD)/CMakeCache.txt; then \
+	  $(CONFIGURE) -DVENEER_BUILD_APP=ON -DVENEER_BUILD_TESTS=ON $(CMAKE_ARGS) || $(CONFIGURE_FAILED); fi
+
+configure-demo:
+	@if [ ! -f $(BUILD)/build.ninja ]; then \
+	  $(CONFIGURE) -DVENEER_BUILD_APP=OFF -DVENEER_BUILD_TESTS=OFF $(CMAKE_ARGS) || $(CONFIGURE_FAILED); fi
 
 build: configure
 	cmake --build $(BUILD) -j $(JOBS)
 
 # What tools/demo.sh runs, and the libraries they link: nothing else.
 demo: deps
-	@$(MAKE) --no-print-directory configure
+	@$(MAKE) --no-print-directory configure-demo
 	@echo "make demo: building veneerd and veneer (make builds veneer-viewer too, make test the tests, make bench the benchmarks)"
 	cmake --build $(BUILD) -j $(JOBS) --target veneerd veneer
 	tools/demo.sh $(BUILD)
 
-test: deps test-deps
+test: test-deps
 	@$(MAKE) --no-print-directory build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS) --timeout 600
 
-bench: deps
+bench: dev-deps
 	@$(MAKE) --no-print-directory build
 	cmake --build $(BUILD) -j $(JOBS) --target benches
 	tools/bench.sh $(BUILD)
 
-soak: deps
+soak: dev-deps
 	@$(MAKE) --no-print-directory configure
 	cmake --build $(BUILD) -j $(JOBS) --target veneer_soak
 	$(BUILD)/tests/veneer_soak --captures $(SOAK_CAPTURES) --out soak-out $(if $(SOAK_FAULTS),--faults '$(SOAK_FAULTS)')
 
-buildtime: deps
+buildtime: dev-deps
 	tools/buildtime.sh build-time $(JOBS)
 
-asan: deps
+asan: dev-deps
 	cmake -S . -B build-asan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DVENEER_SANITIZE=ON $(CMAKE_ARGS)
 	cmake --build build-asan -j $(JOBS)
 	cd build-asan && ASAN_OPTIONS=detect_leaks=1 ctest --output-on-failure -j $(JOBS) --timeout 1200
 
-fuzz: deps
+fuzz: dev-deps
 	CC=clang CXX=clang++ cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DVENEER_FUZZ=ON -DVENEER_BUILD_APP=OFF $(CMAKE_ARGS)
 	cmake --build build-fuzz -j $(JOBS) --target fuzz-all
 	tools/fuzz.sh build-fuzz $(FUZZ_SECONDS)
@@ -87,7 +100,7 @@ fuzz: deps
 package-deps:
 	@tools/install-package-deps
 
-package: deps package-deps
+package: dev-deps package-deps
 	JOBS=$(JOBS) tools/package/build.sh $(PACKAGE_OUT)
 	tools/package/test.sh $(PACKAGE_OUT)
 

@@ -6,7 +6,9 @@
 #  4. photometric stereo on each (normal maps, albedo, masks)
 #  5. correspondence map (method combined) + the destination repainted in the source's look
 #  6. a few live-view frames of the source, repainted onto the destination
-#  7. the thesis's figures 5.2-5.13 re-made on the simulated pairs
+#  7. the thesis's figures 5.2-5.13 re-made on the simulated pairs (they need
+#     no rig: made meanwhile, from the start, while the rig's steps mostly
+#     wait on its lamps and camera; printed when the steps before are done)
 #  8. with a display: veneer-viewer connected to the simulated rig
 # Everything it writes lands in demo-out/. It runs build/bin/veneerd and
 # build/bin/veneer: `make demo` builds only those, not the tests and benchmarks;
@@ -31,10 +33,15 @@ echo "rig certificate fingerprint (SHA-256): $fingerprint"
 "$bin/veneerd" --simulate --scenes bull,orange --listen "127.0.0.1:$port" --store "$store" \
   --size "$size" > "$out/veneerd.log" 2>&1 &
 rig_pid=$!
-cleanup() { kill "$rig_pid" 2>/dev/null || true; wait "$rig_pid" 2>/dev/null || true; }
+figures_pid=""
+cleanup() {
+  for pid in "$rig_pid" $figures_pid; do kill "$pid" 2>/dev/null || true; wait "$pid" 2>/dev/null || true; done
+}
 trap cleanup EXIT
 for _ in $(seq 100); do [ -f "$store/token" ] && break; sleep 0.1; done
 rig=(--rig "127.0.0.1:$port" --token-file "$store/token" --fingerprint "$fingerprint")
+"$bin/veneer" figures --out "$out/figures" > "$out/figures.log" 2>&1 &
+figures_pid=$!
 "$bin/veneer" rig status "${rig[@]}"
 
 step "button press 1: capture the destination (bull)"
@@ -63,7 +70,10 @@ step "live view: the source under a moving hand-held lamp, repainted onto the de
   --map "$out/transfer" --src "$out/source" --dst "$out/destination"
 
 step "the thesis's figures on the simulated pairs"
-"$bin/veneer" figures --out "$out/figures"
+figures_ok=0; wait "$figures_pid" || figures_ok=$?
+figures_pid=""
+cat "$out/figures.log"
+[ "$figures_ok" -eq 0 ] || { echo "demo: veneer figures failed (exit $figures_ok)" >&2; exit 1; }
 
 if [ -n "${DISPLAY:-}" ] && [ ! -x "$bin/veneer-viewer" ]; then
   step "veneer-viewer is not built (make demo builds veneerd and veneer only): 'make' builds it"

@@ -21,7 +21,7 @@ using rigtest::DaemonProcess;
 
 namespace {
 
-std::unique_ptr<veneer::rig::Client> connect(const DaemonProcess& d, const fs::path& store) {
+std::unique_ptr<veneer::rig::Client> connect_to(const DaemonProcess& d, const fs::path& store) {
   auto token = veneer::rig::read_token_file(store / "token");
   if (!token) return nullptr;
   auto c = veneer::rig::Client::connect({"127.0.0.1", d.port()}, *token);
@@ -43,7 +43,7 @@ TEST(LiveFirst, TheTwinStoresAJpegAndACompressedDngWithAPreviewPerFrame) {
   fs::path store = dir / "store";
   auto d = DaemonProcess::start(store, {"--size", "512x340"});
   ASSERT_TRUE(d && d->port() != 0) << (d ? d->log() : "no process");
-  auto c = connect(*d, store);
+  auto c = connect_to(*d, store);
   ASSERT_TRUE(c);
   const std::string id = capture(*c);
   ASSERT_FALSE(id.empty()) << d->log();
@@ -84,7 +84,7 @@ TEST(LiveFirst, ThePreviewSetIsInPlaceAndReadableBeforeTheFullFilesWhichReplaceI
   fs::path store = dir / "store";
   auto d = DaemonProcess::start(store, {"--size", "512x340"});
   ASSERT_TRUE(d && d->port() != 0) << (d ? d->log() : "no process");
-  auto c = connect(*d, store);
+  auto c = connect_to(*d, store);
   ASSERT_TRUE(c);
   const std::string id = capture(*c);
   ASSERT_FALSE(id.empty()) << d->log();
