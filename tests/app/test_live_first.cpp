@@ -127,6 +127,8 @@ TEST(LiveFirst, GoesLiveOnTheLiveSizeMapThenSwapsInTheFullResolution) {
   const int frames = w.live().framesShown();
   ASSERT_TRUE(wait_for([&] { return w.live().framesShown() >= frames + 2; }, 30000));
   EXPECT_EQ(w.live().lastRepaintedFrame().size(), cv::Size(512, 340));
+  // the live views were painted from frames already at their sizes: nothing scaled on the GUI thread
+  EXPECT_TRUE(wait_for([&] { return w.live().fittedPaints() > 0; }, 10000));
   // the full-resolution session paints the live look too (issue 40)
   ASSERT_NE(w.session().live_session, nullptr);
   EXPECT_TRUE(w.session().live_session->has_live_look());

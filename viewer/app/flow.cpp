@@ -32,6 +32,7 @@ FlowController::FlowController(Session& session, CapturePanel& capture, SetsPane
       library_(library) {
   connect(&capture_, &CapturePanel::setStored, this, &FlowController::setStored);
   connect(&session_.rig, &RigLink::pulled, this, &FlowController::pulled);
+  connect(&session_.rig, &RigLink::previewPulled, this, &FlowController::previewPulled);
   connect(&transfer_, &TransferPanel::transferEnded, this, &FlowController::computeWaitingNormals);
   connect(&sets_, &SetsPanel::loadRequested, this, &FlowController::loadSetInBackground);
   connect(&library_, &MapLibrary::loadRequested, this,
@@ -48,15 +49,36 @@ void FlowController::setStored(const QString& id, veneer::io::Role role) {
                                                      : tr("pulling %1 (%2)").arg(id, qs(veneer::io::role_name(role))));
   session_.status.showStep();
   sets_.pullStarted();
-  session_.rig.pull(id, session_.workdir + "/sets/" + id);
+  // live first: the rig's preview set first, read at the live width while the full files come (issue 48)
+  const QString folder = session_.workdir + "/sets/" + id;
+  full_folders_.erase(folder);
+  session_.rig.pull(id, folder, preview_first_ && live_width_ > 0 ? live_width_ : 0);
+}
+
+// The preview of a set the flow pulls is in place: loaded as its role at the
+// live width, so the live-size map need not wait for the full files.
+void FlowController::previewPulled(const QString& id, const QString& folder) {
+  auto it = auto_pulls_.find(id);
+  if (it == auto_pulls_.end() || live_width_ <= 0 || !autoFlow()) return;
+  previews_loaded_.insert(id);
+  session_.status.step().finish();
+  loadSetInBackground(folder, it->second);
 }
 
 void FlowController::pulled(const QString& id, const QString& folder) {
+  full_folders_.insert(folder);
   auto it = auto_pulls_.find(id);
   std::optional<veneer::io::Role> role;
   if (it != auto_pulls_.end()) {
     role = it->second;
     auto_pulls_.erase(it);
+    if (previews_loaded_.erase(id) > 0) {
+      // its preview is loaded (or loading) as the role: the full files are for the full resolution
+      for (const auto& l : {session_.dst, session_.src})
+        if (l && l->folder == folder) l->preview = false;
+      live_first_.maybeStart();
+      return;
+    }
     session_.status.step().finish();
   }
   loadSetInBackground(folder, role);
@@ -94,11 +116,13 @@ veneer::Expected<veneer::io::ImageSet> read_live_size(const std::string& folder,
   manifest.load_photos = false;
   manifest.load_truth = false;
   auto whole = veneer::io::read_set(folder, manifest);
-  if (!whole || whole->size.width <= width) return read_as_transfer(folder);
+  // a preview set (the rig's, while its full files come) is always a live-size set: of a larger one
+  const bool preview = whole && whole->preview_of.has_value();
+  if (!whole || (whole->size.width <= width && !preview)) return read_as_transfer(folder);
   veneer::io::ReducedOptions o;
   o.width = width;
   auto set = veneer::io::read_set_reduced(folder, o);
-  *smaller = set && set->size.width < whole->size.width;
+  *smaller = set && (set->size.width < whole->size.width || set->preview_of.has_value());
   return set;
 }
 }  // namespace
@@ -165,6 +189,8 @@ void FlowController::loadSetInBackground(const QString& folder, std::optional<ve
         self->session_.status.showStep();
         return;
       }
+      // read from the rig's preview while its full files are still coming
+      r.loaded->preview = r.loaded->set.preview_of.has_value() && !self->full_folders_.count(folder);
       self->session_.setLoaded(r.loaded, role);
       // live first: a live-size set's Look-tab normals wait while its map is made, which is what the
       // first live frame waits for (they compete for the same cores)

@@ -7,6 +7,7 @@
 // only chains them. It also loads the sets (for the flow and for the panels).
 #include <map>
 #include <optional>
+#include <set>
 #include <vector>
 
 #include <QObject>
@@ -42,6 +43,10 @@ class FlowController : public QObject {
   // width; 0 = off: full resolution first.
   void setLiveWidth(int px) { live_width_ = px; }
   int liveWidth() const { return live_width_; }
+  // Live first from the rig's preview set (pulled before the full files, read
+  // at the live width when it is as wide): off by default -- a run of the
+  // 5600x3750 bench and a test crashed with it on, cause not found (issue 48).
+  void setPreviewFirst(bool on) { preview_first_ = on; }
 
  signals:
   void tabWanted(QString name);
@@ -49,6 +54,7 @@ class FlowController : public QObject {
  private:
   void setStored(const QString& id, veneer::io::Role role);
   void pulled(const QString& id, const QString& folder);
+  void previewPulled(const QString& id, const QString& folder);
   void computeNormals(std::shared_ptr<LoadedSet> loaded);
   void computeWaitingNormals();
   void maybeCompute();
@@ -62,7 +68,10 @@ class FlowController : public QObject {
   MapLibrary& library_;
   std::vector<std::shared_ptr<LoadedSet>> normals_waiting_;  // loaded sets whose normals wait for their map
   std::map<QString, veneer::io::Role> auto_pulls_;  // rig set id -> role, pulled by the flow
+  std::set<QString> previews_loaded_;  // rig set ids whose preview set the flow loaded (its full files follow)
+  std::set<QString> full_folders_;     // folders whose full files are in place
   int live_width_ = 1280;
+  bool preview_first_ = !qEnvironmentVariableIsEmpty("VENEER_PREVIEW_FIRST");
 };
 
 }  // namespace veneer::app

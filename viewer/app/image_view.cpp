@@ -35,7 +35,22 @@ void ImageView::setSync(ViewSync* sync) {
 
 void ImageView::setImage(const QImage& image) {
   image_ = image;
+  fitted_ = QImage();
   update();
+}
+
+void ImageView::setImage(const QImage& image, const QImage& fitted) {
+  image_ = image;
+  fitted_ = fitted;
+  update();
+}
+
+QSize ImageView::fitSize(QSize widget, QSize picture) {
+  if (picture.isEmpty()) return {};
+  const double fit = std::max(1e-3, std::min(widget.width() / double(picture.width()),
+                                             (widget.height() - 18) / double(picture.height())));
+  return {std::max(1, static_cast<int>(std::lround(picture.width() * fit))),
+          std::max(1, static_cast<int>(std::lround(picture.height() * fit)))};
 }
 
 void ImageView::setTitle(const QString& title) {
@@ -87,8 +102,14 @@ void ImageView::paintEvent(QPaintEvent*) {
   }
   const QPointF tl = toWidget(QPointF(0, 0)), br = toWidget(QPointF(image_.width(), image_.height()));
   p.setClipRect(QRect(0, 18, width(), height() - 18));
-  p.setRenderHint(QPainter::SmoothPixmapTransform, sync_->zoom() < 2.0);
-  p.drawImage(QRectF(tl, br), image_);
+  if (!fitted_.isNull() && sync_->zoom() == 1.0 && fitted_.size() == fitSize(size(), image_.size())) {
+    // already at the painted size: a plain copy, nothing scaled here
+    p.drawImage(QPoint(static_cast<int>(std::lround(tl.x())), static_cast<int>(std::lround(tl.y()))), fitted_);
+    ++fitted_paints_;
+  } else {
+    p.setRenderHint(QPainter::SmoothPixmapTransform, sync_->zoom() < 2.0);
+    p.drawImage(QRectF(tl, br), image_);
+  }
   p.setRenderHint(QPainter::Antialiasing, true);
   for (const Marker& m : markers_) {
     const QPointF w = toWidget(m.pixel + QPointF(0.5, 0.5));

@@ -38,6 +38,15 @@ class ImageView : public QWidget {
   explicit ImageView(const QString& title, QWidget* parent = nullptr);
   void setSync(ViewSync* sync);
   void setImage(const QImage& image);
+  // `image` with `fitted`, the same picture already scaled (off the GUI
+  // thread) to fitSize(): at zoom 1 it is blitted as it is, so painting
+  // scales nothing (Qt's smooth scaling of a large picture waits on a thread
+  // pool the computing can fill). Any other zoom paints `image`.
+  void setImage(const QImage& image, const QImage& fitted);
+  // The size a `picture`-sized image is painted at in a `widget`-sized view
+  // at zoom 1 (what a fitted image must be).
+  static QSize fitSize(QSize widget, QSize picture);
+  int fittedPaints() const { return fitted_paints_; }  // paints that scaled nothing
   const QImage& image() const { return image_; }
   void setTitle(const QString& title);
 
@@ -73,7 +82,8 @@ class ImageView : public QWidget {
  private:
   double scale() const;  // widget px per picture px
   QString title_;
-  QImage image_;
+  QImage image_, fitted_;
+  int fitted_paints_ = 0;
   ViewSync* sync_ = nullptr;
   ViewSync own_sync_;
   std::vector<Marker> markers_;

@@ -16,6 +16,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "live_first.hpp"
+#include "background.hpp"
 #include "live_tab.hpp"
 #include "qt_convert.hpp"
 #include "veneer/io/image_io.hpp"
@@ -64,6 +65,7 @@ QString LiveFirstJob::line() const { return label_ ? label_->text() : QString();
 void LiveFirstJob::maybeStart() {
   const Session& s = session_;
   if (running_ || !s.result || !s.dst || !s.src || !(s.dst->live_size || s.src->live_size)) return;
+  if (s.dst->preview || s.src->preview) return;  // the full files are still being pulled (FlowController::pulled starts it)
   if (!label_) {
     label_ = named<QLabel>("fullResolutionStatus");
     progress_ = named<QProgressBar>("fullResolutionProgress");
@@ -85,7 +87,8 @@ void LiveFirstJob::maybeStart() {
   const cv::Vec3d light = session_.light();
   auto cancel = cancel_, held = held_;
   QPointer<LiveFirstJob> self(this);
-  (void)QtConcurrent::run(job_pool(), [self, dst_folder, src_folder, options, generation, cancel, held, light] {
+  // below the live view and the GUI: the background's threads at a lower priority, its loops its own (background.hpp)
+  (void)run_in_background([self, dst_folder, src_folder, options, generation, cancel, held, light] {
     while (held->load() && !cancel->load()) std::this_thread::sleep_for(std::chrono::milliseconds(20));
     auto report = [self](double f, const std::string& stage) {
       const QString s = qs(stage);

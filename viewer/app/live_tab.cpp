@@ -42,9 +42,32 @@ std::shared_ptr<veneer::repaint::LiveSession> make_live_session(
                                                         lit, result.blend);
 }
 
+namespace {
+// `picture` (8-bit BGR) at the size a `view`-sized ImageView paints it at zoom 1.
+QImage fitted_qimage(const cv::Mat& picture, QSize view) {
+  if (picture.empty()) return {};
+  const QSize s = ImageView::fitSize(view, QSize(picture.cols, picture.rows));
+  if (s.isEmpty()) return {};
+  if (s.width() == picture.cols && s.height() == picture.rows) return to_qimage(picture);
+  cv::Mat small;
+  cv::resize(picture, small, cv::Size(s.width(), s.height()), 0, 0,
+             s.width() < picture.cols ? cv::INTER_AREA : cv::INTER_LINEAR);
+  return to_qimage(small);
+}
+}  // namespace
+
+int LiveTab::fittedPaints() const { return live_src_view_->fittedPaints() + live_dst_view_->fittedPaints(); }
+
 LiveTab::LiveTab(Session& session, QWidget* parent) : QWidget(parent), session_(session) {
-  live_pool_.setMaxThreadCount(1);
-  live_pool_.setExpiryTimeout(-1);  // the live view's thread stays while the window lives
+  live_thread_ = std::thread([this] {  // the live view's thread stays while the window lives
+    for (;;) {
+      live_go_.acquire();
+      if (live_quit_.load()) return;
+      std::function<void()> task = std::move(live_task_);
+      live_task_ = nullptr;
+      if (task) task();
+    }
+  });
   auto* layout = new QVBoxLayout(this);
   auto* top = new QHBoxLayout;
   live_btn_ = button(tr("Start live view"), "liveToggle", this);
@@ -119,7 +142,11 @@ LiveTab::LiveTab(Session& session, QWidget* parent) : QWidget(parent), session_(
   });
 }
 
-LiveTab::~LiveTab() { live_pool_.waitForDone(); }
+LiveTab::~LiveTab() {
+  live_quit_.store(true);
+  live_go_.release();
+  live_thread_.join();
+}
 
 bool LiveTab::isLive() const { return live_btn_->isChecked(); }
 
@@ -187,8 +214,9 @@ void LiveTab::onLiveFrame(const veneer::rig::LiveFrame& frame) {
   const auto& live = session_.live_session;
   auto session = live && live->ready() && session_.live_refusal.isEmpty() ? live : nullptr;
   const veneer::repaint::Look look = look_;
+  const QSize src_view = live_src_view_->size(), dst_view = live_dst_view_->size();
   QPointer<LiveTab> self(this);
-  (void)QtConcurrent::run(&live_pool_, [self, frame, session, look] {
+  live_task_ = [self, frame, session, look, src_view, dst_view] {
     auto out = std::make_shared<LiveOut>();
     out->seq = frame.seq;
     out->frame = cv::imdecode(frame.jpeg, cv::IMREAD_COLOR);
@@ -202,6 +230,7 @@ void LiveTab::onLiveFrame(const veneer::rig::LiveFrame& frame) {
         } else {
           out->repainted = r->repainted;
           out->repainted_image = to_qimage(r->repainted);
+          out->repainted_fitted = fitted_qimage(r->repainted, dst_view);
           out->painted = r->look;
           out->light = r->light;
           // where the source was found: its outline over the frame, green when tracked, red when lost
@@ -218,11 +247,13 @@ void LiveTab::onLiveFrame(const veneer::rig::LiveFrame& frame) {
         }
       }
       out->shown_image = to_qimage(shown);
+      out->shown_fitted = fitted_qimage(shown, src_view);
     }
     QMetaObject::invokeMethod(self.data(), [self, out, session] {
       if (self) self->showLiveFrame(*out, session.get());
     });
-  });
+  };
+  live_go_.release();
 }
 
 void LiveTab::showLiveFrame(const LiveOut& out, const veneer::repaint::LiveSession* session) {
@@ -242,10 +273,10 @@ void LiveTab::showLiveFrame(const LiveOut& out, const veneer::repaint::LiveSessi
     }
     if (current && !out.repainted.empty()) {
       live_repainted_ = out.repainted;
-      live_dst_view_->setImage(out.repainted_image);
+      live_dst_view_->setImage(out.repainted_image, out.repainted_fitted);
       showLight(out.light, out.painted);
     }
-    live_src_view_->setImage(out.shown_image);
+    live_src_view_->setImage(out.shown_image, out.shown_fitted);
     const bool repainting = session_.live_session && session_.live_refusal.isEmpty();
     live_label_->setText(tr("frame %1 · %2 fps").arg(out.seq).arg(live_fps_, 0, 'f', 1) +
                          (out.state.isEmpty() || !current ? QString() : " · " + out.state));

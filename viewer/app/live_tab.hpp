@@ -2,11 +2,14 @@
 // The Live tab: the rig's live view beside the destination repainted live
 // (each frame decoded, registered and repainted on the tab's own thread), the
 // lamps of the rig as check boxes, and the simulated rig's hand-held lamp.
+#include <atomic>
+#include <functional>
 #include <optional>
+#include <semaphore>
+#include <thread>
 #include <vector>
 
 #include <QElapsedTimer>
-#include <QThreadPool>
 #include <QWidget>
 
 #include "image_view.hpp"
@@ -50,6 +53,9 @@ class LiveTab : public QWidget {
   cv::Mat lastRepaintedFrame() const { return live_repainted_; }
   int framesShown() const { return live_frames_; }
   double fps() const { return live_fps_; }
+  // Paints of the live views that scaled nothing on the GUI thread (the
+  // frames came already at the views' sizes): ImageView::fittedPaints.
+  int fittedPaints() const;
   // How the live frames are painted (the tab's selector; shaded by default):
   // each frame's session is told (repaint::LiveSession::set_look) before it
   // paints the frame.
@@ -70,6 +76,7 @@ class LiveTab : public QWidget {
     uint64_t seq = 0;
     cv::Mat frame, repainted;  // empty frame: not a JPEG
     QImage shown_image, repainted_image;
+    QImage shown_fitted, repainted_fitted;  // the same at the views' painted sizes (ImageView::fitSize)
     QString state, refusal;
     veneer::repaint::Look painted = veneer::repaint::Look::copy;  // what `repainted` shows
     std::optional<veneer::repaint::LiveLight> light;              // the frame's light (shaded look)
@@ -78,7 +85,14 @@ class LiveTab : public QWidget {
   void showLiveFrame(const LiveOut& out, const veneer::repaint::LiveSession* session);
 
   Session& session_;
-  QThreadPool live_pool_;  // the live frames' one worker thread (not the pool computes and exports queue in)
+  // The live frames' own thread (not a pool: the GUI thread hands it a frame
+  // by a semaphore's release, which never waits on a lock the thread holds).
+  // `live_task_` is written by the GUI thread only while no frame is out
+  // (!live_busy_), and taken by the thread before it runs it.
+  std::thread live_thread_;
+  std::binary_semaphore live_go_{0};
+  std::function<void()> live_task_;
+  std::atomic<bool> live_quit_{false};
   bool live_busy_ = false;  // a frame is being processed there
   std::optional<veneer::rig::LiveFrame> live_next_;  // the newest frame that came meanwhile
   int live_frames_ = 0;

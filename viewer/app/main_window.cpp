@@ -1,4 +1,5 @@
 #include "main_window.hpp"
+#include "background.hpp"
 
 #include <QApplication>
 #include <QDir>
@@ -18,6 +19,7 @@
 namespace veneer::app {
 
 MainWindow::MainWindow(const Options& options, QWidget* parent) : QMainWindow(parent) {
+  opencv_loops_in_current_arena();  // before any loop runs: the background's OpenCV calls stay on its threads
   const QString workdir = options.workdir.isEmpty()
                               ? QStandardPaths::writableLocation(QStandardPaths::AppLocalDataLocation)
                               : options.workdir;

@@ -1,11 +1,26 @@
 #include "rig_link.hpp"
+#include "veneer/io/imageset.hpp"
 
 #include <QPointer>
+#include <QThreadPool>
 
 #include "veneer/proto/tls.hpp"
 #include <QtConcurrent/QtConcurrentRun>
 
 namespace veneer::app {
+
+// The rig's calls (connect, pull, capture, ...) wait on the network for
+// seconds: on a pool of their own, not Qt's global one, which the raster
+// engine's painting fills and scales on (the GUI thread waits for those).
+QThreadPool* rig_pool() {
+  static QThreadPool pool;
+  static const bool sized = [] {
+    pool.setMaxThreadCount(8);  // a pull, a capture and status calls side by side
+    return true;
+  }();
+  (void)sized;
+  return &pool;
+}
 
 namespace {
 RigLink::PinAsker& default_pin_asker() {
@@ -85,7 +100,7 @@ void RigLink::disconnectFromRig() {
   reconnect_timer_.stop();
   ++generation_;
   if (auto c = takeClient()) {
-    (void)QtConcurrent::run([c] { c->close(); });
+    (void)QtConcurrent::run(rig_pool(), [c] { c->close(); });
     emit connectedChanged(false, tr("disconnected from %1").arg(endpoint_));
   }
 }
@@ -112,7 +127,7 @@ void RigLink::tryConnect() {
         Qt::BlockingQueuedConnection);
     return yes;
   };
-  (void)QtConcurrent::run([self, gen, endpoint, token, options] {
+  (void)QtConcurrent::run(rig_pool(), [self, gen, endpoint, token, options] {
     auto ep = veneer::rig::Endpoint::parse(endpoint);
     veneer::Expected<std::unique_ptr<veneer::rig::Client>> result =
         ep ? veneer::rig::Client::connect(*ep, token, options)
@@ -130,7 +145,7 @@ void RigLink::tryConnect() {
           if (!self) return;
           self->connecting_ = false;
           if (gen != self->generation_ || !self->wanted_) {
-            if (client) (void)QtConcurrent::run([client] { client->close(); });
+            if (client) (void)QtConcurrent::run(rig_pool(), [client] { client->close(); });
             return;
           }
           if (!client) {
@@ -206,7 +221,7 @@ void RigLink::run(const QString& what, std::function<veneer::Status(veneer::rig:
     return;
   }
   QPointer<RigLink> self(this);
-  (void)QtConcurrent::run([self, c, what, job, on_ok] {
+  (void)QtConcurrent::run(rig_pool(), [self, c, what, job, on_ok] {
     veneer::Status s = job(*c);
     QString msg = s ? QString() : qs(s.message());
     QMetaObject::invokeMethod(
@@ -307,7 +322,7 @@ void RigLink::cancelPulls() {
   pull_cancel_ = std::make_shared<std::atomic<bool>>(false);  // the next pull is not cancelled
 }
 
-void RigLink::pull(const QString& id, const QString& folder) {
+void RigLink::pull(const QString& id, const QString& folder, int preview_width) {
   QPointer<RigLink> self(this);
   const std::string sid = id.toStdString(), dir = folder.toStdString();
   auto cancel = pull_cancel_;
@@ -315,7 +330,7 @@ void RigLink::pull(const QString& id, const QString& folder) {
   ++pulls_running_;
   run(
       tr("pull %1").arg(id),
-      [self, id, sid, dir, cancel, truth](veneer::rig::Client& c) {
+      [self, id, sid, dir, cancel, truth, preview_width](veneer::rig::Client& c) {
         struct Done {  // counted down however the pull ends
           QPointer<RigLink> self;
           ~Done() {
@@ -331,7 +346,22 @@ void RigLink::pull(const QString& id, const QString& folder) {
             if (self) emit self->pullProgress(id, f);
           });
         };
-        return c.pull(sid, dir, truth, true, progress);
+        veneer::rig::PullOptions o;
+        o.include_truth = truth;
+        o.overwrite = true;
+        o.live_first = preview_width > 0;
+        o.on_preview = [self, id, preview_width](const std::filesystem::path& f) {
+          veneer::io::ReadOptions manifest;
+          manifest.load_photos = false;
+          manifest.load_truth = false;
+          auto preview = veneer::io::read_set(f, manifest);
+          if (!preview || preview->size.width < preview_width) return;  // too small to stand in: the full files
+          const QString folder = QString::fromStdString(f.string());
+          QMetaObject::invokeMethod(self.data(), [self, id, folder] {
+            if (self) emit self->previewPulled(id, folder);
+          });
+        };
+        return c.pull_set(sid, dir, o, progress);
       },
       [this, id, folder] { emit pulled(id, folder); });
 }

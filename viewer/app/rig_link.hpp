@@ -17,7 +17,12 @@
 #include "qt_convert.hpp"
 #include "veneer/rig/client.hpp"
 
+class QThreadPool;
+
 namespace veneer::app {
+
+// The pool the rig's calls run on (not Qt's global pool: see rig_link.cpp).
+QThreadPool* rig_pool();
 
 class RigLink : public QObject {
   Q_OBJECT
@@ -62,7 +67,12 @@ class RigLink : public QObject {
   void deleteSet(const QString& id);  // into the rig's trash
   void listTrash();
   void restoreSet(const QString& id);
-  void pull(const QString& id, const QString& folder);
+  // With preview_width > 0, the rig's preview set (about 1/4 size, a JPEG
+  // per lamp) is put in `folder` first and previewPulled says so when it is
+  // at least that wide; the full files then replace it in one step and
+  // pulled follows (rig::Client::pull_set's live first). A rig without
+  // previews, or a narrower preview: pulled only.
+  void pull(const QString& id, const QString& folder, int preview_width = 0);
   // Whether pulls bring the simulated rig's truth/ too (for the tests that
   // measure against it; a user's sets have none). Default off.
   void setPullTruth(bool on) { pull_truth_ = on; }
@@ -79,6 +89,7 @@ class RigLink : public QObject {
   void rigEvent(veneer::rig::Event event);
   void liveFrame(veneer::rig::LiveFrame frame);
   void pullProgress(QString id, double fraction);
+  void previewPulled(QString id, QString folder);
   void pulled(QString id, QString folder);
   void failed(QString what, QString message);
   void info(QString message);

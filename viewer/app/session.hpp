@@ -37,6 +37,7 @@ struct LoadedSet {
   int hand_version = 0;
   bool live_size = false;  // read at the live view's width (reduced decode), smaller than the set
   int live_width = 0;      // ... the width asked for (pipeline::LiveOptions' read.width), when live_size
+  bool preview = false;    // read from the rig's preview set, whose full files are still being pulled
 };
 
 // What a transfer ran with (the options, the hand masks), kept with the
