@@ -89,15 +89,25 @@ cv::Mat median_shading(const cv::Mat& normals, const std::vector<cv::Vec3d>& lam
 
 // Per pixel of `used` and channel (CV_32FC3), or of the grey (CV_32FC1): the
 // median over the photos less k (n.h)^alpha, at least `floor`; 0 elsewhere.
+// With `unoccluded` (grey only), in the same pass: the median shading as the
+// pixel's albedo and normal say the lamps would give it with nothing in their
+// way, a x `model_median` (the median over the lamps of max(0, n.l)); a the
+// grey albedo, the median of (photo less gloss) / n.l over the lamps that face
+// the pixel (n.l > 0.15) and light it (at least 0.6 of the largest such value:
+// a lamp whose light another part blocks says nothing of the albedo).
 cv::Mat diffuse_median(const std::vector<cv::Mat>& photos, const cv::Mat& normals, const cv::Mat& weight,
                        const std::vector<cv::Vec3d>& lamps, double exponent, float floor, bool grey,
-                       const cv::Mat& used) {
+                       const cv::Mat& used, cv::Mat* unoccluded = nullptr, const cv::Mat& model_median = {}) {
+  constexpr float kFacing = 0.15f, kLit = 0.6f;
+  const bool open = grey && unoccluded != nullptr;
+  if (open) *unoccluded = cv::Mat(photos[0].size(), CV_32FC1, cv::Scalar(0));
   const int n = static_cast<int>(photos.size());
   std::vector<cv::Vec3f> l, h;
   for (const cv::Vec3d& d : lamps) l.emplace_back(d / std::max(1e-9, cv::norm(d))), h.push_back(half_vector(d));
   cv::Mat out(photos[0].size(), grey ? CV_32FC1 : CV_32FC3, cv::Scalar::all(0));
   cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& r) {
-    std::vector<float> v(3 * n);
+    std::vector<float> v(3 * n), a;
+    a.reserve(n);
     PhotoRows rows_of(photos);
     for (int y = r.start; y < r.end; ++y) {
       if (cv::countNonZero(used.row(y)) == 0) continue;
@@ -115,6 +125,21 @@ cv::Mat diffuse_median(const std::vector<cv::Mat>& photos, const cv::Mat& normal
             for (int c = 0; c < 3; ++c) v[c * n + i] = std::max(p[c] - s, floor);
         }
         if (grey) {
+          if (open) {
+            a.clear();
+            float top = 0;
+            for (int i = 0; i < n; ++i) {
+              const float nl = nn.dot(l[i]);
+              if (nl <= kFacing) continue;
+              a.push_back(std::max(v[i], 0.f) / nl);
+              top = std::max(top, a.back());
+            }
+            if (!a.empty() && top > 0) {
+              a.erase(std::remove_if(a.begin(), a.end(), [&](float q) { return q < kLit * top; }), a.end());
+              unoccluded->at<float>(y, x) =
+                  median_of(a.data(), static_cast<int>(a.size())) * model_median.at<float>(y, x);
+            }
+          }
           out.at<float>(y, x) = median_of(v.data(), n);
           continue;
         }
@@ -126,54 +151,10 @@ cv::Mat diffuse_median(const std::vector<cv::Mat>& photos, const cv::Mat& normal
   return out;
 }
 
-// Per pixel of `used`: the destination's median shading as its albedo and
-// normal say the lamps would give it with nothing in their way, a (median
-// over the lamps of max(0, n.l)): a the grey albedo, the median of I_i / n.l_i
-// (the photo less k (n.h)^alpha) over the lamps that face the pixel (n.l >
-// 0.15) and light it (at least 0.6 of the largest such value: a lamp whose
-// light another part blocks says nothing of the albedo); 0 elsewhere.
 // Dd is raised only where it falls below a_d c_d by more than this factor: lamps of one direction but unequal
 // brightness, and the model's own error, stay Dd's (the demo pair's still median against the truth's: 0.0291 at
 // 1, 0.0287 at 1.25)
 constexpr float kUnoccludedMargin = 1.25f;
-
-cv::Mat unoccluded_median(const std::vector<cv::Mat>& photos, const cv::Mat& normals, const cv::Mat& weight,
-                          const std::vector<cv::Vec3d>& lamps, double exponent, const cv::Mat& model_median,
-                          const cv::Mat& used) {
-  constexpr float kFacing = 0.15f, kLit = 0.6f;
-  const int n = static_cast<int>(photos.size());
-  std::vector<cv::Vec3f> l, h;
-  for (const cv::Vec3d& d : lamps) l.emplace_back(d / std::max(1e-9, cv::norm(d))), h.push_back(half_vector(d));
-  cv::Mat out(photos[0].size(), CV_32FC1, cv::Scalar(0));
-  cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& r) {
-    std::vector<float> v;
-    v.reserve(n);
-    PhotoRows rows_of(photos);
-    for (int y = r.start; y < r.end; ++y) {
-      if (cv::countNonZero(used.row(y)) == 0) continue;
-      const cv::Vec3f* const* row = rows_of.row(y);
-      for (int x = 0; x < out.cols; ++x) {
-        if (!used.at<uchar>(y, x)) continue;
-        const float k = weight.empty() ? 0.f : weight.at<float>(y, x);
-        const cv::Vec3f nn = normals.at<cv::Vec3f>(y, x);
-        v.clear();
-        float top = 0;
-        for (int i = 0; i < n; ++i) {
-          const float nl = nn.dot(l[i]);
-          if (nl <= kFacing) continue;
-          const float s = k > 0 ? k * Gloss::lobe(nn, l[i], h[i], exponent) : 0.f;
-          const cv::Vec3f p = row[i][x];
-          v.push_back(std::max((p[0] + p[1] + p[2]) / 3.f - s, 0.f) / nl);
-          top = std::max(top, v.back());
-        }
-        if (v.empty() || top <= 0) continue;
-        v.erase(std::remove_if(v.begin(), v.end(), [&](float a) { return a < kLit * top; }), v.end());
-        out.at<float>(y, x) = median_of(v.data(), static_cast<int>(v.size())) * model_median.at<float>(y, x);
-      }
-    }
-  });
-  return out;
-}
 
 constexpr float kRatioFloor = ShadedLook::ratio_floor();  // Dd and its median are kept above this (linear units)
 
@@ -232,13 +213,13 @@ Expected<ShadedLook> ShadedLook::make(const LookSide& dst, const LookSide& src, 
                         std::clamp(static_cast<int>(std::lround(m[0])), 0, ssize.width - 1)) = 255;
     }
   look.model_median_ = median_shading(dst.view.normals, dst.lamps);
+  cv::Mat open;
   look.shading_median_ = diffuse_median(dst.view.images, dst.view.normals, look.destination_weight_, dst.lamps,
-                                        look.destination_exponent_, 0.f, true, mapped);
+                                        look.destination_exponent_, 0.f, true, mapped,
+                                        options.unoccluded_median ? &open : nullptr, look.model_median_);
   if (options.unoccluded_median) {
     // the raise as a factor, smoothed over 2 px: a_d from a few lamps is noisy pixel by pixel, and that noise
     // would otherwise sit on the source's texture (the demo pair's texture correlation 0.33 unsmoothed)
-    const cv::Mat open = unoccluded_median(dst.view.images, dst.view.normals, look.destination_weight_, dst.lamps,
-                                           look.destination_exponent_, look.model_median_, mapped);
     cv::Mat raise(dsize, CV_32FC1, cv::Scalar(1));
     raise.forEach<float>([&](float& f, const int* at) {
       const float dd = look.shading_median_.at<float>(at[0], at[1]);
@@ -341,7 +322,8 @@ Expected<cv::Mat> ShadedLook::median(const std::vector<cv::Mat>& photos) const {
   const int n = static_cast<int>(photos.size());
   cv::Mat out(xy_.size(), CV_32FC3);
   cv::parallel_for_(cv::Range(0, out.rows), [&](const cv::Range& r) {
-    std::vector<float> v(3 * n);
+    std::vector<float> v(3 * n), a;
+    a.reserve(n);
     PhotoRows rows_of(photos);
     for (int y = r.start; y < r.end; ++y) {
       const cv::Vec3f* const* row = rows_of.row(y);
